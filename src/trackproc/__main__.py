@@ -1,0 +1,3 @@
+from trackproc.cli.app import run
+
+run()

@@ -1,0 +1,104 @@
+"""The ``trackproc`` command: a Typer app whose commands live in sibling modules.
+
+Only typer and the standard library are imported here and in the command modules at import
+time; numpy, pandas, scipy and pyarrow are imported inside the commands, so that
+``trackproc --help`` stays instant (see ``benchmarks/startup.py``).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+
+import typer
+
+from trackproc import __version__
+from trackproc.errors import EXIT_INPUT, TrackprocError
+
+app = typer.Typer(
+    name="trackproc",
+    help="Satellite tracking passes in, orbits with honest error matrices out.",
+    pretty_exceptions_enable=False,
+    add_completion=False,
+    no_args_is_help=True,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+
+log = logging.getLogger("trackproc")
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"trackproc {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                 help="Print the version and exit."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only errors on stderr."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Debug messages on stderr."),
+) -> None:
+    """Satellite tracking passes in, orbits with honest error matrices out.
+
+    Exit codes: 0 ok, 1 processing failure, 2 usage or invalid input,
+    3 partial failure in batch.
+    """
+    level = logging.ERROR if quiet else logging.DEBUG if verbose else logging.INFO
+    if os.environ.get("TRACKPROC_LOG_LEVEL"):
+        level = os.environ["TRACKPROC_LOG_LEVEL"].upper()
+    logging.basicConfig(level=level, format="trackproc: %(levelname)s: %(message)s",
+                        stream=sys.stderr, force=True)
+
+
+def _register() -> None:
+    # Each module adds its command(s) to ``app``; keep their top-level imports light.
+    from trackproc.cli import commands  # noqa: F401
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console-script entry point: runs the app, maps errors to exit codes, one line each."""
+    _register()
+    try:
+        app(args=argv, prog_name="trackproc", standalone_mode=True)
+    except SystemExit as exit_:
+        code = exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else 1)
+        _flush_stdout()
+        return code
+    except TrackprocError as exc:
+        _flush_stdout()
+        print(f"trackproc: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except BrokenPipeError:
+        return _broken_pipe()
+    except KeyboardInterrupt:
+        print("trackproc: interrupted", file=sys.stderr)
+        return 130
+    return _flush_stdout()
+
+
+def _flush_stdout() -> int:
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        return _broken_pipe()
+    return 0
+
+
+def _broken_pipe() -> int:
+    """The reader closed stdout early (``trackproc ... | head``): stop quietly, as Unix tools do."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    return 141
+
+
+def run() -> None:  # pragma: no cover - thin wrapper for ``python -m trackproc``
+    sys.exit(main())
+
+
+__all__ = ["app", "main", "EXIT_INPUT"]

@@ -1,0 +1,74 @@
+"""Options shared by several commands, defined once (names are part of the CLI contract)."""
+
+from __future__ import annotations
+
+import sys
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+
+class Force(str, Enum):
+    two_body = "two-body"
+    j2 = "j2"
+
+
+class Earth(str, Enum):
+    wgs84 = "wgs84"
+    sphere = "sphere"
+
+
+class RangeRateModel(str, Enum):
+    doppler = "doppler"
+    instantaneous = "instantaneous"
+
+
+class DopplerMode(str, Enum):
+    one_way = "one-way"
+    two_way = "two-way"
+
+
+class TableFormat(str, Enum):
+    parquet = "parquet"
+    arrow = "arrow"
+    csv = "csv"
+
+
+ForceOpt = typer.Option(Force.j2, "--force", help="Force model: two-body or j2.")
+EarthOpt = typer.Option(Earth.wgs84, "--earth",
+                        help="wgs84 ellipsoid, or sphere (R = 6371 km, linear sidereal time, as seed 004).")
+EopOpt = typer.Option(None, "--eop", help="IERS EOP file (finals2000A / finals.all): UT1-UTC and polar motion.",
+                      exists=False, dir_okay=False)
+Dut1Opt = typer.Option(None, "--dut1", help="UT1-UTC in seconds, when no EOP file is given.")
+RangeRateModelOpt = typer.Option(
+    RangeRateModel.doppler, "--range-rate-model",
+    help="doppler: derivative of the light-time range (default); instantaneous: Orekit's one-way RangeRate.")
+StationsOpt = typer.Option(..., "--stations", help="Stations table CSV: station, lat_deg, lon_deg, height_m.")
+OutputOpt = typer.Option(None, "-o", "--output",
+                         help="Output file, or - for stdout (default: stdout when it is a pipe).")
+
+
+def resolve_output(output: Optional[str], what: str = "output") -> str:
+    """``-o`` given: use it. Not given: stdout when it is not a terminal, else a usage error."""
+    if output is not None:
+        return output
+    if not sys.stdout.isatty():
+        return "-"
+    raise typer.BadParameter(f"no {what} given: use -o FILE, or -o - / a pipe for stdout",
+                             param_hint="-o/--output")
+
+
+def table_format_for(output: str, requested: Optional[TableFormat]) -> TableFormat:
+    """Format from ``--format``, else from the file suffix; stdout defaults to an Arrow stream."""
+    if requested is not None:
+        return requested
+    suffix = Path(output).suffix.lower()
+    if output == "-":
+        return TableFormat.arrow
+    if suffix == ".csv":
+        return TableFormat.csv
+    if suffix in (".arrow", ".arrows", ".ipc", ".feather"):
+        return TableFormat.arrow
+    return TableFormat.parquet

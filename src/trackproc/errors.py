@@ -1,0 +1,64 @@
+"""Error types and the exit-code table shared by every command.
+
+=====  ==========================================================
+code   meaning
+=====  ==========================================================
+0      success
+1      processing failure (non-convergence, rank deficiency, ...)
+2      usage error or invalid input (file, row, column named)
+3      partial failure in batch (some inputs failed, others done)
+=====  ==========================================================
+"""
+
+from __future__ import annotations
+
+EXIT_OK = 0
+EXIT_PROCESSING = 1
+EXIT_INPUT = 2
+EXIT_PARTIAL = 3
+
+
+class TrackprocError(Exception):
+    """Base class: a failure that the CLI reports in one line and turns into an exit code."""
+
+    exit_code = EXIT_PROCESSING
+
+
+class InputError(TrackprocError):
+    """Invalid input. Names the file, the 1-based row (as a spreadsheet shows it; the
+    header is row 1 in a CSV with a header), the column, what was found and what was expected.
+    """
+
+    exit_code = EXIT_INPUT
+
+    def __init__(self, message: str = "", *, file: str | None = None, row: int | None = None,
+                 column: str | None = None, found: object = None, expected: str | None = None):
+        self.file, self.row, self.column = file, row, column
+        self.found, self.expected, self.detail = found, expected, message
+        super().__init__(self._format())
+
+    def _format(self) -> str:
+        where = []
+        if self.file is not None:
+            where.append(str(self.file))
+        if self.row is not None:
+            where.append(f"row {self.row}")
+        if self.column is not None:
+            where.append(f"column '{self.column}'")
+        parts = [": ".join([", ".join(where)] if where else [])]
+        text = self.detail
+        if self.found is not None:
+            text += ("; " if text else "") + f"found {self.found!r}"
+        if self.expected is not None:
+            text += ("; " if text else "") + f"expected {self.expected}"
+        return (parts[0] + ": " + text) if where else text
+
+
+class ProcessingError(TrackprocError):
+    """A computation failed on valid input (non-convergence, rank deficiency, too few data)."""
+
+    exit_code = EXIT_PROCESSING
+
+    def __init__(self, message: str, diagnostics: dict | None = None):
+        self.diagnostics = diagnostics or {}
+        super().__init__(message)

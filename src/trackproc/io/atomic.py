@@ -1,0 +1,73 @@
+"""Atomic outputs and the ``-`` convention for stdin/stdout.
+
+Every file trackproc writes goes through :func:`write_bytes` / :func:`open_atomic`: the
+content is written to a temporary file in the destination directory and renamed over the
+target only when complete, so a failure never leaves a half-written file behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import tempfile
+from pathlib import Path
+from typing import BinaryIO, Iterator
+
+STDIO = "-"
+
+
+def is_stdio(path: str | os.PathLike | None) -> bool:
+    return path is not None and str(path) == STDIO
+
+
+@contextlib.contextmanager
+def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
+    """Binary file handle that becomes ``path`` only if the block completes.
+
+    ``path == "-"`` yields stdout's binary buffer (nothing to rename).
+    """
+    if is_stdio(path):
+        out = sys.stdout.buffer
+        yield out
+        out.flush()
+        return
+    target = Path(path)
+    directory = target.parent if str(target.parent) else Path(".")
+    directory.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            yield handle
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+def write_bytes(path: str | os.PathLike, data: bytes) -> None:
+    with open_atomic(path) as handle:
+        handle.write(data)
+
+
+def write_text(path: str | os.PathLike, text: str) -> None:
+    write_bytes(path, text.encode("utf-8"))
+
+
+def read_input_bytes(path: str | os.PathLike) -> bytes:
+    """All bytes of a file, or of stdin for ``-`` (Parquet needs the whole buffer)."""
+    from trackproc.errors import InputError
+
+    if is_stdio(path):
+        return sys.stdin.buffer.read()
+    try:
+        return Path(path).read_bytes()
+    except FileNotFoundError:
+        raise InputError("file not found", file=str(path)) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a file", file=str(path)) from None
+    except PermissionError:
+        raise InputError("permission denied", file=str(path)) from None
