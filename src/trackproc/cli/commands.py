@@ -5,3 +5,7 @@ library at module level.
 """
 
 # isort: off
+from trackproc.cli import ingest_cmd  # noqa: F401
+from trackproc.cli import info_cmd  # noqa: F401
+from trackproc.cli import smooth_cmd  # noqa: F401
+from trackproc.cli import simulate_cmd  # noqa: F401

@@ -1,0 +1,425 @@
+"""Propagation benchmark (issue 3): the Taylor (DT) engine against scipy DOP853 and heyoka.
+
+Run:  python benchmarks/propagation.py [--quick]
+
+Prints, for each case, the median of >= 5 timed runs, the ratios measured in the same run,
+and the errors against references (universal-variable Kepler for two-body; DOP853 at
+rtol 1e-13 and the Taylor engine at tol 1e-16 / order 30 for J2):
+
+* import + first result (fresh interpreter, with and without numpy already imported);
+* one 600 s LEO pass, 601 samples, tol 1e-15: two-body and two-body + J2, with and
+  without the state transition matrix; DOP853 tuned to 1 mm (the loosest rtol that meets
+  1 mm against the reference), DOP853 at rtol 1e-13, heyoka at tol 1e-15 (if installed);
+* one day of LEO, one sample a minute;
+* a batch of 1000 perturbed orbits over the pass (state; STM), in trajectory*samples/s;
+  DOP853 on the stacked 6000-dimensional system, heyoka in SIMD batches.
+
+Timing is never asserted here or in tests; the targets of issue 3 are printed beside the
+measured values.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import statistics
+import subprocess
+import sys
+import time
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from trackproc.constants import J2, MU_EARTH, RE_EARTH
+from trackproc.dynamics import kepler, taylor
+
+#: seed 004 Table 1 "truth" state (km -> m): near-circular LEO, |r| = 7191 km, i = 55 deg.
+LEO = np.array([3774841.0, -1538034.0, 5924146.0, -4816.6, 3936.4, 4091.1])
+PASS_S = 600.0
+N_SAMPLES = 601
+DAY_S = 86400.0
+TOL = 1e-15
+BATCH = 1000
+KJ2 = -1.5 * J2 * MU_EARTH * RE_EARTH ** 2
+
+
+# -- timing --------------------------------------------------------------------------------
+
+def median_time(fn, repeat: int = 7, min_s: float = 0.02) -> float:
+    """Median over ``repeat`` runs of the mean time of one call (calls batched to >= min_s)."""
+    fn()                                                     # warm-up (caches, tables)
+    t0 = time.perf_counter()
+    fn()
+    one = time.perf_counter() - t0
+    number = max(1, int(min_s / max(one, 1e-9)))
+    runs = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        for _ in range(number):
+            fn()
+        runs.append((time.perf_counter() - t0) / number)
+    return statistics.median(runs)
+
+
+def fmt_t(s: float) -> str:
+    return f"{s * 1e3:9.3f} ms"
+
+
+# -- right-hand sides for DOP853 -----------------------------------------------------------
+
+def rhs_two_body(t, y):
+    x, yy, z = y[0], y[1], y[2]
+    r2 = x * x + yy * yy + z * z
+    f = -MU_EARTH / (r2 * math.sqrt(r2))
+    return np.array([y[3], y[4], y[5], f * x, f * yy, f * z])
+
+
+def rhs_j2(t, y):
+    x, yy, z = y[0], y[1], y[2]
+    r2 = x * x + yy * yy + z * z
+    w3 = 1.0 / (r2 * math.sqrt(r2))
+    w5 = w3 / r2
+    g = -MU_EARTH * w3 + KJ2 * (w5 - 5.0 * z * z * w5 / r2)
+    return np.array([y[3], y[4], y[5], g * x, g * yy, (g + 2.0 * KJ2 * w5) * z])
+
+
+def gravity_gradient(r, force):
+    """d acceleration / d r, ``(..., 3, 3)`` for positions ``(..., 3)``, two-body (+ J2).
+
+    With a_i = x_i f_i, f_x = f_y = -mu w3 + k (w5 - 5 z^2 w7), f_z = f_x + 2 k w5
+    (w_m = r^-m, k = -3/2 J2 mu Re^2):
+    G = diag(f_x, f_x, f_z) + q r r^T - 10 k w7 z (r e_z^T + e_z r^T),
+    q = 3 mu w5 - 5 k w7 + 35 k z^2 w9. Checked against finite differences at start-up.
+    """
+    x = np.asarray(r, dtype=float)
+    r2 = np.sum(x * x, axis=-1)[..., None, None]
+    w3 = r2 ** -1.5
+    w5, w7, w9 = w3 / r2, w3 / r2 ** 2, w3 / r2 ** 3
+    k = KJ2 if force == "j2" else 0.0
+    z = x[..., 2][..., None, None]
+    fx = -MU_EARTH * w3 + k * (w5 - 5.0 * z * z * w7)
+    fz = fx + 2.0 * k * w5
+    q = 3.0 * MU_EARTH * w5 - 5.0 * k * w7 + 35.0 * k * z * z * w9
+    g = q * x[..., :, None] * x[..., None, :]
+    ez = np.array([0.0, 0.0, 1.0])
+    g = g - 10.0 * k * w7 * z * (x[..., :, None] * ez + ez[:, None] * x[..., None, :])
+    g = g + fx * np.diag([1.0, 1.0, 0.0]) + fz * np.diag([0.0, 0.0, 1.0])
+    return g
+
+
+def _check_gravity_gradient():
+    r = LEO[:3]
+    for force in ("two-body", "j2"):
+        fd = np.stack([(taylor.acceleration(r + e, force=force)
+                        - taylor.acceleration(r - e, force=force)) / 2.0
+                       for e in np.eye(3)], axis=-1)
+        g = gravity_gradient(r, force)
+        assert np.abs(g - fd).max() < 1e-8 * np.abs(g).max(), force
+
+
+def rhs_var(force):
+    base = rhs_j2 if force == "j2" else rhs_two_body
+
+    def f(t, y):
+        out = np.empty(42)
+        out[:6] = base(t, y[:6])
+        phi = y[6:].reshape(6, 6)
+        g = gravity_gradient(y[:3], force)
+        d = np.empty((6, 6))
+        d[:3] = phi[3:]
+        d[3:] = g @ phi[:3]
+        out[6:] = d.ravel()
+        return out
+    return f
+
+
+def rhs_batch(force):
+    def f(t, y):
+        s = y.reshape(-1, 6)
+        out = np.empty_like(s)
+        out[:, :3] = s[:, 3:]
+        out[:, 3:] = taylor.acceleration(s[:, :3], force=force)
+        return out.ravel()
+    return f
+
+
+def rhs_batch_var(force, n):
+    """Stacked state + STM of n trajectories: y = [n*6 states, n*36 STM entries]."""
+    def f(t, y):
+        s = y[:6 * n].reshape(n, 6)
+        phi = y[6 * n:].reshape(n, 6, 6)
+        out = np.empty_like(y)
+        ds = out[:6 * n].reshape(n, 6)
+        ds[:, :3] = s[:, 3:]
+        ds[:, 3:] = taylor.acceleration(s[:, :3], force=force)
+        dphi = out[6 * n:].reshape(n, 6, 6)
+        dphi[:, :3] = phi[:, 3:]
+        dphi[:, 3:] = gravity_gradient(s[:, :3], force) @ phi[:, :3]
+        return out
+    return f
+
+
+def dop853(fun, y0, t_end, t_eval, rtol, atol):
+    return solve_ivp(fun, (0.0, t_end), y0, method="DOP853", rtol=rtol, atol=atol,
+                     t_eval=t_eval)
+
+
+def pos_err(a, b):
+    return float(np.linalg.norm(np.asarray(a)[..., :3] - np.asarray(b)[..., :3], axis=-1).max())
+
+
+def tune_dop853(fun, y0, t_end, t_eval, ref, target_m=1e-3):
+    """Loosest rtol (atol = rtol * 1 m) whose positions stay within target_m of ref."""
+    for rtol in (1e-6, 3e-7, 1e-7, 3e-8, 1e-8, 3e-9, 1e-9, 3e-10, 1e-10, 3e-11, 1e-11, 3e-12,
+                 1e-12, 3e-13, 1e-13):
+        sol = dop853(fun, y0, t_end, t_eval, rtol, rtol)
+        if pos_err(sol.y.T, ref) <= target_m:
+            return rtol, sol
+    return None, None
+
+
+# -- heyoka (optional) ---------------------------------------------------------------------
+
+def heyoka_system(force):
+    import heyoka as hy
+    x, y, z, vx, vy, vz = hy.make_vars("x", "y", "z", "vx", "vy", "vz")
+    r2 = x ** 2 + y ** 2 + z ** 2
+    g = -MU_EARTH * r2 ** -1.5
+    gz = g
+    if force == "j2":
+        g = g + KJ2 * (r2 ** -2.5 - 5.0 * z ** 2 * r2 ** -3.5)
+        gz = g + 2.0 * KJ2 * r2 ** -2.5
+    return [(x, vx), (y, vy), (z, vz), (vx, x * g), (vy, y * g), (vz, z * gz)]
+
+
+# -- sections ------------------------------------------------------------------------------
+
+def _subprocess_seconds(code: str, repeat: int) -> float:
+    runs = [float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                 check=True).stdout) for _ in range(repeat)]
+    return statistics.median(runs)
+
+
+def section_import(repeat: int):
+    first = ("import numpy as np; from trackproc.dynamics import taylor; "
+             "r = taylor.propagate(np.array([7e6, 0, 0, 0, 7.5e3, 0.0]), 0.0, 60.0); "
+             "s = r.state(np.linspace(0, 60, 61)); print(time.perf_counter() - t0)")
+    print("\n== import + first result (fresh interpreter; 60 s two-body+J2, 61 samples) ==")
+    cold = _subprocess_seconds("import time; t0 = time.perf_counter(); " + first, repeat)
+    warm = _subprocess_seconds("import time, numpy; t0 = time.perf_counter(); " + first, repeat)
+    alone = _subprocess_seconds("import time, numpy; t0 = time.perf_counter(); "
+                                "import trackproc.dynamics.taylor; "
+                                "print(time.perf_counter() - t0)", repeat)
+    npy = _subprocess_seconds("import time; t0 = time.perf_counter(); import numpy; "
+                              "print(time.perf_counter() - t0)", repeat)
+    print(f"  numpy already imported      {fmt_t(warm)}  (target <= 50 ms)")
+    print(f"  including the numpy import  {fmt_t(cold)}  (numpy alone {fmt_t(npy).strip()}; "
+          f"import of taylor alone {fmt_t(alone).strip()})")
+
+
+def ratio_line(name, t_other, t_taylor):
+    r = t_other / t_taylor
+    who = "Taylor" if r >= 1 else name
+    return f"{name}/Taylor time {r:6.2f} ({who} {max(r, 1 / r):.1f}x faster)"
+
+
+def heyoka_grid(ta, y0, t):
+    def run():
+        ta.time = 0.0
+        ta.state[:] = y0
+        return ta.propagate_grid(t)
+    return run
+
+
+def section_pass(force, have_heyoka, repeat):
+    t = np.linspace(0.0, PASS_S, N_SAMPLES)
+    fun = rhs_j2 if force == "j2" else rhs_two_body
+    print(f"\n== one {PASS_S:.0f} s LEO pass, {N_SAMPLES} samples, {force}, tol {TOL:g} ==")
+    if force == "two-body":
+        ref = kepler.propagate(LEO, t)
+        ref_name = "Kepler"
+    else:
+        ref = dop853(fun, LEO, PASS_S, t, 1e-13, 1e-9).y.T
+        ref_name = "DOP853 rtol 1e-13"
+    res = taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL)
+    st = res.state(t)
+    t_state = median_time(lambda: taylor.propagate(LEO, 0.0, PASS_S, force=force,
+                                                   tol=TOL).state(t), repeat)
+    t_stm = median_time(lambda: taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL,
+                                                 stm=True).stm(t), repeat)
+    resv = taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL, stm=True)
+    phi = resv.stm(t)
+    print(f"  Taylor: order {res.order}, {res.n_steps} step(s) of "
+          f"{np.round(np.abs(res.step_sizes_s), 1).tolist()} s")
+    print(f"  Taylor state          {fmt_t(t_state)}  (target <= 1 ms)  max |dr| vs {ref_name} "
+          f"{pos_err(st, ref):.1e} m, |dv| {np.abs(st[:, 3:] - ref[:, 3:]).max():.1e} m/s")
+    print(f"  Taylor state + STM    {fmt_t(t_stm)}  (target <= 2 ms)  max |det Phi - 1| "
+          f"{np.abs(np.linalg.det(phi) - 1.0).max():.1e}")
+    rtol, sol = tune_dop853(fun, LEO, PASS_S, t, ref)
+    t_dop = median_time(lambda: dop853(fun, LEO, PASS_S, t, rtol, rtol), repeat)
+    print(f"  DOP853 @1 mm          {fmt_t(t_dop)}  rtol {rtol:g} (atol rtol*1 m), nfev "
+          f"{sol.nfev}, err {pos_err(sol.y.T, ref):.1e} m;  {ratio_line('DOP853', t_dop, t_state)}"
+          f"  [target Taylor >= 3x faster]")
+    sol13 = dop853(fun, LEO, PASS_S, t, 1e-13, 1e-9)
+    t_dop13 = median_time(lambda: dop853(fun, LEO, PASS_S, t, 1e-13, 1e-9), repeat)
+    print(f"  DOP853 rtol 1e-13     {fmt_t(t_dop13)}  nfev {sol13.nfev};  "
+          f"{ratio_line('DOP853', t_dop13, t_state)}")
+    y0 = np.concatenate([LEO, np.eye(6).ravel()])
+    vf = rhs_var(force)
+    solv = dop853(vf, y0, PASS_S, t, rtol, rtol)
+    t_dopv = median_time(lambda: dop853(vf, y0, PASS_S, t, rtol, rtol), repeat)
+    phi_dop = solv.y.T[:, 6:].reshape(-1, 6, 6)
+    rel = (np.linalg.norm(phi - phi_dop, axis=-2) / np.linalg.norm(phi, axis=-2)).max()
+    print(f"  DOP853 42 var. eqs    {fmt_t(t_dopv)}  same rtol, STM column rel. diff. "
+          f"{rel:.0e};  {ratio_line('DOP853', t_dopv, t_stm)}")
+    if have_heyoka:
+        import heyoka as hy
+        ta = hy.taylor_adaptive(heyoka_system(force), LEO.tolist(), tol=TOL)
+        run = heyoka_grid(ta, LEO, t)
+        out = run()
+        t_hy = median_time(run, repeat)
+        print(f"  heyoka state          {fmt_t(t_hy)}  order {ta.order}, max |dr| vs Taylor "
+              f"{pos_err(out[-1], st):.1e} m;  {ratio_line('heyoka', t_hy, t_state)}")
+        tv = hy.taylor_adaptive(hy.var_ode_sys(heyoka_system(force), hy.var_args.vars,
+                                               order=1), LEO.tolist(), tol=TOL)
+        run = heyoka_grid(tv, tv.state.copy(), t)
+        outv = run()
+        t_hyv = median_time(run, repeat)
+        phi_hy = outv[-1][:, 6:].reshape(-1, 6, 6)
+        rel = (np.linalg.norm(phi - phi_hy, axis=-2) / np.linalg.norm(phi, axis=-2)).max()
+        print(f"  heyoka + var. eqs     {fmt_t(t_hyv)}  STM column rel. diff. vs Taylor "
+              f"{rel:.0e};  {ratio_line('heyoka', t_hyv, t_stm)}")
+
+
+def section_day(force, have_heyoka, repeat):
+    t = np.linspace(0.0, DAY_S, 1441)
+    fun = rhs_j2 if force == "j2" else rhs_two_body
+    print(f"\n== one day of LEO, 1441 samples, {force}, tol {TOL:g} ==")
+    res = taylor.propagate(LEO, 0.0, DAY_S, force=force, tol=TOL)
+    st = res.state(t)
+    t_tay = median_time(lambda: taylor.propagate(LEO, 0.0, DAY_S, force=force,
+                                                 tol=TOL).state(t), 5)
+    if force == "two-body":
+        ref = kepler.propagate(LEO, t)
+        print(f"  Taylor                {fmt_t(t_tay)}  {res.n_steps} steps; max |dr| vs Kepler "
+              f"{pos_err(st, ref):.1e} m (target <= 1 mm)")
+    else:
+        ref = dop853(fun, LEO, DAY_S, t, 1e-13, 1e-9).y.T
+        print(f"  Taylor                {fmt_t(t_tay)}  {res.n_steps} steps; max |dr| vs DOP853 "
+              f"rtol 1e-13 {pos_err(st, ref):.1e} m (target <= 1 cm)")
+    rtol, sol = tune_dop853(fun, LEO, DAY_S, t, ref)
+    if rtol is None:
+        print("  DOP853 cannot reach 1 mm over the day at rtol >= 1e-13")
+    else:
+        t_dop = median_time(lambda: dop853(fun, LEO, DAY_S, t, rtol, rtol), 5)
+        print(f"  DOP853 @1 mm          {fmt_t(t_dop)}  rtol {rtol:g}, nfev {sol.nfev};  "
+              f"{ratio_line('DOP853', t_dop, t_tay)}")
+    if have_heyoka:
+        import heyoka as hy
+        ta = hy.taylor_adaptive(heyoka_system(force), LEO.tolist(), tol=TOL)
+        run = heyoka_grid(ta, LEO, t)
+        out = run()
+        t_hy = median_time(run, 5)
+        print(f"  heyoka                {fmt_t(t_hy)}  max |dr| vs Taylor {pos_err(out[-1], st):.1e}"
+              f" m;  {ratio_line('heyoka', t_hy, t_tay)}")
+
+
+def section_batch(have_heyoka, repeat, n=BATCH):
+    force = "j2"
+    t = np.linspace(0.0, PASS_S, N_SAMPLES)
+    rng = np.random.default_rng(2024)
+    batch = LEO + rng.normal(size=(n, 6)) * np.array([1e3] * 3 + [1.0] * 3)
+    work = n * N_SAMPLES
+    print(f"\n== batch of {n} perturbed orbits (1 km, 1 m/s), {PASS_S:.0f} s pass, "
+          f"{N_SAMPLES} samples, {force}, tol {TOL:g} ==")
+    res = taylor.propagate(batch, 0.0, PASS_S, force=force, tol=TOL)
+    st = res.state(t)
+    t_state = median_time(lambda: taylor.propagate(batch, 0.0, PASS_S, force=force,
+                                                   tol=TOL).state(t), repeat)
+    print(f"  Taylor state          {fmt_t(t_state)}  {work / t_state:.2e} traj*samples/s "
+          f"(target >= 1e7); {res.n_steps} common step(s)")
+    t_stm = median_time(lambda: taylor.propagate(batch, 0.0, PASS_S, force=force, tol=TOL,
+                                                 stm=True).stm(t), 5)
+    phi = taylor.propagate(batch, 0.0, PASS_S, force=force, tol=TOL, stm=True).stm(t)
+    print(f"  Taylor state + STM    {fmt_t(t_stm)}  {work / t_stm:.2e} traj*samples/s "
+          f"(target >= 2e6); output {phi.nbytes / 1e6:.0f} MB")
+    idx = [0, n // 2, n - 1]
+    err = max(pos_err(st[i], taylor.propagate(batch[i], 0.0, PASS_S, force=force, tol=TOL)
+                      .state(t)) for i in idx)
+    print(f"  max |dr| of 3 batch members vs their single runs: {err:.1e} m")
+    fun = rhs_batch(force)
+    y0 = batch.ravel()
+    for rtol in (1e-8, 3e-9, 1e-9, 3e-10, 1e-10, 3e-11, 1e-11):
+        sol = dop853(fun, y0, PASS_S, t, rtol, rtol)
+        ys = sol.y.T.reshape(N_SAMPLES, n, 6).transpose(1, 0, 2)
+        if max(pos_err(ys[i], st[i]) for i in idx) <= 1e-3:
+            t_dop = median_time(lambda: dop853(fun, y0, PASS_S, t, rtol, rtol), 5)
+            print(f"  DOP853 stacked 6n-dim {fmt_t(t_dop)}  @1 mm: rtol {rtol:g}, "
+                  f"{work / t_dop:.2e} traj*samples/s;  {ratio_line('DOP853', t_dop, t_state)}")
+            vfun = rhs_batch_var(force, n)
+            yv = np.concatenate([y0, np.tile(np.eye(6).ravel(), n)])
+            t_dopv = median_time(lambda: dop853(vfun, yv, PASS_S, t, rtol, rtol), 5)
+            print(f"  DOP853 stacked 42n var{fmt_t(t_dopv)}  same rtol, "
+                  f"{work / t_dopv:.2e} traj*samples/s;  {ratio_line('DOP853', t_dopv, t_stm)}")
+            break
+    if have_heyoka:
+        import heyoka as hy
+        bs = hy.recommended_simd_size()
+        grid = np.repeat(t[:, None], bs, axis=1)
+
+        def make_run(tb, y, out_dim):
+            def run():
+                out = np.empty((n, N_SAMPLES, out_dim))
+                for i in range(0, n - n % bs, bs):
+                    tb.set_time(0.0)
+                    tb.state[:] = y[i:i + bs].T
+                    out[i:i + bs] = np.transpose(tb.propagate_grid(grid)[-1], (2, 0, 1))
+                return out
+            return run
+        tb = hy.taylor_adaptive_batch(heyoka_system(force), np.ascontiguousarray(batch[:bs].T),
+                                      tol=TOL)
+        run = make_run(tb, batch, 6)
+        out = run()
+        t_hy = median_time(run, 5)
+        print(f"  heyoka SIMD batch {bs}   {fmt_t(t_hy)}  {work / t_hy:.2e} traj*samples/s, "
+              f"max |dr| vs Taylor {max(pos_err(out[i], st[i]) for i in idx[:2]):.1e} m;  "
+              f"{ratio_line('heyoka', t_hy, t_state)}")
+        yv = np.concatenate([batch, np.tile(np.eye(6).ravel(), (n, 1))], axis=1)
+        tbv = hy.taylor_adaptive_batch(
+            hy.var_ode_sys(heyoka_system(force), hy.var_args.vars, order=1),
+            np.ascontiguousarray(yv[:bs].T), tol=TOL)
+        run = make_run(tbv, yv, 42)
+        run()
+        t_hyv = median_time(run, 5)
+        print(f"  heyoka SIMD var. eqs  {fmt_t(t_hyv)}  {work / t_hyv:.2e} traj*samples/s;  "
+              f"{ratio_line('heyoka', t_hyv, t_stm)}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--quick", action="store_true", help="5 repeats instead of 9, no day runs")
+    args = ap.parse_args(argv)
+    repeat = 5 if args.quick else 9
+    try:
+        import heyoka  # noqa: F401
+        have_heyoka = True
+        hv = getattr(heyoka, "__version__", "?")
+    except ImportError:
+        have_heyoka = False
+    import scipy
+    print(f"python {sys.version.split()[0]}, numpy {np.__version__}, scipy {scipy.__version__}, "
+          + (f"heyoka {hv}" if have_heyoka else "heyoka: not installed"))
+    print(f"Taylor default order at tol {TOL:g}: {taylor.default_order(TOL)}; "
+          f"median of {repeat} runs per figure")
+    _check_gravity_gradient()
+    section_import(repeat=5)
+    for force in ("two-body", "j2"):
+        section_pass(force, have_heyoka, repeat)
+    if not args.quick:
+        for force in ("two-body", "j2"):
+            section_day(force, have_heyoka, repeat)
+    section_batch(have_heyoka, repeat)
+
+
+if __name__ == "__main__":
+    main()

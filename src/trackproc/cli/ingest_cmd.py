@@ -1,0 +1,103 @@
+"""``trackproc ingest``: raw tracking files -> the canonical pass table."""
+
+from __future__ import annotations
+
+import logging
+from enum import Enum
+from typing import List, Optional
+
+import typer
+
+from trackproc.cli.app import app
+from trackproc.cli.common import DopplerMode, OutputOpt, TableFormat, resolve_output, table_format_for
+
+log = logging.getLogger("trackproc")
+
+
+class TdmTwoWayRange(str, Enum):
+    one_way_equivalent = "one-way-equivalent"
+    round_trip = "round-trip"
+
+
+class Layout(str, Enum):
+    auto = "auto"
+    wide = "wide"
+    long = "long"
+    doptrack = "doptrack"
+    aer = "aer"
+    tdm = "tdm"
+
+
+@app.command("ingest")
+def ingest_command(
+    inputs: List[str] = typer.Argument(..., metavar="INPUT",
+                                       help="CSV, Parquet, Arrow IPC, DopTrack CSV, Orekit .aer or CCSDS TDM; - for stdin."),
+    stations: Optional[str] = typer.Option(
+        None, "--stations", metavar="STATIONS.csv",
+        help="Stations table: station, lat_deg, lon_deg, height_m [, range_bias_m]. "
+             "Optional when every input defines its stations (DopTrack sidecar, pass files)."),
+    carrier_hz: Optional[float] = typer.Option(
+        None, "--carrier-hz", metavar="F",
+        help="Nominal carrier frequency, Hz (required with Doppler samples unless the input gives it)."),
+    mode: Optional[DopplerMode] = typer.Option(
+        None, "--mode", help="Doppler link: one-way or two-way (required with Doppler samples)."),
+    max_gap: float = typer.Option(300.0, "--max-gap", metavar="S",
+                                  help="Start a new pass after a gap longer than S seconds."),
+    layout: Layout = typer.Option(Layout.auto, "--layout", help="Input layout (auto: detected)."),
+    sidecar: Optional[str] = typer.Option(None, "--sidecar", metavar="FILE",
+                                          help="DopTrack YAML sidecar (default: ../metadata/<name>.yml)."),
+    tdm_two_way_range: TdmTwoWayRange = typer.Option(
+        TdmTwoWayRange.one_way_equivalent, "--tdm-two-way-range",
+        help="How a CCSDS TDM writes two-way RANGE: one-way-equivalent (as the spec's examples) or round-trip (halved)."),
+    drop_invalid: bool = typer.Option(False, "--drop-invalid",
+                                      help="Drop invalid samples (counts per reason on stderr) instead of failing."),
+    sigma_range_m: float = typer.Option(10.0, "--sigma-range-m", help="Default range sigma, m."),
+    sigma_range_rate_m_s: float = typer.Option(0.1, "--sigma-range-rate-m-s", help="Default range-rate sigma, m/s."),
+    sigma_doppler_hz: float = typer.Option(1.0, "--sigma-doppler-hz", help="Default Doppler sigma, Hz."),
+    sigma_angle_deg: float = typer.Option(0.01, "--sigma-angle-deg", help="Default azimuth/elevation sigma, deg."),
+    fmt: Optional[TableFormat] = typer.Option(
+        None, "--format", help="Output format (default: from the suffix; Arrow stream on stdout)."),
+    output: Optional[str] = OutputOpt,
+) -> None:
+    """Validate raw passes and write the canonical pass table (SI units, UTC, sorted, passes numbered).
+
+    Doppler sign convention: Doppler = received - nominal carrier; range-rate positive when
+    receding (one-way: range_rate = -c*doppler/carrier).
+
+    Example:
+
+        trackproc ingest raw.csv --stations stations.csv --carrier-hz 2.2e9 --mode one-way -o pass.parquet
+
+        cat raw.csv | trackproc ingest - --stations stations.csv | trackproc info -
+    """
+    if inputs.count("-") > 1:
+        raise typer.BadParameter("stdin (-) can be read only once", param_hint="INPUT")
+    if sidecar is not None and len(inputs) > 1:
+        raise typer.BadParameter("--sidecar applies to a single DopTrack input", param_hint="--sidecar")
+    out = resolve_output(output, "output pass file")
+    out_format = table_format_for(out, fmt)
+
+    from trackproc.io.passfile import write_pass_table
+    from trackproc.io.stations import read_stations
+    from trackproc.io.tabular import read_raw
+    from trackproc.pipeline.ingest import IngestOptions, ingest
+
+    table = read_stations(stations) if stations is not None else {}
+    raws = [read_raw(path, layout.value, sidecar=sidecar, carrier_hz=carrier_hz, drop_invalid=drop_invalid,
+                     tdm_two_way_range=tdm_two_way_range.value)
+            for path in inputs]
+    options = IngestOptions(
+        carrier_hz=carrier_hz, doppler_mode=mode.value if mode is not None else None, max_gap_s=max_gap,
+        drop_invalid=drop_invalid, sigma_range_m=sigma_range_m, sigma_range_rate_m_s=sigma_range_rate_m_s,
+        sigma_doppler_hz=sigma_doppler_hz, sigma_angle_deg=sigma_angle_deg)
+    result = ingest(raws, table, options)
+    for warning in result.warnings:
+        log.warning("%s", warning)
+    if result.dropped:
+        log.warning("dropped %d invalid samples: %s", sum(result.dropped.values()),
+                    ", ".join(f"{reason} {n}" for reason, n in result.dropped.items()))
+    write_pass_table(result.table, out, out_format.value)
+    frame = result.table.frame
+    log.info("ingested %d samples, %d pass(es), %d station(s) -> %s (%s)", len(frame),
+             frame["pass_id"].nunique(), frame["station"].nunique(), "stdout" if out == "-" else out,
+             out_format.value)

@@ -1,0 +1,116 @@
+"""``trackproc smooth``: least-squares polynomial smoothing of passes, TCA and carrier estimates."""
+
+from __future__ import annotations
+
+import logging
+from enum import Enum
+from typing import List, Optional
+
+import typer
+
+from trackproc.cli.app import app
+from trackproc.cli.common import OutputOpt, TableFormat, resolve_output, table_format_for
+
+log = logging.getLogger("trackproc")
+
+KIND_NAMES = ("range_rate", "range", "doppler", "elevation", "azimuth")
+
+
+class Basis(str, Enum):
+    chebyshev = "chebyshev"
+    legendre = "legendre"
+
+
+def _degree(text: str):
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        value = int(text)
+    except ValueError:
+        raise typer.BadParameter(f"expected an integer >= 0 or auto, got {text!r}") from None
+    if value < 0:
+        raise typer.BadParameter(f"expected an integer >= 0 or auto, got {value}")
+    return value
+
+
+@app.command("smooth")
+def smooth_command(
+    input: str = typer.Argument(..., metavar="PASS", help="Canonical pass file (Parquet, Arrow, CSV), or - for stdin."),
+    degree: str = typer.Option("auto", "--degree", metavar="N|auto",
+                               help="Polynomial degree, or auto: minimum BIC over 0..--max-degree."),
+    max_degree: int = typer.Option(30, "--max-degree", metavar="N", min=0, help="Largest degree --degree auto tries."),
+    basis: Basis = typer.Option(Basis.chebyshev, "--basis", help="Basis on the pass interval mapped to [-1, 1]."),
+    clip: float = typer.Option(4.0, "--clip", metavar="K",
+                               help="Reject samples beyond K robust sigmas (iterated; flagged, not dropped). 0: off."),
+    kinds: Optional[List[str]] = typer.Option(
+        None, "--kinds", metavar="KIND[,KIND]",
+        help="Kinds to fit (range_rate, range, doppler, elevation, azimuth); default: all present."),
+    grid: Optional[float] = typer.Option(
+        None, "--grid", metavar="STEP",
+        help="Write the fitted curve every STEP seconds (value = curve, sigma = its 1-sigma) instead of the samples."),
+    tca_max_gap: float = typer.Option(
+        30.0, "--tca-max-gap", metavar="S",
+        help="A TCA inside a data gap longer than S s, or within S s of either end of the data, is 'not observed'."),
+    summary: Optional[str] = typer.Option(None, "--summary", metavar="SUMMARY.json",
+                                          help="JSON summary per pass and kind (- for stdout when -o is a file)."),
+    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
+                                       help="Plot data, fit and residuals (needs matplotlib: trackproc[plot])."),
+    fmt: Optional[TableFormat] = typer.Option(
+        None, "--format", help="Output format (default: from the suffix; Arrow stream on stdout)."),
+    output: Optional[str] = OutputOpt,
+) -> None:
+    """Fit each pass (station, pass_id, kind) by weighted least squares with a generalized polynomial
+    (seed 004 eq. 1) and add the columns smoothed, residual and flag (true = not used by the fit).
+
+    For range-rate and Doppler passes the summary gives the time of closest approach with its
+    standard error, and for one-way Doppler the carrier at closest approach (fca_hz).
+
+    Exit status: 0 when at least one pass was fitted (failed passes are reported on stderr and in
+    the summary with status "failed"); 1 when none could be fitted; 2 for invalid input or options.
+
+    Example:
+
+        trackproc smooth pass.parquet --summary smooth.json -o smooth.parquet
+
+        trackproc ingest raw.csv --stations st.csv | trackproc smooth - --grid 1 --plot pass.png > curve.parquet
+    """
+    degree_value = _degree(degree)
+    kind_list = [k.strip() for item in (kinds or []) for k in item.split(",") if k.strip()]
+    bad = [k for k in kind_list if k not in KIND_NAMES]
+    if bad:
+        raise typer.BadParameter(f"unknown kind {', '.join(bad)}; expected {', '.join(KIND_NAMES)}",
+                                 param_hint="--kinds")
+    if plot == "-":
+        raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
+    out = resolve_output(output, "output pass file")
+    if summary == "-" and out == "-":
+        raise typer.BadParameter("stdout already carries the table; give --summary a file, or -o a file",
+                                 param_hint="--summary")
+    out_format = table_format_for(out, fmt)
+
+    from trackproc.io.atomic import is_stdio, write_bytes, write_text
+    from trackproc.io.passfile import read_pass_table, write_pass_table
+    from trackproc.pipeline.smooth import SmoothOptions, plot_bytes, require_matplotlib, smooth, summary_json
+
+    if plot is not None:
+        require_matplotlib()
+    table = read_pass_table(input)
+    options = SmoothOptions(degree=degree_value, clip=clip if clip > 0 else None, kinds=kind_list or None,
+                            basis=basis.value, max_degree=max_degree, grid_step_s=grid, tca_max_gap_s=tca_max_gap)
+    result = smooth(table, options, source="<stdin>" if is_stdio(input) else input)
+
+    for f in result.fits:
+        if f.status == "failed":
+            log.warning("%s: failed: %s", f.label, f.error)
+        elif f.status == "suspect":
+            detail = f"; {f.tca_error}" if f.tca_error else ""
+            log.warning("%s: suspect (%s)%s", f.label, ", ".join(f.warnings), detail)
+    png = plot_bytes(result) if plot is not None else None
+    write_pass_table(result.table, out, out_format.value)
+    if summary is not None:
+        write_text(summary, summary_json(result.summary))
+    if png is not None:
+        write_bytes(plot, png)
+    counts = result.summary["counts"]
+    log.info("%d fits: %d ok, %d suspect, %d failed -> %s (%s)", counts["fits"], counts["ok"], counts["suspect"],
+             counts["failed"], "stdout" if out == "-" else out, out_format.value)

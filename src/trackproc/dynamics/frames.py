@@ -1,0 +1,274 @@
+"""Reference frames: GCRF <-> ITRF (IAU 2006/2000A, CIO based, via ERFA), EME2000, TEME,
+and the quasi-inertial frame used inside the propagator.
+
+Conventions: rotation matrices act on column vectors, ``r_to = M @ r_from``; arrays of
+vectors have shape ``(N, 3)`` and matrices ``(N, 3, 3)``. Times are UTC two-part JDs.
+
+GCRF -> ITRF is ``W(xp, yp, s') · R3(ERA(UT1)) · Q(TT)`` where ``Q`` is the GCRS->CIRS
+matrix (bias, precession, nutation and the CIO locator, ``erfa.c2i06a``), ``R3(ERA)`` the
+Earth rotation and ``W`` polar motion (``erfa.pom00``). Velocities are the exact time
+derivative of the position transform: the ``-ω × r`` term of the Earth rotation (``ω`` the
+rate of the Earth Rotation Angle per SI second, including the UT1 rate of a tabulated EOP,
+i.e. the length-of-day excess) plus the slow rates ``dQ/dt`` and ``dW/dt`` of
+precession-nutation and polar motion. Those slow terms are small (of order 1e-5 m/s at the
+Earth's surface: 1.1e-5 m/s for a station on 2026-03-20, 1.7e-5 m/s with a 1.5 ms
+length-of-day excess) but a range-rate model checked against a numerical derivative of the
+light-time range at 1e-6 m/s needs them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import erfa
+import numpy as np
+
+from trackproc.dynamics import timescales as ts
+
+#: Rate of the Earth Rotation Angle, rad per UT1 second (IERS Conventions 2010 eq. 5.15).
+OMEGA_ERA = 2.0 * np.pi * 1.00273781191135448 / ts.DAY_S
+
+
+def _r3(angle) -> np.ndarray:
+    """Frame rotation about z by ``angle`` (ERFA ``rz`` convention), shape (..., 3, 3)."""
+    c, s = np.cos(angle), np.sin(angle)
+    z, o = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([c, s, z], -1), np.stack([-s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def _omega_cross(r, omega=OMEGA_ERA) -> np.ndarray:
+    """``ω ẑ × r`` for the Earth Rotation Angle rate ``omega`` (rad/s, scalar or per date)."""
+    r = np.asarray(r, float)
+    omega = np.asarray(omega, float)[..., None]
+    return omega * np.stack([-r[..., 1], r[..., 0], np.zeros_like(r[..., 0])], -1)
+
+
+def _mv(m, v):
+    return np.einsum("...ij,...j->...i", m, v)
+
+
+def _mtv(m, v):
+    return np.einsum("...ji,...j->...i", m, v)
+
+
+@dataclass(frozen=True)
+class EarthRotation:
+    """The three factors of GCRF -> ITRF at a set of UTC dates (all arrays along the dates),
+    and their rates per SI second (for velocities)."""
+
+    q: np.ndarray      # GCRS -> CIRS (bias-precession-nutation), (N, 3, 3)
+    era: np.ndarray    # Earth Rotation Angle, rad, (N,)
+    w: np.ndarray      # TIRS -> ITRS (polar motion), (N, 3, 3)
+    q_dot: np.ndarray | None = None     # dQ/dt, 1/s, (N, 3, 3)
+    era_rate: np.ndarray | None = None  # dERA/dt, rad/s, (N,)
+    w_dot: np.ndarray | None = None     # dW/dt, 1/s, (N, 3, 3)
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """Full GCRF -> ITRF rotation, (N, 3, 3)."""
+        return self.w @ _r3(self.era) @ self.q
+
+    @property
+    def omega(self) -> np.ndarray:
+        """Earth Rotation Angle rate per SI second (OMEGA_ERA when no rates were computed)."""
+        return self.era_rate if self.era_rate is not None else np.full(np.shape(self.era), OMEGA_ERA)
+
+
+#: Spacing of the grid on which dQ/dt is differenced (days); see :func:`_q_rate`.
+_Q_RATE_GRID_D = 1.0 / 24.0
+#: Half-width of the central differences of polar motion and UT1 (s).
+_RATE_DELTA_S = 60.0
+
+
+def _q_rate(tt1, tt2) -> np.ndarray:
+    """dQ/dt (per SI second) of the GCRS -> CIRS matrix at TT two-part JDs.
+
+    Q varies on time scales of days (its fastest sizeable nutation term has a period of
+    13.66 d), so its derivative is differenced on an hourly grid (midpoint differences,
+    relative error ~2e-5) and interpolated linearly to the dates (relative error ~5e-5):
+    one ``c2i06a`` per hour of span instead of two per date. For few dates the central
+    difference is taken at each date directly (±60 s).
+    """
+    t = (np.asarray(tt1, float) - 2451545.0) + np.asarray(tt2, float)
+    step = _Q_RATE_GRID_D
+    lo = np.floor(t.min() / step) * step - step
+    hi = np.ceil(t.max() / step) * step + step
+    n_grid = int(round((hi - lo) / step)) + 1
+    if 2 * t.size <= n_grid:
+        d = _RATE_DELTA_S / ts.DAY_S
+        qp = np.asarray(erfa.c2i06a(2451545.0, t + d))
+        qm = np.asarray(erfa.c2i06a(2451545.0, t - d))
+        return (qp - qm) / (2.0 * _RATE_DELTA_S)
+    nodes = lo + step * np.arange(n_grid)
+    qn = np.asarray(erfa.c2i06a(2451545.0, nodes))
+    mid = 0.5 * (nodes[1:] + nodes[:-1])
+    dq = (qn[1:] - qn[:-1]).reshape(-1, 9) / (step * ts.DAY_S)
+    out = np.stack([np.interp(t, mid, dq[:, k]) for k in range(9)], -1)
+    return out.reshape(t.shape + (3, 3))
+
+
+def earth_rotation(jd1, jd2, eop: ts.EarthOrientation | None = None, rates: bool = True) -> EarthRotation:
+    """Earth orientation factors at UTC two-part JDs (IAU 2006/2000A, CIO based).
+
+    With ``rates`` (the default) also their time derivatives per SI second: ``dQ/dt`` (see
+    :func:`_q_rate`), the ERA rate ``OMEGA_ERA * (1 + d(UT1-TAI)/dt)`` (the UT1 rate of a
+    tabulated EOP; zero excess for a constant UT1-UTC) and ``dW/dt`` by central differences
+    of polar motion and s' over ±60 s.
+    """
+    eop = eop or ts.EarthOrientation()
+    jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
+    tt1, tt2 = ts.utc_to_tt(jd1, jd2)
+    dut1, xp, yp = eop.at(jd1, jd2)
+    u1, u2 = ts.utc_to_ut1(jd1, jd2, dut1)
+    q = erfa.c2i06a(tt1, tt2)
+    era = erfa.era00(u1, u2)
+    w = erfa.pom00(xp, yp, erfa.sp00(tt1, tt2))
+    if not rates:
+        return EarthRotation(q=np.asarray(q), era=np.asarray(era), w=np.asarray(w))
+    d = _RATE_DELTA_S / ts.DAY_S
+    _, xpp, ypp = eop.at(jd1, jd2 + d)
+    _, xpm, ypm = eop.at(jd1, jd2 - d)
+    w_dot = (np.asarray(erfa.pom00(xpp, ypp, erfa.sp00(tt1, tt2 + d)))
+             - np.asarray(erfa.pom00(xpm, ypm, erfa.sp00(tt1, tt2 - d)))) / (2.0 * _RATE_DELTA_S)
+    if eop.tabulated:
+        mjd = jd1 - 2400000.5 + jd2
+        ut1_tai = [np.interp(mjd + k * d, eop.mjd, eop.ut1_minus_tai_s) for k in (1, -1)]
+        era_rate = OMEGA_ERA * (1.0 + (ut1_tai[0] - ut1_tai[1]) / (2.0 * _RATE_DELTA_S))
+    else:
+        era_rate = np.full(jd1.shape, OMEGA_ERA)
+    return EarthRotation(q=np.asarray(q), era=np.asarray(era), w=np.asarray(w),
+                         q_dot=_q_rate(tt1, tt2), era_rate=era_rate, w_dot=w_dot)
+
+
+def gcrf_to_itrf(r, v, jd1, jd2, eop=None, *, rotation: EarthRotation | None = None):
+    """Position (m) and velocity (m/s) from GCRF to ITRF at UTC two-part JDs.
+
+    ``r``, ``v`` have shape (N, 3) for N dates, (3,) for one, or (..., N, 3) to transform
+    several points (e.g. stations) at the same N dates. ``rotation`` (from
+    :func:`earth_rotation` at these dates, with rates) saves recomputing it.
+    """
+    rot = rotation if rotation is not None else earth_rotation(jd1, jd2, eop)
+    r, v = np.atleast_2d(r), np.atleast_2d(v)
+    r3 = _r3(rot.era)
+    r_cirs = _mv(rot.q, r)
+    v_cirs = _mv(rot.q, v) + _mv(rot.q_dot, r)
+    r_tirs = _mv(r3, r_cirs)
+    v_tirs = _mv(r3, v_cirs) - _omega_cross(r_tirs, rot.omega)
+    return _mv(rot.w, r_tirs), _mv(rot.w, v_tirs) + _mv(rot.w_dot, r_tirs)
+
+
+def itrf_to_gcrf(r, v, jd1, jd2, eop=None, *, rotation: EarthRotation | None = None):
+    """Position (m) and velocity (m/s) from ITRF to GCRF at UTC two-part JDs (shapes as
+    :func:`gcrf_to_itrf`)."""
+    rot = rotation if rotation is not None else earth_rotation(jd1, jd2, eop)
+    r, v = np.atleast_2d(r), np.atleast_2d(v)
+    r3 = _r3(rot.era)
+    r_tirs = _mtv(rot.w, r)
+    v_tirs = _mtv(rot.w, v - _mv(rot.w_dot, r_tirs))
+    r_cirs = _mtv(r3, r_tirs)
+    v_cirs = _mtv(r3, v_tirs + _omega_cross(r_tirs, rot.omega))
+    r_gcrf = _mtv(rot.q, r_cirs)
+    return r_gcrf, _mtv(rot.q, v_cirs - _mv(rot.q_dot, r_gcrf))
+
+
+def frame_bias_matrix() -> np.ndarray:
+    """GCRS -> mean J2000 (EME2000) frame bias, IAU 2006 (``erfa.bp06`` rb, time independent)."""
+    rb, _, _ = erfa.bp06(2451545.0, 0.0)
+    return np.asarray(rb)
+
+
+def eme2000_to_gcrf(r, v):
+    """EME2000 (mean equator and equinox of J2000) -> GCRF: the frame bias (~23 mas)."""
+    rb = frame_bias_matrix()
+    return _mtv(rb, np.atleast_2d(r)), _mtv(rb, np.atleast_2d(v))
+
+
+def gcrf_to_eme2000(r, v):
+    rb = frame_bias_matrix()
+    return _mv(rb, np.atleast_2d(r)), _mv(rb, np.atleast_2d(v))
+
+
+def teme_to_itrf(r, v, jd1, jd2, eop=None):
+    """TEME (the frame of SGP4 output) -> ITRF: GMST 1982 about z, then polar motion.
+
+    Vallado et al. 2006, "Revisiting Spacetrack Report #3", AIAA 2006-6753, eqs. for TEME -> PEF.
+    """
+    eop = eop or ts.EarthOrientation()
+    jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
+    dut1, xp, yp = eop.at(jd1, jd2)
+    u1, u2 = ts.utc_to_ut1(jd1, jd2, dut1)
+    gmst = erfa.gmst82(u1, u2)
+    r_pef = _mv(_r3(gmst), np.atleast_2d(r))
+    v_pef = _mv(_r3(gmst), np.atleast_2d(v)) - _omega_cross(r_pef)
+    w = np.asarray(erfa.pom00(xp, yp, np.zeros_like(xp)))
+    return _mv(w, r_pef), _mv(w, v_pef)
+
+
+def teme_to_gcrf(r, v, jd1, jd2, eop=None):
+    r_itrf, v_itrf = teme_to_itrf(r, v, jd1, jd2, eop)
+    return itrf_to_gcrf(r_itrf, v_itrf, jd1, jd2, eop)
+
+
+def to_gcrf(frame: str, r, v, jd1, jd2, eop=None):
+    """Convert a state given in ``frame`` (GCRF, EME2000/J2000, TEME, ITRF) to GCRF."""
+    key = frame.strip().upper().replace("-", "").replace("_", "")
+    if key in ("GCRF", "GCRS", "ICRF"):
+        return np.atleast_2d(np.asarray(r, float)), np.atleast_2d(np.asarray(v, float))
+    if key in ("EME2000", "J2000"):
+        return eme2000_to_gcrf(r, v)
+    if key == "TEME":
+        return teme_to_gcrf(r, v, jd1, jd2, eop)
+    if key in ("ITRF", "ITRS", "ECEF", "ECF"):
+        return itrf_to_gcrf(r, v, jd1, jd2, eop)
+    raise ValueError(f"unknown frame {frame!r}; expected GCRF, EME2000, TEME or ITRF")
+
+
+SUPPORTED_FRAMES = ("GCRF", "EME2000", "TEME", "ITRF")
+
+
+@dataclass(frozen=True)
+class QuasiInertialFrame:
+    """The propagator's frame: GCRF rotated by the precession-nutation matrix of a reference epoch.
+
+    In it the Earth's rotation axis is z (so J2 acts about z) and ITRF is reached by a plain
+    rotation through the Earth Rotation Angle, linear in time: ``ERA(t) = era0 + ω t`` with t
+    in SI seconds from the reference epoch (see DESIGN.md). Precession-nutation and polar
+    motion are frozen at the reference epoch: choose it mid-pass; the frozen terms drift by
+    about 0.15 arcsec a day (about 5 m at LEO radius after a day, < 1 cm over a 15-minute pass).
+    """
+
+    ref_jd_utc: tuple
+    q: np.ndarray       # GCRF -> quasi-inertial, (3, 3)
+    w: np.ndarray       # polar motion at the reference epoch, (3, 3)
+    era0: float         # ERA at the reference epoch, rad
+    omega: float = OMEGA_ERA
+
+    @classmethod
+    def at(cls, jd1: float, jd2: float, eop=None) -> "QuasiInertialFrame":
+        rot = earth_rotation(jd1, jd2, eop, rates=False)
+        return cls(ref_jd_utc=(float(np.ravel(jd1)[0]), float(np.ravel(jd2)[0])),
+                   q=rot.q[0], w=rot.w[0], era0=float(rot.era[0]))
+
+    def era(self, t_s):
+        """Earth Rotation Angle (rad) at ``t_s`` seconds after the reference epoch."""
+        return self.era0 + self.omega * np.asarray(t_s, float)
+
+    def from_gcrf(self, r, v):
+        return _mv(self.q, np.asarray(r, float)), _mv(self.q, np.asarray(v, float))
+
+    def to_gcrf(self, r, v):
+        return _mtv(self.q, np.asarray(r, float)), _mtv(self.q, np.asarray(v, float))
+
+    def to_itrf(self, t_s, r, v):
+        """Quasi-inertial -> ITRF at ``t_s`` seconds after the reference epoch."""
+        rot = _r3(self.era(t_s))
+        r_t = _mv(rot, np.asarray(r, float))
+        v_t = _mv(rot, np.asarray(v, float)) - _omega_cross(r_t) * (self.omega / OMEGA_ERA)
+        return _mv(self.w, r_t), _mv(self.w, v_t)
+
+    def station(self, t_s, r_itrf):
+        """Station position (m) and velocity (m/s) in this frame at ``t_s`` seconds after the epoch."""
+        t_s = np.asarray(t_s, float)
+        r_tirs = _mtv(self.w, np.asarray(r_itrf, float))
+        r = _mtv(_r3(self.era(t_s)), np.broadcast_to(r_tirs, t_s.shape + (3,)))
+        return r, _omega_cross(r) * (self.omega / OMEGA_ERA)

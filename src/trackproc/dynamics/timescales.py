@@ -1,0 +1,148 @@
+"""Time scales: UTC <-> TAI <-> TT with leap seconds, UT1 from UTC, Earth orientation data.
+
+Times cross this module as two-part Julian dates ``(jd1, jd2)`` (SOFA/ERFA convention: a
+UTC two-part date is a "quasi-JD" whose day has 86401 s on a leap-second day) or as numpy
+``datetime64[ns]`` arrays of UTC (naive, POSIX-like: no 23:59:60). Leap seconds come from
+ERFA's built-in table (``erfa.dat``), which pyerfa keeps up to date.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import erfa
+import numpy as np
+
+from trackproc.constants import DAY_S
+
+#: Seconds of TT minus TAI (exact, by definition).
+TT_MINUS_TAI_S = 32.184
+
+
+def datetime64_to_jd_utc(t) -> tuple[np.ndarray, np.ndarray]:
+    """UTC datetime64 (any precision, naive = UTC) -> two-part UTC quasi-JD (ERFA dtf2d)."""
+    t = np.asarray(t, dtype="datetime64[ns]")
+    days = t.astype("datetime64[D]")
+    y = days.astype("datetime64[Y]").astype(np.int64) + 1970
+    m = days.astype("datetime64[M]").astype(np.int64) % 12 + 1
+    d = (days - days.astype("datetime64[M]")).astype(np.int64) + 1
+    ns = (t - days).astype(np.int64)
+    hh = ns // 3_600_000_000_000
+    mm = (ns // 60_000_000_000) % 60
+    ss = (ns % 60_000_000_000) / 1e9
+    jd1, jd2 = erfa.dtf2d("UTC", y, m, d, hh, mm, ss)
+    return np.asarray(jd1, float), np.asarray(jd2, float)
+
+
+def jd_utc_to_datetime64(jd1, jd2) -> np.ndarray:
+    """Two-part UTC quasi-JD -> datetime64[ns] (nanosecond rounding; a leap second maps to :59.999...)."""
+    iy, im, id_, ihmsf = erfa.d2dtf("UTC", 9, jd1, jd2)
+    iy, im, id_ = np.asarray(iy), np.asarray(im), np.asarray(id_)
+    ihmsf = np.asarray(ihmsf)
+    h, mi, s, f = ihmsf["h"], ihmsf["m"], ihmsf["s"], ihmsf["f"]
+    s = np.minimum(s, 59)  # 23:59:60 cannot be held in datetime64
+    dates = np.array([f"{a:04d}-{b:02d}-{c:02d}" for a, b, c in
+                      zip(np.atleast_1d(iy), np.atleast_1d(im), np.atleast_1d(id_))],
+                     dtype="datetime64[ns]")
+    out = (dates + np.atleast_1d(h).astype("timedelta64[h]") + np.atleast_1d(mi).astype("timedelta64[m]")
+           + np.atleast_1d(s).astype("timedelta64[s]") + np.atleast_1d(f).astype("timedelta64[ns]"))
+    return out.reshape(np.shape(jd1)) if np.ndim(jd1) else out[0]
+
+
+def utc_to_tai(jd1, jd2):
+    """UTC -> TAI two-part JD (leap seconds from ERFA's table)."""
+    return erfa.utctai(jd1, jd2)
+
+
+def tai_to_utc(jd1, jd2):
+    return erfa.taiutc(jd1, jd2)
+
+
+def utc_to_tt(jd1, jd2):
+    """UTC -> TT two-part JD: TT = TAI + 32.184 s."""
+    return erfa.taitt(*erfa.utctai(jd1, jd2))
+
+
+def tt_to_utc(jd1, jd2):
+    return erfa.taiutc(*erfa.tttai(jd1, jd2))
+
+
+def tai_minus_utc_s(jd1, jd2) -> np.ndarray:
+    """TAI - UTC in seconds (the accumulated leap seconds) at the given UTC dates."""
+    iy, im, id_, fd = erfa.jd2cal(jd1, jd2)
+    return erfa.dat(iy, im, id_, fd)
+
+
+def utc_to_ut1(jd1, jd2, dut1_s):
+    """UTC -> UT1 two-part JD given UT1-UTC (seconds, scalar or per date)."""
+    return erfa.utcut1(jd1, jd2, dut1_s)
+
+
+def seconds_since(t_jd_utc: tuple, ref_jd_utc: tuple) -> np.ndarray:
+    """Elapsed SI seconds (TAI, so leap seconds count) from ``ref`` to ``t``, both UTC two-part JDs."""
+    a1, a2 = utc_to_tai(*t_jd_utc)
+    b1, b2 = utc_to_tai(*ref_jd_utc)
+    return ((np.asarray(a1) - b1) + (np.asarray(a2) - b2)) * DAY_S
+
+
+def add_seconds_utc(ref_jd_utc: tuple, dt_s) -> tuple[np.ndarray, np.ndarray]:
+    """UTC two-part JD of ``ref + dt_s`` SI seconds (through TAI, so leap seconds are honoured)."""
+    b1, b2 = utc_to_tai(*ref_jd_utc)
+    dt_s = np.asarray(dt_s, float)
+    whole = np.floor(dt_s / DAY_S)
+    return tai_to_utc(b1 + whole, b2 + (dt_s - whole * DAY_S) / DAY_S)
+
+
+@dataclass(frozen=True)
+class EarthOrientation:
+    """UT1-UTC and polar motion as functions of UTC MJD (IERS EOP tabulation, or constants).
+
+    Interpolation is linear in UT1-TAI (continuous across leap seconds, unlike UT1-UTC).
+    ``source`` names where the values came from, for the outputs' provenance.
+    """
+
+    mjd: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    ut1_minus_tai_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    xp_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    yp_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    constant_dut1_s: float = 0.0
+    source: str = "none (UT1-UTC = 0, no polar motion)"
+
+    @classmethod
+    def constant(cls, dut1_s: float) -> "EarthOrientation":
+        return cls(constant_dut1_s=float(dut1_s), source=f"constant UT1-UTC = {dut1_s} s, no polar motion")
+
+    @property
+    def tabulated(self) -> bool:
+        return self.mjd.size > 0
+
+    def covers(self, jd1, jd2) -> bool:
+        """True when every date lies inside the tabulated span (always true for constants)."""
+        if not self.tabulated:
+            return True
+        mjd = np.asarray(jd1) - 2400000.5 + np.asarray(jd2)
+        return bool(np.all((mjd >= self.mjd[0]) & (mjd <= self.mjd[-1])))
+
+    def at(self, jd1, jd2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(UT1-UTC s, xp rad, yp rad) at UTC two-part JDs; clamped at the table's ends."""
+        jd1, jd2 = np.broadcast_arrays(np.asarray(jd1, float), np.asarray(jd2, float))
+        if not self.tabulated:
+            z = np.zeros(jd1.shape)
+            return z + self.constant_dut1_s, z, z
+        mjd = jd1 - 2400000.5 + jd2
+        ut1_tai = np.interp(mjd, self.mjd, self.ut1_minus_tai_s)
+        dut1 = ut1_tai + tai_minus_utc_s(jd1, jd2)
+        return dut1, np.interp(mjd, self.mjd, self.xp_rad), np.interp(mjd, self.mjd, self.yp_rad)
+
+
+def eop_from_table(mjd, dut1_s, xp_arcsec, yp_arcsec, source: str) -> EarthOrientation:
+    """Build :class:`EarthOrientation` from IERS columns (UT1-UTC in s, polar motion in arcsec)."""
+    mjd = np.asarray(mjd, float)
+    order = np.argsort(mjd)
+    mjd = mjd[order]
+    day = np.floor(mjd)
+    tai_utc = tai_minus_utc_s(day + 2400000.5, mjd - day)
+    as2r = np.pi / (180 * 3600)
+    return EarthOrientation(mjd=mjd, ut1_minus_tai_s=np.asarray(dut1_s, float)[order] - tai_utc,
+                            xp_rad=np.asarray(xp_arcsec, float)[order] * as2r,
+                            yp_rad=np.asarray(yp_arcsec, float)[order] * as2r, source=source)

@@ -1,0 +1,245 @@
+"""The canonical pass table: one row per sample, SI units, with provenance in the metadata.
+
+Columns (in this order; later commands may append their own, e.g. smoothed/residual/flag):
+
+=======  =====================  =================================================
+column   type                   meaning
+=======  =====================  =================================================
+time     timestamp[ns, UTC]     reception time, UTC (ISO 8601 with Z in CSV)
+station  string                 station name (see ``meta["stations"]``)
+pass_id  string                 pass identifier, e.g. ``ZHY-001``
+kind     string                 range | range_rate | doppler | elevation | azimuth
+value    float64                m | m/s | Hz | rad | rad (see :data:`KIND_UNITS`)
+sigma    float64                1-sigma, same unit as value, > 0
+=======  =====================  =================================================
+
+Rows are sorted by station, then time, then kind. The metadata (a JSON object under the key
+``trackproc`` of the Arrow/Parquet schema metadata; the first line ``# trackproc: {...}`` of a
+CSV) holds ``schema_version``, ``units``, ``time_scale`` ("UTC"), ``carrier_hz``,
+``doppler_mode`` (one-way | two-way), ``doppler_sign_convention``, ``sources``, ``stations``
+(name -> {lat_deg, lon_deg, height_m[, range_bias_m]}) and ``trackproc_version``.
+
+Sign convention: range-rate is positive when the range grows (receding); Doppler = received −
+nominal carrier frequency, so range_rate ≈ −c·doppler/carrier one-way and
+range_rate ≈ −c·doppler/(2·carrier) two-way.
+
+Formats: Parquet (files), Arrow IPC stream (pipes: ``-``), CSV (for people; values in SI).
+Written bytes depend only on the table and the metadata: the same input gives the same file.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+
+from trackproc.errors import InputError
+from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
+from trackproc.io.raw import KIND_UNITS
+from trackproc.io.tabular import (CSV_META_PREFIX, META_KEY, Problems, column_numbers, column_strings,
+                                  column_times, source_table)
+
+SCHEMA_VERSION = 1
+COLUMNS = ("time", "station", "pass_id", "kind", "value", "sigma")
+KINDS = tuple(KIND_UNITS)
+FORMATS = ("parquet", "arrow", "csv")
+SIGN_CONVENTION = (
+    "doppler = received - nominal carrier frequency (Hz); range_rate > 0 when receding; "
+    "one-way: range_rate = -c*doppler/carrier_hz, two-way: range_rate = -c*doppler/(2*carrier_hz) "
+    "(first order)"
+)
+
+
+@dataclass
+class PassTable:
+    """Canonical samples (``frame``, columns :data:`COLUMNS` first) and file metadata (``meta``)."""
+
+    frame: pd.DataFrame
+    meta: dict = field(default_factory=dict)
+
+    def stations(self) -> dict:
+        """Stations recorded at ingest, name -> :class:`trackproc.io.stations.Station`."""
+        from trackproc.io.stations import Station
+
+        return {name: Station.from_dict(name, values)
+                for name, values in (self.meta.get("stations") or {}).items()}
+
+
+def base_meta(**extra) -> dict:
+    """Metadata fields every pass file carries, updated with ``extra``."""
+    from trackproc import __version__
+
+    meta = {
+        "schema_version": SCHEMA_VERSION,
+        "time_scale": "UTC",
+        "units": dict(KIND_UNITS),
+        "doppler_sign_convention": SIGN_CONVENTION,
+        "trackproc_version": __version__,
+    }
+    meta.update(extra)
+    return meta
+
+
+def meta_json(meta: dict) -> str:
+    """Deterministic JSON of the metadata (sorted keys, no NaN)."""
+    return json.dumps(meta, sort_keys=True, separators=(",", ":"), allow_nan=False, default=_json_default)
+
+
+def _json_default(value):
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+# --------------------------------------------------------------------------- writing
+
+
+def to_arrow(table: PassTable) -> pa.Table:
+    """The table as Arrow, canonical types, metadata under ``trackproc`` (no pandas metadata)."""
+    frame = table.frame
+    missing = [c for c in COLUMNS if c not in frame.columns]
+    if missing:
+        raise ValueError(f"pass table lacks columns {missing}")
+    times = frame["time"]
+    if getattr(times.dt, "tz", None) is None:
+        times = times.dt.tz_localize("UTC")
+    arrays = [
+        pa.array(times.dt.tz_convert("UTC").dt.as_unit("ns").dt.tz_localize(None).to_numpy(),
+                 pa.timestamp("ns")).cast(pa.timestamp("ns", tz="UTC")),
+        *(pa.array(frame[c].astype(object).to_numpy(), pa.string()) for c in ("station", "pass_id", "kind")),
+        *(pa.array(frame[c].to_numpy(dtype=np.float64), pa.float64()) for c in ("value", "sigma")),
+    ]
+    fields = [pa.field("time", pa.timestamp("ns", tz="UTC"), nullable=False),
+              pa.field("station", pa.string(), nullable=False),
+              pa.field("pass_id", pa.string(), nullable=False),
+              pa.field("kind", pa.string(), nullable=False),
+              pa.field("value", pa.float64(), nullable=False),
+              pa.field("sigma", pa.float64(), nullable=False)]
+    for name in frame.columns:
+        if name not in COLUMNS:
+            array = pa.array(frame[name], from_pandas=True)
+            arrays.append(array)
+            fields.append(pa.field(str(name), array.type))
+    schema = pa.schema(fields, metadata={META_KEY: meta_json(table.meta).encode()})
+    return pa.Table.from_arrays(arrays, schema=schema)
+
+
+def iso_times(times: pd.Series) -> np.ndarray:
+    """UTC timestamps as ISO 8601 strings with ``Z``, at the coarsest exact precision (s..ns)."""
+    ns = times.dt.tz_convert("UTC").dt.tz_localize(None).dt.as_unit("ns").to_numpy()
+    ints = ns.astype(np.int64)
+    unit = "ns"
+    for candidate, step in (("s", 10**9), ("ms", 10**6), ("us", 10**3)):
+        if np.all(ints % step == 0):
+            unit = candidate
+            break
+    return np.char.add(np.datetime_as_string(ns, unit=unit), "Z")
+
+
+def _csv_cell(value) -> str:
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value))
+    return "" if value is None else str(value)
+
+
+def pass_table_bytes(table: PassTable, fmt: str = "parquet") -> bytes:
+    """The encoded file: ``parquet``, ``arrow`` (IPC stream) or ``csv``."""
+    fmt = getattr(fmt, "value", fmt)
+    if fmt == "csv":
+        frame = table.frame
+        out = io.StringIO()
+        out.write(f"# {CSV_META_PREFIX} {meta_json(table.meta)}\n")
+        writer = csv.writer(out, lineterminator="\n")
+        columns = list(COLUMNS) + [c for c in frame.columns if c not in COLUMNS]
+        writer.writerow(columns)
+        cells = [iso_times(frame["time"])] + [frame[c].to_numpy(dtype=object) for c in columns[1:]]
+        for row in zip(*cells):
+            writer.writerow([row[0]] + [_csv_cell(v) for v in row[1:]])
+        return out.getvalue().encode("utf-8")
+    arrow = to_arrow(table)
+    sink = pa.BufferOutputStream()
+    if fmt == "parquet":
+        import pyarrow.parquet as pq
+        pq.write_table(arrow, sink, compression="zstd")
+    elif fmt == "arrow":
+        with pa.ipc.new_stream(sink, arrow.schema) as writer:
+            writer.write_table(arrow)
+    else:
+        raise ValueError(f"unknown pass-table format {fmt!r}; expected one of {FORMATS}")
+    return sink.getvalue().to_pybytes()
+
+
+def write_pass_table(table: PassTable, path: str, fmt: str = "parquet") -> None:
+    """Write ``table`` atomically to ``path`` (``-`` = stdout) as parquet, arrow or csv."""
+    data = pass_table_bytes(table, fmt)
+    with open_atomic(path) as handle:
+        handle.write(data)
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def read_pass_table(path: str) -> PassTable:
+    """Read a canonical pass file (Parquet, Arrow file or stream, CSV) or ``-`` (stdin, buffered)."""
+    source = "<stdin>" if is_stdio(path) else str(path)
+    return parse_pass_table(read_input_bytes(path), source)
+
+
+def parse_pass_table(data: bytes, source: str) -> PassTable:
+    """The canonical pass table in ``data``; the format is detected from the first bytes."""
+    if not data.strip():
+        raise InputError("empty input", file=source, row=1, found="no data",
+                         expected="a pass file (Parquet, Arrow or CSV from trackproc ingest)")
+    table = source_table(data, source)
+    missing = [c for c in COLUMNS if c not in table.columns]
+    if missing:
+        raise InputError("not a canonical pass file", file=source, row=table.header_row, column=missing[0],
+                         found=", ".join(c.name for c in table.columns.values()),
+                         expected="columns " + ", ".join(COLUMNS) + " (run trackproc ingest first)")
+    meta = dict(table.meta)
+    version = meta.get("schema_version", SCHEMA_VERSION)
+    if not isinstance(version, int) or version > SCHEMA_VERSION:
+        raise InputError("pass file written by a newer trackproc", file=source, column="schema_version",
+                         found=version, expected=f"schema_version <= {SCHEMA_VERSION}")
+    problems = Problems(table.rows, source)
+    times = column_times(table, table.columns["time"], problems)
+    data_columns = {"time": pd.DatetimeIndex(times).tz_localize("UTC")}
+    for name in ("station", "pass_id", "kind"):
+        data_columns[name] = pd.Series(column_strings(table, table.columns[name]), dtype=object).astype(str)
+    kinds = data_columns["kind"].to_numpy(dtype=object)
+    problems.add("unknown kind", ~np.isin(kinds, KINDS), column="kind", found=kinds,
+                 expected="one of " + ", ".join(KINDS))
+    for name in ("value", "sigma"):
+        values, missing_mask, wrong = column_numbers(table, table.columns[name])
+        problems.add("wrong column type", wrong | missing_mask, column=name,
+                     found=table.columns[name].text if table.columns[name].text is not None else "null",
+                     expected="a number (SI units)")
+        data_columns[name] = values
+    problems.resolve(drop_invalid=False)
+    frame = pd.DataFrame(data_columns)
+    for key, column in table.columns.items():
+        if key not in COLUMNS:
+            frame[column.name] = _extra_column(column)
+    return PassTable(frame, meta)
+
+
+def _extra_column(column) -> pd.Series:
+    """A column appended by a later command: typed as stored (CSV: number, boolean or text)."""
+    if column.text is None:
+        return column.array.to_pandas()
+    text = pd.Series(column.text, dtype=object)
+    lowered = text.str.lower()
+    if len(text) and lowered.isin(["true", "false"]).all():
+        return lowered == "true"
+    numbers = pd.to_numeric(text.replace("", np.nan), errors="coerce")
+    if (numbers.notna() | lowered.isin(["", "nan", "inf", "-inf"])).all():
+        numbers = pd.Series([float(v) if v else np.nan for v in text], dtype=np.float64)
+        return numbers.astype(np.float64)
+    return text.astype(str)

@@ -1,0 +1,103 @@
+"""Stations table: ``station, lat_deg, lon_deg, height_m [, range_bias_m]`` (WGS-84 geodetic).
+
+Latitude in degrees in [-90, 90], longitude in degrees in [-180, 360), height in metres above the
+WGS-84 ellipsoid, optional range bias prior in metres. Lines starting with ``#`` and blank lines
+are skipped; other columns are ignored. Row numbers in errors are the file's line numbers (the
+header is row 1 when it is the first line).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Optional
+
+from trackproc.errors import InputError
+from trackproc.io.atomic import is_stdio, read_input_bytes
+
+REQUIRED = ("station", "lat_deg", "lon_deg", "height_m")
+
+
+@dataclass(frozen=True)
+class Station:
+    """A ground station: WGS-84 geodetic latitude/longitude (deg), height (m), range bias prior (m)."""
+
+    name: str
+    lat_deg: float
+    lon_deg: float
+    height_m: float
+    range_bias_m: Optional[float] = None
+
+    def as_dict(self) -> dict:
+        """``{lat_deg, lon_deg, height_m[, range_bias_m]}`` as stored in pass-file metadata."""
+        out = {k: v for k, v in asdict(self).items() if k != "name"}
+        if out["range_bias_m"] is None:
+            del out["range_bias_m"]
+        return out
+
+    @classmethod
+    def from_dict(cls, name: str, values: dict) -> "Station":
+        """Inverse of :meth:`as_dict` (as read back from pass-file metadata)."""
+        return cls(name, float(values["lat_deg"]), float(values["lon_deg"]), float(values["height_m"]),
+                   None if values.get("range_bias_m") is None else float(values["range_bias_m"]))
+
+
+_LIMITS = {
+    "lat_deg": (lambda v: -90.0 <= v <= 90.0, "degrees in [-90, 90]"),
+    "lon_deg": (lambda v: -180.0 <= v < 360.0, "degrees in [-180, 360)"),
+    "height_m": (math.isfinite, "a finite height in metres"),
+    "range_bias_m": (math.isfinite, "a finite bias in metres, or an empty cell"),
+}
+
+
+def parse_stations(data: bytes, source: str) -> dict[str, Station]:
+    """Stations by name from the bytes of a stations CSV (``source`` names it in errors)."""
+    from trackproc.io.tabular import parse_text_table
+
+    table = parse_text_table(data, source)
+    by_key = {name.lower(): name for name in table.columns}
+    for column in REQUIRED:
+        if column not in by_key:
+            raise InputError("missing required column", file=source, row=table.header_row, column=column,
+                             found=", ".join(table.columns), expected="columns " + ", ".join(REQUIRED))
+    if len(table.rows) == 0:
+        raise InputError("empty stations table", file=source, row=table.header_row + 1,
+                         found="no data rows", expected="one row per station")
+    stations: dict[str, Station] = {}
+    first_row: dict[str, int] = {}
+    for i, row in enumerate(table.rows.tolist()):
+        cell = {key: table.cells[name][i] for key, name in by_key.items()}
+        name = cell["station"]
+        if not name:
+            raise InputError("empty station name", file=source, row=row, column=by_key["station"],
+                             expected="a station name")
+        if name in stations:
+            raise InputError(f"duplicate station (first on row {first_row[name]})", file=source, row=row,
+                             column=by_key["station"], found=name, expected="each station once")
+        numbers = {}
+        for key in ("lat_deg", "lon_deg", "height_m", "range_bias_m"):
+            if key not in by_key or (key == "range_bias_m" and not cell[key]):
+                continue
+            ok, expected = _LIMITS[key]
+            try:
+                value = float(cell[key])
+            except ValueError:
+                value = math.nan
+            if not (math.isfinite(value) and ok(value)):
+                raise InputError("invalid station coordinate", file=source, row=row, column=by_key[key],
+                                 found=cell[key], expected=expected)
+            numbers[key] = value
+        stations[name] = Station(name, numbers["lat_deg"], numbers["lon_deg"], numbers["height_m"],
+                                 numbers.get("range_bias_m"))
+        first_row[name] = row
+    return stations
+
+
+def read_stations(path: str) -> dict[str, Station]:
+    """Stations by name from a stations CSV file (or ``-`` for stdin)."""
+    source = "<stdin>" if is_stdio(path) else str(path)
+    data = read_input_bytes(path)
+    if not data.strip():
+        raise InputError("empty stations table", file=source, row=1, found="no data",
+                         expected="a header station, lat_deg, lon_deg, height_m and one row per station")
+    return parse_stations(data, source)

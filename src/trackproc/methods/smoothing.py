@@ -1,0 +1,493 @@
+"""Least-squares smoothing of one pass by a generalized polynomial, and the time of closest approach.
+
+Implements seed 004 eq. 1: ``y_LSQ(t) = phi(t)^T C`` with ``C = (Psi^T W Psi)^-1 Psi^T W y``, where
+``Psi`` holds the basis functions at the sample times and ``W = diag(1/sigma_i^2)``. The basis is
+Chebyshev (default) or Legendre on the pass interval mapped to [-1, 1], so the columns of ``Psi``
+stay of order one at any degree. The normal matrix is never formed: the whitened system
+``(Psi / sigma) C = y / sigma`` is solved by a QR factorization ``Q R``, and the error matrix is
+``(Psi^T W Psi)^-1 = R^-1 R^-T``.
+
+Pure numpy; times are seconds (``t_s``) from a reference epoch the caller chooses, values and
+sigmas are in one SI unit (m, m/s, Hz, rad). A polynomial is rebuilt from its record as
+``numpy.polynomial.Chebyshev(coef, domain=domain_s)(t_s)`` (or ``Legendre``).
+
+Degree selection (``degree="auto"``): the Bayesian information criterion with the variance factor
+profiled out, ``BIC(d) = n ln(chi2_d / n) + (d + 1) ln n``, minimized over ``d = 0..max_degree``
+(``chi2_d`` = weighted residual sum of squares). It depends only on the relative weights, so a
+wrong overall sigma level does not change the chosen degree; and it compares every degree with
+every other, so it is not stopped early by a vanishing odd or even coefficient as a sequential
+F-test is (an S-curve has nearly zero even terms).
+
+The default upper limit of the search, 30, keeps the polynomial from ringing inside data gaps:
+on the DopTrack passes, limits of 40 or 60 did not bring the TCAs closer to the upstream values
+and moved some passes with long gaps by seconds. BIC optimizes the
+whole curve, not a derived quantity such as an inflection point: on a simulated Doppler pass the
+BIC degree leaves a TCA bias of about 3 sigma, which :func:`tca_degree_spread` (the scatter of the
+TCA over neighbouring degrees) makes visible.
+
+Outliers (``clip=K``): iterative K-sigma rejection on the normalized residuals ``z_i = r_i / sigma_i``
+with the robust scale ``s = 1.4826 MAD(z)`` of the samples in use: a sample is rejected when
+``|z_i| > K s``; every sample (including those rejected before) is re-tested against each new fit,
+until the rejected set stops changing. Rejected samples are flagged, never removed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.polynomial import chebyshev as _cheb
+from numpy.polynomial import legendre as _leg
+
+from trackproc.errors import ProcessingError
+
+#: Supported bases: (numpy series class, Vandermonde function, derivative function).
+BASES = {
+    "chebyshev": (np.polynomial.Chebyshev, _cheb.chebvander, _cheb.chebder),
+    "legendre": (np.polynomial.Legendre, _leg.legvander, _leg.legder),
+}
+
+#: Default upper bound of the degree search of ``degree="auto"``.
+DEFAULT_MAX_DEGREE = 30
+#: Iterations of the rejection loop before giving up (the last fit is kept, and said so).
+MAX_CLIP_ITERATIONS = 30
+#: 1 / Phi^-1(3/4): MAD -> standard deviation of a Gaussian.
+MAD_TO_SIGMA = 1.482602218505602
+
+
+class SmoothingError(ProcessingError):
+    """A pass (one station, pass and kind) cannot be fitted; ``reason`` is a short code.
+
+    Codes: ``too_few_points``, ``single_time``, ``all_rejected``, ``rank_deficient``,
+    ``bad_input``, ``no_tca``.
+    """
+
+    def __init__(self, reason: str, message: str):
+        self.reason = reason
+        super().__init__(message, {"reason": reason})
+
+
+@dataclass(frozen=True)
+class PolynomialFit:
+    """A weighted least-squares polynomial over one pass (seed 004 eq. 1) and its statistics.
+
+    ``coef`` are the series coefficients in ``basis`` on ``domain_s`` (seconds from the caller's
+    epoch), ``cov_unscaled = (A^T W A)^-1`` the error matrix from the a-priori sigmas,
+    ``variance_factor = chi2 / dof`` the a-posteriori variance factor, and
+    ``cov_scaled = variance_factor * cov_unscaled``. ``used`` marks the samples in the final fit
+    (False = rejected); ``residual`` is ``y - fit(t)`` for every sample, rejected ones included.
+    ``rms`` is the root mean square of the used residuals (value unit), ``wrms`` that of the
+    normalized residuals ``r / sigma`` (``wrms^2 = chi2 / n_used``).
+    """
+
+    basis: str
+    domain_s: tuple[float, float]
+    degree: int
+    coef: np.ndarray
+    cov_unscaled: np.ndarray
+    chi2: float
+    dof: int
+    used: np.ndarray
+    residual: np.ndarray
+    rms: float
+    wrms: float
+    condition_number: float
+    iterations: int = 1
+    clip_converged: bool = True
+    robust_scale: float = float("nan")
+    degree_scores: dict = field(default_factory=dict)
+    degree_at_limit: bool = False
+
+    @property
+    def variance_factor(self) -> float:
+        return self.chi2 / self.dof if self.dof > 0 else float("nan")
+
+    @property
+    def cov_scaled(self) -> np.ndarray:
+        return self.cov_unscaled * self.variance_factor
+
+    @property
+    def n_used(self) -> int:
+        return int(np.count_nonzero(self.used))
+
+    @property
+    def n_rejected(self) -> int:
+        return int(self.used.size - np.count_nonzero(self.used))
+
+    def covariance(self, scaled: bool = True) -> np.ndarray:
+        return self.cov_scaled if scaled else self.cov_unscaled
+
+    def series(self, deriv: int = 0):
+        """The fitted curve (or its ``deriv``-th time derivative) as a numpy series in t_s."""
+        cls = BASES[self.basis][0]
+        poly = cls(self.coef, domain=list(self.domain_s))
+        return poly.deriv(deriv) if deriv else poly
+
+    def __call__(self, t_s, deriv: int = 0) -> np.ndarray:
+        return self.series(deriv)(np.asarray(t_s, dtype=float))
+
+    def design(self, t_s, deriv: int = 0) -> np.ndarray:
+        """Rows ``d^m phi(t)/dt^m`` for the times ``t_s``: shape (n, degree + 1)."""
+        return design_matrix(t_s, self.degree, self.domain_s, self.basis, deriv)
+
+    def sigma(self, t_s, deriv: int = 0, scaled: bool = True) -> np.ndarray:
+        """1-sigma of the fitted curve (or derivative) at ``t_s``: sqrt(diag(Phi Sigma Phi^T))."""
+        phi = self.design(t_s, deriv)
+        cov = self.covariance(scaled)
+        return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", phi, cov, phi), 0.0))
+
+
+@dataclass(frozen=True)
+class ClosestApproach:
+    """Time of closest approach from a fitted curve, with its first-order error propagation.
+
+    ``t_s`` is the root of the ``order``-th derivative of the fit (0: range-rate = 0,
+    1: range minimum, 2: inflection of a one-way Doppler S-curve); ``value`` the fitted curve at
+    ``t_s`` (for one-way Doppler: the Doppler at closest approach, so ``fca = carrier + value``).
+    ``cov`` (2x2, scaled by the variance factor) and ``cov_unscaled`` are the covariance of
+    ``(t_s, value)``, including their correlation: ``J Sigma_C J^T`` with
+    ``J = [dt*/dC; dvalue/dC]``, ``dt*/dC = -phi^(m)(t*) / f^(m+1)(t*)`` and
+    ``dvalue/dC = phi(t*) + f'(t*) dt*/dC``.
+    """
+
+    definition: str
+    order: int
+    t_s: float
+    value: float
+    cov: np.ndarray
+    cov_unscaled: np.ndarray
+    slope: float
+    n_candidates: int
+
+    @property
+    def sigma_s(self) -> float:
+        return float(np.sqrt(self.cov[0, 0]))
+
+    @property
+    def sigma_s_unscaled(self) -> float:
+        return float(np.sqrt(self.cov_unscaled[0, 0]))
+
+    @property
+    def value_sigma(self) -> float:
+        return float(np.sqrt(self.cov[1, 1]))
+
+    @property
+    def value_sigma_unscaled(self) -> float:
+        return float(np.sqrt(self.cov_unscaled[1, 1]))
+
+
+def design_matrix(t_s, degree: int, domain_s, basis: str = "chebyshev", deriv: int = 0) -> np.ndarray:
+    """Basis functions (or their ``deriv``-th time derivatives) at ``t_s``: the matrix Psi of seed 004 eq. 1.
+
+    Column k is ``d^m/dt^m P_k(x(t))`` with ``x = (2 t - (a + b)) / (b - a)`` on ``domain_s = (a, b)``.
+    """
+    _, vander, der = _basis(basis)
+    a, b = float(domain_s[0]), float(domain_s[1])
+    x = (2.0 * np.asarray(t_s, dtype=float) - (a + b)) / (b - a)
+    if deriv == 0:
+        return vander(x, degree)
+    if deriv > degree:
+        return np.zeros((x.size, degree + 1))
+    # Coefficients of d^m P_k / dt^m, for each k (columns), in the same basis; dx/dt = 2/(b-a).
+    dcoef = der(np.eye(degree + 1), deriv, scl=2.0 / (b - a), axis=0)
+    return vander(x, degree - deriv) @ dcoef
+
+
+def fit_polynomial(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", domain_s=None,
+                   used=None) -> PolynomialFit:
+    """Weighted least-squares fit of one degree, no rejection (seed 004 eq. 1).
+
+    Parameters: ``t_s`` sample times (s), ``y`` values and ``sigma`` (> 0) their 1-sigma, in one
+    unit; ``domain_s`` the interval mapped to [-1, 1] (default: min and max of ``t_s``);
+    ``used`` a boolean mask of the samples to fit (default all). Residuals are returned for all.
+    Raises :class:`SmoothingError` when the samples cannot determine the polynomial.
+    """
+    t, y, s = _check_arrays(t_s, y, sigma)
+    domain = _domain(t, domain_s)
+    mask = np.ones(t.size, bool) if used is None else np.asarray(used, bool)
+    _check_enough(t[mask], int(degree))
+    return _solve(t, y, s, int(degree), domain, basis, mask)
+
+
+def smooth_pass(t_s, y, sigma, degree: int | str = "auto", *, clip: float | None = 4.0,
+                basis: str = "chebyshev", max_degree: int = DEFAULT_MAX_DEGREE,
+                domain_s=None) -> PolynomialFit:
+    """Fit a pass robustly: fixed or BIC-selected degree, with iterative K-sigma rejection.
+
+    ``degree`` an integer or ``"auto"`` (BIC over 0..``max_degree``, capped so that at least one
+    degree of freedom remains); ``clip`` the rejection threshold K in robust standard deviations
+    (None or 0: no rejection). Raises :class:`SmoothingError` for an unfittable pass: fewer
+    distinct times than the degree needs (``too_few_points``), one single time (``single_time``),
+    too few samples left after rejection (``all_rejected``).
+    """
+    t, y, s = _check_arrays(t_s, y, sigma)
+    domain = _domain(t, domain_s)
+    auto = isinstance(degree, str)
+    if auto and degree != "auto":
+        raise ValueError(f"degree must be an integer or 'auto', got {degree!r}")
+    if not auto and int(degree) < 0:
+        raise ValueError(f"degree must be >= 0, got {degree}")
+    used = np.ones(t.size, bool)
+    if not auto:
+        _check_enough(t, int(degree))
+    clipping = clip is not None and clip > 0
+    history: list[bytes] = []
+    fit = None
+    for iteration in range(1, MAX_CLIP_ITERATIONS + 1):
+        if np.count_nonzero(used) < 2:
+            raise SmoothingError("all_rejected", f"only {np.count_nonzero(used)} of {t.size} samples "
+                                 "left after outlier rejection")
+        try:
+            if auto:
+                deg, scores, at_limit = select_degree(t[used], y[used], s[used], basis=basis,
+                                                      max_degree=max_degree, domain_s=domain)
+            else:
+                deg, scores, at_limit = int(degree), {}, False
+                _check_enough(t[used], deg)
+        except SmoothingError as exc:
+            if iteration > 1:
+                raise SmoothingError("all_rejected", f"after outlier rejection: {exc}") from None
+            raise
+        fit = _solve(t, y, s, deg, domain, basis, used)
+        if not clipping:
+            return _replace(fit, degree_scores=scores, degree_at_limit=at_limit)
+        z = fit.residual / s
+        zu = z[used]
+        scale = MAD_TO_SIGMA * float(np.median(np.abs(zu - np.median(zu))))
+        if not scale > 0.0:
+            scale = np.sqrt(fit.chi2 / max(fit.dof, 1))
+        # residuals at the rounding level of the values are never outliers (an exact curve)
+        floor = 1e3 * np.finfo(float).eps * float(np.max(np.abs(y[used]))) / s
+        new_used = np.abs(z) <= np.maximum(clip * scale, floor)
+        fit = _replace(fit, degree_scores=scores, degree_at_limit=at_limit, iterations=iteration,
+                       robust_scale=scale)
+        if np.array_equal(new_used, used):
+            return fit
+        key = np.packbits(new_used).tobytes()
+        if key in history:        # the rejected set cycles: stop, keep this fit, say so
+            return _replace(fit, clip_converged=False)
+        history.append(np.packbits(used).tobytes())
+        used = new_used
+    return _replace(fit, clip_converged=False)
+
+
+def select_degree(t_s, y, sigma, *, basis: str = "chebyshev", max_degree: int = DEFAULT_MAX_DEGREE,
+                  domain_s=None) -> tuple[int, dict, bool]:
+    """Degree minimizing ``BIC(d) = n ln(chi2_d / n) + (d + 1) ln n`` over ``0..max_degree``.
+
+    One QR factorization of the whitened design matrix at the largest degree gives every nested
+    fit: ``chi2_d = |y_w|^2 - |(Q^T y_w)[:d+1]|^2``. The search stops at ``n_distinct - 2`` so that
+    each candidate keeps a degree of freedom. Returns (degree, {degree: BIC}, at_limit) where
+    ``at_limit`` says the minimum is at the upper end of the search (more terms might help).
+    """
+    t, y, s = _check_arrays(t_s, y, sigma)
+    domain = _domain(t, domain_s)
+    n_distinct = np.unique(t).size
+    if n_distinct < 2:
+        raise SmoothingError("single_time", f"all {t.size} samples at one time: no curve can be fitted")
+    dmax = int(min(max_degree, n_distinct - 2, t.size - 2))
+    if dmax < 0:
+        raise SmoothingError("too_few_points", f"{t.size} samples are too few to fit and test a curve")
+    a = design_matrix(t, dmax, domain, basis) / s[:, None]
+    yw = y / s
+    q, r = np.linalg.qr(a)
+    qty = q.T @ yw
+    total = float(yw @ yw)
+    n = t.size
+    scores = {}
+    tiny = np.finfo(float).tiny
+    for d in range(dmax + 1):
+        chi2 = max(total - float(qty[: d + 1] @ qty[: d + 1]), 0.0)
+        # Guard against cancellation: recompute small chi2 directly from the residual.
+        if chi2 < 1e-8 * total:
+            coef = np.linalg.lstsq(r[: d + 1, : d + 1], qty[: d + 1], rcond=None)[0]
+            res = yw - a[:, : d + 1] @ coef
+            chi2 = float(res @ res)
+        scores[d] = n * np.log(max(chi2, tiny) / n) + (d + 1) * np.log(n)
+    best = min(scores, key=scores.get)
+    return best, scores, best == dmax
+
+
+def closest_approach(fit: PolynomialFit, kind: str, doppler_mode: str = "one-way") -> ClosestApproach:
+    """Time of closest approach (TCA) of a fitted pass, its standard error and the curve value there.
+
+    - ``range_rate``: the zero of the fitted range-rate where it goes from negative to positive;
+      ``sigma_t = sigma_f(t*) / |f'(t*)|``.
+    - ``range``: the minimum of the fitted range (zero of f', f'' > 0).
+    - ``doppler``, one-way (received minus nominal carrier, Hz): the transmitter's own frequency
+      offset is unknown, so the zero of the Doppler is not the TCA. The TCA is the inflection point
+      of the S-curve (zero of f'', f''' > 0: the steepest descent), which an offset and a linear
+      drift of the onboard oscillator do not move; ``value`` there is the Doppler at closest
+      approach, ``fca = carrier + value``. This is the definition of DopTrack's own processing
+      (``estimate_tca``: root of the second derivative of the fitted curve; ``fca = fit(tca)``).
+    - ``doppler``, two-way: the zero of the Doppler where it goes from positive to negative.
+
+    Among several roots inside the pass, the one with the steepest fitted curve is taken
+    (the S-curve is steepest at closest approach); roots outside the fitted interval are never used.
+    Raises :class:`SmoothingError` (``no_tca``) when no root of the right sign lies in the pass.
+    """
+    if kind == "range_rate":
+        order, sign, definition = 0, +1, "zero of the fitted range-rate (negative to positive)"
+    elif kind == "range":
+        order, sign, definition = 1, +1, "minimum of the fitted range (zero of its derivative)"
+    elif kind == "doppler" and doppler_mode == "two-way":
+        order, sign, definition = 0, -1, "zero of the fitted two-way Doppler (positive to negative)"
+    elif kind == "doppler":
+        order, sign, definition = 2, +1, ("inflection point of the fitted one-way Doppler S-curve "
+                                          "(zero of the second derivative, steepest descent)")
+    else:
+        raise ValueError(f"no closest approach is defined for kind {kind!r}")
+
+    g = fit.series(order)
+    gp = fit.series(order + 1)
+    candidates = _real_roots(g, fit.domain_s)
+    good = [r for r in candidates if sign * gp(r) > 0]
+    if not good:
+        what = {0: "zero", 1: "minimum", 2: "inflection point"}[order]
+        found = f" ({len(candidates)} of the wrong sense)" if candidates else ""
+        raise SmoothingError("no_tca", f"no {what} of the fitted {kind.replace('_', '-')} inside the pass"
+                             f"{found}: closest approach not observed")
+    if order == 2:      # Doppler S-curve: steepest descent = most negative f'
+        f1 = fit.series(1)
+        t_star = min(good, key=lambda r: f1(r))
+    elif order == 1:    # range: the lowest minimum
+        t_star = min(good, key=lambda r: fit(r))
+    else:               # steepest crossing
+        t_star = max(good, key=lambda r: abs(gp(r)))
+
+    slope = float(gp(t_star))
+    phi_m = design_matrix([t_star], fit.degree, fit.domain_s, fit.basis, order)[0]
+    phi_0 = design_matrix([t_star], fit.degree, fit.domain_s, fit.basis, 0)[0]
+    dt_dc = -phi_m / slope
+    dv_dc = phi_0 + float(fit(t_star, 1)) * dt_dc
+    jac = np.vstack([dt_dc, dv_dc])
+    cov_u = jac @ fit.cov_unscaled @ jac.T
+    return ClosestApproach(definition=definition, order=order, t_s=float(t_star), value=float(fit(t_star)),
+                           cov=cov_u * fit.variance_factor, cov_unscaled=cov_u, slope=slope,
+                           n_candidates=len(candidates))
+
+
+def tca_degree_spread(t_s, y, sigma, fit: PolynomialFit, kind: str, doppler_mode: str = "one-way",
+                      width: int = 2) -> tuple[float, float, int]:
+    """Sensitivity of the TCA to the choice of degree: a model-error indicator.
+
+    Refits the samples ``fit`` used with degrees ``fit.degree - width .. fit.degree + width`` and
+    returns the standard deviation of t* and of the curve value at t* over those that give a
+    closest approach, and how many did (NaN when fewer than 3). The coefficient covariance cannot
+    show this error: it assumes the polynomial of the chosen degree is the true curve.
+    """
+    t, yy, s = _check_arrays(t_s, y, sigma)
+    times, values = [], []
+    for d in range(max(0, fit.degree - width), fit.degree + width + 1):
+        try:
+            other = fit if d == fit.degree else fit_polynomial(t, yy, s, d, basis=fit.basis,
+                                                               domain_s=fit.domain_s, used=fit.used)
+            ca = closest_approach(other, kind, doppler_mode)
+        except SmoothingError:
+            continue
+        times.append(ca.t_s)
+        values.append(ca.value)
+    if len(times) < 3:
+        return float("nan"), float("nan"), len(times)
+    return float(np.std(times, ddof=1)), float(np.std(values, ddof=1)), len(times)
+
+
+# --------------------------------------------------------------------------- internals
+
+
+def _basis(basis: str):
+    try:
+        return BASES[basis]
+    except KeyError:
+        raise ValueError(f"unknown basis {basis!r}; expected one of {sorted(BASES)}") from None
+
+
+def _check_arrays(t_s, y, sigma):
+    t = np.asarray(t_s, dtype=float).ravel()
+    y = np.asarray(y, dtype=float).ravel()
+    s = np.broadcast_to(np.asarray(sigma, dtype=float), t.shape).astype(float)
+    if y.shape != t.shape:
+        raise ValueError(f"t_s and y differ in length: {t.size} and {y.size}")
+    if t.size == 0:
+        raise SmoothingError("too_few_points", "no samples")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(y))):
+        raise SmoothingError("bad_input", "non-finite time or value")
+    if not np.all(np.isfinite(s) & (s > 0)):
+        raise SmoothingError("bad_input", "sigma must be finite and > 0 for every sample")
+    return t, y, s
+
+
+def _domain(t, domain_s):
+    if domain_s is None:
+        a, b = float(t.min()), float(t.max())
+    else:
+        a, b = float(domain_s[0]), float(domain_s[1])
+    if not b > a:
+        raise SmoothingError("single_time", f"all {t.size} samples at one time: no curve can be fitted")
+    return (a, b)
+
+
+def _check_enough(t, degree: int) -> None:
+    n_distinct = np.unique(t).size
+    if n_distinct < 2:
+        raise SmoothingError("single_time", f"all {t.size} samples at one time: no curve can be fitted")
+    if n_distinct < degree + 2:
+        raise SmoothingError("too_few_points", f"{t.size} samples at {n_distinct} distinct times; degree "
+                             f"{degree} needs at least {degree + 2} (degree + 1 coefficients and one "
+                             "degree of freedom)")
+
+
+def _solve(t, y, s, degree, domain, basis, used) -> PolynomialFit:
+    """QR solution of the whitened system for the samples ``used``; residuals for all samples."""
+    psi = design_matrix(t, degree, domain, basis)
+    a = psi[used] / s[used, None]
+    yw = y[used] / s[used]
+    q, r = np.linalg.qr(a)
+    sv = np.linalg.svd(r, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+    if not cond < 1.0 / (np.finfo(float).eps * 1e3):
+        raise SmoothingError("rank_deficient", f"degree {degree} is not determined by the sample times "
+                             f"(condition number {cond:.3g})")
+    coef = np.linalg.solve(r, q.T @ yw)
+    r_inv = np.linalg.solve(r, np.eye(degree + 1))
+    cov = r_inv @ r_inv.T
+    residual = y - psi @ coef
+    ru = residual[used]
+    chi2 = float(np.sum((ru / s[used]) ** 2))
+    n_used = int(np.count_nonzero(used))
+    return PolynomialFit(
+        basis=basis, domain_s=domain, degree=degree, coef=coef, cov_unscaled=cov, chi2=chi2,
+        dof=n_used - (degree + 1), used=np.asarray(used, bool).copy(), residual=residual,
+        rms=float(np.sqrt(np.mean(ru ** 2))), wrms=float(np.sqrt(chi2 / n_used)), condition_number=cond)
+
+
+def _replace(fit: PolynomialFit, **changes) -> PolynomialFit:
+    from dataclasses import replace
+    return replace(fit, **changes)
+
+
+def _real_roots(series, domain) -> list[float]:
+    """Real roots of a numpy series inside [a, b], polished by Newton steps."""
+    a, b = domain
+    if series.degree() < 1:
+        return []
+    roots = series.roots()
+    half = 0.5 * (b - a)
+    d1 = series.deriv()
+    out = []
+    for z in roots:
+        if abs(z.imag) > 1e-3 * half:
+            continue
+        x = float(z.real)
+        for _ in range(5):
+            slope = d1(x)
+            if slope == 0:
+                break
+            step = series(x) / slope
+            x -= step
+            if abs(step) < 1e-12 * half:
+                break
+        if a <= x <= b and np.isfinite(x):
+            out.append(x)
+    out = sorted(set(np.round(out, 9)))
+    return [float(v) for v in out]
