@@ -61,6 +61,7 @@ def _register() -> None:
 def main(argv: list[str] | None = None) -> int:
     """Console-script entry point: runs the app, maps errors to exit codes, one line each."""
     _register()
+    argv = _hoist_global_flags(sys.argv[1:] if argv is None else list(argv))
     try:
         app(args=argv, prog_name="trackproc", standalone_mode=True)
     except SystemExit as exit_:
@@ -77,6 +78,18 @@ def main(argv: list[str] | None = None) -> int:
         print("trackproc: interrupted", file=sys.stderr)
         return 130
     return _flush_stdout()
+
+
+_GLOBAL_FLAGS = ("--quiet", "-q", "--verbose", "-v")
+
+
+def _hoist_global_flags(argv: list[str]) -> list[str]:
+    """Let ``--quiet``/``--verbose`` follow the command too (``trackproc ingest x.csv -q``):
+    they are moved before it, where the root callback reads them (up to a ``--``)."""
+    end = argv.index("--") if "--" in argv else len(argv)
+    flags = [a for a in argv[:end] if a in _GLOBAL_FLAGS]
+    rest = [a for a in argv[:end] if a not in _GLOBAL_FLAGS]
+    return flags + rest + argv[end:]
 
 
 def _flush_stdout() -> int:

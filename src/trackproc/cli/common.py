@@ -61,14 +61,40 @@ def resolve_output(output: Optional[str], what: str = "output") -> str:
 
 
 def table_format_for(output: str, requested: Optional[TableFormat]) -> TableFormat:
-    """Format from ``--format``, else from the file suffix; stdout defaults to an Arrow stream."""
+    """Format from ``--format``, else from the file suffix.
+
+    On stdout: an Arrow stream into a pipe (a reader can consume it as it comes); when stdout
+    is redirected to a regular file (``trackproc smooth - > out.parquet``) the format follows
+    that file's suffix, and is Parquet when the suffix says nothing.
+    """
     if requested is not None:
         return requested
-    suffix = Path(output).suffix.lower()
     if output == "-":
-        return TableFormat.arrow
+        target = _stdout_file()
+        if target is None:
+            return TableFormat.arrow
+        output = target
+        if Path(output).suffix.lower() not in (".csv", ".arrow", ".arrows", ".ipc", ".feather"):
+            return TableFormat.parquet
+    suffix = Path(output).suffix.lower()
     if suffix == ".csv":
         return TableFormat.csv
     if suffix in (".arrow", ".arrows", ".ipc", ".feather"):
         return TableFormat.arrow
     return TableFormat.parquet
+
+
+def _stdout_file() -> Optional[str]:
+    """The path of the regular file stdout is redirected to, or None (pipe, terminal, unknown)."""
+    import os
+    import stat
+
+    try:
+        if not stat.S_ISREG(os.fstat(sys.stdout.fileno()).st_mode):
+            return None
+    except (OSError, ValueError, AttributeError):
+        return None
+    try:
+        return os.readlink(f"/proc/self/fd/{sys.stdout.fileno()}")
+    except OSError:
+        return "stdout.parquet"  # a regular file of unknown name: Parquet

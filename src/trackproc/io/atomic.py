@@ -33,10 +33,17 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
         out.flush()
         return
     target = Path(path)
+    if target.exists() and not target.is_file():
+        # a device, FIFO or /dev/stdout: there is nothing to replace atomically (and renaming
+        # over /dev/null would destroy it): write straight through
+        with open(target, "wb") as handle:
+            yield handle
+        return
     directory = target.parent if str(target.parent) else Path(".")
     directory.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
     try:
+        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
         with os.fdopen(fd, "wb") as handle:
             yield handle
             handle.flush()
@@ -46,6 +53,12 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def write_bytes(path: str | os.PathLike, data: bytes) -> None:
