@@ -28,12 +28,12 @@ Units: metres, m/s; the covariance in the units of the parameters (m², m²/s, m
 from __future__ import annotations
 
 import json
-import math
 from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
 
+from trackproc.io.jsonutil import json_ready
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
 
@@ -383,23 +383,6 @@ def read_state_or_tle(path: str, eop=None, at=None) -> State:
 
 # --------------------------------------------------------------------------- writing
 
-def _plain(value):
-    """JSON-ready copy: numpy scalars/arrays to Python, NaN/Inf to None (JSON has neither)."""
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, np.generic):
-        return _plain(value.item())
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, np.datetime64):
-        return format_epoch(value)
-    return value
-
-
 def state_document(state: State, force: str | None = None, eop_source: str | None = None) -> dict:
     """The JSON object of ``state`` (GCRF), keys in the documented order.
 
@@ -444,7 +427,7 @@ def state_document(state: State, force: str | None = None, eop_source: str | Non
     for k in sorted(state.extra):
         if k not in doc:
             doc[k] = state.extra[k]
-    return _plain(doc)
+    return json_ready(doc)
 
 
 def state_json(state: State, force: str | None = None, eop_source: str | None = None) -> str:

@@ -35,6 +35,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from trackproc.io.jsonutil import json_ready
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable
 from trackproc.io.raw import KIND_UNITS
@@ -166,7 +167,7 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
     samples["residual"] = residual
     samples["flag"] = flag
 
-    summary = _clean(_summary(fits, options, table.meta, source, doppler_mode, carrier_hz))
+    summary = json_ready(_summary(fits, options, table.meta, source, doppler_mode, carrier_hz))
     meta = dict(table.meta)
     meta["smoothing"] = summary
     sample_table = PassTable(samples, {**meta, "smoothing": {**summary, "output": "samples"}})
@@ -188,7 +189,7 @@ def summary_json(summary: dict) -> str:
     """The summary as strict JSON text (NaN and infinities as null), indented, newline-terminated."""
     import json
 
-    return json.dumps(_clean(summary), indent=2, allow_nan=False) + "\n"
+    return json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n"
 
 
 def require_matplotlib() -> None:
@@ -471,19 +472,3 @@ def _grid(fits, step_s: float) -> pd.DataFrame:
     return grid.sort_values(["station", "time", "kind"], kind="mergesort").reset_index(drop=True)[list(COLUMNS)]
 
 
-def _clean(value):
-    """JSON-ready: numpy scalars to Python, NaN/inf to None, tuples to lists."""
-    if isinstance(value, dict):
-        return {str(k): _clean(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_clean(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _clean(value.tolist())
-    if isinstance(value, (np.bool_,)):
-        return bool(value)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        return v if math.isfinite(v) else None
-    return value

@@ -1,0 +1,31 @@
+"""JSON output shared by every command: plain Python values, NaN/Inf as null, stable text."""
+
+from __future__ import annotations
+
+import json
+import math
+
+
+def json_ready(value):
+    """A JSON-ready copy: numpy scalars/arrays to Python, NaN/Inf to None (JSON has neither),
+    tuples to lists, datetime64 to ISO 8601 UTC with Z."""
+    import numpy as np
+
+    if isinstance(value, dict):
+        return {str(k): json_ready(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_ready(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return json_ready(value.tolist())
+    if isinstance(value, np.datetime64):
+        return np.datetime_as_string(value.astype("datetime64[ns]"), unit="ns") + "Z"
+    if isinstance(value, np.generic):
+        return json_ready(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def dumps(value, indent: int | None = 2) -> str:
+    """Deterministic JSON text (keys sorted) of :func:`json_ready` of ``value``, newline-terminated."""
+    return json.dumps(json_ready(value), indent=indent, sort_keys=True, allow_nan=False) + "\n"

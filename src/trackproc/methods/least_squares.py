@@ -1,0 +1,393 @@
+"""Batch weighted least squares: Gauss-Newton on the whitened system, solved by SVD.
+
+Seed 002 eqs. 4-8: ``Δq = (Aᵀ K⁻¹ A)⁻¹ Aᵀ K⁻¹ Δr``, iterated (Gauss-Newton), and eq. 9: the
+error matrix ``K_out = (Aᵀ K⁻¹ A)⁻¹``. Here that is computed without ever forming or inverting
+the normal matrix: the residuals and the Jacobian are *whitened* (divided by the measurement
+sigmas, so ``K = I``), the columns scaled by the parameters' scales (``x = x_ref + S ξ``), any
+a-priori constraints appended as extra whitened rows, and the system ``J ξ ≈ b`` is solved by
+the thin SVD ``J = U Σ Vᵀ``:
+
+    step        ξ = V Σ⁻¹ Uᵀ b
+    covariance  K_out = S V Σ⁻² Vᵀ S           (= (Aᵀ K⁻¹ A + prior)⁻¹, eq. 9)
+
+which loses no precision to squaring the condition number (the normal matrix would).
+
+Levenberg-Marquardt damping: when the Gauss-Newton step does not reduce the cost, the
+damped step ``ξ(λ) = V diag(σᵢ / (σᵢ² + λ)) Uᵀ b`` (the minimiser of ``|J ξ - b|² + λ|ξ|²``,
+from the same SVD) is tried with λ growing tenfold until the cost falls.
+
+Convergence: after an accepted step, when the step is below ``step_tol`` formal sigmas in
+every parameter, or the relative change of the cost is below ``cost_rtol`` — and the set of
+edited samples did not change.
+
+Residual editing (k-sigma, iterated): after every iteration, a sample is edited (excluded,
+flagged, still reported) when ``|r/σ| > k · max(1, WRMS)`` with WRMS the RMS of the normalized
+residuals of the samples kept in the previous iteration; every sample is re-tested each time,
+so a sample edited while the orbit was poor comes back.
+
+Failures raise :class:`~trackproc.errors.ProcessingError` with diagnostics: too few
+measurements, rank deficiency (naming the unobservable combinations: the right singular
+vectors of the negligible singular values, in parameter names), non-convergence, and a
+model that fails (non-finite values).
+
+Pure numpy; the model is a callable ``model(x) -> (computed (N,), jacobian (N, n))``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from trackproc.errors import ProcessingError
+
+__all__ = ["Options", "Prior", "Solution", "solve", "whitened_svd", "combination_text"]
+
+
+@dataclass
+class Options:
+    """Settings of :func:`solve`.
+
+    ``max_iterations``: Gauss-Newton iterations (each may try several damped steps);
+    ``step_tol``: converged when every step component is below this many formal sigmas;
+    ``cost_rtol``: or when the relative cost change is below this;
+    ``clip``: k of the k-sigma editing (None or 0: no editing);
+    ``rank_rtol``: a singular value below ``rank_rtol * max`` (of the whitened, scaled
+    Jacobian) is a rank deficiency; ``max_damping_tries``: damped steps tried per iteration.
+    """
+
+    max_iterations: int = 20
+    step_tol: float = 1e-3
+    cost_rtol: float = 1e-9
+    clip: Optional[float] = 4.0
+    rank_rtol: float = 1e-9
+    max_damping_tries: int = 12
+    initial_damping: float = 1e-4
+
+
+@dataclass(frozen=True)
+class Prior:
+    """An a-priori constraint ``x[index] ~ N(centre, covariance)`` (index into the parameters)."""
+
+    index: np.ndarray
+    centre: np.ndarray
+    covariance: np.ndarray
+
+    @classmethod
+    def diagonal(cls, index, centre, sigma) -> "Prior":
+        sigma = np.asarray(sigma, float)
+        return cls(np.asarray(index, int), np.asarray(centre, float), np.diag(sigma ** 2))
+
+
+@dataclass
+class Solution:
+    """Result of :func:`solve`.
+
+    Parameters: ``names``, ``values``, physical ``covariance`` (eq. 9, including any a-priori
+    information), ``sigma``, ``correlation``, ``covariance_scaled`` (of ξ = (x - x_ref)/scale:
+    Orekit's "normalized" covariance), ``scales``.
+
+    Statistics: ``chi2`` (sum of squared normalized residuals of the kept samples plus the
+    a-priori terms), ``dof`` (kept samples + a-priori rows - parameters), ``variance_factor``
+    (a-posteriori variance factor = chi2/dof, the reduced χ²; NaN when dof = 0),
+    ``condition_number`` (of the whitened, scaled Jacobian), ``singular_values``.
+
+    Samples (all N, edited ones included): ``computed``, ``residual`` (observed - computed,
+    azimuth wrapped), ``normalized`` (residual/sigma), ``edited`` (bool), ``jacobian`` (N, n)
+    at the solution.
+
+    Run: ``iterations``, ``converged``, ``cost_history``, ``damped_steps``, ``message``.
+    """
+
+    names: list
+    values: np.ndarray
+    covariance: np.ndarray
+    sigma: np.ndarray
+    correlation: np.ndarray
+    covariance_scaled: np.ndarray
+    scales: np.ndarray
+    chi2: float
+    dof: int
+    variance_factor: float
+    condition_number: float
+    singular_values: np.ndarray
+    computed: np.ndarray
+    residual: np.ndarray
+    normalized: np.ndarray
+    edited: np.ndarray
+    jacobian: np.ndarray
+    iterations: int
+    converged: bool
+    cost_history: list = field(default_factory=list)
+    damped_steps: int = 0
+    message: str = ""
+
+    @property
+    def n_measurements(self) -> int:
+        return int(self.edited.size)
+
+    @property
+    def n_edited(self) -> int:
+        return int(self.edited.sum())
+
+    @property
+    def wrms(self) -> float:
+        """RMS of the normalized residuals of the kept samples."""
+        z = self.normalized[~self.edited]
+        return float(np.sqrt(np.mean(z * z))) if z.size else math.nan
+
+    def block(self, names: Sequence[str]) -> np.ndarray:
+        """Covariance block of the named parameters."""
+        idx = [self.names.index(n) for n in names]
+        return self.covariance[np.ix_(idx, idx)]
+
+
+# ----------------------------------------------------------------------------- linear algebra
+
+def whitened_svd(jacobian_w: np.ndarray):
+    """Thin SVD of a whitened Jacobian (rows: samples; columns: scaled parameters)."""
+    return np.linalg.svd(jacobian_w, full_matrices=False)
+
+
+def combination_text(vector: np.ndarray, names: Sequence[str], threshold: float = 0.1) -> str:
+    """A unit vector over the (scaled) parameters as text, e.g. ``+0.71 x -0.71 range_bias:KIR``."""
+    v = np.asarray(vector, float)
+    v = v / np.linalg.norm(v)
+    k = int(np.argmax(np.abs(v)))
+    if v[k] < 0:
+        v = -v
+    order = np.argsort(-np.abs(v))
+    terms = [f"{v[i]:+.2f} {names[i]}" for i in order if abs(v[i]) >= threshold]
+    return " ".join(terms)
+
+
+def _prior_rows(priors: Sequence[Prior], n: int, scales: np.ndarray):
+    """Whitening of the priors: rows ``W E S`` and the factor W (with W Wᵀ = covariance⁻¹)."""
+    rows, factors = [], []
+    for p in priors:
+        cov = np.atleast_2d(np.asarray(p.covariance, float))
+        chol = np.linalg.cholesky(cov)                     # cov = L Lᵀ; rows L⁻¹
+        w = np.linalg.solve(chol, np.eye(cov.shape[0]))
+        e = np.zeros((len(p.index), n))
+        e[np.arange(len(p.index)), p.index] = 1.0
+        rows.append(w @ e * scales[None, :])
+        factors.append((w, p))
+    a = np.vstack(rows) if rows else np.zeros((0, n))
+    return a, factors
+
+
+def _prior_rhs(factors, x: np.ndarray) -> np.ndarray:
+    parts = [w @ (p.centre - x[p.index]) for w, p in factors]
+    return np.concatenate(parts) if parts else np.zeros(0)
+
+
+# ----------------------------------------------------------------------------- the solver
+
+def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: Sequence[str],
+          scales=None, priors: Sequence[Prior] = (), periodic=None, bounds=None,
+          options: Options | None = None, edited=None) -> Solution:
+    """Minimise ``Σ ((y - h(x))/σ)² + prior terms`` over ``x`` by damped Gauss-Newton.
+
+    Parameters
+    ----------
+    model : callable
+        ``model(x) -> (h (N,), H (N, n))``, computed values and their Jacobian at ``x``. It may
+        raise ``ArithmeticError`` or :class:`ProcessingError` at a trial point (treated as an
+        infinite cost, i.e. the step is damped).
+    x0 : (n,) starting values (also the reference of the scaling).
+    observed, sigma : (N,) measurements and their 1-sigma (> 0).
+    names : parameter names (for diagnostics).
+    scales : (n,) positive column scales (default 1).
+    priors : a-priori constraints (:class:`Prior`).
+    periodic : (N,) bool, residuals wrapped to [-π, π) (azimuth).
+    bounds : ((n,), (n,)) lower and upper bounds (steps are clipped into them).
+    edited : (N,) bool, samples excluded from the start (never re-admitted).
+
+    Returns :class:`Solution`; raises :class:`ProcessingError` (see the module docstring).
+    Implements seed 002 eqs. 4-9.
+    """
+    opt = options or Options()
+    x = np.asarray(x0, float).copy()
+    n = x.size
+    names = list(names)
+    y = np.asarray(observed, float)
+    sig = np.asarray(sigma, float)
+    nobs = y.size
+    if sig.shape != y.shape or not np.all(np.isfinite(sig) & (sig > 0)):
+        raise ValueError("sigma must be positive and finite, one per measurement")
+    scales = np.ones(n) if scales is None else np.asarray(scales, float)
+    periodic = np.zeros(nobs, bool) if periodic is None else np.asarray(periodic, bool)
+    fixed_out = np.zeros(nobs, bool) if edited is None else np.asarray(edited, bool).copy()
+    lo, hi = (np.full(n, -np.inf), np.full(n, np.inf)) if bounds is None else (np.asarray(bounds[0], float),
+                                                                                np.asarray(bounds[1], float))
+    prior_a, prior_factors = _prior_rows(priors, n, scales)
+    n_prior = prior_a.shape[0]
+    clip = opt.clip if opt.clip else None
+
+    def residuals(h):
+        r = y - h
+        if periodic.any():
+            r = np.where(periodic, np.mod(r + np.pi, 2 * np.pi) - np.pi, r)
+        return r
+
+    def evaluate(xv):
+        h, jac = model(xv)
+        h = np.asarray(h, float)
+        jac = np.asarray(jac, float)
+        if h.shape != (nobs,) or jac.shape != (nobs, n):
+            raise ValueError(f"model returned shapes {h.shape}, {jac.shape}; expected ({nobs},), ({nobs}, {n})")
+        return h, jac
+
+    def cost_of(r, xv, mask):
+        z = r[~mask] / sig[~mask]
+        pr = _prior_rhs(prior_factors, xv)
+        return float(z @ z + pr @ pr)
+
+    def edit(r, mask_prev):
+        if clip is None:
+            return fixed_out.copy()
+        z = np.abs(r / sig)
+        kept = z[~mask_prev]
+        wrms = float(np.sqrt(np.mean(kept * kept))) if kept.size else 1.0
+        return fixed_out | (z > clip * max(1.0, wrms))
+
+    def check_counts(mask):
+        kept = int((~mask).sum())
+        if kept + n_prior < n or kept == 0:
+            raise ProcessingError(
+                f"too few measurements: {kept} kept ({int(mask.sum())} edited) and {n_prior} a-priori "
+                f"constraints for {n} parameters",
+                {"measurements": nobs, "kept": kept, "edited": int(mask.sum()), "parameters": n,
+                 "apriori_rows": n_prior})
+
+    def system(jac, r, xv, mask):
+        keep = ~mask
+        a = jac[keep] / sig[keep, None] * scales[None, :]
+        b = r[keep] / sig[keep]
+        if n_prior:
+            a = np.vstack([a, prior_a])
+            b = np.concatenate([b, _prior_rhs(prior_factors, xv)])
+        return a, b
+
+    def factor(a, it):
+        if not np.all(np.isfinite(a)):
+            raise ProcessingError("the Jacobian has non-finite entries", {"iteration": it})
+        u, s, vt = whitened_svd(a)
+        if s.size < n or s[-1] <= opt.rank_rtol * s[0]:
+            _raise_rank(s, vt, names, scales, opt.rank_rtol, it)
+        return u, s, vt
+
+    try:
+        h, jac = evaluate(x)
+    except (ArithmeticError, ValueError) as exc:
+        raise ProcessingError(f"the model cannot be evaluated at the initial values: {exc}") from None
+    if not np.all(np.isfinite(h)):
+        raise ProcessingError("the model gives non-finite values at the initial values",
+                              {"non_finite": int((~np.isfinite(h)).sum())})
+    r = residuals(h)
+    mask = fixed_out.copy()
+    check_counts(mask)
+    # first editing pass against the initial orbit (generous: WRMS of everything)
+    mask = edit(r, mask)
+    check_counts(mask)
+    cost = cost_of(r, x, mask)
+    history = [cost]
+    damped = 0
+    converged = False
+    message = ""
+    it = 0
+    for it in range(1, opt.max_iterations + 1):
+        a, b = system(jac, r, x, mask)
+        u, s, vt = factor(a, it)
+        ub = u.T @ b
+        sig_scaled = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))     # formal sigma of ξ
+        accepted = None
+        lam = 0.0
+        for attempt in range(opt.max_damping_tries + 1):
+            if attempt == 0:
+                xi = vt.T @ (ub / s)
+            else:
+                lam = opt.initial_damping * s[0] ** 2 * 10.0 ** (attempt - 1)
+                xi = vt.T @ (ub * s / (s * s + lam))
+            x_new = np.clip(x + scales * xi, lo, hi)
+            try:
+                h_new, jac_new = evaluate(x_new)
+            except (ArithmeticError, ProcessingError, ValueError):
+                continue
+            if not np.all(np.isfinite(h_new)):
+                continue
+            r_new = residuals(h_new)
+            c_new = cost_of(r_new, x_new, mask)
+            if c_new <= cost * (1.0 + 1e-12) + 1e-300:
+                accepted = (x_new, h_new, jac_new, r_new, c_new, xi)
+                damped += attempt > 0
+                break
+        if accepted is None:
+            step_sig = float(np.max(np.abs(vt.T @ (ub / s)) / sig_scaled))
+            if step_sig < opt.step_tol:       # already at the minimum to round-off
+                converged = True
+                message = "converged (no step reduces the cost further)"
+                break
+            raise ProcessingError(
+                f"no step reduces the cost after {opt.max_damping_tries} damped tries at iteration {it} "
+                f"(cost {cost:.6g}); the initial state may be too far off",
+                {"iteration": it, "cost": cost, "cost_history": history})
+        x_new, h, jac, r, c_new, xi = accepted
+        step_sig = float(np.max(np.abs(xi) / sig_scaled))
+        rel = abs(cost - c_new) / max(c_new, 1e-300)
+        x = x_new
+        new_mask = edit(r, mask)
+        check_counts(new_mask)
+        same = bool(np.array_equal(new_mask, mask))
+        mask = new_mask
+        cost = cost_of(r, x, mask)
+        history.append(cost)
+        if same and (step_sig < opt.step_tol or rel < opt.cost_rtol):
+            converged = True
+            message = (f"converged: step {step_sig:.2g} sigma" if step_sig < opt.step_tol
+                       else f"converged: relative cost change {rel:.2g}")
+            break
+    if not converged:
+        raise ProcessingError(
+            f"did not converge in {opt.max_iterations} iterations (cost {history[-2]:.6g} -> {history[-1]:.6g}); "
+            "try --max-iterations, a better --initial state, or a-priori sigmas",
+            {"iterations": it, "cost_history": history, "edited": int(mask.sum())})
+
+    # error matrices at the solution (the Jacobian of the last accepted point)
+    a, b = system(jac, r, x, mask)
+    u, s, vt = factor(a, it)
+    cov_scaled = (vt.T / s ** 2) @ vt
+    cov = cov_scaled * np.outer(scales, scales)
+    cov = 0.5 * (cov + cov.T)
+    sd = np.sqrt(np.diag(cov))
+    corr = cov / np.outer(sd, sd)
+    kept = int((~mask).sum())
+    dof = kept + n_prior - n
+    chi2 = cost
+    vf = chi2 / dof if dof > 0 else math.nan
+    return Solution(names=names, values=x, covariance=cov, sigma=sd, correlation=corr, covariance_scaled=cov_scaled,
+                    scales=scales, chi2=chi2, dof=dof, variance_factor=vf, condition_number=float(s[0] / s[-1]),
+                    singular_values=s, computed=h, residual=r, normalized=r / sig, edited=mask, jacobian=jac,
+                    iterations=it, converged=True, cost_history=history, damped_steps=damped, message=message)
+
+
+def _raise_rank(s, vt, names, scales, rtol, it):
+    """Rank deficiency: name the combinations of the negligible singular values."""
+    n = len(names)
+    smax = s[0] if s.size else 0.0
+    weak = [i for i in range(n) if i >= s.size or s[i] <= rtol * smax]
+    combos = []
+    for i in weak:
+        if i < vt.shape[0]:
+            combos.append(combination_text(vt[i], names))
+    if s.size < n:
+        text = f"only {s.size} independent rows for {n} parameters"
+    else:
+        text = "; ".join(combos)
+    raise ProcessingError(
+        f"rank-deficient problem (condition number {smax / s[-1] if s.size and s[-1] > 0 else math.inf:.3g}): "
+        f"unobservable combination(s) of the scaled parameters: {text}; add data, fix or drop a parameter, "
+        "or give it an a-priori sigma",
+        {"iteration": it, "singular_values": s.tolist(), "unobservable": combos})

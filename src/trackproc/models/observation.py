@@ -1,0 +1,389 @@
+"""Estimation measurement models: values with analytic partials, and bias modifiers.
+
+The same physics as the simulator's :mod:`trackproc.models.measurements` (DESIGN.md
+"Frames, time, forces", normative), written for the estimator: every model returns its value
+and its partial derivatives, all vectors in GCRF (m, m/s, s), every sample time-tagged at
+**reception** ``t_r`` on the ground.
+
+Geometry (one-way, down leg). The signal received at ``t_r`` left the satellite at
+``t_e = t_r - ρ/c``, with ``ρ = |r(t_e) - r_st(t_r)|`` and ``û = (r(t_e) - r_st(t_r)) / ρ``:
+
+    range              ρ (+ range_bias:STATION)                                      (1)
+    range-rate         doppler:       ρ̇ = û·(v(t_e) - v_st(t_r)) / (1 + û·v(t_e)/c)   (2)
+                       instantaneous: ρ̇ = û·(v(t_e) - v_st(t_r))                       (3)
+    Doppler            Δf = -f ρ̇ / c (+ doppler_offset + doppler_drift (t_r - t0))      (4)
+    azimuth/elevation  of r(t_e) - r_st(t_r) in the station's ENU frame at t_r       (5)
+
+(seed 002 eq. 17 writes (2) and (1) without light time and without station velocity; the
+station's rotation with the Earth is kept here: ``v_st`` is its GCRF velocity.)
+
+Partials with respect to the satellite state at emission, ``s_e = (r(t_e), v(t_e))``, at fixed
+``t_e`` (:func:`range_partials`, :func:`range_rate_partials`, :func:`azel_partials`), with
+``P = I - ûûᵀ``:
+
+    ∂ρ/∂r_e = ûᵀ
+    ∂ρ̇/∂r_e = (v_e - v_st)ᵀ P / (ρ d) - ρ̇ v_eᵀ P / (ρ c d),   ∂ρ̇/∂v_e = ûᵀ (1 - ρ̇/c) / d
+             with d = 1 + û·v_e/c (doppler), d = 1 and the ρ̇/c terms dropped (instantaneous)
+    ∂(az, el)/∂r_e = ∂(az, el)/∂enu · E · M      (E: ITRF -> ENU, M: GCRF -> ITRF at t_r)
+
+**Through the light time.** ``t_e`` itself depends on the parameters ``p`` (the initial state):
+a change ``δp`` moves the satellite by ``Φ(t_e) δp`` at fixed ``t_e`` and the emission time by
+``δt_e = -δρ/c``, so ``δρ = û·(Φ_r δp + v_e δt_e)`` gives
+
+    dρ/dp = û·Φ_r(t_e) / (1 + û·v_e/c),    dt_e/dp = -(dρ/dp) / c                     (6)
+
+and the total derivative of the emission state is ``D = Φ(t_e) + ṡ(t_e) (dt_e/dp)`` with
+``ṡ = (v, a)`` the state's time derivative (:func:`emission_jacobian`). Every observable
+``g(s_e)`` then has ``dg/dp = (∂g/∂s_e) D`` — exact to first order, and the reason the range
+partial carries the factor ``1/(1 + û·v/c)``. The station is a known function of ``t_r``
+and contributes nothing.
+
+Biases are *modifiers* that bring their own drivers (:class:`BiasModifier`): each adds
+``coefficient × value`` to some rows, so its partial is the coefficient — 1 for a range,
+Doppler offset, azimuth or elevation bias, ``t_r - t0`` for a Doppler drift, and
+``-c/f`` (``-c (t_r - t0)/f``) when a Doppler offset (drift) acts on range-rate samples that
+came from one-way Doppler (``ρ̇ = -c Δf / f``).
+
+Every partial here is checked against central finite differences in
+``tests/test_observation.py``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional, Sequence
+
+import numpy as np
+
+from trackproc.constants import C_LIGHT
+
+__all__ = ["KINDS", "RANGE_RATE_MODELS", "MeasurementSet", "BiasModifier", "EmissionGeometry",
+           "range_partials", "range_rate_value", "range_rate_partials", "azel_value", "azel_partials",
+           "solve_light_time", "emission_jacobian", "evaluate", "bias_modifiers", "wrap_pi"]
+
+#: Measurement kinds the estimator models.
+KINDS = ("range", "range_rate", "doppler", "azimuth", "elevation")
+RANGE_RATE_MODELS = ("doppler", "instantaneous")
+#: Light-time convergence threshold, s (as the simulator).
+LIGHT_TIME_TOL_S = 1e-12
+
+
+def _dot(a, b):
+    return np.einsum("...i,...i->...", a, b)
+
+
+def wrap_pi(angle_rad):
+    """Angle in [-π, π) (residuals of azimuth)."""
+    return np.mod(np.asarray(angle_rad, float) + np.pi, 2.0 * np.pi) - np.pi
+
+
+# ----------------------------------------------------------------------------- geometry
+
+def range_partials(r_e, r_st):
+    """Range ``ρ`` (m), unit vector ``û`` and ``∂ρ/∂r_e = û`` (fixed ``t_e``), shapes (...,), (..., 3)."""
+    d = np.asarray(r_e, float) - np.asarray(r_st, float)
+    rho = np.linalg.norm(d, axis=-1)
+    u = d / rho[..., None]
+    return rho, u, u
+
+
+def range_rate_value(r_e, v_e, r_st, v_st, model: str = "doppler", c: float = C_LIGHT):
+    """One-way range-rate (m/s, positive receding): eq. (2) ``doppler`` or (3) ``instantaneous``."""
+    _check_model(model)
+    d = np.asarray(r_e, float) - np.asarray(r_st, float)
+    u = d / np.linalg.norm(d, axis=-1)[..., None]
+    rr = _dot(u, np.asarray(v_e, float) - np.asarray(v_st, float))
+    if model == "doppler":
+        rr = rr / (1.0 + _dot(u, v_e) / c)
+    return rr
+
+
+def range_rate_partials(r_e, v_e, r_st, v_st, model: str = "doppler", c: float = C_LIGHT):
+    """Range-rate and its partials ``∂ρ̇/∂r_e`` and ``∂ρ̇/∂v_e`` at fixed ``t_e`` (module docstring).
+
+    Returns ``(rr, d_rr_d_r (..., 3), d_rr_d_v (..., 3))``.
+    """
+    _check_model(model)
+    r_e, v_e, r_st, v_st = (np.asarray(x, float) for x in (r_e, v_e, r_st, v_st))
+    d = r_e - r_st
+    rho = np.linalg.norm(d, axis=-1)[..., None]
+    u = d / rho
+    dv = v_e - v_st
+    num = _dot(u, dv)[..., None]
+    # P w = w - u (u·w): derivative of û along r_e, times rho
+    proj_dv = dv - u * num
+    if model == "instantaneous":
+        return num[..., 0], proj_dv / rho, u.copy()
+    den = 1.0 + _dot(u, v_e)[..., None] / c
+    rr = num / den
+    proj_v = v_e - u * _dot(u, v_e)[..., None]
+    d_r = (proj_dv - rr * proj_v / c) / (rho * den)
+    d_v = u * (1.0 - rr / c) / den
+    return rr[..., 0], d_r, d_v
+
+
+def azel_value(direction_gcrf, gcrf_to_enu):
+    """Azimuth (rad, [0, 2π), from north through east) and elevation (rad) of a GCRF direction;
+    ``gcrf_to_enu`` (..., 3, 3) = E · M, the rotation to the station's east-north-up frame."""
+    enu = np.einsum("...ij,...j->...i", gcrf_to_enu, direction_gcrf)
+    e, n, up = enu[..., 0], enu[..., 1], enu[..., 2]
+    az = np.mod(np.arctan2(e, n), 2.0 * np.pi)
+    az = np.where(az >= 2.0 * np.pi, 0.0, az)
+    return az, np.arctan2(up, np.hypot(e, n))
+
+
+def azel_partials(direction_gcrf, gcrf_to_enu):
+    """Azimuth, elevation and their gradients with respect to the GCRF direction vector.
+
+    ``∂az/∂enu = (n, -e, 0)/h²``, ``∂el/∂enu = (-e u, -n u, h²)/(h ρ²)``, h = √(e² + n²), then
+    times ``gcrf_to_enu``. Returns ``(az, el, d_az (..., 3), d_el (..., 3))``.
+    """
+    m = np.asarray(gcrf_to_enu, float)
+    enu = np.einsum("...ij,...j->...i", m, direction_gcrf)
+    e, n, up = enu[..., 0], enu[..., 1], enu[..., 2]
+    h2 = e * e + n * n
+    h = np.sqrt(h2)
+    rho2 = h2 + up * up
+    g_az = np.stack([n / h2, -e / h2, np.zeros_like(e)], -1)
+    g_el = np.stack([-e * up / (h * rho2), -n * up / (h * rho2), h / rho2], -1)
+    az, el = azel_value(direction_gcrf, m)
+    return az, el, np.einsum("...i,...ij->...j", g_az, m), np.einsum("...i,...ij->...j", g_el, m)
+
+
+def _check_model(model: str) -> None:
+    if model not in RANGE_RATE_MODELS:
+        raise ValueError(f"unknown range-rate model {model!r}; expected one of {RANGE_RATE_MODELS}")
+
+
+# ----------------------------------------------------------------------------- light time
+
+@dataclass(frozen=True)
+class EmissionGeometry:
+    """Result of :func:`solve_light_time` (arrays along the samples).
+
+    ``t_e_s`` emission times (s, the trajectory's time axis), ``tau_s`` light times,
+    ``state`` (N, 6) and ``state_dot`` (N, 6) of the satellite at ``t_e``, ``rho_m`` ranges,
+    ``u`` unit vectors station -> satellite, ``iterations`` Newton iterations taken.
+    """
+
+    t_e_s: np.ndarray
+    tau_s: np.ndarray
+    state: np.ndarray
+    state_dot: np.ndarray
+    rho_m: np.ndarray
+    u: np.ndarray
+    iterations: int
+
+
+def solve_light_time(trajectory, t_r_s, r_st, *, c: float = C_LIGHT, tol_s: float = LIGHT_TIME_TOL_S,
+                     max_iter: int = 10) -> EmissionGeometry:
+    """Emission times of one-way signals received at ``r_st`` (N, 3) at ``t_r_s`` (N,).
+
+    ``trajectory.state(t, derivative=0|1)`` gives the satellite's GCRF ``(r, v)`` or ``(v, a)``
+    at any times (dense output). Newton on ``g(τ) = c τ - ρ(t_r - τ)``, ``g' = c + û·v``,
+    from ``τ = |r(t_r) - r_st|/c``; converged when every ``|Δτ| < tol_s`` (1e-12 s: 0.3 mm).
+    Raises ``ArithmeticError`` if it does not converge in ``max_iter`` iterations.
+    """
+    t_r = np.asarray(t_r_s, float)
+    r_st = np.asarray(r_st, float)
+    s = trajectory.state(t_r)
+    tau = np.linalg.norm(s[:, :3] - r_st, axis=-1) / c
+    for it in range(1, max_iter + 1):
+        s = trajectory.state(t_r - tau)
+        d = s[:, :3] - r_st
+        rho = np.linalg.norm(d, axis=-1)
+        u = d / rho[:, None]
+        step = (c * tau - rho) / (c + _dot(u, s[:, 3:]))
+        tau = tau - step
+        if np.all(np.abs(step) < tol_s):
+            break
+    else:
+        raise ArithmeticError("light-time iteration did not converge")
+    t_e = t_r - tau
+    s = trajectory.state(t_e)
+    sdot = trajectory.state(t_e, derivative=1)
+    d = s[:, :3] - r_st
+    rho = np.linalg.norm(d, axis=-1)
+    return EmissionGeometry(t_e_s=t_e, tau_s=tau, state=s, state_dot=sdot, rho_m=rho, u=d / rho[:, None],
+                            iterations=it)
+
+
+def emission_jacobian(u, v_e, state_dot_e, phi_e, c: float = C_LIGHT):
+    """Total derivative of the emission state with respect to the parameters, eq. (6).
+
+    ``u`` (N, 3), ``v_e`` (N, 3), ``state_dot_e`` (N, 6) = (v, a) at ``t_e``, ``phi_e`` (N, 6, P) =
+    d state(t_e) / d p at fixed ``t_e``. Returns ``D`` (N, 6, P) and ``dt_e/dp`` (N, P).
+    """
+    drho = np.einsum("ni,nip->np", u, phi_e[:, :3, :]) / (1.0 + _dot(u, v_e) / c)[:, None]
+    dte = -drho / c
+    return phi_e + state_dot_e[:, :, None] * dte[:, None, :], dte
+
+
+# ----------------------------------------------------------------------------- measurements
+
+@dataclass
+class MeasurementSet:
+    """Samples to model, all arrays along the N samples (SI units, GCRF).
+
+    ``t_s`` reception times (s from the solution epoch); ``kind`` (one of :data:`KINDS`);
+    ``station`` names; ``pass_id``; ``observed`` and ``sigma``; ``r_st``/``v_st`` (N, 3) the
+    station in GCRF at ``t_r``; ``gcrf_to_enu`` (N, 3, 3) for angles (None if there are none);
+    ``carrier_hz`` (N,) nominal carrier (NaN where unknown).
+    """
+
+    t_s: np.ndarray
+    kind: np.ndarray
+    station: np.ndarray
+    pass_id: np.ndarray
+    observed: np.ndarray
+    sigma: np.ndarray
+    r_st: np.ndarray
+    v_st: np.ndarray
+    gcrf_to_enu: Optional[np.ndarray] = None
+    carrier_hz: Optional[np.ndarray] = None
+
+    def __post_init__(self) -> None:
+        self.kind = np.asarray(self.kind, dtype=object)
+        self.station = np.asarray(self.station, dtype=object)
+        self.pass_id = np.asarray(self.pass_id, dtype=object)
+        n = len(self.t_s)
+        if self.carrier_hz is None:
+            self.carrier_hz = np.full(n, np.nan)
+        self.carrier_hz = np.broadcast_to(np.asarray(self.carrier_hz, float), (n,)).copy()
+        bad = sorted(set(self.kind.tolist()) - set(KINDS))
+        if bad:
+            raise ValueError(f"unknown measurement kind {bad[0]!r}; expected one of {KINDS}")
+
+    def __len__(self) -> int:
+        return len(self.t_s)
+
+    @property
+    def periodic(self) -> np.ndarray:
+        """True for azimuth samples (residuals wrap at 2π)."""
+        return self.kind == "azimuth"
+
+    def subset(self, rows) -> "MeasurementSet":
+        rows = np.asarray(rows)
+        pick = (lambda a: None if a is None else a[rows])
+        return MeasurementSet(t_s=self.t_s[rows], kind=self.kind[rows], station=self.station[rows],
+                              pass_id=self.pass_id[rows], observed=self.observed[rows], sigma=self.sigma[rows],
+                              r_st=self.r_st[rows], v_st=self.v_st[rows], gcrf_to_enu=pick(self.gcrf_to_enu),
+                              carrier_hz=self.carrier_hz[rows])
+
+
+@dataclass(frozen=True)
+class BiasModifier:
+    """A linear bias: adds ``coefficient[k] * value`` of driver ``name`` to row ``rows[k]``."""
+
+    name: str
+    rows: np.ndarray
+    coefficient: np.ndarray = field(default=None)
+
+    def coefficients(self) -> np.ndarray:
+        return np.ones(len(self.rows)) if self.coefficient is None else np.asarray(self.coefficient, float)
+
+
+def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | None = None,
+                   c: float = C_LIGHT) -> list[BiasModifier]:
+    """The modifiers of the bias drivers ``names`` on ``meas`` (state names are skipped).
+
+    ``range_bias:S`` -> ranges of station S; ``az_bias:S``/``el_bias:S`` -> its angles;
+    ``doppler_offset:K`` and ``doppler_drift:K`` -> Doppler and range-rate samples whose pass id
+    or station is K (range-rate through ``-c/f``; NaN carrier there raises ValueError).
+    ``epochs`` maps a drift name to its reference time (s). A driver touching no sample raises
+    ValueError (it would be unobservable).
+    """
+    from trackproc.models.parameters import split_name
+
+    epochs = epochs or {}
+    out = []
+    for name in names:
+        family, key = split_name(name)
+        if family == "state":
+            continue
+        if family == "range_bias":
+            rows = np.flatnonzero((meas.kind == "range") & (meas.station == key))
+            coef = None
+        elif family in ("az_bias", "el_bias"):
+            kind = "azimuth" if family == "az_bias" else "elevation"
+            rows = np.flatnonzero((meas.kind == kind) & (meas.station == key))
+            coef = None
+        else:
+            owner = (meas.pass_id == key) | (meas.station == key)
+            rows = np.flatnonzero(owner & ((meas.kind == "doppler") | (meas.kind == "range_rate")))
+            coef = np.ones(rows.size)
+            if family == "doppler_drift":
+                if name not in epochs:
+                    raise ValueError(f"{name}: no reference epoch for the drift")
+                coef = meas.t_s[rows] - epochs[name]
+            rr = meas.kind[rows] == "range_rate"
+            if rr.any():
+                f = meas.carrier_hz[rows][rr]
+                if not np.all(np.isfinite(f) & (f > 0)):
+                    raise ValueError(f"{name}: range-rate samples without a carrier frequency cannot take a "
+                                     "Doppler offset/drift")
+                coef = coef.copy()
+                coef[rr] *= -c / f
+        if rows.size == 0:
+            raise ValueError(f"parameter {name!r} acts on no measurement")
+        out.append(BiasModifier(name, rows, coef))
+    return out
+
+
+def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modifiers: Sequence[BiasModifier] = (),
+             bias_values: dict | None = None, bias_columns: dict | None = None, n_columns: int | None = None,
+             range_rate_model: str = "doppler", c: float = C_LIGHT):
+    """Model values and partials of every sample (eqs. (1)-(6) of the module docstring).
+
+    ``trajectory`` gives ``state(t, derivative=0|1)`` (N, 6) and ``jacobian(t)`` (N, 6, P) —
+    d state(t) / d (parameters of the trajectory), P = ``n_state_params`` columns placed first.
+    ``modifiers`` (from :func:`bias_modifiers`), with ``bias_values`` name -> value and
+    ``bias_columns`` name -> column of the Jacobian (omit a name to hold it fixed: value added,
+    no column). Returns ``(computed (N,), jacobian (N, n_columns), geometry)``.
+    """
+    _check_model(range_rate_model)
+    n = len(meas)
+    bias_values = bias_values or {}
+    bias_columns = bias_columns or {}
+    ncol = n_columns if n_columns is not None else n_state_params + len(bias_columns)
+    geo = solve_light_time(trajectory, meas.t_s, meas.r_st, c=c)
+    r_e, v_e = geo.state[:, :3], geo.state[:, 3:]
+    phi = trajectory.jacobian(geo.t_e_s)
+    dstate, _ = emission_jacobian(geo.u, v_e, geo.state_dot, phi, c)
+    value = np.empty(n)
+    g = np.zeros((n, 6))                            # ∂ value / ∂ s_e
+
+    kind = meas.kind
+    m = kind == "range"
+    value[m] = geo.rho_m[m]
+    g[m, :3] = geo.u[m]
+    for k in ("range_rate", "doppler"):
+        m = kind == k
+        if not m.any():
+            continue
+        rr, d_r, d_v = range_rate_partials(r_e[m], v_e[m], meas.r_st[m], meas.v_st[m], range_rate_model, c)
+        factor = 1.0 if k == "range_rate" else -meas.carrier_hz[m] / c
+        if k == "doppler" and not np.all(np.isfinite(factor)):
+            raise ValueError("Doppler samples need a carrier frequency")
+        factor = np.broadcast_to(factor, rr.shape)
+        value[m] = factor * rr
+        g[m, :3] = factor[:, None] * d_r
+        g[m, 3:] = factor[:, None] * d_v
+    ang = (kind == "azimuth") | (kind == "elevation")
+    if ang.any():
+        if meas.gcrf_to_enu is None:
+            raise ValueError("angle samples need gcrf_to_enu")
+        az, el, d_az, d_el = azel_partials(r_e[ang] - meas.r_st[ang], meas.gcrf_to_enu[ang])
+        is_az = kind[ang] == "azimuth"
+        value[ang] = np.where(is_az, az, el)
+        g[ang, :3] = np.where(is_az[:, None], d_az, d_el)
+
+    jac = np.zeros((n, ncol))
+    jac[:, :n_state_params] = np.einsum("ni,nip->np", g, dstate)
+    for mod in modifiers:
+        coef = mod.coefficients()
+        value[mod.rows] += coef * bias_values.get(mod.name, 0.0)
+        col = bias_columns.get(mod.name)
+        if col is not None:
+            jac[mod.rows, col] += coef
+    return value, jac, geo
