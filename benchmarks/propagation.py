@@ -1,6 +1,6 @@
 """Propagation benchmark (issue 3): the Taylor (DT) engine against scipy DOP853 and heyoka.
 
-Run:  python benchmarks/propagation.py [--quick]
+Run:  python benchmarks/propagation.py [--quick] [--only import|pass|day|batch|measurements]
 
 Prints, for each case, the median of >= 5 timed runs, the ratios measured in the same run,
 and the errors against references (universal-variable Kepler for two-body; DOP853 at
@@ -12,7 +12,12 @@ rtol 1e-13 and the Taylor engine at tol 1e-16 / order 30 for J2):
   1 mm against the reference), DOP853 at rtol 1e-13, heyoka at tol 1e-15 (if installed);
 * one day of LEO, one sample a minute;
 * a batch of 1000 perturbed orbits over the pass (state; STM), in trajectory*samples/s;
-  DOP853 on the stacked 6000-dimensional system, heyoka in SIMD batches.
+  DOP853 on the stacked 6000-dimensional system, heyoka in SIMD batches;
+* measurement spectra (issue 3 item 5): the pass's one-way light-time range-rate and its
+  partials with respect to the initial state straight from the series
+  (:mod:`trackproc.dynamics.measurement_spectra`), against the foundation's model
+  (DOP853 reference orbit + ``models/measurements.py``, as ``trackproc simulate`` computes it)
+  with central finite differences for the partials.
 
 Timing is never asserted here or in tests; the targets of issue 3 are printed beside the
 measured values.
@@ -395,9 +400,87 @@ def section_batch(have_heyoka, repeat, n=BATCH):
               f"{ratio_line('heyoka', t_hyv, t_stm)}")
 
 
+def section_measurements(repeat):
+    """Range-rate and its partials over a 601-sample pass, image domain vs foundation + FD."""
+    from trackproc.dynamics import frames, geodesy, measurement_spectra, propagator, reference
+    from trackproc.dynamics import timescales as ts
+    from trackproc.models import measurements as mm
+
+    epoch = np.datetime64("2026-03-20T09:30:00", "ns")
+    jd = tuple(float(x) for x in ts.datetime64_to_jd_utc(epoch))
+    eop = ts.EarthOrientation.constant(0.0)
+    t = np.linspace(0.0, PASS_S, N_SAMPLES)
+    r0, v0 = LEO[:3], LEO[3:]
+    # a station under the ground track at mid-pass: a pass through the zenith
+    q = frames.QuasiInertialFrame.at(*jd, eop).q
+    mid_r, mid_v = reference.propagate_gcrf(r0, v0, [PASS_S / 2], q, "j2")
+    jm = ts.add_seconds_utc(jd, np.array([PASS_S / 2]))
+    lat, lon, _ = geodesy.itrf_to_geodetic(frames.gcrf_to_itrf(mid_r[0], mid_v[0], *jm, eop)[0][0])
+    lat, lon = float(lat), float(lon)
+    st_itrf = geodesy.geodetic_to_itrf(lat, lon, 0.0)
+    print(f"\n== measurement spectra: one {PASS_S:.0f} s pass, {N_SAMPLES} samples, j2, tol {TOL:g}, "
+          f"station at the sub-satellite point of mid-pass, one-way light time ==")
+
+    def spectra_run(with_partials=True):
+        traj = propagator.propagate(r0, v0, epoch, t, eop=eop, tol=TOL, stm=with_partials)
+        st = measurement_spectra.StationModel.build(st_itrf, lat, lon, traj.epoch_jd_utc, traj.frame.q,
+                                                    t[0], t[-1], eop=eop)
+        return traj, st, measurement_spectra.predict(traj, st, t, partials=with_partials)
+
+    traj, st, pred = spectra_run()
+    t_all = median_time(spectra_run, repeat)
+    t_pred = median_time(lambda: measurement_spectra.predict(traj, st, t), repeat)
+    t_vals = median_time(lambda: spectra_run(False), repeat)
+    j1, j2 = ts.add_seconds_utc(jd, t)
+    track = mm.station_gcrf(st_itrf, j1, j2, eop)
+
+    def foundation(x):
+        r, v = reference.propagate_gcrf(x[:3], x[3:], t, q, "j2")
+        a, jk = reference.acceleration_gcrf(r, v, q, "j2")
+        return mm.observables(r, v, a, jk, track.r, track.v, track.a, track.gcrf_to_itrf, lat, lon,
+                              carrier_hz=2.2e9)
+
+    steps = np.array([10.0] * 3 + [0.01] * 3)
+
+    def foundation_fd():
+        base = foundation(LEO)
+        d_rr = np.empty((N_SAMPLES, 6))
+        for k in range(6):
+            e = np.zeros(6)
+            e[k] = steps[k]
+            d_rr[:, k] = (foundation(LEO + e).range_rate_m_s - foundation(LEO - e).range_rate_m_s) / (2 * steps[k])
+        return base, d_rr
+
+    def foundation_full():
+        return foundation(LEO), mm.station_gcrf(st_itrf, j1, j2, eop)
+
+    base, fd = foundation_fd()
+    t_found = median_time(foundation_full, max(3, repeat // 2))
+    t_fd = median_time(foundation_fd, 3) + median_time(lambda: mm.station_gcrf(st_itrf, j1, j2, eop), 3)
+    rel = np.abs(pred.d_range_rate_d_state - fd).max(axis=0) / np.abs(fd).max(axis=0)
+    h = 0.25                   # 4th-order differences: truncation h^4|D^(5)|/30 vs 1e-8 m noise / h
+    rng = [measurement_spectra.predict(traj, st, t[2:-2] + d, partials=False).range_m for d in (2 * h, h, -h, -2 * h)]
+    numeric = (-rng[0] + 8 * rng[1] - 8 * rng[2] + rng[3]) / (12 * h)
+    print(f"  {pred.segments.range.shape[0]} range segments (half-widths "
+          f"{pred.segments.half_width_s.min():.0f}..{pred.segments.half_width_s.max():.0f} s), "
+          f"{pred.segments.iterations} light-time passes; elevation up to {np.degrees(pred.elevation_rad.max()):.1f} deg")
+    print(f"  spectra: propagate+STM+range-rate+partials {fmt_t(t_all)};  predict alone {fmt_t(t_pred)};  "
+          f"values only (no STM) {fmt_t(t_vals)}")
+    print(f"  foundation model, values only (DOP853 + station + light time)  {fmt_t(t_found)};  "
+          f"{ratio_line('foundation', t_found, t_vals)}")
+    print(f"  foundation + central FD partials (13 evaluations)   {fmt_t(t_fd)};  "
+          f"{ratio_line('foundation+FD', t_fd, t_all)}")
+    print(f"  range vs foundation max {np.abs(pred.range_m - base.range_m).max():.1e} m, range-rate "
+          f"{np.abs(pred.range_rate_m_s - base.range_rate_m_s).max():.1e} m/s; range-rate vs numerical derivative "
+          f"of the light-time range {np.abs(numeric - pred.range_rate_m_s[2:-2]).max():.1e} m/s (target <= 1e-6)")
+    print(f"  partials d(range-rate)/d(x0) vs foundation central FD: max rel. diff. per column {rel.max():.1e}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="5 repeats instead of 9, no day runs")
+    ap.add_argument("--only", choices=("import", "pass", "day", "batch", "measurements"),
+                    help="run one section only")
     args = ap.parse_args(argv)
     repeat = 5 if args.quick else 9
     try:
@@ -412,13 +495,22 @@ def main(argv=None):
     print(f"Taylor default order at tol {TOL:g}: {taylor.default_order(TOL)}; "
           f"median of {repeat} runs per figure")
     _check_gravity_gradient()
-    section_import(repeat=5)
-    for force in ("two-body", "j2"):
-        section_pass(force, have_heyoka, repeat)
-    if not args.quick:
+
+    def want(name):
+        return args.only is None or args.only == name
+
+    if want("import"):
+        section_import(repeat=5)
+    if want("pass"):
+        for force in ("two-body", "j2"):
+            section_pass(force, have_heyoka, repeat)
+    if want("day") and (not args.quick or args.only == "day"):
         for force in ("two-body", "j2"):
             section_day(force, have_heyoka, repeat)
-    section_batch(have_heyoka, repeat)
+    if want("batch"):
+        section_batch(have_heyoka, repeat)
+    if want("measurements"):
+        section_measurements(repeat)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,10 @@ def median_time(cmd, runs):
 
 def main():
     runs = int(sys.argv[1]) if len(sys.argv) > 1 else 7
-    exe = shutil.which("trackproc") or "trackproc"
+    from pathlib import Path
+
+    beside = Path(sys.executable).with_name("trackproc")  # the venv's console script
+    exe = str(beside) if beside.exists() else shutil.which("trackproc") or "trackproc"
     base = median_time([sys.executable, "-c", "pass"], runs)
     for args in (["--help"], ["--version"], ["ingest", "--help"]):
         t = median_time([exe, *args], runs)

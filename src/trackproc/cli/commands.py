@@ -9,3 +9,8 @@ from trackproc.cli import ingest_cmd  # noqa: F401
 from trackproc.cli import info_cmd  # noqa: F401
 from trackproc.cli import smooth_cmd  # noqa: F401
 from trackproc.cli import simulate_cmd  # noqa: F401
+from trackproc.cli import requirements_cmd  # noqa: F401
+from trackproc.cli import detect_cmd  # noqa: F401
+from trackproc.cli import accuracy_cmd  # noqa: F401
+from trackproc.cli import estimate_cmd  # noqa: F401
+from trackproc.cli import propagate_cmd  # noqa: F401

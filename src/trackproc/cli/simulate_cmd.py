@@ -26,7 +26,8 @@ def simulate_command(
                                  help="Stations table: station, lat_deg, lon_deg, height_m."),
     start: Optional[str] = typer.Option(None, "--start", metavar="ISO",
                                         help="First sample time, UTC ISO 8601 (default: the state's epoch)."),
-    duration: float = typer.Option(..., "--duration", metavar="S", help="Span to simulate, s."),
+    duration: Optional[float] = typer.Option(None, "--duration", metavar="S",
+                                             help="Span to simulate, s (required unless --ballistic)."),
     step: float = typer.Option(10.0, "--step", metavar="S", help="Sample spacing, s."),
     elevation_mask_deg: float = typer.Option(10.0, "--elevation-mask-deg",
                                              help="Samples below this elevation are not seen, deg."),
@@ -60,6 +61,17 @@ def simulate_command(
     truth: Optional[str] = typer.Option(None, "--truth", metavar="TRUTH.json",
                                         help="Also write the true state at the start time (state file, GCRF)."),
     output: Optional[str] = OutputOpt,
+    ballistic: Optional[str] = typer.Option(
+        None, "--ballistic", metavar="NOMINAL.json",
+        help="Instead: elevation/azimuth pass of a seed 003 ballistic trajectory (see trackproc detect).",
+        rich_help_panel="Ballistic (seed 003)"),
+    hypothesis: str = typer.Option("h0", "--hypothesis", metavar="h0|h1",
+                                   help="With --ballistic: nominal (h0) or displaced (h1) trajectory.",
+                                   rich_help_panel="Ballistic (seed 003)"),
+    displacement_m: Optional[float] = typer.Option(None, "--displacement-m", metavar="D",
+                                                   help="With --ballistic --hypothesis h1: displacement, m "
+                                                        "(default: the nominal file's).",
+                                                   rich_help_panel="Ballistic (seed 003)"),
 ) -> None:
     """Simulate tracking passes of a known orbit: range, range-rate (one-way light time), Doppler,
     azimuth and elevation, with noise, range biases and a frequency offset/drift.
@@ -75,6 +87,13 @@ def simulate_command(
         trackproc simulate --tle iss.tle --stations stations.csv --duration 21600 \\
             | trackproc ingest - | trackproc info -
     """
+    if ballistic is not None:
+        return _simulate_ballistic(ballistic, hypothesis, displacement_m, stations, step, elevation_mask_deg, kinds,
+                                   sigma_angle_deg, seed, eop, dut1, fmt, output,
+                                   ignored={"--state": state, "--tle": tle, "--start": start, "--duration": duration,
+                                            "--truth": truth, "--wide": wide or None})
+    if duration is None:
+        raise typer.BadParameter("missing option (required unless --ballistic)", param_hint="--duration")
     if (state is None) == (tle is None):
         raise typer.BadParameter("give exactly one of --state STATE.json or --tle FILE", param_hint="--state/--tle")
     if wide and fmt is not None and fmt != TableFormat.csv:
@@ -133,3 +152,35 @@ def simulate_command(
              frame["station"].nunique(), "stdout" if out == "-" else out,
              "wide csv" if wide else out_format.value)
 
+
+def _simulate_ballistic(nominal_path, hypothesis, displacement_m, stations, step, elevation_mask_deg, kinds,
+                        sigma_angle_deg, seed, eop, dut1, fmt, output, ignored) -> None:
+    """``simulate --ballistic``: pipeline.ballistic_sim (seed 003), same output conventions."""
+    given = [flag for flag, value in ignored.items() if value is not None]
+    if given:
+        raise typer.BadParameter("not used with --ballistic (the nominal file sets the trajectory and times)",
+                                 param_hint=given[0])
+    if hypothesis.lower() not in ("h0", "h1"):
+        raise typer.BadParameter(f"expected h0 or h1, got {hypothesis!r}", param_hint="--hypothesis")
+    out = resolve_output(output, "output pass file")
+    out_format = table_format_for(out, fmt)
+
+    from trackproc.io.eop import earth_orientation
+    from trackproc.io.passfile import PassTable, write_pass_table
+    from trackproc.io.stations import read_stations
+    from trackproc.pipeline.ballistic_sim import BallisticOptions, simulate_ballistic
+    from trackproc.pipeline.detect import read_nominal
+
+    nominal = read_nominal(nominal_path)
+    orientation = None
+    if nominal.model == "3d":
+        orientation, warning = earth_orientation(eop, dut1)
+        if warning:
+            log.warning(warning)
+    options = BallisticOptions(hypothesis=hypothesis.lower(), displacement_m=displacement_m, step_s=step,
+                               elevation_mask_deg=elevation_mask_deg, sigma_angle_deg=sigma_angle_deg, seed=seed,
+                               kinds=tuple(k.strip() for k in kinds.split(",") if k.strip()))
+    result = simulate_ballistic(nominal, read_stations(stations), options, orientation)
+    write_pass_table(PassTable(result.frame, result.meta), out, out_format.value)
+    log.info("ballistic %s pass, %d samples at %s -> %s (%s)", hypothesis.upper(), len(result.frame), result.station,
+             "stdout" if out == "-" else out, out_format.value)

@@ -63,10 +63,10 @@ __all__ = [
     "normalizing_factor", "mean_spectrum", "correlation_spectrum", "correlation", "variance",
     "seed000_spectra", "seed000_variance_exact", "seed000_velocity_variance_exact",
     "seed000_statistics", "seed000_enough_discretes", "seed000_velocity_weight",
-    "state_spectra", "spectral_covariance", "spectral_cross_covariance",
+    "state_spectra", "spectral_covariance", "spectral_cross_covariance", "spectral_factors",
     "stm_covariance", "stm_cross_covariance",
     "sample_initial_states", "sample_covariance", "monte_carlo_bounds", "covariance_sd",
-    "rtn_rotation", "to_rtn", "range_range_rate_jacobian", "observable_covariance",
+    "rtn_rotation", "rtn_jacobian", "to_rtn", "range_range_rate_jacobian", "observable_covariance",
     "sigmas", "correlation_coefficients",
 ]
 
@@ -329,33 +329,51 @@ def seed000_statistics(t_s, sigma1_m: float, sigma2_m_s: float, n_rad_s: float, 
 
 # =========================================================================== the DT engine's spectra
 
-def _step_index(step_times_s, t):
-    """Index of the engine step holding each time (times inside the propagated interval)."""
-    tb = np.asarray(step_times_s, float)
-    nsteps = tb.size - 1
-    if nsteps < 1:
-        raise ValueError("the propagation took no step")
-    lo, hi = min(tb[0], tb[-1]), max(tb[0], tb[-1])
-    slack = 8 * np.finfo(float).eps * max(abs(lo), abs(hi), 1.0)
-    if t.size and (t.min() < lo - slack or t.max() > hi + slack):
-        raise ValueError(f"times must lie in the propagated interval [{lo}, {hi}] s; "
-                         f"found [{t.min()}, {t.max()}]")
-    if tb[-1] >= tb[0]:
-        idx = np.searchsorted(tb, t, side="right") - 1
-    else:
-        idx = np.searchsorted(-tb, -t, side="right") - 1
-    return np.clip(idx, 0, nsteps - 1)
+def _step_arrays(source):
+    """(step index of each time fn, expansion times (S,), position spectra (S, 3, n),
+    sensitivity spectra (S, 3, 6, n)) of a Taylor propagation, a propagator trajectory or its steps."""
+    if hasattr(source, "step_times_s"):                       # taylor.Propagation
+        if source.sensitivities is None:
+            raise ValueError("the propagation carries no sensitivities; call propagate(..., stm=True)")
+        if source.coefficients.shape[1] != 1:
+            raise ValueError("state spectra need a single-trajectory propagation")
+        tb = np.asarray(source.step_times_s, float)
+        if tb.size < 2:
+            raise ValueError("the propagation took no step")
+        lo, hi = min(tb[0], tb[-1]), max(tb[0], tb[-1])
+        forward = tb[-1] >= tb[0]
+
+        def locate(t):
+            slack = 8 * np.finfo(float).eps * max(abs(lo), abs(hi), 1.0)
+            if t.size and (t.min() < lo - slack or t.max() > hi + slack):
+                raise ValueError(f"times must lie in the propagated interval [{lo}, {hi}] s; "
+                                 f"found [{t.min()}, {t.max()}]")
+            idx = (np.searchsorted(tb, t, side="right") if forward
+                   else np.searchsorted(-tb, -t, side="right")) - 1
+            return np.clip(idx, 0, tb.size - 2)
+
+        return locate, tb[:-1], source.coefficients[:, 0], source.sensitivities[:, 0, :, :6]
+    steps = source.steps() if hasattr(source, "steps") else source   # propagator.Trajectory / Steps
+    if steps.sensitivities is None:
+        raise ValueError("the trajectory carries no sensitivities; propagate with stm=True")
+
+    def locate_steps(t):
+        return steps.locate(t)
+
+    return locate_steps, steps.t_expand_s, steps.coefficients, steps.sensitivities
 
 
 def state_spectra(propagation, t_s) -> np.ndarray:
     """First-order random spectra of the state at times ``t_s``, from a DT propagation.
 
-    ``propagation`` is a :class:`trackproc.dynamics.taylor.Propagation` of one trajectory made
-    with ``stm=True``. For each time t, in the step starting at ``t_s``, with ``H = t - t_s``:
-    the position discretes ``X_H(K) = H^K X_1(K)`` and the velocity discretes by the
-    derivative rule ``V_H(K) = (K+1)/H X_H(K+1) = (K+1) H^K X_1(K+1)`` (SEEDS.md notation),
-    each with its derivatives with respect to the initial state (the engine's sensitivity
-    spectra, seed 004 eqs. 19-21 to first order).
+    ``propagation``: a :class:`trackproc.dynamics.taylor.Propagation` of one trajectory made
+    with ``stm=True``, or a :class:`trackproc.dynamics.propagator.Trajectory` (or its
+    ``steps()``) made with ``stm=True`` -- then in its quasi-inertial frame, with derivatives
+    with respect to the quasi-inertial initial state. For each time t, in the step expanded
+    about ``t_s``, with ``H = t - t_s``: the position discretes ``X_H(K) = H^K X_1(K)`` and the
+    velocity discretes by the derivative rule ``V_H(K) = (K+1)/H X_H(K+1) = (K+1) H^K X_1(K+1)``
+    (SEEDS.md notation), each with its derivatives with respect to the initial state (the
+    engine's sensitivity spectra, seed 004 eqs. 19-21 to first order).
 
     Returns
     -------
@@ -365,21 +383,17 @@ def state_spectra(propagation, t_s) -> np.ndarray:
         random initial errors V); ``n = order + 2``. ``sum_K`` over the last axis gives the
         nominal state (slot 0) and the state transition matrix (slots 1..6).
     """
-    prop = propagation
-    if prop.sensitivities is None:
-        raise ValueError("the propagation carries no sensitivities; call propagate(..., stm=True)")
-    if prop.batch and prop.coefficients.shape[1] != 1:
-        raise ValueError("state_spectra needs a single-trajectory propagation")
+    locate, t_expand, coefs, senss = _step_arrays(propagation)
     t = np.atleast_1d(np.asarray(t_s, dtype=float))
-    idx = _step_index(prop.step_times_s, t)
-    coef = prop.coefficients[idx, 0]                              # (M, 3, n)
-    sens = prop.sensitivities[idx, 0, :, :6]                      # (M, 3, 6, n)
+    idx = locate(t)
+    coef = coefs[idx]                                             # (M, 3, n)
+    sens = senss[idx]                                             # (M, 3, 6, n)
     n = coef.shape[-1]
     pos = np.concatenate([coef[:, :, None, :], sens], axis=2)     # (M, 3, 7, n)
     vel = np.zeros_like(pos)
-    vel[..., :n - 1] = pos[..., 1:] * np.arange(1, n)             # (K+1) X_1(K+1)
+    vel[..., :n - 1] = sp.derivative(pos)                         # (K+1) X_1(K+1)
     spec = np.concatenate([pos, vel], axis=1)                     # (M, 6, 7, n)
-    h = t - prop.step_times_s[idx]
+    h = t - np.asarray(t_expand, float)[idx]
     hp = h[:, None] ** np.arange(n)                               # rescale to H = t - t_s
     return spec * hp[:, None, None, :]
 
@@ -425,6 +439,19 @@ def spectral_cross_covariance(propagation, t1_s, t2_s, cov0) -> np.ndarray:
     for i in range(w1.shape[0]):
         out[i] = _cross_sum(np.broadcast_to(w1[i], w2.shape[:1] + w1.shape[1:]), w2)
     return out
+
+
+def spectral_factors(propagation, t_s, cov0) -> np.ndarray:
+    """``F(t) = sum_K W(K, t)``, the summed normalised random discretes ``dX(K)/dV L``: ``(M, 6, k)``.
+
+    The sum over K of a complete Cauchy product is the product of the two sums, so eq. 25
+    factorises exactly: ``R(t1, t2) = F(t1) F(t2)^T`` -- the same numbers as
+    :func:`spectral_cross_covariance` (tested) at the cost of one product per pair of times
+    instead of a Cauchy product, for correlation matrices over long time grids.
+    """
+    spec = state_spectra(propagation, t_s)
+    lo = normalizing_factor(cov0)
+    return np.einsum("mcjn,jk->mck", spec[:, :, 1:], lo)
 
 
 # =========================================================================== STM and Monte Carlo
@@ -512,17 +539,37 @@ def rtn_rotation(r, v) -> np.ndarray:
     return np.stack([er, ea, ec], axis=-2)
 
 
-def to_rtn(cov, r, v) -> np.ndarray:
-    """6 x 6 covariances ``(..., 6, 6)`` resolved along the RTN axes of the nominal ``r, v``.
+def rtn_jacobian(r, v, rotating: bool = True) -> np.ndarray:
+    """6 x 6 map of inertial state errors to RTN errors at the nominal ``r, v (..., 3)``.
 
-    Position and velocity errors are both projected on the same radial / along / cross axes
-    (the inertial velocity error, not the rate of change of the position error in the
-    rotating RTN frame).
+    Position: ``dr_rtn = M dr`` (rows of :func:`rtn_rotation`). Velocity, ``rotating=True``:
+    the rate of change of the RTN position error, ``M dv - w x (M dr)`` with the frame's
+    angular velocity ``w = (0, 0, |r x v| / r^2)`` in RTN (two-body; the slow turn of the plane
+    under J2 is ~1e-3 of it) -- the Clohessy-Wiltshire convention, in which an along-track
+    drift shows as a constant along-track rate, not as a growing radial velocity.
+    ``rotating=False``: the inertial velocity error resolved on the same axes, ``M dv``.
+    Returns ``(..., 6, 6)``.
     """
     m = rtn_rotation(r, v)
     big = np.zeros(m.shape[:-2] + (6, 6))
     big[..., :3, :3] = m
     big[..., 3:, 3:] = m
+    if rotating:
+        r = np.asarray(r, dtype=float)
+        w = np.linalg.norm(np.cross(r, np.asarray(v, float)), axis=-1) / np.sum(r * r, axis=-1)
+        # -[w]x M with [w]x = w [[0,-1,0],[1,0,0],[0,0,0]]: rows (w M_1, -w M_0, 0)
+        big[..., 3, :3] = w[..., None] * m[..., 1, :]
+        big[..., 4, :3] = -w[..., None] * m[..., 0, :]
+    return big
+
+
+def to_rtn(cov, r, v, rotating: bool = True) -> np.ndarray:
+    """6 x 6 covariances ``(..., 6, 6)`` resolved along the RTN axes of the nominal ``r, v``.
+
+    ``J P J^T`` with ``J`` from :func:`rtn_jacobian` (by default the velocity block is the rate
+    of the RTN position errors; ``rotating=False``: inertial velocity errors on RTN axes).
+    """
+    big = rtn_jacobian(r, v, rotating)
     return np.einsum("...ij,...jk,...lk->...il", big, np.asarray(cov, float), big)
 
 

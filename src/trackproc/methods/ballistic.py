@@ -320,11 +320,13 @@ def observer_motion_error(t_s, elevation_rad, range_m, latitude_rad: float, *, r
         fictitious:  r_f = (-R (1 - cos ω_f t),  R sin ω_f t,  0),   ω_f = ω cos φ_H
 
     (the paper prints ``cos ω t`` in z_H; ``1 - cos ω t`` is what its u_H gives). The object is
-    at range d and elevation ε from O in the orbit plane, ``r = (d sin ε, side · d cos ε, 0)``;
-    ``side = -1`` (the object on the far side from the observer's displacement, i.e. an object
-    that moves in the same direction as the observer, in forward time) is the side that
-    reproduces Table 1. Returns ``(Δd, Δl, Δε)``: ``Δd = d_f - d_H`` (m), the shift
-    ``Δl = Δd / cos ε`` (m) and the elevation error ``Δε = (Δd / d) tan ε`` (rad).
+    at range d and elevation ε from O in the orbit plane, ``r = (d sin ε, side · d cos ε, 0)``.
+    ``side = -1``: the object on the other side of O than the observer's (time-reversed)
+    displacement, i.e. in forward time the two converge on O from opposite sides (head-on,
+    "against"); this side reproduces Table 1 cell by cell (tests/test_ballistic_model.py).
+    ``side = +1`` (converging from the same side, "with") gives errors of the same order.
+    Returns ``(Δd, Δl, Δε)``: ``Δd = d_f - d_H`` (m), the shift ``Δl = Δd / cos ε`` (m) and
+    the elevation error ``Δε = (Δd / d) tan ε`` (rad), as the paper's Fig. 2.
     """
     t = np.asarray(t_s, float)
     el = np.asarray(elevation_rad, float)
@@ -361,25 +363,24 @@ def impact_state_3d(r_station_m, v_station_m_s, velocity_m_s: float, angle_rad: 
     velocity ``V (cos α ĥ - sin α û)`` has the geocentric vertical ``û = r/|r|`` and the
     horizontal ``ĥ``: the station's inertial velocity direction ("with", the unfavourable
     orbit of seed 003 moving eastward), its opposite ("against"), or, when ``heading_rad`` is
-    given, the geocentric horizontal at that azimuth (from north through east; the Earth's
-    rotation axis is taken as GCRF z for "north", 0.3 arcsec at most from the CIP). H1: the
+    given, the geocentric horizontal at that azimuth (from north through east; east is the
+    station's inertial velocity direction, so north refers to the true rotation axis). H1: the
     state rotated about the orbit normal by ``-Δ/|r|`` (the impact point moves back along the
     track by Δ: the observer lies Δ beyond it, as the planar ``+Δ/R``).
     """
     r = np.asarray(r_station_m, float)
     up = r / np.linalg.norm(r)
+    v_st = np.asarray(v_station_m_s, float)
+    v_h = v_st - np.dot(v_st, up) * up
+    norm = np.linalg.norm(v_h)
+    if norm < 1e-3:
+        raise ValueError("the station does not move (pole): the 3-D model needs a station off the poles")
+    east = v_h / norm                      # ω × r about the true rotation axis: exactly east
     if heading_rad is None:
-        v_st = np.asarray(v_station_m_s, float)
-        v_h = v_st - np.dot(v_st, up) * up
-        norm = np.linalg.norm(v_h)
-        if norm < 1e-3:
-            raise ValueError("the station does not move (pole): give a heading instead of with/against")
-        h = DIRECTIONS[direction] * v_h / norm
         if DIRECTIONS[direction] == 0:
             raise ValueError("direction must be 'with' or 'against' for the 3-D model (or give a heading)")
+        h = DIRECTIONS[direction] * east
     else:
-        east = np.cross([0.0, 0.0, 1.0], up)
-        east /= np.linalg.norm(east)
         north = np.cross(up, east)
         h = np.sin(heading_rad) * east + np.cos(heading_rad) * north
     v = velocity_m_s * (np.cos(angle_rad) * h - np.sin(angle_rad) * up)

@@ -146,9 +146,20 @@ class Solution:
 
 # ----------------------------------------------------------------------------- linear algebra
 
-def whitened_svd(jacobian_w: np.ndarray):
-    """Thin SVD of a whitened Jacobian (rows: samples; columns: scaled parameters)."""
-    return np.linalg.svd(jacobian_w, full_matrices=False)
+def whitened_svd(jacobian_w: np.ndarray, rhs: np.ndarray):
+    """SVD of a whitened Jacobian (rows: samples; columns: scaled parameters) and ``Uᵀ b``.
+
+    The tall system is first reduced by a Householder QR of the augmented matrix ``[J | b]``
+    (``R``, ``c = Qᵀ b`` exactly, no normal matrix), then the small ``R`` is decomposed:
+    ``J = Q R = (Q U_R) Σ Vᵀ``, so ``Uᵀ b = U_Rᵀ c``. Returns ``(Uᵀ b, Σ, Vᵀ)``.
+    """
+    n = jacobian_w.shape[1]
+    if jacobian_w.shape[0] <= n:
+        u, s, vt = np.linalg.svd(jacobian_w, full_matrices=False)
+        return u.T @ rhs, s, vt
+    r = np.linalg.qr(np.column_stack([jacobian_w, rhs]), mode="r")
+    u, s, vt = np.linalg.svd(r[:n, :n])
+    return u.T @ r[:n, n], s, vt
 
 
 def combination_text(vector: np.ndarray, names: Sequence[str], threshold: float = 0.1) -> str:
@@ -271,13 +282,13 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
             b = np.concatenate([b, _prior_rhs(prior_factors, xv)])
         return a, b
 
-    def factor(a, it):
+    def factor(a, b, it):
         if not np.all(np.isfinite(a)):
             raise ProcessingError("the Jacobian has non-finite entries", {"iteration": it})
-        u, s, vt = whitened_svd(a)
+        ub, s, vt = whitened_svd(a, b)
         if s.size < n or s[-1] <= opt.rank_rtol * s[0]:
             _raise_rank(s, vt, names, scales, opt.rank_rtol, it)
-        return u, s, vt
+        return ub, s, vt
 
     try:
         h, jac = evaluate(x)
@@ -291,6 +302,7 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
     check_counts(mask)
     # first editing pass against the initial orbit (generous: WRMS of everything)
     mask = edit(r, mask)
+    stable = bool(np.array_equal(mask, fixed_out))
     check_counts(mask)
     cost = cost_of(r, x, mask)
     history = [cost]
@@ -300,9 +312,13 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
     it = 0
     for it in range(1, opt.max_iterations + 1):
         a, b = system(jac, r, x, mask)
-        u, s, vt = factor(a, it)
-        ub = u.T @ b
+        ub, s, vt = factor(a, b, it)
         sig_scaled = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))     # formal sigma of ξ
+        gn_sig = float(np.max(np.abs(vt.T @ (ub / s)) / sig_scaled))
+        if stable and gn_sig < opt.step_tol:          # at the minimum already: no evaluation needed
+            converged = True
+            message = f"converged: Gauss-Newton step {gn_sig:.2g} sigma"
+            break
         accepted = None
         lam = 0.0
         for attempt in range(opt.max_damping_tries + 1):
@@ -325,8 +341,7 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
                 damped += attempt > 0
                 break
         if accepted is None:
-            step_sig = float(np.max(np.abs(vt.T @ (ub / s)) / sig_scaled))
-            if step_sig < opt.step_tol:       # already at the minimum to round-off
+            if gn_sig < opt.step_tol:         # already at the minimum to round-off
                 converged = True
                 message = "converged (no step reduces the cost further)"
                 break
@@ -341,6 +356,7 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
         new_mask = edit(r, mask)
         check_counts(new_mask)
         same = bool(np.array_equal(new_mask, mask))
+        stable = same
         mask = new_mask
         cost = cost_of(r, x, mask)
         history.append(cost)
@@ -350,14 +366,17 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
                        else f"converged: relative cost change {rel:.2g}")
             break
     if not converged:
+        weakest = combination_text(vt[-1], names)
         raise ProcessingError(
-            f"did not converge in {opt.max_iterations} iterations (cost {history[-2]:.6g} -> {history[-1]:.6g}); "
+            f"did not converge in {opt.max_iterations} iterations (cost {history[-2]:.6g} -> {history[-1]:.6g}; "
+            f"condition number {s[0] / s[-1]:.3g}, weakest combination {weakest}); "
             "try --max-iterations, a better --initial state, or a-priori sigmas",
-            {"iterations": it, "cost_history": history, "edited": int(mask.sum())})
+            {"iterations": it, "cost_history": history, "edited": int(mask.sum()),
+             "condition_number": float(s[0] / s[-1]), "weakest_combination": weakest})
 
     # error matrices at the solution (the Jacobian of the last accepted point)
     a, b = system(jac, r, x, mask)
-    u, s, vt = factor(a, it)
+    _, s, vt = factor(a, b, it)
     cov_scaled = (vt.T / s ** 2) @ vt
     cov = cov_scaled * np.outer(scales, scales)
     cov = 0.5 * (cov + cov.T)

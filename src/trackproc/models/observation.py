@@ -335,8 +335,9 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
              range_rate_model: str = "doppler", c: float = C_LIGHT):
     """Model values and partials of every sample (eqs. (1)-(6) of the module docstring).
 
-    ``trajectory`` gives ``state(t, derivative=0|1)`` (N, 6) and ``jacobian(t)`` (N, 6, P) —
-    d state(t) / d (parameters of the trajectory), P = ``n_state_params`` columns placed first.
+    ``trajectory`` gives GCRF ``state(t, derivative=0|1)`` (N, 6) and ``stm(t)`` (N, 6, P) —
+    d state(t) / d (state at the epoch), P = ``n_state_params`` columns placed first (a
+    :class:`trackproc.dynamics.propagator.Trajectory` propagated with ``stm=True``).
     ``modifiers`` (from :func:`bias_modifiers`), with ``bias_values`` name -> value and
     ``bias_columns`` name -> column of the Jacobian (omit a name to hold it fixed: value added,
     no column). Returns ``(computed (N,), jacobian (N, n_columns), geometry)``.
@@ -348,7 +349,7 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
     ncol = n_columns if n_columns is not None else n_state_params + len(bias_columns)
     geo = solve_light_time(trajectory, meas.t_s, meas.r_st, c=c)
     r_e, v_e = geo.state[:, :3], geo.state[:, 3:]
-    phi = trajectory.jacobian(geo.t_e_s)
+    phi = trajectory.stm(geo.t_e_s)
     dstate, _ = emission_jacobian(geo.u, v_e, geo.state_dot, phi, c)
     value = np.empty(n)
     g = np.zeros((n, 6))                            # ∂ value / ∂ s_e

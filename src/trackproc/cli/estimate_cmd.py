@@ -1,0 +1,178 @@
+"""``trackproc estimate``: orbit + biases by batch weighted least squares, error matrices out."""
+
+from __future__ import annotations
+
+import logging
+from enum import Enum
+from typing import List, Optional
+
+import typer
+
+from trackproc.cli.app import app
+from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, resolve_output
+
+log = logging.getLogger("trackproc")
+
+
+class DopplerBias(str, Enum):
+    offset = "offset"
+    offset_drift = "offset+drift"
+
+
+class BiasPer(str, Enum):
+    pass_ = "pass"
+    station = "station"
+
+
+class RangeRateChoice(str, Enum):
+    doppler = "doppler"
+    instantaneous = "instantaneous"
+
+
+def _named_values(items: List[str], flag: str) -> dict:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not name.strip():
+            raise typer.BadParameter(f"expected NAME=SIGMA, got {item!r}", param_hint=flag)
+        if name.strip() in out:
+            raise typer.BadParameter(f"{name.strip()} given twice", param_hint=flag)
+        out[name.strip()] = number
+    return out
+
+
+@app.command("estimate")
+def estimate_command(
+    passes: List[str] = typer.Argument(..., metavar="PASS...",
+                                       help="Pass files (Parquet, Arrow, CSV from ingest/simulate), or - for stdin."),
+    initial: str = typer.Option(..., "--initial", metavar="STATE.json|TLE",
+                                help="Initial state: a state file (GCRF, EME2000, TEME, ITRF) or a TLE."),
+    stations: Optional[str] = typer.Option(
+        None, "--stations", metavar="STATIONS.csv",
+        help="Stations table (station, lat_deg, lon_deg, height_m[, range_bias_m]); default: the pass files' metadata."),
+    range_bias: bool = typer.Option(False, "--range-bias", help="Estimate a range bias for every station with ranges."),
+    range_bias_station: List[str] = typer.Option(
+        [], "--range-bias-station", metavar="STATION", help="Estimate a range bias for this station only (repeatable)."),
+    doppler_bias: Optional[DopplerBias] = typer.Option(
+        None, "--doppler-bias", help="Estimate a one-way Doppler frequency offset, or offset and drift."),
+    doppler_bias_per: BiasPer = typer.Option(BiasPer.pass_, "--doppler-bias-per",
+                                             help="One Doppler offset (drift) per pass or per station."),
+    angle_bias: bool = typer.Option(False, "--angle-bias", help="Estimate azimuth and elevation biases per station."),
+    apriori_sigma: List[str] = typer.Option(
+        [], "--apriori-sigma", metavar="NAME=SIGMA",
+        help="A-priori 1-sigma (SI units) of a parameter (x, vx, range_bias:KIR), a family (range_bias, "
+             "doppler_offset) or position/velocity/state; repeatable."),
+    apriori_initial: bool = typer.Option(False, "--apriori-initial",
+                                         help="Use the initial state file's covariance as an a-priori constraint."),
+    epoch: Optional[str] = typer.Option(None, "--epoch", metavar="ISO|initial|first",
+                                        help="Solution epoch (default: the initial state's; first = first sample)."),
+    kinds: Optional[str] = typer.Option(None, "--kinds", metavar="KIND[,KIND]",
+                                        help="Kinds to use: range, range_rate, doppler, azimuth, elevation (default all)."),
+    max_iterations: int = typer.Option(20, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
+    clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
+                               help="Edit samples beyond K x max(1, WRMS) sigmas (iterated, flagged). 0: off."),
+    force=ForceOpt,
+    earth=EarthOpt,
+    eop: Optional[str] = EopOpt,
+    dut1: Optional[float] = Dut1Opt,
+    range_rate_model: Optional[RangeRateChoice] = typer.Option(
+        None, "--range-rate-model",
+        help="doppler (derivative of the light-time range) or instantaneous (Orekit's RangeRate); "
+             "default: the pass files' metadata, else doppler."),
+    compare_doppler_only: bool = typer.Option(
+        False, "--compare-doppler-only", help="Seed 002: also solve without the ranges; print both motion blocks."),
+    two_stage: bool = typer.Option(False, "--two-stage",
+                                   help="Seed 002 two-stage method: per-pass offsets, then bias-corrected ranges."),
+    opm: Optional[str] = typer.Option(None, "--opm", metavar="FILE", help="Also write a CCSDS OPM (KVN) with covariance."),
+    object_name: str = typer.Option("UNKNOWN", "--object-name", help="OBJECT_NAME of the OPM."),
+    object_id: str = typer.Option("UNKNOWN", "--object-id", help="OBJECT_ID of the OPM."),
+    residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
+                                            help="Write the residuals (Parquet, or CSV by the .csv suffix)."),
+    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
+                                       help="Plot residuals by station (needs matplotlib: trackproc[plot])."),
+    output: Optional[str] = OutputOpt,
+) -> None:
+    """Estimate the orbit state at an epoch and the selected biases from one or more passes
+    (batch weighted least squares with per-station range biases, seed 002), and write a state
+    file with every parameter, its sigma, the full covariance and the diagnostics.
+
+    A one-screen summary goes to stderr. Exit status 1 when the estimation fails (too few
+    data, rank deficiency with the unobservable combinations named, no convergence).
+
+    Example:
+
+        trackproc estimate passes/*.parquet --initial refined.json --range-bias \\
+            --opm solution.opm --residuals residuals.csv -o solution.json
+
+        trackproc simulate --state s.json --stations st.csv --duration 21600 --range-bias KIR=100 \\
+            | trackproc estimate - --initial s.json --range-bias -o -
+    """
+    if plot == "-":
+        raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
+    if sum(p == "-" for p in passes) > 1:
+        raise typer.BadParameter("stdin (-) can be read once", param_hint="PASS")
+    out = resolve_output(output, "output state file")
+    taken = [f for f in (opm, residuals) if f == "-"]
+    if taken and out == "-":
+        raise typer.BadParameter("stdout already carries the state file; give --opm/--residuals a file",
+                                 param_hint="--opm/--residuals")
+    if range_bias and range_bias_station:
+        raise typer.BadParameter("give --range-bias (every station) or --range-bias-station, not both",
+                                 param_hint="--range-bias")
+    sigmas = _named_values(apriori_sigma, "--apriori-sigma")
+    kind_list = [k.strip() for k in kinds.split(",") if k.strip()] if kinds else None
+
+    import sys
+
+    from trackproc.io.atomic import is_stdio, write_bytes
+    from trackproc.io.eop import earth_orientation
+    from trackproc.io.opm import write_opm
+    from trackproc.io.passfile import read_pass_table
+    from trackproc.io.residuals import write_residuals
+    from trackproc.io.stations import read_stations
+    from trackproc.io.statefile import format_epoch, read_state_or_tle, write_state
+    from trackproc.pipeline.estimate import EstimateOptions, estimate, plot_bytes, require_matplotlib, summary_text
+
+    if plot is not None:
+        require_matplotlib()
+    orientation, warning = earth_orientation(eop, dut1)
+    if warning:
+        log.warning(warning)
+    tables = [("<stdin>" if is_stdio(p) else p, read_pass_table(p)) for p in passes]
+    at = None                                       # where a TLE is evaluated by SGP4
+    if epoch is not None and epoch.lower() == "first":
+        at = min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
+    elif epoch is not None and epoch.lower() != "initial":
+        from trackproc.io.statefile import parse_epoch
+
+        at = parse_epoch(epoch, column="--epoch")
+    state0 = read_state_or_tle(initial, orientation, at=at)
+    station_table = read_stations(stations) if stations is not None else None
+    options = EstimateOptions(
+        range_bias=True if range_bias else list(range_bias_station), doppler_bias=doppler_bias.value if doppler_bias else None,
+        doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,
+        apriori_initial=apriori_initial, force=force.value, earth=earth.value,
+        range_rate_model=range_rate_model.value if range_rate_model else None, max_iterations=max_iterations,
+        clip=clip if clip > 0 else None, epoch=epoch, kinds=kind_list, compare_doppler_only=compare_doppler_only,
+        two_stage=two_stage)
+    result = estimate(tables, state0, station_table, options, orientation)
+
+    png = plot_bytes(result) if plot is not None else None
+    write_state(result.state, out, force=force.value, eop_source=orientation.source)
+    if opm is not None:
+        write_opm(result.state, opm, object_name=object_name, object_id=object_id,
+                  comments=[f"trackproc estimate, range-rate model {result.problem.range_rate_model}"])
+    if residuals is not None:
+        meta = {"epoch": format_epoch(result.state.epoch), "parameters": result.solution.names,
+                "force_model": force.value, "range_rate_model": result.problem.range_rate_model,
+                "sources": sorted(str(s) for s in set(result.problem.sources))}
+        write_residuals(result.residuals, residuals, meta)
+    if png is not None:
+        write_bytes(plot, png)
+    if log.isEnabledFor(logging.INFO):
+        sys.stderr.write(summary_text(result))
+        sys.stderr.flush()

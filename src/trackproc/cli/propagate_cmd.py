@@ -1,0 +1,148 @@
+"""``trackproc propagate``: a state file or TLE to an ephemeris (a pass predictor with --at-station)."""
+
+from __future__ import annotations
+
+import logging
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from trackproc.cli.app import app
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModelOpt, TableFormat,
+                                  resolve_output, table_format_for)
+
+log = logging.getLogger("trackproc")
+
+
+class EphemerisFormat(str, Enum):
+    parquet = "parquet"
+    arrow = "arrow"
+    csv = "csv"
+    oem = "oem"
+
+
+def _format(output: str, requested: Optional[EphemerisFormat]) -> EphemerisFormat:
+    if requested is not None:
+        return requested
+    if Path(output).suffix.lower() in (".oem", ".kvn"):
+        return EphemerisFormat.oem
+    return EphemerisFormat(table_format_for(output, None).value)
+
+
+@app.command("propagate")
+def propagate_command(
+    state: str = typer.Argument(..., metavar="STATE.json|TLE",
+                                help="Initial state (JSON state file, any supported frame) or a TLE; - for stdin."),
+    span: Optional[float] = typer.Option(None, "--span", metavar="S",
+                                         help="Span from the start, s (negative: backwards in time)."),
+    step: Optional[float] = typer.Option(None, "--step", metavar="S", help="Output spacing, s (with --span)."),
+    at: Optional[str] = typer.Option(None, "--at", metavar="PASSFILE",
+                                     help="Instead of a grid: the sample times of a pass file."),
+    start: Optional[str] = typer.Option(None, "--start", metavar="ISO",
+                                        help="First grid time, UTC ISO 8601 (default: the state's epoch; a TLE "
+                                             "is evaluated by SGP4 there)."),
+    force=ForceOpt,
+    earth=EarthOpt,
+    eop: Optional[str] = EopOpt,
+    dut1: Optional[float] = Dut1Opt,
+    tol: float = typer.Option(1e-15, "--tol", metavar="TOL",
+                              help="Taylor tolerance per step (relative/absolute; 1e-15 ~ micrometres per pass)."),
+    stm: bool = typer.Option(False, "--stm", help="Add the state transition matrix columns stm_1_1 .. stm_6_6."),
+    at_station: Optional[str] = typer.Option(None, "--at-station", metavar="ID",
+                                             help="Add predicted range, range-rate, azimuth, elevation at this "
+                                                  "station (one-way light time)."),
+    stations: Optional[str] = typer.Option(None, "--stations", metavar="STATIONS.csv",
+                                           help="Stations table (default with --at: the pass file's stations)."),
+    carrier_hz: Optional[float] = typer.Option(None, "--carrier-hz", metavar="F",
+                                               help="With --at-station: add doppler_hz = -F range_rate / c."),
+    range_rate_model=RangeRateModelOpt,
+    visible_only: bool = typer.Option(False, "--visible-only",
+                                      help="With --at-station: keep only rows above --elevation-mask-deg."),
+    elevation_mask_deg: float = typer.Option(10.0, "--elevation-mask-deg", metavar="DEG",
+                                             help="Elevation mask of --visible-only, deg."),
+    object_name: Optional[str] = typer.Option(None, "--object-name", help="OEM OBJECT_NAME (default: the TLE "
+                                                                          "name, else UNKNOWN)."),
+    object_id: Optional[str] = typer.Option(None, "--object-id", help="OEM OBJECT_ID (default: the TLE's "
+                                                                      "international designator, else UNKNOWN)."),
+    fmt: Optional[EphemerisFormat] = typer.Option(
+        None, "--format", help="parquet, arrow, csv or oem (CCSDS OEM KVN; default from the suffix; "
+                               "Arrow stream on stdout)."),
+    output: Optional[str] = OutputOpt,
+) -> None:
+    """Propagate an orbit state (two-body or J2, adaptive Taylor series) and write its ephemeris:
+    time, x_m .. vz_m_s in GCRF, optionally the STM, the propagated covariance (when the state
+    file has one) and a station's predicted measurements.
+
+    Example:
+
+        trackproc propagate state.json --span 86400 --step 60 -o day.parquet
+
+        trackproc propagate state.json --span 600 --step 1 --at-station ZHY --stations stations.csv \\
+            --carrier-hz 2.2e9 --visible-only -o pass.csv
+
+        trackproc propagate solution.json --at pass.parquet --at-station ZHY --format oem -o pass.oem
+
+        trackproc propagate iss.tle --span -3600 --step 10 -o - | trackproc info -
+    """
+    if at is not None and (span is not None or step is not None):
+        raise typer.BadParameter("give either --span S --step S or --at PASSFILE, not both", param_hint="--at")
+    if at is None and (span is None or step is None):
+        raise typer.BadParameter("give --span S and --step S, or --at PASSFILE", param_hint="--span/--step")
+    if at is None and at_station is not None and stations is None:
+        raise typer.BadParameter("--at-station needs --stations STATIONS.csv (or --at PASSFILE with stations)",
+                                 param_hint="--stations")
+    for flag, given in (("--carrier-hz", carrier_hz is not None), ("--visible-only", visible_only)):
+        if given and at_station is None:
+            raise typer.BadParameter(f"{flag} needs --at-station ID", param_hint=flag)
+    out = resolve_output(output, "output ephemeris")
+    out_format = _format(out, fmt)
+    if out_format is EphemerisFormat.oem and (stm or at_station is not None):
+        raise typer.BadParameter("an OEM holds states and covariances only; drop --stm/--at-station or use "
+                                 "--format parquet, arrow or csv", param_hint="--format")
+
+    from trackproc.io.eop import earth_orientation
+    from trackproc.io.ephemeris import write_ephemeris
+    from trackproc.io.statefile import parse_epoch, read_state_or_tle
+    from trackproc.pipeline.propagate import PropagateOptions, oem_identity, pass_times, propagate, resolve_station
+
+    orientation, warning = earth_orientation(eop, dut1)
+    if warning:
+        log.warning(warning)
+    start_t = parse_epoch(start, column="--start") if start is not None else None
+    initial = read_state_or_tle(state, orientation, at=start_t)
+    at_times = None
+    pass_table = None
+    if at is not None:
+        from trackproc.io.passfile import read_pass_table
+
+        pass_table = read_pass_table(at)
+        at_times = pass_times(pass_table, at_station)
+    station = None
+    if at_station is not None:
+        table = None
+        if stations is not None:
+            from trackproc.io.stations import read_stations
+
+            table = read_stations(stations)
+        station = resolve_station(at_station, table, pass_table)
+    options = PropagateOptions(
+        span_s=span, step_s=step, start=start_t, at_times=at_times, force=force.value, earth=earth.value, tol=tol,
+        stm=stm, station=station, carrier_hz=carrier_hz, range_rate_model=range_rate_model.value,
+        visible_only=visible_only, elevation_mask_deg=elevation_mask_deg)
+    result = propagate(initial, options, orientation)
+
+    oem_kwargs = {}
+    if out_format is EphemerisFormat.oem:
+        name, ident = oem_identity(initial, object_name, object_id)
+        oem_kwargs = {"object_name": name, "object_id": ident,
+                      "comments": [f"trackproc propagate: Taylor (DT) integration, tol {tol:g}"]}
+    write_ephemeris(result.ephemeris, out, out_format.value, **oem_kwargs)
+    eph = result.ephemeris
+    log.info("%d rows, %s .. %s, %d Taylor steps (%s) -> %s (%s)", len(eph.frame), eph.meta["start"],
+             eph.meta["end"], result.trajectory.n_steps, eph.meta["force_model"],
+             "stdout" if out == "-" else out, out_format.value)
+
+
+__all__ = ["propagate_command", "EphemerisFormat", "TableFormat"]

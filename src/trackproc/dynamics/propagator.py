@@ -1,0 +1,344 @@
+"""Propagation façade: a GCRF state at a UTC epoch in, GCRF states, STM and covariance out.
+
+The Taylor (DT) engine (:mod:`trackproc.dynamics.taylor`) integrates in a frame whose z axis
+is the Earth's rotation axis, with plain float seconds. This module does the bookkeeping
+around it, once, for every command that propagates:
+
+1. **Frame.** The state is rotated from GCRF into the
+   :class:`~trackproc.dynamics.frames.QuasiInertialFrame` of a reference epoch (GCRF rotated by
+   that epoch's bias-precession-nutation matrix ``q``; by default the state's own epoch, as
+   :func:`trackproc.pipeline.simulate.simulate` does), so J2 acts about the rotation axis of
+   that epoch (DESIGN.md "Frames, time, forces"). Results are rotated back to GCRF: states by
+   ``blockdiag(q, q)^T``, the STM as ``Q^T Phi Q`` with ``Q = blockdiag(q, q)``.
+2. **Time.** ``t_s`` are SI seconds from the state's epoch (through TAI, so leap seconds
+   count); :meth:`Trajectory.seconds` converts UTC ``datetime64`` labels, and
+   :meth:`Trajectory.times_utc` converts back.
+3. **Direction.** Times before the epoch are covered by a backward run, times after it by a
+   forward run, both starting from the epoch state (so the STM is the identity at t = 0).
+4. **Outcome.** A run that stops early (step limit, non-finite state) is kept with its
+   outcome; :meth:`Trajectory.raise_for_outcome` turns it into a
+   :class:`~trackproc.errors.ProcessingError` (exit code 1 at the command line).
+
+Example (the seed 004 orbit, one hour, J2, with the STM):
+
+>>> import numpy as np
+>>> from trackproc.dynamics.propagator import propagate
+>>> traj = propagate([3774841.0, -1538034.0, 5924146.0], [-4816.6, 3936.4, 4091.1],
+...                  np.datetime64("2026-03-20T09:30:00"), [-600.0, 3600.0], stm=True)
+>>> traj.state(np.array([0.0, 3600.0])).shape, traj.stm(1800.0).shape
+((2, 6), (6, 6))
+>>> bool(np.allclose(traj.stm(0.0), np.eye(6)))
+True
+
+Everything here is pure numpy on SI units; nothing reads files or prints.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from trackproc.dynamics import taylor
+from trackproc.dynamics import timescales as ts
+from trackproc.dynamics.frames import QuasiInertialFrame, earth_rotation
+from trackproc.errors import ProcessingError
+
+__all__ = ["FORCES", "Trajectory", "Steps", "propagate", "propagate_state", "force_parameters"]
+
+FORCES = taylor.FORCES
+#: Length of the run made when every requested time is the epoch itself (s).
+_MIN_SPAN_S = 1.0
+
+
+def force_parameters(force: str) -> tuple[float, float, float]:
+    """``(mu m^3/s^2, j2, re m)`` of ``"two-body"`` or ``"j2"`` (the constants module)."""
+    from trackproc.dynamics.reference import force_parameters as fp
+
+    return fp(force)
+
+
+@dataclass(frozen=True)
+class Steps:
+    """Every Taylor step of a trajectory in time order, in the quasi-inertial frame.
+
+    ``t_lo_s``, ``t_hi_s`` (S,): the interval a step covers; ``t_expand_s`` (S,): the time its
+    spectra are expanded about (the step's start: ``t_lo_s`` forward, ``t_hi_s`` backward);
+    ``coefficients`` (S, 3, n): position spectra, H = 1 s; ``sensitivities`` (S, 3, 6, n) or
+    None: spectra of d position / d (initial quasi-inertial state).
+    """
+
+    t_lo_s: np.ndarray
+    t_hi_s: np.ndarray
+    t_expand_s: np.ndarray
+    coefficients: np.ndarray
+    sensitivities: np.ndarray | None
+
+    def locate(self, t_s) -> np.ndarray:
+        """Index of the step covering each time (the nearest step for times just outside)."""
+        idx = np.searchsorted(self.t_lo_s, np.asarray(t_s, float), side="right") - 1
+        return np.clip(idx, 0, self.t_lo_s.size - 1)
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A propagated orbit: evaluate GCRF states, the STM and covariances at any covered time.
+
+    Attributes
+    ----------
+    epoch : datetime64[ns]
+        UTC epoch of the initial state (``t_s = 0``).
+    epoch_jd_utc : tuple
+        The same as a two-part UTC Julian date.
+    frame : QuasiInertialFrame
+        The integration frame (its ``q`` is GCRF -> quasi-inertial).
+    runs : tuple of :class:`~trackproc.dynamics.taylor.Propagation`
+        The backward run (if any) then the forward run (if any), both from ``t_s = 0``.
+    force, mu_m3_s2, j2, re_m, tol : the model and tolerance used.
+    t_min_s, t_max_s : float
+        The requested interval (seconds from the epoch) the runs were asked to cover.
+    """
+
+    epoch: np.datetime64
+    epoch_jd_utc: tuple
+    frame: QuasiInertialFrame
+    runs: tuple
+    force: str
+    mu_m3_s2: float
+    j2: float
+    re_m: float
+    tol: float
+    t_min_s: float
+    t_max_s: float
+    initial_gcrf: np.ndarray | None = None
+
+    # -- summary -----------------------------------------------------------------------------
+    @property
+    def has_stm(self) -> bool:
+        return all(run.sensitivities is not None for run in self.runs)
+
+    @property
+    def outcome(self) -> taylor.Outcome:
+        """SUCCESS when every run reached its end time, else the first failure."""
+        for run in self.runs:
+            if run.outcome is not taylor.Outcome.SUCCESS:
+                return run.outcome
+        return taylor.Outcome.SUCCESS
+
+    @property
+    def order(self) -> int:
+        return self.runs[0].order
+
+    @property
+    def n_steps(self) -> int:
+        return sum(run.n_steps for run in self.runs)
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """``blockdiag(q, q)`` (6, 6): GCRF state -> quasi-inertial state."""
+        big = np.zeros((6, 6))
+        big[:3, :3] = big[3:, 3:] = self.frame.q
+        return big
+
+    def raise_for_outcome(self) -> "Trajectory":
+        """Raise :class:`ProcessingError` unless every run reached its end; return self."""
+        for run in self.runs:
+            if run.outcome is not taylor.Outcome.SUCCESS:
+                reached = self.times_utc(run.t_end_s)
+                raise ProcessingError(
+                    f"propagation stopped ({run.outcome.value}) at {np.datetime_as_string(reached, 'ms')}Z "
+                    f"(t = {run.t_end_s:.3f} s from the epoch) after {run.n_steps} steps",
+                    {"outcome": run.outcome.value, "t_reached_s": run.t_end_s, "steps": run.n_steps})
+        return self
+
+    # -- time --------------------------------------------------------------------------------
+    def seconds(self, times_utc) -> np.ndarray:
+        """SI seconds from the epoch of UTC ``datetime64`` labels (leap seconds counted)."""
+        jd1, jd2 = ts.datetime64_to_jd_utc(np.asarray(times_utc, dtype="datetime64[ns]"))
+        return np.asarray(ts.seconds_since((jd1, jd2), self.epoch_jd_utc), float)
+
+    def times_utc(self, t_s) -> np.ndarray:
+        """UTC ``datetime64[ns]`` of times ``t_s`` (s from the epoch)."""
+        jd1, jd2 = ts.add_seconds_utc(self.epoch_jd_utc, np.asarray(t_s, float))
+        return ts.jd_utc_to_datetime64(jd1, jd2)
+
+    # -- evaluation --------------------------------------------------------------------------
+    def _split(self, t_s):
+        t = np.asarray(t_s, float)
+        flat = t.reshape(-1)
+        back = flat < 0.0
+        if not any(run.t_end_s > run.t0_s for run in self.runs):
+            back |= flat == 0.0                  # only a backward run: it starts at t = 0
+        parts = []
+        for run in self.runs:
+            sel = back if run.t_end_s < run.t0_s else ~back
+            if run.n_steps and sel.any():
+                parts.append((run, sel))
+        covered = np.zeros(flat.size, bool)
+        for _, sel in parts:
+            covered |= sel
+        if not covered.all():
+            bad = flat[~covered]
+            raise ValueError(f"times {bad.min()} .. {bad.max()} s lie outside the propagated interval "
+                             f"[{self.t_min_s}, {self.t_max_s}] s")
+        return t.shape, flat, parts
+
+    def _evaluate(self, t_s, fn, tail):
+        shape, flat, parts = self._split(t_s)
+        out = np.empty((flat.size,) + tail)
+        for run, sel in parts:
+            out[sel] = fn(run, flat[sel])
+        return out.reshape(shape + tail)
+
+    def state(self, t_s, *, frame: str = "gcrf", derivative: int = 0) -> np.ndarray:
+        """State ``[r (m), v (m/s)]`` at ``t_s`` (s from the epoch), shape ``t_s.shape + (6,)``.
+
+        ``frame="gcrf"`` (default) or ``"quasi-inertial"``; ``derivative=1`` gives ``[v, a]``.
+        """
+        out = self._evaluate(t_s, lambda run, t: run.state(t, derivative), (6,))
+        if _frame_key(frame) == "gcrf":
+            q = self.frame.q
+            out = np.concatenate([out[..., :3] @ q, out[..., 3:] @ q], axis=-1)
+            if derivative == 0 and self.initial_gcrf is not None:
+                out[np.asarray(t_s, float) == 0.0] = self.initial_gcrf     # the epoch state, unrotated
+        return out
+
+    def stm(self, t_s, *, frame: str = "gcrf") -> np.ndarray:
+        """State transition matrix ``Phi(t, epoch) = d state(t) / d state(epoch)``, ``(..., 6, 6)``.
+
+        In GCRF (default) ``Phi_gcrf = Q^T Phi_qi Q``; needs ``propagate(..., stm=True)``.
+        """
+        if not self.has_stm:
+            raise ValueError("this trajectory carries no STM; propagate with stm=True")
+        out = self._evaluate(t_s, lambda run, t: run.stm(t), (6, 6))
+        if _frame_key(frame) == "gcrf":
+            big = self.rotation
+            out = big.T @ out @ big
+        return out
+
+    def covariance(self, t_s, covariance0) -> np.ndarray:
+        """Propagated GCRF covariance ``Phi P0 Phi^T`` (m^2, m^2/s, m^2/s^2), ``(..., 6, 6)``.
+
+        ``covariance0`` is the 6 x 6 GCRF covariance of the epoch state (rows/columns x, y, z,
+        vx, vy, vz). Linear propagation (the first-order sensitivities of seed 004 eqs. 19-21),
+        the generalisation of seed 000's correlation function to the full state.
+        """
+        p0 = np.asarray(covariance0, float)
+        if p0.shape != (6, 6):
+            raise ValueError(f"covariance0 must be 6 x 6; found {p0.shape}")
+        phi = self.stm(t_s)
+        out = phi @ p0 @ np.swapaxes(phi, -1, -2)
+        return 0.5 * (out + np.swapaxes(out, -1, -2))
+
+    def steps(self) -> Steps:
+        """All Taylor steps in time order (quasi-inertial frame), for measurement spectra."""
+        lo, hi, ex, coef, sens = [], [], [], [], []
+        for run in self.runs:
+            if not run.n_steps:
+                continue
+            tb = run.step_times_s
+            forward = run.t_end_s >= run.t0_s
+            order = range(run.n_steps) if forward else range(run.n_steps - 1, -1, -1)
+            for k in order:
+                a, b = tb[k], tb[k + 1]
+                lo.append(min(a, b))
+                hi.append(max(a, b))
+                ex.append(a)
+                coef.append(run.coefficients[k, 0])
+                if run.sensitivities is not None:
+                    sens.append(run.sensitivities[k, 0, :, :6])
+        if not lo:
+            raise ValueError("the trajectory has no steps")
+        return Steps(t_lo_s=np.array(lo), t_hi_s=np.array(hi), t_expand_s=np.array(ex),
+                     coefficients=np.stack(coef),
+                     sensitivities=np.stack(sens) if len(sens) == len(lo) else None)
+
+
+def _frame_key(frame: str) -> str:
+    key = str(frame).strip().lower().replace("_", "-")
+    if key in ("gcrf", "gcrs", "icrf"):
+        return "gcrf"
+    if key in ("quasi-inertial", "qi", "integration"):
+        return "qi"
+    raise ValueError(f"unknown frame {frame!r}; expected 'gcrf' or 'quasi-inertial'")
+
+
+def reference_frame(jd1: float, jd2: float, eop=None) -> QuasiInertialFrame:
+    """The quasi-inertial frame of a UTC epoch, with the ERA rate of the Earth orientation
+    (``OMEGA_ERA`` times ``1 +`` the UT1 rate of a tabulated EOP)."""
+    rot = earth_rotation(jd1, jd2, eop, rates=True)
+    return QuasiInertialFrame(ref_jd_utc=(float(np.ravel(jd1)[0]), float(np.ravel(jd2)[0])),
+                              q=rot.q[0], w=rot.w[0], era0=float(rot.era[0]), omega=float(rot.omega[0]))
+
+
+def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float = 1e-15,
+              stm: bool = False, frame: QuasiInertialFrame | None = None,
+              max_steps: int = 100_000) -> Trajectory:
+    """Propagate a GCRF state to cover times ``t_s`` (s from ``epoch``, either sign).
+
+    Parameters
+    ----------
+    r_m, v_m_s : (3,)
+        GCRF position (m) and velocity (m/s) at ``epoch``.
+    epoch : datetime64 or ISO 8601 text
+        UTC epoch of the state.
+    t_s : float or array
+        Times to cover, SI seconds from the epoch (negative = before it). The runs cover
+        ``[min(t_s, 0), max(t_s, 0)]``; evaluate at any time inside.
+    force : ``"two-body"`` or ``"j2"``
+        Force model (constants from :mod:`trackproc.constants`).
+    eop : :class:`~trackproc.dynamics.timescales.EarthOrientation` or None
+        Earth orientation for the integration frame (only the precession-nutation matrix of
+        the reference epoch matters to the dynamics).
+    tol : float
+        Taylor tolerance per step (combined absolute/relative; down to about 1e-16).
+    stm : bool
+        Also propagate the state transition matrix (first-order sensitivity spectra).
+    frame : QuasiInertialFrame, optional
+        Integration frame; default that of ``epoch`` (what the simulator uses).
+    max_steps : int
+        Per run; beyond it the run stops with outcome ``step_limit``.
+
+    Returns
+    -------
+    Trajectory
+        Check :attr:`Trajectory.outcome` or call :meth:`Trajectory.raise_for_outcome`.
+
+    Implements seed 000 eq. 14 and seed 004 eqs. 6, 19-21 through
+    :func:`trackproc.dynamics.taylor.propagate`.
+    """
+    if isinstance(epoch, str):
+        epoch = np.datetime64(epoch.rstrip("Zz"), "ns")
+    epoch = np.datetime64(epoch, "ns")
+    jd1, jd2 = ts.datetime64_to_jd_utc(epoch)
+    jd = (float(jd1), float(jd2))
+    mu, j2, re = force_parameters(force)
+    key = "two-body" if j2 == 0.0 else "j2"
+    r = np.asarray(r_m, float).reshape(3)
+    v = np.asarray(v_m_s, float).reshape(3)
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
+        raise ValueError("the initial state must be finite")
+    t = np.atleast_1d(np.asarray(t_s, float))
+    if t.size == 0 or not np.all(np.isfinite(t)):
+        raise ValueError("t_s must hold at least one finite time")
+    fr = frame if frame is not None else reference_frame(jd[0], jd[1], eop)
+    q = fr.q
+    s0 = np.concatenate([q @ r, q @ v])
+    t_min, t_max = float(min(t.min(), 0.0)), float(max(t.max(), 0.0))
+    runs = []
+    if t_min < 0.0:
+        runs.append(taylor.propagate(s0, 0.0, t_min, force=key, mu_m3_s2=mu, j2=j2, re_m=re, tol=tol,
+                                     stm=stm, max_steps=max_steps))
+    if t_max > 0.0 or t_min == 0.0:
+        end = t_max if t_max > 0.0 else _MIN_SPAN_S
+        runs.append(taylor.propagate(s0, 0.0, end, force=key, mu_m3_s2=mu, j2=j2, re_m=re, tol=tol,
+                                     stm=stm, max_steps=max_steps))
+    return Trajectory(epoch=epoch, epoch_jd_utc=jd, frame=fr, runs=tuple(runs), force=key,
+                      mu_m3_s2=mu, j2=j2, re_m=re, tol=float(tol), t_min_s=t_min, t_max_s=t_max,
+                      initial_gcrf=np.concatenate([r, v]))
+
+
+def propagate_state(state, t_s, **kwargs) -> Trajectory:
+    """:func:`propagate` from a state object with ``r_m``, ``v_m_s`` (GCRF) and ``epoch``
+    (UTC ``datetime64``), e.g. :class:`trackproc.io.statefile.State`."""
+    return propagate(state.r_m, state.v_m_s, state.epoch, t_s, **kwargs)

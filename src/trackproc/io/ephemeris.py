@@ -1,0 +1,292 @@
+"""Ephemeris tables (the output of ``trackproc propagate``) and CCSDS OEM (KVN) text.
+
+Columns, in this order (GCRF, SI units; DESIGN.md "Data contracts"):
+
+==============================  =================  ==============================================
+column                          unit               present
+==============================  =================  ==============================================
+time                            timestamp[ns, UTC] always
+x_m, y_m, z_m                   m                  always
+vx_m_s, vy_m_s, vz_m_s          m/s                always
+stm_I_J (I, J = 1..6)           see below          ``--stm``: Phi_IJ = d x_I(t) / d x_J(epoch)
+sigma_x_m .. sigma_vz_m_s       m, m/s             the state file has a covariance
+cov_I_J (I, J = 1..6)           m^2, m^2/s, m^2/s^2  the same: the full propagated 6 x 6
+range_m                         m                  ``--at-station``
+range_rate_m_s                  m/s                ``--at-station`` (positive receding)
+doppler_hz                      Hz                 ``--at-station`` with ``--carrier-hz``
+azimuth_deg, elevation_deg      deg                ``--at-station``
+light_time_s                    s                  ``--at-station``
+sigma_range_m, sigma_range_rate_m_s (, sigma_doppler_hz)    ``--at-station`` with a covariance
+==============================  =================  ==============================================
+
+State components are numbered 1..6 = x, y, z, vx, vy, vz, so ``stm_1_4 = d x(t) / d vx(epoch)``
+(unit s) and ``cov_1_4`` the x-vx covariance (m^2/s). Rows are in time order. The metadata (a
+JSON object under the key ``trackproc`` of the Arrow/Parquet schema metadata; the first line
+``# trackproc: {...}`` of a CSV) names the force model and its constants, the Earth
+orientation, the propagator and its tolerance, the station and the range-rate model.
+
+CCSDS OEM: :func:`oem_text` writes Orbit Ephemeris Message KVN (CCSDS 502.0-B-2/B-3
+section 5; ``CCSDS_OEM_VERS = 2.0``, whose keywords B-3 keeps): header, one META block
+(OBJECT_NAME, OBJECT_ID, CENTER_NAME = EARTH, REF_FRAME = GCRF, TIME_SYSTEM = UTC,
+START_TIME, STOP_TIME), data lines ``epoch x y z x_dot y_dot z_dot`` in km and km/s, and
+with a propagated covariance one COVARIANCE_START .. COVARIANCE_STOP section with a matrix per
+epoch (``EPOCH =``, ``COV_REF_FRAME = GCRF``, the lower triangle row by row in km^2, km^2/s,
+km^2/s^2). Times are ISO 8601 without a zone letter. Numbers are written as the shortest
+text that reads back to the same double (of the km values).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+
+from trackproc.errors import InputError
+from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
+
+__all__ = ["COLUMNS", "STATE_NAMES", "STM_COLUMNS", "SIGMA_COLUMNS", "COV_COLUMNS", "MEASUREMENT_COLUMNS",
+           "FORMATS", "Ephemeris", "ephemeris_bytes", "write_ephemeris", "read_ephemeris", "oem_text",
+           "international_designator"]
+
+SCHEMA_VERSION = 1
+COLUMNS = ("time", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s")
+STATE_NAMES = ("x", "y", "z", "vx", "vy", "vz")
+STM_COLUMNS = tuple(f"stm_{i}_{j}" for i in range(1, 7) for j in range(1, 7))
+SIGMA_COLUMNS = ("sigma_x_m", "sigma_y_m", "sigma_z_m", "sigma_vx_m_s", "sigma_vy_m_s", "sigma_vz_m_s")
+COV_COLUMNS = tuple(f"cov_{i}_{j}" for i in range(1, 7) for j in range(1, 7))
+MEASUREMENT_COLUMNS = ("range_m", "range_rate_m_s", "doppler_hz", "azimuth_deg", "elevation_deg",
+                       "light_time_s", "sigma_range_m", "sigma_range_rate_m_s", "sigma_doppler_hz")
+FORMATS = ("parquet", "arrow", "csv", "oem")
+OEM_VERSION = "2.0"
+
+
+@dataclass
+class Ephemeris:
+    """Ephemeris rows (``frame``: :data:`COLUMNS` first, time tz-aware UTC) and metadata."""
+
+    frame: pd.DataFrame
+    meta: dict = field(default_factory=dict)
+
+    def matrix(self, prefix: str) -> np.ndarray | None:
+        """The (N, 6, 6) matrices of the ``stm`` or ``cov`` columns, or None."""
+        names = [f"{prefix}_{i}_{j}" for i in range(1, 7) for j in range(1, 7)]
+        if not all(n in self.frame.columns for n in names):
+            return None
+        return self.frame[names].to_numpy(float).reshape(-1, 6, 6)
+
+    @property
+    def states(self) -> np.ndarray:
+        """(N, 6) positions (m) and velocities (m/s), GCRF."""
+        return self.frame[list(COLUMNS[1:])].to_numpy(float)
+
+
+# --------------------------------------------------------------------------- tables
+
+def to_arrow(eph: Ephemeris) -> pa.Table:
+    """Arrow table: time as timestamp[ns, UTC], numbers float64, metadata under ``trackproc``."""
+    from trackproc.io.passfile import meta_json
+    from trackproc.io.tabular import META_KEY
+
+    frame = eph.frame
+    missing = [c for c in COLUMNS if c not in frame.columns]
+    if missing:
+        raise ValueError(f"ephemeris lacks columns {missing}")
+    times = pd.DatetimeIndex(frame["time"])
+    if times.tz is None:
+        times = times.tz_localize("UTC")
+    arrays = [pa.array(times.tz_convert("UTC").tz_localize(None).as_unit("ns").to_numpy(), pa.timestamp("ns"))
+              .cast(pa.timestamp("ns", tz="UTC"))]
+    fields = [pa.field("time", pa.timestamp("ns", tz="UTC"), nullable=False)]
+    for name in frame.columns:
+        if name == "time":
+            continue
+        col = frame[name]
+        if pd.api.types.is_bool_dtype(col):
+            array = pa.array(col.to_numpy(bool), pa.bool_())
+        elif pd.api.types.is_numeric_dtype(col):
+            array = pa.array(col.to_numpy(np.float64), pa.float64())
+        else:
+            array = pa.array(col.astype(str).to_numpy(object), pa.string())
+        arrays.append(array)
+        fields.append(pa.field(str(name), array.type, nullable=False))
+    schema = pa.schema(fields, metadata={META_KEY: meta_json(eph.meta).encode()})
+    return pa.Table.from_arrays(arrays, schema=schema)
+
+
+def _csv_bytes(eph: Ephemeris) -> bytes:
+    from trackproc.io.passfile import iso_times, meta_json
+    from trackproc.io.tabular import CSV_META_PREFIX
+
+    frame = eph.frame
+    out = io.StringIO()
+    out.write(f"# {CSV_META_PREFIX} {meta_json(eph.meta)}\n")
+    writer = csv.writer(out, lineterminator="\n")
+    columns = list(frame.columns)
+    writer.writerow(columns)
+    times = pd.Series(pd.DatetimeIndex(frame["time"]))
+    if times.dt.tz is None:
+        times = times.dt.tz_localize("UTC")
+    cells = [iso_times(times)]
+    for name in columns[1:]:
+        col = frame[name]
+        if pd.api.types.is_bool_dtype(col):
+            cells.append(np.where(col.to_numpy(bool), "true", "false"))
+        elif pd.api.types.is_numeric_dtype(col):
+            cells.append([repr(float(v)) for v in col.to_numpy(np.float64)])
+        else:
+            cells.append(col.astype(str).to_numpy(object))
+    for row in zip(*cells):
+        writer.writerow(row)
+    return out.getvalue().encode("utf-8")
+
+
+def ephemeris_bytes(eph: Ephemeris, fmt: str = "parquet", **oem_kwargs) -> bytes:
+    """The encoded ephemeris: ``parquet``, ``arrow`` (IPC stream), ``csv`` or ``oem`` (KVN)."""
+    fmt = getattr(fmt, "value", fmt)
+    if fmt == "csv":
+        return _csv_bytes(eph)
+    if fmt == "oem":
+        return oem_text(eph, **oem_kwargs).encode("utf-8")
+    table = to_arrow(eph)
+    sink = pa.BufferOutputStream()
+    if fmt == "parquet":
+        import pyarrow.parquet as pq
+        pq.write_table(table, sink, compression="zstd")
+    elif fmt == "arrow":
+        with pa.ipc.new_stream(sink, table.schema) as writer:
+            writer.write_table(table)
+    else:
+        raise ValueError(f"unknown ephemeris format {fmt!r}; expected one of {FORMATS}")
+    return sink.getvalue().to_pybytes()
+
+
+def write_ephemeris(eph: Ephemeris, path: str, fmt: str = "parquet", **oem_kwargs) -> None:
+    """Write ``eph`` atomically to ``path`` (``-`` = stdout); ``oem_kwargs`` go to :func:`oem_text`."""
+    data = ephemeris_bytes(eph, fmt, **oem_kwargs)
+    with open_atomic(path) as handle:
+        handle.write(data)
+
+
+def read_ephemeris(path: str) -> Ephemeris:
+    """Read an ephemeris written by :func:`write_ephemeris` (Parquet, Arrow, CSV; ``-`` = stdin)."""
+    from trackproc.io.tabular import Problems, column_numbers, column_times, source_table
+
+    source = "<stdin>" if is_stdio(path) else str(path)
+    data = read_input_bytes(path)
+    if not data.strip():
+        raise InputError("empty input", file=source, row=1, found="no data", expected="an ephemeris table")
+    table = source_table(data, source)
+    missing = [c for c in COLUMNS if c not in table.columns]
+    if missing:
+        raise InputError("not an ephemeris", file=source, row=table.header_row, column=missing[0],
+                         found=", ".join(c.name for c in table.columns.values()),
+                         expected="columns " + ", ".join(COLUMNS) + " (from trackproc propagate)")
+    problems = Problems(table.rows, source)
+    columns = {"time": pd.DatetimeIndex(column_times(table, table.columns["time"], problems)).tz_localize("UTC")}
+    for key, column in table.columns.items():
+        if key == "time":
+            continue
+        if column.text is not None and key not in COLUMNS and not _numeric_text(column.text):
+            columns[column.name] = pd.Series(column.text, dtype=object).astype(str)
+            continue
+        values, missing_mask, wrong = column_numbers(table, column)
+        problems.add("wrong column type", wrong | missing_mask, column=column.name,
+                     found=column.text if column.text is not None else "null", expected="a number (SI units)")
+        columns[column.name] = values
+    problems.resolve(drop_invalid=False)
+    return Ephemeris(pd.DataFrame(columns), dict(table.meta))
+
+
+def _numeric_text(cells) -> bool:
+    try:
+        [float(c) for c in cells if c]
+    except ValueError:
+        return False
+    return True
+
+
+# --------------------------------------------------------------------------- CCSDS OEM
+
+def _oem_epoch(t) -> str:
+    """UTC ISO 8601 without zone letter, milliseconds at least, more digits only when needed."""
+    from trackproc.io.statefile import format_epoch
+
+    return format_epoch(t)[:-1]
+
+
+def _num(value: float) -> str:
+    return repr(float(value))
+
+
+def creation_date() -> datetime:
+    """Now (UTC), or ``SOURCE_DATE_EPOCH`` when set (reproducible outputs)."""
+    epoch = os.environ.get("SOURCE_DATE_EPOCH")
+    if epoch:
+        try:
+            return datetime.fromtimestamp(int(epoch), timezone.utc).replace(tzinfo=None)
+        except ValueError:
+            pass
+    return datetime.now(timezone.utc).replace(tzinfo=None)
+
+
+def international_designator(tle_line1: str) -> str:
+    """``YYYY-NNNP{PP}`` from TLE line 1 columns 10-17 (``98067A`` -> ``1998-067A``), or UNKNOWN."""
+    raw = tle_line1[9:17].strip() if len(tle_line1) >= 17 else ""
+    if len(raw) < 6 or not raw[:5].isdigit():
+        return "UNKNOWN"
+    yy = int(raw[:2])
+    year = 1900 + yy if yy >= 57 else 2000 + yy
+    return f"{year}-{raw[2:5]}{raw[5:]}"
+
+
+def oem_text(eph: Ephemeris, *, object_name: str = "UNKNOWN", object_id: str = "UNKNOWN",
+             originator: str = "TRACKPROC", created: datetime | None = None, comments=()) -> str:
+    """CCSDS OEM KVN of an ephemeris (states; the propagated covariances if present).
+
+    Positions and velocities are converted to km and km/s, covariances to km^2, km^2/s, km^2/s^2
+    (CCSDS 502.0 section 5.2.4-5.2.5); see the module docstring for the layout.
+    """
+    frame = eph.frame
+    if len(frame) == 0:
+        raise ValueError("an OEM needs at least one ephemeris line")
+    times = pd.DatetimeIndex(frame["time"])
+    if times.tz is not None:
+        times = times.tz_convert("UTC").tz_localize(None)
+    t64 = times.as_unit("ns").to_numpy()
+    if np.any(np.diff(t64.astype(np.int64)) <= 0):
+        raise ValueError("OEM ephemeris lines must be in increasing time order")
+    stamp = np.datetime64(created or creation_date(), "ms")
+    lines = [f"CCSDS_OEM_VERS = {OEM_VERSION}"]
+    for c in comments:
+        lines.extend(f"COMMENT {part}" for part in str(c).splitlines())
+    lines += [f"CREATION_DATE = {np.datetime_as_string(stamp, unit='ms')}", f"ORIGINATOR = {originator}", "",
+              "META_START", f"OBJECT_NAME = {object_name}", f"OBJECT_ID = {object_id}", "CENTER_NAME = EARTH",
+              "REF_FRAME = GCRF", "TIME_SYSTEM = UTC", f"START_TIME = {_oem_epoch(t64[0])}",
+              f"STOP_TIME = {_oem_epoch(t64[-1])}", "META_STOP", ""]
+    force = eph.meta.get("force_model")
+    if force:
+        constants = ", ".join(f"{k} = {v!r}" for k, v in sorted((eph.meta.get("constants") or {}).items()))
+        lines.append(f"COMMENT force model {force} ({constants})")
+    if eph.meta.get("earth_orientation"):
+        lines.append(f"COMMENT Earth orientation: {eph.meta['earth_orientation']}")
+    lines.append("COMMENT position km, velocity km/s")
+    states = eph.states / 1000.0
+    for t, row in zip(t64, states):
+        lines.append(" ".join([_oem_epoch(t)] + [_num(v) for v in row]))
+    cov = eph.matrix("cov")
+    if cov is not None:
+        lines += ["", "COVARIANCE_START", "COMMENT propagated P(t) = Phi P0 Phi^T; km**2, km**2/s, km**2/s**2"]
+        ckm = cov / 1.0e6
+        for k, (t, m) in enumerate(zip(t64, ckm)):
+            if k:
+                lines.append("")
+            lines += [f"EPOCH = {_oem_epoch(t)}", "COV_REF_FRAME = GCRF"]
+            lines += [" ".join(_num(m[i, j]) for j in range(i + 1)) for i in range(6)]
+        lines.append("COVARIANCE_STOP")
+    return "\n".join(lines) + "\n"
