@@ -84,7 +84,10 @@ def propagate_command(
 
         trackproc propagate solution.json --at pass.parquet --at-station ZHY --format oem -o pass.oem
 
-        trackproc propagate iss.tle --span -3600 --step 10 -o - | trackproc info -
+        trackproc propagate iss.tle --span -3600 --step 10 -o - > back.arrows
+
+    Exit status: 0 ok; 2 bad options or input; 1 propagation failure (the Taylor run stopped,
+    the orbit enters the Earth, or --visible-only found no pass).
     """
     if at is not None and (span is not None or step is not None):
         raise typer.BadParameter("give either --span S --step S or --at PASSFILE, not both", param_hint="--at")
@@ -96,6 +99,8 @@ def propagate_command(
     for flag, given in (("--carrier-hz", carrier_hz is not None), ("--visible-only", visible_only)):
         if given and at_station is None:
             raise typer.BadParameter(f"{flag} needs --at-station ID", param_hint=flag)
+    if state == "-" and at == "-":
+        raise typer.BadParameter("only one input can come from stdin", param_hint="--at")
     out = resolve_output(output, "output ephemeris")
     out_format = _format(out, fmt)
     if out_format is EphemerisFormat.oem and (stm or at_station is not None):

@@ -209,7 +209,7 @@ def rotation_spectra(theta_rad, omega_rad_s, n: int) -> tuple[np.ndarray, np.nda
     >>> from trackproc.dynamics import spectra as sp
     >>> c, s = rotation_spectra(0.3, 7.29e-5, 6)
     >>> sn, cs = sp.sin_cos(np.array([0.3, 7.29e-5, 0, 0, 0, 0]))
-    >>> bool(np.allclose(c, cs, rtol=1e-15, atol=0) and np.allclose(s, sn, rtol=1e-15, atol=0))
+    >>> bool(np.allclose(c, cs, rtol=1e-13, atol=0) and np.allclose(s, sn, rtol=1e-13, atol=0))
     True
     """
     theta = np.asarray(theta_rad, float)[..., None]

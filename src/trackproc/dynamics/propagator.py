@@ -97,6 +97,8 @@ class Trajectory:
     force, mu_m3_s2, j2, re_m, tol : the model and tolerance used.
     t_min_s, t_max_s : float
         The requested interval (seconds from the epoch) the runs were asked to cover.
+    initial_gcrf : (6,)
+        The epoch state as given: :meth:`state` returns it unrotated at ``t_s = 0``.
     """
 
     epoch: np.datetime64

@@ -99,6 +99,8 @@ class Solution:
     at the solution.
 
     Run: ``iterations``, ``converged``, ``cost_history``, ``damped_steps``, ``message``.
+    A-priori: ``n_prior`` constraint rows and their share of chi2, ``chi2_prior`` (a large value
+    means the data pulled the solution far from the a-priori values).
     """
 
     names: list
@@ -123,6 +125,8 @@ class Solution:
     cost_history: list = field(default_factory=list)
     damped_steps: int = 0
     message: str = ""
+    chi2_prior: float = 0.0
+    n_prior: int = 0
 
     @property
     def n_measurements(self) -> int:
@@ -389,7 +393,8 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
     return Solution(names=names, values=x, covariance=cov, sigma=sd, correlation=corr, covariance_scaled=cov_scaled,
                     scales=scales, chi2=chi2, dof=dof, variance_factor=vf, condition_number=float(s[0] / s[-1]),
                     singular_values=s, computed=h, residual=r, normalized=r / sig, edited=mask, jacobian=jac,
-                    iterations=it, converged=True, cost_history=history, damped_steps=damped, message=message)
+                    iterations=it, converged=True, cost_history=history, damped_steps=damped, message=message,
+                    chi2_prior=float(np.sum(_prior_rhs(prior_factors, x) ** 2)), n_prior=int(n_prior))
 
 
 def _raise_rank(s, vt, names, scales, rtol, it):

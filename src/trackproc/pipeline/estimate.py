@@ -524,6 +524,14 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     if sol.dof > 0 and sol.variance_factor > 4.0:
         warnings.append(f"a-posteriori variance factor {sol.variance_factor:.3g} (> 4): the sigmas of the data "
                         "are too small or the model misses something; the covariance is optimistic")
+    if sol.n_prior:
+        from scipy.stats import chi2 as chi2_dist
+
+        limit = float(chi2_dist.ppf(0.999, sol.n_prior))
+        if sol.chi2_prior > limit:
+            warnings.append(f"the solution departs from the a-priori values by chi2 = {sol.chi2_prior:.4g} over "
+                            f"{sol.n_prior} constraints (99.9 % limit {limit:.3g}): the data and the a-priori "
+                            "(initial state, biases) disagree; check for a bad pass")
     if sol.n_edited > 0.1 * sol.n_measurements:
         warnings.append(f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)")
     fixed = {d.name: d.value for d in problem.params if not d.selected}
@@ -532,6 +540,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         "converged": bool(sol.converged), "message": sol.message, "iterations": int(sol.iterations),
         "damped_steps": int(sol.damped_steps), "cost": float(sol.chi2), "cost_history": sol.cost_history,
         "dof": int(sol.dof), "variance_factor": sol.variance_factor, "wrms": sol.wrms,
+        "apriori_rows": sol.n_prior, "chi2_apriori": sol.chi2_prior,
         "condition_number": sol.condition_number,
         "measurements": sol.n_measurements, "edited": sol.n_edited, "clip_sigma": opt.clip,
         "rms": _rms_table(problem, sol),
