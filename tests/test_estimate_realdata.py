@@ -19,7 +19,6 @@ import pytest
 from trackproc.constants import C_LIGHT
 from trackproc.dynamics import frames
 from trackproc.dynamics import timescales as ts
-from trackproc.io.passfile import PassTable
 from trackproc.io.statefile import State
 from trackproc.io.tabular import read_raw
 from trackproc.io.tle import parse_tle, sgp4_teme, tle_state

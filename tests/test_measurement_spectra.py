@@ -129,7 +129,7 @@ def test_station_model_against_iau2006_over_a_day():
 
 
 def test_station_spectra_are_the_taylor_series_of_the_station():
-    traj, st = _setup(LOW, PASS, stm=False)
+    _, st = _setup(LOW, PASS, stm=False)
     spec = st.spectra(np.array([100.0]), 26)[0]
     tau = np.array([-40.0, -5.0, 0.0, 17.0, 40.0])
     r_ref, v_ref = st.state(100.0 + tau)

@@ -251,6 +251,38 @@ def test_at_station_equals_simulated_noiseless_measurements(run_cli, files, tmp_
     assert checked > 500
 
 
+def _finals(mjds, dut1, xp, yp) -> str:
+    """IERS finals2000A rows (fixed columns: MJD 8-15, PM-x 19-27, PM-y 38-46, UT1-UTC 59-68)."""
+    rows = []
+    for m, d, x, y in zip(mjds, dut1, xp, yp):
+        line = [" "] * 80
+        for start, text in ((7, f"{m:8.2f}"), (18, f"{x:9.6f}"), (37, f"{y:9.6f}"), (58, f"{d:10.7f}")):
+            line[start:start + len(text)] = text
+        rows.append("".join(line))
+    return "\n".join(rows) + "\n"
+
+
+def test_at_station_with_an_eop_file(run_cli, files, write, tmp_path):
+    # UT1-UTC with a 1.5 ms length-of-day excess and 0.3 arcsec of polar motion
+    mjd = np.arange(61117.0, 61124.0)
+    eop = write("finals.all", _finals(mjd, 0.1 - 0.0015 * np.arange(7), [0.15] * 7, [0.3] * 7))
+    passes = tmp_path / "passes.parquet"
+    _run_ok(run_cli, ["simulate", "--state", files["state"], "--stations", files["stations"], "--duration", "86400",
+                      "--step", "30", "--eop", eop, *NOISELESS, "-o", passes])
+    out = tmp_path / "pred.parquet"
+    _run_ok(run_cli, ["propagate", files["state"], "--at", passes, "--at-station", "KIR", "--eop", eop, "-o", out])
+    pred = read_ephemeris(str(out))
+    assert pred.meta["earth_orientation"] == "IERS finals2000A finals.all"
+    f = pred.frame.set_index("time")
+    sim = read_pass_table(str(passes)).frame
+    sim = sim[sim["station"] == "KIR"]
+    for kind, column, scale, tol in (("range", "range_m", 1.0, 1e-3), ("range_rate", "range_rate_m_s", 1.0, 1e-6),
+                                     ("elevation", "elevation_deg", np.pi / 180, 1e-7)):
+        rows = sim[sim["kind"] == kind]
+        diff = f.loc[pd.DatetimeIndex(rows["time"]), column].to_numpy() * scale - rows["value"].to_numpy()
+        assert np.abs(diff).max() < tol, (kind, np.abs(diff).max())
+
+
 def test_pass_predictor_grid_visible_only_and_sigmas(run_cli, files, tmp_path):
     out = tmp_path / "pred.csv"
     _run_ok(run_cli, ["propagate", files["cov"], "--span", "7200", "--step", "20", "--at-station", "ZHY",
@@ -305,11 +337,13 @@ def test_bad_state_file_exit_2_and_orbit_into_the_earth_exit_1(run_cli, files, w
     res = run_cli(["propagate", bad, "--span", "600", "--step", "10", "-o", tmp_path / "o.parquet"])
     assert res.exit_code == 2 and "velocity_m_s" in res.stderr
     # an ellipse with perigee 4300 km from the centre: it goes through the Earth
-    falling = write("falling.json", json.dumps(dict(STATE, position_m=[6.5e6, 0.0, 0.0], velocity_m_s=[0.0, 7000.0, 0.0])))
+    falling = write("falling.json",
+                    json.dumps(dict(STATE, position_m=[6.5e6, 0.0, 0.0], velocity_m_s=[0.0, 7000.0, 0.0])))
     res = run_cli(["propagate", falling, "--span", "3600", "--step", "60", "--dut1", "0", "-o", tmp_path / "o.parquet"])
     assert res.exit_code == 1 and "enters the Earth" in res.stderr
     # straight through the centre: the Taylor series blow up, the propagation outcome is not success
-    radial = write("radial.json", json.dumps(dict(STATE, position_m=[6.5e6, 0.0, 0.0], velocity_m_s=[0.0, 1000.0, 0.0])))
+    radial = write("radial.json",
+                   json.dumps(dict(STATE, position_m=[6.5e6, 0.0, 0.0], velocity_m_s=[0.0, 1000.0, 0.0])))
     res = run_cli(["propagate", radial, "--span", "3600", "--step", "60", "--dut1", "0", "-o", tmp_path / "o.parquet"])
     assert res.exit_code == 1 and "propagation stopped (non_finite)" in res.stderr
     assert not (tmp_path / "o.parquet").exists()

@@ -121,6 +121,10 @@ def test_time_conversions_count_leap_seconds():
     assert traj.seconds(later)[0] == pytest.approx(121.0, abs=1e-6)      # 2016-12-31 had 86401 s
     assert traj.times_utc(121.0) == later[0]
     assert traj.seconds(epoch) == pytest.approx(0.0, abs=1e-9)
+    # UTC labels wherever times are taken
+    by_label = propagator.propagate(R0, V0, epoch, later)
+    assert by_label.t_max_s == pytest.approx(121.0, abs=1e-6)
+    assert np.array_equal(by_label.state(later), by_label.state(by_label.seconds(later)))
 
 
 def test_step_limit_outcome_raises_processing_error():

@@ -10,8 +10,17 @@ from typing import Optional
 import typer
 
 from trackproc.cli.app import app
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModelOpt, TableFormat,
-                                  resolve_output, table_format_for)
+from trackproc.cli.common import (
+    Dut1Opt,
+    EarthOpt,
+    EopOpt,
+    ForceOpt,
+    OutputOpt,
+    RangeRateModelOpt,
+    TableFormat,
+    resolve_output,
+    table_format_for,
+)
 
 log = logging.getLogger("trackproc")
 
@@ -110,7 +119,13 @@ def propagate_command(
     from trackproc.io.eop import earth_orientation
     from trackproc.io.ephemeris import write_ephemeris
     from trackproc.io.statefile import parse_epoch, read_state_or_tle
-    from trackproc.pipeline.propagate import PropagateOptions, oem_identity, pass_times, propagate, resolve_station
+    from trackproc.pipeline.propagate import (
+        PropagateOptions,
+        oem_identity,
+        pass_times,
+        propagate,
+        resolve_station,
+    )
 
     orientation, warning = earth_orientation(eop, dut1)
     if warning:

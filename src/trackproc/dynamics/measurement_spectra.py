@@ -38,7 +38,8 @@ One-way light time (DESIGN.md "Frames, time, forces", normative)
     in the image domain (derivative rule for ``r^(m)``, Cauchy powers of ``T``; ``m <= 4``,
     whose remainder ``T^5 |r^(5)| / 120`` is below 1e-13 m for LEO and GEO), and ``T`` is found
     by fixed-point iteration on spectra, ``T <- sqrt(D2(T)) / c``, which contracts by
-    ``|u . v| / c ~ 3e-5`` per pass (four passes from ``T = 0`` reach 1e-12 m). The range
+    ``|u . v| / c ~ 3e-5`` per pass (after the geometric range, three passes reach 1e-12 m;
+    the loop stops when the predicted next change is below 1e-12 m). The range
     spectrum ``D`` is then the light-time range as a function of reception time, so the
     derivative rule gives exactly the ``doppler`` range-rate model
     ``dD/dt = u . (v_sat(t_e) - v_st(t)) / (1 + u . v_sat(t_e)/c)``. The ``instantaneous``
@@ -69,6 +70,10 @@ with the upper-triangular Toeplitz matrix ``M(v)[l, K] = V(K - l)``, the derivat
 constant matrix and re-expanding about another point is ``u @ B(delta)``,
 ``B[j, K] = C(j, K) delta^(j-K)``; the retarded-time operator is
 ``E = sum_m (-1)^m/m! D^m M(T)^m``.
+
+Limits: one-way measurements (no two-way round trip); aberration and refraction neglected,
+as in :mod:`trackproc.models.measurements`; the station must never coincide with the
+satellite (``D2(0) > 0``).
 """
 
 from __future__ import annotations
@@ -115,8 +120,8 @@ def _derivative_matrix(n: int) -> np.ndarray:
 
 @lru_cache(maxsize=16)
 def _toeplitz_index(n: int) -> tuple[np.ndarray, np.ndarray]:
-    l, k = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    return np.where(k >= l, k - l, n), (k >= l)
+    row, col = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    return np.where(col >= row, col - row, n), (col >= row)
 
 
 def product_matrix(v) -> np.ndarray:
@@ -164,6 +169,19 @@ def _evaluate(spec, dt, derivative: int = 0, *, vander=None):
     """
     v = vander if vander is not None else sp.vandermonde(dt, spec.shape[-1], derivative=derivative)
     return np.einsum("n...k,nk->n...", spec, v)
+
+
+def _evaluate_segments(spec, bounds, vander) -> np.ndarray:
+    """Inverse transform of segment spectra ``spec`` (S, ..., n) at the samples: segment ``i``
+    covers the sorted samples ``bounds[i, 0]:bounds[i, 1]``, ``vander`` (N, n) their powers of
+    ``t - centre`` (one small matrix product per segment; no per-sample copy of the spectra)."""
+    n = spec.shape[-1]
+    tail = spec.shape[1:-1]
+    flat = spec.reshape(spec.shape[0], -1, n)
+    out = np.empty((vander.shape[0], flat.shape[1]))
+    for i, (a, b) in enumerate(bounds):
+        out[a:b] = vander[a:b] @ flat[i].T
+    return out.reshape((vander.shape[0],) + tail)
 
 
 def _sqrt(d2) -> np.ndarray:
@@ -257,7 +275,10 @@ def _quadratic_about(nodes_t, values, c):
     f0, f1, f2 = values[i], values[i + 1], values[i + 2]
     # Newton form about t0, then re-expanded about c
     shape = (-1,) + (1,) * (values.ndim - 1)
-    a = lambda x: x.reshape(shape)                                   # noqa: E731
+
+    def a(x):
+        return x.reshape(shape)
+
     d01 = (f1 - f0) / a(t1 - t0)
     d12 = (f2 - f1) / a(t2 - t1)
     d012 = (d12 - d01) / a(t2 - t0)
@@ -297,7 +318,7 @@ class StationModel:
 
     @classmethod
     def build(cls, r_itrf_m, lat_rad: float, lon_rad: float, epoch_jd_utc: tuple, q_ref,
-              t_lo_s: float, t_hi_s: float, *, eop=None, frozen: bool = False) -> "StationModel":
+              t_lo_s: float, t_hi_s: float, *, eop=None, frozen: bool = False) -> StationModel:
         """Station model over ``[t_lo_s, t_hi_s]`` (s from the epoch; the slow rotation is
         tabulated there, with 60 s of margin, and extrapolated beyond)."""
         from trackproc.dynamics.frames import earth_rotation
@@ -305,7 +326,7 @@ class StationModel:
         eop = eop or ts.EarthOrientation()
         r = np.asarray(r_itrf_m, float).reshape(3)
         lo, hi = float(t_lo_s) - _SLOW_PAD_S, float(t_hi_s) + _SLOW_PAD_S
-        k = max(3, int(math.ceil((hi - lo) / SLOW_NODE_SPACING_S)) + 1)
+        k = max(3, math.ceil((hi - lo) / SLOW_NODE_SPACING_S) + 1)
         nodes = np.linspace(lo, hi, k)
         j1, j2 = ts.add_seconds_utc(epoch_jd_utc, nodes)
         rot = earth_rotation(j1, j2, eop, rates=False)
@@ -347,14 +368,14 @@ class StationModel:
         return (_quadratic_about(self.nodes_s, self.pn_nodes, c),
                 _quadratic_about(self.nodes_s, self.p_nodes, c))
 
-    def spectra(self, centres_s, n: int, *, _angle=None) -> np.ndarray:
+    def spectra(self, centres_s, n: int) -> np.ndarray:
         """Position spectra (S, 3, n) of the station about ``centres_s`` (quasi-inertial, m).
 
         Seed 004 eqs. 7-10 with eq. 9 in closed form (:func:`rotation_spectra`), times the
         slow precession-nutation and polar-motion polynomials.
         """
         c = np.atleast_1d(np.asarray(centres_s, float))
-        theta, omega = _angle if _angle is not None else self.angle(c)
+        theta, omega = self.angle(c)
         cs, sn = rotation_spectra(theta, omega, n)                     # (S, n)
         pn, p = self._slow(c)
         px = np.swapaxes(p, 1, 2)                                      # (S, comp, power)
@@ -677,27 +698,33 @@ def predict(trajectory, station: StationModel, t_s, *, range_rate_model: str = "
         raise ArithmeticError("could not split the pass into converging range segments")
     segs = _concat_segments(done)
     seg_index = np.empty(t.size, dtype=np.int64)
+    bounds = np.empty((len(done_members), 2), dtype=np.int64)
     for i, members in enumerate(done_members):
         seg_index[members] = i
+        bounds[i] = members[0], members[-1] + 1                         # contiguous in sorted time
     dt = t - segs.centre_s[seg_index]
 
     n_coef = segs.range.shape[-1]
     v0 = sp.vandermonde(dt, n_coef)
     v1 = sp.vandermonde(dt, n_coef, derivative=1)
-    rng = _evaluate(segs.range[seg_index], dt, vander=v0)
-    rr = _evaluate(segs.range[seg_index], dt, vander=v1)
-    rho = _evaluate(segs.rho[seg_index], dt, vander=v0)                 # (N, 3)
-    v_sat = _evaluate(segs.v_sat[seg_index], dt, vander=v0)
+
+    def at_samples(spec, vander=v0):
+        return _evaluate_segments(spec, bounds, vander)
+
+    rng = at_samples(segs.range)
+    rr = at_samples(segs.range, v1)
+    rho = at_samples(segs.rho)                                           # (N, 3)
+    v_sat = at_samples(segs.v_sat)
     factor = 1.0 + np.einsum("ni,ni->n", rho, v_sat) / (rng * c) if light_time else np.ones_like(rng)
     d_rng = d_rr = None
     if partials:
         big = trajectory.rotation                                      # x0_qi = big @ x0_gcrf
-        d_rng_qi = _evaluate(segs.d_range[seg_index], dt, vander=v0)    # (N, 6)
-        d_rr_qi = _evaluate(segs.d_range[seg_index], dt, vander=v1)
+        d_rng_qi = at_samples(segs.d_range)                              # (N, 6)
+        d_rr_qi = at_samples(segs.d_range, v1)
         if range_rate_model == "instantaneous" and light_time:
             # Vr_inst = Vr_dop * F, F = 1 + rho . v_sat / (c D)
-            d_rho = _evaluate(segs.d_rho[seg_index], dt, vander=v0)     # (N, 3, 6)
-            d_v = _evaluate(segs.d_v_sat[seg_index], dt, vander=v0)
+            d_rho = at_samples(segs.d_rho)                               # (N, 3, 6)
+            d_v = at_samples(segs.d_v_sat)
             dot = np.einsum("ni,ni->n", rho, v_sat)
             d_dot = np.einsum("nip,ni->np", d_rho, v_sat) + np.einsum("ni,nip->np", rho, d_v)
             d_factor = (d_dot - (dot / rng)[:, None] * d_rng_qi) / (c * rng)[:, None]
@@ -714,7 +741,10 @@ def predict(trajectory, station: StationModel, t_s, *, range_rate_model: str = "
 
     inv = np.empty_like(order)
     inv[order] = np.arange(order.size)
-    pick = (lambda a: None if a is None else a[inv])                     # noqa: E731
+
+    def pick(a):
+        return None if a is None else a[inv]
+
     return Prediction(t_s=t_in, range_m=rng[inv], range_rate_m_s=rr[inv],
                       light_time_s=(rng / c)[inv] if light_time else np.zeros(t_in.size),
                       azimuth_rad=az[inv], elevation_rad=el[inv], d_range_d_state=pick(d_rng),

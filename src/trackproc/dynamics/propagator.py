@@ -11,8 +11,9 @@ around it, once, for every command that propagates:
    that epoch (DESIGN.md "Frames, time, forces"). Results are rotated back to GCRF: states by
    ``blockdiag(q, q)^T``, the STM as ``Q^T Phi Q`` with ``Q = blockdiag(q, q)``.
 2. **Time.** ``t_s`` are SI seconds from the state's epoch (through TAI, so leap seconds
-   count); :meth:`Trajectory.seconds` converts UTC ``datetime64`` labels, and
-   :meth:`Trajectory.times_utc` converts back.
+   count), or UTC ``datetime64`` labels wherever times are taken;
+   :meth:`Trajectory.seconds` converts labels to seconds and :meth:`Trajectory.times_utc`
+   back.
 3. **Direction.** Times before the epoch are covered by a backward run, times after it by a
    forward run, both starting from the epoch state (so the STM is the identity at t = 0).
 4. **Outcome.** A run that stops early (step limit, non-finite state) is kept with its
@@ -44,7 +45,7 @@ from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.frames import QuasiInertialFrame, earth_rotation
 from trackproc.errors import ProcessingError
 
-__all__ = ["FORCES", "Trajectory", "Steps", "propagate", "propagate_state", "force_parameters"]
+__all__ = ["FORCES", "Trajectory", "Steps", "propagate", "propagate_state", "force_parameters", "reference_frame"]
 
 FORCES = taylor.FORCES
 #: Length of the run made when every requested time is the epoch itself (s).
@@ -142,7 +143,7 @@ class Trajectory:
         big[:3, :3] = big[3:, 3:] = self.frame.q
         return big
 
-    def raise_for_outcome(self) -> "Trajectory":
+    def raise_for_outcome(self) -> Trajectory:
         """Raise :class:`ProcessingError` unless every run reached its end; return self."""
         for run in self.runs:
             if run.outcome is not taylor.Outcome.SUCCESS:
@@ -165,8 +166,15 @@ class Trajectory:
         return ts.jd_utc_to_datetime64(jd1, jd2)
 
     # -- evaluation --------------------------------------------------------------------------
+    def _as_seconds(self, t_s) -> np.ndarray:
+        """Seconds from the epoch; UTC ``datetime64`` values are converted."""
+        t = np.asarray(t_s)
+        if np.issubdtype(t.dtype, np.datetime64):
+            return self.seconds(t)
+        return np.asarray(t, float)
+
     def _split(self, t_s):
-        t = np.asarray(t_s, float)
+        t = self._as_seconds(t_s)
         flat = t.reshape(-1)
         back = flat < 0.0
         if not any(run.t_end_s > run.t0_s for run in self.runs):
@@ -193,7 +201,8 @@ class Trajectory:
         return out.reshape(shape + tail)
 
     def state(self, t_s, *, frame: str = "gcrf", derivative: int = 0) -> np.ndarray:
-        """State ``[r (m), v (m/s)]`` at ``t_s`` (s from the epoch), shape ``t_s.shape + (6,)``.
+        """State ``[r (m), v (m/s)]`` at ``t_s`` (s from the epoch, or UTC ``datetime64``),
+        shape ``t_s.shape + (6,)``.
 
         ``frame="gcrf"`` (default) or ``"quasi-inertial"``; ``derivative=1`` gives ``[v, a]``.
         """
@@ -202,7 +211,7 @@ class Trajectory:
             q = self.frame.q
             out = np.concatenate([out[..., :3] @ q, out[..., 3:] @ q], axis=-1)
             if derivative == 0 and self.initial_gcrf is not None:
-                out[np.asarray(t_s, float) == 0.0] = self.initial_gcrf     # the epoch state, unrotated
+                out[self._as_seconds(t_s) == 0.0] = self.initial_gcrf      # the epoch state, unrotated
         return out
 
     def stm(self, t_s, *, frame: str = "gcrf") -> np.ndarray:
@@ -285,8 +294,9 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
     epoch : datetime64 or ISO 8601 text
         UTC epoch of the state.
     t_s : float or array
-        Times to cover, SI seconds from the epoch (negative = before it). The runs cover
-        ``[min(t_s, 0), max(t_s, 0)]``; evaluate at any time inside.
+        Times to cover, SI seconds from the epoch (negative = before it), or UTC
+        ``datetime64`` labels. The runs cover ``[min(t_s, 0), max(t_s, 0)]``; evaluate at any
+        time inside (:meth:`Trajectory.state` etc. take seconds or ``datetime64`` too).
     force : ``"two-body"`` or ``"j2"``
         Force model (constants from :mod:`trackproc.constants`).
     eop : :class:`~trackproc.dynamics.timescales.EarthOrientation` or None
@@ -320,7 +330,10 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
     v = np.asarray(v_m_s, float).reshape(3)
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
         raise ValueError("the initial state must be finite")
-    t = np.atleast_1d(np.asarray(t_s, float))
+    t = np.atleast_1d(np.asarray(t_s))
+    if np.issubdtype(t.dtype, np.datetime64):
+        t = np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(t.astype("datetime64[ns]")), jd), float)
+    t = t.astype(float)
     if t.size == 0 or not np.all(np.isfinite(t)):
         raise ValueError("t_s must hold at least one finite time")
     fr = frame if frame is not None else reference_frame(jd[0], jd[1], eop)

@@ -175,7 +175,12 @@ def write_ephemeris(eph: Ephemeris, path: str, fmt: str = "parquet", **oem_kwarg
 
 def read_ephemeris(path: str) -> Ephemeris:
     """Read an ephemeris written by :func:`write_ephemeris` (Parquet, Arrow, CSV; ``-`` = stdin)."""
-    from trackproc.io.tabular import Problems, column_numbers, column_times, source_table
+    from trackproc.io.tabular import (
+        Problems,
+        column_numbers,
+        column_times,
+        source_table,
+    )
 
     source = "<stdin>" if is_stdio(path) else str(path)
     data = read_input_bytes(path)

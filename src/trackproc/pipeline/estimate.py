@@ -125,7 +125,7 @@ class Problem:
 
     def _columns(self):
         names = self.names
-        cols = {n: i for i, n in enumerate(names) if not n in pm.STATE_NAMES}
+        cols = {n: i for i, n in enumerate(names) if n not in pm.STATE_NAMES}
         fixed = {d.name: d.value for d in self.params if not d.selected and d.family != "state"}
         return cols, fixed
 
@@ -511,7 +511,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     non-convergence), with diagnostics.
     """
     from trackproc.constants import force_model_constants
-    from trackproc.io.statefile import FORCE_LABELS, State
+    from trackproc.io.statefile import State
 
     opt = options or EstimateOptions()
     problem = build_problem(tables, initial, stations, opt, eop)
@@ -585,7 +585,6 @@ def _motion_columns(names):
 
 def _compare(problem: Problem, sol) -> dict:
     """Seed 002 eqs. 9, 15: solve without the ranges (and range biases), compare motion blocks."""
-    from trackproc.methods import least_squares as lsq
 
     names = sol.names
     mcol = _motion_columns(names)

@@ -19,8 +19,10 @@ docstring) whose metadata names the force model, its constants and the Earth ori
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping, Optional
+from typing import Optional
 
 import numpy as np
 import pandas as pd
@@ -70,8 +72,8 @@ class PropagateResult:
 def grid_times(start: np.datetime64, span_s: float, step_s: float) -> np.ndarray:
     """UTC labels ``start + k step`` for k = 0 .. floor(|span|/step), backwards for a negative
     span, returned in increasing order (``datetime64[ns]``)."""
-    step_ns = int(round(step_s * 1e9))
-    n = int(np.floor(abs(span_s) / step_s * (1 + 1e-12))) + 1
+    step_ns = round(step_s * 1e9)
+    n = math.floor(abs(span_s) / step_s * (1 + 1e-12)) + 1
     sign = 1 if span_s >= 0 else -1
     times = np.datetime64(start, "ns") + sign * np.arange(n, dtype=np.int64) * np.timedelta64(step_ns, "ns")
     return times[::sign]
@@ -148,7 +150,12 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
     from trackproc.dynamics import measurement_spectra as ms
     from trackproc.dynamics import propagator
     from trackproc.dynamics import timescales as ts
-    from trackproc.io.ephemeris import COV_COLUMNS, SIGMA_COLUMNS, STM_COLUMNS, Ephemeris
+    from trackproc.io.ephemeris import (
+        COV_COLUMNS,
+        SIGMA_COLUMNS,
+        STM_COLUMNS,
+        Ephemeris,
+    )
 
     _check_options(options)
     if options.at_times is not None:
@@ -258,7 +265,7 @@ def _meta(initial, options, traj, eop, has_cov, times) -> dict:
         "initial_state": {"epoch": _iso(initial.epoch), "position_m": [float(x) for x in initial.r_m],
                           "velocity_m_s": [float(x) for x in initial.v_m_s],
                           "source": initial.source or initial.extra.get("source")},
-        "start": _iso(times[0]), "end": _iso(times[-1]), "samples": int(len(times)),
+        "start": _iso(times[0]), "end": _iso(times[-1]), "samples": len(times),
         "force_model": FORCE_LABELS.get(options.force, options.force),
         "constants": force_model_constants(options.force),
         "earth_orientation": getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
