@@ -14,3 +14,4 @@ from trackproc.cli import detect_cmd  # noqa: F401
 from trackproc.cli import accuracy_cmd  # noqa: F401
 from trackproc.cli import estimate_cmd  # noqa: F401
 from trackproc.cli import propagate_cmd  # noqa: F401
+from trackproc.cli import batch_cmd  # noqa: F401

@@ -33,9 +33,16 @@ class EphemerisFormat(str, Enum):
 
 
 def _format(output: str, requested: Optional[EphemerisFormat]) -> EphemerisFormat:
+    """``--format``, else ``oem`` for a ``.oem``/``.kvn`` file (also when stdout is redirected to
+    one), else the table format of :func:`table_format_for`."""
     if requested is not None:
         return requested
-    if Path(output).suffix.lower() in (".oem", ".kvn"):
+    target = output
+    if output == "-":
+        from trackproc.cli.common import _stdout_file
+
+        target = _stdout_file() or "-"
+    if Path(target).suffix.lower() in (".oem", ".kvn"):
         return EphemerisFormat.oem
     return EphemerisFormat(table_format_for(output, None).value)
 

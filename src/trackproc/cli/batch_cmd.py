@@ -1,0 +1,183 @@
+"""``trackproc batch``: a directory or glob of passes through ingest -> smooth (-> estimate), cron-grade.
+
+The flags are generated from :data:`trackproc.pipeline.batch_config.SCHEMA`, the same table that
+defines the TOML keys and the ``TRACKPROC_BATCH_*`` environment variables, so the three can never
+drift apart. Precedence: flag > environment > config file > default.
+"""
+
+from __future__ import annotations
+
+import inspect
+import logging
+import sys
+import time
+from typing import List, Optional
+
+import typer
+
+from trackproc.cli.app import app
+from trackproc.pipeline.batch_config import CONFIG_ENV, SCHEMA
+
+log = logging.getLogger("trackproc")
+
+_PANELS = {"batch": "Run", "ingest": "Ingest step", "smooth": "Smooth step", "estimate": "Estimate step"}
+_ANNOTATIONS = {"str": Optional[str], "path": Optional[str], "choice": Optional[str], "degree": Optional[str],
+                "int": Optional[int], "float": Optional[float], "bool": Optional[bool],
+                "list": Optional[List[str]], "paths": Optional[List[str]], "map": Optional[List[str]]}
+
+
+def _help(opt) -> str:
+    extra = f" One of: {', '.join(opt.choices)}." if opt.choices else ""
+    return f"{opt.help}{extra} (config {opt.name}, env {opt.env})"
+
+
+def batch_command(**kwargs) -> None:
+    """Process many raw pass files through a chain of steps (ingest -> smooth, and optionally a
+    multi-pass estimate per window), in parallel, skipping results already up to date.
+
+    Settings come from flags, TRACKPROC_BATCH_* environment variables and the TOML config file,
+    in that order of precedence. Results go to OUTPUT/passes/ (one per input), OUTPUT/estimates/
+    (one per window), OUTPUT/summary.json and OUTPUT/summary.csv.
+
+    Exit status: 0 all inputs (and windows) done, 3 some failed (each reported with its reason),
+    1 all failed or another run holds the output directory, 2 usage error.
+
+    Example:
+
+        trackproc batch nightly.toml
+
+        trackproc batch --input 'inbox/*.csv' --stations stations.csv --carrier-hz 2.2e9 \\
+            --mode one-way -o out --workers 4
+
+        trackproc batch nightly.toml --scheduler tcp://10.0.0.5:8786 --force
+    """
+    config = kwargs.pop("config")
+    flags = {opt.name: kwargs[opt.dest] for opt in SCHEMA}
+
+    from trackproc.pipeline.batch_config import resolve
+
+    settings = resolve(config, flags)
+    handler, restore = _log_handler(settings.get("batch.log"))
+    progress = _Progress(sys.stderr) if _show_progress() else None
+    if progress is not None:
+        handler.progress = progress
+    try:
+        from trackproc.pipeline.batch import run_batch
+
+        result = run_batch(settings, progress=progress.update if progress else None)
+    finally:
+        if progress is not None:
+            progress.finish()
+        restore()
+    raise typer.Exit(result.exit_code)
+
+
+def _show_progress() -> bool:
+    try:
+        return sys.stderr.isatty() and logging.getLogger("trackproc").getEffectiveLevel() <= logging.INFO
+    except (AttributeError, ValueError):
+        return False
+
+
+class _Handler(logging.StreamHandler):
+    """Log lines with a UTC timestamp; clears the progress line before writing and redraws it after."""
+
+    progress = None
+
+    def emit(self, record):
+        if self.progress is not None:
+            self.progress.clear()
+        super().emit(record)
+        if self.progress is not None:
+            self.progress.draw()
+
+
+def _log_handler(path: Optional[str]):
+    """Route the ``trackproc`` logger to stderr or ``--log FILE`` (appended) for this run."""
+    logger = logging.getLogger("trackproc")
+    saved = (list(logger.handlers), logger.propagate, logger.level)
+    if path is not None:
+        try:
+            stream = open(path, "a", encoding="utf-8", buffering=1)
+        except OSError as exc:
+            from trackproc.errors import InputError
+
+            raise InputError(f"cannot open the log file: {exc.strerror}", file=path, column="--log") from None
+    else:
+        stream = sys.stderr
+    handler = _Handler(stream)
+    formatter = logging.Formatter("%(asctime)s trackproc batch[%(process)d]: %(levelname)s: %(message)s",
+                                  "%Y-%m-%dT%H:%M:%SZ")
+    formatter.converter = time.gmtime
+    handler.setFormatter(formatter)
+    root_level = logging.getLogger().getEffectiveLevel()
+    logger.handlers[:] = [handler]
+    logger.propagate = False
+    logger.setLevel(root_level)
+
+    def restore():
+        handler.flush()
+        if path is not None:
+            stream.close()
+        logger.handlers[:], logger.propagate, _ = saved
+        logger.setLevel(saved[2])
+
+    return handler, restore
+
+
+class _Progress:
+    """``\\r`` progress line on a terminal: done/total, failures, rate, a bar."""
+
+    def __init__(self, stream):
+        self.stream = stream
+        self.t0 = time.monotonic()
+        self.state = None
+        self.shown = False
+
+    def update(self, done: int, total: int, failed: int) -> None:
+        self.state = (done, total, failed)
+        self.draw()
+
+    def _line(self) -> str:
+        done, total, failed = self.state
+        width = 30
+        filled = int(width * done / total) if total else width
+        rate = done / max(time.monotonic() - self.t0, 1e-9)
+        return (f"[{'#' * filled}{'.' * (width - filled)}] {done}/{total} inputs, {failed} failed, "
+                f"{rate:.1f}/s")
+
+    def draw(self) -> None:
+        if self.state is None:
+            return
+        self.stream.write("\r" + self._line() + "\033[K")
+        self.stream.flush()
+        self.shown = True
+
+    def clear(self) -> None:
+        if self.shown:
+            self.stream.write("\r\033[K")
+            self.stream.flush()
+
+    def finish(self) -> None:
+        if self.shown:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _signature() -> inspect.Signature:
+    params = [inspect.Parameter(
+        "config", inspect.Parameter.KEYWORD_ONLY, annotation=Optional[str],
+        default=typer.Argument(None, metavar="[CONFIG.toml]",
+                               help=f"TOML config file (default: ${CONFIG_ENV}, else flags only)."))]
+    for opt in SCHEMA:
+        option = typer.Option(None, *opt.flags, help=_help(opt), metavar=opt.metavar,
+                              rich_help_panel=_PANELS[opt.section], show_default=False)
+        params.append(inspect.Parameter(opt.dest, inspect.Parameter.KEYWORD_ONLY, default=option,
+                                        annotation=_ANNOTATIONS[opt.kind]))
+    return inspect.Signature(params, return_annotation=None)
+
+
+batch_command.__signature__ = _signature()
+batch_command.__annotations__ = {p.name: p.annotation for p in batch_command.__signature__.parameters.values()}
+batch_command.__annotations__["return"] = None
+app.command("batch")(batch_command)
