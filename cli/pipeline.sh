@@ -31,4 +31,14 @@ echo "== 5. elevation-only pass and the multi-station set shipped with the proje
 trackproc ingest "$data/elevation_pass.csv" --stations "$data/stations.csv" -o "$out/elevation.parquet"
 trackproc info "$out/elevation.parquet" --json > "$out/elevation_info.json"
 trackproc info "$data/multistation.parquet"
+echo "== 6. estimate the orbit and the three range biases from the stale state (seed 002)" >&2
+trackproc estimate "$data/multistation.parquet" --initial "$data/stale.json" --apriori-initial \
+    --range-bias --opm "$out/solution.opm" --residuals "$out/residuals.csv" -o "$out/solution.json"
+
+echo "== 7. how good is the prediction a day ahead? (seed 000) and the ephemeris as CCSDS OEM" >&2
+trackproc accuracy "$out/solution.json" --span 86400 --step 3600 --format csv -o "$out/accuracy.csv"
+trackproc propagate "$out/solution.json" --span 86400 --step 600 --format oem -o "$out/solution.oem"
+
+echo "== 8. elevation-only sensor requirement, beside the paper's Table 2 (seed 003)" >&2
+trackproc requirements --format md --compare-paper -o "$out/requirements.md"
 echo "outputs in $out" >&2

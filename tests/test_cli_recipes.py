@@ -32,6 +32,19 @@ def test_pipeline_recipe(tmp_path):
     assert by_file[["value", "smoothed", "residual"]].equals(by_pipe[["value", "smoothed", "residual"]])
     assert (out / "smooth.json").stat().st_size > 0
     assert "KIR-007" in run.stdout  # info of the shipped multi-station set
+    # the estimate from the stale state lands on the truth within its own error matrix
+    import json
+
+    import numpy as np
+
+    sol = json.loads((out / "solution.json").read_text())
+    truth = json.loads((ROOT / "sample_data" / "truth_at_start.json").read_text())
+    err = np.array(sol["position_m"] + sol["velocity_m_s"]) - np.array(truth["position_m"] + truth["velocity_m_s"])
+    cov = np.array(sol["covariance"])[:6, :6]
+    assert float(err @ np.linalg.solve(cov, err)) < 22.5  # chi2(6) at 0.999
+    biases = dict(zip(sol["parameters"], sol["values"]))
+    assert abs(biases["range_bias:CPH"] - 120) < 3 and abs(biases["range_bias:ZHY"] + 80) < 3
+    assert (out / "solution.oem").read_text().startswith("CCSDS_OEM_VERS")
 
 
 def test_cron_recipe_reports_partial_failure_and_skips_done_files(tmp_path):

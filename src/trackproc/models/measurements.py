@@ -86,20 +86,36 @@ def station_gcrf(r_itrf, jd1, jd2, eop=None) -> StationTrack:
     Position and velocity are the exact IAU 2006/2000A transform
     (:func:`~trackproc.dynamics.frames.itrf_to_gcrf`, one Earth-orientation evaluation shared
     by all stations); the acceleration is the centripetal ``ω × v`` about the rotation axis
-    (used only to move the station over a round-trip light time).
+    (used only to move the station over a round-trip light time). Repeated dates (a range
+    and a range-rate sample share their reception time) are evaluated once: the Earth
+    orientation (``erfa.c2i06a`` per date) is the cost here.
     """
     from trackproc.dynamics import frames
 
     r_itrf = np.asarray(r_itrf, float)
     jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
+    jd1, jd2 = jd1.reshape(-1), jd2.reshape(-1)
     n = jd1.size
-    shape = (n, 3) if r_itrf.ndim == 1 else (r_itrf.shape[0], n, 3)
+    inverse = None
+    if n > 1:
+        dates, inverse = np.unique(np.stack([jd1, jd2], -1), axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        if dates.shape[0] == n:
+            inverse = None
+        else:
+            jd1, jd2 = dates[:, 0], dates[:, 1]
+    m = jd1.size
+    shape = (m, 3) if r_itrf.ndim == 1 else (r_itrf.shape[0], m, 3)
     r_src = np.broadcast_to(r_itrf if r_itrf.ndim == 1 else r_itrf[:, None, :], shape)
     rot = frames.earth_rotation(jd1, jd2, eop)
     r, v = frames.itrf_to_gcrf(r_src, np.zeros(shape), jd1, jd2, eop, rotation=rot)
-    axis = rot.q[n // 2][2]  # the CIP (rotation axis) in GCRF, mid-span
+    matrix = rot.matrix
+    mid = n // 2 if inverse is None else inverse[n // 2]
+    axis = rot.q[mid][2]  # the CIP (rotation axis) in GCRF, mid-span
+    if inverse is not None:
+        r, v, matrix = r[..., inverse, :], v[..., inverse, :], matrix[inverse]
     a = np.cross(frames.OMEGA_ERA * axis, v)
-    return StationTrack(r=r, v=v, a=a, gcrf_to_itrf=rot.matrix)
+    return StationTrack(r=r, v=v, a=a, gcrf_to_itrf=matrix)
 
 
 # --------------------------------------------------------------------------- light time

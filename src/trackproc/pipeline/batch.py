@@ -481,7 +481,7 @@ def _table_numbers(table) -> dict:
 class _SerialExecutor:
     """Runs each task in this process when it is submitted."""
 
-    label = "serial"
+    label = "this process (--workers 1)"
     slots = 1
 
     def submit(self, task: Task):
@@ -553,11 +553,11 @@ class _DaskExecutor:
         return self.client.submit(run_task, task, pure=False,
                                   key=f"trackproc-batch-{task.kind}-{task.key[:12]}-{uuid.uuid4().hex[:8]}")
 
-    @staticmethod
-    def wait_first(futures):
+    def wait_first(self, futures):
         from distributed import wait
 
-        result = wait(list(futures), return_when="FIRST_COMPLETED")
+        with self.client.as_current():
+            result = wait(list(futures), return_when="FIRST_COMPLETED")
         return set(result.done), set(result.not_done)
 
     def close(self):
@@ -1067,7 +1067,7 @@ def _log_record(record: Record, result: Optional[TaskResult] = None) -> None:
     if record.status == "ok":
         n = record.numbers
         if record.task == "pass":
-            log.info("%s: ok (%s samples, %s passes%s) in %.2f s", record.name, n.get("samples"), n.get("passes"),
+            log.info("%s: ok (%s samples, %s pass(es)%s) in %.2f s", record.name, n.get("samples"), n.get("passes"),
                      f", {n['kind']} RMS {n['rms']:.4g} {n['rms_unit']}" if n.get("rms") is not None else "",
                      record.seconds)
         else:

@@ -107,7 +107,7 @@ SCHEMA: tuple[Opt, ...] = (
     Opt("batch", "workers", "int", 0, ("--workers", "-j"),
         "Worker processes (0: one per core; 1: in this process).", check=_INT_NONNEG, metavar="N"),
     Opt("batch", "scheduler", "str", None, ("--scheduler",),
-        "Run on an existing Dask distributed cluster (needs the dask extra: pip install 'trackproc[dask]').", metavar="tcp://HOST:PORT"),
+        "Run on an existing Dask distributed cluster (needs the optional dask extra of trackproc).", metavar="tcp://HOST:PORT"),
     Opt("batch", "force", "bool", False, ("--force/--no-force",),
         "Redo every result, up to date or not."),
     Opt("batch", "retry_failed", "bool", False, ("--retry-failed/--no-retry-failed",),

@@ -1,0 +1,610 @@
+"""Refinement of a stale orbit from one Doppler pass (seed 004): the integral cost, the circular-orbit
+constraints by Lagrange multipliers, and the observability of one pass.
+
+Seed 004 refines the state ``X_T = (x0, y0, z0, vx, vy, vz, r_ka)`` at the *traverse point* (where
+the range-rate vanishes) by minimising the integral over the pass
+
+    I(X_T) = ∫_T (Vr_LSQ(t) - Vr(X_T, t))² dt                                  (eq. 14)
+
+of the squared difference between the smoothed range-rate polynomial ``Vr_LSQ = φ(t)ᵀ C``
+(eq. 1, :mod:`trackproc.methods.smoothing`) and the range-rate of the orbit, computed in the
+image domain (eqs. 6-13, :mod:`trackproc.dynamics.measurement_spectra`), optionally under the
+circular-orbit constraints
+
+    f(X_T) = (|r|² - r_ka²,  |v|² - μ/r_ka,  r·v) = 0                              (eq. 5)
+
+by Lagrange multipliers, ``L = I + λᵀ f`` (eqs. 15-17), with the gradients of ``Vr`` from the
+first-order two-dimensional DT (eqs. 18-21), i.e. the sensitivity spectra of the Taylor engine
+carried through the range and range-rate spectra.
+
+Here:
+
+* **Quadrature.** ``I`` is evaluated by composite Gauss-Legendre quadrature
+  (:func:`gauss_legendre`) over the parts of the pass covered by data (:func:`covered_intervals`;
+  a polynomial says nothing inside a long gap). With nodes ``t_k`` and weights ``w_k``,
+  ``I ≈ Σ w_k (Vr_LSQ(t_k) - Vr(X, t_k))²``: a weighted least-squares problem in *pseudo-observations*
+  ``Vr_LSQ(t_k)``. It is normalised to the scale of the samples' own χ², ``χ²_I = I / (σ̄² Δt̄)``
+  (σ̄ the RMS sample sigma, Δt̄ the mean sample spacing: the integral of a curve sampled every Δt̄
+  is Δt̄ times the sum), which is the pseudo-sigma ``σ_k = σ̄ √(Δt̄ / w_k)`` of
+  :func:`pseudo_sigma`. That puts the integral cost and an a-priori constraint on one scale and
+  lets the unconstrained problem be solved by the ordinary solver,
+  :func:`trackproc.methods.least_squares.solve`.
+* **Constraints (KKT).** :func:`solve_kkt` is Gauss-Newton with equality constraints: each step
+  solves the KKT system of the linearised problem,
+
+      [ 2 JᵀJ   Aᵀ ] [ δ ]   [ 2 Jᵀ b ]
+      [  A      0  ] [ λ ] = [  -f    ],
+
+  (J the whitened Jacobian, b the whitened residual, A = ∂f/∂X), by the null-space method: a QR
+  factorisation ``Aᵀ = [Y Z] [R; 0]`` splits ``δ = Y p + Z q`` with ``Rᵀ p = -f`` (the
+  constraint step) and ``q`` the least-squares solution of ``J Z q ≈ b - J Y p`` (by the same
+  QR + SVD as the unconstrained solver: no normal matrix is formed). After each step the
+  state is put back on the constraint surface by minimum-norm Newton steps, so every iterate is
+  feasible and the cost alone decides whether a step is accepted (Levenberg-Marquardt damping
+  of ``q`` otherwise). The multipliers follow from the first KKT row at the solution,
+  ``Aᵀ λ = -∇χ²`` (least squares), and the covariance is that of the constrained estimate,
+  ``Z (Zᵀ JᵀJ Z)⁻¹ Zᵀ`` (zero across the constraint surface).
+* **Covariance of the integral estimate.** The pseudo-observations are a smoothed curve, not
+  independent samples; :func:`sandwich_covariance` propagates the polynomial's coefficient
+  covariance (from ``smooth``) through the linearised estimator:
+  ``Cov = K J_dᵀ Σ⁻¹ Φ Σ_C Φᵀ Σ⁻¹ J_d K + K J_pᵀ J_p K`` (K the solver's (constrained) inverse
+  normal matrix, J_d/J_p its data/a-priori rows, Φ the basis at the nodes).
+* **Observability.** :func:`observability` reports the singular values of the whitened
+  Jacobian and, with the bias parameters projected out, the state directions a pass determines
+  and those it cannot see, in radial / along-track / cross-track terms.
+
+Pure numpy on SI units (m, m/s, s); nothing here reads files or prints.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from trackproc.errors import ProcessingError
+from trackproc.methods.least_squares import (Options, Solution, _prior_rhs, _prior_rows, combination_text,
+                                             whitened_svd)
+
+__all__ = ["gauss_legendre", "covered_intervals", "pseudo_sigma", "circular_constraints", "constraint_scales",
+           "IntegralModel", "KKTResult", "solve_kkt", "sandwich_covariance", "observability", "Observability",
+           "RTN_NAMES", "CONSTRAINT_NAMES"]
+
+#: Names of the circular-orbit constraints (seed 004 eq. 5), in order.
+CONSTRAINT_NAMES = ("|r|^2 - r_ka^2", "|v|^2 - mu/r_ka", "r.v")
+#: State directions in the radial / along-track / cross-track frame.
+RTN_NAMES = ("radial_m", "along_m", "cross_m", "radial_m_s", "along_m_s", "cross_m_s")
+#: Feasibility reached by the restoration steps (relative to each constraint's scale).
+FEASIBILITY_RTOL = 1e-14
+_MAX_RESTORE = 30
+
+
+# ----------------------------------------------------------------------------- quadrature
+
+def gauss_legendre(intervals, *, order: int = 16, panel_s: float = 60.0):
+    """Composite Gauss-Legendre nodes and weights over ``intervals`` [(a, b), ...] (s).
+
+    Each interval is cut into ``ceil((b - a) / panel_s)`` equal panels with ``order`` nodes
+    each; every panel integrates polynomials of degree ``2 order - 1`` exactly. Returns
+    ``(t_s (K,), w_s (K,))`` with ``Σ w_k g(t_k) ≈ ∫ g dt`` over the union of the intervals.
+    Implements the quadrature of seed 004 eq. 14.
+
+    >>> t, w = gauss_legendre([(0.0, 100.0)], order=4, panel_s=50.0)
+    >>> round(float(w.sum()), 12), round(float(w @ t ** 3), 6)
+    (100.0, 25000000.0)
+    """
+    if order < 1 or not panel_s > 0:
+        raise ValueError(f"order must be >= 1 and panel_s > 0; found {order}, {panel_s}")
+    x, wx = np.polynomial.legendre.leggauss(int(order))
+    ts, ws = [], []
+    for a, b in intervals:
+        a, b = float(a), float(b)
+        if not b > a:
+            continue
+        m = max(1, int(math.ceil((b - a) / panel_s - 1e-9)))
+        edges = np.linspace(a, b, m + 1)
+        mid = 0.5 * (edges[1:] + edges[:-1])
+        half = 0.5 * (edges[1:] - edges[:-1])
+        ts.append((mid[:, None] + half[:, None] * x[None, :]).ravel())
+        ws.append((half[:, None] * wx[None, :]).ravel())
+    if not ts:
+        raise ValueError("no interval of positive length to integrate over")
+    return np.concatenate(ts), np.concatenate(ws)
+
+
+def covered_intervals(t_s, max_gap_s: float = 30.0, min_length_s: float = 1.0) -> list:
+    """The parts of a pass covered by samples: ``[(a, b), ...]`` split at gaps longer than
+    ``max_gap_s``; pieces shorter than ``min_length_s`` (isolated samples) are dropped."""
+    t = np.sort(np.asarray(t_s, float))
+    if t.size == 0:
+        return []
+    cut = np.flatnonzero(np.diff(t) > max_gap_s)
+    starts = np.r_[0, cut + 1]
+    ends = np.r_[cut, t.size - 1]
+    return [(float(t[a]), float(t[b])) for a, b in zip(starts, ends) if t[b] - t[a] >= min_length_s]
+
+
+def pseudo_sigma(weights_s, sigma_ref: float, spacing_s: float) -> np.ndarray:
+    """Pseudo-sigmas ``σ̄ √(Δt̄ / w_k)`` of the quadrature nodes: the whitened sum of squares is
+    then ``I / (σ̄² Δt̄)``, the integral cost on the scale of the samples' χ² (module docstring)."""
+    w = np.asarray(weights_s, float)
+    if not (sigma_ref > 0 and spacing_s > 0) or np.any(w <= 0):
+        raise ValueError("sigma_ref, spacing_s and the weights must be positive")
+    return sigma_ref * np.sqrt(spacing_s / w)
+
+
+# ----------------------------------------------------------------------------- constraints
+
+def circular_constraints(x, mu_m3_s2: float, *, state_index=(0, 1, 2, 3, 4, 5), rka_index: int = 6):
+    """Seed 004 eq. 5: ``f = (|r|² - r_ka², |v|² - μ/r_ka, r·v)`` and its Jacobian ``A`` (3, n).
+
+    ``x`` holds the GCRF state at ``state_index`` (m, m/s) and ``r_ka`` (m) at ``rka_index``;
+    every other entry (e.g. Doppler offsets) has zero partials.
+    """
+    x = np.asarray(x, float)
+    idx = list(state_index)
+    r, v, rka = x[idx[:3]], x[idx[3:]], float(x[rka_index])
+    f = np.array([r @ r - rka * rka, v @ v - mu_m3_s2 / rka, r @ v])
+    a = np.zeros((3, x.size))
+    a[0, idx[:3]] = 2.0 * r
+    a[0, rka_index] = -2.0 * rka
+    a[1, idx[3:]] = 2.0 * v
+    a[1, rka_index] = mu_m3_s2 / (rka * rka)
+    a[2, idx[:3]] = v
+    a[2, idx[3:]] = r
+    return f, a
+
+
+def constraint_scales(x, mu_m3_s2: float, *, state_index=(0, 1, 2, 3, 4, 5), rka_index: int = 6) -> np.ndarray:
+    """Scales that make eq. 5 relative: ``(r_ka², μ/r_ka, |r| |v|)``."""
+    x = np.asarray(x, float)
+    idx = list(state_index)
+    rka = abs(float(x[rka_index]))
+    return np.array([rka * rka, mu_m3_s2 / rka, np.linalg.norm(x[idx[:3]]) * np.linalg.norm(x[idx[3:]])])
+
+
+# ----------------------------------------------------------------------------- the integral model
+
+class IntegralModel:
+    """Range-rate of the orbit at the quadrature nodes and its gradient, from the DT spectra.
+
+    ``model(x) -> (Vr (K,), ∂Vr/∂x (K, n))`` for ``x = (state at the epoch (6), biases..., [r_ka])``:
+    the state is propagated by the Taylor (DT) engine with its sensitivity spectra
+    (:func:`trackproc.dynamics.propagator.propagate`, ``stm=True``), and the range and range-rate
+    spectra of the station (:func:`trackproc.dynamics.measurement_spectra.predict`: seed 004
+    eqs. 7-13 with one-way light time) give ``Vr`` and, through the first-order sensitivities
+    (eqs. 19-21), ``∂Vr/∂state``. A bias ``j`` adds ``coefficients[j] * x[6 + j]`` (e.g. ``-c/f``
+    for a one-way Doppler offset in Hz, ``-c (t - t0)/f`` for its drift); trailing entries of
+    ``x`` beyond those (``r_ka``) have no effect on ``Vr``.
+
+    Parameters
+    ----------
+    epoch : datetime64 — the epoch of the state (the traverse point).
+    frame : QuasiInertialFrame — the integration frame (the estimation problem's).
+    station : :class:`~trackproc.dynamics.measurement_spectra.StationModel` built on ``epoch``
+        and ``frame``.
+    t_s : (K,) node times, s from the epoch (reception times).
+    bias_coefficients : list of (K,) arrays, one per bias parameter.
+    force, eop, range_rate_model : as elsewhere.
+    """
+
+    def __init__(self, epoch, frame, station, t_s, bias_coefficients=(), *, force: str = "j2", eop=None,
+                 range_rate_model: str = "doppler", n_extra: int = 0):
+        self.epoch = epoch
+        self.frame = frame
+        self.station = station
+        self.t_s = np.asarray(t_s, float)
+        self.bias = [np.asarray(c, float) for c in bias_coefficients]
+        self.force = force
+        self.eop = eop
+        self.range_rate_model = range_rate_model
+        self.n_extra = int(n_extra)
+        self.evaluations = 0
+
+    @property
+    def n_parameters(self) -> int:
+        return 6 + len(self.bias) + self.n_extra
+
+    def trajectory(self, x):
+        from trackproc.dynamics import propagator
+
+        span = [float(self.t_s.min()) - 1.0, float(self.t_s.max())]
+        return propagator.propagate(x[:3], x[3:6], self.epoch, span, force=self.force, stm=True, frame=self.frame,
+                                    eop=self.eop).raise_for_outcome()
+
+    def __call__(self, x):
+        from trackproc.dynamics import measurement_spectra as ms
+
+        x = np.asarray(x, float)
+        try:
+            pred = ms.predict(self.trajectory(x), self.station, self.t_s, range_rate_model=self.range_rate_model)
+        except ValueError as exc:
+            raise ArithmeticError(str(exc)) from None
+        value = pred.range_rate_m_s.copy()
+        jac = np.zeros((self.t_s.size, x.size))
+        jac[:, :6] = pred.d_range_rate_d_state
+        for j, coef in enumerate(self.bias):
+            value += coef * x[6 + j]
+            jac[:, 6 + j] = coef
+        self.evaluations += 1
+        return value, jac
+
+
+# ----------------------------------------------------------------------------- constrained solver
+
+@dataclass
+class KKTResult:
+    """A solution under equality constraints (:func:`solve_kkt`).
+
+    ``solution`` (a :class:`~trackproc.methods.least_squares.Solution`; its covariance is the
+    constrained one, singular across the constraint surface), ``multipliers`` λ of
+    ``L = χ² + λᵀ f`` (seed 004 eq. 16; units: cost per unit of each constraint),
+    ``constraints`` f at the solution, ``relative`` f divided by :func:`constraint_scales`,
+    ``stationarity`` ``|∇χ² + Aᵀλ| / |∇χ²|`` (0 at a KKT point; 0/0 is reported as 0),
+    ``restorations`` minimum-norm Newton steps taken to stay feasible.
+    """
+
+    solution: Solution
+    multipliers: np.ndarray
+    constraints: np.ndarray
+    relative: np.ndarray
+    stationarity: float
+    restorations: int = 0
+    null_space_dim: int = 0
+
+
+def _null_space(a_scaled):
+    """``Y`` (n, m), ``Z`` (n, n - m), ``R`` (m, m) with ``A_sᵀ = Y R`` (QR of the constraint Jacobian)."""
+    m = a_scaled.shape[0]
+    q, r = np.linalg.qr(a_scaled.T, mode="complete")
+    rr = r[:m, :m]
+    if np.any(np.abs(np.diag(rr)) <= 1e-13 * max(np.abs(np.diag(rr)).max(), 1e-300)):
+        raise ProcessingError("the constraints are degenerate at this point (their Jacobian is rank deficient)")
+    return q[:, :m], q[:, m:], rr
+
+
+def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: Sequence[str],
+              constraints: Callable[[np.ndarray], tuple], constraint_scale: Callable[[np.ndarray], np.ndarray],
+              scales=None, priors=(), periodic=None, options: Options | None = None) -> KKTResult:
+    """Minimise ``Σ ((y - h(x))/σ)² + prior terms`` subject to ``f(x) = 0`` (seed 004 eqs. 15-17).
+
+    Gauss-Newton on the KKT system of each linearised step, solved by the null-space method
+    (module docstring); every iterate is restored onto ``f = 0`` by minimum-norm Newton steps;
+    Levenberg-Marquardt damping of the free step; the same k-sigma editing, stopping rules and
+    failure reports as :func:`trackproc.methods.least_squares.solve`.
+
+    ``constraints(x) -> (f (m,), A (m, n))``; ``constraint_scale(x) -> (m,)`` positive scales
+    making ``f`` relative (feasible when every ``|f| / scale < 1e-14``).
+    Raises :class:`ProcessingError` on failure.
+    """
+    opt = options or Options()
+    x = np.asarray(x0, float).copy()
+    n = x.size
+    names = list(names)
+    y = np.asarray(observed, float)
+    sig = np.asarray(sigma, float)
+    nobs = y.size
+    if sig.shape != y.shape or not np.all(np.isfinite(sig) & (sig > 0)):
+        raise ValueError("sigma must be positive and finite, one per measurement")
+    scales = np.ones(n) if scales is None else np.asarray(scales, float)
+    periodic = np.zeros(nobs, bool) if periodic is None else np.asarray(periodic, bool)
+    prior_a, prior_factors = _prior_rows(priors, n, scales)
+    n_prior = prior_a.shape[0]
+    clip = opt.clip if opt.clip else None
+    restorations = 0
+
+    def restore(xv):
+        nonlocal restorations
+        for _ in range(_MAX_RESTORE):
+            f, a = constraints(xv)
+            if np.all(np.abs(f) <= FEASIBILITY_RTOL * constraint_scale(xv)):
+                return xv
+            step = np.linalg.lstsq(a * scales[None, :], -f, rcond=None)[0]
+            xv = xv + scales * step
+            restorations += 1
+        f, _ = constraints(xv)
+        rel = np.abs(f) / constraint_scale(xv)
+        if np.all(rel < 1e-10):
+            return xv
+        raise ArithmeticError(f"cannot satisfy the constraints (relative residual {rel.max():.3g})")
+
+    def residuals(h):
+        r = y - h
+        if periodic.any():
+            r = np.where(periodic, np.mod(r + np.pi, 2 * np.pi) - np.pi, r)
+        return r
+
+    def evaluate(xv):
+        h, jac = model(xv)
+        h = np.asarray(h, float)
+        jac = np.asarray(jac, float)
+        if h.shape != (nobs,) or jac.shape != (nobs, n):
+            raise ValueError(f"model returned shapes {h.shape}, {jac.shape}; expected ({nobs},), ({nobs}, {n})")
+        return h, jac
+
+    def cost_of(r, xv, mask):
+        z = r[~mask] / sig[~mask]
+        pr = _prior_rhs(prior_factors, xv)
+        return float(z @ z + pr @ pr)
+
+    def edit(r, mask_prev):
+        if clip is None:
+            return np.zeros(nobs, bool)
+        z = np.abs(r / sig)
+        kept = z[~mask_prev]
+        wrms = float(np.sqrt(np.mean(kept * kept))) if kept.size else 1.0
+        return z > clip * max(1.0, wrms)
+
+    def system(jac, r, xv, mask):
+        keep = ~mask
+        a = jac[keep] / sig[keep, None] * scales[None, :]
+        b = r[keep] / sig[keep]
+        if n_prior:
+            a = np.vstack([a, prior_a])
+            b = np.concatenate([b, _prior_rhs(prior_factors, xv)])
+        return a, b
+
+    def reduced(jac, r, xv, mask, it):
+        f, ac = constraints(xv)
+        yb, zb, rr = _null_space(ac * scales[None, :])
+        p = -np.linalg.solve(rr.T, f)
+        a, b = system(jac, r, xv, mask)
+        if not np.all(np.isfinite(a)):
+            raise ProcessingError("the Jacobian has non-finite entries", {"iteration": it})
+        rhs = b - a @ (yb @ p)
+        az = a @ zb
+        ub, s, vt = whitened_svd(az, rhs)
+        if s.size < zb.shape[1] or s[-1] <= opt.rank_rtol * s[0]:
+            weak = combination_text(zb @ vt[-1], names) if s.size else ""
+            raise ProcessingError(
+                f"rank-deficient problem under the constraints (condition number "
+                f"{s[0] / s[-1] if s.size and s[-1] > 0 else math.inf:.3g}); unobservable combination of the "
+                f"scaled parameters: {weak}", {"iteration": it, "singular_values": s.tolist()})
+        return yb, zb, p, ub, s, vt
+
+    try:
+        x = restore(x)
+        h, jac = evaluate(x)
+    except (ArithmeticError, ValueError) as exc:
+        raise ProcessingError(f"the model cannot be evaluated at the initial values: {exc}") from None
+    if not np.all(np.isfinite(h)):
+        raise ProcessingError("the model gives non-finite values at the initial values")
+    r = residuals(h)
+    mask = edit(r, np.zeros(nobs, bool))
+    stable = not mask.any()
+    cost = cost_of(r, x, mask)
+    history = [cost]
+    damped = 0
+    converged = False
+    message = ""
+    it = 0
+    for it in range(1, opt.max_iterations + 1):
+        yb, zb, p, ub, s, vt = reduced(jac, r, x, mask, it)
+        sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))
+        q_gn = vt.T @ (ub / s)
+        gn_sig = float(np.max(np.abs(q_gn) / sig_q))
+        if stable and gn_sig < opt.step_tol:
+            converged = True
+            message = f"converged: Gauss-Newton step {gn_sig:.2g} sigma (constrained)"
+            break
+        accepted = None
+        for attempt in range(opt.max_damping_tries + 1):
+            if attempt == 0:
+                q = q_gn
+            else:
+                lam = opt.initial_damping * s[0] ** 2 * 10.0 ** (attempt - 1)
+                q = vt.T @ (ub * s / (s * s + lam))
+            xi = yb @ p + zb @ q
+            try:
+                x_new = restore(x + scales * xi)
+                h_new, jac_new = evaluate(x_new)
+            except (ArithmeticError, ProcessingError, ValueError):
+                continue
+            if not np.all(np.isfinite(h_new)):
+                continue
+            r_new = residuals(h_new)
+            c_new = cost_of(r_new, x_new, mask)
+            if c_new <= cost * (1.0 + 1e-12) + 1e-300:
+                accepted = (x_new, h_new, jac_new, r_new, c_new, q)
+                damped += attempt > 0
+                break
+        if accepted is None:
+            if gn_sig < opt.step_tol:
+                converged = True
+                message = "converged (no step reduces the cost further)"
+                break
+            raise ProcessingError(
+                f"no step reduces the cost after {opt.max_damping_tries} damped tries at iteration {it} "
+                f"(cost {cost:.6g}); the initial state may be too far off",
+                {"iteration": it, "cost": cost, "cost_history": history})
+        x_new, h, jac, r, c_new, q = accepted
+        step_sig = float(np.max(np.abs(q) / sig_q))
+        rel = abs(cost - c_new) / max(c_new, 1e-300)
+        x = x_new
+        new_mask = edit(r, mask)
+        same = bool(np.array_equal(new_mask, mask))
+        stable = same
+        mask = new_mask
+        if int((~mask).sum()) + n_prior < n - 3:
+            raise ProcessingError(f"too few measurements: {int((~mask).sum())} kept for {n} parameters")
+        cost = cost_of(r, x, mask)
+        history.append(cost)
+        if same and (step_sig < opt.step_tol or rel < opt.cost_rtol):
+            converged = True
+            message = (f"converged: step {step_sig:.2g} sigma (constrained)" if step_sig < opt.step_tol
+                       else f"converged: relative cost change {rel:.2g} (constrained)")
+            break
+    if not converged:
+        raise ProcessingError(
+            f"did not converge in {opt.max_iterations} iterations under the constraints (cost {history[-2]:.6g} -> "
+            f"{history[-1]:.6g}); try --max-iterations, a better --initial state, or drop --circular",
+            {"iterations": it, "cost_history": history})
+
+    # covariance, multipliers and stationarity at the solution
+    yb, zb, p, ub, s, vt = reduced(jac, r, x, mask, it)
+    inner = (vt.T / s ** 2) @ vt
+    cov_scaled = zb @ inner @ zb.T
+    cov = cov_scaled * np.outer(scales, scales)
+    cov = 0.5 * (cov + cov.T)
+    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.where(np.outer(sd, sd) > 0, cov / np.outer(sd, sd), 0.0)
+    a, b = system(jac, r, x, mask)
+    grad = -2.0 * a.T @ b                                    # ∇χ² in the scaled parameters
+    f, ac = constraints(x)
+    as_ = ac * scales[None, :]
+    lam = np.linalg.lstsq(as_.T, -grad, rcond=None)[0]
+    resid = grad + as_.T @ lam
+    gnorm = float(np.linalg.norm(grad))
+    stationarity = float(np.linalg.norm(resid) / gnorm) if gnorm > 0 else 0.0
+    kept = int((~mask).sum())
+    dof = kept + n_prior - (n - f.size)
+    sol = Solution(names=names, values=x, covariance=cov, sigma=sd, correlation=corr, covariance_scaled=cov_scaled,
+                   scales=scales, chi2=cost, dof=dof, variance_factor=cost / dof if dof > 0 else math.nan,
+                   condition_number=float(s[0] / s[-1]), singular_values=s, computed=h, residual=r,
+                   normalized=r / sig, edited=mask, jacobian=jac, iterations=it, converged=True,
+                   cost_history=history, damped_steps=damped, message=message,
+                   chi2_prior=float(np.sum(_prior_rhs(prior_factors, x) ** 2)), n_prior=int(n_prior))
+    return KKTResult(solution=sol, multipliers=lam, constraints=f, relative=f / constraint_scale(x),
+                     stationarity=stationarity, restorations=restorations, null_space_dim=int(zb.shape[1]))
+
+
+# ----------------------------------------------------------------------------- covariance of the integral
+
+def sandwich_covariance(solution: Solution, sigma_nodes, design_nodes, coefficient_covariance,
+                        priors=(), *, rows=None) -> np.ndarray:
+    """Covariance of the integral estimate from the smoothing polynomial's coefficient covariance.
+
+    The estimate is a function of the polynomial coefficients C (and of the a-priori centre);
+    linearised, ``δξ = K (J_dᵀ Σ⁻¹ Φ δC + J_pᵀ δb_p)`` with ``K`` the solver's covariance of the
+    scaled parameters (the constrained one under constraints), ``J_d`` the whitened data rows,
+    ``Σ = diag(σ_k)`` the pseudo-sigmas, ``Φ`` (K, m) the basis at the nodes in the units of the
+    pseudo-observations, ``Cov(C)`` the coefficient covariance and ``J_p`` the whitened a-priori
+    rows (``δb_p ~ N(0, I)``). Returns the physical covariance (n, n).
+    """
+    sol = solution
+    scales = np.asarray(sol.scales, float)
+    n = scales.size
+    k_scaled = np.asarray(sol.covariance_scaled, float)
+    sig = np.asarray(sigma_nodes, float)
+    jd = sol.jacobian / sig[:, None] * scales[None, :]
+    b = jd.T @ (np.asarray(design_nodes, float) / sig[:, None])          # (n, m)
+    middle = b @ np.asarray(coefficient_covariance, float) @ b.T
+    if priors:
+        pa, _ = _prior_rows(priors, n, scales)
+        middle = middle + pa.T @ pa
+    cov_scaled = k_scaled @ middle @ k_scaled
+    cov = cov_scaled * np.outer(scales, scales)
+    return 0.5 * (cov + cov.T)
+
+
+# ----------------------------------------------------------------------------- observability
+
+@dataclass
+class Observability:
+    """What one pass determines: see :func:`observability`.
+
+    ``singular_values``: of the whitened Jacobian of every estimated parameter, the state columns
+    in units of the reference sigma and the others in their drivers' scales; ``names`` its
+    columns. ``state_singular_values`` (6,): of the state part after projecting the other
+    parameters out, in units of the reference (a-priori) sigma: ``s > 1`` means the pass alone
+    determines that direction better than the reference; ``gain`` ``1/√(1 + s²)`` is the
+    posterior/prior sigma ratio along it (with the reference as the prior). ``directions`` (6, 6):
+    rows are the corresponding state directions, RTN components (m, m/s) of a one-reference-sigma
+    perturbation; ``unobservable`` the indices with ``s < threshold``; ``reference_sigma`` the
+    RTN sigmas of the reference (6,); ``posterior_sigma_rtn``: the solution's RTN sigmas.
+    """
+
+    names: list
+    singular_values: np.ndarray
+    state_singular_values: np.ndarray
+    gain: np.ndarray
+    directions: np.ndarray
+    unobservable: list
+    reference: str
+    reference_sigma_rtn: np.ndarray
+    posterior_sigma_rtn: np.ndarray
+    threshold: float = 1.0
+    notes: list = field(default_factory=list)
+
+    def direction_text(self, i: int, threshold: float = 0.2) -> str:
+        """``+9.9 km along -1.3 km radial ...``: the main RTN components of direction ``i``."""
+        d = self.directions[i]
+        k = int(np.argmax(np.abs(d / np.maximum(self.reference_sigma_rtn, 1e-300))))
+        if d[k] < 0:
+            d = -d
+        weight = np.abs(d) / np.maximum(self.reference_sigma_rtn, 1e-300)
+        weight = weight / max(weight.max(), 1e-300)
+        parts = []
+        for j in np.argsort(-weight):
+            if weight[j] < threshold:
+                continue
+            label = RTN_NAMES[j].replace("_m_s", " velocity").replace("_m", "")
+            value = d[j]
+            if j < 3:
+                parts.append(f"{value / 1e3:+.3g} km {label}")
+            else:
+                parts.append(f"{value:+.3g} m/s {label}")
+        return " ".join(parts)
+
+    def as_dict(self) -> dict:
+        return {
+            "reference": self.reference,
+            "threshold": self.threshold,
+            "singular_values": {"parameters": list(self.names), "values": self.singular_values.tolist()},
+            "state_singular_values": self.state_singular_values.tolist(),
+            "posterior_to_reference_sigma": self.gain.tolist(),
+            "directions_rtn": [dict(zip(RTN_NAMES, row.tolist())) for row in self.directions],
+            "directions_text": [self.direction_text(i) for i in range(len(self.directions))],
+            "unobservable": [self.direction_text(i) for i in self.unobservable],
+            "reference_sigma_rtn": dict(zip(RTN_NAMES, self.reference_sigma_rtn.tolist())),
+            "posterior_sigma_rtn": dict(zip(RTN_NAMES, self.posterior_sigma_rtn.tolist())),
+            "notes": list(self.notes),
+        }
+
+
+def observability(jacobian, sigma, names, rtn_matrix, reference_covariance, posterior_covariance, *,
+                  other_scales=None, reference: str = "", threshold: float = 1.0) -> Observability:
+    """Observability of the state from one pass.
+
+    ``jacobian`` (N, n) of the model at the solution (state x..vz in the first 6 columns, GCRF),
+    ``sigma`` (N,) the data sigmas, ``rtn_matrix`` (3, 3) rows radial/along/cross,
+    ``reference_covariance`` (6, 6) GCRF: the a-priori covariance (or a nominal one) that sets
+    the units; ``posterior_covariance`` (6, 6) GCRF; ``other_scales`` (n - 6,) column scales
+    of the other parameters for the plain singular values.
+
+    The state information ``Λ = J_sᵀ (I - P_b) J_s`` (``P_b`` the projector on the bias columns:
+    the biases are estimated, so only what they cannot absorb informs the state) is whitened by
+    the reference, ``M = Lᵀ Λ L`` with ``reference = L Lᵀ``; its eigenvalues are the squared
+    state singular values and ``L u`` the directions (rotated to RTN).
+    """
+    jw = np.asarray(jacobian, float) / np.asarray(sigma, float)[:, None]
+    n = jw.shape[1]
+    ref = np.asarray(reference_covariance, float)
+    chol = np.linalg.cholesky(ref)
+    js = jw[:, :6] @ chol
+    scales_other = np.ones(n - 6) if other_scales is None else np.asarray(other_scales, float)
+    if n > 6:
+        jb = jw[:, 6:] * scales_other[None, :]
+        qb, rb = np.linalg.qr(jb)
+        keep = np.abs(np.diag(rb)) > 1e-12 * max(np.abs(np.diag(rb)).max(), 1e-300)
+        qb = qb[:, keep]
+        js_proj = js - qb @ (qb.T @ js)
+        full = np.hstack([js, jb])
+    else:
+        js_proj = js
+        full = js
+    sv_full = np.linalg.svd(full, compute_uv=False)
+    _, s, vt = np.linalg.svd(js_proj, full_matrices=False)
+    big = np.zeros((6, 6))
+    big[:3, :3] = big[3:, 3:] = np.asarray(rtn_matrix, float)
+    directions = (big @ chol @ vt.T).T                           # rows: RTN of L u_i
+    ref_rtn = np.sqrt(np.clip(np.diag(big @ ref @ big.T), 0.0, None))
+    post_rtn = np.sqrt(np.clip(np.diag(big @ np.asarray(posterior_covariance, float) @ big.T), 0.0, None))
+    weak = [i for i in range(6) if s[i] < threshold]
+    return Observability(names=list(names), singular_values=sv_full, state_singular_values=s,
+                         gain=1.0 / np.sqrt(1.0 + s * s), directions=directions, unobservable=weak,
+                         reference=reference, reference_sigma_rtn=ref_rtn, posterior_sigma_rtn=post_rtn,
+                         threshold=threshold)

