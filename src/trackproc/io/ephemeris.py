@@ -47,6 +47,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from trackproc.io.tables import arrow_table_bytes
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
 
@@ -154,16 +155,9 @@ def ephemeris_bytes(eph: Ephemeris, fmt: str = "parquet", **oem_kwargs) -> bytes
     if fmt == "oem":
         return oem_text(eph, **oem_kwargs).encode("utf-8")
     table = to_arrow(eph)
-    sink = pa.BufferOutputStream()
-    if fmt == "parquet":
-        import pyarrow.parquet as pq
-        pq.write_table(table, sink, compression="zstd")
-    elif fmt == "arrow":
-        with pa.ipc.new_stream(sink, table.schema) as writer:
-            writer.write_table(table)
-    else:
+    if fmt not in ("parquet", "arrow"):
         raise ValueError(f"unknown ephemeris format {fmt!r}; expected one of {FORMATS}")
-    return sink.getvalue().to_pybytes()
+    return arrow_table_bytes(table, fmt)
 
 
 def write_ephemeris(eph: Ephemeris, path: str, fmt: str = "parquet", **oem_kwargs) -> None:

@@ -38,6 +38,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from trackproc.io.tables import arrow_table_bytes
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
 from trackproc.io.raw import KIND_UNITS
@@ -164,16 +165,9 @@ def pass_table_bytes(table: PassTable, fmt: str = "parquet") -> bytes:
             writer.writerow([row[0]] + [_csv_cell(v) for v in row[1:]])
         return out.getvalue().encode("utf-8")
     arrow = to_arrow(table)
-    sink = pa.BufferOutputStream()
-    if fmt == "parquet":
-        import pyarrow.parquet as pq
-        pq.write_table(arrow, sink, compression="zstd")
-    elif fmt == "arrow":
-        with pa.ipc.new_stream(sink, arrow.schema) as writer:
-            writer.write_table(arrow)
-    else:
+    if fmt not in ("parquet", "arrow"):
         raise ValueError(f"unknown pass-table format {fmt!r}; expected one of {FORMATS}")
-    return sink.getvalue().to_pybytes()
+    return arrow_table_bytes(arrow, fmt)
 
 
 def write_pass_table(table: PassTable, path: str, fmt: str = "parquet") -> None:

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
+from trackproc.io.tables import arrow_table_bytes
 from trackproc.io.atomic import open_atomic
 
 __all__ = ["COLUMNS", "residuals_bytes", "write_residuals", "format_for"]
@@ -76,17 +77,9 @@ def residuals_bytes(frame: pd.DataFrame, meta: dict | None = None, fmt: str = "p
                                         for v in row[1:]])
         return out.getvalue().encode("utf-8")
     table = _arrow(frame, meta)
-    sink = pa.BufferOutputStream()
-    if fmt == "parquet":
-        import pyarrow.parquet as pq
-
-        pq.write_table(table, sink, compression="zstd")
-    elif fmt == "arrow":
-        with pa.ipc.new_stream(sink, table.schema) as writer:
-            writer.write_table(table)
-    else:
+    if fmt not in ("parquet", "arrow"):
         raise ValueError(f"unknown residual format {fmt!r}; expected parquet, arrow or csv")
-    return sink.getvalue().to_pybytes()
+    return arrow_table_bytes(table, fmt)
 
 
 def write_residuals(frame: pd.DataFrame, path: str, meta: dict | None = None, fmt: str | None = None) -> None:

@@ -35,6 +35,8 @@ from typing import Optional, Sequence
 import numpy as np
 import pandas as pd
 
+from trackproc.io.tables import arrow_table_bytes
+from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 from trackproc.constants import MU_EARTH, force_model_constants
 from trackproc.errors import InputError
 from trackproc.io.statefile import STATE_PARAMETERS
@@ -611,17 +613,9 @@ def table_bytes(frame: pd.DataFrame, meta: dict, fmt: str) -> bytes:
             arrays.append(pa.array(frame[c].to_numpy(dtype=np.float64), pa.float64()))
             fields.append(pa.field(c, pa.float64()))
     table = pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata={META_KEY: meta_text.encode()}))
-    sink = pa.BufferOutputStream()
-    if fmt == "parquet":
-        import pyarrow.parquet as pq
-
-        pq.write_table(table, sink, compression="zstd")
-    elif fmt == "arrow":
-        with pa.ipc.new_stream(sink, table.schema) as writer:
-            writer.write_table(table)
-    else:
+    if fmt not in ("parquet", "arrow"):
         raise ValueError(f"unknown format {fmt!r}; expected one of {FORMATS}")
-    return sink.getvalue().to_pybytes()
+    return arrow_table_bytes(table, fmt)
 
 
 def correlation_frame(result: AccuracyResult) -> pd.DataFrame:
@@ -672,14 +666,6 @@ def correlation_bytes(result: AccuracyResult, fmt: str) -> bytes:
 
 
 # ============================================================================ plots
-
-def require_matplotlib() -> None:
-    """Raise an InputError (exit 2) with the fix when matplotlib is missing."""
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        raise InputError("--plot needs matplotlib, which is not installed",
-                         expected="pip install 'trackproc[plot]' (or matplotlib), or run without --plot") from None
 
 
 def _pyplot():

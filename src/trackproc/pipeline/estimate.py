@@ -41,6 +41,7 @@ from typing import Mapping, Optional, Sequence
 import numpy as np
 import pandas as pd
 
+from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 from trackproc.errors import InputError, ProcessingError
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
@@ -783,15 +784,6 @@ def summary_text(result: EstimateResult) -> str:
     for w in result.warnings:
         lines.append(f"  warning: {w}")
     return "\n".join(lines) + "\n"
-
-
-def require_matplotlib() -> None:
-    """InputError (exit 2) with the fix when matplotlib is missing."""
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        raise InputError("--plot needs matplotlib, which is not installed",
-                         expected="pip install 'trackproc[plot]' (or matplotlib), or run without --plot") from None
 
 
 def plot_bytes(result: EstimateResult) -> bytes:

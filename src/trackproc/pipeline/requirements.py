@@ -23,6 +23,7 @@ from typing import Optional
 
 import numpy as np
 
+from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 from trackproc.errors import InputError
 
 DEG = math.pi / 180.0
@@ -303,14 +304,6 @@ def to_markdown(result: RequirementsResult, compare_paper: bool = False) -> str:
 
 
 # --------------------------------------------------------------------------- Fig. 3
-
-def require_matplotlib() -> None:
-    """Raise an InputError (exit 2) with the fix when matplotlib is missing."""
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        raise InputError("--plot needs matplotlib, which is not installed",
-                         expected="pip install 'trackproc[plot]' (or matplotlib), or run without --plot") from None
 
 
 def plot_bytes(result: RequirementsResult | None = None, sigma_max_rad: float = 0.01) -> bytes:

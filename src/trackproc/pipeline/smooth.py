@@ -35,6 +35,7 @@ from typing import Sequence
 import numpy as np
 import pandas as pd
 
+from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 from trackproc.io.jsonutil import json_ready
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable
@@ -190,15 +191,6 @@ def summary_json(summary: dict) -> str:
     import json
 
     return json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n"
-
-
-def require_matplotlib() -> None:
-    """Raise an InputError (exit 2) with the fix when matplotlib is missing."""
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        raise InputError("--plot needs matplotlib, which is not installed",
-                         expected="pip install 'trackproc[plot]' (or matplotlib), or run without --plot") from None
 
 
 def plot_bytes(result: SmoothResult, max_panels: int = 24) -> bytes:

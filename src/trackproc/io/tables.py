@@ -1,0 +1,20 @@
+"""Encoding of Arrow tables for every tabular output: Parquet (files) or an Arrow IPC stream (pipes)."""
+
+from __future__ import annotations
+
+
+def arrow_table_bytes(table, fmt: str) -> bytes:
+    """``table`` (a pyarrow Table, schema metadata included) as Parquet (zstd) or an Arrow IPC stream."""
+    import pyarrow as pa
+
+    sink = pa.BufferOutputStream()
+    if fmt == "parquet":
+        import pyarrow.parquet as pq
+
+        pq.write_table(table, sink, compression="zstd")
+    elif fmt == "arrow":
+        with pa.ipc.new_stream(sink, table.schema) as writer:
+            writer.write_table(table)
+    else:
+        raise ValueError(f"unknown table format {fmt!r}; expected parquet or arrow")
+    return sink.getvalue().to_pybytes()
