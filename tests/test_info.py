@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -81,3 +82,25 @@ def test_info_lists_extra_columns():
     table.frame["flag"] = np.zeros(len(table.frame), dtype=bool)
     assert summarize(table, "s").extra_columns == ["flag"]
     assert "columns +   flag" in format_info(summarize(table, "s"))
+
+
+def test_info_summarises_an_ephemeris_from_propagate(tmp_path):
+    import json as _json
+
+    from typer.testing import CliRunner
+
+    from trackproc.cli.app import _register, app
+
+    _register()
+    root = Path(__file__).resolve().parents[1]
+    runner = CliRunner()
+    eph = tmp_path / "eph.parquet"
+    out = runner.invoke(app, ["propagate", str(root / "sample_data" / "truth.json"), "--span", "6000",
+                              "--step", "60", "-o", str(eph)])
+    assert out.exit_code == 0, out.output
+    res = runner.invoke(app, ["info", str(eph), "--json"])
+    assert res.exit_code == 0, res.output
+    summary = _json.loads(res.stdout)
+    assert summary["samples"] == 101 and summary["step_s"] == 60.0
+    # |r| starts at the seed 004 Table 1 truth, 7191.0 km
+    assert abs(summary["radius_km"][0] - 7191.0) < 0.01

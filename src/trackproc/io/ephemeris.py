@@ -169,6 +169,12 @@ def write_ephemeris(eph: Ephemeris, path: str, fmt: str = "parquet", **oem_kwarg
 
 def read_ephemeris(path: str) -> Ephemeris:
     """Read an ephemeris written by :func:`write_ephemeris` (Parquet, Arrow, CSV; ``-`` = stdin)."""
+    source = "<stdin>" if is_stdio(path) else str(path)
+    return parse_ephemeris(read_input_bytes(path), source)
+
+
+def parse_ephemeris(data: bytes, source: str) -> Ephemeris:
+    """An ephemeris from the bytes of a Parquet, Arrow or CSV file named ``source`` (for messages)."""
     from trackproc.io.tabular import (
         Problems,
         column_numbers,
@@ -176,8 +182,6 @@ def read_ephemeris(path: str) -> Ephemeris:
         source_table,
     )
 
-    source = "<stdin>" if is_stdio(path) else str(path)
-    data = read_input_bytes(path)
     if not data.strip():
         raise InputError("empty input", file=source, row=1, found="no data", expected="an ephemeris table")
     table = source_table(data, source)

@@ -151,3 +151,32 @@ def format_info(info: PassFileInfo) -> str:
         rows.append(row)
     lines += _table(headers, rows, right=set(range(4, len(headers))))
     return "\n".join(lines) + "\n"
+
+
+def ephemeris_info(frame, meta: dict, source: str) -> dict:
+    """Summary of an ephemeris table: span, samples, step, geocentric radius, height above the
+    equatorial radius (a quick check, not a geodetic height) and speed ranges."""
+    import numpy as np
+
+    from trackproc.constants import WGS84_A
+
+    times = frame["time"]
+    r = np.linalg.norm(frame[["x_m", "y_m", "z_m"]].to_numpy(float), axis=1)
+    v = np.linalg.norm(frame[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy(float), axis=1)
+    steps = np.diff(times.dt.tz_convert("UTC").dt.tz_localize(None).to_numpy().astype(np.int64)) / 1e9
+    extra = [c for c in frame.columns if c not in ("time", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s")]
+    fmt = lambda t: t.strftime("%Y-%m-%dT%H:%M:%S.%f")[:-3] + "Z"  # noqa: E731
+    return {
+        "file": source,
+        "kind": "ephemeris (GCRF)",
+        "samples": int(len(frame)),
+        "start": fmt(times.iloc[0]) if len(frame) else None,
+        "end": fmt(times.iloc[-1]) if len(frame) else None,
+        "step_s": float(np.median(steps)) if steps.size else None,
+        "radius_km": [round(float(r.min()) / 1e3, 3), round(float(r.max()) / 1e3, 3)] if r.size else None,
+        "above_equatorial_radius_km": ([round(float(r.min() - WGS84_A) / 1e3, 3), round(float(r.max() - WGS84_A) / 1e3, 3)]
+                        if r.size else None),
+        "speed_m_s": [round(float(v.min()), 3), round(float(v.max()), 3)] if v.size else None,
+        "force_model": meta.get("force_model"),
+        "extra_columns": extra,
+    }
