@@ -62,7 +62,10 @@ def batch_command(**kwargs) -> None:
     if progress is not None:
         handler.progress = progress
     try:
-        from trackproc.pipeline.batch import run_batch
+        from trackproc.pipeline.batch import run_batch, single_thread_blas
+
+        if "numpy" not in sys.modules:  # one BLAS thread here too: --workers 1 computes as the workers do
+            single_thread_blas()
 
         result = run_batch(settings, progress=progress.update if progress else None)
     finally:
@@ -167,7 +170,7 @@ class _Progress:
 def _signature() -> inspect.Signature:
     params = [inspect.Parameter(
         "config", inspect.Parameter.KEYWORD_ONLY, annotation=Optional[str],
-        default=typer.Argument(None, metavar="[CONFIG.toml]",
+        default=typer.Argument(None, metavar="CONFIG.toml",
                                help=f"TOML config file (default: ${CONFIG_ENV}, else flags only)."))]
     for opt in SCHEMA:
         option = typer.Option(None, *opt.flags, help=_help(opt), metavar=opt.metavar,

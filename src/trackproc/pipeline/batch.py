@@ -13,10 +13,14 @@ is a small adapter (:class:`Step`) around one pipeline function:
 Adding a step (``refine`` is the next one) is an adapter and one :func:`register` call::
 
     def _refine(ctx: InputContext, opt: dict) -> None:
+        from trackproc.io.statefile import parse_state, state_json
         from trackproc.pipeline.refine import RefineOptions, refine
-        result = refine(ctx.table, ctx.state("refine.initial"), RefineOptions(**opt))
+
+        initial = parse_state(ctx.files["refine.initial"], ctx.paths["refine.initial"])
+        result = refine(ctx.table, initial, None, RefineOptions(cost=opt["cost"], circular=opt["circular"]),
+                        source=ctx.source)
         ctx.outputs[".refined.json"] = state_json(result.state).encode()
-        ctx.numbers.update(refine_rms=result.rms)
+        ctx.numbers.update(iterations=result.state.diagnostics.get("iterations"))
 
     register(Step("refine", "input", _refine, files=("refine.initial",)))
 
@@ -70,6 +74,7 @@ import logging
 import math
 import os
 import socket
+import threading
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -410,15 +415,25 @@ class TaskResult:
     seconds: float = 0.0
 
 
-class _Collect(logging.Handler):
-    """Collects the log records a pipeline function emits during a task (into its warnings)."""
+_task_log = threading.local()
 
-    def __init__(self):
-        super().__init__(logging.WARNING)
-        self.messages = []
 
-    def emit(self, record):
-        self.messages.append(record.getMessage())
+class _TaskLogFilter(logging.Filter):
+    """While a task runs in this thread, what the pipeline logs on the ``trackproc`` logger
+    (warnings: e.g. an ignored column) becomes the task's warnings instead of reaching any
+    handler, so the same warnings are reported whichever process ran the task (thread-safe:
+    Dask workers may run several tasks in threads)."""
+
+    def filter(self, record):
+        sink = getattr(_task_log, "sink", None)
+        if sink is None:
+            return True
+        if record.levelno >= logging.WARNING:
+            sink.append(record.getMessage())
+        return False
+
+
+_TASK_LOG_FILTER = _TaskLogFilter()
 
 
 def run_task(task: Task) -> TaskResult:
@@ -426,10 +441,13 @@ def run_task(task: Task) -> TaskResult:
     t0 = time.perf_counter()
     ctx = None
     logger = logging.getLogger("trackproc")
-    collect = _Collect()
-    propagate = logger.propagate
-    logger.addHandler(collect)
-    logger.propagate = False
+    if _TASK_LOG_FILTER not in logger.filters:
+        logger.addFilter(_TASK_LOG_FILTER)
+    level = logger.level
+    if logger.getEffectiveLevel() > logging.WARNING:  # --quiet, in this process: still collect warnings
+        logger.setLevel(logging.WARNING)
+    messages: list = []
+    _task_log.sink = messages
     try:
         if task.kind == "input":
             ctx = InputContext(task.name, task.source, task.data, task.files, task.paths)
@@ -456,12 +474,13 @@ def run_task(task: Task) -> TaskResult:
         status, error, error_type = "failed", f"internal error: {type(exc).__name__}: {exc}", "internal"
         trace = traceback.format_exc()
     finally:
-        logger.removeHandler(collect)
-        logger.propagate = propagate
+        _task_log.sink = None
+        if logger.level != level:
+            logger.setLevel(level)
     ok = status == "ok"
     return TaskResult(kind=task.kind, name=task.name, key=task.key, status=status,
                       numbers=json_ready(ctx.numbers) if ok else {}, details=json_ready(ctx.details) if ok else {},
-                      warnings=(list(ctx.warnings) if ctx is not None else []) + collect.messages,
+                      warnings=(list(ctx.warnings) if ctx is not None else []) + messages,
                       outputs=ctx.outputs if ok else {}, error=error, error_type=error_type, trace=trace,
                       seconds=time.perf_counter() - t0)
 
@@ -477,6 +496,24 @@ def _table_numbers(table) -> dict:
 
 
 # ============================================================================= executors
+
+#: Thread-count variables of the BLAS/OpenMP libraries numpy and scipy may use.
+BLAS_THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS",
+                         "NUMEXPR_NUM_THREADS")
+
+
+def single_thread_blas() -> None:
+    """One BLAS/OpenMP thread in this process (takes effect when set before numpy is imported).
+
+    A batch runs its inputs in parallel, one per worker; threads inside the small matrix
+    operations of one pass only contend for the same cores (ingest + smooth ran 4.4 times slower
+    with OpenBLAS's default threads on a busy 2-core machine), and a threaded reduction may
+    change the last bits of a sum. Worker processes always start with this; Dask's workers
+    already do the same (``distributed.nanny.pre-spawn-environ``).
+    """
+    for name in BLAS_THREAD_VARIABLES:
+        os.environ[name] = "1"
+
 
 class _SerialExecutor:
     """Runs each task in this process when it is submitted."""
@@ -511,7 +548,7 @@ class _PoolExecutor:
         if method == "forkserver":
             context.set_forkserver_preload(["trackproc.pipeline.batch"])
         self.workers = workers
-        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+        self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=single_thread_blas)
         self.label = f"{workers} worker processes"
         self.slots = 2 * workers
 
@@ -608,7 +645,7 @@ def _execute(executor, tasks: Sequence, make_task: Callable, on_result: Callable
         for future in done:
             item, task = pending.pop(future)
             result = _outcome(future, task)
-            if _is_broken_pool(result):
+            if isinstance(executor, _PoolExecutor) and _is_broken_pool(result):
                 broken.append((item, task))
                 continue
             on_result(item, result)
@@ -652,9 +689,9 @@ class _Executors:
 def _make_executor(settings: Settings, n_tasks: int):
     scheduler = settings.get("batch.scheduler")
     if scheduler:
-        if "://" not in scheduler:
-            raise InputError("invalid scheduler address", column="--scheduler", found=scheduler,
-                             expected="tcp://HOST:PORT (a Dask distributed scheduler)")
+        if settings.origins.get("batch.workers") != "default":
+            log.info("workers = %s is not used with a scheduler: the cluster's workers run the tasks",
+                     settings.get("batch.workers"))
         return _DaskExecutor(scheduler)
     workers = settings.get("batch.workers") or _cores()
     workers = max(1, min(workers, n_tasks))
@@ -890,7 +927,7 @@ def _store(out: Path, directory: str, result: TaskResult, *, task: str, path: Op
         rel = f"{directory}/{result.name}{suffix}"
         write_bytes(out / rel, data)
         outputs[rel] = {"bytes": len(data), "sha256": sha256(data)}
-    if old and result.status == "failed":
+    if old and result.status == "failed" and result.error_type != "internal":
         for rel in (old.get("outputs") or {}):
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(out / rel)
@@ -931,9 +968,13 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None) -> BatchR
     started, t0 = _now(), time.perf_counter()
     chain = make_chain(settings.get("batch.steps"))
     output = settings.get("batch.output")
-    if not output:
-        raise InputError("no output directory", column="-o/--output",
+    if not output or output == "-":
+        raise InputError("no output directory", column="-o/--output", found=output,
                          expected="-o DIR, output = \"DIR\" in [batch], or TRACKPROC_BATCH_OUTPUT")
+    scheduler = settings.get("batch.scheduler")
+    if scheduler and "://" not in scheduler:
+        raise InputError("invalid scheduler address", column="--scheduler", found=scheduler,
+                         expected="tcp://HOST:PORT (a Dask distributed scheduler)")
     entries = settings.get("batch.inputs")
     if not entries:
         raise InputError("no inputs", column="--input",
@@ -988,10 +1029,12 @@ def _read_files(settings: Settings, chain: Chain):
 def _remove_leftovers(out: Path) -> None:
     """Temporary files of an interrupted run (``.NAME.XXXX.tmp``): no other run is writing now."""
     removed = 0
-    for directory in (out, out / PASSES_DIR, out / ESTIMATES_DIR):
-        if not directory.is_dir():
-            continue
-        for path in directory.rglob(".*.tmp"):
+    candidates = list(out.glob(".*.tmp"))
+    for directory in (out / PASSES_DIR, out / ESTIMATES_DIR):
+        if directory.is_dir():
+            candidates.extend(directory.rglob(".*.tmp"))
+    for path in candidates:
+        if path.is_file():
             with contextlib.suppress(OSError):
                 path.unlink()
                 removed += 1
@@ -1041,6 +1084,9 @@ def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, p
             records[item.name] = Record(task="pass", name=item.name, status="failed", skipped=False, key=key,
                                         path=item.path, error=f"{item.path}: cannot read: {exc.strerror}",
                                         error_type="internal")
+            _log_record(records[item.name])
+            done[0] += 1
+            done[1] += 1
             return None
         key = _key({**base, "input_sha256": sha256(data)})  # the bytes sent are the bytes hashed
         return Task(kind="input", name=item.name, key=key, steps=chain.input_steps, options=options,

@@ -224,8 +224,9 @@ class Settings:
         return self.values[section][key]
 
     def section(self, section: str) -> dict:
-        """A copy of one section's values (JSON-ready: lists, not tuples)."""
-        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.values[section].items()}
+        """A copy of one section's values (JSON-ready: lists, not tuples); {} for a section
+        without settings."""
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.values.get(section, {}).items()}
 
 
 # ----------------------------------------------------------------------------- parsing
