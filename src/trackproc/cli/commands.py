@@ -1,17 +1,39 @@
-"""Imports every command module so that each registers itself on ``app``.
+"""Imports every command module so that each registers itself on ``app``, and gives each command
+its one-line summary for ``trackproc --help``.
 
-Add one line per command module. Command modules import only typer and the standard
-library at module level.
+Add one line per command module (in the order ``--help`` lists them). Command modules import
+only typer and the standard library at module level.
 """
 
 # isort: off
 from trackproc.cli import ingest_cmd  # noqa: F401
 from trackproc.cli import info_cmd  # noqa: F401
-from trackproc.cli import smooth_cmd  # noqa: F401
 from trackproc.cli import simulate_cmd  # noqa: F401
+from trackproc.cli import propagate_cmd  # noqa: F401
+from trackproc.cli import smooth_cmd  # noqa: F401
+from trackproc.cli import estimate_cmd  # noqa: F401
+from trackproc.cli import refine_cmd  # noqa: F401
+from trackproc.cli import accuracy_cmd  # noqa: F401
 from trackproc.cli import requirements_cmd  # noqa: F401
 from trackproc.cli import detect_cmd  # noqa: F401
-from trackproc.cli import accuracy_cmd  # noqa: F401
-from trackproc.cli import estimate_cmd  # noqa: F401
-from trackproc.cli import propagate_cmd  # noqa: F401
 from trackproc.cli import batch_cmd  # noqa: F401
+# isort: on
+
+from trackproc.cli.app import app
+
+SUMMARIES = {
+    "ingest": "Raw passes (CSV, Parquet, Arrow, CCSDS TDM, DopTrack, .aer) -> validated pass file.",
+    "info": "What a pass file or ephemeris holds: stations, passes, kinds, spans.",
+    "simulate": "Passes of a known orbit with light time, noise, biases: the test bench.",
+    "propagate": "Ephemeris, STM, covariance and pass prediction by the DT (Taylor) engine.",
+    "smooth": "Least-squares polynomial per pass; TCA and carrier at closest approach (seed 004).",
+    "estimate": "Orbit + biases by weighted least squares with error matrices (seed 002).",
+    "refine": "Refine a stale orbit from one Doppler pass (seed 004).",
+    "accuracy": "Sigma and correlation of a predicted orbit by the differential spectrum (seed 000).",
+    "requirements": "Sensor requirement g = sigma*sqrt(dt) for elevation-only detection (seed 003).",
+    "detect": "Elevation-only test for an orbit displacement (seed 003).",
+    "batch": "Many passes, every night: parallel, resumable, cron-grade.",
+}
+
+for _command in app.registered_commands:
+    _command.short_help = _command.short_help or SUMMARIES.get(_command.name)

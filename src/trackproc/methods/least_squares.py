@@ -202,7 +202,7 @@ def _prior_rhs(factors, x: np.ndarray) -> np.ndarray:
 
 def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: Sequence[str],
           scales=None, priors: Sequence[Prior] = (), periodic=None, bounds=None,
-          options: Options | None = None, edited=None) -> Solution:
+          options: Options | None = None, edited=None, retract=None) -> Solution:
     """Minimise ``Σ ((y - h(x))/σ)² + prior terms`` over ``x`` by damped Gauss-Newton.
 
     Parameters
@@ -219,6 +219,9 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
     periodic : (N,) bool, residuals wrapped to [-π, π) (azimuth).
     bounds : ((n,), (n,)) lower and upper bounds (steps are clipped into them).
     edited : (N,) bool, samples excluded from the start (never re-admitted).
+    retract : callable, optional
+        ``retract(x, dx) -> x_new``: how a step is applied (default ``x + dx``), e.g. along a
+        curved family of nearly equivalent solutions (to first order it must equal ``x + dx``).
 
     Returns :class:`Solution`; raises :class:`ProcessingError` (see the module docstring).
     Implements seed 002 eqs. 4-9.
@@ -331,7 +334,7 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
             else:
                 lam = opt.initial_damping * s[0] ** 2 * 10.0 ** (attempt - 1)
                 xi = vt.T @ (ub * s / (s * s + lam))
-            x_new = np.clip(x + scales * xi, lo, hi)
+            x_new = np.clip(x + scales * xi if retract is None else retract(x, scales * xi), lo, hi)
             try:
                 h_new, jac_new = evaluate(x_new)
             except (ArithmeticError, ProcessingError, ValueError):

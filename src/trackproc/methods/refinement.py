@@ -51,7 +51,15 @@ Here:
   normal matrix, J_d/J_p its data/a-priori rows, Φ the basis at the nodes).
 * **Observability.** :func:`observability` reports the singular values of the whitened
   Jacobian and, with the bias parameters projected out, the state directions a pass determines
-  and those it cannot see, in radial / along-track / cross-track terms.
+  and those it cannot see, in radial / along-track / cross-track terms (the weakest is a
+  rotation of the orbit about the station's geocentric axis, which leaves every
+  station-satellite distance unchanged).
+* **Geodesic steps.** One pass leaves narrow, curved valleys in the cost; :func:`geodesic_retraction`
+  adds the geodesic acceleration of Transtrum & Sethna to each Gauss-Newton step (one extra
+  model evaluation) so that it follows them instead of creeping.
+* **A default a-priori.** :func:`element_covariance` maps independent errors of non-singular
+  orbital elements to a Cartesian covariance: tight in the period, loose along the track, as a
+  stale catalogue orbit is.
 
 Pure numpy on SI units (m, m/s, s); nothing here reads files or prints.
 """
@@ -68,9 +76,11 @@ from trackproc.errors import ProcessingError
 from trackproc.methods.least_squares import (Options, Solution, _prior_rhs, _prior_rows, combination_text,
                                              whitened_svd)
 
-__all__ = ["gauss_legendre", "covered_intervals", "pseudo_sigma", "circular_constraints", "constraint_scales",
-           "IntegralModel", "KKTResult", "solve_kkt", "sandwich_covariance", "observability", "Observability",
-           "RTN_NAMES", "CONSTRAINT_NAMES"]
+__all__ = ["nonsingular_elements", "state_from_elements", "element_covariance", "ELEMENT_NAMES", "gauss_legendre",
+           "covered_intervals", "pseudo_sigma", "circular_constraints", "constraint_scales", "IntegralModel",
+           "KKTResult", "CachedModel", "geodesic_retraction", "solve_kkt", "circular_tolerance_covariance",
+           "constraint_error_covariance", "sandwich_covariance", "observability", "Observability", "RTN_NAMES",
+           "CONSTRAINT_NAMES"]
 
 #: Names of the circular-orbit constraints (seed 004 eq. 5), in order.
 CONSTRAINT_NAMES = ("|r|^2 - r_ka^2", "|v|^2 - mu/r_ka", "r.v")
@@ -165,6 +175,128 @@ def constraint_scales(x, mu_m3_s2: float, *, state_index=(0, 1, 2, 3, 4, 5), rka
     return np.array([rka * rka, mu_m3_s2 / rka, np.linalg.norm(x[idx[:3]]) * np.linalg.norm(x[idx[3:]])])
 
 
+# ----------------------------------------------------------------------------- orbital elements
+
+#: Non-singular orbital elements (two-body, osculating): semi-major axis, eccentricity vector
+#: components along the ascending node and 90 deg ahead of it in the plane, inclination, right
+#: ascension of the ascending node, argument of latitude.
+ELEMENT_NAMES = ("a_m", "ex", "ey", "i_rad", "raan_rad", "u_rad")
+
+
+def nonsingular_elements(rv, mu_m3_s2: float) -> np.ndarray:
+    """``(a, ex, ey, i, Ω, u)`` of a GCRF state (m, m/s); valid for e < 1 and i not near 0 or π."""
+    rv = np.asarray(rv, float)
+    r, v = rv[:3], rv[3:]
+    rn = np.linalg.norm(r)
+    h = np.cross(r, v)
+    hn = np.linalg.norm(h)
+    inc = math.acos(max(-1.0, min(1.0, h[2] / hn)))
+    raan = math.atan2(h[0], -h[1])
+    p_hat = np.array([math.cos(raan), math.sin(raan), 0.0])
+    q_hat = np.cross(h / hn, p_hat)
+    e_vec = ((v @ v - mu_m3_s2 / rn) * r - (r @ v) * v) / mu_m3_s2
+    a = 1.0 / (2.0 / rn - (v @ v) / mu_m3_s2)
+    u = math.atan2(r @ q_hat, r @ p_hat)
+    return np.array([a, e_vec @ p_hat, e_vec @ q_hat, inc, raan, u])
+
+
+def state_from_elements(q, mu_m3_s2: float) -> np.ndarray:
+    """Inverse of :func:`nonsingular_elements`: the GCRF state (6,) of ``(a, ex, ey, i, Ω, u)``."""
+    a, ex, ey, inc, raan, u = (float(x) for x in q)
+    p = a * (1.0 - ex * ex - ey * ey)
+    radius = p / (1.0 + ex * math.cos(u) + ey * math.sin(u))
+    p_hat = np.array([math.cos(raan), math.sin(raan), 0.0])
+    q_hat = np.array([-math.cos(inc) * math.sin(raan), math.cos(inc) * math.cos(raan), math.sin(inc)])
+    r = radius * (math.cos(u) * p_hat + math.sin(u) * q_hat)
+    w = math.sqrt(mu_m3_s2 / p)
+    v = w * (-(math.sin(u) + ey) * p_hat + (math.cos(u) + ex) * q_hat)
+    return np.concatenate([r, v])
+
+
+#: Finite-difference steps of the element Jacobian.
+_ELEMENT_STEPS = np.array([1.0, 1e-7, 1e-7, 1e-8, 1e-8, 1e-8])
+
+
+def element_covariance(rv, mu_m3_s2: float, sigma_elements) -> np.ndarray:
+    """GCRF covariance (6, 6) of a state whose non-singular elements have independent errors
+    ``sigma_elements`` (:data:`ELEMENT_NAMES` order; m and rad): ``J diag(σ²) Jᵀ`` with
+    ``J = ∂state/∂elements`` by central differences. It keeps what an orbit catalogue knows well
+    (the period: semi-major axis) apart from what it knows poorly (the along-track phase)."""
+    q0 = nonsingular_elements(rv, mu_m3_s2)
+    jac = np.empty((6, 6))
+    for k in range(6):
+        dq = np.zeros(6)
+        dq[k] = _ELEMENT_STEPS[k]
+        jac[:, k] = (state_from_elements(q0 + dq, mu_m3_s2) - state_from_elements(q0 - dq, mu_m3_s2)) / (2 * dq[k])
+    cov = jac @ np.diag(np.square(np.asarray(sigma_elements, float))) @ jac.T
+    return 0.5 * (cov + cov.T)
+
+
+# ----------------------------------------------------------------------------- geodesic steps
+
+class CachedModel:
+    """``model(x)`` remembering its last few results (the geodesic step re-uses the solver's)."""
+
+    def __init__(self, model, size: int = 8):
+        self.model = model
+        self.size = size
+        self._cache: dict = {}
+        self.evaluations = 0
+
+    def __call__(self, x):
+        key = np.asarray(x, float).tobytes()
+        hit = self._cache.get(key)
+        if hit is None:
+            if len(self._cache) >= self.size:
+                self._cache.pop(next(iter(self._cache)))
+            hit = self.model(x)
+            self.evaluations += 1
+            self._cache[key] = hit
+        return hit
+
+
+def geodesic_retraction(model, sigma, scales, priors=(), *, fraction: float = 0.1, alpha: float = 0.75):
+    """A step rule with geodesic acceleration (Transtrum & Sethna, arXiv:1201.5885).
+
+    One pass of Doppler leaves the orbit in narrow, curved valleys of the cost (a slant range
+    traded against radial and cross-track position; a rotation about the station's geocentric
+    axis, which leaves every station-satellite distance unchanged): a straight Gauss-Newton step
+    along the valley leaves it, is refused, and damped steps creep. The rule adds half the
+    second-order correction ``a = -J⁺ h_vv``, with the directional second derivative of the
+    model ``h_vv ≈ (2/f) ((h(x + f δ) - h(x))/f - J δ)`` (one extra model evaluation, ``f`` =
+    ``fraction``), so the step follows the valley: ``x_new = x + δ + a/2``; the correction is
+    dropped when ``|a| > alpha |δ|`` (scaled), where the expansion is not to be trusted.
+
+    ``model`` (a :class:`CachedModel`, so that ``h(x), J(x)`` come from the solver's own
+    evaluation), ``sigma`` the data sigmas, ``scales`` the parameter scales, ``priors`` the
+    a-priori constraints (linear: no curvature). Returns ``retract(x, dx) -> x_new`` for
+    :func:`trackproc.methods.least_squares.solve`.
+    """
+    sig = np.asarray(sigma, float)
+    sc = np.asarray(scales, float)
+    prior_a, _ = _prior_rows(priors, sc.size, sc)
+
+    def retract(x, dx):
+        x = np.asarray(x, float)
+        dx = np.asarray(dx, float)
+        try:
+            h0, jac = model(x)
+            h1, _ = model(x + fraction * dx)
+        except (ArithmeticError, ValueError, ProcessingError):
+            return x + dx
+        hvv = (2.0 / fraction) * ((np.asarray(h1) - h0) / fraction - jac @ dx)
+        a_w = np.vstack([jac / sig[:, None] * sc[None, :], prior_a])
+        rhs = np.r_[hvv / sig, np.zeros(prior_a.shape[0])]
+        if not (np.all(np.isfinite(a_w)) and np.all(np.isfinite(rhs))):
+            return x + dx
+        acc = -np.linalg.lstsq(a_w, rhs, rcond=None)[0]
+        if np.linalg.norm(acc) > alpha * np.linalg.norm(dx / sc):
+            return x + dx
+        return x + dx + 0.5 * sc * acc
+
+    return retract
+
+
 # ----------------------------------------------------------------------------- the integral model
 
 class IntegralModel:
@@ -242,8 +374,11 @@ class KKTResult:
     constrained one, singular across the constraint surface), ``multipliers`` λ of
     ``L = χ² + λᵀ f`` (seed 004 eq. 16; units: cost per unit of each constraint),
     ``constraints`` f at the solution, ``relative`` f divided by :func:`constraint_scales`,
-    ``stationarity`` ``|∇χ² + Aᵀλ| / |∇χ²|`` (0 at a KKT point; 0/0 is reported as 0),
-    ``restorations`` minimum-norm Newton steps taken to stay feasible.
+    ``stationarity`` the free Gauss-Newton step left at the solution, in formal sigmas (0 at a
+    KKT point: ``∇χ² + Aᵀλ = 0``),
+    ``restorations`` minimum-norm Newton steps taken to stay feasible, ``sensitivity`` (n, m)
+    ``dx̂/dε``: how the solution moves if the constraints were ``f = ε`` instead of 0 (for the
+    covariance of a constraint that holds only approximately, :func:`constraint_error_covariance`).
     """
 
     solution: Solution
@@ -253,6 +388,7 @@ class KKTResult:
     stationarity: float
     restorations: int = 0
     null_space_dim: int = 0
+    sensitivity: Optional[np.ndarray] = None
 
 
 def _null_space(a_scaled):
@@ -267,7 +403,7 @@ def _null_space(a_scaled):
 
 def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: Sequence[str],
               constraints: Callable[[np.ndarray], tuple], constraint_scale: Callable[[np.ndarray], np.ndarray],
-              scales=None, priors=(), periodic=None, options: Options | None = None) -> KKTResult:
+              scales=None, priors=(), periodic=None, options: Options | None = None, retract=None) -> KKTResult:
     """Minimise ``Σ ((y - h(x))/σ)² + prior terms`` subject to ``f(x) = 0`` (seed 004 eqs. 15-17).
 
     Gauss-Newton on the KKT system of each linearised step, solved by the null-space method
@@ -276,7 +412,8 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
     failure reports as :func:`trackproc.methods.least_squares.solve`.
 
     ``constraints(x) -> (f (m,), A (m, n))``; ``constraint_scale(x) -> (m,)`` positive scales
-    making ``f`` relative (feasible when every ``|f| / scale < 1e-14``).
+    making ``f`` relative (feasible when every ``|f| / scale < 1e-14``); ``retract`` as in
+    :func:`~trackproc.methods.least_squares.solve` (applied before the restoration).
     Raises :class:`ProcessingError` on failure.
     """
     opt = options or Options()
@@ -362,7 +499,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
                 f"rank-deficient problem under the constraints (condition number "
                 f"{s[0] / s[-1] if s.size and s[-1] > 0 else math.inf:.3g}); unobservable combination of the "
                 f"scaled parameters: {weak}", {"iteration": it, "singular_values": s.tolist()})
-        return yb, zb, p, ub, s, vt
+        return yb, zb, rr, p, ub, s, vt
 
     try:
         x = restore(x)
@@ -381,7 +518,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
     message = ""
     it = 0
     for it in range(1, opt.max_iterations + 1):
-        yb, zb, p, ub, s, vt = reduced(jac, r, x, mask, it)
+        yb, zb, _, p, ub, s, vt = reduced(jac, r, x, mask, it)
         sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))
         q_gn = vt.T @ (ub / s)
         gn_sig = float(np.max(np.abs(q_gn) / sig_q))
@@ -398,7 +535,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
                 q = vt.T @ (ub * s / (s * s + lam))
             xi = yb @ p + zb @ q
             try:
-                x_new = restore(x + scales * xi)
+                x_new = restore(x + scales * xi if retract is None else retract(x, scales * xi))
                 h_new, jac_new = evaluate(x_new)
             except (ArithmeticError, ProcessingError, ValueError):
                 continue
@@ -443,7 +580,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
             {"iterations": it, "cost_history": history})
 
     # covariance, multipliers and stationarity at the solution
-    yb, zb, p, ub, s, vt = reduced(jac, r, x, mask, it)
+    yb, zb, rr, p, ub, s, vt = reduced(jac, r, x, mask, it)
     inner = (vt.T / s ** 2) @ vt
     cov_scaled = zb @ inner @ zb.T
     cov = cov_scaled * np.outer(scales, scales)
@@ -456,9 +593,12 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
     f, ac = constraints(x)
     as_ = ac * scales[None, :]
     lam = np.linalg.lstsq(as_.T, -grad, rcond=None)[0]
-    resid = grad + as_.T @ lam
-    gnorm = float(np.linalg.norm(grad))
-    stationarity = float(np.linalg.norm(resid) / gnorm) if gnorm > 0 else 0.0
+    # stationarity: the free Gauss-Newton step left at the solution, in formal sigmas
+    sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))
+    stationarity = float(np.max(np.abs(vt.T @ (ub / s)) / sig_q))
+    # dξ/dε: the constraint step Y R⁻ᵀ δε, minus the free directions' readjustment
+    a_y = yb @ np.linalg.inv(rr.T)
+    sens = a_y - zb @ (inner @ (zb.T @ (a.T @ (a @ a_y))))
     kept = int((~mask).sum())
     dof = kept + n_prior - (n - f.size)
     sol = Solution(names=names, values=x, covariance=cov, sigma=sd, correlation=corr, covariance_scaled=cov_scaled,
@@ -468,7 +608,26 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
                    cost_history=history, damped_steps=damped, message=message,
                    chi2_prior=float(np.sum(_prior_rhs(prior_factors, x) ** 2)), n_prior=int(n_prior))
     return KKTResult(solution=sol, multipliers=lam, constraints=f, relative=f / constraint_scale(x),
-                     stationarity=stationarity, restorations=restorations, null_space_dim=int(zb.shape[1]))
+                     stationarity=stationarity, restorations=restorations, null_space_dim=int(zb.shape[1]),
+                     sensitivity=sens * scales[:, None])
+
+
+def circular_tolerance_covariance(x, mu_m3_s2: float, eccentricity: float, *, state_index=(0, 1, 2, 3, 4, 5)):
+    """Covariance (3, 3) of the constraint values of eq. 5 for an orbit that is circular only to
+    ``eccentricity``: with r_ka = |r| the first is exact; ``|v|² - μ/r = (μ/r) e cos E`` and
+    ``r·v = √(μ r) e sin E`` to first order in e, for an unknown eccentric anomaly E (variance e²/2)."""
+    x = np.asarray(x, float)
+    r = float(np.linalg.norm(x[list(state_index)[:3]]))
+    e2 = float(eccentricity) ** 2 / 2.0
+    return np.diag([0.0, (mu_m3_s2 / r) ** 2 * e2, mu_m3_s2 * r * e2])
+
+
+def constraint_error_covariance(sensitivity, constraint_covariance) -> np.ndarray:
+    """``D Σ_ε Dᵀ``: the covariance a constraint that holds only to ``Σ_ε`` adds to the solution
+    (D = dx̂/dε from :func:`solve_kkt`)."""
+    d = np.asarray(sensitivity, float)
+    out = d @ np.asarray(constraint_covariance, float) @ d.T
+    return 0.5 * (out + out.T)
 
 
 # ----------------------------------------------------------------------------- covariance of the integral
@@ -514,7 +673,10 @@ class Observability:
     posterior/prior sigma ratio along it (with the reference as the prior). ``directions`` (6, 6):
     rows are the corresponding state directions, RTN components (m, m/s) of a one-reference-sigma
     perturbation; ``unobservable`` the indices with ``s < threshold``; ``reference_sigma`` the
-    RTN sigmas of the reference (6,); ``posterior_sigma_rtn``: the solution's RTN sigmas.
+    RTN sigmas of the reference (6,); ``posterior_sigma_rtn``: the solution's RTN sigmas;
+    ``rotation_alignment``: |cos| between the weakest direction and a rotation of the orbit about
+    the station's geocentric axis (which leaves every station-satellite distance unchanged), in
+    the reference metric (1 = that rotation is what the pass cannot see).
     """
 
     names: list
@@ -527,6 +689,7 @@ class Observability:
     reference_sigma_rtn: np.ndarray
     posterior_sigma_rtn: np.ndarray
     threshold: float = 1.0
+    rotation_alignment: Optional[float] = None
     notes: list = field(default_factory=list)
 
     def direction_text(self, i: int, threshold: float = 0.2) -> str:
@@ -560,13 +723,15 @@ class Observability:
             "directions_text": [self.direction_text(i) for i in range(len(self.directions))],
             "unobservable": [self.direction_text(i) for i in self.unobservable],
             "reference_sigma_rtn": dict(zip(RTN_NAMES, self.reference_sigma_rtn.tolist())),
+            "weakest_vs_rotation_about_station_axis": self.rotation_alignment,
             "posterior_sigma_rtn": dict(zip(RTN_NAMES, self.posterior_sigma_rtn.tolist())),
             "notes": list(self.notes),
         }
 
 
 def observability(jacobian, sigma, names, rtn_matrix, reference_covariance, posterior_covariance, *,
-                  other_scales=None, reference: str = "", threshold: float = 1.0) -> Observability:
+                  other_scales=None, reference: str = "", threshold: float = 1.0,
+                  station_axis=None, state=None) -> Observability:
     """Observability of the state from one pass.
 
     ``jacobian`` (N, n) of the model at the solution (state x..vz in the first 6 columns, GCRF),
@@ -604,7 +769,13 @@ def observability(jacobian, sigma, names, rtn_matrix, reference_covariance, post
     ref_rtn = np.sqrt(np.clip(np.diag(big @ ref @ big.T), 0.0, None))
     post_rtn = np.sqrt(np.clip(np.diag(big @ np.asarray(posterior_covariance, float) @ big.T), 0.0, None))
     weak = [i for i in range(6) if s[i] < threshold]
+    align = None
+    if station_axis is not None and state is not None:
+        k = np.asarray(station_axis, float) / np.linalg.norm(station_axis)
+        st = np.asarray(state, float)
+        t_w = np.linalg.solve(chol, np.r_[np.cross(k, st[:3]), np.cross(k, st[3:6])])
+        align = float(abs(vt[-1] @ t_w) / np.linalg.norm(t_w))
     return Observability(names=list(names), singular_values=sv_full, state_singular_values=s,
                          gain=1.0 / np.sqrt(1.0 + s * s), directions=directions, unobservable=weak,
                          reference=reference, reference_sigma_rtn=ref_rtn, posterior_sigma_rtn=post_rtn,
-                         threshold=threshold)
+                         threshold=threshold, rotation_alignment=align)

@@ -1,0 +1,181 @@
+"""``trackproc refine``: refine a stale orbit from one Doppler pass of one station (seed 004)."""
+
+from __future__ import annotations
+
+import logging
+from enum import Enum
+from typing import List, Optional
+
+import typer
+
+from trackproc.cli.app import app
+from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, resolve_output
+
+log = logging.getLogger("trackproc")
+
+
+class Cost(str, Enum):
+    pointwise = "pointwise"
+    integral = "integral"
+
+
+class DopplerBias(str, Enum):
+    none = "none"
+    offset = "offset"
+    offset_drift = "offset+drift"
+
+
+class Kind(str, Enum):
+    doppler = "doppler"
+    range_rate = "range_rate"
+
+
+class RangeRateChoice(str, Enum):
+    doppler = "doppler"
+    instantaneous = "instantaneous"
+
+
+class OutputEpoch(str, Enum):
+    traverse = "traverse"
+    stale = "stale"
+
+
+def _named_values(items: List[str], flag: str) -> dict:
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not name.strip():
+            raise typer.BadParameter(f"expected NAME=SIGMA, got {item!r}", param_hint=flag)
+        if name.strip() in out:
+            raise typer.BadParameter(f"{name.strip()} given twice", param_hint=flag)
+        out[name.strip()] = number
+    return out
+
+
+@app.command("refine")
+def refine_command(
+    input: str = typer.Argument(..., metavar="PASS",
+                                help="One pass of one station (raw or smoothed; Parquet, Arrow, CSV), or - for stdin."),
+    initial: str = typer.Option(..., "--initial", metavar="STATE.json|TLE",
+                                help="The stale state: a state file (optional covariance) or a TLE (SGP4 at the "
+                                     "traverse epoch)."),
+    stations: Optional[str] = typer.Option(
+        None, "--stations", metavar="STATIONS.csv",
+        help="Stations table (station, lat_deg, lon_deg, height_m); default: the pass file's metadata."),
+    cost: Cost = typer.Option(Cost.pointwise, "--cost",
+                              help="pointwise: least squares on the samples with the stale state as a-priori "
+                                   "(default); integral: seed 004 eq. 14 on the smoothed curve."),
+    circular: bool = typer.Option(
+        False, "--circular", help="Impose the circular-orbit constraints of seed 004 eq. 5 (Lagrange multipliers)."),
+    circular_tolerance: float = typer.Option(
+        0.0, "--circular-tolerance", metavar="E", min=0.0,
+        help="With --circular: the eccentricity to which the orbit is circular; adds that uncertainty to the "
+             "covariance (0: covariance conditional on an exactly circular orbit)."),
+    doppler_bias: Optional[DopplerBias] = typer.Option(
+        None, "--doppler-bias",
+        help="Transmitter frequency offset (and drift) to estimate; default: offset for one-way Doppler, none "
+             "for range-rate."),
+    apriori: Optional[bool] = typer.Option(
+        None, "--apriori/--no-apriori",
+        help="Use the stale state as an a-priori (its covariance, else the default of docs/refine.md). "
+             "Default: on for pointwise, off for integral."),
+    apriori_sigma: List[str] = typer.Option(
+        [], "--apriori-sigma", metavar="NAME=SIGMA",
+        help="A-priori 1-sigma (SI) of a parameter (x, vx, doppler_offset) or position/velocity/state; repeatable; "
+             "overrides the stale covariance."),
+    pass_id: Optional[str] = typer.Option(None, "--pass-id", metavar="ID",
+                                          help="The pass, when the file holds several."),
+    kind: Optional[Kind] = typer.Option(None, "--kind",
+                                        help="doppler or range_rate, when the file holds both (default: doppler)."),
+    reweight: bool = typer.Option(
+        True, "--reweight/--no-reweight",
+        help="Pointwise: scale the sample sigmas to their actual scatter (sqrt of the variance factor, when above "
+             "1.5) before weighing them against the a-priori."),
+    max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
+    clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
+                               help="Pointwise: edit samples beyond K x max(1, WRMS) sigmas. 0: off."),
+    quadrature_order: int = typer.Option(16, "--quadrature-order", metavar="N", min=2,
+                                         help="Integral: Gauss-Legendre nodes per panel."),
+    quadrature_panel: float = typer.Option(30.0, "--quadrature-panel", metavar="S", min=1e-3,
+                                           help="Integral: longest quadrature panel, s."),
+    max_gap: float = typer.Option(30.0, "--max-gap", metavar="S", min=1e-3,
+                                  help="Integral: data gaps longer than S s are left out of the integral."),
+    force=ForceOpt,
+    earth=EarthOpt,
+    eop: Optional[str] = EopOpt,
+    dut1: Optional[float] = Dut1Opt,
+    range_rate_model: Optional[RangeRateChoice] = typer.Option(
+        None, "--range-rate-model",
+        help="doppler (derivative of the light-time range) or instantaneous (Orekit's RangeRate); "
+             "default: the pass file's metadata, else doppler."),
+    output_epoch: OutputEpoch = typer.Option(
+        OutputEpoch.traverse, "--output-epoch",
+        help="Epoch of the state written by -o: the traverse point (default) or the stale state's epoch; "
+             "the file holds the other one too."),
+    residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
+                                            help="Write the residuals at the samples (Parquet, or CSV by the suffix)."),
+    output: Optional[str] = OutputOpt,
+) -> None:
+    """Refine a stale orbit state from one Doppler (or range-rate) pass of one station, at the
+    traverse point of the pass (seed 004), and write a state file with the covariance, the same
+    state at the stale epoch, the constraint residuals, an observability report (what one pass
+    cannot see, in radial/along/cross-track terms), the residuals and the iterations.
+
+    A one-screen summary goes to stderr. Exit status 1 when the refinement fails (no
+    convergence, rank deficiency), 2 for invalid input.
+
+    Example:
+
+        trackproc smooth pass.parquet -o smoothed.parquet
+        trackproc refine smoothed.parquet --initial stale.json -o refined.json
+
+        trackproc refine pass.parquet --initial delfi.tle --doppler-bias offset+drift --residuals res.csv -o -
+
+        trackproc refine smoothed.parquet --initial stale.json --cost integral --circular -o seed004.json
+    """
+    out = resolve_output(output, "output state file")
+    if residuals == "-" and out == "-":
+        raise typer.BadParameter("stdout already carries the state file; give --residuals a file",
+                                 param_hint="--residuals")
+    sigmas = _named_values(apriori_sigma, "--apriori-sigma")
+
+    import sys
+
+    from trackproc.io.atomic import is_stdio
+    from trackproc.io.eop import earth_orientation
+    from trackproc.io.passfile import read_pass_table
+    from trackproc.io.residuals import write_residuals
+    from trackproc.io.stations import read_stations
+    from trackproc.io.statefile import format_epoch, read_state_or_tle, write_state
+    from trackproc.pipeline.refine import RefineOptions, refine, summary_text
+
+    orientation, warning = earth_orientation(eop, dut1)
+    if warning:
+        log.warning(warning)
+    source = "<stdin>" if is_stdio(input) else input
+    table = read_pass_table(input)
+    state0 = read_state_or_tle(initial, orientation)
+    station_table = read_stations(stations) if stations is not None else None
+    options = RefineOptions(
+        cost=cost.value, circular=circular, circular_tolerance=circular_tolerance,
+        doppler_bias=doppler_bias.value if doppler_bias else None, apriori=apriori, apriori_sigma=sigmas,
+        force=force.value, earth=earth.value, range_rate_model=range_rate_model.value if range_rate_model else None,
+        max_iterations=max_iterations, clip=clip if clip > 0 else None, pass_id=pass_id,
+        kind=kind.value if kind else None, quadrature_order=quadrature_order, quadrature_panel_s=quadrature_panel,
+        max_gap_s=max_gap, reweight=reweight)
+    result = refine(table, state0, station_table, options, orientation, source=source)
+
+    state = result.state if output_epoch is OutputEpoch.traverse else result.stale_epoch_state
+    write_state(state, out, force=force.value, eop_source=orientation.source)
+    if residuals is not None:
+        meta = {"epoch": format_epoch(result.state.epoch), "parameters": result.names, "command": "refine",
+                "cost": cost.value, "force_model": force.value, "range_rate_model": result.problem.range_rate_model,
+                "sources": [source]}
+        write_residuals(result.residuals, residuals, meta)
+    if log.isEnabledFor(logging.INFO):
+        sys.stderr.write(summary_text(result))
+        sys.stderr.flush()

@@ -1,0 +1,953 @@
+"""``trackproc refine``: refine a stale orbit from one Doppler pass of one station (seed 004).
+
+Input: one pass of one station (one-way Doppler or range-rate; raw from ``ingest``/``simulate``
+or smoothed by ``smooth``), a stale state (state file, or a TLE evaluated by SGP4 at the traverse
+epoch) with an optional covariance, and the station (from ``--stations`` or the pass metadata).
+
+1. **The smoothed curve** (seed 004 eq. 1): the polynomial ``smooth`` stored in the file's
+   metadata for this station, pass and kind, or, for a raw pass, the same fit made here
+   (:func:`trackproc.pipeline.smooth.smooth`).
+2. **The traverse point**: the time of closest approach of that curve (the zero of the
+   range-rate; for one-way Doppler, whose transmitter offset is unknown, the inflection point of
+   the S-curve, which an offset or a linear drift does not move). The refined state is the GCRF
+   state at that epoch; ``r_ka`` is its radius (seed 004 eq. 5).
+3. **The problem**: :func:`trackproc.pipeline.estimate.build_problem` with the solution epoch at
+   the traverse point: the parameter registry (state, ``doppler_offset:PASS`` and
+   ``doppler_drift:PASS`` for one-way Doppler), the measurement model (one-way light time,
+   partials through it) and the a-priori constraints (the stale covariance moved to the
+   traverse epoch by the state transition matrix, or ``--apriori-sigma``, or the documented
+   default :data:`DEFAULT_APRIORI_ELEMENTS`).
+4. **The cost**:
+
+   * ``pointwise`` (default, the practical method): weighted least squares on the samples
+     themselves with the stale state as an a-priori, solved by
+     :func:`trackproc.methods.least_squares.solve` on the estimator's model. A single pass
+     cannot determine all six elements; the a-priori keeps the unseen directions where the
+     stale state put them, with their stale uncertainty, instead of letting them diverge.
+   * ``integral`` (the seed's method): seed 004 eq. 14 by Gauss-Legendre quadrature on the
+     smoothed polynomial, the orbit's range-rate and its gradient from the DT spectra
+     (:class:`trackproc.methods.refinement.IntegralModel`), no a-priori unless asked. Its
+     covariance propagates the polynomial's coefficient covariance through the estimator
+     (:func:`~trackproc.methods.refinement.sandwich_covariance`).
+
+   ``circular=True`` adds the circular-orbit constraints of eq. 5 with ``r_ka`` as a seventh
+   parameter, solved by Lagrange multipliers (:func:`~trackproc.methods.refinement.solve_kkt`).
+5. **Outputs**: the refined state at the traverse point and at the stale epoch (both with the
+   covariance), constraint residuals (and multipliers), an observability report, residuals at
+   the samples and the iterations.
+
+:func:`traverse_station` places a station so that a given state is the traverse point of a
+visible pass: the seed 004 Table 1 scenario.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+from typing import Mapping, Optional
+
+import numpy as np
+import pandas as pd
+
+from trackproc.constants import C_LIGHT
+from trackproc.errors import InputError, ProcessingError
+from trackproc.io.passfile import PassTable
+
+COSTS = ("pointwise", "integral")
+DOPPLER_BIAS = ("none", "offset", "offset+drift")
+#: Range-rate-like kinds a Doppler station gives, in order of preference.
+RANGE_RATE_KINDS = ("doppler", "range_rate")
+#: The a-priori of a stale state that carries no covariance, as independent 1-sigma errors of
+#: its non-singular orbital elements (:func:`trackproc.methods.refinement.element_covariance`):
+#: a state a day or so old (a TLE, an old solution) is off by kilometres along-track (the
+#: phase ``u``: 4e-4 rad = 2.9 km at 7200 km) but knows its period well (``a``: 50 m) and its
+#: plane and shape to hundreds of metres (``e`` 5e-5, ``i`` and ``raan`` 1e-4 rad). In RTN at
+#: 7200 km: about 360 m radial, 2.9 km along-track, 720 m cross-track, 3 / 0.4 / 0.7 m/s.
+#: Pointwise: when the a-posteriori variance factor exceeds this, the sample sigmas are scaled by
+#: its square root and the fit repeated (at most :data:`MAX_REWEIGHT` times), so that the stale
+#: state and the pass are weighed by the pass's actual scatter, not by nominal sigmas.
+REWEIGHT_THRESHOLD = 1.5
+MAX_REWEIGHT = 6
+#: A pass whose highest elevation is below this gives a weak refinement (see docs/refine.md).
+LOW_PASS_DEG = 25.0
+DEFAULT_APRIORI_ELEMENTS = {"a_m": 50.0, "ex": 5e-5, "ey": 5e-5, "i_rad": 1e-4, "raan_rad": 1e-4, "u_rad": 4e-4}
+
+
+@dataclass
+class RefineOptions:
+    """Options of :func:`refine` (defaults = the CLI's).
+
+    ``cost``: ``"pointwise"`` or ``"integral"``; ``circular``: the constraints of seed 004
+    eq. 5; ``doppler_bias``: ``"none"``, ``"offset"``, ``"offset+drift"`` or None (= ``offset``
+    for one-way Doppler, ``none`` for range-rate); ``apriori``: use the stale state as an
+    a-priori (None = yes for ``pointwise``, no for ``integral``); ``apriori_sigma``: name ->
+    1-sigma (as ``estimate --apriori-sigma``), overriding the stale covariance and the default;
+    ``pass_id``/``kind``: which pass and kind when the file holds several; quadrature:
+    ``quadrature_order`` nodes per panel of at most ``quadrature_panel_s`` seconds, over the
+    parts of the pass without gaps longer than ``max_gap_s``; ``circular_tolerance``: the
+    eccentricity to which the orbit is taken to be circular under ``circular``: it adds the
+    covariance of an approximate constraint (:func:`~trackproc.methods.refinement.constraint_error_covariance`);
+    0 (the default, the seed's assumption) makes the covariance conditional on an exactly circular
+    orbit. With J2 the osculating eccentricity of a mean-circular LEO orbit swings by
+    ``1.5 J2 (Re/r)^2`` (about 1e-3): see docs/refine.md before trusting a conditional covariance.
+    ``reweight``: weigh the data by their actual scatter (:data:`REWEIGHT_THRESHOLD`).
+    """
+
+    cost: str = "pointwise"
+    circular: bool = False
+    doppler_bias: Optional[str] = None
+    apriori: Optional[bool] = None
+    apriori_sigma: Mapping[str, float] = field(default_factory=dict)
+    force: str = "j2"
+    earth: str = "wgs84"
+    range_rate_model: Optional[str] = None
+    max_iterations: int = 30
+    clip: Optional[float] = 4.0
+    pass_id: Optional[str] = None
+    kind: Optional[str] = None
+    quadrature_order: int = 16
+    quadrature_panel_s: float = 30.0
+    max_gap_s: float = 30.0
+    circular_tolerance: Optional[float] = None
+    reweight: bool = True
+    rank_rtol: float = 1e-12
+
+
+@dataclass
+class SmoothedCurve:
+    """The smoothed pass: ``fit`` (a :class:`~trackproc.methods.smoothing.PolynomialFit` in seconds
+    from ``epoch``, UTC), its ``tca`` (or None, with ``tca_note``), where it came from
+    (``source``: ``"metadata"`` or ``"fitted here"``) and the times ``used_t_s`` of the samples it
+    was fitted to (s from ``epoch``)."""
+
+    fit: object
+    epoch: np.datetime64
+    kind: str
+    tca: object
+    tca_note: str
+    source: str
+    used_t_s: np.ndarray
+
+
+@dataclass
+class RefineResult:
+    """Everything :func:`refine` produces (the CLI writes it).
+
+    ``state`` (GCRF :class:`~trackproc.io.statefile.State` at the traverse epoch, with every
+    parameter, the covariance and the diagnostics), ``stale_epoch_state`` (the same orbit at the
+    stale state's epoch), ``solution`` (the solver's), ``problem`` (the estimator's), ``curve``,
+    ``residuals`` (one row per sample, as ``estimate --residuals``), ``observability``
+    (:class:`~trackproc.methods.refinement.Observability`), ``constraints`` (dict), ``warnings``.
+    """
+
+    state: object
+    stale_epoch_state: object
+    solution: object
+    problem: object
+    curve: SmoothedCurve
+    residuals: pd.DataFrame
+    observability: object
+    constraints: dict
+    covariance: np.ndarray
+    names: list
+    warnings: list = field(default_factory=list)
+
+
+# ----------------------------------------------------------------------------- the pass
+
+def _select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple[PassTable, str, str, str]:
+    frame = table.frame
+    if len(frame) == 0:
+        raise InputError("no samples", file=source, expected="a pass file with one Doppler or range-rate pass")
+    kinds = set(frame["kind"].astype(str))
+    if options.kind is not None:
+        if options.kind not in RANGE_RATE_KINDS:
+            raise InputError("refine uses Doppler or range-rate", column="--kind", found=options.kind,
+                             expected=" or ".join(RANGE_RATE_KINDS))
+        if options.kind not in kinds:
+            raise InputError("no samples of the requested kind", file=source, column="kind",
+                             found=", ".join(sorted(kinds)), expected=options.kind)
+        kind = options.kind
+    else:
+        present = [k for k in RANGE_RATE_KINDS if k in kinds]
+        if not present:
+            raise InputError("no Doppler or range-rate samples", file=source, column="kind",
+                             found=", ".join(sorted(kinds)), expected="doppler or range_rate (one Doppler station)")
+        kind = present[0]
+    sub = frame[frame["kind"].astype(str) == kind]
+    if options.pass_id is not None:
+        sub = sub[sub["pass_id"].astype(str) == options.pass_id]
+        if len(sub) == 0:
+            found = ", ".join(sorted(set(frame.loc[frame["kind"] == kind, "pass_id"].astype(str))))
+            raise InputError("no such pass", file=source, column="--pass-id", found=options.pass_id,
+                             expected=f"one of {found}")
+    keys = sorted(set(zip(sub["station"].astype(str), sub["pass_id"].astype(str))))
+    if len(keys) > 1:
+        listed = ", ".join(f"{s}/{p}" for s, p in keys[:8]) + (" ..." if len(keys) > 8 else "")
+        raise InputError("more than one pass", file=source, column="pass_id", found=listed,
+                         expected="one pass of one station; choose one with --pass-id")
+    station, pass_id = keys[0]
+    mode = (table.meta or {}).get("doppler_mode", "one-way")
+    if mode not in (None, "one-way"):
+        raise InputError("two-way data cannot be refined yet", file=source, column="doppler_mode", found=mode,
+                         expected="one-way (the one-way light-time model of DESIGN.md)")
+    return PassTable(sub.reset_index(drop=True), dict(table.meta or {})), kind, station, pass_id
+
+
+def _utc64(times) -> np.ndarray:
+    t = pd.DatetimeIndex(times)
+    if t.tz is not None:
+        t = t.tz_convert("UTC").tz_localize(None)
+    return t.to_numpy(dtype="datetime64[ns]")
+
+
+def _fit_from_record(rec: dict):
+    from trackproc.methods.smoothing import PolynomialFit
+
+    n_used = int(rec.get("n_used") or 0)
+    cov = np.asarray(rec["covariance_unscaled"], float)
+    return PolynomialFit(basis=str(rec["basis"]), domain_s=tuple(float(a) for a in rec["domain_s"]),
+                         degree=int(rec["degree"]), coef=np.asarray(rec["coefficients"], float), cov_unscaled=cov,
+                         chi2=float(rec["chi2"]), dof=int(rec["dof"]), used=np.ones(n_used, bool),
+                         residual=np.zeros(n_used), rms=float(rec.get("rms") or math.nan),
+                         wrms=float(rec.get("weighted_rms") or math.nan),
+                         condition_number=float(rec.get("condition_number") or math.nan))
+
+
+def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source: str) -> SmoothedCurve:
+    """The smoothed polynomial of the pass: from the ``smoothing`` metadata when ``smooth`` made
+    it (seed 004 eq. 1), else fitted here with ``smooth``'s defaults; and its closest approach."""
+    from trackproc.methods.smoothing import SmoothingError, closest_approach
+
+    meta = sub.meta or {}
+    mode = str(meta.get("doppler_mode") or "one-way")
+    times = _utc64(sub.frame["time"])
+    rec = None
+    for r in (meta.get("smoothing") or {}).get("fits", []) or []:
+        if (r.get("station"), r.get("pass_id"), r.get("kind")) == (station, pass_id, kind) and r.get("coefficients"):
+            rec = r
+            break
+    if rec is not None:
+        fit = _fit_from_record(rec)
+        epoch = np.datetime64(str(rec["epoch_utc"]).rstrip("Zz"), "ns")
+        used = ~sub.frame["flag"].to_numpy(bool) if "flag" in sub.frame.columns else np.ones(len(sub.frame), bool)
+        t_used = (times[used] - epoch).astype(np.int64) * 1e-9
+        tca, note = None, ""
+        try:
+            tca = closest_approach(fit, kind, mode)
+        except SmoothingError as exc:
+            note = str(exc)
+        if isinstance(rec.get("tca"), dict) and rec["tca"].get("status") == "not_observed":
+            note = str(rec["tca"].get("error") or "closest approach not observed")
+        return SmoothedCurve(fit=fit, epoch=epoch, kind=kind, tca=tca, tca_note=note, source="metadata",
+                             used_t_s=np.sort(t_used))
+    if ((meta.get("smoothing") or {}).get("output") == "grid"):
+        raise InputError("a smoothed grid without its polynomial", file=source, column="smoothing",
+                         expected=f"the smoothing record of {station}/{pass_id}/{kind} in the metadata")
+    from trackproc.pipeline.smooth import SmoothOptions, smooth
+
+    try:
+        result = smooth(PassTable(sub.frame[["time", "station", "pass_id", "kind", "value", "sigma"]], meta),
+                        SmoothOptions(), source=source)
+    except ProcessingError as exc:
+        raise ProcessingError(f"the pass cannot be smoothed: {exc}") from None
+    pf = result.fits[0]
+    if pf.fit is None:
+        raise ProcessingError(f"the pass cannot be smoothed: {pf.error}")
+    epoch = np.datetime64(pd.Timestamp(pf.epoch).tz_convert("UTC").tz_localize(None).as_unit("ns").to_datetime64())
+    tca, note = pf.tca, pf.tca_error or ""
+    if tca is None:
+        try:
+            tca = closest_approach(pf.fit, kind, mode)
+        except SmoothingError as exc:
+            note = str(exc)
+    return SmoothedCurve(fit=pf.fit, epoch=epoch, kind=kind, tca=tca, tca_note=note, source="fitted here",
+                         used_t_s=np.sort(pf.t_s[pf.fit.used]))
+
+
+def _traverse_epoch(curve: SmoothedCurve, warnings: list) -> tuple[np.datetime64, str]:
+    if curve.tca is not None:
+        t = curve.tca.t_s
+        how = curve.tca.definition
+        if curve.tca_note:
+            warnings.append(f"the closest approach of the smoothed curve is not well observed ({curve.tca_note}); "
+                            "the traverse epoch rests on the polynomial there")
+    else:
+        a, b = curve.fit.domain_s
+        t = 0.5 * (a + b)
+        how = "middle of the pass (no closest approach in the smoothed curve)"
+        warnings.append(f"no traverse point in the pass ({curve.tca_note}); the state is given at mid-pass")
+    return curve.epoch + np.timedelta64(int(round(t * 1e9)), "ns"), how
+
+
+# ----------------------------------------------------------------------------- the problem
+
+def _is_tle_state(state) -> bool:
+    return state.force_model == "sgp4" and bool((state.extra or {}).get("tle"))
+
+
+def _state_prior_covariance(priors) -> Optional[np.ndarray]:
+    """The 6 × 6 a-priori covariance of x..vz from the problem's priors (None unless all six)."""
+    cov = np.full((6, 6), np.nan)
+    for p in priors:
+        idx = np.asarray(p.index, int)
+        pc = np.asarray(p.covariance, float)
+        sel = np.flatnonzero(idx < 6)
+        if sel.size:
+            cov[np.ix_(idx[sel], idx[sel])] = pc[np.ix_(sel, sel)]
+    if np.isnan(np.diag(cov)).any():
+        return None
+    return np.nan_to_num(cov, nan=0.0)
+
+
+def default_apriori_covariance(rv, mu_m3_s2: float) -> np.ndarray:
+    """GCRF covariance (6, 6) of :data:`DEFAULT_APRIORI_ELEMENTS` at the state ``rv``."""
+    from trackproc.methods.refinement import ELEMENT_NAMES, element_covariance
+
+    return element_covariance(rv, mu_m3_s2, [DEFAULT_APRIORI_ELEMENTS[k] for k in ELEMENT_NAMES])
+
+
+@dataclass
+class Refinement:
+    """An assembled refinement, reusable (e.g. Monte Carlo): :func:`prepare` builds it,
+    :meth:`solve` solves it (optionally with other observations and another a-priori centre),
+    :func:`refine` turns a solution into the outputs."""
+
+    options: RefineOptions
+    problem: object
+    curve: SmoothedCurve
+    kind: str
+    station_name: str
+    pass_id: str
+    initial: object
+    stale_epoch: np.datetime64
+    traverse_how: str
+    names: list
+    x0: np.ndarray
+    scales: np.ndarray
+    priors: list
+    apriori_note: str
+    station_model: object
+    mu: float
+    carrier_hz: float
+    station_axis: np.ndarray
+    integral: Optional[dict] = None
+    warnings: list = field(default_factory=list)
+
+    @property
+    def n_problem(self) -> int:
+        return len(self.problem.names)
+
+    # -- models ------------------------------------------------------------------------------
+    def pointwise_model(self, x):
+        h, jac = self.problem.model(np.asarray(x, float)[: self.n_problem])
+        if len(self.names) > self.n_problem:
+            jac = np.hstack([jac, np.zeros((jac.shape[0], len(self.names) - self.n_problem))])
+        return h, jac
+
+    def constraints(self, x):
+        from trackproc.methods.refinement import circular_constraints
+
+        return circular_constraints(x, self.mu, rka_index=len(self.names) - 1)
+
+    def constraint_scale(self, x):
+        from trackproc.methods.refinement import constraint_scales
+
+        return constraint_scales(x, self.mu, rka_index=len(self.names) - 1)
+
+    def data(self):
+        """``(model, observed, sigma, periodic, clip)`` of the chosen cost."""
+        if self.options.cost == "integral":
+            d = self.integral
+            return d["model"], d["observed"], d["sigma"], None, None
+        meas = self.problem.meas
+        return self.pointwise_model, meas.observed, meas.sigma, meas.periodic, self.options.clip
+
+    def solve(self, observed=None, prior_centre=None, x0=None, sigma_scale=1.0):
+        """Solve (``observed`` replaces the data: the samples, or the curve at the nodes;
+        ``prior_centre`` (6,) the stale state at the traverse epoch; ``sigma_scale`` multiplies
+        the data sigmas). Returns ``(Solution, KKTResult or None)``."""
+        from trackproc.methods.least_squares import Options, Prior, solve
+        from trackproc.methods.refinement import CachedModel, geodesic_retraction, solve_kkt
+
+        model, y, sigma, periodic, clip = self.data()
+        sigma = np.asarray(sigma, float) * sigma_scale
+        if observed is not None:
+            y = np.asarray(observed, float)
+        priors = self.priors
+        if prior_centre is not None:
+            priors = []
+            for p in self.priors:
+                centre = np.asarray(p.centre, float).copy()
+                sel = np.asarray(p.index) < 6
+                centre[sel] = np.asarray(prior_centre, float)[np.asarray(p.index)[sel]]
+                priors.append(Prior(p.index, centre, p.covariance))
+        start = self.x0 if x0 is None else np.asarray(x0, float)
+        opts = Options(max_iterations=self.options.max_iterations, clip=clip, rank_rtol=self.options.rank_rtol)
+        model = CachedModel(model)
+        retract = geodesic_retraction(model, sigma, self.scales, priors)
+        if self.options.circular:
+            kkt = solve_kkt(model, start, y, sigma, names=self.names, constraints=self.constraints,
+                            constraint_scale=self.constraint_scale, scales=self.scales, priors=priors,
+                            periodic=periodic, options=opts, retract=retract)
+            return kkt.solution, kkt
+        lo, hi = self.problem.params.bounds()
+        lo, hi = np.r_[lo, [-np.inf] * (len(self.names) - lo.size)], np.r_[hi, [np.inf] * (len(self.names) - hi.size)]
+        return solve(model, start, y, sigma, names=self.names, scales=self.scales, priors=priors, periodic=periodic,
+                     bounds=(lo, hi), options=opts, retract=retract), None
+
+    def tolerance(self) -> float:
+        """The eccentricity tolerance of ``--circular`` (0 unless given)."""
+        return float(self.options.circular_tolerance or 0.0)
+
+    def covariance(self, sol, kkt=None, priors=None) -> np.ndarray:
+        """The reported covariance: the solver's (pointwise) or the sandwich (integral), plus,
+        under ``--circular``, what a constraint holding only to :meth:`tolerance` adds."""
+        from trackproc.methods import refinement as rf
+
+        if self.options.cost != "integral":
+            cov = sol.covariance
+        else:
+            d = self.integral
+            cov = rf.sandwich_covariance(sol, d["sigma"], d["design"], d["coefficient_covariance"],
+                                         self.priors if priors is None else priors)
+        if kkt is not None and self.tolerance() > 0:
+            sigma_eps = rf.circular_tolerance_covariance(sol.values, self.mu, self.tolerance())
+            cov = cov + rf.constraint_error_covariance(kkt.sensitivity, sigma_eps)
+        return cov
+
+
+def prepare(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
+            source: str = "<pass>") -> Refinement:
+    """Assemble a :class:`Refinement` (see the module docstring); :class:`InputError` for bad input."""
+    from trackproc.dynamics import geodesy, propagator
+    from trackproc.dynamics import measurement_spectra as ms
+    from trackproc.dynamics import timescales as ts
+    from trackproc.pipeline.estimate import EstimateOptions, build_problem
+
+    opt = options or RefineOptions()
+    if opt.cost not in COSTS:
+        raise InputError("unknown cost", column="--cost", found=opt.cost, expected=" or ".join(COSTS))
+    if opt.doppler_bias not in (None,) + DOPPLER_BIAS:
+        raise InputError("unknown Doppler bias model", column="--doppler-bias", found=opt.doppler_bias,
+                         expected=" or ".join(DOPPLER_BIAS))
+    if opt.force not in propagator.FORCES:
+        raise InputError("unknown force model", column="--force", found=opt.force, expected="two-body or j2")
+    if not (opt.quadrature_order >= 2 and opt.quadrature_panel_s > 0 and opt.max_gap_s > 0):
+        raise InputError("bad quadrature settings", column="--quadrature-order",
+                         found=(opt.quadrature_order, opt.quadrature_panel_s, opt.max_gap_s),
+                         expected="order >= 2, panel > 0 s, gap > 0 s")
+    warnings: list = []
+    sub, kind, station, pass_id = _select_pass(table, opt, source)
+    meta = sub.meta
+    if opt.cost == "pointwise" and (meta.get("smoothing") or {}).get("output") == "grid":
+        raise InputError("a smoothed grid is a curve, not samples", file=source, column="smoothing",
+                         found="output = grid",
+                         expected="the samples (smooth without --grid), or --cost integral")
+    carrier = meta.get("carrier_hz")
+    carrier = float(carrier) if isinstance(carrier, (int, float)) and carrier > 0 else math.nan
+    if kind == "doppler" and not carrier > 0:
+        raise InputError("Doppler samples need the carrier frequency", file=source, column="carrier_hz",
+                         found=meta.get("carrier_hz"), expected="carrier_hz > 0 in the file metadata "
+                                                                "(trackproc ingest --carrier-hz)")
+    bias = opt.doppler_bias if opt.doppler_bias is not None else ("offset" if kind == "doppler" else "none")
+    if bias != "none" and kind == "range_rate" and not carrier > 0:
+        raise InputError("a Doppler offset on range-rate samples needs the carrier frequency", file=source,
+                         column="carrier_hz", found=meta.get("carrier_hz"),
+                         expected="carrier_hz in the metadata, or --doppler-bias none")
+    frame = sub.frame
+    sig = frame["sigma"].to_numpy(float)
+    if not np.all(np.isfinite(sig) & (sig > 0)):
+        i = int(np.flatnonzero(~(np.isfinite(sig) & (sig > 0)))[0])
+        raise InputError(f"invalid sigma at {pd.Timestamp(frame['time'].iloc[i]).isoformat()} (sample {i + 1} of the "
+                         "pass)", file=source, column="sigma", found=sig[i], expected="a positive number")
+    if len(frame) < 8:
+        raise ProcessingError(f"too few samples in the pass: {len(frame)} (at least 8 are needed)")
+
+    curve = smoothed_curve(sub, kind, station, pass_id, source)
+    t_traverse, how = _traverse_epoch(curve, warnings)
+
+    # the stale state: a TLE is evaluated by SGP4 at the traverse epoch
+    if _is_tle_state(initial):
+        from trackproc.io.tle import parse_tle, tle_state
+
+        lines = initial.extra["tle"]
+        tle = parse_tle("\n".join(([initial.extra["tle_name"]] if initial.extra.get("tle_name") else []) + list(lines)),
+                        initial.source or "<tle>")
+        initial = tle_state(tle, at=t_traverse, eop=eop)
+        warnings.append("the TLE is evaluated by SGP4 at the traverse epoch: the stale epoch is the traverse epoch")
+    stale_epoch = np.datetime64(initial.epoch, "ns")
+
+    use_apriori = opt.apriori if opt.apriori is not None else (opt.cost == "pointwise")
+    apriori_sigma, apriori_initial, note, default_prior = {}, False, "none (the pass alone)", False
+    if use_apriori:
+        if opt.apriori_sigma:
+            apriori_sigma, note = dict(opt.apriori_sigma), "--apriori-sigma"
+        elif initial.state_covariance is not None:
+            apriori_initial, note = True, "the stale state's covariance, moved to the traverse epoch by the STM"
+        else:
+            default_prior = True
+            note = ("default (the stale state has no covariance): orbital-element sigmas " +
+                    ", ".join(f"{k} {v:g}" for k, v in DEFAULT_APRIORI_ELEMENTS.items()))
+    elif opt.apriori_sigma:
+        raise InputError("--apriori-sigma with --no-apriori", column="--apriori-sigma",
+                         expected="one of the two")
+    est = EstimateOptions(doppler_bias=None if bias == "none" else bias, doppler_bias_per="pass",
+                          apriori_sigma=apriori_sigma, apriori_initial=apriori_initial, force=opt.force,
+                          earth=opt.earth, range_rate_model=opt.range_rate_model, max_iterations=opt.max_iterations,
+                          clip=opt.clip, epoch=t_traverse, kinds=[kind])
+    problem = build_problem([(source, PassTable(frame, meta))], initial, stations, est, eop)
+    mu = propagator.force_parameters(opt.force)[0]
+    if default_prior:
+        from trackproc.methods.least_squares import Prior
+
+        rv0 = problem.x0[:6]
+        problem.priors.append(Prior(np.arange(6), rv0.copy(), default_apriori_covariance(rv0, mu)))
+
+    names = list(problem.names)
+    x0 = problem.x0.copy()
+    scales = problem.params.scales()
+    if opt.circular:
+        names.append("r_ka")
+        x0 = np.r_[x0, np.linalg.norm(x0[:3])]
+        scales = np.r_[scales, scales[0]]
+
+    # the station in the image domain (seed 004 eqs. 7-10), for the integral and the model traverse time
+    known = dict(stations or {})
+    for n_, s_ in sub.stations().items():
+        known.setdefault(n_, s_)
+    st = known[station]
+    lat, lon = math.radians(st.lat_deg), math.radians(st.lon_deg)
+    r_itrf = geodesy.geodetic_to_itrf(lat, lon, st.height_m, opt.earth)
+    t_meas = problem.meas.t_s
+    epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))
+    station_model = ms.StationModel.build(r_itrf, lat, lon, epoch_jd, problem.frame.q, float(t_meas.min()) - 60.0,
+                                          float(t_meas.max()) + 60.0, eop=eop)
+
+    # the station's geocentric axis at the traverse epoch (GCRF): the single-pass rotation family
+    r_st0, _ = station_model.state(np.array([0.0]))
+    axis = problem.frame.q.T @ r_st0[0]
+    ref = Refinement(options=opt, problem=problem, curve=curve, kind=kind, station_name=station, pass_id=pass_id,
+                     initial=initial, stale_epoch=stale_epoch, traverse_how=how, names=names, x0=x0, scales=scales,
+                     priors=list(problem.priors), apriori_note=note, station_model=station_model, mu=mu,
+                     carrier_hz=carrier, station_axis=axis / np.linalg.norm(axis), warnings=warnings)
+    if opt.cost == "integral":
+        ref.integral = _integral_setup(ref, frame)
+    return ref
+
+
+def _integral_setup(ref: Refinement, frame) -> dict:
+    """Gauss-Legendre nodes on the covered parts of the pass, the curve there (range-rate), the
+    pseudo-sigmas, the bias coefficients and the basis (for the sandwich covariance)."""
+    from trackproc.dynamics import timescales as ts
+    from trackproc.methods import refinement as rf
+
+    opt = ref.options
+    curve = ref.curve
+    intervals = rf.covered_intervals(curve.used_t_s, opt.max_gap_s)
+    if not intervals:
+        raise ProcessingError("the smoothed pass has no interval without gaps to integrate over")
+    t_poly, w = rf.gauss_legendre(intervals, order=opt.quadrature_order, panel_s=opt.quadrature_panel_s)
+    # node times: polynomial time (s from the curve's epoch) -> s from the traverse epoch (SI)
+    jd_c = ts.datetime64_to_jd_utc(curve.epoch)
+    jd_e = tuple(float(a) for a in ts.datetime64_to_jd_utc(ref.problem.epoch))
+    offset = float(ts.seconds_since(jd_c, jd_e))
+    t_nodes = t_poly + offset
+    to_rr = -C_LIGHT / ref.carrier_hz if ref.kind == "doppler" else 1.0
+    observed = to_rr * curve.fit(t_poly)
+    design = to_rr * curve.fit.design(t_poly)
+    sig = frame["sigma"].to_numpy(float) * abs(to_rr)
+    n_used = curve.used_t_s.size
+    covered = float(sum(b - a for a, b in intervals))
+    spacing = covered / max(n_used - len(intervals), 1)
+    sigma_ref = float(np.sqrt(np.mean(sig * sig)))
+    vf_curve = float(curve.fit.variance_factor)
+    if opt.reweight and math.isfinite(vf_curve) and vf_curve > 1.0:
+        sigma_ref *= math.sqrt(vf_curve)           # the samples' actual scatter about the curve
+    sigma_nodes = rf.pseudo_sigma(w, sigma_ref, spacing)
+    bias_cols = []
+    for d in ref.problem.params.selected[6:]:
+        coef = -C_LIGHT / ref.carrier_hz * np.ones(t_nodes.size)
+        if d.family == "doppler_drift":
+            coef = coef * (t_nodes - d.epoch_s)
+        elif d.family != "doppler_offset":
+            raise ProcessingError(f"parameter {d.name} has no meaning for the integral cost")
+        bias_cols.append(coef)
+    model = rf.IntegralModel(ref.problem.epoch, ref.problem.frame, ref.station_model, t_nodes, bias_cols,
+                             force=opt.force, eop=ref.problem.eop, range_rate_model=ref.problem.range_rate_model,
+                             n_extra=1 if opt.circular else 0)
+    return {"model": model, "observed": observed, "sigma": sigma_nodes, "weights": w, "t_nodes": t_nodes,
+            "t_poly": t_poly, "design": design, "coefficient_covariance": curve.fit.cov_scaled,
+            "intervals": intervals, "sigma_ref": sigma_ref, "spacing": spacing, "to_range_rate": to_rr}
+
+
+# ----------------------------------------------------------------------------- the run
+
+def _max_elevation_deg(ref: Refinement, x) -> Optional[float]:
+    """Highest elevation (deg) of the refined orbit at the pass's sample times."""
+    from trackproc.dynamics import measurement_spectra as ms
+    from trackproc.dynamics import propagator
+
+    t = ref.problem.meas.t_s
+    try:
+        traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [float(t.min()) - 1.0, float(t.max())],
+                                    force=ref.options.force, frame=ref.problem.frame,
+                                    eop=ref.problem.eop).raise_for_outcome()
+        el = ms.predict(traj, ref.station_model, t, partials=False).elevation_rad
+        return float(np.degrees(el.max()))
+    except (ArithmeticError, ValueError, ProcessingError):
+        return None
+
+
+def _model_traverse(ref: Refinement, x) -> Optional[float]:
+    """Seconds from the traverse epoch where the refined orbit's range-rate vanishes (None if
+    not within ±60 s)."""
+    from trackproc.dynamics import measurement_spectra as ms
+    from trackproc.dynamics import propagator
+
+    try:
+        traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [-62.0, 62.0], force=ref.options.force,
+                                    frame=ref.problem.frame, eop=ref.problem.eop).raise_for_outcome()
+        t = np.linspace(-60.0, 60.0, 241)
+        rr = ms.predict(traj, ref.station_model, t, range_rate_model=ref.problem.range_rate_model,
+                        partials=False).range_rate_m_s
+        k = np.flatnonzero((rr[:-1] < 0) & (rr[1:] >= 0))
+        if k.size == 0:
+            return None
+        i = int(k[np.argmin(np.abs(t[k]))])
+        a, b = t[i], t[i + 1]
+        fa, fb = rr[i], rr[i + 1]
+        for _ in range(30):
+            m = a - fa * (b - a) / (fb - fa)
+            fm = float(ms.predict(traj, ref.station_model, np.array([m]), range_rate_model=ref.problem.range_rate_model,
+                                  partials=False).range_rate_m_s[0])
+            if abs(fm) < 1e-9 or b - a < 1e-7:
+                return float(m)
+            if fm < 0:
+                a, fa = m, fm
+            else:
+                b, fb = m, fm
+        return float(m)
+    except (ArithmeticError, ValueError, ProcessingError):
+        return None
+
+
+def _eccentricity(r, v, mu) -> float:
+    r = np.asarray(r, float)
+    v = np.asarray(v, float)
+    e = ((v @ v - mu / np.linalg.norm(r)) * r - (r @ v) * v) / mu
+    return float(np.linalg.norm(e))
+
+
+def refine(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
+           source: str = "<pass>") -> RefineResult:
+    """Refine ``initial`` (a GCRF :class:`~trackproc.io.statefile.State`, or a TLE's) from one pass.
+
+    Returns :class:`RefineResult`; raises :class:`InputError` (exit 2) for invalid input and
+    :class:`ProcessingError` (exit 1) when the refinement fails (no convergence, rank deficiency).
+    """
+    ref = prepare(table, initial, stations, options, eop, source)
+    sol, kkt, scale = solve_weighted(ref)
+    return finish(ref, sol, kkt, scale)
+
+
+def solve_weighted(ref: Refinement):
+    """:meth:`Refinement.solve`, repeated with the sample sigmas scaled by √(variance factor) while
+    that exceeds :data:`REWEIGHT_THRESHOLD` (pointwise with ``reweight``). Returns
+    ``(Solution, KKTResult or None, sigma scale)``."""
+    scale = 1.0
+    x0 = None
+    for _ in range(MAX_REWEIGHT):
+        sol, kkt = ref.solve(sigma_scale=scale, x0=x0)
+        vf = sol.variance_factor
+        if not (ref.options.reweight and ref.options.cost == "pointwise" and math.isfinite(vf)
+                and vf > REWEIGHT_THRESHOLD):
+            break
+        scale *= math.sqrt(vf)
+        x0 = sol.values
+    return sol, kkt, scale
+
+
+def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0) -> RefineResult:
+    """Outputs of a solved :class:`Refinement` (states, covariance, report, residuals)."""
+    from trackproc.constants import force_model_constants
+    from trackproc.dynamics import propagator
+    from trackproc.dynamics import timescales as ts
+    from trackproc.io.statefile import State, format_epoch
+    from trackproc.methods import refinement as rf
+    from trackproc.pipeline.estimate import UNITS, residual_frame, rtn_covariance, rtn_matrix
+
+    opt = ref.options
+    problem = ref.problem
+    warnings = list(ref.warnings)
+    x = sol.values
+    names = list(ref.names)
+    npb = ref.n_problem
+    cov = ref.covariance(sol, kkt)
+    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    units = problem.params.units() + (["m"] if opt.circular else [])
+
+    # residuals at the samples (both costs)
+    if opt.cost == "pointwise":
+        samples = sol
+    else:
+        h, _ = problem.model(x[:npb])
+        r = problem.meas.observed - h
+        samples = SimpleNamespace(computed=h, residual=r, normalized=r / problem.meas.sigma,
+                                  edited=np.zeros(r.size, bool))
+    residuals = residual_frame(problem, samples)
+    kept = ~samples.edited
+    rr_factor = abs(-C_LIGHT / ref.carrier_hz) if ref.kind == "doppler" else 1.0
+    res_kept = samples.residual[kept]
+    rms = float(np.sqrt(np.mean(res_kept ** 2))) if res_kept.size else math.nan
+
+    # constraints (eq. 5) at the solution
+    rka = float(x[-1]) if opt.circular else float(np.linalg.norm(x[:3]))
+    x7 = np.r_[x[:6], rka]
+    f, _ = rf.circular_constraints(x7, ref.mu)
+    fscale = rf.constraint_scales(x7, ref.mu)
+    constraints = {"names": list(rf.CONSTRAINT_NAMES), "units": ["m^2", "m^2/s^2", "m^2/s"],
+                   "values": f.tolist(), "relative": (f / fscale).tolist(), "imposed": bool(opt.circular),
+                   "r_ka_m": rka, "eccentricity": _eccentricity(x[:3], x[3:6], ref.mu)}
+    if kkt is not None:
+        constraints.update({"multipliers": kkt.multipliers.tolist(),
+                            "multipliers_note": "lambda of L = chi2 + lambda^T f (chi2: the whitened cost; "
+                                                "seed 004 eq. 16), per unit of each constraint",
+                            "stationarity": kkt.stationarity, "restoration_steps": kkt.restorations,
+                            "free_directions": kkt.null_space_dim, "eccentricity_tolerance": ref.tolerance(),
+                            "tolerance_note": "the covariance includes the constraints' own uncertainty for an orbit "
+                                              "circular only to this eccentricity (0: conditional on an exactly "
+                                              "circular orbit)"})
+        i_rka = names.index("r_ka")
+        constraints["r_ka_sigma_m"] = float(sigma[i_rka])
+    else:
+        u = x[:3] / np.linalg.norm(x[:3])
+        constraints["r_ka_sigma_m"] = float(np.sqrt(u @ cov[:3, :3] @ u))
+
+    # observability of the state from this pass
+    reference = _state_prior_covariance(ref.priors)
+    ref_name = "the a-priori covariance at the traverse epoch"
+    if reference is None:
+        reference = default_apriori_covariance(x[:6], ref.mu)
+        ref_name = "the default a-priori covariance (not used in the fit)"
+    _, _, sig_data, _, _ = ref.data()
+    keep = ~sol.edited
+    obs = rf.observability(sol.jacobian[keep][:, :npb], np.asarray(sig_data)[keep] * sigma_scale, problem.names,
+                           rtn_matrix(x[:3], x[3:6]), reference, cov[:6, :6],
+                           other_scales=problem.params.scales()[6:], reference=ref_name,
+                           station_axis=ref.station_axis, state=x[:6])
+    if opt.circular:
+        obs.notes.append("--circular: the three constraints of eq. 5 fix three combinations of the state; "
+                         "the covariance is zero across them (it is conditional on a circular orbit)")
+    if ref.priors and opt.cost == "pointwise" and obs.unobservable:
+        obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
+
+    # the state at the stale epoch
+    dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(ref.stale_epoch),
+                                tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))))
+    if dt == 0.0:
+        rv_s, cov_s = x[:6].copy(), cov.copy()
+    else:
+        traj = propagator.propagate(x[:3], x[3:6], problem.epoch, [dt], force=opt.force, stm=True,
+                                    frame=problem.frame, eop=problem.eop).raise_for_outcome()
+        rv_s = traj.state(dt)
+        jac = np.eye(len(names))
+        jac[:6, :6] = traj.stm(dt)
+        cov_s = jac @ cov @ jac.T
+        cov_s = 0.5 * (cov_s + cov_s.T)
+
+    # traverse-point diagnostics
+    t_model = _model_traverse(ref, x)
+    traverse = {"epoch": format_epoch(problem.epoch), "definition": ref.traverse_how,
+                "sigma_s": float(ref.curve.tca.sigma_s) if ref.curve.tca is not None else None,
+                "curve": ref.curve.source,
+                "refined_orbit_zero_range_rate_s": t_model,
+                "refined_orbit_zero_range_rate_utc": (format_epoch(problem.epoch + np.timedelta64(
+                    int(round(t_model * 1e9)), "ns")) if t_model is not None else None)}
+
+    # warnings
+    max_el = _max_elevation_deg(ref, x)
+    if max_el is not None and max_el < LOW_PASS_DEG:
+        warnings.append(f"a low pass (highest elevation {max_el:.1f} deg < {LOW_PASS_DEG:g}): one low pass "
+                        "determines the orbit poorly and an onboard oscillator's wander is easily taken for orbit; "
+                        "see docs/refine.md")
+    if sigma_scale > 1.0:
+        warnings.append(f"the samples scatter more than their sigmas say: sigmas scaled by {sigma_scale:.3g} "
+                        "(sqrt of the variance factor, iterated) before weighing them against the a-priori")
+    if opt.circular and kkt is not None and ref.tolerance() == 0.0:
+        warnings.append("--circular: the covariance is conditional on an exactly circular orbit; with J2 the "
+                        "osculating eccentricity of a circular orbit swings by about 1e-3 (give --circular-tolerance)")
+    if sol.dof > 0 and sol.variance_factor > 4.0 and opt.cost == "pointwise":
+        warnings.append(f"a-posteriori variance factor {sol.variance_factor:.3g} (> 4): the sigmas of the data are too "
+                        "small or the model misses something; the covariance is optimistic")
+    if sol.n_prior:
+        from scipy.stats import chi2 as chi2_dist
+
+        limit = float(chi2_dist.ppf(0.999, sol.n_prior))
+        if sol.chi2_prior > limit:
+            warnings.append(f"the refined state departs from the stale state by chi2 = {sol.chi2_prior:.4g} over "
+                            f"{sol.n_prior} a-priori constraints (99.9 % limit {limit:.3g}): the pass and the stale "
+                            "state disagree; check the pass, or loosen the a-priori")
+    if opt.cost == "pointwise" and sol.n_edited > 0.1 * sol.n_measurements:
+        warnings.append(f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)")
+    if opt.cost == "integral" and not ref.priors and obs.unobservable:
+        warnings.append(f"{len(obs.unobservable)} state direction(s) are weakly determined by the pass alone "
+                        "(see the observability report); consider --apriori")
+
+    rtn = rtn_covariance(x[:3], x[3:6], cov[:6, :6])
+    diagnostics = {
+        "converged": bool(sol.converged), "message": sol.message, "iterations": int(sol.iterations),
+        "damped_steps": int(sol.damped_steps), "cost": float(sol.chi2), "cost_history": sol.cost_history,
+        "dof": int(sol.dof), "variance_factor": sol.variance_factor, "condition_number": sol.condition_number,
+        "apriori_rows": sol.n_prior, "chi2_apriori": sol.chi2_prior,
+        "samples": int(problem.meas.observed.size), "edited": int((~kept).sum()),
+        "sigma_scale": sigma_scale, "max_elevation_deg": max_el,
+        "residual_rms": {"value": rms, "unit": UNITS[ref.kind], "range_rate_m_s": rms * rr_factor},
+        "traverse": traverse, "constraints": constraints, "observability": obs.as_dict(),
+        "covariance_rtn": rtn,
+        "sigma_rtn": dict(zip(rf.RTN_NAMES, np.sqrt(np.clip(np.diag(rtn), 0.0, None)).tolist())),
+        "units": units, "warnings": warnings,
+    }
+    method = {"cost": opt.cost, "circular": bool(opt.circular),
+              "solver": ("Gauss-Newton with equality constraints, KKT by the null-space method (seed 004 eqs. 15-17)"
+                         if opt.circular else "Gauss-Newton by QR/SVD with Levenberg-Marquardt damping"),
+              "apriori": ref.apriori_note, "kind": ref.kind, "station": ref.station_name, "pass_id": ref.pass_id,
+              "range_rate_model": problem.range_rate_model, "force_model": opt.force, "earth": opt.earth,
+              "doppler_bias": [n for n in problem.names if n.startswith("doppler_")],
+              "propagator": "Taylor (DT) with first-order sensitivity spectra, quasi-inertial frame of the traverse "
+                            "epoch"}
+    if opt.cost == "integral":
+        d = ref.integral
+        w = d["weights"]
+        res_nodes = d["observed"] - sol.computed
+        integral = float(np.sum(w * res_nodes ** 2))
+        method.update({
+            "integral": {"equation": "I = integral over the pass of (Vr_LSQ - Vr(X, t))^2 dt (seed 004 eq. 14)",
+                         "quadrature": f"composite Gauss-Legendre, {opt.quadrature_order} nodes per panel of at most "
+                                       f"{opt.quadrature_panel_s:g} s", "nodes": int(w.size),
+                         "intervals_s": d["intervals"], "I_m2_s": integral,
+                         "rms_curve_difference_m_s": math.sqrt(integral / float(np.sum(w))),
+                         "normalisation": "chi2 = I / (sigma_ref^2 * spacing)", "sigma_ref_m_s": d["sigma_ref"],
+                         "spacing_s": d["spacing"],
+                         "gradient": "first-order 2-D DT sensitivities (seed 004 eqs. 19-21) through the range and "
+                                     "range-rate spectra",
+                         "covariance": "the smoothing polynomial's scaled coefficient covariance propagated through "
+                                       "the linearised estimator (sandwich)",
+                         "sigma_formal": sol.sigma.tolist()},
+            "curve": {"degree": int(ref.curve.fit.degree), "basis": ref.curve.fit.basis, "source": ref.curve.source}})
+    stale_doc = {"epoch": format_epoch(ref.stale_epoch), "frame": "GCRF", "position_m": rv_s[:3].tolist(),
+                 "velocity_m_s": rv_s[3:].tolist(), "parameters": names, "values": np.r_[rv_s, x[6:]].tolist(),
+                 "sigma": np.sqrt(np.clip(np.diag(cov_s), 0.0, None)).tolist(), "covariance": cov_s.tolist()}
+    values = x.copy()
+    extra = {"refinement": method, "at_stale_epoch": stale_doc,
+             "stale_state": {"epoch": format_epoch(ref.initial.epoch), "position_m": ref.initial.r_m.tolist(),
+                             "velocity_m_s": ref.initial.v_m_s.tolist(),
+                             "source": ref.initial.source or (ref.initial.extra or {}).get("source")}}
+    eop_source = getattr(problem.eop, "source", None) or "none (UT1-UTC = 0, no polar motion)"
+    state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=names, values=values, sigma=sigma,
+                               covariance=cov, force_model=opt.force, constants=force_model_constants(opt.force),
+                               eop_source=eop_source, diagnostics=diagnostics, extra=extra)
+    stale_state = State.from_vectors(ref.stale_epoch, rv_s[:3], rv_s[3:], parameters=names,
+                                     values=np.r_[rv_s, x[6:]], sigma=np.sqrt(np.clip(np.diag(cov_s), 0.0, None)),
+                                     covariance=cov_s, force_model=opt.force,
+                                     constants=force_model_constants(opt.force), eop_source=eop_source,
+                                     diagnostics=diagnostics,
+                                     extra={"refinement": method, "at_traverse_epoch": format_epoch(problem.epoch)})
+    return RefineResult(state=state, stale_epoch_state=stale_state, solution=sol, problem=problem, curve=ref.curve,
+                        residuals=residuals, observability=obs, constraints=constraints, covariance=cov, names=names,
+                        warnings=warnings)
+
+
+# ----------------------------------------------------------------------------- text
+
+def summary_text(result: RefineResult) -> str:
+    """One screen for a person: the refined state ± sigma, RTN sigmas, constraints, observability."""
+    st = result.state
+    d = st.diagnostics
+    m = st.extra["refinement"]
+    sol = result.solution
+    lines = [f"trackproc refine ({m['cost']}{', circular' if m['circular'] else ''}): converged in "
+             f"{sol.iterations} iterations ({sol.message}); traverse epoch {d['traverse']['epoch']} "
+             f"({m['station']}/{m['pass_id']}, {m['kind']}); a-priori: {m['apriori']}"]
+    for name, value, sigma, unit in zip(st.parameters, st.values, st.sigma, d["units"]):
+        lines.append(f"  {name:<28s}{value:>18.6f} ± {sigma:<12.4g} {unit}")
+    s = d["sigma_rtn"]
+    lines.append(f"  sigma RTN: radial {s['radial_m']:.3g} m, along {s['along_m']:.3g} m, cross {s['cross_m']:.3g} m; "
+                 f"{s['radial_m_s']:.3g}, {s['along_m_s']:.3g}, {s['cross_m_s']:.3g} m/s")
+    rr = d["residual_rms"]
+    lines.append(f"  residual RMS {rr['value']:.4g} {rr['unit']} ({rr['range_rate_m_s']:.4g} m/s), samples "
+                 f"{d['samples']}, edited {d['edited']}, cost {d['cost']:.6g}, "
+                 f"condition number {d['condition_number']:.3g}")
+    c = d["constraints"]
+    rel = ", ".join(f"{v:.2e}" for v in c["relative"])
+    lines.append(f"  constraints (eq. 5{', imposed' if c['imposed'] else ', not imposed'}): relative [{rel}]; "
+                 f"r_ka {c['r_ka_m']:.3f} ± {c['r_ka_sigma_m']:.3g} m, e {c['eccentricity']:.2e}")
+    o = result.observability
+    sv = ", ".join(f"{v:.3g}" for v in o.state_singular_values)
+    lines.append(f"  observability (state singular values, units of {o.reference}): {sv}")
+    for i in o.unobservable:
+        lines.append(f"    not seen by the pass: {o.direction_text(i)} (posterior/reference sigma {o.gain[i]:.2f})")
+    stale = st.extra["at_stale_epoch"]
+    r_text = ", ".join(f"{v:.3f}" for v in stale["position_m"])
+    v_text = ", ".join(f"{v:.5f}" for v in stale["velocity_m_s"])
+    lines.append(f"  at the stale epoch {stale['epoch']}: r = [{r_text}] m, v = [{v_text}] m/s")
+    for w in result.warnings:
+        lines.append(f"  warning: {w}")
+    return "\n".join(lines) + "\n"
+
+
+# ----------------------------------------------------------------------------- the Table 1 scenario
+
+def traverse_station(state, *, cross_track_m: float = 600e3, side: str = "left", height_m: float = 0.0,
+                     name: str = "TRV", eop=None, earth: str = "wgs84", force: str = "j2",
+                     range_rate_model: str = "doppler"):
+    """A station for which ``state`` (GCRF, at its epoch) is the traverse point of a visible pass.
+
+    The station is placed ``cross_track_m`` from the sub-satellite point at the epoch, to the
+    ``side`` (``"left"``/``"right"``) of the ground track (perpendicular to the satellite's
+    Earth-fixed velocity), then moved along the track until the one-way range-rate received at
+    the epoch (light time, station motion, ``range_rate_model``) is zero to 1 µm/s. Returns
+    ``(Station, info)`` with the elevation and range at the epoch (the top of the pass).
+    """
+    from scipy.optimize import brentq
+
+    from trackproc.dynamics import frames, geodesy, propagator
+    from trackproc.dynamics import timescales as ts
+    from trackproc.io.stations import Station
+    from trackproc.models import measurements as mm
+    from trackproc.models import observation as ob
+
+    jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(np.datetime64(state.epoch, "ns")))
+    r_itrf, v_itrf = frames.gcrf_to_itrf(state.r_m, state.v_m_s, *jd, eop)
+    r_itrf, v_itrf = r_itrf.reshape(3), v_itrf.reshape(3)
+    up = r_itrf / np.linalg.norm(r_itrf)
+    track = v_itrf - up * (up @ v_itrf)
+    track /= np.linalg.norm(track)
+    left = np.cross(up, track)
+    cross = left if side == "left" else -left
+    traj = propagator.propagate(state.r_m, state.v_m_s, state.epoch, [-2.0, 2.0], force=force, eop=eop)
+    radius = 6371e3
+
+    def site(s):
+        n = up + (cross_track_m / radius) * cross + (s / radius) * track
+        n /= np.linalg.norm(n)
+        lat, lon, _ = geodesy.itrf_to_geodetic(n * radius, earth)
+        return float(lat), float(lon)
+
+    def rate(s):
+        lat, lon = site(s)
+        r_st_itrf = geodesy.geodetic_to_itrf(lat, lon, height_m, earth)
+        trk = mm.station_gcrf(r_st_itrf, np.array([jd[0]]), np.array([jd[1]]), eop)
+        geo = ob.solve_light_time(traj, np.array([0.0]), trk.r)
+        return float(ob.range_rate_value(geo.state[:, :3], geo.state[:, 3:], trk.r, trk.v, range_rate_model)[0])
+
+    s = brentq(rate, -400e3, 400e3, xtol=1e-6, rtol=1e-15)
+    lat, lon = site(s)
+    r_st_itrf = geodesy.geodetic_to_itrf(lat, lon, height_m, earth)
+    enu = geodesy.itrf_to_enu(r_itrf, r_st_itrf, lat, lon)
+    az, el, rng = geodesy.enu_to_azel(enu)
+    station = Station(name, math.degrees(lat), math.degrees(lon) if lon >= -math.pi else math.degrees(lon) + 360.0,
+                      float(height_m))
+    return station, {"elevation_deg": float(np.degrees(el)), "range_m": float(rng),
+                     "azimuth_deg": float(np.degrees(az)), "along_track_shift_m": float(s), "range_rate_m_s": rate(s)}

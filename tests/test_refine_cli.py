@@ -1,0 +1,179 @@
+"""``trackproc refine`` at the command line: the seed 004 Table 1 scenario through simulate ->
+smooth -> refine (state file with covariance, the state at the stale epoch, constraints,
+observability, residuals), a pipe on stdin, a TLE as the stale state, exit code 2 for bad input
+(naming the file or the field) and exit code 1 for a failed refinement (nothing written)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from trackproc.io.statefile import read_state
+
+SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+#: The station of the Table 1 scenario: the truth state of sample_data/truth.json is the traverse
+#: point of its pass (trackproc.pipeline.refine.traverse_station, 500 km left of the track).
+TRV = "station,lat_deg,lon_deg,height_m\nTRV,56.454155,9.725833,0.0\n"
+ISS_TLE = ("1 25544U 98067A   19343.69339541  .00001764  00000-0  38792-4 0  9991\n"
+           "2 25544  51.6439 211.2001 0007417  17.6667  85.6398 15.50103472202482\n")
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    from trackproc.cli import app as cli_app
+
+    d = tmp_path_factory.mktemp("refine")
+    (d / "trv.csv").write_text(TRV)
+    args = ["simulate", "--state", SAMPLE / "truth.json", "--stations", d / "trv.csv", "--start",
+            "2026-03-20T09:15:00Z", "--duration", "1800", "--step", "2", "--kinds", "doppler", "--carrier-hz", "2.2e9",
+            "--sigma-doppler-hz", "0.1", "--freq-offset-hz", "150", "--seed", "1", "-q", "-o", d / "pass.parquet"]
+    assert cli_app.main([str(a) for a in args]) == 0
+    assert cli_app.main(["-q", "smooth", str(d / "pass.parquet"), "-o", str(d / "smoothed.parquet")]) == 0
+    assert cli_app.main(["-q", "smooth", str(d / "pass.parquet"), "--grid", "5", "-o", str(d / "grid.parquet")]) == 0
+    return d
+
+
+def test_refine_writes_the_state_the_stale_epoch_report_and_residuals(run_cli, files, tmp_path):
+    out, res_csv = tmp_path / "refined.json", tmp_path / "res.csv"
+    result = run_cli(["refine", files / "smoothed.parquet", "--initial", SAMPLE / "stale.json", "--residuals", res_csv,
+                      "-o", out])
+    assert result.exit_code == 0, result.stderr
+    assert "trackproc refine (pointwise)" in result.stderr and "not seen by the pass" in result.stderr
+    doc = json.loads(out.read_text())
+    assert doc["parameters"] == ["x", "y", "z", "vx", "vy", "vz", "doppler_offset:TRV-001"]
+    assert len(doc["covariance"]) == 7 and doc["frame"] == "GCRF" and doc["force_model"] == "two-body+J2"
+    assert doc["epoch"].startswith("2026-03-20T09:29:59.9")                         # the traverse point
+    diag = doc["diagnostics"]
+    assert diag["converged"] and diag["iterations"] >= 1 and diag["traverse"]["curve"] == "metadata"
+    assert {"singular_values", "state_singular_values", "directions_rtn", "unobservable"} <= set(diag["observability"])
+    assert diag["observability"]["unobservable"] and "cross velocity" in diag["observability"]["unobservable"][0]
+    assert set(diag["constraints"]) >= {"names", "values", "relative", "r_ka_m", "eccentricity"}
+    stale = doc["at_stale_epoch"]
+    assert stale["epoch"] == "2026-03-20T09:30:00.000Z" and len(stale["covariance"]) == 7
+    truth = read_state(str(SAMPLE / "truth.json"))
+    err = np.r_[stale["position_m"], stale["velocity_m_s"]] - truth.rv
+    assert np.all(np.abs(err) < 3 * np.array(stale["sigma"][:6]))
+    assert doc["refinement"]["apriori"].startswith("the stale state's covariance")
+    state = read_state(str(out))                                   # a valid state file, for chaining
+    assert state.covariance.shape == (7, 7)
+    res = pd.read_csv(res_csv, comment="#")
+    assert list(res.columns)[:6] == ["time", "station", "pass_id", "kind", "unit", "observed"]
+    assert len(res) > 300 and res["kind"].eq("doppler").all()
+    assert abs(res["residual"].std() - 0.1) < 0.02                                  # 0.1 Hz noise
+
+
+def test_output_epoch_stale_and_integral_with_constraints(run_cli, files, tmp_path):
+    out = tmp_path / "seed.json"
+    result = run_cli(["refine", files / "pass.parquet", "--initial", SAMPLE / "stale.json", "--cost", "integral",
+                      "--circular", "--output-epoch", "stale", "-o", out])
+    assert result.exit_code == 0, result.stderr
+    doc = json.loads(out.read_text())
+    assert doc["epoch"] == "2026-03-20T09:30:00.000Z" and "r_ka" in doc["parameters"]
+    c = doc["diagnostics"]["constraints"]
+    assert c["imposed"] and max(abs(v) for v in c["relative"]) < 1e-9 and len(c["multipliers"]) == 3
+    assert doc["refinement"]["integral"]["nodes"] > 100 and doc["refinement"]["curve"]["source"] == "fitted here"
+    assert "conditional on an exactly circular orbit" in result.stderr
+
+
+def test_pipe_on_stdin_to_stdout(run_cli, files):
+    result = run_cli(["refine", "-", "--initial", SAMPLE / "stale.json", "-q", "-o", "-"],
+                     input=(files / "smoothed.parquet").read_bytes())
+    assert result.exit_code == 0, result.stderr
+    doc = json.loads(result.stdout)
+    assert doc["diagnostics"]["converged"] and result.stderr == ""
+
+
+def test_a_tle_as_the_stale_state(run_cli, tmp_path):
+    """The ISS TLE: a station placed under a pass, simulated from the TLE's state, refined from the TLE."""
+    from trackproc.dynamics import timescales as ts
+    from trackproc.io.tle import parse_tle, tle_state
+    from trackproc.pipeline.refine import traverse_station
+
+    (tmp_path / "iss.tle").write_text(ISS_TLE)
+    at = np.datetime64("2019-12-09T17:00:00")
+    station, _ = traverse_station(tle_state(parse_tle(ISS_TLE), at=at), cross_track_m=400e3,
+                                  eop=ts.EarthOrientation())
+    (tmp_path / "st.csv").write_text(f"station,lat_deg,lon_deg,height_m\nISS,{station.lat_deg:.6f},"
+                                     f"{station.lon_deg:.6f},0\n")
+    res = run_cli(["simulate", "--tle", tmp_path / "iss.tle", "--stations", tmp_path / "st.csv", "--start",
+                   "2019-12-09T16:52:00Z", "--duration", "960", "--step", "2", "--kinds", "doppler", "--seed", "3",
+                   "--freq-offset-hz", "-40", "-q", "-o", tmp_path / "p.parquet"])
+    assert res.exit_code == 0, res.stderr
+    res = run_cli(["refine", tmp_path / "p.parquet", "--initial", tmp_path / "iss.tle", "-q", "-o",
+                   tmp_path / "o.json"])
+    assert res.exit_code == 0, res.stderr
+    doc = json.loads((tmp_path / "o.json").read_text())
+    assert doc["refinement"]["apriori"].startswith("default")
+    assert doc["at_stale_epoch"]["epoch"] == doc["epoch"]                  # SGP4 at the traverse epoch
+    assert any("TLE is evaluated by SGP4" in w for w in doc["diagnostics"]["warnings"])
+    i = doc["parameters"].index("doppler_offset:ISS-001")
+    assert abs(doc["values"][i] + 40.0) < 3 * doc["sigma"][i]
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["{dir}/missing.parquet", "--initial", "{stale}"], "missing.parquet"),
+    (["{pass}", "--initial", "{dir}/nope.json"], "nope.json"),
+    (["{pass}", "--initial", "{dir}/bad.json"], "bad.json"),
+    (["{pass}", "--initial", "{stale}", "--stations", "{dir}/badst.csv"], "badst.csv"),
+    (["{unknown}", "--initial", "{stale}", "--stations", "{dir}/other.csv"], "'station'"),
+    (["{pass}", "--initial", "{stale}", "--pass-id", "TRV-009"], "--pass-id"),
+    (["{pass}", "--initial", "{stale}", "--kind", "range_rate"], "'kind'"),
+    (["{two}", "--initial", "{stale}"], "--pass-id"),
+    (["{angles}", "--initial", "{stale}"], "'kind'"),
+    (["{grid}", "--initial", "{stale}"], "--cost integral"),
+    (["{pass}", "--initial", "{stale}", "--apriori-sigma", "x:10"], "--apriori-sigma"),
+    (["{pass}", "--initial", "{stale}", "--apriori-sigma", "clock=10"], "--apriori-sigma"),
+    (["{pass}", "--initial", "{stale}", "--no-apriori", "--apriori-sigma", "x=10"], "--apriori-sigma"),
+    (["{pass}", "--initial", "{stale}", "--cost", "other"], "--cost"),
+    (["{nocarrier}", "--initial", "{stale}"], "carrier_hz"),
+])
+def test_bad_input_exit_2_naming_the_file_or_field(run_cli, files, tmp_path, args, needle):
+    from trackproc.io.passfile import read_pass_table, write_pass_table
+
+    d = tmp_path
+    (d / "bad.json").write_text('{"epoch": "2026-03-20T09:30:00Z", "frame": "GCRF", "position_m": [1, 2]}')
+    (d / "badst.csv").write_text("station,lat_deg,lon_deg,height_m\nTRV,95.0,9.7,0\n")
+    (d / "other.csv").write_text("station,lat_deg,lon_deg,height_m\nXYZ,50.0,9.7,0\n")
+    table = read_pass_table(str(files / "pass.parquet"))
+    two = table.frame.copy()
+    two.loc[two.index[: len(two) // 2], "pass_id"] = "TRV-000"
+    write_pass_table(type(table)(two, table.meta), str(d / "two.parquet"))
+    angles = table.frame.copy()
+    angles["kind"] = "elevation"
+    angles["value"] = 0.5
+    angles["sigma"] = 1e-3
+    write_pass_table(type(table)(angles, table.meta), str(d / "angles.parquet"))
+    write_pass_table(type(table)(table.frame, {k: v for k, v in table.meta.items() if k != "carrier_hz"}),
+                     str(d / "nocarrier.parquet"))
+    unknown = table.frame.copy()
+    unknown["station"] = "ABC"
+    write_pass_table(type(table)(unknown, {k: v for k, v in table.meta.items() if k != "stations"}),
+                     str(d / "unknown.parquet"))
+    fill = {"pass": str(files / "pass.parquet"), "stale": str(SAMPLE / "stale.json"), "dir": str(d),
+            "two": str(d / "two.parquet"), "angles": str(d / "angles.parquet"), "grid": str(files / "grid.parquet"),
+            "nocarrier": str(d / "nocarrier.parquet"), "unknown": str(d / "unknown.parquet")}
+    out = d / "o.json"
+    result = run_cli(["refine"] + [a.format(**fill) for a in args] + ["-o", str(out)])
+    assert result.exit_code == 2, result.stderr
+    assert needle in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr
+    assert not out.exists()
+
+
+def test_non_convergence_exit_1_and_nothing_written(run_cli, files, tmp_path):
+    out = tmp_path / "o.json"
+    result = run_cli(["refine", files / "pass.parquet", "--initial", SAMPLE / "stale.json", "--max-iterations", "1",
+                      "-o", out])
+    assert result.exit_code == 1, result.stderr
+    assert "did not converge in 1 iterations" in result.stderr
+    assert not out.exists()
+
+
+def test_help_shows_the_example(run_cli):
+    result = run_cli(["refine", "--help"])
+    assert result.exit_code == 0
+    assert "--cost" in result.stdout and "--circular" in result.stdout and "trackproc refine" in result.stdout
