@@ -50,6 +50,23 @@ OutputOpt = typer.Option(None, "-o", "--output",
                          help="Output file, or - for stdout (default: stdout when it is a pipe).")
 
 
+def named_values(items: list, flag: str) -> dict:
+    """``NAME=NUMBER`` options (``--apriori-sigma x=1000``) as a dict; a usage error otherwise."""
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not name.strip():
+            raise typer.BadParameter(f"expected NAME=SIGMA, got {item!r}", param_hint=flag)
+        if name.strip() in out:
+            raise typer.BadParameter(f"{name.strip()} given twice", param_hint=flag)
+        out[name.strip()] = number
+    return out
+
+
 def resolve_output(output: Optional[str], what: str = "output") -> str:
     """``-o`` given: use it. Not given: stdout when it is not a terminal, else a usage error."""
     if output is not None:

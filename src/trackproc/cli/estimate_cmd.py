@@ -9,7 +9,8 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
-from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, resolve_output
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModel, named_values,
+                                  resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -22,27 +23,6 @@ class DopplerBias(str, Enum):
 class BiasPer(str, Enum):
     pass_ = "pass"
     station = "station"
-
-
-class RangeRateChoice(str, Enum):
-    doppler = "doppler"
-    instantaneous = "instantaneous"
-
-
-def _named_values(items: List[str], flag: str) -> dict:
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            number = float(value)
-        except ValueError:
-            sep = ""
-        if not sep or not name.strip():
-            raise typer.BadParameter(f"expected NAME=SIGMA, got {item!r}", param_hint=flag)
-        if name.strip() in out:
-            raise typer.BadParameter(f"{name.strip()} given twice", param_hint=flag)
-        out[name.strip()] = number
-    return out
 
 
 @app.command("estimate")
@@ -79,7 +59,7 @@ def estimate_command(
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
     dut1: Optional[float] = Dut1Opt,
-    range_rate_model: Optional[RangeRateChoice] = typer.Option(
+    range_rate_model: Optional[RangeRateModel] = typer.Option(
         None, "--range-rate-model",
         help="doppler (derivative of the light-time range) or instantaneous (Orekit's RangeRate); "
              "default: the pass files' metadata, else doppler."),
@@ -123,7 +103,7 @@ def estimate_command(
     if range_bias and range_bias_station:
         raise typer.BadParameter("give --range-bias (every station) or --range-bias-station, not both",
                                  param_hint="--range-bias")
-    sigmas = _named_values(apriori_sigma, "--apriori-sigma")
+    sigmas = named_values(apriori_sigma, "--apriori-sigma")
     kind_list = [k.strip() for k in kinds.split(",") if k.strip()] if kinds else None
 
     import sys

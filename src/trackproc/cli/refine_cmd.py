@@ -9,7 +9,8 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
-from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, resolve_output
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModel, named_values,
+                                  resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -30,30 +31,9 @@ class Kind(str, Enum):
     range_rate = "range_rate"
 
 
-class RangeRateChoice(str, Enum):
-    doppler = "doppler"
-    instantaneous = "instantaneous"
-
-
 class OutputEpoch(str, Enum):
     traverse = "traverse"
     stale = "stale"
-
-
-def _named_values(items: List[str], flag: str) -> dict:
-    out = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        try:
-            number = float(value)
-        except ValueError:
-            sep = ""
-        if not sep or not name.strip():
-            raise typer.BadParameter(f"expected NAME=SIGMA, got {item!r}", param_hint=flag)
-        if name.strip() in out:
-            raise typer.BadParameter(f"{name.strip()} given twice", param_hint=flag)
-        out[name.strip()] = number
-    return out
 
 
 @app.command("refine")
@@ -108,7 +88,7 @@ def refine_command(
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
     dut1: Optional[float] = Dut1Opt,
-    range_rate_model: Optional[RangeRateChoice] = typer.Option(
+    range_rate_model: Optional[RangeRateModel] = typer.Option(
         None, "--range-rate-model",
         help="doppler (derivative of the light-time range) or instantaneous (Orekit's RangeRate); "
              "default: the pass file's metadata, else doppler."),
@@ -141,7 +121,7 @@ def refine_command(
     if residuals == "-" and out == "-":
         raise typer.BadParameter("stdout already carries the state file; give --residuals a file",
                                  param_hint="--residuals")
-    sigmas = _named_values(apriori_sigma, "--apriori-sigma")
+    sigmas = named_values(apriori_sigma, "--apriori-sigma")
 
     import sys
 
