@@ -30,7 +30,9 @@ measurements, rank deficiency (naming the unobservable combinations: the right s
 vectors of the negligible singular values, in parameter names), non-convergence, and a
 model that fails (non-finite values).
 
-Pure numpy; the model is a callable ``model(x) -> (computed (N,), jacobian (N, n))``.
+Pure numpy; the model is a callable ``model(x) -> (computed (N,), jacobian (N, n))``. The problem
+(:class:`_Problem`) and the iterations (:func:`_iterate`) also serve the constrained solver
+:func:`trackproc.methods.refinement.solve_kkt`.
 """
 
 from __future__ import annotations
@@ -198,6 +200,212 @@ def _prior_rhs(factors, x: np.ndarray) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0)
 
 
+# ----------------------------------------------------------------------------- the problem, shared
+
+@dataclass
+class _Run:
+    """Where :func:`_iterate` stopped: the last accepted point (``x, h, jac, r``), the editing
+    ``mask`` and ``cost`` there, and the bookkeeping; ``s, vt`` of the last linearisation."""
+
+    x: np.ndarray
+    h: np.ndarray
+    jac: np.ndarray
+    r: np.ndarray
+    mask: np.ndarray
+    cost: float
+    history: list
+    damped: int
+    converged: bool
+    message: str
+    iterations: int
+    s: Optional[np.ndarray] = None
+    vt: Optional[np.ndarray] = None
+
+
+class _Problem:
+    """The whitened problem ``Σ ((y - h(x))/σ)² + prior terms`` (seed 002 eqs. 4-8), shared by
+    :func:`solve` and :func:`trackproc.methods.refinement.solve_kkt`: residuals, model calls,
+    cost, k-sigma editing and the whitened system.
+
+    ``n`` parameters; ``clip`` the k of the editing (None or 0: none); ``fixed_out`` (N,) bool:
+    samples edited from the start and never re-admitted (default: none). Other arguments as in
+    :func:`solve`.
+    """
+
+    def __init__(self, model, n: int, observed, sigma, *, scales=None, priors: Sequence[Prior] = (),
+                 periodic=None, clip: Optional[float] = None, fixed_out=None):
+        self.model = model
+        self.n = n
+        self.y = np.asarray(observed, float)
+        self.sig = np.asarray(sigma, float)
+        self.nobs = self.y.size
+        if self.sig.shape != self.y.shape or not np.all(np.isfinite(self.sig) & (self.sig > 0)):
+            raise ValueError("sigma must be positive and finite, one per measurement")
+        self.scales = np.ones(n) if scales is None else np.asarray(scales, float)
+        self.periodic = np.zeros(self.nobs, bool) if periodic is None else np.asarray(periodic, bool)
+        self.fixed_out = np.zeros(self.nobs, bool) if fixed_out is None else np.asarray(fixed_out, bool).copy()
+        self.prior_a, self.prior_factors = _prior_rows(priors, n, self.scales)
+        self.n_prior = self.prior_a.shape[0]
+        self.clip = clip if clip else None
+
+    def residuals(self, h):
+        """``y - h``, wrapped to [-π, π) where periodic."""
+        r = self.y - h
+        if self.periodic.any():
+            r = np.where(self.periodic, np.mod(r + np.pi, 2 * np.pi) - np.pi, r)
+        return r
+
+    def evaluate(self, x):
+        """``model(x)`` as float arrays of the expected shapes (ValueError otherwise)."""
+        h, jac = self.model(x)
+        h = np.asarray(h, float)
+        jac = np.asarray(jac, float)
+        nobs, n = self.nobs, self.n
+        if h.shape != (nobs,) or jac.shape != (nobs, n):
+            raise ValueError(f"model returned shapes {h.shape}, {jac.shape}; expected ({nobs},), ({nobs}, {n})")
+        return h, jac
+
+    def start(self, x, prepare=None):
+        """``(x, h, J)`` at the initial values, after ``prepare(x)`` if given; a failure is a ProcessingError."""
+        try:
+            if prepare is not None:
+                x = prepare(x)
+            h, jac = self.evaluate(x)
+        except (ArithmeticError, ValueError) as exc:
+            raise ProcessingError(f"the model cannot be evaluated at the initial values: {exc}") from None
+        return x, h, jac
+
+    def step(self, x, xi, retract=None):
+        """The point a scaled step ξ leads to: ``x + S ξ``, or ``retract(x, S ξ)``."""
+        return x + self.scales * xi if retract is None else retract(x, self.scales * xi)
+
+    def prior_rhs(self, x):
+        """The whitened a-priori residuals at ``x``."""
+        return _prior_rhs(self.prior_factors, x)
+
+    def cost(self, r, x, mask):
+        """χ²: squared normalized residuals of the kept samples plus the a-priori terms."""
+        z = r[~mask] / self.sig[~mask]
+        pr = self.prior_rhs(x)
+        return float(z @ z + pr @ pr)
+
+    def edit(self, r, mask_prev):
+        """k-sigma editing: ``fixed_out`` or ``|r/σ| > k · max(1, WRMS of the samples kept in mask_prev)``."""
+        if self.clip is None:
+            return self.fixed_out.copy()
+        z = np.abs(r / self.sig)
+        kept = z[~mask_prev]
+        wrms = float(np.sqrt(np.mean(kept * kept))) if kept.size else 1.0
+        return self.fixed_out | (z > self.clip * max(1.0, wrms))
+
+    def system(self, jac, r, x, mask, it):
+        """The whitened, scaled system ``J ξ ≈ b``: kept samples, then the a-priori rows."""
+        keep = ~mask
+        a = jac[keep] / self.sig[keep, None] * self.scales[None, :]
+        b = r[keep] / self.sig[keep]
+        if self.n_prior:
+            a = np.vstack([a, self.prior_a])
+            b = np.concatenate([b, self.prior_rhs(x)])
+        if not np.all(np.isfinite(a)):
+            raise ProcessingError("the Jacobian has non-finite entries", {"iteration": it})
+        return a, b
+
+    def solution(self, names, run: _Run, cov_scaled, s, *, free: int, constrained: bool = False) -> Solution:
+        """The :class:`Solution` at the end of ``run``, with ``K_out = S cov_scaled S`` (eq. 9) and
+        ``free`` parameters in the degrees of freedom; ``constrained``: the covariance may be
+        singular (zero sigmas, zero correlations there)."""
+        scales = self.scales
+        cov = cov_scaled * np.outer(scales, scales)
+        cov = 0.5 * (cov + cov.T)
+        if constrained:
+            sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                corr = np.where(np.outer(sd, sd) > 0, cov / np.outer(sd, sd), 0.0)
+        else:
+            sd = np.sqrt(np.diag(cov))
+            corr = cov / np.outer(sd, sd)
+        dof = int((~run.mask).sum()) + self.n_prior - free
+        chi2 = run.cost
+        return Solution(names=names, values=run.x, covariance=cov, sigma=sd, correlation=corr,
+                        covariance_scaled=cov_scaled, scales=scales, chi2=chi2, dof=dof,
+                        variance_factor=chi2 / dof if dof > 0 else math.nan, condition_number=float(s[0] / s[-1]),
+                        singular_values=s, computed=run.h, residual=run.r, normalized=run.r / self.sig,
+                        edited=run.mask, jacobian=run.jac, iterations=run.iterations, converged=True,
+                        cost_history=run.history, damped_steps=run.damped, message=run.message,
+                        chi2_prior=float(np.sum(self.prior_rhs(run.x) ** 2)), n_prior=int(self.n_prior))
+
+
+def _iterate(prob: _Problem, opt: Options, x, h, jac, r, mask, *, stable: bool, linearise, trial, check,
+             tag: str = "") -> _Run:
+    """Damped Gauss-Newton with k-sigma editing and the stopping rules of the module docstring,
+    from the point ``x`` (model values ``h``, Jacobian ``jac``, residuals ``r``, editing ``mask``,
+    ``stable`` if that editing is settled). Shared by :func:`solve` and
+    :func:`trackproc.methods.refinement.solve_kkt`.
+
+    ``linearise(jac, r, x, mask, it) -> (Uᵀ b, Σ, Vᵀ, to_step)``: the SVD of the whitened system
+    of the free step ``q`` and the map ``q -> ξ`` (the scaled step); ``trial(x, ξ) -> x_new``, or
+    None for a refused point; ``check(mask)`` raises when too few samples are kept; ``tag`` ends
+    the convergence messages. Non-convergence is returned (``converged`` False), not raised.
+    """
+    cost = prob.cost(r, x, mask)
+    history = [cost]
+    damped = 0
+    s = vt = None
+    it = 0
+    for it in range(1, opt.max_iterations + 1):
+        ub, s, vt, to_step = linearise(jac, r, x, mask, it)
+        sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))     # formal sigma of q
+        q_gn = vt.T @ (ub / s)
+        gn_sig = float(np.max(np.abs(q_gn) / sig_q))
+        if stable and gn_sig < opt.step_tol:          # at the minimum already: no evaluation needed
+            return _Run(x, h, jac, r, mask, cost, history, damped, True,
+                        f"converged: Gauss-Newton step {gn_sig:.2g} sigma{tag}", it, s, vt)
+        accepted = None
+        for attempt in range(opt.max_damping_tries + 1):
+            if attempt == 0:
+                q = q_gn
+            else:
+                lam = opt.initial_damping * s[0] ** 2 * 10.0 ** (attempt - 1)
+                q = vt.T @ (ub * s / (s * s + lam))
+            x_new = trial(x, to_step(q))
+            if x_new is None:
+                continue
+            try:
+                h_new, jac_new = prob.evaluate(x_new)
+            except (ArithmeticError, ProcessingError, ValueError):
+                continue
+            if not np.all(np.isfinite(h_new)):
+                continue
+            r_new = prob.residuals(h_new)
+            c_new = prob.cost(r_new, x_new, mask)
+            if c_new <= cost * (1.0 + 1e-12) + 1e-300:
+                accepted = (x_new, h_new, jac_new, r_new, c_new, q)
+                damped += attempt > 0
+                break
+        if accepted is None:
+            if gn_sig < opt.step_tol:         # already at the minimum to round-off
+                return _Run(x, h, jac, r, mask, cost, history, damped, True,
+                            "converged (no step reduces the cost further)", it, s, vt)
+            raise ProcessingError(
+                f"no step reduces the cost after {opt.max_damping_tries} damped tries at iteration {it} "
+                f"(cost {cost:.6g}); the initial state may be too far off",
+                {"iteration": it, "cost": cost, "cost_history": history})
+        x, h, jac, r, c_new, q = accepted
+        step_sig = float(np.max(np.abs(q) / sig_q))
+        rel = abs(cost - c_new) / max(c_new, 1e-300)
+        new_mask = prob.edit(r, mask)
+        check(new_mask)
+        stable = bool(np.array_equal(new_mask, mask))
+        mask = new_mask
+        cost = prob.cost(r, x, mask)
+        history.append(cost)
+        if stable and (step_sig < opt.step_tol or rel < opt.cost_rtol):
+            message = (f"converged: step {step_sig:.2g} sigma{tag}" if step_sig < opt.step_tol
+                       else f"converged: relative cost change {rel:.2g}{tag}")
+            return _Run(x, h, jac, r, mask, cost, history, damped, True, message, it, s, vt)
+    return _Run(x, h, jac, r, mask, cost, history, damped, False, "", it, s, vt)
+
+
 # ----------------------------------------------------------------------------- the solver
 
 def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: Sequence[str],
@@ -230,174 +438,56 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
     x = np.asarray(x0, float).copy()
     n = x.size
     names = list(names)
-    y = np.asarray(observed, float)
-    sig = np.asarray(sigma, float)
-    nobs = y.size
-    if sig.shape != y.shape or not np.all(np.isfinite(sig) & (sig > 0)):
-        raise ValueError("sigma must be positive and finite, one per measurement")
-    scales = np.ones(n) if scales is None else np.asarray(scales, float)
-    periodic = np.zeros(nobs, bool) if periodic is None else np.asarray(periodic, bool)
-    fixed_out = np.zeros(nobs, bool) if edited is None else np.asarray(edited, bool).copy()
+    prob = _Problem(model, n, observed, sigma, scales=scales, priors=priors, periodic=periodic, clip=opt.clip,
+                    fixed_out=edited)
+    scales = prob.scales
     lo, hi = (np.full(n, -np.inf), np.full(n, np.inf)) if bounds is None else (np.asarray(bounds[0], float),
                                                                                 np.asarray(bounds[1], float))
-    prior_a, prior_factors = _prior_rows(priors, n, scales)
-    n_prior = prior_a.shape[0]
-    clip = opt.clip if opt.clip else None
-
-    def residuals(h):
-        r = y - h
-        if periodic.any():
-            r = np.where(periodic, np.mod(r + np.pi, 2 * np.pi) - np.pi, r)
-        return r
-
-    def evaluate(xv):
-        h, jac = model(xv)
-        h = np.asarray(h, float)
-        jac = np.asarray(jac, float)
-        if h.shape != (nobs,) or jac.shape != (nobs, n):
-            raise ValueError(f"model returned shapes {h.shape}, {jac.shape}; expected ({nobs},), ({nobs}, {n})")
-        return h, jac
-
-    def cost_of(r, xv, mask):
-        z = r[~mask] / sig[~mask]
-        pr = _prior_rhs(prior_factors, xv)
-        return float(z @ z + pr @ pr)
-
-    def edit(r, mask_prev):
-        if clip is None:
-            return fixed_out.copy()
-        z = np.abs(r / sig)
-        kept = z[~mask_prev]
-        wrms = float(np.sqrt(np.mean(kept * kept))) if kept.size else 1.0
-        return fixed_out | (z > clip * max(1.0, wrms))
 
     def check_counts(mask):
         kept = int((~mask).sum())
-        if kept + n_prior < n or kept == 0:
+        if kept + prob.n_prior < n or kept == 0:
             raise ProcessingError(
-                f"too few measurements: {kept} kept ({int(mask.sum())} edited) and {n_prior} a-priori "
+                f"too few measurements: {kept} kept ({int(mask.sum())} edited) and {prob.n_prior} a-priori "
                 f"constraints for {n} parameters",
-                {"measurements": nobs, "kept": kept, "edited": int(mask.sum()), "parameters": n,
-                 "apriori_rows": n_prior})
+                {"measurements": prob.nobs, "kept": kept, "edited": int(mask.sum()), "parameters": n,
+                 "apriori_rows": prob.n_prior})
 
-    def system(jac, r, xv, mask):
-        keep = ~mask
-        a = jac[keep] / sig[keep, None] * scales[None, :]
-        b = r[keep] / sig[keep]
-        if n_prior:
-            a = np.vstack([a, prior_a])
-            b = np.concatenate([b, _prior_rhs(prior_factors, xv)])
-        return a, b
-
-    def factor(a, b, it):
-        if not np.all(np.isfinite(a)):
-            raise ProcessingError("the Jacobian has non-finite entries", {"iteration": it})
-        ub, s, vt = whitened_svd(a, b)
+    def factor(jac, r, xv, mask, it):
+        ub, s, vt = whitened_svd(*prob.system(jac, r, xv, mask, it))
         if s.size < n or s[-1] <= opt.rank_rtol * s[0]:
             _raise_rank(s, vt, names, scales, opt.rank_rtol, it)
         return ub, s, vt
 
-    try:
-        h, jac = evaluate(x)
-    except (ArithmeticError, ValueError) as exc:
-        raise ProcessingError(f"the model cannot be evaluated at the initial values: {exc}") from None
+    def linearise(jac, r, xv, mask, it):
+        return (*factor(jac, r, xv, mask, it), lambda xi: xi)      # the free step is the whole step
+
+    x, h, jac = prob.start(x)
     if not np.all(np.isfinite(h)):
         raise ProcessingError("the model gives non-finite values at the initial values",
                               {"non_finite": int((~np.isfinite(h)).sum())})
-    r = residuals(h)
-    mask = fixed_out.copy()
+    r = prob.residuals(h)
+    mask = prob.fixed_out.copy()
     check_counts(mask)
     # first editing pass against the initial orbit (generous: WRMS of everything)
-    mask = edit(r, mask)
-    stable = bool(np.array_equal(mask, fixed_out))
+    mask = prob.edit(r, mask)
+    stable = bool(np.array_equal(mask, prob.fixed_out))
     check_counts(mask)
-    cost = cost_of(r, x, mask)
-    history = [cost]
-    damped = 0
-    converged = False
-    message = ""
-    it = 0
-    for it in range(1, opt.max_iterations + 1):
-        a, b = system(jac, r, x, mask)
-        ub, s, vt = factor(a, b, it)
-        sig_scaled = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))     # formal sigma of ξ
-        gn_sig = float(np.max(np.abs(vt.T @ (ub / s)) / sig_scaled))
-        if stable and gn_sig < opt.step_tol:          # at the minimum already: no evaluation needed
-            converged = True
-            message = f"converged: Gauss-Newton step {gn_sig:.2g} sigma"
-            break
-        accepted = None
-        lam = 0.0
-        for attempt in range(opt.max_damping_tries + 1):
-            if attempt == 0:
-                xi = vt.T @ (ub / s)
-            else:
-                lam = opt.initial_damping * s[0] ** 2 * 10.0 ** (attempt - 1)
-                xi = vt.T @ (ub * s / (s * s + lam))
-            x_new = np.clip(x + scales * xi if retract is None else retract(x, scales * xi), lo, hi)
-            try:
-                h_new, jac_new = evaluate(x_new)
-            except (ArithmeticError, ProcessingError, ValueError):
-                continue
-            if not np.all(np.isfinite(h_new)):
-                continue
-            r_new = residuals(h_new)
-            c_new = cost_of(r_new, x_new, mask)
-            if c_new <= cost * (1.0 + 1e-12) + 1e-300:
-                accepted = (x_new, h_new, jac_new, r_new, c_new, xi)
-                damped += attempt > 0
-                break
-        if accepted is None:
-            if gn_sig < opt.step_tol:         # already at the minimum to round-off
-                converged = True
-                message = "converged (no step reduces the cost further)"
-                break
-            raise ProcessingError(
-                f"no step reduces the cost after {opt.max_damping_tries} damped tries at iteration {it} "
-                f"(cost {cost:.6g}); the initial state may be too far off",
-                {"iteration": it, "cost": cost, "cost_history": history})
-        x_new, h, jac, r, c_new, xi = accepted
-        step_sig = float(np.max(np.abs(xi) / sig_scaled))
-        rel = abs(cost - c_new) / max(c_new, 1e-300)
-        x = x_new
-        new_mask = edit(r, mask)
-        check_counts(new_mask)
-        same = bool(np.array_equal(new_mask, mask))
-        stable = same
-        mask = new_mask
-        cost = cost_of(r, x, mask)
-        history.append(cost)
-        if same and (step_sig < opt.step_tol or rel < opt.cost_rtol):
-            converged = True
-            message = (f"converged: step {step_sig:.2g} sigma" if step_sig < opt.step_tol
-                       else f"converged: relative cost change {rel:.2g}")
-            break
-    if not converged:
-        weakest = combination_text(vt[-1], names)
+    run = _iterate(prob, opt, x, h, jac, r, mask, stable=stable, linearise=linearise,
+                   trial=lambda xv, xi: np.clip(prob.step(xv, xi, retract), lo, hi), check=check_counts)
+    if not run.converged:
+        s, history = run.s, run.history
+        weakest = combination_text(run.vt[-1], names)
         raise ProcessingError(
             f"did not converge in {opt.max_iterations} iterations (cost {history[-2]:.6g} -> {history[-1]:.6g}; "
             f"condition number {s[0] / s[-1]:.3g}, weakest combination {weakest}); "
             "try --max-iterations, a better --initial state, or a-priori sigmas",
-            {"iterations": it, "cost_history": history, "edited": int(mask.sum()),
+            {"iterations": run.iterations, "cost_history": history, "edited": int(run.mask.sum()),
              "condition_number": float(s[0] / s[-1]), "weakest_combination": weakest})
 
     # error matrices at the solution (the Jacobian of the last accepted point)
-    a, b = system(jac, r, x, mask)
-    _, s, vt = factor(a, b, it)
-    cov_scaled = (vt.T / s ** 2) @ vt
-    cov = cov_scaled * np.outer(scales, scales)
-    cov = 0.5 * (cov + cov.T)
-    sd = np.sqrt(np.diag(cov))
-    corr = cov / np.outer(sd, sd)
-    kept = int((~mask).sum())
-    dof = kept + n_prior - n
-    chi2 = cost
-    vf = chi2 / dof if dof > 0 else math.nan
-    return Solution(names=names, values=x, covariance=cov, sigma=sd, correlation=corr, covariance_scaled=cov_scaled,
-                    scales=scales, chi2=chi2, dof=dof, variance_factor=vf, condition_number=float(s[0] / s[-1]),
-                    singular_values=s, computed=h, residual=r, normalized=r / sig, edited=mask, jacobian=jac,
-                    iterations=it, converged=True, cost_history=history, damped_steps=damped, message=message,
-                    chi2_prior=float(np.sum(_prior_rhs(prior_factors, x) ** 2)), n_prior=int(n_prior))
+    _, s, vt = factor(run.jac, run.r, run.x, run.mask, run.iterations)
+    return prob.solution(names, run, (vt.T / s ** 2) @ vt, s, free=n)
 
 
 def _raise_rank(s, vt, names, scales, rtol, it):

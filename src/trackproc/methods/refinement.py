@@ -73,7 +73,7 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from trackproc.errors import ProcessingError
-from trackproc.methods.least_squares import (Options, Solution, _prior_rhs, _prior_rows, combination_text,
+from trackproc.methods.least_squares import (Options, Solution, _iterate, _prior_rows, _Problem, combination_text,
                                              whitened_svd)
 
 __all__ = ["nonsingular_elements", "state_from_elements", "element_covariance", "ELEMENT_NAMES", "gauss_legendre",
@@ -408,8 +408,8 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
 
     Gauss-Newton on the KKT system of each linearised step, solved by the null-space method
     (module docstring); every iterate is restored onto ``f = 0`` by minimum-norm Newton steps;
-    Levenberg-Marquardt damping of the free step; the same k-sigma editing, stopping rules and
-    failure reports as :func:`trackproc.methods.least_squares.solve`.
+    Levenberg-Marquardt damping of the free step; the k-sigma editing, stopping rules and failure
+    reports are those of :func:`trackproc.methods.least_squares.solve` (the same problem and iterations).
 
     ``constraints(x) -> (f (m,), A (m, n))``; ``constraint_scale(x) -> (m,)`` positive scales
     making ``f`` relative (feasible when every ``|f| / scale < 1e-14``); ``retract`` as in
@@ -420,16 +420,8 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
     x = np.asarray(x0, float).copy()
     n = x.size
     names = list(names)
-    y = np.asarray(observed, float)
-    sig = np.asarray(sigma, float)
-    nobs = y.size
-    if sig.shape != y.shape or not np.all(np.isfinite(sig) & (sig > 0)):
-        raise ValueError("sigma must be positive and finite, one per measurement")
-    scales = np.ones(n) if scales is None else np.asarray(scales, float)
-    periodic = np.zeros(nobs, bool) if periodic is None else np.asarray(periodic, bool)
-    prior_a, prior_factors = _prior_rows(priors, n, scales)
-    n_prior = prior_a.shape[0]
-    clip = opt.clip if opt.clip else None
+    prob = _Problem(model, n, observed, sigma, scales=scales, priors=priors, periodic=periodic, clip=opt.clip)
+    scales = prob.scales
     restorations = 0
 
     def restore(xv):
@@ -447,52 +439,12 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
             return xv
         raise ArithmeticError(f"cannot satisfy the constraints (relative residual {rel.max():.3g})")
 
-    def residuals(h):
-        r = y - h
-        if periodic.any():
-            r = np.where(periodic, np.mod(r + np.pi, 2 * np.pi) - np.pi, r)
-        return r
-
-    def evaluate(xv):
-        h, jac = model(xv)
-        h = np.asarray(h, float)
-        jac = np.asarray(jac, float)
-        if h.shape != (nobs,) or jac.shape != (nobs, n):
-            raise ValueError(f"model returned shapes {h.shape}, {jac.shape}; expected ({nobs},), ({nobs}, {n})")
-        return h, jac
-
-    def cost_of(r, xv, mask):
-        z = r[~mask] / sig[~mask]
-        pr = _prior_rhs(prior_factors, xv)
-        return float(z @ z + pr @ pr)
-
-    def edit(r, mask_prev):
-        if clip is None:
-            return np.zeros(nobs, bool)
-        z = np.abs(r / sig)
-        kept = z[~mask_prev]
-        wrms = float(np.sqrt(np.mean(kept * kept))) if kept.size else 1.0
-        return z > clip * max(1.0, wrms)
-
-    def system(jac, r, xv, mask):
-        keep = ~mask
-        a = jac[keep] / sig[keep, None] * scales[None, :]
-        b = r[keep] / sig[keep]
-        if n_prior:
-            a = np.vstack([a, prior_a])
-            b = np.concatenate([b, _prior_rhs(prior_factors, xv)])
-        return a, b
-
     def reduced(jac, r, xv, mask, it):
         f, ac = constraints(xv)
         yb, zb, rr = _null_space(ac * scales[None, :])
         p = -np.linalg.solve(rr.T, f)
-        a, b = system(jac, r, xv, mask)
-        if not np.all(np.isfinite(a)):
-            raise ProcessingError("the Jacobian has non-finite entries", {"iteration": it})
-        rhs = b - a @ (yb @ p)
-        az = a @ zb
-        ub, s, vt = whitened_svd(az, rhs)
+        a, b = prob.system(jac, r, xv, mask, it)
+        ub, s, vt = whitened_svd(a @ zb, b - a @ (yb @ p))
         if s.size < zb.shape[1] or s[-1] <= opt.rank_rtol * s[0]:
             weak = combination_text(zb @ vt[-1], names) if s.size else ""
             raise ProcessingError(
@@ -501,112 +453,49 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
                 f"scaled parameters: {weak}", {"iteration": it, "singular_values": s.tolist()})
         return yb, zb, rr, p, ub, s, vt
 
-    try:
-        x = restore(x)
-        h, jac = evaluate(x)
-    except (ArithmeticError, ValueError) as exc:
-        raise ProcessingError(f"the model cannot be evaluated at the initial values: {exc}") from None
+    def linearise(jac, r, xv, mask, it):
+        yb, zb, _, p, ub, s, vt = reduced(jac, r, xv, mask, it)
+        return ub, s, vt, lambda q: yb @ p + zb @ q                 # δ = Y p + Z q
+
+    def trial(xv, xi):
+        try:
+            return restore(prob.step(xv, xi, retract))
+        except (ArithmeticError, ProcessingError, ValueError):
+            return None
+
+    def check_counts(mask):
+        if int((~mask).sum()) + prob.n_prior < n - 3:
+            raise ProcessingError(f"too few measurements: {int((~mask).sum())} kept for {n} parameters")
+
+    x, h, jac = prob.start(x, prepare=restore)
     if not np.all(np.isfinite(h)):
         raise ProcessingError("the model gives non-finite values at the initial values")
-    r = residuals(h)
-    mask = edit(r, np.zeros(nobs, bool))
-    stable = not mask.any()
-    cost = cost_of(r, x, mask)
-    history = [cost]
-    damped = 0
-    converged = False
-    message = ""
-    it = 0
-    for it in range(1, opt.max_iterations + 1):
-        yb, zb, _, p, ub, s, vt = reduced(jac, r, x, mask, it)
-        sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))
-        q_gn = vt.T @ (ub / s)
-        gn_sig = float(np.max(np.abs(q_gn) / sig_q))
-        if stable and gn_sig < opt.step_tol:
-            converged = True
-            message = f"converged: Gauss-Newton step {gn_sig:.2g} sigma (constrained)"
-            break
-        accepted = None
-        for attempt in range(opt.max_damping_tries + 1):
-            if attempt == 0:
-                q = q_gn
-            else:
-                lam = opt.initial_damping * s[0] ** 2 * 10.0 ** (attempt - 1)
-                q = vt.T @ (ub * s / (s * s + lam))
-            xi = yb @ p + zb @ q
-            try:
-                x_new = restore(x + scales * xi if retract is None else retract(x, scales * xi))
-                h_new, jac_new = evaluate(x_new)
-            except (ArithmeticError, ProcessingError, ValueError):
-                continue
-            if not np.all(np.isfinite(h_new)):
-                continue
-            r_new = residuals(h_new)
-            c_new = cost_of(r_new, x_new, mask)
-            if c_new <= cost * (1.0 + 1e-12) + 1e-300:
-                accepted = (x_new, h_new, jac_new, r_new, c_new, q)
-                damped += attempt > 0
-                break
-        if accepted is None:
-            if gn_sig < opt.step_tol:
-                converged = True
-                message = "converged (no step reduces the cost further)"
-                break
-            raise ProcessingError(
-                f"no step reduces the cost after {opt.max_damping_tries} damped tries at iteration {it} "
-                f"(cost {cost:.6g}); the initial state may be too far off",
-                {"iteration": it, "cost": cost, "cost_history": history})
-        x_new, h, jac, r, c_new, q = accepted
-        step_sig = float(np.max(np.abs(q) / sig_q))
-        rel = abs(cost - c_new) / max(c_new, 1e-300)
-        x = x_new
-        new_mask = edit(r, mask)
-        same = bool(np.array_equal(new_mask, mask))
-        stable = same
-        mask = new_mask
-        if int((~mask).sum()) + n_prior < n - 3:
-            raise ProcessingError(f"too few measurements: {int((~mask).sum())} kept for {n} parameters")
-        cost = cost_of(r, x, mask)
-        history.append(cost)
-        if same and (step_sig < opt.step_tol or rel < opt.cost_rtol):
-            converged = True
-            message = (f"converged: step {step_sig:.2g} sigma (constrained)" if step_sig < opt.step_tol
-                       else f"converged: relative cost change {rel:.2g} (constrained)")
-            break
-    if not converged:
+    r = prob.residuals(h)
+    mask = prob.edit(r, np.zeros(prob.nobs, bool))
+    run = _iterate(prob, opt, x, h, jac, r, mask, stable=not mask.any(), linearise=linearise, trial=trial,
+                   check=check_counts, tag=" (constrained)")
+    if not run.converged:
+        history = run.history
         raise ProcessingError(
             f"did not converge in {opt.max_iterations} iterations under the constraints (cost {history[-2]:.6g} -> "
             f"{history[-1]:.6g}); try --max-iterations, a better --initial state, or drop --circular",
-            {"iterations": it, "cost_history": history})
+            {"iterations": run.iterations, "cost_history": history})
 
     # covariance, multipliers and stationarity at the solution
-    yb, zb, rr, p, ub, s, vt = reduced(jac, r, x, mask, it)
+    x = run.x
+    yb, zb, rr, _, ub, s, vt = reduced(run.jac, run.r, x, run.mask, run.iterations)
     inner = (vt.T / s ** 2) @ vt
-    cov_scaled = zb @ inner @ zb.T
-    cov = cov_scaled * np.outer(scales, scales)
-    cov = 0.5 * (cov + cov.T)
-    sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        corr = np.where(np.outer(sd, sd) > 0, cov / np.outer(sd, sd), 0.0)
-    a, b = system(jac, r, x, mask)
-    grad = -2.0 * a.T @ b                                    # ∇χ² in the scaled parameters
     f, ac = constraints(x)
-    as_ = ac * scales[None, :]
-    lam = np.linalg.lstsq(as_.T, -grad, rcond=None)[0]
+    sol = prob.solution(names, run, zb @ inner @ zb.T, s, free=n - f.size, constrained=True)
+    a, b = prob.system(run.jac, run.r, x, run.mask, run.iterations)
+    grad = -2.0 * a.T @ b                                    # ∇χ² in the scaled parameters
+    lam = np.linalg.lstsq((ac * scales[None, :]).T, -grad, rcond=None)[0]
     # stationarity: the free Gauss-Newton step left at the solution, in formal sigmas
     sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))
     stationarity = float(np.max(np.abs(vt.T @ (ub / s)) / sig_q))
     # dξ/dε: the constraint step Y R⁻ᵀ δε, minus the free directions' readjustment
     a_y = yb @ np.linalg.inv(rr.T)
     sens = a_y - zb @ (inner @ (zb.T @ (a.T @ (a @ a_y))))
-    kept = int((~mask).sum())
-    dof = kept + n_prior - (n - f.size)
-    sol = Solution(names=names, values=x, covariance=cov, sigma=sd, correlation=corr, covariance_scaled=cov_scaled,
-                   scales=scales, chi2=cost, dof=dof, variance_factor=cost / dof if dof > 0 else math.nan,
-                   condition_number=float(s[0] / s[-1]), singular_values=s, computed=h, residual=r,
-                   normalized=r / sig, edited=mask, jacobian=jac, iterations=it, converged=True,
-                   cost_history=history, damped_steps=damped, message=message,
-                   chi2_prior=float(np.sum(_prior_rhs(prior_factors, x) ** 2)), n_prior=int(n_prior))
     return KKTResult(solution=sol, multipliers=lam, constraints=f, relative=f / constraint_scale(x),
                      stationarity=stationarity, restorations=restorations, null_space_dim=int(zb.shape[1]),
                      sensitivity=sens * scales[:, None])
