@@ -5,6 +5,9 @@ CSV per pass, as stations write them; five more inputs are broken in the ways a 
 meets: a bad CSV, an unknown station, too few points for the smoother, a pass the smoother
 cannot fit (its clock froze: 24 samples inside 24 ns), and a Parquet file cut in half by a
 transfer.
+
+The refine step runs on the seed 004 Table 1 geometry (``refine_passes``): passes over stations
+placed so that the truth state is their traverse point, refined from the stale state.
 """
 
 from __future__ import annotations
@@ -344,6 +347,12 @@ def test_settings_precedence_flag_env_config_default(tmp_path):
                            "TRACKPROC_BATCH_FORCE": "yes"})
     assert s.get("batch.workers") == 3 and s.get("batch.inputs") == ("a", "b")  # env paths: as given
     assert s.get("estimate.apriori_sigma") == {"x": 1000.0, "vx": 1.0} and s.get("batch.force") is True
+    # refine: "none" is a Doppler bias model there (the default is auto); apriori unset = by cost
+    assert s.get("refine.doppler_bias") == "auto" and s.get("refine.apriori") is None
+    config.write_text('[refine]\ndoppler_bias = "none"\napriori = false\n')
+    s = resolve(str(config), {}, {"TRACKPROC_BATCH_REFINE_OUTPUT_EPOCH": "stale"})
+    assert s.get("refine.doppler_bias") == "none" and s.get("refine.apriori") is False
+    assert s.get("refine.output_epoch") == "stale" and s.origins["refine.output_epoch"] == "env"
 
 
 @pytest.mark.parametrize("text, env, message", [
@@ -371,7 +380,13 @@ def test_bad_settings_are_usage_errors_naming_the_key(tmp_path, run_cli, monkeyp
     (["-i", "{inbox}"], "no output directory"),
     (["-o", "{tmp}/out"], "no inputs"),
     (["-i", "{tmp}/nowhere", "-o", "{tmp}/out"], "nowhere: input not found"),
-    (["-i", "{inbox}", "-o", "{tmp}/out", "--steps", "ingest,refine"], "step 'refine' is not available"),
+    (["-i", "{inbox}", "-o", "{tmp}/out", "--steps", "ingest,smooth,refine"], "the refine step needs a stale state"),
+    (["-i", "{inbox}", "-o", "{tmp}/out", "--steps", "ingest,refine", "--refine-initial", "{inbox}/broken_bad_csv.csv"],
+     "broken_bad_csv.csv, row 1, column 'line number': not a TLE element line"),
+    (["-i", "{inbox}", "-o", "{tmp}/out", "--steps", "ingest,refine", "--refine-initial", "{tmp}/none.json"],
+     "none.json, column 'refine.initial': file not found"),
+    (["-i", "{inbox}", "-o", "{tmp}/out", "--steps", "refine", "--refine-initial", "{inbox}/../stale.json",
+      "--refine-eop", "{tmp}/finals.txt", "--refine-dut1", "0.1"], "give either an EOP file or UT1-UTC, not both"),
     (["-i", "{inbox}", "-o", "{tmp}/out", "--steps", "smooth,ingest"], "steps out of order"),
     (["-i", "{inbox}", "-o", "{tmp}/out", "--steps", "ingest,estimate"], "the estimate step needs an initial state"),
     (["-i", "{inbox}", "-o", "{tmp}/out", "--stations", "{tmp}/none.csv"], "none.csv, column 'ingest.stations': file"),
@@ -522,6 +537,174 @@ def test_estimate_windows_non_convergence_reported_then_redone_alone(passes, tmp
     assert len(rows) == 3 and all(",ok,false," in row and ",true," in row for row in rows)
     run = run_cli(["batch", config, "--workers", "2", "--max-iterations", "20"])
     assert "3 estimate window(s): 3 up to date, 0 to do" in run.stderr
+
+
+# ----------------------------------------------------------------------------- the refine step
+
+#: Stations for which the truth state of sample_data/truth.json (seed 004 Table 1) is the
+#: traverse point of a pass (trackproc.pipeline.refine.traverse_station: km to the left (+) or
+#: right (-) of the ground track; highest elevations 34-78 deg), as tests/test_refine_cli.py's TRV.
+TRAVERSE_STATIONS = ("station,lat_deg,lon_deg,height_m\n"
+                     "TRV,56.454155,9.725833,0\n"     # +500 km
+                     "TRF,56.607825,4.914447,0\n"     # +800 km
+                     "TRR,55.143123,22.251255,0\n"    # -300 km
+                     "TRE,54.190283,27.382994,0\n"    # -650 km
+                     "TRN,56.038446,15.300490,0\n"    # +150 km
+                     "TRW,56.607022,1.725211,0\n")    # +1000 km
+REFINED = ("TRE", "TRF", "TRR", "TRV", "multi")
+REFINED_PASSES = ("TRE/TRE-001", "TRF/TRF-001", "TRR/TRR-001", "TRV/TRV-001", "TRN/TRN-001")  # multi: its longest
+
+
+@pytest.fixture(scope="session")
+def refine_passes(tmp_path_factory) -> Path:
+    """``inbox/``: one-way Doppler passes (5 s, 0.2 Hz, a 150 Hz transmitter offset) around the
+    traverse epoch 2026-03-20T09:30:00Z of the Table 1 truth, one wide CSV per station (TRE,
+    TRF, TRR, TRV); ``multi``: TRN's whole pass and the first 40 samples of TRW's; ``short``:
+    7 samples of TRE's pass (smoothed, but too few to refine). ``stations.csv``, ``stale.json``."""
+    import numpy as np
+    import pandas as pd
+
+    from trackproc.io.stations import parse_stations
+    from trackproc.io.statefile import read_state
+    from trackproc.pipeline.simulate import SimulateOptions, simulate
+
+    root = tmp_path_factory.mktemp("refine_batch")
+    inbox = root / "inbox"
+    inbox.mkdir()
+    (root / "stations.csv").write_text(TRAVERSE_STATIONS)
+    shutil.copy(ROOT / "sample_data" / "stale.json", root / "stale.json")
+    sim = simulate(read_state(str(ROOT / "sample_data" / "truth.json")),
+                   parse_stations(TRAVERSE_STATIONS.encode(), "st"),
+                   SimulateOptions(duration_s=1800, step_s=5, start=np.datetime64("2026-03-20T09:15:00"),
+                                   kinds=("doppler",), sigma_doppler_hz=0.2, freq_offset_hz=150.0, seed=4))
+    wide = sim.wide()
+    wide = wide.assign(time=wide["time"].dt.strftime("%Y-%m-%dT%H:%M:%SZ"))
+    rows = {station: group for station, group in wide.groupby("station")}
+    assert all(len(rows[s]) > 100 for s in rows)  # one pass each, ~10 minutes
+    for station in ("TRE", "TRF", "TRR", "TRV"):
+        rows[station].to_csv(inbox / f"{station}.csv", index=False)
+    pd.concat([rows["TRW"].head(40), rows["TRN"]]).to_csv(inbox / "multi.csv", index=False)
+    middle = len(rows["TRE"]) // 2
+    rows["TRE"].iloc[middle - 3:middle + 4].to_csv(inbox / "short.csv", index=False)
+    return root
+
+
+def refine_config(path: Path, root: Path, output: Path, **sections) -> Path:
+    """``write_config`` for ``refine_passes``: ingest -> smooth -> refine from the stale state
+    (UT1-UTC = 0 given: no EOP warning on every input)."""
+    refine = {"initial": str(root / "stale.json"), "dut1": 0.0, **sections.pop("refine", {})}
+    batch = {"inputs": [str(root / "inbox")], "steps": ["ingest", "smooth", "refine"], **sections.pop("batch", {})}
+    ingest = {"stations": str(root / "stations.csv"), **sections.pop("ingest", {})}
+    return write_config(path, root, output, batch=batch, ingest=ingest, refine=refine, **sections)
+
+
+def test_refine_step_writes_refined_states_and_fails_only_the_pass_it_cannot_refine(refine_passes, tmp_path,
+                                                                                    run_cli):
+    import numpy as np
+
+    from trackproc.io.statefile import read_state
+
+    out = tmp_path / "out"
+    config = refine_config(tmp_path / "r.toml", refine_passes, out)
+    run = run_cli(["batch", config, "--workers", "2"])
+    assert run.exit_code == 3, run.stderr
+    assert "Traceback" not in run.stderr
+    records = by_name(out)
+    assert sorted(records) == sorted(REFINED + ("short",))
+    # the pass too short to refine fails alone, with its reason, and leaves no results
+    short = records["short"]
+    assert short["status"] == "failed" and short["error_type"] == "processing"
+    assert short["error"] == "refine TRE/TRE-001: too few samples in the pass: 7 (at least 8 are needed)"
+    assert "short: failed: refine TRE/TRE-001: too few samples" in run.stderr
+    assert [p.name for p in (out / "passes").glob("short.*")] == ["short.batch.json"]
+    # the others: a refined state file and the key numbers
+    truth = read_state(str(ROOT / "sample_data" / "truth.json"))
+    for name in REFINED:
+        record = records[name]
+        assert record["status"] == "ok", record["error"]
+        n = record["numbers"]
+        assert n["converged"] is True and 1 <= n["iterations"] <= 10
+        assert n["traverse_utc"][:19] in ("2026-03-20T09:29:59", "2026-03-20T09:30:00")  # the truth's traverse
+        assert 0.1 < n["residual_rms"] < 0.3 and n["residual_rms_unit"] == "Hz"
+        assert all(0 < n[k] < 2e4 for k in ("sigma_radial_m", "sigma_along_m", "sigma_cross_m"))
+        assert "passes/" + name + ".refined.json" in record["outputs"]
+        doc = json.loads((out / "passes" / f"{name}.refined.json").read_text())
+        assert doc["epoch"] == n["traverse_utc"] and doc["parameters"][-1].startswith("doppler_offset:")
+        stale = doc["at_stale_epoch"]  # the refined orbit at the stale epoch holds the truth within 3 sigma
+        err = np.r_[stale["position_m"], stale["velocity_m_s"]] - truth.rv
+        assert np.all(np.abs(err) < 3 * np.array(stale["sigma"][:6])), name
+        assert record["details"]["refine"]["traverse"]["epoch"] == n["traverse_utc"]
+    assert [records[n]["numbers"]["refined_pass"] for n in REFINED] == list(REFINED_PASSES)
+    # an input of two passes: the one with the most samples is refined, and the summary says so
+    multi = records["multi"]
+    assert multi["numbers"]["passes"] == 2
+    candidates = multi["details"]["refine"]["candidates"]
+    assert [(c["pass_id"], c["samples"]) for c in candidates][1] == ("TRW-001", 40)
+    assert candidates[0]["pass_id"] == "TRN-001" and candidates[0]["samples"] > 100
+    assert any(w.startswith("2 passes in the input: refined TRN/TRN-001") and "not refined: TRW/TRW-001 (40)" in w
+               for w in multi["warnings"])
+    # the batch's refinement is trackproc refine's on the stored pass file, byte for byte
+    cli = run_cli(["-q", "refine", out / "passes" / "multi.parquet", "--initial", refine_passes / "stale.json",
+                   "--pass-id", "TRN-001", "--dut1", "0", "-o", tmp_path / "cli.json"])
+    assert cli.exit_code == 0, cli.stderr
+    assert (tmp_path / "cli.json").read_bytes() == (out / "passes" / "multi.refined.json").read_bytes()
+    # summary.csv: the refine columns
+    header, *lines = (out / "summary.csv").read_text().splitlines()
+    columns = header.split(",")
+    assert {"refined_pass", "traverse_utc", "converged", "iterations", "residual_rms", "sigma_radial_m"} <= set(columns)
+    row = dict(zip(columns, next(line for line in lines if line.startswith("pass,TRV,")).split(",")))
+    assert row["refined_pass"] == "TRV/TRV-001" and row["converged"] == "true" and row["residual_rms_unit"] == "Hz"
+    # a re-run skips everything, the recorded failure too
+    before = mtimes(out)
+    run = run_cli(["batch", config])
+    assert run.exit_code == 3 and "6 input(s): 6 up to date, 0 to do" in run.stderr
+    assert mtimes(out) == before
+
+
+def test_changing_a_refine_setting_redoes_only_the_refinements(refine_passes, tmp_path, run_cli, monkeypatch):
+    out = tmp_path / "out"
+    config = refine_config(tmp_path / "r.toml", refine_passes, out,
+                           batch={"steps": ["ingest", "smooth", "refine", "estimate"]},
+                           estimate={"initial": str(refine_passes / "stale.json"), "dut1": 0.0,
+                                     "doppler_bias": "offset"})
+    first = run_cli(["batch", config])
+    assert first.exit_code == 3, first.stderr
+    records = by_name(out)
+    (window,) = summary(out)["estimates"]
+    assert window["status"] == "ok" and window["members"] == list(REFINED)  # not the input refine failed
+    refined = {n: (out / "passes" / f"{n}.refined.json").read_bytes() for n in REFINED}
+
+    def table_outputs():
+        return {p: t for p, t in mtimes(out).items() if not p.endswith((".refined.json", ".batch.json"))}
+
+    tables, estimate = table_outputs(), (out / "estimates" / "all.json").stat().st_mtime_ns
+    # a [refine] setting (here through the environment): only the refinements are redone, from
+    # the stored pass tables; the tables, the smoothing and the window's estimate stay as they are
+    monkeypatch.setenv("TRACKPROC_BATCH_REFINE_OUTPUT_EPOCH", "stale")
+    run = run_cli(["batch", config])
+    assert run.exit_code == 3, run.stderr
+    assert ("6 input(s): 0 up to date, 6 to do (steps ingest -> smooth -> refine -> estimate; 5 of them refine "
+            "only, from their stored ingest and smooth results)") in run.stderr
+    assert "1 estimate window(s): 1 up to date, 0 to do" in run.stderr
+    assert table_outputs() == tables and (out / "estimates" / "all.json").stat().st_mtime_ns == estimate
+    for name in REFINED:
+        assert json.loads((out / "passes" / f"{name}.refined.json").read_text())["epoch"] == "2026-03-20T09:30:00.000Z"
+    # back to the default: the same bytes and records as the first run made from the raw inputs
+    monkeypatch.delenv("TRACKPROC_BATCH_REFINE_OUTPUT_EPOCH")
+    run = run_cli(["batch", config])
+    assert run.exit_code == 3 and "5 of them refine only" in run.stderr
+    assert {n: (out / "passes" / f"{n}.refined.json").read_bytes() for n in REFINED} == refined
+    assert {n: comparable(r) for n, r in by_name(out).items()} == {n: comparable(r) for n, r in records.items()}
+    assert table_outputs() == tables
+    # one iteration is not enough: every refinement fails with its reason (exit 1: none left)
+    run = run_cli(["batch", config, "--refine-max-iterations", "1"])
+    assert run.exit_code == 1, run.stderr
+    for name, record in by_name(out).items():
+        assert record["status"] == "failed" and record["error_type"] == "processing"
+        if name != "short":
+            assert record["error"].startswith(f"refine {dict(zip(REFINED, REFINED_PASSES))[name]}: did not "
+                                              "converge in 1 iterations"), record["error"]
+            assert not (out / "passes" / f"{name}.parquet").exists()
 
 
 # ----------------------------------------------------------------------------- the nightly recipe

@@ -1,4 +1,4 @@
-"""``trackproc batch``: a directory or glob of passes through ingest -> smooth (-> estimate), cron-grade.
+"""``trackproc batch``: a directory or glob of passes through ingest -> smooth (-> refine) (-> estimate), cron-grade.
 
 The flags are generated from :data:`trackproc.pipeline.batch_config.SCHEMA`, the same table that
 defines the TOML keys and the ``TRACKPROC_BATCH_*`` environment variables, so the three can never
@@ -20,7 +20,8 @@ from trackproc.pipeline.batch_config import CONFIG_ENV, SCHEMA
 
 log = logging.getLogger("trackproc")
 
-_PANELS = {"batch": "Run", "ingest": "Ingest step", "smooth": "Smooth step", "estimate": "Estimate step"}
+_PANELS = {"batch": "Run", "ingest": "Ingest step", "smooth": "Smooth step", "refine": "Refine step",
+           "estimate": "Estimate step"}
 _ANNOTATIONS = {"str": Optional[str], "path": Optional[str], "choice": Optional[str], "degree": Optional[str],
                 "int": Optional[int], "float": Optional[float], "bool": Optional[bool],
                 "list": Optional[List[str]], "paths": Optional[List[str]], "map": Optional[List[str]]}
@@ -32,8 +33,8 @@ def _help(opt) -> str:
 
 
 def batch_command(**kwargs) -> None:
-    """Process many raw pass files through a chain of steps (ingest -> smooth, and optionally a
-    multi-pass estimate per window), in parallel, skipping results already up to date.
+    """Process many raw pass files through a chain of steps (ingest -> smooth, optionally refine of
+    each pass and a multi-pass estimate per window), in parallel, skipping results already up to date.
 
     Settings come from flags, TRACKPROC_BATCH_* environment variables and the TOML config file,
     in that order of precedence. Results go to OUTPUT/passes/ (one per input), OUTPUT/estimates/

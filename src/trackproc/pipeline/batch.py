@@ -6,33 +6,34 @@ is a small adapter (:class:`Step`) around one pipeline function:
 - ``scope="input"`` steps run once per input file, in order, on an :class:`InputContext`
   (``ctx.table`` is the pass table handed from step to step; a step adds its side outputs and
   its key numbers). When the chain does not start with ``ingest`` the inputs are read as
-  canonical pass files.
+  canonical pass files. ``ingest`` and ``smooth`` make the table (``Step.table``); ``refine``
+  only reads it (the stale state refined from the input's pass, ``<name>.refined.json``; the
+  pass with the most samples when an input holds several, :func:`refine_pass`).
 - ``scope="window"`` steps run once per window of processed inputs (``estimate``: one orbit
   from all the passes of a window, ``[estimate] window_s``) on a :class:`WindowContext`.
 
-Adding a step (``refine`` is the next one) is an adapter and one :func:`register` call::
+Adding a step is an adapter and one :func:`register` call (see :func:`_refine`)::
 
     def _refine(ctx: InputContext, opt: dict) -> None:
-        from trackproc.io.statefile import parse_state, state_json
-        from trackproc.pipeline.refine import RefineOptions, refine
-
-        initial = parse_state(ctx.files["refine.initial"], ctx.paths["refine.initial"])
-        result = refine(ctx.table, initial, None, RefineOptions(cost=opt["cost"], circular=opt["circular"]),
+        ...
+        result = refine(table, initial, stations, RefineOptions(cost=opt["cost"], ...), orientation,
                         source=ctx.source)
-        ctx.outputs[".refined.json"] = state_json(result.state).encode()
-        ctx.numbers.update(iterations=result.state.diagnostics.get("iterations"))
+        ctx.outputs[".refined.json"] = state_json(state, ...).encode("utf-8")
+        ctx.numbers.update(converged=..., iterations=..., ...)
 
-    register(Step("refine", "input", _refine, files=("refine.initial",)))
+    register(Step("refine", "input", _refine, files=("refine.initial", "refine.eop", "ingest.stations"),
+                  table=False))
 
-plus its ``[refine]`` settings in :mod:`trackproc.pipeline.batch_config` (the schema gives the
+plus its settings section in :mod:`trackproc.pipeline.batch_config` (the schema gives the
 TOML keys, the flags and the environment variables). The position in :data:`CHAIN` fixes
 where it runs.
 
 Work and results (``OUTPUT`` is the output directory):
 
 - ``OUTPUT/passes/<name>.parquet`` (the last table of the chain), the side outputs of each step
-  (``<name>.smooth.json``), and ``<name>.batch.json``: the manifest — the content key, the
-  status, the key numbers, the error and the outputs with their sizes and SHA-256. ``<name>``
+  (``<name>.smooth.json``, ``<name>.refined.json``), and ``<name>.batch.json``: the manifest —
+  the content key, the status, the key numbers, the error and the outputs with their sizes and
+  SHA-256. ``<name>``
   is the input's path relative to its directory (or to the fixed part of its glob), without
   the suffix, so sub-directories are mirrored.
 - ``OUTPUT/estimates/<window>.json`` (state file), ``<window>.residuals.parquet``, manifest.
@@ -40,9 +41,13 @@ Work and results (``OUTPUT`` is the output directory):
 
 The content key of a result is the SHA-256 of the input's bytes, the settings of the steps that
 produced it (the content of every file they name: stations table, initial state, EOP file) and
-the trackproc version; a window's key covers its members' keys. A result whose manifest holds
-the same key and whose outputs are all present is up to date and skipped (``force`` redoes
-it). A failure caused by the data (an :class:`~trackproc.errors.TrackprocError`) is recorded
+the trackproc version, in two stages: the table key (input, table steps) and, when the chain
+has side steps (refine), the key over the table key and their settings. A window's key covers
+its members' table keys (it reads their pass tables). A result whose manifest holds the same
+key and whose outputs are all present is up to date and skipped (``force`` redoes it); one
+whose table key alone matches runs only its side steps, on its stored pass table, and keeps its
+table outputs untouched (so changing a ``[refine]`` setting redoes the refinements and nothing
+else). A failure caused by the data (an :class:`~trackproc.errors.TrackprocError`) is recorded
 the same way and not retried until its input or the settings change (or ``retry_failed``); an
 unexpected failure (a bug, a worker that died, a full disk) is never recorded, so the next run
 retries it.
@@ -101,8 +106,8 @@ SUMMARY_CSV = "summary.csv"
 #: Columns of summary.csv, one row per input ("pass") and per window ("estimate").
 CSV_COLUMNS = ("task", "input", "status", "skipped", "samples", "passes", "stations", "start_utc", "end_utc",
                "fits_ok", "fits_suspect", "fits_failed", "kind", "rms", "rms_unit", "tca_utc", "tca_sigma_s",
-               "fca_hz", "converged", "iterations", "wrms", "sigma_radial_m", "sigma_along_m", "sigma_cross_m",
-               "output", "error")
+               "fca_hz", "refined_pass", "traverse_utc", "converged", "iterations", "wrms", "residual_rms",
+               "residual_rms_unit", "sigma_radial_m", "sigma_along_m", "sigma_cross_m", "output", "error")
 #: Kinds in the order their fit is reported as the input's key numbers.
 _PRIMARY_KINDS = ("doppler", "range_rate", "range", "elevation", "azimuth")
 
@@ -152,12 +157,16 @@ class WindowContext:
 class Step:
     """A named step: ``scope`` "input" or "window", ``run(ctx, options)`` with ``options`` the
     step's settings section, ``files``: settings (``"section.key"``) naming files whose content
-    the step reads (hashed into the content key and shipped to the workers)."""
+    the step reads (hashed into the content key and shipped to the workers). ``table``: the step
+    makes the pass table (ingest, smooth); False for an input step that only reads it and adds
+    side outputs and numbers (refine): such steps run after the table steps, and changing only
+    their settings redoes only them, from the stored pass table."""
 
     name: str
     scope: str
     run: Callable
     files: tuple = ()
+    table: bool = True
 
 
 STEPS: dict[str, Step] = {}
@@ -327,8 +336,106 @@ def _estimate(ctx: WindowContext, opt: dict) -> None:
     ctx.warnings.extend(result.warnings)
 
 
+def _initial_state(data: bytes, path: str, orientation):
+    """The stale state of ``refine.initial``: a JSON state file, or a TLE (at its epoch here; refine
+    evaluates it by SGP4 at the traverse epoch)."""
+    from trackproc.io.statefile import parse_state
+
+    if data.lstrip()[:1] == b"{":
+        return parse_state(data, path, orientation)
+    from trackproc.io.tle import parse_tle, tle_state
+
+    return tle_state(parse_tle(data.decode("utf-8", errors="replace"), path), eop=orientation)
+
+
+#: The rule that picks the pass refine uses when an input holds several (docs/batch.md).
+REFINE_PASS_RULE = "the pass with the most samples of the kind refine uses (ties: the earliest)"
+
+
+def refine_pass(table) -> tuple:
+    """``(table, chosen, candidates)``: the one pass (station, pass id) refine uses of an input, by
+    :data:`REFINE_PASS_RULE`, with all its samples; ``candidates``: every pass of that kind as
+    ``{"station", "pass_id", "samples", "start_utc"}``, the chosen first. An input of one pass (or
+    without Doppler or range-rate: refine reports that) is returned as it is."""
+    from trackproc.io.passfile import PassTable
+    from trackproc.pipeline.refine import RANGE_RATE_KINDS
+
+    frame = table.frame
+    kinds = set(frame["kind"].astype(str))
+    kind = next((k for k in RANGE_RATE_KINDS if k in kinds), None)
+    if kind is None:
+        return table, None, []
+    sub = frame[frame["kind"].astype(str) == kind]
+    groups = sub.groupby([sub["station"].astype(str), sub["pass_id"].astype(str)], sort=True)["time"]
+    counts, starts = groups.size(), groups.min()
+    order = sorted(counts.index, key=lambda k: (-int(counts[k]), starts[k], k))
+    candidates = [{"station": st, "pass_id": pid, "samples": int(counts[(st, pid)]),
+                   "start_utc": starts[(st, pid)].tz_convert("UTC").strftime("%Y-%m-%dT%H:%M:%S.%fZ")}
+                  for st, pid in order]
+    station, pass_id = order[0]
+    if len(order) == 1:
+        return table, order[0], candidates
+    keep = (frame["station"].astype(str) == station) & (frame["pass_id"].astype(str) == pass_id)
+    return PassTable(frame[keep].reset_index(drop=True), dict(table.meta or {})), order[0], candidates
+
+
+def _refine(ctx: InputContext, opt: dict) -> None:
+    """refine: the stale state refined from the input's pass at its traverse point
+    (:func:`trackproc.pipeline.refine.refine`, as ``trackproc refine PASS --pass-id ID``); the pass
+    with the most samples when the input holds several (:func:`refine_pass`)."""
+    from trackproc.io.eop import earth_orientation
+    from trackproc.io.stations import parse_stations
+    from trackproc.io.statefile import state_json
+    from trackproc.pipeline.refine import RefineOptions, refine
+
+    orientation, warning = earth_orientation(opt["eop"], opt["dut1"])
+    if warning:
+        ctx.warnings.append(warning)
+    initial = _initial_state(ctx.files["refine.initial"], ctx.paths["refine.initial"], orientation)
+    stations = (None if ctx.files.get("ingest.stations") is None
+                else parse_stations(ctx.files["ingest.stations"], ctx.paths["ingest.stations"]))
+    table, chosen, candidates = refine_pass(ctx.table)
+    if len(candidates) > 1:
+        ctx.warnings.append("%d passes in the input: refined %s/%s (%d samples: %s); not refined: %s" % (
+            len(candidates), chosen[0], chosen[1], candidates[0]["samples"], REFINE_PASS_RULE,
+            ", ".join(f"{c['station']}/{c['pass_id']} ({c['samples']})" for c in candidates[1:])))
+    options = RefineOptions(
+        cost=opt["cost"], circular=opt["circular"], circular_tolerance=opt["circular_tolerance"],
+        doppler_bias=None if opt["doppler_bias"] == "auto" else opt["doppler_bias"], apriori=opt["apriori"],
+        apriori_sigma=dict(opt["apriori_sigma"]), force=opt["force"], earth=opt["earth"],
+        range_rate_model=opt["range_rate_model"], max_iterations=opt["max_iterations"],
+        clip=opt["clip"] if opt["clip"] > 0 else None, reweight=opt["reweight"])
+    try:
+        result = refine(table, initial, stations, options, orientation, source=ctx.source)
+    except ProcessingError as exc:  # no convergence, too few samples, ...: say which step and pass
+        where = f" {chosen[0]}/{chosen[1]}" if chosen else ""
+        raise ProcessingError(f"refine{where}: {exc}", exc.diagnostics) from None
+    state = result.state if opt["output_epoch"] == "traverse" else result.stale_epoch_state
+    ctx.outputs[".refined.json"] = state_json(state, force=opt["force"], eop_source=orientation.source).encode("utf-8")
+    diag = result.state.diagnostics
+    method = result.state.extra["refinement"]
+    sig = diag["sigma_rtn"]
+    rms = diag["residual_rms"]
+    ctx.numbers.update(
+        refined_pass=f"{method['station']}/{method['pass_id']}", traverse_utc=diag["traverse"]["epoch"],
+        converged=bool(diag["converged"]), iterations=int(diag["iterations"]), residual_rms=rms["value"],
+        residual_rms_unit=rms["unit"], sigma_radial_m=sig["radial_m"], sigma_along_m=sig["along_m"],
+        sigma_cross_m=sig["cross_m"])
+    ctx.details["refine"] = {
+        "station": method["station"], "pass_id": method["pass_id"], "kind": method["kind"],
+        "rule": REFINE_PASS_RULE, "candidates": candidates, "cost": method["cost"], "circular": method["circular"],
+        "apriori": method["apriori"], "message": diag["message"], "samples": diag["samples"], "edited": diag["edited"],
+        "variance_factor": diag["variance_factor"], "residual_rms": rms, "max_elevation_deg": diag["max_elevation_deg"],
+        "traverse": diag["traverse"], "sigma_rtn": sig, "output_epoch": opt["output_epoch"],
+        "unobservable": diag["observability"].get("unobservable"),
+        "parameters": {n: {"value": float(v), "sigma": float(e)}
+                       for n, v, e in zip(result.state.parameters, result.state.values, result.state.sigma)}}
+    ctx.warnings.extend(result.warnings)
+
+
 register(Step("ingest", "input", _ingest, files=("ingest.stations",)))
 register(Step("smooth", "input", _smooth))
+register(Step("refine", "input", _refine, files=("refine.initial", "refine.eop", "ingest.stations"), table=False))
 register(Step("estimate", "window", _estimate, files=("estimate.initial", "estimate.eop", "ingest.stations")))
 
 
@@ -344,17 +451,30 @@ class Chain:
         return self.input_steps + self.window_steps
 
     @property
+    def table_steps(self) -> tuple:
+        """The input steps that make the pass table (``passes/<name>.parquet``)."""
+        return tuple(n for n in self.input_steps if STEPS[n].table)
+
+    @property
+    def side_steps(self) -> tuple:
+        """The input steps after them that only read the table (their own content key stage)."""
+        return tuple(n for n in self.input_steps if not STEPS[n].table)
+
+    @property
     def reads_raw(self) -> bool:
         """True when the inputs are raw files for ``ingest``; else canonical pass files."""
         return bool(self.input_steps) and self.input_steps[0] == "ingest"
 
     def files(self, scope: str) -> tuple:
-        names = self.input_steps if scope == "input" else self.window_steps
+        """Settings naming files the steps of ``scope`` read: "input", "window", or the two stages
+        of the input steps, "table" and "side"."""
+        names = {"input": self.input_steps, "window": self.window_steps, "table": self.table_steps,
+                 "side": self.side_steps}[scope]
         return tuple(sorted({f for n in names for f in STEPS[n].files}))
 
 
 def make_chain(names: Sequence[str]) -> Chain:
-    """Validate a configured chain (names known, available, in order, none twice)."""
+    """Validate a configured chain (names known, in order, none twice)."""
     names = [str(n).strip().lower() for n in names if str(n).strip()]
     if not names:
         raise InputError("no steps", column="batch.steps", expected="a subsequence of " + ", ".join(CHAIN))
@@ -362,14 +482,14 @@ def make_chain(names: Sequence[str]) -> Chain:
         if name not in CHAIN:
             raise InputError("unknown step", column="batch.steps", found=name,
                              expected="steps among " + ", ".join(CHAIN))
-        if name not in STEPS:
-            raise InputError(f"step {name!r} is not available in trackproc {__version__}", column="batch.steps",
-                             found=name, expected="available steps: " + ", ".join(n for n in CHAIN if n in STEPS))
     if len(set(names)) != len(names) or names != sorted(names, key=CHAIN.index):
         raise InputError("steps out of order or repeated", column="batch.steps", found=", ".join(names),
                          expected="each step at most once, in the order " + " -> ".join(CHAIN))
     input_steps = tuple(n for n in names if STEPS[n].scope == "input")
     window_steps = tuple(n for n in names if STEPS[n].scope == "window")
+    tables = [STEPS[n].table for n in input_steps]
+    if tables != sorted(tables, reverse=True):  # the registry's promise, not the user's error
+        raise ValueError(f"input steps that only read the pass table must follow those that make it: {input_steps}")
     return Chain(input_steps, window_steps)
 
 
@@ -381,6 +501,10 @@ class Task:
 
     ``kind``: "input" or "window"; ``data``: the input's bytes (input) or ``members`` (window);
     ``options``: section -> settings of the steps; ``files``/``paths``: see :class:`InputContext`.
+    Input tasks run ``steps`` (the table stage), then ``side_steps`` (the steps that only read
+    the table, :attr:`Chain.side_steps`); with ``stage`` (the stored table stage of an earlier
+    run: numbers, details, warnings, outputs) ``data`` is that run's pass table, ``steps`` is
+    empty and only the side steps run. ``table_key``: the content key of the table stage.
     """
 
     kind: str
@@ -394,12 +518,17 @@ class Task:
     data: bytes = b""
     members: list = field(default_factory=list)
     reads_raw: bool = True
+    side_steps: tuple = ()
+    stage: Optional[dict] = None
+    table_key: str = ""
 
 
 @dataclass
 class TaskResult:
     """What a task returns: status ``ok`` or ``failed``; ``error_type`` input | processing (data
-    errors, recorded) | internal (never recorded, retried next run); outputs suffix -> bytes."""
+    errors, recorded) | internal (never recorded, retried next run); outputs suffix -> bytes;
+    ``stage``: the table stage (numbers, details, warnings, output suffixes) of an input task with
+    side steps; ``reused``: that stage was the stored one (only the side steps ran)."""
 
     kind: str
     name: str
@@ -413,6 +542,9 @@ class TaskResult:
     error_type: Optional[str] = None
     trace: Optional[str] = None
     seconds: float = 0.0
+    stage: Optional[dict] = None
+    reused: bool = False
+    table_key: str = ""
 
 
 _task_log = threading.local()
@@ -448,6 +580,7 @@ def run_task(task: Task) -> TaskResult:
         logger.setLevel(logging.WARNING)
     messages: list = []
     _task_log.sink = messages
+    stage = None
     try:
         if task.kind == "input":
             ctx = InputContext(task.name, task.source, task.data, task.files, task.paths)
@@ -455,12 +588,25 @@ def run_task(task: Task) -> TaskResult:
                 from trackproc.io.passfile import parse_pass_table
 
                 ctx.table = parse_pass_table(task.data, task.source)
-            for name in task.steps:
-                STEPS[name].run(ctx, task.options[name])
-            from trackproc.io.passfile import pass_table_bytes
+            if task.stage is not None:  # the table stage is stored: only the side steps run
+                stage = task.stage
+                ctx.numbers = dict(stage["numbers"])
+                ctx.details = dict(stage["details"])
+                ctx.warnings = list(stage["warnings"])
+            else:
+                for name in task.steps:
+                    STEPS[name].run(ctx, task.options[name])
+                from trackproc.io.passfile import pass_table_bytes
 
-            ctx.outputs[".parquet"] = pass_table_bytes(ctx.table, "parquet")
-            ctx.numbers = {**_table_numbers(ctx.table), **ctx.numbers}
+                ctx.outputs[".parquet"] = pass_table_bytes(ctx.table, "parquet")
+                ctx.numbers = {**_table_numbers(ctx.table), **ctx.numbers}
+                if task.side_steps:
+                    ctx.warnings.extend(messages)  # in the order a run from the stored stage gives
+                    messages.clear()
+                    stage = {"numbers": json_ready(ctx.numbers), "details": json_ready(ctx.details),
+                             "warnings": list(ctx.warnings), "outputs": sorted(ctx.outputs)}
+            for name in task.side_steps:
+                STEPS[name].run(ctx, task.options[name])
         else:
             ctx = WindowContext(task.name, task.members, task.files, task.paths)
             ctx.numbers["inputs"] = len(task.members)
@@ -482,7 +628,8 @@ def run_task(task: Task) -> TaskResult:
                       numbers=json_ready(ctx.numbers) if ok else {}, details=json_ready(ctx.details) if ok else {},
                       warnings=(list(ctx.warnings) if ctx is not None else []) + messages,
                       outputs=ctx.outputs if ok else {}, error=error, error_type=error_type, trace=trace,
-                      seconds=time.perf_counter() - t0)
+                      seconds=time.perf_counter() - t0, stage=stage if ok else None,
+                      reused=task.stage is not None, table_key=task.table_key)
 
 
 def _table_numbers(table) -> dict:
@@ -872,9 +1019,11 @@ class Record:
     error_type: Optional[str] = None
     seconds: float = 0.0
     members: list = field(default_factory=list)
+    table_key: str = ""  # the content key of the pass table (what a window's key covers)
 
     def as_dict(self) -> dict:
         out = dataclasses.asdict(self)
+        del out["table_key"]
         if self.task == "pass":
             del out["members"]
         return out
@@ -916,32 +1065,77 @@ def _record_from_manifest(manifest: dict, task: str) -> Record:
                   path=manifest.get("path"), numbers=manifest.get("numbers") or {},
                   details=manifest.get("details") or {}, warnings=manifest.get("warnings") or [],
                   outputs=list(manifest.get("outputs") or {}), error=manifest.get("error"),
-                  error_type=manifest.get("error_type"), members=manifest.get("members") or [])
+                  error_type=manifest.get("error_type"), members=manifest.get("members") or [],
+                  table_key=manifest.get("table_key") or manifest["key"])
+
+
+def _stored_stage(manifest: Optional[dict], table_key: str, out: Path) -> Optional[dict]:
+    """The table stage of an up-to-date-but-for-the-side-steps result (same table key, ok, its
+    table outputs in place), from which only the side steps need to run; else None. A result made
+    without side steps (its key is its table key) is all table stage."""
+    if (not manifest or manifest.get("status") != "ok" or manifest.get("trackproc_version") != __version__
+            or (manifest.get("table_key") or manifest.get("key")) != table_key):
+        return None
+    outputs = manifest.get("outputs") or {}
+    stage = manifest.get("table_stage")
+    if not isinstance(stage, dict):
+        if manifest.get("key") != table_key:
+            return None
+        stage = {"numbers": manifest.get("numbers") or {}, "details": manifest.get("details") or {},
+                 "warnings": manifest.get("warnings") or [], "outputs": sorted(outputs)}
+    for rel in stage.get("outputs") or ():
+        info = outputs.get(rel)
+        try:
+            if not info or (out / rel).stat().st_size != info.get("bytes"):
+                return None
+        except OSError:
+            return None
+    return stage
 
 
 def _store(out: Path, directory: str, result: TaskResult, *, task: str, path: Optional[str], settings_doc: dict,
            members: Sequence = (), old: Optional[dict] = None) -> Record:
-    """Write a task's outputs (atomically) then its manifest; remove a failed input's old outputs."""
+    """Write a task's outputs (atomically) then its manifest; remove a failed input's old outputs.
+    When only the side steps ran (``result.reused``), the stored table stage's outputs stay as
+    they are and are listed again."""
     outputs = {}
     for suffix, data in sorted(result.outputs.items()):
         rel = f"{directory}/{result.name}{suffix}"
         write_bytes(out / rel, data)
         outputs[rel] = {"bytes": len(data), "sha256": sha256(data)}
+    stage = result.stage
+    if stage is not None and result.reused:
+        for rel in stage["outputs"]:
+            outputs.setdefault(rel, (old or {}).get("outputs", {}).get(rel))
+        outputs = dict(sorted(outputs.items()))
+    elif stage is not None:
+        stage = {**stage, "outputs": [f"{directory}/{result.name}{suffix}" for suffix in stage["outputs"]]}
     if old and result.status == "failed" and result.error_type != "internal":
         for rel in (old.get("outputs") or {}):
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(out / rel)
                 log.info("removed %s (its input now fails)", rel)
+    elif old and result.status == "ok":  # e.g. a .refined.json when refine left the chain
+        for rel in (old.get("outputs") or {}):
+            if rel not in outputs:
+                with contextlib.suppress(FileNotFoundError):
+                    os.unlink(out / rel)
+                    log.info("removed %s (no longer made by the chain)", rel)
     record = Record(task=task, name=result.name, status=result.status, skipped=False, key=result.key, path=path,
                     numbers=result.numbers, details=result.details, warnings=result.warnings,
                     outputs=list(outputs), error=result.error, error_type=result.error_type,
-                    seconds=round(result.seconds, 3), members=list(members))
+                    seconds=round(result.seconds, 3), members=list(members),
+                    table_key=result.table_key or result.key)
     if result.error_type == "internal":  # not recorded: the next run tries again
         return record
     manifest = {"trackproc_version": __version__, "key": result.key, "name": result.name, "path": path,
                 "status": result.status, "error": result.error, "error_type": result.error_type,
                 "numbers": result.numbers, "details": result.details, "warnings": result.warnings,
                 "outputs": outputs, "members": list(members), "settings": settings_doc, "finished_utc": _now()}
+    if task == "pass":
+        manifest["table_key"] = result.table_key or result.key
+        if stage is not None:
+            manifest["table_stage"] = stage
     write_text(_manifest_path(out, directory, result.name), dumps(manifest))
     return record
 
@@ -982,7 +1176,11 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None) -> BatchR
     if "estimate" in chain.names and not settings.get("estimate.initial"):
         raise InputError("the estimate step needs an initial state", column="--initial",
                          expected="--initial STATE.json|TLE, or initial = \"...\" in [estimate]")
+    if "refine" in chain.names:
+        _check_refine_settings(settings)
     files, paths, hashes = _read_files(settings, chain)
+    if "refine" in chain.names:  # a state file every input would fail on: a usage error, now
+        _initial_state(files["refine.initial"], paths["refine.initial"], None)
     out = Path(output)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -1003,6 +1201,20 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None) -> BatchR
     return result
 
 
+def _check_refine_settings(settings: Settings) -> None:
+    """Settings of the refine step that would fail every input: usage errors before any work."""
+    if not settings.get("refine.initial"):
+        raise InputError("the refine step needs a stale state", column="--refine-initial",
+                         expected="--refine-initial STATE.json|TLE, or initial = \"...\" in [refine]")
+    if settings.get("refine.eop") is not None and settings.get("refine.dut1") is not None:
+        raise InputError("give either an EOP file or UT1-UTC, not both", column="refine.eop / refine.dut1",
+                         expected="one of --refine-eop, --refine-dut1")
+    if settings.get("refine.apriori") is False and settings.get("refine.apriori_sigma"):
+        raise InputError("a-priori sigmas without the a-priori", column="refine.apriori_sigma",
+                         found=", ".join(settings.get("refine.apriori_sigma")),
+                         expected="apriori = true (or unset), or no apriori_sigma")
+
+
 def _read_files(settings: Settings, chain: Chain):
     """Bytes, paths and hashes of the files the chain's settings name (read once, here)."""
     files, paths, hashes = {}, {}, {}
@@ -1021,7 +1233,7 @@ def _read_files(settings: Settings, chain: Chain):
             raise InputError("is a directory, expected a file", file=path, column=name) from None
         except PermissionError:
             raise InputError("permission denied", file=path, column=name) from None
-        files[name] = data if name != "estimate.eop" else None  # the EOP file is read by its own reader
+        files[name] = data if not name.endswith(".eop") else None  # the EOP file is read by its own reader
         hashes[name] = "sha256:" + sha256(data)
     return files, paths, hashes
 
@@ -1042,10 +1254,32 @@ def _remove_leftovers(out: Path) -> None:
         log.info("removed %d temporary file(s) left by an interrupted run", removed)
 
 
+def _input_keys(settings, chain, hashes) -> Callable:
+    """``keys(input bytes) -> (key, table key)``.
+
+    The table key covers the input, the table steps' settings and files and the version (with no
+    side steps it is the key, as it always was); the key covers the table key and the side
+    steps' settings and files, so changing only those redoes only the side steps (from the
+    stored table) and leaves the windows, which read the table, up to date.
+    """
+    table_doc = step_options(settings, chain.table_steps, {k: hashes[k] for k in chain.files("table")})
+    base = {"trackproc": __version__, "steps": list(chain.table_steps), "reads_raw": chain.reads_raw, **table_doc}
+    side = None
+    if chain.side_steps:
+        side = {"trackproc": __version__, "steps": list(chain.side_steps),
+                **step_options(settings, chain.side_steps, {k: hashes[k] for k in chain.files("side")})}
+
+    def keys(data: bytes) -> tuple:
+        table_key = _key({**base, "input_sha256": sha256(data)})
+        return (table_key if side is None else _key({**side, "table_key": table_key})), table_key
+
+    return keys
+
+
 def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, progress):
     input_files = {k: hashes[k] for k in chain.files("input")}
     options_doc = step_options(settings, chain.input_steps, input_files)
-    base = {"trackproc": __version__, "steps": list(chain.input_steps), "reads_raw": chain.reads_raw, **options_doc}
+    keys = _input_keys(settings, chain, hashes)
     force, retry = settings.get("batch.force"), settings.get("batch.retry_failed")
     records: dict = {}
     todo = []
@@ -1059,17 +1293,20 @@ def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, p
                                         error_type="internal")
             log.error("%s: failed: cannot read: %s", item.path, exc.strerror)
             continue
-        key = _key({**base, "input_sha256": sha256(data)})
+        key, table_key = keys(data)
         manifest = _read_manifest(_manifest_path(out, PASSES_DIR, item.name))
         manifests[item.name] = manifest
         if not force and _up_to_date(manifest, key, out, retry):
             records[item.name] = _record_from_manifest(manifest, "pass")
             continue
-        todo.append((item, key))
+        stage = None if force or not chain.side_steps else _stored_stage(manifest, table_key, out)
+        todo.append((item, key, table_key, stage))
     total = len(inputs)
     n_skipped = len(records)
-    log.info("%d input(s): %d up to date, %d to do (steps %s)", total, n_skipped, len(todo),
-             " -> ".join(chain.names))
+    n_side = sum(stage is not None for *_, stage in todo)
+    log.info("%d input(s): %d up to date, %d to do (steps %s%s)", total, n_skipped, len(todo),
+             " -> ".join(chain.names), f"; {n_side} of them {', '.join(chain.side_steps)} only, from their stored "
+                                        f"{' and '.join(chain.table_steps) or 'pass'} results" if n_side else "")
     done = [n_skipped, sum(r.status == "failed" for r in records.values())]
     if progress:
         progress(done[0], total, done[1])
@@ -1077,7 +1314,16 @@ def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, p
     task_files = {k: files[k] for k in chain.files("input")}
     task_paths = {k: paths[k] for k in chain.files("input")}
     def make_task(entry):
-        item, key = entry
+        item, key, table_key, stage = entry
+        if stage is not None:  # only the side steps, on the stored pass table (unless it changed since)
+            rel = f"{PASSES_DIR}/{item.name}.parquet"
+            info = (manifests[item.name].get("outputs") or {}).get(rel) or {}
+            with contextlib.suppress(OSError):
+                table = (out / rel).read_bytes()
+                if sha256(table) == info.get("sha256"):
+                    return Task(kind="input", name=item.name, key=key, steps=(), options=options, files=task_files,
+                                paths=task_paths, source=item.path, data=table, reads_raw=False,
+                                side_steps=chain.side_steps, stage=stage, table_key=table_key)
         try:
             data = Path(item.path).read_bytes()
         except OSError as exc:
@@ -1088,12 +1334,13 @@ def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, p
             done[0] += 1
             done[1] += 1
             return None
-        key = _key({**base, "input_sha256": sha256(data)})  # the bytes sent are the bytes hashed
-        return Task(kind="input", name=item.name, key=key, steps=chain.input_steps, options=options,
-                    files=task_files, paths=task_paths, source=item.path, data=data, reads_raw=chain.reads_raw)
+        key, table_key = keys(data)  # the bytes sent are the bytes hashed
+        return Task(kind="input", name=item.name, key=key, steps=chain.table_steps, options=options,
+                    files=task_files, paths=task_paths, source=item.path, data=data, reads_raw=chain.reads_raw,
+                    side_steps=chain.side_steps, table_key=table_key)
 
     def on_result(entry, result: TaskResult):
-        item, _ = entry
+        item = entry[0]
         record = _store(out, PASSES_DIR, result, task="pass", path=item.path, old=manifests.get(item.name),
                         settings_doc={"steps": list(chain.input_steps), **options_doc})
         records[item.name] = record
@@ -1113,9 +1360,15 @@ def _log_record(record: Record, result: Optional[TaskResult] = None) -> None:
     if record.status == "ok":
         n = record.numbers
         if record.task == "pass":
-            log.info("%s: ok (%s samples, %s pass(es)%s) in %.2f s", record.name, n.get("samples"), n.get("passes"),
+            refined = ""
+            if n.get("refined_pass"):
+                refined = (f"; refined {n['refined_pass']} in {n.get('iterations')} iterations, residual RMS "
+                           f"{n.get('residual_rms') or math.nan:.4g} {n.get('residual_rms_unit')}, sigma RTN "
+                           + "/".join(f"{n.get(k) or math.nan:.3g}" for k in ("sigma_radial_m", "sigma_along_m",
+                                                                                "sigma_cross_m")) + " m")
+            log.info("%s: ok (%s samples, %s pass(es)%s%s) in %.2f s", record.name, n.get("samples"), n.get("passes"),
                      f", {n['kind']} RMS {n['rms']:.4g} {n['rms_unit']}" if n.get("rms") is not None else "",
-                     record.seconds)
+                     refined, record.seconds)
         else:
             log.info("estimate %s: ok (%s inputs, %s samples, %s iterations, WRMS %.3g) in %.2f s", record.name,
                      n.get("inputs"), n.get("samples"), n.get("iterations"), n.get("wrms") or math.nan,
@@ -1158,7 +1411,7 @@ def _run_windows(settings, chain, records, files, paths, hashes, out, executors)
     todo = []
     manifests = {}
     for name, members in sorted(groups.items()):
-        member_keys = [[r.name, r.key] for r in members]
+        member_keys = [[r.name, r.table_key or r.key] for r in members]  # a window reads the pass tables
         key = _key({"trackproc": __version__, "steps": list(chain.window_steps), **options_doc,
                     "members": member_keys})
         manifest = _read_manifest(_manifest_path(out, ESTIMATES_DIR, name))
@@ -1250,4 +1503,4 @@ def _cell(value) -> str:
 
 __all__ = ["CHAIN", "STEPS", "Step", "register", "make_chain", "InputContext", "WindowContext", "Task",
            "TaskResult", "run_task", "run_batch", "BatchResult", "Record", "batch_lock", "LockedError", "discover",
-           "window_of", "summary_csv"]
+           "window_of", "summary_csv", "refine_pass", "REFINE_PASS_RULE"]

@@ -1,7 +1,7 @@
 """Settings of ``trackproc batch``: one schema for the TOML file, the flags and the environment.
 
 Every setting is a key of a TOML section (``[batch]``, ``[ingest]``, ``[smooth]``,
-``[estimate]``), a command-line flag and an environment variable, resolved in this order:
+``[refine]``, ``[estimate]``), a command-line flag and an environment variable, resolved in this order:
 
     flag  >  environment variable  >  config file  >  default
 
@@ -31,7 +31,7 @@ from typing import Any, Mapping, Optional
 from trackproc.errors import InputError
 
 #: Sections in the order they are documented; ``batch`` holds the run options.
-SECTIONS = ("batch", "ingest", "smooth", "estimate")
+SECTIONS = ("batch", "ingest", "smooth", "refine", "estimate")
 ENV_PREFIX = "TRACKPROC_BATCH_"
 CONFIG_ENV = "TRACKPROC_BATCH_CONFIG"
 
@@ -100,7 +100,7 @@ SCHEMA: tuple[Opt, ...] = (
     Opt("batch", "output", "path", None, ("--output", "-o"),
         "Output directory: passes/, estimates/, summary.json, summary.csv, the lock file.", metavar="DIR"),
     Opt("batch", "steps", "list", ("ingest", "smooth"), ("--steps",),
-        "The chain, comma separated, in order: ingest, smooth, refine (when available), estimate.",
+        "The chain, comma separated, in order: ingest, smooth, refine, estimate.",
         metavar="STEP[,STEP]"),
     Opt("batch", "patterns", "list", DEFAULT_PATTERNS, ("--patterns",),
         "File patterns taken from an input directory (not from a glob).", metavar="GLOB[,GLOB]"),
@@ -157,6 +157,51 @@ SCHEMA: tuple[Opt, ...] = (
     Opt("smooth", "tca_max_gap_s", "float", 30.0, ("--tca-max-gap",),
         "A TCA in a data gap longer than S s, or closer than S s to an end, is not observed.", affects=True,
         check=_POS, metavar="S"),
+    # ------------------------------------------------------------------ [refine]
+    # trackproc refine's options; flags that other steps also have carry a --refine- prefix
+    Opt("refine", "initial", "path", None, ("--refine-initial",),
+        "Stale state (JSON state file, optional covariance, or TLE: SGP4 at the traverse epoch) refined from "
+        "each input's pass.", affects=True, metavar="STATE.json|TLE"),
+    Opt("refine", "cost", "choice", "pointwise", ("--cost",),
+        "pointwise: least squares on the samples with the stale state as a-priori; integral: seed 004 eq. 14 on "
+        "the smoothed curve.", choices=("pointwise", "integral"), affects=True),
+    Opt("refine", "circular", "bool", False, ("--circular/--no-circular",),
+        "Impose the circular-orbit constraints of seed 004 eq. 5 (Lagrange multipliers).", affects=True),
+    Opt("refine", "circular_tolerance", "float", 0.0, ("--circular-tolerance",),
+        "With circular: the eccentricity to which the orbit is circular, added to the covariance (0: conditional "
+        "on an exactly circular orbit).", affects=True, check=_NONNEG, metavar="E"),
+    Opt("refine", "doppler_bias", "choice", "auto", ("--refine-doppler-bias",),
+        "Transmitter frequency offset (and drift) to estimate; auto: offset for one-way Doppler, none for "
+        "range-rate.", choices=("auto", "none", "offset", "offset+drift"), affects=True),
+    Opt("refine", "apriori", "bool", None, ("--refine-apriori/--no-refine-apriori",),
+        "Use the stale state as an a-priori (its covariance, else the default of docs/refine.md); unset: on for "
+        "pointwise, off for integral.", affects=True),
+    Opt("refine", "apriori_sigma", "map", {}, ("--refine-apriori-sigma",),
+        "A-priori 1-sigma (SI) of x, vx, doppler_offset, position, velocity or state, NAME=SIGMA; overrides the "
+        "stale covariance; repeatable.", affects=True, metavar="NAME=SIGMA"),
+    Opt("refine", "force", "choice", "j2", ("--refine-force-model",), "Force model of the refinement.",
+        choices=("two-body", "j2"), affects=True),
+    Opt("refine", "earth", "choice", "wgs84", ("--refine-earth",), "Earth model of the station.",
+        choices=("wgs84", "sphere"), affects=True),
+    Opt("refine", "range_rate_model", "choice", None, ("--refine-range-rate-model",),
+        "doppler or instantaneous (default: the pass file's metadata, else doppler).",
+        choices=("doppler", "instantaneous"), affects=True),
+    Opt("refine", "max_iterations", "int", 30, ("--refine-max-iterations",),
+        "Gauss-Newton iterations at most; an input whose refinement does not converge fails.", affects=True,
+        check=_INT_POS, metavar="N"),
+    Opt("refine", "clip", "float", 4.0, ("--refine-clip",),
+        "Pointwise: edit samples beyond K x max(1, WRMS) sigmas (0: off).", affects=True, check=_NONNEG,
+        metavar="K"),
+    Opt("refine", "reweight", "bool", True, ("--reweight/--no-reweight",),
+        "Pointwise: scale the sample sigmas to their actual scatter before weighing them against the a-priori.",
+        affects=True),
+    Opt("refine", "output_epoch", "choice", "traverse", ("--output-epoch",),
+        "Epoch of the state in passes/<name>.refined.json: the traverse point or the stale state's epoch (the "
+        "file holds the other one too).", choices=("traverse", "stale"), affects=True),
+    Opt("refine", "eop", "path", None, ("--refine-eop",), "IERS finals2000A file (UT1-UTC, polar motion).",
+        affects=True, metavar="FILE"),
+    Opt("refine", "dut1", "float", None, ("--refine-dut1",), "UT1-UTC, s, when no EOP file is given.",
+        affects=True, check=(lambda v: abs(v) <= 0.9, "|UT1-UTC| <= 0.9 s"), metavar="S"),
     # ------------------------------------------------------------------ [estimate]
     Opt("estimate", "initial", "path", None, ("--initial",),
         "Initial state (JSON state file or TLE) of every window's estimate.", affects=True,
