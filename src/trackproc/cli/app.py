@@ -62,12 +62,16 @@ def main(argv: list[str] | None = None) -> int:
     """Console-script entry point: runs the app, maps errors to exit codes, one line each."""
     _register()
     argv = _hoist_global_flags(sys.argv[1:] if argv is None else list(argv))
+    stdout = sys.stdout
     try:
         app(args=argv, prog_name="trackproc", standalone_mode=True)
     except SystemExit as exit_:
+        if sys.stdout is not stdout:
+            # click met EPIPE on stdout, swapped in a pacifying wrapper and exits 1: the reader went away
+            return _broken_pipe()
         code = exit_.code if isinstance(exit_.code, int) else (0 if exit_.code is None else 1)
-        _flush_stdout()
-        return code
+        flushed = _flush_stdout()
+        return flushed or code
     except TrackprocError as exc:
         _flush_stdout()
         print(f"trackproc: error: {exc}", file=sys.stderr)

@@ -28,7 +28,7 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
     ``path == "-"`` yields stdout's binary buffer (nothing to rename).
     """
     if is_stdio(path):
-        out = sys.stdout.buffer
+        out = _WholeWrites(sys.stdout.buffer)
         yield out
         out.flush()
         return
@@ -53,6 +53,31 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+class _WholeWrites:
+    """stdout whose ``write`` writes everything or raises: a pipe whose reader went away can make
+    a buffered write return a short count without an error, which would end the run with exit 0
+    and a silently truncated output."""
+
+    def __init__(self, raw: BinaryIO):
+        self._raw = raw
+
+    def write(self, data) -> int:
+        view = memoryview(data).cast("B")
+        total = len(view)
+        while view:
+            n = self._raw.write(view)
+            if not n:
+                raise BrokenPipeError("stdout accepted no more data")
+            view = view[n:]
+        return total
+
+    def flush(self) -> None:
+        self._raw.flush()
+
+    def __getattr__(self, name):
+        return getattr(self._raw, name)
 
 
 def _umask() -> int:
