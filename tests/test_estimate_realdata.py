@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,17 +24,10 @@ from trackproc.io.tle import parse_tle, sgp4_teme, tle_state
 from trackproc.models import observation as ob
 from trackproc.pipeline.estimate import EstimateOptions, build_problem, estimate
 from trackproc.pipeline.ingest import IngestOptions, ingest
+from realdata import REALDATA, DOPTRACK, W3B, requires
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
-REALDATA = SHARED / "realdata"
-DOPTRACK = REALDATA / "doptrack-delfic3"
-W3B = REALDATA / "orekit-w3b"
 
-pytestmark = [
-    pytest.mark.realdata,
-    pytest.mark.skipif(not REALDATA.is_dir(), reason=f"real data not available: {REALDATA} is absent "
-                       "(CI checks it out beside the repository)"),
-]
+pytestmark = requires(REALDATA)
 
 #: UT1-UTC from IERS Bulletin B 274 (2010-11-02: -0.0927 s) and for April 2020 (about -0.2 s).
 DUT1_W3B = -0.0927264

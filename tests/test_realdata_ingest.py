@@ -20,17 +20,10 @@ from trackproc.constants import C_LIGHT
 from trackproc.io.passfile import read_pass_table, write_pass_table
 from trackproc.io.tabular import read_raw
 from trackproc.pipeline.ingest import ingest
+from realdata import SHARED, DOPTRACK, W3B, requires
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
-REALDATA = SHARED / "realdata"
-DOPTRACK = REALDATA / "doptrack-delfic3"
-W3B = REALDATA / "orekit-w3b"
 
-pytestmark = [
-    pytest.mark.realdata,
-    pytest.mark.skipif(not SHARED.is_dir(), reason=f"real data not available: {SHARED} is absent "
-                       "(CI checks it out beside the repository)"),
-]
+pytestmark = requires(SHARED)
 
 
 @pytest.fixture(scope="module")

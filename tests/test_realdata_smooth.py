@@ -23,21 +23,15 @@ Run ``python tests/test_realdata_smooth.py`` to print the table of docs/smooth.m
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from realdata import DOPTRACK, requires
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
-DOPTRACK = SHARED / "realdata" / "doptrack-delfic3"
 BAD_PASS = "202004011959"
 
-pytestmark = [
-    pytest.mark.realdata,
-    pytest.mark.skipif(not (DOPTRACK / "data").is_dir(),
-                       reason=f"real data not found: {DOPTRACK} (CI has ../shared beside the checkout)"),
-]
+pytestmark = requires(DOPTRACK / "data")
 
 
 def smooth_all() -> pd.DataFrame:

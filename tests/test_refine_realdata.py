@@ -11,10 +11,8 @@ from __future__ import annotations
 
 import datetime as dt
 import json
-from pathlib import Path
 
 import numpy as np
-import pytest
 
 from trackproc.constants import C_LIGHT
 from trackproc.dynamics import frames
@@ -23,15 +21,10 @@ from trackproc.io.tle import parse_tle, sgp4_teme, tle_state
 from trackproc.models import observation as ob
 from trackproc.pipeline.estimate import EstimateOptions, build_problem
 from trackproc.pipeline.refine import LOW_PASS_DEG, RefineOptions, refine
+from realdata import DOPTRACK, requires
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
-DOPTRACK = SHARED / "realdata" / "doptrack-delfic3"
 
-pytestmark = [
-    pytest.mark.realdata,
-    pytest.mark.skipif(not DOPTRACK.is_dir(), reason=f"real data not available: {DOPTRACK} is absent "
-                       "(CI checks ../shared out beside the repository)"),
-]
+pytestmark = requires(DOPTRACK)
 
 #: UT1-UTC for April 2020 (IERS Bulletin A: about -0.2 s).
 EOP = ts.EarthOrientation.constant(-0.2)
