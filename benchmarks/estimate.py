@@ -48,17 +48,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))     # the Orekit driver, shared with tests/test_against_orekit.py
 import orekit_helpers as oh
 
-EPOCH = "2025-06-01T09:30:00.000Z"
-TRUTH = {"epoch": EPOCH, "frame": "GCRF", "position_m": [3774841.0, -1538034.0, 5924146.0],
-         "velocity_m_s": [-4816.6, 3936.4, 4091.1]}
-GUESS = {**TRUTH, "position_m": [3775441.0, -1538534.0, 5924706.0], "velocity_m_s": [-4816.0, 3935.9, 4091.7]}
-STATIONS = "station,lat_deg,lon_deg,height_m\nZHY,48.0,35.0,150\nKIR,67.857,20.964,400\nMAD,40.43,-4.25,830\n"
-BIASES = {"ZHY": 100.0, "KIR": -80.0, "MAD": 120.0}
-#: IERS values around 2025-06-01, laid out linearly (see tests/test_against_orekit.py).
-EOP_ROWS = {"first_mjd": 60824, "days": 8, "dut1_s": 0.0289865 - 3 * 4.39e-5, "dut1_rate_s_day": 4.39e-5,
-            "xp_arcsec": 0.113195 - 3 * 8.8e-4, "xp_rate": 8.8e-4, "yp_arcsec": 0.437657 - 3 * 3.4e-4,
-            "yp_rate": 3.4e-4}
-MODEL = ["--force", "two-body", "--range-rate-model", "instantaneous"]
+GUESS, MODEL = oh.GUESS, oh.MODEL   # the case shared with tests/test_against_orekit.py
 TARGET_S, TARGET_MB = 4.0, 1024.0
 
 
@@ -67,11 +57,7 @@ def trackproc_cmd(*args):
 
 
 def make_case(d: Path, hours: float) -> dict:
-    eop = oh.write_linear_finals2000a(d / "finals2000A.txt", **EOP_ROWS)
-    (d / "truth.json").write_text(json.dumps(TRUTH))
-    (d / "guess.json").write_text(json.dumps(GUESS))
-    (d / "stations.csv").write_text(STATIONS)
-    biased = [a for s, b in BIASES.items() for a in ("--range-bias", f"{s}={b:g}")]
+    eop, biased = oh.write_case_inputs(d)
     t0 = time.perf_counter()
     child = oh.run_measured(trackproc_cmd(
         "-q", "simulate", "--state", d / "truth.json", "--stations", d / "stations.csv", "--duration",

@@ -433,3 +433,32 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+# --------------------------------------------------------------------------- the shared case
+# One small simulated case for tests/test_against_orekit.py and benchmarks/estimate.py.
+
+EPOCH = "2025-06-01T09:30:00.000Z"
+TRUTH = {"epoch": EPOCH, "frame": "GCRF", "position_m": [3774841.0, -1538034.0, 5924146.0],
+         "velocity_m_s": [-4816.6, 3936.4, 4091.1]}
+GUESS = {**TRUTH, "position_m": [3775441.0, -1538534.0, 5924706.0], "velocity_m_s": [-4816.0, 3935.9, 4091.7]}
+STATIONS = "station,lat_deg,lon_deg,height_m\nZHY,48.0,35.0,150\nKIR,67.857,20.964,400\nMAD,40.43,-4.25,830\n"
+BIASES = {"ZHY": 100.0, "KIR": -80.0, "MAD": 120.0}
+#: IERS values around 2025-06-01 (finals2000A, MJD 60827: UT1-UTC 0.0289865 s, x 0.113195",
+#: y 0.437657") and their daily rates, laid out *linearly* from MJD 60824 so that trackproc's
+#: linear and Orekit's 4-point interpolation give identical values between the rows.
+EOP_ROWS = {"first_mjd": 60824, "days": 8, "dut1_s": 0.0289865 - 3 * 4.39e-5, "dut1_rate_s_day": 4.39e-5,
+            "xp_arcsec": 0.113195 - 3 * 8.8e-4, "xp_rate": 8.8e-4, "yp_arcsec": 0.437657 - 3 * 3.4e-4,
+            "yp_rate": 3.4e-4}
+#: The trackproc options that match Orekit's model: two-body, Orekit's one-way RangeRate.
+MODEL = ["--force", "two-body", "--range-rate-model", "instantaneous"]
+
+
+def write_case_inputs(d: Path) -> tuple[Path, list[str]]:
+    """Write the EOP file, truth.json, guess.json and stations.csv of the shared case into ``d``;
+    return the EOP file and the ``--range-bias STATION=M`` options of its biases."""
+    eop = write_linear_finals2000a(d / "finals2000A.txt", **EOP_ROWS)
+    (d / "truth.json").write_text(json.dumps(TRUTH))
+    (d / "guess.json").write_text(json.dumps(GUESS))
+    (d / "stations.csv").write_text(STATIONS)
+    return eop, [a for s, b in BIASES.items() for a in ("--range-bias", f"{s}={b:g}")]

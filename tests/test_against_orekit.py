@@ -36,19 +36,9 @@ pytestmark = pytest.mark.validation
 
 _OK, _WHY = oh.availability()
 
-EPOCH = "2025-06-01T09:30:00.000Z"
-TRUTH = {"epoch": EPOCH, "frame": "GCRF", "position_m": [3774841.0, -1538034.0, 5924146.0],
-         "velocity_m_s": [-4816.6, 3936.4, 4091.1]}
-GUESS = {**TRUTH, "position_m": [3775441.0, -1538534.0, 5924706.0], "velocity_m_s": [-4816.0, 3935.9, 4091.7]}
-STATIONS = "station,lat_deg,lon_deg,height_m\nZHY,48.0,35.0,150\nKIR,67.857,20.964,400\nMAD,40.43,-4.25,830\n"
-BIASES = {"ZHY": 100.0, "KIR": -80.0, "MAD": 120.0}
-#: IERS values around 2025-06-01 (finals2000A, MJD 60827: UT1-UTC 0.0289865 s, x 0.113195",
-#: y 0.437657") and their daily rates, laid out *linearly* from MJD 60824 so that trackproc's
-#: linear and Orekit's 4-point interpolation give identical values between the rows.
-EOP_ROWS = {"first_mjd": 60824, "days": 8, "dut1_s": 0.0289865 - 3 * 4.39e-5, "dut1_rate_s_day": 4.39e-5,
-            "xp_arcsec": 0.113195 - 3 * 8.8e-4, "xp_rate": 8.8e-4, "yp_arcsec": 0.437657 - 3 * 3.4e-4,
-            "yp_rate": 3.4e-4}
-COMMON = ["--force", "two-body", "--range-rate-model", "instantaneous"]
+from orekit_helpers import BIASES, EPOCH, GUESS, STATIONS, TRUTH  # noqa: E402  (the shared case)
+
+COMMON = oh.MODEL
 
 
 def _cli(args):
@@ -69,17 +59,13 @@ def case(tmp_path_factory):
     if not _OK:
         pytest.skip(_WHY)
     d = tmp_path_factory.mktemp("orekit")
-    eop = oh.write_linear_finals2000a(d / "finals2000A.txt", **EOP_ROWS)
-    (d / "truth.json").write_text(json.dumps(TRUTH))
-    (d / "guess.json").write_text(json.dumps(GUESS))
-    (d / "stations.csv").write_text(STATIONS)
+    eop, biased = oh.write_case_inputs(d)
     sim = ["simulate", "--state", d / "truth.json", "--stations", d / "stations.csv", "--duration", "43200",
            "--step", "30", "--eop", eop, "--kinds", "range,range_rate", "-q"]
     noiseless = ["--sigma-range-m", "0", "--sigma-range-rate-m-s", "0"]
     assert _cli(sim + COMMON + noiseless + ["-o", d / "noiseless.parquet"]) == 0
     assert _cli(sim + ["--force", "two-body", "--range-rate-model", "doppler"] + noiseless
                 + ["-o", d / "noiseless_doppler.parquet"]) == 0
-    biased = [a for s, b in BIASES.items() for a in ("--range-bias", f"{s}={b:g}")]
     assert _cli(sim + COMMON + biased + ["--seed", "7", "-o", d / "passes.parquet"]) == 0
     assert _cli(["estimate", d / "passes.parquet", "--initial", d / "guess.json", "--stations", d / "stations.csv",
                  "--eop", eop, "--range-bias", "--clip", "0", "-q", "-o", d / "trackproc.json"] + COMMON) == 0
