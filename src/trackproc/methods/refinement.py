@@ -580,6 +580,19 @@ class Observability:
     threshold: float = 1.0
     rotation_alignment: Optional[float] = None
     notes: list = field(default_factory=list)
+    #: (6, 6) GCRF: column i is direction i (``L vᵢ``); ``dual`` row i picks its coefficient (``vᵢᵀ L⁻¹``)
+    basis: Optional[np.ndarray] = None
+    dual: Optional[np.ndarray] = None
+
+    def split(self, difference) -> tuple[np.ndarray, np.ndarray]:
+        """``(seen, unseen)``: a GCRF state difference (6,) (an error, a correction) split into
+        the part along the directions the pass determines and the part along those it cannot
+        see (:attr:`unobservable`); ``seen + unseen = difference``. The split is the one of the
+        report (the reference metric), so the unseen part is what only the a-priori can bound."""
+        d = np.asarray(difference, float)
+        weak = list(self.unobservable)
+        unseen = self.basis[:, weak] @ (self.dual[weak] @ d) if weak else np.zeros(6)
+        return d - unseen, unseen
 
     def direction_text(self, i: int, threshold: float = 0.2) -> str:
         """``+9.9 km along -1.3 km radial ...``: the main RTN components of direction ``i``."""
@@ -667,4 +680,5 @@ def observability(jacobian, sigma, names, rtn_matrix, reference_covariance, post
     return Observability(names=list(names), singular_values=sv_full, state_singular_values=s,
                          gain=1.0 / np.sqrt(1.0 + s * s), directions=directions, unobservable=weak,
                          reference=reference, reference_sigma_rtn=ref_rtn, posterior_sigma_rtn=post_rtn,
-                         threshold=threshold, rotation_alignment=align)
+                         threshold=threshold, rotation_alignment=align, basis=chol @ vt.T,
+                         dual=vt @ np.linalg.inv(chol))
