@@ -260,7 +260,7 @@ def test_non_convergence_is_a_processing_error():
 
 @pytest.mark.parametrize("change, column", [
     (lambda f, m: (f.assign(station=f["station"].replace("KIR", "XXX")), m), "station"),
-    (lambda f, m: (f, {**m, "doppler_mode": "two-way"}), "doppler_mode"),
+    (lambda f, m: (f, {**m, "doppler_mode": "three-way"}), "doppler_mode"),     # two-way is estimated now
     (lambda f, m: (f.assign(sigma=np.where(np.arange(len(f)) == 7, -1.0, f["sigma"])), m), "sigma"),
     (lambda f, m: (f.assign(value=np.where(np.arange(len(f)) == 3, np.nan, f["value"])), m), "value"),
 ])

@@ -38,7 +38,7 @@ def estimate_command(
     range_bias_station: List[str] = typer.Option(
         [], "--range-bias-station", metavar="STATION", help="Estimate a range bias for this station only (repeatable)."),
     doppler_bias: Optional[DopplerBias] = typer.Option(
-        None, "--doppler-bias", help="Estimate a one-way Doppler frequency offset, or offset and drift."),
+        None, "--doppler-bias", help="Estimate a Doppler frequency offset (a one-way transmitter's), or offset and drift."),
     doppler_bias_per: BiasPer = typer.Option(BiasPer.pass_, "--doppler-bias-per",
                                              help="One Doppler offset (drift) per pass or per station."),
     angle_bias: bool = typer.Option(False, "--angle-bias", help="Estimate azimuth and elevation biases per station."),

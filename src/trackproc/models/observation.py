@@ -38,14 +38,57 @@ and the total derivative of the emission state is ``D = Φ(t_e) + ṡ(t_e) (dt_e
 partial carries the factor ``1/(1 + û·v/c)``. The station is a known function of ``t_r``
 and contributes nothing.
 
+**Two-way** (samples with ``mode`` ``"two-way"``: round trip, the same station transmits and
+receives, transponder turnaround ratio 1; the simulator's model). The down leg above ends the
+trip: the satellite bounced the signal at ``t_b = t_e``, state ``s_b = (r_b, v_b)``. The up leg
+left the station at ``t_t = t_b - ρ_u/c``; with ``T = τ_d + τ_u`` the round-trip light time the
+station is moved back from ``t_r`` with its GCRF velocity and centripetal acceleration ``a_st``:
+
+    R(T) = r_st - v_st T + a_st T²/2,   V(T) = v_st - a_st T
+    ρ_u = |r_b - R(T)| = c τ_u,   û_u = (r_b - R(T)) / ρ_u                          (7)
+    range              (ρ_d + ρ_u)/2  (= c T/2)                                     (8)
+    range-rate         (ρ̇_d + ρ̇_u)/2 with ρ̇_d by (2) or (3) and                    (9)
+                       doppler:       ρ̇_u = (1 - ρ̇_d/c) û_u·(v_b - V) / (1 - û_u·V/c)
+                       instantaneous: ρ̇_u = û_u·(v_b - V)
+    Doppler            Δf = -2 f (range-rate) / c  (+ modifiers)                     (10)
+
+(``ρ̇_u`` of (9) is dρ_u/dt_r: the up leg's ends move with ``dt_b/dt_r = 1 - ρ̇_d/c`` and
+``dt_t/dt_r = dt_b/dt_r - ρ̇_u/c``.) Azimuth and elevation stay those of the down leg (5).
+
+*Partials through both light times.* A two-way value ``g(s_b, T)`` depends on the bounce state
+and, through the station's motion, on ``T``. A change ``δp`` moves the bounce state by ``D δp``
+(eq. 6 at ``t_b``, ``D_r`` its position rows) and the round trip by ``δT = (δρ_d + δρ_u)/c``
+with ``δρ_d = û_d·D_r δp`` (that is dρ/dp of eq. 6: the bounce-time term of ``D`` supplies the
+factor ``1/(1 + û_d·v_b/c)``) and ``δρ_u = û_u·(D_r δp - δR) = û_u·D_r δp + (û_u·V) δT``, so
+
+    dT/dp = (û_d + û_u)·D_r / (c - û_u·V)                                           (11)
+    dg/dp = (∂g/∂s_b) D + (∂g/∂T) dT/dp,    ∂R/∂T = -V,  ∂V/∂T = -a_st               (12)
+
+(:func:`round_trip_jacobian`). Range: ``∂/∂r_b = (û_d + û_u)/2``, ``∂/∂T = û_u·V/2``, which
+sum to ``(c/2) dT/dp``. Up-leg rate (:func:`up_rate_partials`), with ``e = û_u·V``,
+``w = û_u·(v_b - V)``, ``k = (1 - ρ̇_d/c)/(1 - e/c)`` and ``P_u = I - û_u û_uᵀ``:
+
+    ∂ρ̇_u/∂r_b = P_u (k (v_b - V) + ρ̇_u V/(c - e)) / ρ_u,    ∂ρ̇_u/∂v_b = k û_u
+    ∂ρ̇_u/∂V = (ρ̇_u/(c - e) - k) û_u,   ∂ρ̇_u/∂R = -∂ρ̇_u/∂r_b,   ∂ρ̇_u/∂ρ̇_d = -w/(c - e)
+    ∂ρ̇_u/∂T = (∂ρ̇_u/∂r_b)·V - (∂ρ̇_u/∂V)·a_st                                      (13)
+
+(instantaneous: ``k = 1`` and the ``e`` and ``ρ̇_d`` terms vanish), and the two-way rate
+(:func:`two_way_range_rate_partials`) has ``∂/∂s_b = (∂ρ̇_d/∂s_b (1 + ∂ρ̇_u/∂ρ̇_d) + ∂ρ̇_u/∂s_b)/2``
+(``∂ρ̇_d/∂s_b`` by :func:`range_rate_partials` with the station at ``t_r``) and
+``∂/∂T = (∂ρ̇_u/∂T)/2``. The ``∂/∂T`` terms are small (relative size ~``|V|/c``: ≤ 1.5e-6,
+~1e-7 typically in LEO) but above the finite-difference check's resolution (~4e-9), so they
+are kept: the partials are exact to first order.
+
 Biases are *modifiers* that bring their own drivers (:class:`BiasModifier`): each adds
 ``coefficient × value`` to some rows, so its partial is the coefficient — 1 for a range,
 Doppler offset, azimuth or elevation bias, ``t_r - t0`` for a Doppler drift, and
 ``-c/f`` (``-c (t_r - t0)/f``) when a Doppler offset (drift) acts on range-rate samples that
-came from one-way Doppler (``ρ̇ = -c Δf / f``).
+came from one-way Doppler (``ρ̇ = -c Δf / f``), ``-c/(2f)`` (``-c (t_r - t0)/(2f)``) from
+two-way Doppler (``ρ̇ = -c Δf / (2f)``). A range bias of a two-way range is in the range's
+(half round trip) metres.
 
 Every partial here is checked against central finite differences in
-``tests/test_observation.py``.
+``tests/test_observation.py`` (one-way) and ``tests/test_two_way.py`` (two-way).
 """
 
 from __future__ import annotations
@@ -57,13 +100,19 @@ import numpy as np
 
 from trackproc.constants import C_LIGHT
 
-__all__ = ["KINDS", "RANGE_RATE_MODELS", "MeasurementSet", "BiasModifier", "EmissionGeometry",
+__all__ = ["KINDS", "RANGE_RATE_MODELS", "MODES", "MeasurementSet", "BiasModifier", "EmissionGeometry", "UpLeg",
            "range_partials", "range_rate_value", "range_rate_partials", "azel_value", "azel_partials",
-           "solve_light_time", "emission_jacobian", "evaluate", "bias_modifiers", "wrap_pi"]
+           "solve_light_time", "emission_jacobian", "evaluate", "bias_modifiers", "wrap_pi",
+           "solve_up_leg", "round_trip_jacobian", "two_way_range_partials", "up_rate_partials",
+           "two_way_range_rate_partials"]
 
 #: Measurement kinds the estimator models.
 KINDS = ("range", "range_rate", "doppler", "azimuth", "elevation")
 RANGE_RATE_MODELS = ("doppler", "instantaneous")
+#: Link modes: the satellite transmits (one-way) or transponds the station's signal (two-way).
+MODES = ("one-way", "two-way")
+#: Kinds a two-way link changes (angles are the down leg's in both modes).
+LINK_KINDS = ("range", "range_rate", "doppler")
 #: Light-time convergence threshold, s (as the simulator).
 LIGHT_TIME_TOL_S = 1e-12
 
@@ -228,7 +277,10 @@ class MeasurementSet:
     ``t_s`` reception times (s from the solution epoch); ``kind`` (one of :data:`KINDS`);
     ``station`` names; ``pass_id``; ``observed`` and ``sigma``; ``r_st``/``v_st`` (N, 3) the
     station in GCRF at ``t_r``; ``gcrf_to_enu`` (N, 3, 3) for angles (None if there are none);
-    ``carrier_hz`` (N,) nominal carrier (NaN where unknown).
+    ``carrier_hz`` (N,) nominal carrier (NaN where unknown); ``a_st`` (N, 3) the station's GCRF
+    (centripetal) acceleration at ``t_r``, needed by two-way samples only (it moves the station
+    back over the round trip); ``mode`` (N,) the link, one of :data:`MODES` (default: all
+    one-way; it matters for range, range-rate and Doppler samples).
     """
 
     t_s: np.ndarray
@@ -241,6 +293,8 @@ class MeasurementSet:
     v_st: np.ndarray
     gcrf_to_enu: Optional[np.ndarray] = None
     carrier_hz: Optional[np.ndarray] = None
+    a_st: np.ndarray | None = None
+    mode: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.kind = np.asarray(self.kind, dtype=object)
@@ -250,9 +304,16 @@ class MeasurementSet:
         if self.carrier_hz is None:
             self.carrier_hz = np.full(n, np.nan)
         self.carrier_hz = np.broadcast_to(np.asarray(self.carrier_hz, float), (n,)).copy()
+        self.mode = np.broadcast_to(np.asarray("one-way" if self.mode is None else self.mode, dtype=object),
+                                    (n,)).copy()
+        if self.a_st is not None:
+            self.a_st = np.asarray(self.a_st, float)
         bad = sorted(set(self.kind.tolist()) - set(KINDS))
         if bad:
             raise ValueError(f"unknown measurement kind {bad[0]!r}; expected one of {KINDS}")
+        bad = sorted(set(self.mode.tolist()) - set(MODES))
+        if bad:
+            raise ValueError(f"unknown link mode {bad[0]!r}; expected one of {MODES}")
 
     def __len__(self) -> int:
         return len(self.t_s)
@@ -262,13 +323,18 @@ class MeasurementSet:
         """True for azimuth samples (residuals wrap at 2π)."""
         return self.kind == "azimuth"
 
+    @property
+    def two_way(self) -> np.ndarray:
+        """True for two-way range, range-rate and Doppler samples (the round-trip model)."""
+        return (self.mode == "two-way") & np.isin(self.kind, LINK_KINDS)
+
     def subset(self, rows) -> "MeasurementSet":
         rows = np.asarray(rows)
         pick = (lambda a: None if a is None else a[rows])
         return MeasurementSet(t_s=self.t_s[rows], kind=self.kind[rows], station=self.station[rows],
                               pass_id=self.pass_id[rows], observed=self.observed[rows], sigma=self.sigma[rows],
                               r_st=self.r_st[rows], v_st=self.v_st[rows], gcrf_to_enu=pick(self.gcrf_to_enu),
-                              carrier_hz=self.carrier_hz[rows])
+                              carrier_hz=self.carrier_hz[rows], a_st=pick(self.a_st), mode=self.mode[rows])
 
 
 @dataclass(frozen=True)
@@ -289,7 +355,8 @@ def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | No
 
     ``range_bias:S`` -> ranges of station S; ``az_bias:S``/``el_bias:S`` -> its angles;
     ``doppler_offset:K`` and ``doppler_drift:K`` -> Doppler and range-rate samples whose pass id
-    or station is K (range-rate through ``-c/f``; NaN carrier there raises ValueError).
+    or station is K (range-rate through ``-c/f``, ``-c/(2f)`` two-way; NaN carrier there raises
+    ValueError).
     ``epochs`` maps a drift name to its reference time (s). A driver touching no sample raises
     ValueError (it would be unobservable).
     """
@@ -324,6 +391,8 @@ def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | No
                                      "Doppler offset/drift")
                 coef = coef.copy()
                 coef[rr] *= -c / f
+                # two-way range-rate came from two-way Doppler: ρ̇ = -c Δf / (2 f)
+                coef[rr] = np.where(meas.two_way[rows][rr], 0.5 * coef[rr], coef[rr])
         if rows.size == 0:
             raise ValueError(f"parameter {name!r} acts on no measurement")
         out.append(BiasModifier(name, rows, coef))
@@ -333,14 +402,16 @@ def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | No
 def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modifiers: Sequence[BiasModifier] = (),
              bias_values: dict | None = None, bias_columns: dict | None = None, n_columns: int | None = None,
              range_rate_model: str = "doppler", c: float = C_LIGHT):
-    """Model values and partials of every sample (eqs. (1)-(6) of the module docstring).
+    """Model values and partials of every sample (eqs. (1)-(13) of the module docstring).
 
     ``trajectory`` gives GCRF ``state(t, derivative=0|1)`` (N, 6) and ``stm(t)`` (N, 6, P) —
     d state(t) / d (state at the epoch), P = ``n_state_params`` columns placed first (a
     :class:`trackproc.dynamics.propagator.Trajectory` propagated with ``stm=True``).
     ``modifiers`` (from :func:`bias_modifiers`), with ``bias_values`` name -> value and
     ``bias_columns`` name -> column of the Jacobian (omit a name to hold it fixed: value added,
-    no column). Returns ``(computed (N,), jacobian (N, n_columns), geometry)``.
+    no column). Two-way samples (``meas.two_way``) take the round trip, eqs. (7)-(13), and need
+    ``meas.a_st``. Returns ``(computed (N,), jacobian (N, n_columns), geometry)``, the geometry
+    being the down leg's (:class:`EmissionGeometry`; for two-way samples ``t_e`` is the bounce).
     """
     _check_model(range_rate_model)
     n = len(meas)
@@ -355,9 +426,22 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
     g = np.zeros((n, 6))                            # ∂ value / ∂ s_e
 
     kind = meas.kind
+    two = meas.two_way
+    up = None
+    if two.any():
+        if meas.a_st is None:
+            raise ValueError("two-way samples need the station acceleration a_st")
+        up = solve_up_leg(r_e[two], meas.r_st[two], meas.v_st[two], meas.a_st[two], geo.tau_s[two], c=c)
+        g_t = np.zeros(n)                           # ∂ value / ∂ T at fixed s_b (eq. 12)
+        pos = np.cumsum(two) - 1                    # row -> index in the up-leg arrays
     m = kind == "range"
     value[m] = geo.rho_m[m]
     g[m, :3] = geo.u[m]
+    if up is not None and (m & two).any():
+        rows = np.flatnonzero(m & two)
+        j = pos[rows]
+        value[rows], g[rows, :3], g_t[rows] = two_way_range_partials(geo.rho_m[rows], geo.u[rows], up.rho_m[j],
+                                                                     up.u[j], up.v_st[j])
     for k in ("range_rate", "doppler"):
         m = kind == k
         if not m.any():
@@ -367,6 +451,16 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         if k == "doppler" and not np.all(np.isfinite(factor)):
             raise ValueError("Doppler samples need a carrier frequency")
         factor = np.broadcast_to(factor, rr.shape)
+        tm = two[m]
+        if tm.any():
+            rows = np.flatnonzero(m)[tm]
+            j = pos[rows]
+            rr[tm], d_r[tm], d_v[tm], d_t = two_way_range_rate_partials(
+                r_e[rows], v_e[rows], meas.r_st[rows], meas.v_st[rows], up.r_st[j], up.v_st[j], meas.a_st[rows],
+                range_rate_model, c)
+            if k == "doppler":
+                factor = np.where(tm, 2.0 * factor, factor)     # eq. (10): the round trip doubles the shift
+            g_t[rows] = factor[tm] * d_t
         value[m] = factor * rr
         g[m, :3] = factor[:, None] * d_r
         g[m, 3:] = factor[:, None] * d_v
@@ -381,6 +475,9 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
 
     jac = np.zeros((n, ncol))
     jac[:, :n_state_params] = np.einsum("ni,nip->np", g, dstate)
+    if up is not None:
+        d_big_t = round_trip_jacobian(geo.u[two], up.u, up.v_st, dstate[two, :3, :n_state_params], c)
+        jac[two, :n_state_params] += g_t[two, None] * d_big_t
     for mod in modifiers:
         coef = mod.coefficients()
         value[mod.rows] += coef * bias_values.get(mod.name, 0.0)
@@ -388,3 +485,120 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         if col is not None:
             jac[mod.rows, col] += coef
     return value, jac, geo
+
+
+# ----------------------------------------------------------------------------- two-way (eqs. 7-13)
+
+@dataclass(frozen=True)
+class UpLeg:
+    """Result of :func:`solve_up_leg` (arrays along the two-way samples).
+
+    ``tau_s`` up-leg light times, ``rho_m`` up-leg ranges, ``u`` unit vectors from the station at
+    ``t_t`` to the bounce point, ``r_st``/``v_st`` (N, 3) the station ``R(T)``, ``V(T)`` at
+    ``t_t`` (eq. 7), ``iterations`` Newton iterations taken.
+    """
+
+    tau_s: np.ndarray
+    rho_m: np.ndarray
+    u: np.ndarray
+    r_st: np.ndarray
+    v_st: np.ndarray
+    iterations: int
+
+
+def _station_back(r_st, v_st, a_st, big_t):
+    """Station ``T`` seconds before ``t_r``: ``R = r - v T + a T²/2``, ``V = v - a T`` (eq. 7)."""
+    t = np.asarray(big_t, float)[:, None]
+    return r_st - v_st * t + a_st * (t * t / 2.0), v_st - a_st * t
+
+
+def solve_up_leg(r_b, r_st, v_st, a_st, tau_down_s, *, c: float = C_LIGHT, tol_s: float = LIGHT_TIME_TOL_S,
+                 max_iter: int = 10) -> UpLeg:
+    """Up leg of two-way samples: the signal that reached the satellite at ``r_b`` (N, 3) at the
+    bounce time left the station ``τ_u`` earlier, eq. (7).
+
+    ``r_st, v_st, a_st`` (N, 3): the station in GCRF at ``t_r``; ``tau_down_s`` (N,) the down
+    leg's light time. Newton on ``g(τ) = c τ - |r_b - R(τ_d + τ)|``, ``g' = c - û_u·V``, from
+    ``τ = τ_d`` (the simulator's iteration); raises ``ArithmeticError`` if it does not converge.
+    """
+    r_b, r_st, v_st, a_st = (np.asarray(x, float) for x in (r_b, r_st, v_st, a_st))
+    tau_d = np.asarray(tau_down_s, float)
+    tau = tau_d.copy()
+    for it in range(1, max_iter + 1):
+        big_r, big_v = _station_back(r_st, v_st, a_st, tau_d + tau)
+        d = r_b - big_r
+        rho = np.linalg.norm(d, axis=-1)
+        step = (c * tau - rho) / (c - _dot(d / rho[:, None], big_v))
+        tau = tau - step
+        if np.all(np.abs(step) < tol_s):
+            break
+    else:
+        raise ArithmeticError("two-way up-leg light-time iteration did not converge")
+    big_r, big_v = _station_back(r_st, v_st, a_st, tau_d + tau)
+    d = r_b - big_r
+    rho = np.linalg.norm(d, axis=-1)
+    return UpLeg(tau_s=tau, rho_m=rho, u=d / rho[:, None], r_st=big_r, v_st=big_v, iterations=it)
+
+
+def round_trip_jacobian(u_down, u_up, v_st_t, dstate_r, c: float = C_LIGHT):
+    """``dT/dp`` (N, P) of the round-trip light time, eq. (11).
+
+    ``u_down``, ``u_up`` (N, 3) the legs' unit vectors, ``v_st_t`` (N, 3) the station's velocity
+    ``V`` at ``t_t``, ``dstate_r`` (N, 3, P) the position rows of the bounce state's total
+    derivative ``D`` (:func:`emission_jacobian`).
+    """
+    num = np.einsum("ni,nip->np", np.asarray(u_down) + np.asarray(u_up), dstate_r)
+    return num / (c - _dot(u_up, v_st_t))[:, None]
+
+
+def two_way_range_partials(rho_down, u_down, rho_up, u_up, v_st_t):
+    """Two-way range ``(ρ_d + ρ_u)/2`` (eq. 8), ``∂/∂r_b = (û_d + û_u)/2`` and ``∂/∂T = û_u·V/2``
+    (the station recedes along ``-V`` as ``T`` grows). Returns ``(range, d_r (N, 3), d_t (N,))``."""
+    u_down, u_up = np.asarray(u_down, float), np.asarray(u_up, float)
+    return (0.5 * (np.asarray(rho_down, float) + np.asarray(rho_up, float)), 0.5 * (u_down + u_up),
+            0.5 * _dot(u_up, v_st_t))
+
+
+def up_rate_partials(r_b, v_b, r_st_t, v_st_t, a_st, rr_down, model: str = "doppler", c: float = C_LIGHT):
+    """Up-leg rate ``ρ̇_u`` (eq. 9) and its partials, eq. (13).
+
+    ``r_b, v_b`` the bounce state, ``r_st_t, v_st_t`` the station ``R, V`` at ``t_t``, ``a_st``
+    its acceleration, ``rr_down`` the down leg's rate ``ρ̇_d``. Returns ``(rr_u, d_r, d_v,
+    d_rr_down (N,), d_t (N,))``: ``∂ρ̇_u/∂r_b``, ``∂ρ̇_u/∂v_b`` (N, 3) at fixed ``T`` and ``ρ̇_d``,
+    ``∂ρ̇_u/∂ρ̇_d`` and ``∂ρ̇_u/∂T`` at fixed bounce state.
+    """
+    _check_model(model)
+    r_b, v_b, big_r, big_v, a_st = (np.asarray(x, float) for x in (r_b, v_b, r_st_t, v_st_t, a_st))
+    d = r_b - big_r
+    rho = np.linalg.norm(d, axis=-1)[:, None]
+    u = d / rho
+    dv = v_b - big_v
+    w = _dot(u, dv)
+    if model == "instantaneous":
+        rr, q, d_v, d_big_v, d_rrd = w, dv, u.copy(), -u, np.zeros_like(w)
+    else:
+        e = _dot(u, big_v)
+        k = ((1.0 - np.asarray(rr_down, float) / c) / (1.0 - e / c))[:, None]
+        rr = k[:, 0] * w
+        s = (rr / (c - e))[:, None]                 # ∂ρ̇_u/∂e
+        q = k * dv + s * big_v
+        d_v = k * u
+        d_big_v = (s - k) * u
+        d_rrd = -w / (c - e)
+    d_r = (q - u * _dot(u, q)[:, None]) / rho       # P_u q / ρ_u
+    d_t = _dot(d_r, big_v) - _dot(d_big_v, a_st)    # ∂R/∂T = -V, ∂R enters as -∂r_b; ∂V/∂T = -a_st
+    return rr, d_r, d_v, d_rrd, d_t
+
+
+def two_way_range_rate_partials(r_b, v_b, r_st, v_st, r_st_t, v_st_t, a_st, model: str = "doppler",
+                                c: float = C_LIGHT):
+    """Two-way range-rate ``(ρ̇_d + ρ̇_u)/2`` (eq. 9) with ``∂/∂r_b``, ``∂/∂v_b`` (N, 3) at fixed
+    ``T`` and ``∂/∂T`` (N,) at fixed bounce state (module docstring, after eq. 13).
+
+    ``r_st, v_st`` the station at ``t_r`` (down leg), ``r_st_t, v_st_t`` at ``t_t`` (up leg),
+    ``a_st`` its acceleration. Returns ``(rr, d_r, d_v, d_t)``.
+    """
+    rr_d, dd_r, dd_v = range_rate_partials(r_b, v_b, r_st, v_st, model, c)
+    rr_u, du_r, du_v, du_dd, du_t = up_rate_partials(r_b, v_b, r_st_t, v_st_t, a_st, rr_d, model, c)
+    chain = (1.0 + du_dd)[:, None]                  # ρ̇_d enters directly and through ρ̇_u
+    return 0.5 * (rr_d + rr_u), 0.5 * (dd_r * chain + du_r), 0.5 * (dd_v * chain + du_v), 0.5 * du_t

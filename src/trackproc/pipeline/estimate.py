@@ -19,7 +19,11 @@ The problem (:class:`Problem`, built by :func:`build_problem`):
    dense output at every emission time. One propagation per model evaluation.
 4. **Measurement model.** :func:`trackproc.models.observation.evaluate`: one-way light time
    (Newton on the dense output), ``--range-rate-model`` doppler/instantaneous, station motion,
-   partials through the light time, biases as modifiers.
+   partials through the light time, biases as modifiers. A pass file whose ``doppler_mode`` is
+   ``two-way`` has its range, range-rate and Doppler samples modelled as round trips (the same
+   station transmits and receives, turnaround ratio 1: range = round trip / 2, range-rate =
+   mean of both legs' rates, Doppler = -2 f ρ̇ / c), with partials through both light times;
+   its angles are the down leg's, as one-way.
 5. **Solver.** :func:`trackproc.methods.least_squares.solve`: whitened Gauss-Newton by SVD,
    Levenberg-Marquardt damping, k-sigma editing, a-priori constraints (``--apriori-sigma``,
    ``--apriori-initial``), failures as :class:`~trackproc.errors.ProcessingError`.
@@ -177,11 +181,11 @@ def _merge_tables(tables, kinds):
         meta = table.meta or {}
         if len(frame) == 0:
             raise InputError("no samples", file=source, expected="a pass file with at least one sample")
-        mode = meta.get("doppler_mode", "one-way")
+        mode = meta.get("doppler_mode") or "one-way"
         kinds_here = set(frame["kind"].astype(str))
-        if mode not in (None, "one-way") and kinds_here & {"doppler", "range_rate", "range"}:
-            raise InputError("two-way data cannot be estimated yet", file=source, column="doppler_mode",
-                             found=mode, expected="one-way (the one-way light-time model of DESIGN.md)")
+        if mode not in ob.MODES and kinds_here & set(ob.LINK_KINDS):
+            raise InputError("unknown link mode", file=source, column="doppler_mode", found=mode,
+                             expected="one-way or two-way (a round trip through a transponder of ratio 1)")
         carrier = meta.get("carrier_hz")
         if "doppler" in kinds_here and (kinds is None or "doppler" in kinds):
             if not isinstance(carrier, (int, float)) or not (carrier > 0):
@@ -193,6 +197,7 @@ def _merge_tables(tables, kinds):
         sub = frame[["time", "station", "pass_id", "kind", "value", "sigma"]].copy()
         sub["_source"] = source
         sub["_carrier"] = carriers[-1]
+        sub["_mode"] = mode if mode in ob.MODES else "one-way"     # angles only: the link does not matter
         sub["_row"] = np.arange(len(sub))
         frames.append(sub)
         sources.append(source)
@@ -327,6 +332,7 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     n = len(frame)
     r_st = np.empty((n, 3))
     v_st = np.empty((n, 3))
+    a_st = np.empty((n, 3))
     enu = np.empty((n, 3, 3))
     station_col = frame["station"].astype(str).to_numpy(dtype=object)
     for name in sorted(set(station_col)):
@@ -335,12 +341,13 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
         lat, lon = math.radians(st.lat_deg), math.radians(st.lon_deg)
         r_itrf = geodesy.geodetic_to_itrf(lat, lon, st.height_m, opt.earth)
         track = mm.station_gcrf(r_itrf, jd1[rows], jd2[rows], eop)
-        r_st[rows], v_st[rows] = track.r, track.v
+        r_st[rows], v_st[rows], a_st[rows] = track.r, track.v, track.a
         enu[rows] = geodesy.enu_matrix(lat, lon) @ track.gcrf_to_itrf
     meas = ob.MeasurementSet(t_s=t_s, kind=frame["kind"].astype(str).to_numpy(dtype=object), station=station_col,
                              pass_id=frame["pass_id"].astype(str).to_numpy(dtype=object),
                              observed=frame["value"].to_numpy(float), sigma=frame["sigma"].to_numpy(float),
-                             r_st=r_st, v_st=v_st, gcrf_to_enu=enu, carrier_hz=frame["_carrier"].to_numpy(float))
+                             r_st=r_st, v_st=v_st, gcrf_to_enu=enu, carrier_hz=frame["_carrier"].to_numpy(float),
+                             a_st=a_st, mode=frame["_mode"].to_numpy(dtype=object))
 
     # parameters
     rv0, cov0 = _initial_at_epoch(initial, epoch, opt.force, eop)
@@ -560,7 +567,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     extra = {"estimation": {
         "method": "batch weighted least squares (Gauss-Newton by SVD, Levenberg-Marquardt damping)",
         "range_rate_model": problem.range_rate_model,
-        "light_time": "one-way, time tag at reception, range-rate > 0 receding",
+        "light_time": _light_time_note(problem.meas),
         "propagator": "Taylor (DT) with state transition matrix, quasi-inertial frame of the solution epoch",
         "earth": opt.earth, "doppler_bias": opt.doppler_bias, "doppler_bias_per": opt.doppler_bias_per,
         "fixed_parameters": fixed, "drift_epochs_s": drifts,
@@ -576,6 +583,15 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     return EstimateResult(state=state, solution=sol, problem=problem, residuals=residual_frame(problem, sol),
                           rtn_covariance=rtn, comparison=comparison, two_stage=two, two_stage_solution=sol2,
                           warnings=warnings)
+
+
+def _light_time_note(meas) -> str:
+    """How the samples' light time was modelled (the state file's ``estimation`` record)."""
+    if not meas.two_way.any():
+        return "one-way, time tag at reception, range-rate > 0 receding"
+    both = "one-way and " if (~meas.two_way & np.isin(meas.kind, ob.LINK_KINDS)).any() else ""
+    return (f"{both}two-way (round trip to the same station, turnaround ratio 1: range = round trip / 2, "
+            "range-rate = mean of both legs), time tag at reception, range-rate > 0 receding")
 
 
 # ----------------------------------------------------------------------------- seed 002 reports
