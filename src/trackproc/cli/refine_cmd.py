@@ -58,7 +58,7 @@ def refine_command(
     doppler_bias: Optional[DopplerBias] = typer.Option(
         None, "--doppler-bias",
         help="Transmitter frequency offset (and drift) to estimate; default: offset for one-way Doppler, none "
-             "for range-rate."),
+             "for range-rate and two-way data."),
     apriori: Optional[bool] = typer.Option(
         None, "--apriori/--no-apriori",
         help="Use the stale state as an a-priori (its covariance, else the default of docs/refine.md). "

@@ -188,10 +188,11 @@ def _select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple
         raise InputError("more than one pass", file=source, column="pass_id", found=listed,
                          expected="one pass of one station; choose one with --pass-id")
     station, pass_id = keys[0]
-    mode = (table.meta or {}).get("doppler_mode", "one-way")
-    if mode not in (None, "one-way"):
-        raise InputError("two-way data cannot be refined yet", file=source, column="doppler_mode", found=mode,
-                         expected="one-way (the one-way light-time model of DESIGN.md)")
+    mode = (table.meta or {}).get("doppler_mode") or "one-way"
+    if mode != "one-way" and options.cost == "integral":
+        # the image-domain model of seed 004 (eqs. 6-13) follows the signal down one leg only
+        raise InputError("two-way data cannot be refined with the integral cost", file=source,
+                         column="doppler_mode", found=mode, expected="one-way data, or --cost pointwise")
     return PassTable(sub.reset_index(drop=True), dict(table.meta or {})), kind, station, pass_id
 
 
@@ -451,7 +452,9 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
         raise InputError("Doppler samples need the carrier frequency", file=source, column="carrier_hz",
                          found=meta.get("carrier_hz"), expected="carrier_hz > 0 in the file metadata "
                                                                 "(trackproc ingest --carrier-hz)")
-    bias = opt.doppler_bias if opt.doppler_bias is not None else ("offset" if kind == "doppler" else "none")
+    # a coherent two-way link returns the ground station's own frequency: no transmitter offset
+    one_way = (meta.get("doppler_mode") or "one-way") == "one-way"
+    bias = opt.doppler_bias if opt.doppler_bias is not None else ("offset" if kind == "doppler" and one_way else "none")
     if bias != "none" and kind == "range_rate" and not carrier > 0:
         raise InputError("a Doppler offset on range-rate samples needs the carrier frequency", file=source,
                          column="carrier_hz", found=meta.get("carrier_hz"),
