@@ -227,8 +227,17 @@ def test_seed004_table1_pointwise_converges_from_the_stale_errors():
     cross_v_err = m[2] @ err[3:]
     assert abs(cross_v_err) < 3 * res.state.diagnostics["sigma_rtn"]["cross_m_s"]
     assert res.state.diagnostics["sigma_rtn"]["cross_m_s"] > 4.0          # the prior's 5 m/s, kept
+    # the correction split: seen + unseen = refined - stale (RTN); the unseen part is what the
+    # a-priori, not the data, moved (here the stale state's own error along the rotation: small)
+    corr = obs.correction_rtn
+    big = np.kron(np.eye(2), m)
+    total = big @ (res.state.values[:6] - prepare(table(sim), STALE, None, RefineOptions(), EOP).x0[:6])
+    both = np.array([corr["seen"][k] + corr["unseen"][k] for k in rf.RTN_NAMES])
+    np.testing.assert_allclose(both, total, rtol=1e-9, atol=1e-9)
+    assert np.linalg.norm(total[:3]) > 5e3 and np.linalg.norm([corr["unseen"][k] for k in rf.RTN_NAMES[:3]]) < 100.0
     text = summary_text(res)
     assert "not seen by the pass" in text and "cross velocity" in text and len(text.splitlines()) < 25
+    assert "correction seen" in text and "correction unseen" in text
 
 
 @pytest.mark.parametrize("link", ["one-way Doppler 0.01 Hz", "two-way range-rate 1 mm/s"])

@@ -583,6 +583,8 @@ class Observability:
     #: (6, 6) GCRF: column i is direction i (``L vᵢ``); ``dual`` row i picks its coefficient (``vᵢᵀ L⁻¹``)
     basis: Optional[np.ndarray] = None
     dual: Optional[np.ndarray] = None
+    #: the refinement's correction (refined - stale) split by :meth:`split`, RTN (m, m/s)
+    correction_rtn: Optional[dict] = None
 
     def split(self, difference) -> tuple[np.ndarray, np.ndarray]:
         """``(seen, unseen)``: a GCRF state difference (6,) (an error, a correction) split into
@@ -627,6 +629,7 @@ class Observability:
             "reference_sigma_rtn": dict(zip(RTN_NAMES, self.reference_sigma_rtn.tolist())),
             "weakest_vs_rotation_about_station_axis": self.rotation_alignment,
             "posterior_sigma_rtn": dict(zip(RTN_NAMES, self.posterior_sigma_rtn.tolist())),
+            "correction_rtn": self.correction_rtn,
             "notes": list(self.notes),
         }
 

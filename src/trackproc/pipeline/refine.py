@@ -745,6 +745,11 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0) -> RefineRe
                          "the covariance is zero across them (it is conditional on a circular orbit)")
     if ref.priors and opt.cost == "pointwise" and obs.unobservable:
         obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
+    # how far the pass moved the stale state, along what it sees and along what it cannot
+    # (a large unseen part means the a-priori, not the data, put the state there)
+    big = np.kron(np.eye(2), rtn_matrix(x[:3], x[3:6]))
+    obs.correction_rtn = {part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))
+                          for part, d in zip(("seen", "unseen"), obs.split(x[:6] - ref.x0[:6]))}
 
     # the state at the stale epoch
     dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(ref.stale_epoch),
@@ -891,6 +896,10 @@ def summary_text(result: RefineResult) -> str:
     lines.append(f"  observability (state singular values, units of {o.reference}): {sv}")
     for i in o.unobservable:
         lines.append(f"    not seen by the pass: {o.direction_text(i)} (posterior/reference sigma {o.gain[i]:.2f})")
+    if o.correction_rtn:
+        for part, c in o.correction_rtn.items():
+            lines.append(f"    correction {part}: R/A/C {c['radial_m']:.4g}, {c['along_m']:.4g}, {c['cross_m']:.4g} m; "
+                         f"{c['radial_m_s']:.3g}, {c['along_m_s']:.3g}, {c['cross_m_s']:.3g} m/s")
     stale = st.extra["at_stale_epoch"]
     r_text = ", ".join(f"{v:.3f}" for v in stale["position_m"])
     v_text = ", ".join(f"{v:.5f}" for v in stale["velocity_m_s"])
