@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from test_estimate import EOP, GUESS, STATIONS, TRUTH  # the estimate tests' scenario
+from test_observation import _stations, _Trajectory
 
 from trackproc.constants import C_LIGHT, OMEGA_EARTH
-from trackproc.dynamics import propagator
 from trackproc.io.passfile import PassTable
 from trackproc.io.statefile import read_state
 from trackproc.models import measurements as mm
@@ -30,20 +30,13 @@ RNG = np.random.default_rng(2)
 MODELS = ["doppler", "instantaneous"]
 
 
-def _trajectory(state0, t_end=3000.0):
-    """The estimator's propagation (Taylor, J2, GCRF dense output) with its STM."""
-    return propagator.propagate(state0[:3], state0[3:], EPOCH, [-1.0, t_end], force="j2", stm=True).raise_for_outcome()
+_trajectory = _Trajectory             # the estimator's propagation (Taylor, J2, GCRF) with its STM
 
 
 def _station(t):
-    """A station on a sphere rotating about z: GCRF position, velocity, centripetal acceleration."""
-    ang = OMEGA_EARTH * t
-    r0 = np.array([4.0e6, -1.0e6, 4.8e6])
-    c, s = np.cos(ang), np.sin(ang)
-    r = np.stack([c * r0[0] - s * r0[1], s * r0[0] + c * r0[1], np.full_like(t, r0[2])], -1)
-    v = OMEGA_EARTH * np.stack([-r[:, 1], r[:, 0], np.zeros_like(t)], -1)
-    a = OMEGA_EARTH * np.stack([-v[:, 1], v[:, 0], np.zeros_like(t)], -1)
-    return r, v, a
+    """The one-way tests' station on a sphere rotating about z, with its centripetal acceleration."""
+    r, v = _stations(t)
+    return r, v, OMEGA_EARTH * np.stack([-v[:, 1], v[:, 0], np.zeros_like(t)], -1)
 
 
 def _rotations(n):
