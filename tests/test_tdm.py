@@ -475,3 +475,17 @@ def test_bad_carrier_argument():
 def test_binary_input_is_refused():
     err = read_error(b"PAR1\x00\x01\x02")
     assert err.row == 1
+
+
+def test_range_only_file_takes_its_paths_link_mode():
+    """Two-way RANGE alone makes the file two-way (estimate models its ranges as round trips);
+    ranges whose path differs from the Doppler's are named in a warning."""
+    two = read_tdm(tdm(*HEADER, *meta("RANGE_UNITS = km", path="1,2,1"), "DATA_START",
+                       "RANGE = 2020-01-01T00:00:00 1.234", "DATA_STOP"), "x.tdm")
+    assert two.meta["doppler_mode"] == "two-way" and two.meta["range_source_paths"] == ["two-way"]
+    mixed = read_tdm(tdm(*HEADER, *meta("RANGE_UNITS = km", path="1,2,1"), "DATA_START",
+                         "RANGE = 2020-01-01T00:00:00 1.234", "DATA_STOP",
+                         *meta(), "DATA_START", "DOPPLER_INSTANTANEOUS = 2020-01-01T00:00:01 0.5", "DATA_STOP"),
+                     "x.tdm")
+    assert mixed.meta["doppler_mode"] == "one-way"
+    assert any("RANGE paths are two-way" in w and "split the file by path" in w for w in mixed.meta["warnings"])

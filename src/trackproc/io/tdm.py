@@ -36,7 +36,10 @@ Conventions (each is also written where it is applied):
   range). Producers that write the full round trip need ``two_way_range="round-trip"``
   (``trackproc ingest --tdm-two-way-range round-trip``), which halves the values;
   ``meta["range_two_way_halved"]`` records which was done, and a warning names the assumption.
-  ``RANGE_MODULUS`` is not applied (recorded in the warnings).
+  ``RANGE_MODULUS`` is not applied (recorded in the warnings). A file whose ranges are all
+  of one path and that has no Doppler data takes that path's link mode as its ``doppler_mode``
+  (the link mode estimate models ranges with); ranges of another path than the file's
+  Doppler data are named in a warning (split such a file by path).
 * **DOPPLER_INSTANTANEOUS / DOPPLER_INTEGRATED** are range rates in km/s (503.0-B-2 keyword
   tables; "instantaneous range rate", "mean range rate over INTEGRATION_INTERVAL"), i.e. the
   time derivative of the range: positive when the range increases (receding), which is
@@ -499,6 +502,14 @@ class _Converter:
         if self.range_modes:
             meta["range_two_way_halved"] = self.halve_two_way and "two-way" in self.range_modes
             meta["range_source_paths"] = sorted(self.range_modes)
+            # the file's link mode (``doppler_mode``) is what estimate models ranges with too
+            if self.doppler_mode is None and len(self.range_modes) == 1:
+                meta["doppler_mode"] = next(iter(self.range_modes))
+            elif self.range_modes - {meta.get("doppler_mode")}:
+                link = meta.get("doppler_mode") or "one-way (the default)"
+                self.warnings.append(
+                    f"RANGE paths are {' and '.join(sorted(self.range_modes))} but the file's link mode is {link}, "
+                    "which estimate applies to every range, range-rate and Doppler sample: split the file by path")
             if "two-way" in self.range_modes:
                 self.warnings.append(
                     "two-way RANGE values " + ("halved (written as round trips)" if self.halve_two_way
