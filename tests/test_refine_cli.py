@@ -212,9 +212,76 @@ def test_refine_two_way_pass_without_an_offset(run_cli, two_way, tmp_path, kind)
     assert doc["diagnostics"]["residual_rms"]["value"] < 3 * (0.001 if kind == "range_rate" else 0.015)
 
 
-def test_refine_integral_cost_refuses_two_way_data(run_cli, two_way, tmp_path):
+@pytest.fixture(scope="module")
+def two_way_smoothed(tmp_path_factory):
+    """simulate --mode two-way --kinds range_rate (1 mm/s) -> smooth: the seed's own two-way convention."""
+    from trackproc.cli import app as cli_app
+
+    d = tmp_path_factory.mktemp("refine2wsm")
+    (d / "trv.csv").write_text(TRV)
+    args = ["simulate", "--state", SAMPLE / "truth.json", "--stations", d / "trv.csv", "--start",
+            "2026-03-20T09:15:00Z", "--duration", "1800", "--step", "2", "--kinds", "range_rate", "--mode", "two-way",
+            "--sigma-range-rate-m-s", "0.001", "--seed", "5", "-q", "-o", d / "pass.parquet"]
+    assert cli_app.main([str(a) for a in args]) == 0
+    assert cli_app.main(["-q", "smooth", str(d / "pass.parquet"), "-o", str(d / "smoothed.parquet")]) == 0
+    return d
+
+
+def test_refine_integral_cost_on_a_two_way_pass_with_constraints(run_cli, two_way_smoothed, tmp_path):
+    """simulate (two-way range-rate) -> smooth -> refine --cost integral --circular: the seed's method
+    on the round-trip model; the constraints hold, the state at the stale epoch is within a
+    kilometre of the truth (the stale error is 7.8 km; forcing e = 0 on the truth's e = 2.7e-5
+    costs about 530 m, tests/test_refine.py), and with --circular-tolerance at that eccentricity
+    within 3 sigma."""
+    out = tmp_path / "seed.json"
+    result = run_cli(["refine", two_way_smoothed / "smoothed.parquet", "--initial", SAMPLE / "stale.json", "--cost",
+                      "integral", "--circular", "--circular-tolerance", "2.74e-5", "--output-epoch", "stale",
+                      "--residuals", tmp_path / "res.csv", "-o", out])
+    assert result.exit_code == 0, result.stderr
+    doc = json.loads(out.read_text())
+    assert doc["parameters"] == ["x", "y", "z", "vx", "vy", "vz", "r_ka"]
+    c = doc["diagnostics"]["constraints"]
+    assert c["imposed"] and max(abs(v) for v in c["relative"]) < 1e-9
+    m = doc["refinement"]
+    assert m["cost"] == "integral" and m["integral"]["link"] == "two-way" and m["curve"]["source"] == "metadata"
+    assert m["integral"]["rms_curve_difference_m_s"] < 3e-3
+    truth = read_state(str(SAMPLE / "truth.json"))
+    err = np.r_[doc["position_m"], doc["velocity_m_s"]] - truth.rv
+    assert np.linalg.norm(err[:3]) < 1000.0
+    assert np.all(np.abs(err) < 3 * np.array(doc["sigma"][:6])), err / np.array(doc["sigma"][:6])
+    # the residuals at the samples, by the round-trip model: at the noise level
+    res = pd.read_csv(tmp_path / "res.csv", comment="#")
+    assert res["kind"].eq("range_rate").all() and res["residual"].std() < 3e-3
+
+
+def test_refine_integral_cost_on_two_way_doppler_with_an_offset_asked_for(run_cli, two_way, tmp_path):
+    """Two-way Doppler, the integral with the stale a-priori and a Doppler offset asked for (a coherent
+    link has none: it comes out at zero within its sigma; its column is -c/(2f) in range-rate)."""
+    out = tmp_path / "refined.json"
+    result = run_cli(["refine", two_way / "pass.parquet", "--kind", "doppler", "--initial", SAMPLE / "stale.json",
+                      "--cost", "integral", "--apriori", "--doppler-bias", "offset", "--output-epoch", "stale", "-o",
+                      out])
+    assert result.exit_code == 0, result.stderr
+    doc = json.loads(out.read_text())
+    i = doc["parameters"].index("doppler_offset:TRV-001")
+    assert abs(doc["values"][i]) < 3 * doc["sigma"][i] and doc["sigma"][i] < 0.1
+    truth = read_state(str(SAMPLE / "truth.json"))
+    err = np.r_[doc["position_m"], doc["velocity_m_s"]] - truth.rv
+    assert np.all(np.abs(err) < 3 * np.array(doc["sigma"][:6])), err / np.array(doc["sigma"][:6])
+    assert np.linalg.norm(err[:3]) < 1000.0
+    # the residual RMS in m/s is the Hz one times c/(2f)
+    rr = doc["diagnostics"]["residual_rms"]
+    assert rr["range_rate_m_s"] == pytest.approx(rr["value"] * 299792458.0 / (2 * 2.2e9), rel=1e-12)
+
+
+@pytest.mark.parametrize("cost", ["integral", "pointwise"])
+def test_refine_unknown_link_mode_exit_2(run_cli, two_way, tmp_path, cost):
+    from trackproc.io.passfile import read_pass_table, write_pass_table
+
+    table = read_pass_table(str(two_way / "pass.parquet"))
+    write_pass_table(type(table)(table.frame, dict(table.meta, doppler_mode="three-way")), str(tmp_path / "p.parquet"))
     out = tmp_path / "x.json"
-    result = run_cli(["refine", two_way / "pass.parquet", "--kind", "range_rate", "--initial", SAMPLE / "stale.json",
-                      "--cost", "integral", "-o", out])
-    assert result.exit_code == 2 and not out.exists()
-    assert "doppler_mode" in result.stderr and "--cost pointwise" in result.stderr
+    result = run_cli(["refine", tmp_path / "p.parquet", "--kind", "range_rate", "--initial", SAMPLE / "stale.json",
+                      "--cost", cost, "-o", out])
+    assert result.exit_code == 2 and not out.exists(), result.stderr
+    assert "doppler_mode" in result.stderr and "three-way" in result.stderr and "Traceback" not in result.stderr

@@ -8,8 +8,10 @@ the range-rate vanishes) by minimising the integral over the pass
 
 of the squared difference between the smoothed range-rate polynomial ``Vr_LSQ = φ(t)ᵀ C``
 (eq. 1, :mod:`trackproc.methods.smoothing`) and the range-rate of the orbit, computed in the
-image domain (eqs. 6-13, :mod:`trackproc.dynamics.measurement_spectra`), optionally under the
-circular-orbit constraints
+image domain (eqs. 6-13, :mod:`trackproc.dynamics.measurement_spectra`; one-way light time) or,
+for a two-way (round-trip) pass, the seed's own ``Vr = c/(2 f0) f_D`` convention, by the
+estimator's round-trip model on the same Taylor trajectory and STM (:class:`IntegralModel`),
+optionally under the circular-orbit constraints
 
     f(X_T) = (|r|² - r_ka²,  |v|² - μ/r_ka,  r·v) = 0                              (eq. 5)
 
@@ -308,22 +310,39 @@ class IntegralModel:
     spectra of the station (:func:`trackproc.dynamics.measurement_spectra.predict`: seed 004
     eqs. 7-13 with one-way light time) give ``Vr`` and, through the first-order sensitivities
     (eqs. 19-21), ``∂Vr/∂state``. A bias ``j`` adds ``coefficients[j] * x[6 + j]`` (e.g. ``-c/f``
-    for a one-way Doppler offset in Hz, ``-c (t - t0)/f`` for its drift); trailing entries of
-    ``x`` beyond those (``r_ka``) have no effect on ``Vr``.
+    for a one-way Doppler offset in Hz, ``-c (t - t0)/f`` for its drift; ``-c/(2f)``,
+    ``-c (t - t0)/(2f)`` two-way); trailing entries of ``x`` beyond those (``r_ka``) have no
+    effect on ``Vr``.
+
+    **Two-way** (``mode="two-way"``: a coherent round trip, the seed's own ``Vr = c/(2 f0) f_D``
+    convention). The image-domain spectra follow the signal down one leg only, so a two-way
+    ``Vr`` is the estimator's round-trip model instead:
+    :func:`trackproc.models.observation.evaluate` on ``range_rate`` samples with mode
+    ``two-way`` at the nodes — the mean of the up- and down-leg rates, both light times solved
+    on the same Taylor trajectory (its dense output, GCRF), the station in GCRF
+    (:func:`trackproc.models.measurements.station_gcrf`, with its acceleration, at the nodes'
+    UTC dates, as :func:`trackproc.pipeline.estimate.build_problem` does). ``∂Vr/∂state`` is
+    then the leg partials times the Taylor engine's state transition matrix (its first-order
+    sensitivity spectra, eqs. 19-21 in spirit) through both light times (observation eqs. 6,
+    11-13): analytic, not finite differences. The node set-up (station track) is built once,
+    on the first evaluation.
 
     Parameters
     ----------
     epoch : datetime64 — the epoch of the state (the traverse point).
     frame : QuasiInertialFrame — the integration frame (the estimation problem's).
     station : :class:`~trackproc.dynamics.measurement_spectra.StationModel` built on ``epoch``
-        and ``frame``.
-    t_s : (K,) node times, s from the epoch (reception times).
+        and ``frame`` (two-way: its ITRF position ``r_itrf_m`` is used).
+    t_s : (K,) node times, SI s from the epoch (reception times).
     bias_coefficients : list of (K,) arrays, one per bias parameter.
     force, eop, range_rate_model : as elsewhere.
+    mode : ``"one-way"`` (default) or ``"two-way"``.
     """
 
     def __init__(self, epoch, frame, station, t_s, bias_coefficients=(), *, force: str = "j2", eop=None,
-                 range_rate_model: str = "doppler", n_extra: int = 0):
+                 range_rate_model: str = "doppler", n_extra: int = 0, mode: str = "one-way"):
+        if mode not in ("one-way", "two-way"):
+            raise ValueError(f"unknown link mode {mode!r}; expected 'one-way' or 'two-way'")
         self.epoch = epoch
         self.frame = frame
         self.station = station
@@ -333,7 +352,9 @@ class IntegralModel:
         self.eop = eop
         self.range_rate_model = range_rate_model
         self.n_extra = int(n_extra)
+        self.mode = mode
         self.evaluations = 0
+        self._nodes = None
 
     @property
     def n_parameters(self) -> int:
@@ -346,17 +367,48 @@ class IntegralModel:
         return propagator.propagate(x[:3], x[3:6], self.epoch, span, force=self.force, stm=True, frame=self.frame,
                                     eop=self.eop).raise_for_outcome()
 
-    def __call__(self, x):
+    def node_measurements(self):
+        """The nodes as two-way ``range_rate`` samples (a
+        :class:`~trackproc.models.observation.MeasurementSet`, built once): the station's GCRF
+        position, velocity and acceleration at the nodes' UTC dates."""
+        if self._nodes is None:
+            from trackproc.dynamics import timescales as ts
+            from trackproc.models import measurements as mm
+            from trackproc.models import observation as ob
+
+            epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(np.datetime64(self.epoch, "ns")))
+            jd1, jd2 = ts.add_seconds_utc(epoch_jd, self.t_s)
+            track = mm.station_gcrf(np.asarray(self.station.r_itrf_m, float), jd1, jd2, self.eop)
+            k = self.t_s.size
+            self._nodes = ob.MeasurementSet(t_s=self.t_s.copy(), kind=np.full(k, "range_rate", dtype=object),
+                                            station=np.full(k, "station", dtype=object),
+                                            pass_id=np.full(k, "", dtype=object), observed=np.zeros(k),
+                                            sigma=np.ones(k), r_st=track.r, v_st=track.v, a_st=track.a,
+                                            mode=np.full(k, self.mode, dtype=object))
+        return self._nodes
+
+    def _state_part(self, x):
+        """``(Vr (K,), ∂Vr/∂state (K, 6))`` of the link (one-way: DT spectra; two-way: round trip)."""
+        traj = self.trajectory(x)
+        if self.mode == "two-way":
+            from trackproc.models import observation as ob
+
+            value, jac, _ = ob.evaluate(self.node_measurements(), traj, n_state_params=6, n_columns=6,
+                                        range_rate_model=self.range_rate_model)
+            return value, jac
         from trackproc.dynamics import measurement_spectra as ms
 
+        pred = ms.predict(traj, self.station, self.t_s, range_rate_model=self.range_rate_model)
+        return pred.range_rate_m_s.copy(), pred.d_range_rate_d_state
+
+    def __call__(self, x):
         x = np.asarray(x, float)
         try:
-            pred = ms.predict(self.trajectory(x), self.station, self.t_s, range_rate_model=self.range_rate_model)
+            value, d_state = self._state_part(x)
         except ValueError as exc:
             raise ArithmeticError(str(exc)) from None
-        value = pred.range_rate_m_s.copy()
         jac = np.zeros((self.t_s.size, x.size))
-        jac[:, :6] = pred.d_range_rate_d_state
+        jac[:, :6] = d_state
         for j, coef in enumerate(self.bias):
             value += coef * x[6 + j]
             jac[:, 6 + j] = coef

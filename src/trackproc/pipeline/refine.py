@@ -1,6 +1,6 @@
 """``trackproc refine``: refine a stale orbit from one Doppler pass of one station (seed 004).
 
-Input: one pass of one station (one-way Doppler or range-rate; raw from ``ingest``/``simulate``
+Input: one pass of one station (one- or two-way Doppler or range-rate; raw from ``ingest``/``simulate``
 or smoothed by ``smooth``), a stale state (state file, or a TLE evaluated by SGP4 at the traverse
 epoch) with an optional covariance, and the station (from ``--stations`` or the pass metadata).
 
@@ -13,10 +13,10 @@ epoch) with an optional covariance, and the station (from ``--stations`` or the 
    state at that epoch; ``r_ka`` is its radius (seed 004 eq. 5).
 3. **The problem**: :func:`trackproc.pipeline.estimate.build_problem` with the solution epoch at
    the traverse point: the parameter registry (state, ``doppler_offset:PASS`` and
-   ``doppler_drift:PASS`` for one-way Doppler), the measurement model (one-way light time,
-   partials through it) and the a-priori constraints (the stale covariance moved to the
-   traverse epoch by the state transition matrix, or ``--apriori-sigma``, or the documented
-   default :data:`DEFAULT_APRIORI_ELEMENTS`).
+   ``doppler_drift:PASS`` for one-way Doppler), the measurement model (one-way light time, or
+   the round trip of a two-way pass, partials through the light times) and the a-priori
+   constraints (the stale covariance moved to the traverse epoch by the state transition
+   matrix, or ``--apriori-sigma``, or the documented default :data:`DEFAULT_APRIORI_ELEMENTS`).
 4. **The cost**:
 
    * ``pointwise`` (default, the practical method): weighted least squares on the samples
@@ -26,8 +26,9 @@ epoch) with an optional covariance, and the station (from ``--stations`` or the 
      stale state put them, with their stale uncertainty, instead of letting them diverge.
    * ``integral`` (the seed's method): seed 004 eq. 14 by Gauss-Legendre quadrature on the
      smoothed polynomial, the orbit's range-rate and its gradient from the DT spectra
-     (:class:`trackproc.methods.refinement.IntegralModel`), no a-priori unless asked. Its
-     covariance propagates the polynomial's coefficient covariance through the estimator
+     (:class:`trackproc.methods.refinement.IntegralModel`; for a two-way pass, the seed's own
+     ``Vr = c/(2 f0) f_D``, the round-trip model and the Taylor STM), no a-priori unless asked.
+     Its covariance propagates the polynomial's coefficient covariance through the estimator
      (:func:`~trackproc.methods.refinement.sandwich_covariance`).
 
    ``circular=True`` adds the circular-orbit constraints of eq. 5 with ``r_ka`` as a seventh
@@ -58,6 +59,8 @@ COSTS = ("pointwise", "integral")
 DOPPLER_BIAS = ("none", "offset", "offset+drift")
 #: Range-rate-like kinds a Doppler station gives, in order of preference.
 RANGE_RATE_KINDS = ("doppler", "range_rate")
+#: Links (the pass metadata's ``doppler_mode``): both costs take either.
+LINK_MODES = ("one-way", "two-way")
 #: The a-priori of a stale state that carries no covariance, as independent 1-sigma errors of
 #: its non-singular orbital elements (:func:`trackproc.methods.refinement.element_covariance`):
 #: a state a day or so old (a TLE, an old solution) is off by kilometres along-track (the
@@ -189,10 +192,9 @@ def _select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple
                          expected="one pass of one station; choose one with --pass-id")
     station, pass_id = keys[0]
     mode = (table.meta or {}).get("doppler_mode") or "one-way"
-    if mode != "one-way" and options.cost == "integral":
-        # the image-domain model of seed 004 (eqs. 6-13) follows the signal down one leg only
-        raise InputError("two-way data cannot be refined with the integral cost", file=source,
-                         column="doppler_mode", found=mode, expected="one-way data, or --cost pointwise")
+    if mode not in LINK_MODES:
+        raise InputError("unknown link mode", file=source, column="doppler_mode", found=mode,
+                         expected=" or ".join(LINK_MODES))
     return PassTable(sub.reset_index(drop=True), dict(table.meta or {})), kind, station, pass_id
 
 
@@ -557,7 +559,10 @@ def _integral_setup(ref: Refinement, frame) -> dict:
     jd_e = tuple(float(a) for a in ts.datetime64_to_jd_utc(ref.problem.epoch))
     offset = float(ts.seconds_since(jd_c, jd_e))
     t_nodes = t_poly + offset
-    to_rr = -C_LIGHT / ref.carrier_hz if ref.kind == "doppler" else 1.0
+    # Doppler -> range-rate: -c Δf/f one-way, -c Δf/(2f) two-way (seed 004: Vr = c/(2 f0) f_D)
+    mode = _link_mode(ref)
+    k_link = 2.0 if mode == "two-way" else 1.0
+    to_rr = -C_LIGHT / (k_link * ref.carrier_hz) if ref.kind == "doppler" else 1.0
     observed = to_rr * curve.fit(t_poly)
     design = to_rr * curve.fit.design(t_poly)
     sig = frame["sigma"].to_numpy(float) * abs(to_rr)
@@ -571,7 +576,8 @@ def _integral_setup(ref: Refinement, frame) -> dict:
     sigma_nodes = rf.pseudo_sigma(w, sigma_ref, spacing)
     bias_cols = []
     for d in ref.problem.params.selected[6:]:
-        coef = -C_LIGHT / ref.carrier_hz * np.ones(t_nodes.size)
+        # an offset in Hz on range-rate: -c/f one-way, -c/(2f) two-way (observation.bias_modifiers)
+        coef = -C_LIGHT / (k_link * ref.carrier_hz) * np.ones(t_nodes.size)
         if d.family == "doppler_drift":
             coef = coef * (t_nodes - d.epoch_s)
         elif d.family != "doppler_offset":
@@ -579,10 +585,16 @@ def _integral_setup(ref: Refinement, frame) -> dict:
         bias_cols.append(coef)
     model = rf.IntegralModel(ref.problem.epoch, ref.problem.frame, ref.station_model, t_nodes, bias_cols,
                              force=opt.force, eop=ref.problem.eop, range_rate_model=ref.problem.range_rate_model,
-                             n_extra=1 if opt.circular else 0)
+                             n_extra=1 if opt.circular else 0, mode=mode)
     return {"model": model, "observed": observed, "sigma": sigma_nodes, "weights": w, "t_nodes": t_nodes,
             "t_poly": t_poly, "design": design, "coefficient_covariance": curve.fit.cov_scaled,
-            "intervals": intervals, "sigma_ref": sigma_ref, "spacing": spacing, "to_range_rate": to_rr}
+            "intervals": intervals, "sigma_ref": sigma_ref, "spacing": spacing, "to_range_rate": to_rr,
+            "mode": mode}
+
+
+def _link_mode(ref: Refinement) -> str:
+    """``"two-way"`` when the pass's samples are modelled as round trips, else ``"one-way"``."""
+    return "two-way" if bool(np.any(ref.problem.meas.two_way)) else "one-way"
 
 
 # ----------------------------------------------------------------------------- the run
@@ -603,18 +615,38 @@ def _max_elevation_deg(ref: Refinement, x) -> Optional[float]:
         return None
 
 
-def _model_traverse(ref: Refinement, x) -> Optional[float]:
-    """Seconds from the traverse epoch where the refined orbit's range-rate vanishes (None if
-    not within ±60 s)."""
+def _link_range_rate(ref: Refinement, traj, t_s) -> np.ndarray:
+    """The orbit's range-rate (m/s) at reception times ``t_s`` (s from the traverse epoch) by the
+    pass's link: one-way from the DT spectra, two-way by the round trip (mean of both legs,
+    :mod:`trackproc.models.observation` eqs. 7-9), with the problem's range-rate model."""
     from trackproc.dynamics import measurement_spectra as ms
+
+    t = np.atleast_1d(np.asarray(t_s, float))
+    model = ref.problem.range_rate_model
+    if _link_mode(ref) == "one-way":
+        return ms.predict(traj, ref.station_model, t, range_rate_model=model, partials=False).range_rate_m_s
+    from trackproc.dynamics import timescales as ts
+    from trackproc.models import measurements as mm
+    from trackproc.models import observation as ob
+
+    jd1, jd2 = ts.add_seconds_utc(tuple(float(a) for a in ts.datetime64_to_jd_utc(ref.problem.epoch)), t)
+    track = mm.station_gcrf(ref.station_model.r_itrf_m, jd1, jd2, ref.problem.eop)
+    geo = ob.solve_light_time(traj, t, track.r)
+    up = ob.solve_up_leg(geo.state[:, :3], track.r, track.v, track.a, geo.tau_s)
+    return ob.two_way_range_rate_partials(geo.state[:, :3], geo.state[:, 3:], track.r, track.v, up.r_st, up.v_st,
+                                          track.a, model)[0]
+
+
+def _model_traverse(ref: Refinement, x) -> Optional[float]:
+    """Seconds from the traverse epoch where the refined orbit's range-rate (by the pass's link,
+    one- or two-way) vanishes (None if not within ±60 s)."""
     from trackproc.dynamics import propagator
 
     try:
         traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [-62.0, 62.0], force=ref.options.force,
                                     frame=ref.problem.frame, eop=ref.problem.eop).raise_for_outcome()
         t = np.linspace(-60.0, 60.0, 241)
-        rr = ms.predict(traj, ref.station_model, t, range_rate_model=ref.problem.range_rate_model,
-                        partials=False).range_rate_m_s
+        rr = _link_range_rate(ref, traj, t)
         k = np.flatnonzero((rr[:-1] < 0) & (rr[1:] >= 0))
         if k.size == 0:
             return None
@@ -623,8 +655,7 @@ def _model_traverse(ref: Refinement, x) -> Optional[float]:
         fa, fb = rr[i], rr[i + 1]
         for _ in range(30):
             m = a - fa * (b - a) / (fb - fa)
-            fm = float(ms.predict(traj, ref.station_model, np.array([m]), range_rate_model=ref.problem.range_rate_model,
-                                  partials=False).range_rate_m_s[0])
+            fm = float(_link_range_rate(ref, traj, np.array([m]))[0])
             if abs(fm) < 1e-9 or b - a < 1e-7:
                 return float(m)
             if fm < 0:
@@ -701,7 +732,9 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0) -> RefineRe
                                   edited=np.zeros(r.size, bool))
     residuals = residual_frame(problem, samples)
     kept = ~samples.edited
-    rr_factor = abs(-C_LIGHT / ref.carrier_hz) if ref.kind == "doppler" else 1.0
+    # Doppler residual (Hz) -> m/s: c/f one-way, c/(2f) two-way
+    rr_factor = (C_LIGHT / ((2.0 if _link_mode(ref) == "two-way" else 1.0) * ref.carrier_hz)
+                 if ref.kind == "doppler" else 1.0)
     res_kept = samples.residual[kept]
     rms = float(np.sqrt(np.mean(res_kept ** 2))) if res_kept.size else math.nan
 
@@ -838,8 +871,11 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0) -> RefineRe
                          "rms_curve_difference_m_s": math.sqrt(integral / float(np.sum(w))),
                          "normalisation": "chi2 = I / (sigma_ref^2 * spacing)", "sigma_ref_m_s": d["sigma_ref"],
                          "spacing_s": d["spacing"],
-                         "gradient": "first-order 2-D DT sensitivities (seed 004 eqs. 19-21) through the range and "
-                                     "range-rate spectra",
+                         "link": d["mode"],
+                         "gradient": ("first-order 2-D DT sensitivities (seed 004 eqs. 19-21) through the range and "
+                                      "range-rate spectra" if d["mode"] == "one-way" else
+                                      "round-trip (two-way) range-rate partials through both light times times the "
+                                      "Taylor engine's state transition matrix (first-order DT sensitivities)"),
                          "covariance": "the smoothing polynomial's scaled coefficient covariance propagated through "
                                        "the linearised estimator (sandwich)",
                          "sigma_formal": sol.sigma.tolist()},
