@@ -22,16 +22,24 @@ ISS_TLE = ("1 25544U 98067A   19343.69339541  .00001764  00000-0  38792-4 0  999
            "2 25544  51.6439 211.2001 0007417  17.6667  85.6398 15.50103472202482\n")
 
 
+def _simulate_trv(d: Path, *link) -> None:
+    """``d/pass.parquet``: the Table 1 pass over TRV (``d/trv.csv``), 2 s samples, with ``link``
+    (kinds, mode, noise, seed) as simulate options."""
+    from trackproc.cli import app as cli_app
+
+    (d / "trv.csv").write_text(TRV)
+    args = ["simulate", "--state", SAMPLE / "truth.json", "--stations", d / "trv.csv", "--start",
+            "2026-03-20T09:15:00Z", "--duration", "1800", "--step", "2", *link, "-q", "-o", d / "pass.parquet"]
+    assert cli_app.main([str(a) for a in args]) == 0
+
+
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     from trackproc.cli import app as cli_app
 
     d = tmp_path_factory.mktemp("refine")
-    (d / "trv.csv").write_text(TRV)
-    args = ["simulate", "--state", SAMPLE / "truth.json", "--stations", d / "trv.csv", "--start",
-            "2026-03-20T09:15:00Z", "--duration", "1800", "--step", "2", "--kinds", "doppler", "--carrier-hz", "2.2e9",
-            "--sigma-doppler-hz", "0.1", "--freq-offset-hz", "150", "--seed", "1", "-q", "-o", d / "pass.parquet"]
-    assert cli_app.main([str(a) for a in args]) == 0
+    _simulate_trv(d, "--kinds", "doppler", "--carrier-hz", "2.2e9", "--sigma-doppler-hz", "0.1", "--freq-offset-hz",
+                  "150", "--seed", "1")
     assert cli_app.main(["-q", "smooth", str(d / "pass.parquet"), "-o", str(d / "smoothed.parquet")]) == 0
     assert cli_app.main(["-q", "smooth", str(d / "pass.parquet"), "--grid", "5", "-o", str(d / "grid.parquet")]) == 0
     return d
@@ -182,15 +190,9 @@ def test_help_shows_the_example(run_cli):
 @pytest.fixture(scope="module")
 def two_way(tmp_path_factory):
     """The Table 1 pass as a coherent two-way S-band link: range-rate (1 mm/s) and Doppler."""
-    from trackproc.cli import app as cli_app
-
     d = tmp_path_factory.mktemp("refine2w")
-    (d / "trv.csv").write_text(TRV)
-    args = ["simulate", "--state", SAMPLE / "truth.json", "--stations", d / "trv.csv", "--start",
-            "2026-03-20T09:15:00Z", "--duration", "1800", "--step", "2", "--kinds", "range_rate,doppler", "--mode",
-            "two-way", "--sigma-range-rate-m-s", "0.001", "--sigma-doppler-hz", "0.015", "--seed", "3", "-q", "-o",
-            d / "pass.parquet"]
-    assert cli_app.main([str(a) for a in args]) == 0
+    _simulate_trv(d, "--kinds", "range_rate,doppler", "--mode", "two-way", "--sigma-range-rate-m-s", "0.001",
+                  "--sigma-doppler-hz", "0.015", "--seed", "3")
     return d
 
 
@@ -218,11 +220,7 @@ def two_way_smoothed(tmp_path_factory):
     from trackproc.cli import app as cli_app
 
     d = tmp_path_factory.mktemp("refine2wsm")
-    (d / "trv.csv").write_text(TRV)
-    args = ["simulate", "--state", SAMPLE / "truth.json", "--stations", d / "trv.csv", "--start",
-            "2026-03-20T09:15:00Z", "--duration", "1800", "--step", "2", "--kinds", "range_rate", "--mode", "two-way",
-            "--sigma-range-rate-m-s", "0.001", "--seed", "5", "-q", "-o", d / "pass.parquet"]
-    assert cli_app.main([str(a) for a in args]) == 0
+    _simulate_trv(d, "--kinds", "range_rate", "--mode", "two-way", "--sigma-range-rate-m-s", "0.001", "--seed", "5")
     assert cli_app.main(["-q", "smooth", str(d / "pass.parquet"), "-o", str(d / "smoothed.parquet")]) == 0
     return d
 
