@@ -45,6 +45,17 @@ def test_pipeline_recipe(tmp_path):
     biases = dict(zip(sol["parameters"], sol["values"]))
     assert abs(biases["range_bias:CPH"] - 120) < 3 and abs(biases["range_bias:ZHY"] + 80) < 3
     assert (out / "solution.oem").read_text().startswith("CCSDS_OEM_VERS")
+    # the one-pass refinement: within its error matrix of the truth (the same state at 09:30), two
+    # directions reported as not seen, and the Doppler drift of sample_data/make.sh recovered
+    ref = json.loads((out / "refined.json").read_text())
+    truth0 = json.loads((ROOT / "sample_data" / "truth.json").read_text())
+    err = np.array(ref["position_m"] + ref["velocity_m_s"]) - np.array(truth0["position_m"] + truth0["velocity_m_s"])
+    assert ref["epoch"] == "2026-03-20T09:30:00.000Z"
+    assert np.all(np.abs(err) < 3 * np.array(ref["sigma"][:6])), err / np.array(ref["sigma"][:6])
+    assert len(ref["diagnostics"]["observability"]["unobservable"]) >= 1
+    values = dict(zip(ref["parameters"], ref["values"]))
+    assert abs(values["doppler_drift:CPH-001"] - 0.02) < 0.012 and abs(values["doppler_offset:CPH-001"] - 150) < 4
+    assert (out / "refine_residuals.csv").stat().st_size > 0
 
 
 def test_cron_recipe_reports_partial_failure_and_skips_done_files(tmp_path):
