@@ -507,3 +507,61 @@ def test_noise_free_pass_recovers_the_truth_in_the_observed_directions():
     assert abs(sol.values[6] - OFFSET_HZ) < 1e-5
     res = finish(ref, sol)
     assert res.state.diagnostics["residual_rms"]["value"] < 1e-5
+
+
+# ----------------------------------------------------------------------------- does the pass contradict --circular?
+
+def test_circular_consistency_is_chi2_2_for_a_circular_orbit():
+    """Monte Carlo of the likelihood-ratio test of the circular constraints: an exactly circular
+    two-body orbit (the Table 1 position, circular speed), 0.01 Hz one-way Doppler, the a-priori
+    centre drawn from its covariance around the truth: Δχ² = χ²(constrained) - χ²(free) follows
+    χ²(2) (three constraints less the free r_ka)."""
+    from dataclasses import replace
+
+    from trackproc.dynamics import propagator
+
+    r, v = TRUTH.r_m, TRUTH.v_m_s
+    v_perp = v - (v @ r) / (r @ r) * r
+    circ = State.from_vectors(EPOCH, r, v_perp / np.linalg.norm(v_perp) * np.sqrt(MU_EARTH / np.linalg.norm(r)))
+    station, _ = traverse_station(circ, cross_track_m=500e3, eop=EOP, force="two-body")
+    sim = simulate(circ, {station.name: station},
+                   SimulateOptions(duration_s=1800, step_s=2.0, start=np.datetime64("2026-03-20T09:15:00"),
+                                   kinds=("doppler",), sigma_doppler_hz=0.01, freq_offset_hz=OFFSET_HZ, seed=1,
+                                   force="two-body"), EOP)
+    opts = RefineOptions(circular=True, force="two-body", clip=None)
+    ref = prepare(table(sim), STALE, None, opts, EOP)
+    free = prepare(table(sim), STALE, None, replace(opts, circular=False), EOP)
+    dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(np.datetime64(ref.problem.epoch, "ns")), circ.jd_utc))
+    truth = propagator.propagate(circ.r_m, circ.v_m_s, circ.epoch, [dt], force="two-body").state(dt)
+    chol = np.linalg.cholesky(ref.priors[0].covariance)
+    noiseless = sim.truth_values + OFFSET_HZ
+    rng = np.random.default_rng(11)
+    delta = []
+    for _ in range(60):
+        y = noiseless + rng.normal(size=noiseless.size) * 0.01
+        centre = truth + chol @ rng.normal(size=6)
+        sol, _ = ref.solve(observed=y, prior_centre=centre, x0=np.r_[truth, OFFSET_HZ, np.linalg.norm(truth[:3])])
+        sol_free, _ = free.solve(observed=y, prior_centre=centre, x0=sol.values[:len(free.names)])
+        delta.append(sol.chi2 - sol_free.chi2)
+    delta = np.array(delta)
+    lo, hi = stats.chi2.ppf([0.005, 0.995], 2 * delta.size) / delta.size
+    assert lo < delta.mean() < hi and delta.min() > -1e-6, delta.mean()
+    assert stats.kstest(delta, stats.chi2(2).cdf).pvalue > 1e-3
+
+
+def test_circular_consistency_flags_a_pass_that_contradicts_the_constraints():
+    """The Table 1 truth is not exactly circular (osculating e = 2.7e-5 with J2): 0.1 Hz Doppler
+    cannot tell, 1 mm/s two-way range-rate can, and refine says so (both costs)."""
+    _, _, loose = scenario()
+    _, _, sharp = scenario(two_way_sigma_m_s=1e-3)
+    for cost in ("pointwise", "integral"):
+        quiet = refine(table(loose), STALE, None, RefineOptions(cost=cost, circular=True), EOP)
+        c = quiet.constraints["consistency"]
+        assert c["dof"] == 2 and c["p_value"] > 0.01, c
+        assert not any("contradicts the circular-orbit constraints" in w for w in quiet.warnings)
+        loud = refine(table(sharp), STALE, None, RefineOptions(cost=cost, circular=True), EOP)
+        c = loud.constraints["consistency"]
+        assert c["p_value"] < 1e-6, c
+        assert any("contradicts the circular-orbit constraints" in w and "--circular-tolerance" in w
+                   for w in loud.warnings)
+    assert 1e-5 < c["free_fit_eccentricity"] < 1e-4                 # the truth's 2.7e-5

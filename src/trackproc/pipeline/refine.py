@@ -44,7 +44,7 @@ visible pass: the seed 004 Table 1 scenario.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import SimpleNamespace
 from typing import Mapping, Optional
 
@@ -59,6 +59,8 @@ COSTS = ("pointwise", "integral")
 DOPPLER_BIAS = ("none", "offset", "offset+drift")
 #: Range-rate-like kinds a Doppler station gives, in order of preference.
 RANGE_RATE_KINDS = ("doppler", "range_rate")
+#: ``--circular`` is reported as contradicted by the pass below this p-value (:func:`circular_consistency`).
+CIRCULAR_TEST_P = 1e-3
 #: Links (the pass metadata's ``doppler_mode``): both costs take either.
 LINK_MODES = ("one-way", "two-way")
 #: The a-priori of a stale state that carries no covariance, as independent 1-sigma errors of
@@ -683,7 +685,34 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     """
     ref = prepare(table, initial, stations, options, eop, source)
     sol, kkt, scale = solve_weighted(ref)
-    return finish(ref, sol, kkt, scale)
+    consistency = None
+    if ref.options.circular:
+        free = prepare(table, initial, stations, replace(ref.options, circular=False), eop, source)
+        consistency = circular_consistency(free, sol, scale)
+    return finish(ref, sol, kkt, scale, consistency=consistency)
+
+
+def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0) -> dict:
+    """Do the data contradict the circular-orbit constraints (seed 004 eq. 5)? The likelihood-ratio
+    test: ``Δχ² = χ²(constrained) - χ²(free)`` is χ² with 2 degrees of freedom when the orbit is
+    circular — three constraints, less the free radius ``r_ka`` that absorbs ``|r|² = r_ka²``
+    (checked by Monte Carlo in the tests; with a fixed a-priori centre it is smaller on average,
+    so the test errs towards silence). ``free`` is the same refinement without the constraints,
+    solved here from the constrained solution with the same data sigmas."""
+    from scipy.stats import chi2 as chi2_dist
+
+    try:
+        sol, _ = free.solve(sigma_scale=sigma_scale, x0=np.asarray(constrained.values, float)[:len(free.names)])
+    except ProcessingError as exc:
+        return {"test": "likelihood ratio", "status": f"the unconstrained fit failed: {exc}"}
+    delta = float(constrained.chi2 - sol.chi2)
+    out = {"test": "likelihood ratio", "delta_chi2": delta, "dof": 2,
+           "p_value": float(chi2_dist.sf(max(delta, 0.0), 2)),
+           "free_fit_eccentricity": _eccentricity(sol.values[:3], sol.values[3:6], free.mu),
+           "edited_constrained_free": [int(constrained.n_edited), int(sol.n_edited)]}
+    if constrained.n_edited != sol.n_edited:
+        out["note"] = "the two fits edited different samples: the test is approximate"
+    return out
 
 
 def solve_weighted(ref: Refinement):
@@ -703,8 +732,9 @@ def solve_weighted(ref: Refinement):
     return sol, kkt, scale
 
 
-def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0) -> RefineResult:
-    """Outputs of a solved :class:`Refinement` (states, covariance, report, residuals)."""
+def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None) -> RefineResult:
+    """Outputs of a solved :class:`Refinement` (states, covariance, report, residuals);
+    ``consistency`` the :func:`circular_consistency` of a ``--circular`` solution."""
     from trackproc.constants import force_model_constants
     from trackproc.dynamics import propagator
     from trackproc.dynamics import timescales as ts
@@ -757,6 +787,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0) -> RefineRe
                                               "circular orbit)"})
         i_rka = names.index("r_ka")
         constraints["r_ka_sigma_m"] = float(sigma[i_rka])
+        if consistency is not None:
+            constraints["consistency"] = consistency
     else:
         u = x[:3] / np.linalg.norm(x[:3])
         constraints["r_ka_sigma_m"] = float(np.sqrt(u @ cov[:3, :3] @ u))
@@ -816,6 +848,13 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0) -> RefineRe
     if sigma_scale > 1.0:
         warnings.append(f"the samples scatter more than their sigmas say: sigmas scaled by {sigma_scale:.3g} "
                         "(sqrt of the variance factor, iterated) before weighing them against the a-priori")
+    if consistency is not None and consistency.get("p_value", 1.0) < CIRCULAR_TEST_P:
+        c = consistency
+        warnings.append(f"the pass contradicts the circular-orbit constraints (delta chi2 = {c['delta_chi2']:.4g}, 2 "
+                        f"degrees of freedom, p = {c['p_value']:.2g}; the unconstrained fit's eccentricity is "
+                        f"{c['free_fit_eccentricity']:.2g}): the constrained state is biased and its covariance too "
+                        "small; give --circular-tolerance (the eccentricity the orbit is circular to) or drop "
+                        "--circular")
     if opt.circular and kkt is not None and ref.tolerance() == 0.0:
         warnings.append("--circular: the covariance is conditional on an exactly circular orbit; with J2 the "
                         "osculating eccentricity of a circular orbit swings by about 1e-3 (give --circular-tolerance)")
