@@ -50,7 +50,8 @@ def refine_command(
                               help="pointwise: least squares on the samples with the stale state as a-priori "
                                    "(default); integral: seed 004 eq. 14 on the smoothed curve."),
     circular: bool = typer.Option(
-        False, "--circular", help="Impose the circular-orbit constraints of seed 004 eq. 5 (Lagrange multipliers)."),
+        False, "--circular", help="Impose the circular-orbit constraints of seed 004 eq. 5 (Lagrange multipliers); a warning when "
+             "the pass contradicts them (likelihood-ratio test)."),
     circular_tolerance: float = typer.Option(
         0.0, "--circular-tolerance", metavar="E", min=0.0,
         help="With --circular: the eccentricity to which the orbit is circular; adds that uncertainty to the "
@@ -100,13 +101,14 @@ def refine_command(
                                             help="Write the residuals at the samples (Parquet, or CSV by the suffix)."),
     output: Optional[str] = OutputOpt,
 ) -> None:
-    """Refine a stale orbit state from one Doppler (or range-rate) pass of one station, at the
-    traverse point of the pass (seed 004), and write a state file with the covariance, the same
-    state at the stale epoch, the constraint residuals, an observability report (what one pass
-    cannot see, in radial/along/cross-track terms), the residuals and the iterations.
+    """Refine a stale orbit state from one Doppler (or range-rate) pass of one station, one- or
+    two-way, at the traverse point of the pass (seed 004), and write a state file with the
+    covariance, the same state at the stale epoch, the constraint residuals, an observability
+    report (what one pass cannot see, in radial/along/cross-track terms), the residuals and the
+    iterations.
 
-    A one-screen summary goes to stderr. Exit status 1 when the refinement fails (no
-    convergence, rank deficiency), 2 for invalid input.
+    A one-screen summary goes to stderr. Exit status 1 when the refinement fails
+    (no convergence, rank deficiency), 2 for invalid input.
 
     Example:
 
