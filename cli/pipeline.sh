@@ -35,8 +35,8 @@ echo "== 6. elevation-only pass and the multi-station set shipped with the proje
 trackproc ingest "$data/elevation_pass.csv" --stations "$data/stations.csv" -o "$out/elevation.parquet"
 trackproc info "$out/elevation.parquet" --json > "$out/elevation_info.json"
 trackproc info "$data/multistation.parquet"
-echo "== 7. estimate the orbit and the three range biases from the stale state (seed 002)" >&2
-trackproc estimate "$data/multistation.parquet" --initial "$data/stale.json" --apriori-initial \
+echo "== 7. estimate the orbit and the three range biases from the refined state (seed 002)" >&2
+trackproc estimate "$data/multistation.parquet" --initial "$out/refined.json" --apriori-initial \
     --range-bias --opm "$out/solution.opm" --residuals "$out/residuals.csv" -o "$out/solution.json"
 
 echo "== 8. how good is the prediction a day ahead? (seed 000) and the ephemeris as CCSDS OEM" >&2
