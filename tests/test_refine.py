@@ -292,12 +292,48 @@ def test_seed004_table1_monte_carlo_beats_the_paper_tenfold_where_the_pass_sees(
     assert np.all(rms[:3] < np.abs(PAPER_POSITION_ERROR) / 10), rms[:3]
     assert np.all(rms[3:] < 0.01), rms[3:]
     assert max(unseen_z) < 3.0 and max(total_z) < 4.0
-    # The seen part's NEES is chi2(5) in mean only to first order: the solution slides along the
-    # curved rotation the pass cannot see (its a-priori allows 5 m/s), and that curve leaves the
-    # straight line of the linear covariance by 1/2 theta^2 r (decimetres), which shows along the
-    # best-determined combinations, whose sigmas are centimetres at 0.01 Hz and millimetres at
-    # 1 mm/s (with a 0.5 m/s a-priori velocity sigma the seen z-scores are 0.86-1.11).
-    assert 4.0 < np.mean(nees_seen) < (8.0 if offset else 400.0)
+    # the reported (profile) covariance is not too small along the seen directions either; with
+    # this one fixed stale state it is conservative there (the stale error along the unseen
+    # rotation is small, and the curvature it drives scales with it): the calibration proper is
+    # test_profile_covariance_is_calibrated_where_the_linear_one_is_not
+    assert np.mean(nees_seen) < 8.0, np.mean(nees_seen)
+
+
+def test_profile_covariance_is_calibrated_where_the_linear_one_is_not():
+    """Two-way range-rate at 1 mm/s, 30 draws of the noise and of the a-priori centre (from the
+    stale covariance, 10 km / 5 m/s, around the truth). Along the directions the pass sees, the
+    linear covariance is far too small (the estimate slides along the curved rotation the pass
+    cannot see, by up to the a-priori's 5 m/s); the profile covariance (finish's default)
+    mixes the solutions along that rotation at its Gauss-Hermite points and is calibrated, a
+    little on the safe side: NEES of the seen part and of the whole state near their chi2(5)
+    and chi2(6) means, never above their 99 % bands."""
+    _, _, sim = scenario(two_way_sigma_m_s=1e-3)
+    ref = prepare(table(sim), STALE, None, RefineOptions(clip=None), EOP)
+    truth = truth_at(ref.problem.epoch)
+    chol = np.linalg.cholesky(ref.priors[0].covariance)
+    rng = np.random.default_rng(3)
+    seen_linear, seen_profile, full_profile = [], [], []
+    for _ in range(30):
+        y = sim.truth_values + rng.normal(size=sim.truth_values.size) * 1e-3
+        centre = truth + chol @ rng.normal(size=6)
+        sol, _ = ref.solve(observed=y, prior_centre=centre, x0=truth)
+        res = finish(ref, sol, prior_centre=centre)
+        obs = res.observability
+        e = res.state.values[:6] - truth
+        c = obs.dual @ e
+        for cov, out in ((sol.covariance, seen_linear), (res.state.covariance, seen_profile)):
+            var = np.einsum("ij,jk,ik->i", obs.dual, np.asarray(cov)[:6, :6], obs.dual)
+            out.append(float(np.sum(c[:5] ** 2 / var[:5])))
+        full_profile.append(float(e @ np.linalg.solve(np.asarray(res.state.covariance)[:6, :6], e)))
+    print(f"NEES of the seen part: linear {np.mean(seen_linear):.1f}, profile {np.mean(seen_profile):.2f}; "
+          f"whole state (profile) {np.mean(full_profile):.2f}")
+    lo5, hi5 = stats.chi2.ppf([0.005, 0.995], 5 * 30) / 30
+    lo6, hi6 = stats.chi2.ppf([0.005, 0.995], 6 * 30) / 30
+    assert np.mean(seen_linear) > 10 * hi5                       # the linear covariance is not honest here
+    # calibrated, on the safe side: the mixture over the rotation's linear sigma is slightly wide
+    # (the data see that rotation faintly: posterior/prior 0.84), measured 3.6 for 5 directions
+    assert 0.6 * 5 < np.mean(seen_profile) < hi5 and 0.6 * 6 < np.mean(full_profile) < hi6
+    assert "profile" in res.state.extra["refinement"]["covariance"]
 
 
 def test_seed004_table1_integral_with_and_without_constraints():

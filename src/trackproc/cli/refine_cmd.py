@@ -36,6 +36,11 @@ class OutputEpoch(str, Enum):
     stale = "stale"
 
 
+class Covariance(str, Enum):
+    profile = "profile"
+    linear = "linear"
+
+
 @app.command("refine")
 def refine_command(
     input: str = typer.Argument(..., metavar="PASS",
@@ -50,8 +55,9 @@ def refine_command(
                               help="pointwise: least squares on the samples with the stale state as a-priori "
                                    "(default); integral: seed 004 eq. 14 on the smoothed curve."),
     circular: bool = typer.Option(
-        False, "--circular", help="Impose the circular-orbit constraints of seed 004 eq. 5 (Lagrange multipliers); a warning when "
-             "the pass contradicts them (likelihood-ratio test)."),
+        False, "--circular",
+        help="Impose the circular-orbit constraints of seed 004 eq. 5 (Lagrange multipliers); a warning when the "
+             "pass contradicts them (likelihood-ratio test)."),
     circular_tolerance: float = typer.Option(
         0.0, "--circular-tolerance", metavar="E", min=0.0,
         help="With --circular: the eccentricity to which the orbit is circular; adds that uncertainty to the "
@@ -76,6 +82,10 @@ def refine_command(
         True, "--reweight/--no-reweight",
         help="Pointwise: scale the sample sigmas to their actual scatter (sqrt of the variance factor, when above "
              "1.5) before weighing them against the a-priori."),
+    covariance: Covariance = typer.Option(
+        Covariance.profile, "--covariance",
+        help="Pointwise without --circular: profile = the linear covariance plus the curvature along the directions "
+             "the pass cannot see (5 extra solves per direction); linear = the inverse normal matrix only."),
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Pointwise: edit samples beyond K x max(1, WRMS) sigmas. 0: off."),
@@ -148,7 +158,7 @@ def refine_command(
         force=force.value, earth=earth.value, range_rate_model=range_rate_model.value if range_rate_model else None,
         max_iterations=max_iterations, clip=clip if clip > 0 else None, pass_id=pass_id,
         kind=kind.value if kind else None, quadrature_order=quadrature_order, quadrature_panel_s=quadrature_panel,
-        max_gap_s=max_gap, reweight=reweight)
+        max_gap_s=max_gap, reweight=reweight, covariance=covariance.value)
     result = refine(table, state0, station_table, options, orientation, source=source)
 
     state = result.state if output_epoch is OutputEpoch.traverse else result.stale_epoch_state

@@ -82,7 +82,7 @@ __all__ = ["nonsingular_elements", "state_from_elements", "element_covariance", 
            "covered_intervals", "pseudo_sigma", "circular_constraints", "constraint_scales", "IntegralModel",
            "KKTResult", "CachedModel", "geodesic_retraction", "solve_kkt", "circular_tolerance_covariance",
            "constraint_error_covariance", "sandwich_covariance", "observability", "Observability", "RTN_NAMES",
-           "CONSTRAINT_NAMES"]
+           "CONSTRAINT_NAMES", "profile_mixture", "PROFILE_NODES"]
 
 #: Names of the circular-orbit constraints (seed 004 eq. 5), in order.
 CONSTRAINT_NAMES = ("|r|^2 - r_ka^2", "|v|^2 - mu/r_ka", "r.v")
@@ -684,6 +684,31 @@ class Observability:
             "correction_rtn": self.correction_rtn,
             "notes": list(self.notes),
         }
+
+
+#: Gauss-Hermite nodes per unseen direction of :func:`profile_mixture`.
+PROFILE_NODES = 5
+
+
+def profile_mixture(solve_fixed: Callable[[float], tuple], x_hat, sigma: float, nodes: int = PROFILE_NODES):
+    """Covariance about ``x_hat`` of a posterior that is curved along one direction.
+
+    ``solve_fixed(target) -> (x_k, C_k)``: the solution with that direction's coordinate held
+    at ``target`` and its covariance conditional on it; ``sigma`` the coordinate's linear
+    posterior sigma. With the probabilists' Gauss-Hermite nodes ``t_k`` and weights ``w_k``
+    (normalised), ``Σ w_k (C_k + (x_k - x̂)(x_k - x̂)ᵀ)`` at ``target = t_k σ``: equal to the linear
+    covariance when the problem is linear, and it carries the spread of the valley the
+    estimate slides along when it is not (one pass: the rotation about the station's axis).
+    """
+    t, w = np.polynomial.hermite_e.hermegauss(nodes)
+    w = w / w.sum()
+    x_hat = np.asarray(x_hat, float)
+    out = np.zeros((x_hat.size, x_hat.size))
+    for tk, wk in zip(t, w):
+        x_k, c_k = solve_fixed(float(tk) * sigma)
+        d = np.asarray(x_k, float) - x_hat
+        out += wk * (np.asarray(c_k, float) + np.outer(d, d))
+    return out
 
 
 def observability(jacobian, sigma, names, rtn_matrix, reference_covariance, posterior_covariance, *,

@@ -23,7 +23,9 @@ epoch) with an optional covariance, and the station (from ``--stations`` or the 
      themselves with the stale state as an a-priori, solved by
      :func:`trackproc.methods.least_squares.solve` on the estimator's model. A single pass
      cannot determine all six elements; the a-priori keeps the unseen directions where the
-     stale state put them, with their stale uncertainty, instead of letting them diverge.
+     stale state put them, with their stale uncertainty, instead of letting them diverge. Its
+     covariance adds to the linear one the curvature along those unseen directions
+     (:meth:`Refinement.profile_covariance`; ``covariance="linear"`` leaves it out).
    * ``integral`` (the seed's method): seed 004 eq. 14 by Gauss-Legendre quadrature on the
      smoothed polynomial, the orbit's range-rate and its gradient from the DT spectra
      (:class:`trackproc.methods.refinement.IntegralModel`; for a two-way pass, the seed's own
@@ -97,6 +99,9 @@ class RefineOptions:
     orbit. With J2 the osculating eccentricity of a mean-circular LEO orbit swings by
     ``1.5 J2 (Re/r)^2`` (about 1e-3): see docs/refine.md before trusting a conditional covariance.
     ``reweight``: weigh the data by their actual scatter (:data:`REWEIGHT_THRESHOLD`).
+    ``covariance``: ``"profile"`` (pointwise without ``circular``: the linear covariance plus the
+    curvature along the directions the pass cannot see, :meth:`Refinement.profile_covariance`)
+    or ``"linear"``.
     """
 
     cost: str = "pointwise"
@@ -117,6 +122,7 @@ class RefineOptions:
     circular_tolerance: Optional[float] = None
     reweight: bool = True
     rank_rtol: float = 1e-12
+    covariance: str = "profile"
 
 
 @dataclass
@@ -373,21 +379,14 @@ class Refinement:
         """Solve (``observed`` replaces the data: the samples, or the curve at the nodes;
         ``prior_centre`` (6,) the stale state at the traverse epoch; ``sigma_scale`` multiplies
         the data sigmas). Returns ``(Solution, KKTResult or None)``."""
-        from trackproc.methods.least_squares import Options, Prior, solve
+        from trackproc.methods.least_squares import Options, solve
         from trackproc.methods.refinement import CachedModel, geodesic_retraction, solve_kkt
 
         model, y, sigma, periodic, clip = self.data()
         sigma = np.asarray(sigma, float) * sigma_scale
         if observed is not None:
             y = np.asarray(observed, float)
-        priors = self.priors
-        if prior_centre is not None:
-            priors = []
-            for p in self.priors:
-                centre = np.asarray(p.centre, float).copy()
-                sel = np.asarray(p.index) < 6
-                centre[sel] = np.asarray(prior_centre, float)[np.asarray(p.index)[sel]]
-                priors.append(Prior(p.index, centre, p.covariance))
+        priors = self.priors_at(prior_centre)
         start = self.x0 if x0 is None else np.asarray(x0, float)
         opts = Options(max_iterations=self.options.max_iterations, clip=clip, rank_rtol=self.options.rank_rtol)
         model = CachedModel(model)
@@ -401,6 +400,64 @@ class Refinement:
         lo, hi = np.r_[lo, [-np.inf] * (len(self.names) - lo.size)], np.r_[hi, [np.inf] * (len(self.names) - hi.size)]
         return solve(model, start, y, sigma, names=self.names, scales=self.scales, priors=priors, periodic=periodic,
                      bounds=(lo, hi), options=opts, retract=retract), None
+
+    def priors_at(self, prior_centre=None) -> list:
+        """The a-priori terms, centred on ``prior_centre`` (6,) instead of the stale state if given."""
+        from trackproc.methods.least_squares import Prior
+
+        if prior_centre is None:
+            return list(self.priors)
+        out = []
+        for p in self.priors:
+            centre = np.asarray(p.centre, float).copy()
+            sel = np.asarray(p.index) < 6
+            centre[sel] = np.asarray(prior_centre, float)[np.asarray(p.index)[sel]]
+            out.append(Prior(p.index, centre, p.covariance))
+        return out
+
+    def profile_covariance(self, sol, obs, sigma_scale: float = 1.0, prior_centre=None) -> np.ndarray:
+        """The covariance of a pointwise solution with the curvature along the directions the pass
+        cannot see (:func:`trackproc.methods.refinement.profile_mixture`): for each unseen
+        direction ``i`` (``obs.dual[i]``), the refinement is solved again with that coordinate
+        held at the Gauss-Hermite nodes of its posterior (linear equality constraint, KKT), and
+        the conditional solutions and covariances are mixed. The data are the solution's own
+        (``computed + residual``, the same editing); ``prior_centre`` as in :meth:`solve`.
+        Raises :class:`ProcessingError` if a profile point cannot be solved."""
+        from trackproc.methods.least_squares import Options
+        from trackproc.methods.refinement import CachedModel, profile_mixture, solve_kkt
+
+        model, _, sigma, periodic, _ = self.data()
+        keep = ~np.asarray(sol.edited, bool)
+        y = (np.asarray(sol.computed, float) + np.asarray(sol.residual, float))[keep]
+        sigma = (np.asarray(sigma, float) * sigma_scale)[keep]
+        periodic = None if periodic is None else np.asarray(periodic)[keep]
+
+        def kept(x):
+            h, jac = model(x)
+            return h[keep], jac[keep]
+
+        x_hat = np.asarray(sol.values, float)
+        cov = np.asarray(sol.covariance, float)
+        n = x_hat.size
+        priors = self.priors_at(prior_centre)
+        opts = Options(max_iterations=self.options.max_iterations, clip=None, rank_rtol=self.options.rank_rtol)
+        cached = CachedModel(kept)
+        out = cov.copy()
+        for i in obs.unobservable:
+            row = np.r_[obs.dual[i], np.zeros(n - 6)]
+            sigma_i = float(np.sqrt(row @ cov @ row))
+
+            def fixed(target, row=row, sigma_i=sigma_i):
+                def constraint(x):
+                    return np.array([row @ (x - x_hat) - target]), row[None, :]
+
+                k = solve_kkt(cached, x_hat, y, sigma, names=self.names, constraints=constraint,
+                              constraint_scale=lambda x: np.array([max(sigma_i, 1.0)]), scales=self.scales,
+                              priors=priors, periodic=periodic, options=opts)
+                return k.solution.values, k.solution.covariance
+
+            out += profile_mixture(fixed, x_hat, sigma_i) - cov
+        return out
 
     def tolerance(self) -> float:
         """The eccentricity tolerance of ``--circular`` (0 unless given)."""
@@ -434,6 +491,9 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     opt = options or RefineOptions()
     if opt.cost not in COSTS:
         raise InputError("unknown cost", column="--cost", found=opt.cost, expected=" or ".join(COSTS))
+    if opt.covariance not in ("linear", "profile"):
+        raise InputError("unknown covariance", column="--covariance", found=opt.covariance,
+                         expected="linear or profile")
     if opt.doppler_bias not in (None,) + DOPPLER_BIAS:
         raise InputError("unknown Doppler bias model", column="--doppler-bias", found=opt.doppler_bias,
                          expected=" or ".join(DOPPLER_BIAS))
@@ -732,9 +792,11 @@ def solve_weighted(ref: Refinement):
     return sol, kkt, scale
 
 
-def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None) -> RefineResult:
+def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None,
+           prior_centre=None) -> RefineResult:
     """Outputs of a solved :class:`Refinement` (states, covariance, report, residuals);
-    ``consistency`` the :func:`circular_consistency` of a ``--circular`` solution."""
+    ``consistency`` the :func:`circular_consistency` of a ``--circular`` solution;
+    ``prior_centre`` the a-priori centre the solution was solved with (:meth:`Refinement.solve`)."""
     from trackproc.constants import force_model_constants
     from trackproc.dynamics import propagator
     from trackproc.dynamics import timescales as ts
@@ -810,6 +872,19 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                          "the covariance is zero across them (it is conditional on a circular orbit)")
     if ref.priors and opt.cost == "pointwise" and obs.unobservable:
         obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
+    covariance_note = "linear (the inverse of the whitened normal matrix at the solution)"
+    if opt.covariance == "profile" and opt.cost == "pointwise" and not opt.circular and obs.unobservable and ref.priors:
+        # the estimate slides along a curved valley where the pass sees nothing: the linear
+        # covariance misses that curvature along the best-determined combinations
+        try:
+            cov = ref.profile_covariance(sol, obs, sigma_scale, prior_centre)
+            sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+            big6 = np.kron(np.eye(2), rtn_matrix(x[:3], x[3:6]))
+            obs.posterior_sigma_rtn = np.sqrt(np.clip(np.diag(big6 @ cov[:6, :6] @ big6.T), 0.0, None))
+            covariance_note = (f"profile: linear, plus the curvature along the {len(obs.unobservable)} "
+                               f"direction(s) the pass cannot see ({rf.PROFILE_NODES} Gauss-Hermite points each)")
+        except ProcessingError as exc:
+            warnings.append(f"the profile covariance could not be computed ({exc}); the linear one is reported")
     # how far the pass moved the stale state, along what it sees and along what it cannot
     # (a large unseen part means the a-priori, not the data, put the state there)
     big = np.kron(np.eye(2), rtn_matrix(x[:3], x[3:6]))
@@ -892,7 +967,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     method = {"cost": opt.cost, "circular": bool(opt.circular),
               "solver": ("Gauss-Newton with equality constraints, KKT by the null-space method (seed 004 eqs. 15-17)"
                          if opt.circular else "Gauss-Newton by QR/SVD with Levenberg-Marquardt damping"),
-              "apriori": ref.apriori_note, "kind": ref.kind, "station": ref.station_name, "pass_id": ref.pass_id,
+              "apriori": ref.apriori_note, "covariance": covariance_note,
+              "kind": ref.kind, "station": ref.station_name, "pass_id": ref.pass_id,
               "range_rate_model": problem.range_rate_model, "force_model": opt.force, "earth": opt.earth,
               "doppler_bias": [n for n in problem.names if n.startswith("doppler_")],
               "propagator": "Taylor (DT) with first-order sensitivity spectra, quasi-inertial frame of the traverse "
