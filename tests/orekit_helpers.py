@@ -9,8 +9,8 @@ pytest's process, and the benchmark reads its peak memory (``ru_maxrss`` of that
 
 What Orekit is given is what ``trackproc estimate`` is given:
 
-* the pass files (Parquet/CSV from ``trackproc simulate``: range and one-way range-rate,
-  time tags = UTC reception times);
+* the pass files (Parquet/CSV from ``trackproc simulate``: range and range-rate, one-way or
+  two-way as the file's ``doppler_mode`` metadata says, time tags = UTC reception times);
 * the stations table (WGS-84 geodetic; a :class:`GroundStation` on a ``OneAxisEllipsoid``
   with the WGS-84 constants, attached to ITRF IERS 2010 conventions with ``simpleEOP`` =
   true, i.e. no tidal corrections to the EOP, as trackproc);
@@ -22,9 +22,10 @@ What Orekit is given is what ``trackproc estimate`` is given:
   with μ = 3.986004418e14 m³/s², two-body (``NumericalPropagatorBuilder`` with no force
   model: Newtonian attraction only; DormandPrince853 with a position tolerance of 1e-6 m:
   at Orekit's usual 1e-4 m its integration error alone moves a 24 h solution by ~1e-2 sigma);
-* ``Range(station, twoWay=false, ...)``, ``RangeRate(station, ..., twoway=false, ...)``, one
-  ``Bias`` modifier per station on its ranges with a selected driver named
-  ``range_bias:STATION``, sigmas from the pass file, base weight 1;
+* ``Range(station, twoWay, ...)``, ``RangeRate(station, ..., twoway, ...)`` with ``twoWay``
+  true for the samples of a file whose ``doppler_mode`` is ``two-way`` (or as the task's
+  ``two_way`` option forces), one ``Bias`` modifier per station on its ranges with a selected
+  driver named ``range_bias:STATION``, sigmas from the pass file, base weight 1;
 * ``BatchLSEstimator`` with a Levenberg-Marquardt (default) or Gauss-Newton (QR) optimizer,
   convergence on the normalized parameter step (1e-3), no outlier filter.
 
@@ -33,6 +34,16 @@ Tasks (keys of the configuration, see :func:`run`):
 ``station_times``  GCRF position and velocity of each station at these UTC times;
 ``model``          the measurements' theoretical values at a given state (no estimation);
 ``estimate``       the batch least-squares solution: values, covariance, iterations, timings.
+
+Orekit 13.1's two-way conventions (``theoreticalEvaluationWithoutDerivatives`` of ``Range``
+and ``RangeRate``, ``GroundReceiverMeasurement.computeCommonParametersWithout``; see
+docs/estimate_orekit.md): the down leg ``τ_d`` is solved with the station at reception
+``t_r``; the up leg ``τ_u`` with the station moved back from ``t_r`` by a Taylor shift
+(position, velocity, acceleration) to the emission ``t_r - τ_d - τ_u``. Two-way range =
+``c (τ_d + τ_u) / 2``. Two-way range-rate =
+``(û_d·(v_sat - v_st(t_r)) + û_u·(v_sat - v_st(t_r - τ_d - τ_u))) / 2``: the mean of the two
+legs' *instantaneous* line-of-sight rates (no ``1/(1 + û·v/c)`` factor, no ``dt_b/dt_r``
+factor), i.e. trackproc's two-way ``instantaneous`` model (observation.py eq. 9).
 
 Helpers usable without Java: :func:`availability` (why the comparison must be skipped) and
 :func:`write_linear_finals2000a`.
@@ -135,15 +146,33 @@ def _start(eop_file: str):
 
 
 def _read_passes(paths):
+    """The samples of the pass files, in file and row order, with a ``link_mode`` column: the
+    file's ``doppler_mode`` metadata ("one-way" when absent)."""
     import pandas as pd
 
     frames = []
     for p in paths:
-        frames.append(pd.read_csv(p, comment="#", parse_dates=["time"]) if str(p).endswith(".csv")
-                      else pd.read_parquet(p))
+        frame = (pd.read_csv(p, comment="#", parse_dates=["time"]) if str(p).endswith(".csv")
+                 else pd.read_parquet(p))
+        frame["link_mode"] = _file_meta(p).get("doppler_mode") or "one-way"
+        frames.append(frame)
     frame = pd.concat(frames, ignore_index=True)
     frame["time"] = pd.to_datetime(frame["time"], utc=True)
     return frame
+
+
+def _file_meta(path) -> dict:
+    """trackproc's metadata of a pass file: the JSON under the ``trackproc`` key of the Parquet
+    schema metadata, or of the first line ``# trackproc: {...}`` of a CSV."""
+    if str(path).endswith(".csv"):
+        with open(path, encoding="utf-8") as f:
+            first = f.readline().strip()
+        prefix = "# trackproc:"
+        return json.loads(first[len(prefix):]) if first.startswith(prefix) else {}
+    import pyarrow.parquet as pq
+
+    meta = pq.read_schema(path).metadata or {}
+    return json.loads(meta[b"trackproc"]) if b"trackproc" in meta else {}
 
 
 def _read_stations(path):
@@ -193,8 +222,9 @@ class _Setup:
         pv = PVCoordinates(Vector3D(*map(float, state["position_m"])), Vector3D(*map(float, state["velocity_m_s"])))
         return CartesianOrbit(pv, self.gcrf, self.date(state["epoch"]), self.mu)
 
-    def measurements(self, frame, range_bias: bool):
-        """Orekit measurements of the pass table's range and range_rate rows (in row order)."""
+    def measurements(self, frame, range_bias: bool, two_way=None):
+        """Orekit measurements of the pass table's range and range_rate rows (in row order);
+        ``two_way`` None: two-way where the row's file says so (``link_mode``), else forced."""
         from jpype import JArray, JDouble, JString
         from org.orekit.estimation.measurements import (
             ObservableSatellite,
@@ -211,17 +241,23 @@ class _Setup:
                             JArray(JDouble)([-math.inf]), JArray(JDouble)([math.inf]))
                 bias.getParametersDrivers().get(0).setSelected(True)
                 biases[name] = bias
+        if two_way is None:
+            modes = (frame["link_mode"] if "link_mode" in frame else ["one-way"] * len(frame))
+            links = [str(m) == "two-way" for m in modes]
+        else:
+            links = [bool(two_way)] * len(frame)
         out, rows = [], []
         times = frame["time"]
-        for i, (t, station, kind, value, sigma) in enumerate(zip(times, frame["station"].astype(str), frame["kind"],
-                                                                 frame["value"], frame["sigma"])):
+        for i, (t, station, kind, value, sigma, two) in enumerate(zip(times, frame["station"].astype(str),
+                                                                      frame["kind"], frame["value"], frame["sigma"],
+                                                                      links)):
             st = self.stations[station]
             if kind == "range":
-                m = Range(st, False, self.date(t), float(value), float(sigma), 1.0, sat)
+                m = Range(st, two, self.date(t), float(value), float(sigma), 1.0, sat)
                 if station in biases:
                     m.addModifier(biases[station])
             elif kind == "range_rate":
-                m = RangeRate(st, self.date(t), float(value), float(sigma), 1.0, False, sat)
+                m = RangeRate(st, self.date(t), float(value), float(sigma), 1.0, two, sat)
             else:
                 continue
             out.append(m)
@@ -264,7 +300,7 @@ def _task_model(setup, frame, state, config):
     from org.orekit.propagation import SpacecraftState
     from org.orekit.propagation.analytical import KeplerianPropagator
 
-    ms, rows = setup.measurements(frame, range_bias=False)
+    ms, rows = setup.measurements(frame, range_bias=False, two_way=config.get("two_way"))
     orbit = setup.orbit(state)
     for m in ms:                                 # the estimator does this itself (drift-type drivers)
         for driver in m.getParametersDrivers():
@@ -276,7 +312,7 @@ def _task_model(setup, frame, state, config):
         s = prop.propagate(m.getDate())
         est = m.estimateWithoutDerivatives(JArray(SpacecraftState)([s]))
         values.append(float(est.getEstimatedValue()[0]))
-    return {"rows": rows, "values": values}
+    return {"rows": rows, "values": values, "two_way": [bool(m.isTwoWay()) for m in ms]}
 
 
 def _task_estimate(setup, frame, config):
@@ -286,7 +322,8 @@ def _task_estimate(setup, frame, config):
     from org.orekit.estimation.leastsquares import BatchLSEstimator
 
     t0 = time.perf_counter()
-    ms, _ = setup.measurements(frame, range_bias=bool(config.get("range_bias", True)))
+    ms, _ = setup.measurements(frame, range_bias=bool(config.get("range_bias", True)),
+                               two_way=config.get("two_way"))
     orbit = setup.orbit(config["initial"])
     builder = _numerical_builder(setup, orbit, config)
     if config.get("optimizer", "levenberg-marquardt") == "gauss-newton":
@@ -325,6 +362,7 @@ def _task_estimate(setup, frame, config):
             orbital + prop_names + [str(d.getName()) for d in meas_drivers],
             "iterations": int(estimator.getIterationsCount()), "evaluations": int(estimator.getEvaluationsCount()),
             "rms": float(optimum.getRMS()), "cost": float(optimum.getCost()), "measurements": len(ms),
+            "two_way": sum(bool(m.isTwoWay()) for m in ms),
             "setup_s": setup_s, "estimate_s": estimate_s, "epoch": str(orbit.getDate())}
 
 
@@ -333,9 +371,10 @@ def run(config: dict) -> dict:
 
     ``config``: ``eop`` (finals2000A file), ``stations`` (CSV), optional ``mu``, ``integrator``
     (``min_step_s``, ``max_step_s``, ``position_tolerance_m``), and one or more tasks:
-    ``station_times`` (UTC ISO list), ``model`` (``passes``, ``state``), ``estimate``
-    (``passes``, ``initial``, ``range_bias``, ``optimizer`` "levenberg-marquardt" |
+    ``station_times`` (UTC ISO list), ``model`` (``passes``, ``state``, ``two_way``), ``estimate``
+    (``passes``, ``initial``, ``range_bias``, ``two_way``, ``optimizer`` "levenberg-marquardt" |
     "gauss-newton", ``convergence_threshold``, ``max_iterations``, ``max_evaluations``).
+    ``two_way``: absent or None = each file's ``doppler_mode``; true/false = all two-way/one-way.
     States are ``{"epoch": ISO UTC, "position_m": [...], "velocity_m_s": [...]}`` in GCRF.
     """
     t_start = time.perf_counter()
@@ -347,7 +386,7 @@ def run(config: dict) -> dict:
             out["stations"] = _task_stations(setup, config["station_times"])
         if config.get("model"):
             task = config["model"]
-            out["model"] = _task_model(setup, _read_passes(task["passes"]), task["state"], config)
+            out["model"] = _task_model(setup, _read_passes(task["passes"]), task["state"], {**config, **task})
         if config.get("estimate"):
             task = config["estimate"]
             out["estimate"] = _task_estimate(setup, _read_passes(task["passes"]), {**config, **task})
