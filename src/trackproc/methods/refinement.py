@@ -82,7 +82,7 @@ __all__ = ["nonsingular_elements", "state_from_elements", "element_covariance", 
            "covered_intervals", "pseudo_sigma", "circular_constraints", "constraint_scales", "IntegralModel",
            "KKTResult", "CachedModel", "geodesic_retraction", "solve_kkt", "circular_tolerance_covariance",
            "constraint_error_covariance", "sandwich_covariance", "observability", "Observability", "RTN_NAMES",
-           "CONSTRAINT_NAMES", "profile_mixture", "PROFILE_NODES"]
+           "CONSTRAINT_NAMES", "profile_mixture", "PROFILE_NODES", "range_rate_samples"]
 
 #: Names of the circular-orbit constraints (seed 004 eq. 5), in order.
 CONSTRAINT_NAMES = ("|r|^2 - r_ka^2", "|v|^2 - mu/r_ka", "r.v")
@@ -94,6 +94,27 @@ _MAX_RESTORE = 30
 
 
 # ----------------------------------------------------------------------------- quadrature
+
+def range_rate_samples(epoch, r_itrf_m, t_s, mode: str, eop=None):
+    """``range_rate`` samples of a station at ``t_s`` (s from ``epoch``, reception times) as a
+    :class:`~trackproc.models.observation.MeasurementSet` of link ``mode``: the station's GCRF
+    position, velocity and acceleration at those UTC dates (as
+    :func:`trackproc.pipeline.estimate.build_problem` does), for
+    :func:`~trackproc.models.observation.evaluate` (values unset: zeros, unit sigmas)."""
+    from trackproc.dynamics import timescales as ts
+    from trackproc.models import measurements as mm
+    from trackproc.models import observation as ob
+
+    t_s = np.atleast_1d(np.asarray(t_s, float))
+    epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns")))
+    jd1, jd2 = ts.add_seconds_utc(epoch_jd, t_s)
+    track = mm.station_gcrf(np.asarray(r_itrf_m, float), jd1, jd2, eop)
+    k = t_s.size
+    return ob.MeasurementSet(t_s=t_s.copy(), kind=np.full(k, "range_rate", dtype=object),
+                             station=np.full(k, "station", dtype=object), pass_id=np.full(k, "", dtype=object),
+                             observed=np.zeros(k), sigma=np.ones(k), r_st=track.r, v_st=track.v, a_st=track.a,
+                             mode=np.full(k, mode, dtype=object))
+
 
 def gauss_legendre(intervals, *, order: int = 16, panel_s: float = 60.0):
     """Composite Gauss-Legendre nodes and weights over ``intervals`` [(a, b), ...] (s).
@@ -368,23 +389,9 @@ class IntegralModel:
                                     eop=self.eop).raise_for_outcome()
 
     def node_measurements(self):
-        """The nodes as two-way ``range_rate`` samples (a
-        :class:`~trackproc.models.observation.MeasurementSet`, built once): the station's GCRF
-        position, velocity and acceleration at the nodes' UTC dates."""
+        """The nodes as ``range_rate`` samples of the link (:func:`range_rate_samples`, built once)."""
         if self._nodes is None:
-            from trackproc.dynamics import timescales as ts
-            from trackproc.models import measurements as mm
-            from trackproc.models import observation as ob
-
-            epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(np.datetime64(self.epoch, "ns")))
-            jd1, jd2 = ts.add_seconds_utc(epoch_jd, self.t_s)
-            track = mm.station_gcrf(np.asarray(self.station.r_itrf_m, float), jd1, jd2, self.eop)
-            k = self.t_s.size
-            self._nodes = ob.MeasurementSet(t_s=self.t_s.copy(), kind=np.full(k, "range_rate", dtype=object),
-                                            station=np.full(k, "station", dtype=object),
-                                            pass_id=np.full(k, "", dtype=object), observed=np.zeros(k),
-                                            sigma=np.ones(k), r_st=track.r, v_st=track.v, a_st=track.a,
-                                            mode=np.full(k, self.mode, dtype=object))
+            self._nodes = range_rate_samples(self.epoch, self.station.r_itrf_m, self.t_s, self.mode, self.eop)
         return self._nodes
 
     def _state_part(self, x):

@@ -680,23 +680,19 @@ def _max_elevation_deg(ref: Refinement, x) -> Optional[float]:
 def _link_range_rate(ref: Refinement, traj, t_s) -> np.ndarray:
     """The orbit's range-rate (m/s) at reception times ``t_s`` (s from the traverse epoch) by the
     pass's link: one-way from the DT spectra, two-way by the round trip (mean of both legs,
-    :mod:`trackproc.models.observation` eqs. 7-9), with the problem's range-rate model."""
+    :mod:`trackproc.models.observation` eqs. 7-9, on the same samples as the integral cost's
+    :class:`~trackproc.methods.refinement.IntegralModel`), with the problem's range-rate model.
+    ``traj`` carries its STM (the round trip's :func:`~trackproc.models.observation.evaluate`)."""
     from trackproc.dynamics import measurement_spectra as ms
+    from trackproc.methods.refinement import range_rate_samples
+    from trackproc.models import observation as ob
 
     t = np.atleast_1d(np.asarray(t_s, float))
     model = ref.problem.range_rate_model
     if _link_mode(ref) == "one-way":
         return ms.predict(traj, ref.station_model, t, range_rate_model=model, partials=False).range_rate_m_s
-    from trackproc.dynamics import timescales as ts
-    from trackproc.models import measurements as mm
-    from trackproc.models import observation as ob
-
-    jd1, jd2 = ts.add_seconds_utc(tuple(float(a) for a in ts.datetime64_to_jd_utc(ref.problem.epoch)), t)
-    track = mm.station_gcrf(ref.station_model.r_itrf_m, jd1, jd2, ref.problem.eop)
-    geo = ob.solve_light_time(traj, t, track.r)
-    up = ob.solve_up_leg(geo.state[:, :3], track.r, track.v, track.a, geo.tau_s)
-    return ob.two_way_range_rate_partials(geo.state[:, :3], geo.state[:, 3:], track.r, track.v, up.r_st, up.v_st,
-                                          track.a, model)[0]
+    meas = range_rate_samples(ref.problem.epoch, ref.station_model.r_itrf_m, t, "two-way", ref.problem.eop)
+    return ob.evaluate(meas, traj, n_columns=6, range_rate_model=model)[0]
 
 
 def _model_traverse(ref: Refinement, x) -> Optional[float]:
@@ -706,7 +702,8 @@ def _model_traverse(ref: Refinement, x) -> Optional[float]:
 
     try:
         traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [-62.0, 62.0], force=ref.options.force,
-                                    frame=ref.problem.frame, eop=ref.problem.eop).raise_for_outcome()
+                                    stm=_link_mode(ref) == "two-way", frame=ref.problem.frame,
+                                    eop=ref.problem.eop).raise_for_outcome()
         t = np.linspace(-60.0, 60.0, 241)
         rr = _link_range_rate(ref, traj, t)
         k = np.flatnonzero((rr[:-1] < 0) & (rr[1:] >= 0))
@@ -872,6 +869,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                          "the covariance is zero across them (it is conditional on a circular orbit)")
     if ref.priors and opt.cost == "pointwise" and obs.unobservable:
         obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
+    big = np.kron(np.eye(2), rtn_matrix(x[:3], x[3:6]))           # GCRF -> RTN for (r, v)
     covariance_note = "linear (the inverse of the whitened normal matrix at the solution)"
     if opt.covariance == "profile" and opt.cost == "pointwise" and not opt.circular and obs.unobservable and ref.priors:
         # the estimate slides along a curved valley where the pass sees nothing: the linear
@@ -879,15 +877,13 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         try:
             cov = ref.profile_covariance(sol, obs, sigma_scale, prior_centre)
             sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-            big6 = np.kron(np.eye(2), rtn_matrix(x[:3], x[3:6]))
-            obs.posterior_sigma_rtn = np.sqrt(np.clip(np.diag(big6 @ cov[:6, :6] @ big6.T), 0.0, None))
+            obs.posterior_sigma_rtn = np.sqrt(np.clip(np.diag(big @ cov[:6, :6] @ big.T), 0.0, None))
             covariance_note = (f"profile: linear, plus the curvature along the {len(obs.unobservable)} "
                                f"direction(s) the pass cannot see ({rf.PROFILE_NODES} Gauss-Hermite points each)")
         except ProcessingError as exc:
             warnings.append(f"the profile covariance could not be computed ({exc}); the linear one is reported")
     # how far the pass moved the stale state, along what it sees and along what it cannot
     # (a large unseen part means the a-priori, not the data, put the state there)
-    big = np.kron(np.eye(2), rtn_matrix(x[:3], x[3:6]))
     obs.correction_rtn = {part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))
                           for part, d in zip(("seen", "unseen"), obs.split(x[:6] - ref.x0[:6]))}
 
