@@ -744,7 +744,9 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     sol, kkt, scale = solve_weighted(ref)
     consistency = None
     if ref.options.circular:
-        free = prepare(table, initial, stations, replace(ref.options, circular=False), eop, source)
+        # the same assembled problem without the constraints and r_ka (always the last parameter)
+        free = replace(ref, options=replace(ref.options, circular=False), names=ref.names[:-1], x0=ref.x0[:-1],
+                       scales=ref.scales[:-1])
         consistency = circular_consistency(free, sol, scale)
     return finish(ref, sol, kkt, scale, consistency=consistency)
 
