@@ -1,0 +1,373 @@
+"""The recorded output set: representative CLI cases on the shipped sample_data, whose numeric outputs
+are kept in tests/golden/*.json and re-checked by tests/test_golden.py (issue 15: "outputs stay
+bit-identical or within 1e-12 relative on a recorded set of cases").
+
+    PYTHONPATH=src python tests/golden/record.py            # re-record every case (after a deliberate change)
+    PYTHONPATH=src python tests/golden/record.py refine     # only the cases whose name contains 'refine'
+
+Each case is a list of ``trackproc`` commands run in-process (``trackproc.cli.app.main``) in a fresh
+directory; every file the case writes there, and every command's stdout, is recorded in a normalised
+form: JSON as parsed; Parquet/Arrow/CSV tables column by column (long tables as evenly spaced rows plus
+each numeric column's sum and sum of |x|, so a change in any row shows); other text as its
+sequence of words and numbers. Paths are replaced by {data}/{work}; run-dependent fields (IGNORED_KEYS)
+are dropped. Re-record only when a change of output is intended, and say so in the commit message.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import logging
+import math
+import re
+import sys
+import tempfile
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+DATA = ROOT / "sample_data"
+
+RTOL = 1e-12      # relative tolerance on every number
+FLOOR = 1e-12     # absolute floor, as a fraction of the field's scale (the largest |x| of its column or
+                  # array): a value near zero computed from numbers of that size carries their rounding
+MAX_ROWS = 16     # longer tables are recorded as this many evenly spaced rows plus column sums
+MAX_MATRIX = 100  # larger matrices are recorded as their diagonal and row sums
+
+# Keys whose values legitimately vary from run to run (none are produced today; kept as the one place
+# to add e.g. a creation time or a version string).
+IGNORED_KEYS = frozenset({"created", "creation_date", "trackproc_version", "version_string"})
+IGNORED_LINE = re.compile(r"^(\s*CREATION_DATE\s*=\s*).*$")   # CCSDS OPM/OEM/TDM headers: the run's time
+
+TRV_CSV = "station,lat_deg,lon_deg,height_m\nTRV,56.454155,9.725833,0.0\n"
+NOMINAL = {"impact_time": "2026-03-20T10:00:00Z", "velocity_kms": 3, "angle_deg": 48, "station": "KIR",
+           "tau_s": 30}
+
+# name -> (files written into the work directory first, commands). {data}: sample_data, {work}: the case's
+# directory. Every case fixes UT1-UTC (--dut1 0) where the command takes it, so that the set checks the
+# code, not the Earth-orientation table shipped with a dependency.
+CASES: dict[str, tuple[dict[str, str], list[list[str]]]] = {
+    "ingest_smooth_doppler": ({}, [
+        ["ingest", "{data}/doppler_pass.csv", "--stations", "{data}/stations.csv", "--carrier-hz", "2.2e9",
+         "--mode", "one-way", "-o", "{work}/pass.parquet"],
+        ["info", "{work}/pass.parquet", "--json"],
+        ["smooth", "{work}/pass.parquet", "--summary", "{work}/smooth.json", "-o", "{work}/smoothed.parquet"],
+    ]),
+    "ingest_elevation_csv": ({}, [
+        ["ingest", "{data}/elevation_pass.csv", "--stations", "{data}/stations.csv", "-o", "{work}/elev.csv"],
+        ["smooth", "{work}/elev.csv", "--degree", "6", "--grid", "60", "--summary", "{work}/smooth.json",
+         "-o", "{work}/grid.csv"],
+    ]),
+    "simulate_multistation": ({}, [
+        ["simulate", "--state", "{data}/truth.json", "--stations", "{data}/stations.csv", "--duration", "7200",
+         "--step", "30", "--kinds", "range,range_rate,doppler,elevation,azimuth", "--range-bias", "CPH=120",
+         "--freq-offset-hz", "40", "--seed", "7", "--dut1", "0", "--truth", "{work}/truth_at_start.json",
+         "-o", "{work}/sim.parquet"],
+    ]),
+    "estimate_multistation": ({}, [
+        ["estimate", "{data}/multistation.parquet", "--initial", "{data}/stale.json", "--apriori-initial",
+         "--range-bias", "--dut1", "0", "--opm", "{work}/solution.opm", "--residuals", "{work}/residuals.csv",
+         "-o", "{work}/solution.json"],
+    ]),
+    # seed 004 Table 1 (docs/refine.md): the TRV pass, pointwise and integral + --circular
+    "refine_seed004": ({"trv.csv": TRV_CSV}, [
+        ["simulate", "--state", "{data}/truth.json", "--stations", "{work}/trv.csv", "--start",
+         "2026-03-20T09:15:00Z", "--duration", "1800", "--step", "1", "--kinds", "doppler", "--carrier-hz",
+         "2.2e9", "--sigma-doppler-hz", "0.1", "--freq-offset-hz", "150", "--seed", "1", "--dut1", "0",
+         "-o", "{work}/pass.parquet"],
+        ["smooth", "{work}/pass.parquet", "-o", "{work}/smoothed.parquet"],
+        ["refine", "{work}/smoothed.parquet", "--initial", "{data}/stale.json", "--output-epoch", "stale",
+         "--dut1", "0", "--residuals", "{work}/pw_residuals.csv", "-o", "{work}/pw.json"],
+        ["refine", "{work}/smoothed.parquet", "--initial", "{data}/stale.json", "--cost", "integral",
+         "--circular", "--output-epoch", "stale", "--dut1", "0", "-o", "{work}/seed.json"],
+    ]),
+    "refine_sample_pass": ({}, [  # the pass of ingest_smooth_doppler, hence its files are not recorded again
+        ["ingest", "{data}/doppler_pass.csv", "--stations", "{data}/stations.csv", "--carrier-hz", "2.2e9",
+         "--mode", "one-way", "-o", "{work}/_pass.parquet"],
+        ["smooth", "{work}/_pass.parquet", "-o", "{work}/_smoothed.parquet"],
+        ["refine", "{work}/_smoothed.parquet", "--initial", "{data}/stale.json", "--doppler-bias",
+         "offset+drift", "--output-epoch", "stale", "--dut1", "0", "-o", "{work}/refined.json"],
+    ]),
+    "propagate_at_station": ({}, [
+        ["propagate", "{data}/truth.json", "--span", "3600", "--step", "120", "--at-station", "CPH",
+         "--stations", "{data}/stations.csv", "--carrier-hz", "2.2e9", "--dut1", "0", "-o", "{work}/pred.csv"],
+        ["propagate", "{data}/stale.json", "--span", "-1800", "--step", "300", "--stm", "-o", "{work}/stm.csv"],
+        ["propagate", "{data}/truth_at_start.json", "--span", "3600", "--step", "600", "--format", "oem",
+         "--dut1", "0", "-o", "{work}/eph.oem"],
+    ]),
+    "accuracy_monte_carlo": ({}, [
+        ["accuracy", "{data}/stale.json", "--span", "21600", "--step", "3600", "--method", "all",
+         "--monte-carlo", "64", "--seed", "3", "--at-station", "KIR", "--stations", "{data}/stations.csv",
+         "--dut1", "0", "--format", "json", "-o", "{work}/accuracy.json"],
+        ["accuracy", "--seed-example", "--span", "6000", "--step", "500", "--format", "csv",
+         "-o", "{work}/example.csv"],
+    ]),
+    "detect_ballistic": ({"nominal.json": json.dumps(NOMINAL),
+                          "kir.csv": "station,lat_deg,lon_deg,height_m\nKIR,67.8,20.9,400\n"}, [
+        ["simulate", "--ballistic", "{work}/nominal.json", "--stations", "{work}/kir.csv", "--hypothesis", "h1",
+         "--step", "2", "--elevation-mask-deg", "0", "--sigma-angle-deg", "0.2", "--seed", "1", "--dut1", "0",
+         "-o", "{work}/pass.parquet"],
+        ["detect", "{work}/pass.parquet", "--nominal", "{work}/nominal.json", "--false-alarm", "0.001",
+         "--dut1", "0", "-o", "{work}/result.json"],
+    ]),
+    "requirements_tables": ({}, [
+        ["requirements", "--format", "json", "--compare-paper", "-o", "{work}/table2.json"],
+        ["requirements", "--latitude", "60", "--direction", "against", "--tau-s", "30", "-o", "{work}/table3.csv"],
+        ["requirements", "--format", "md", "--compare-paper"],
+    ]),
+}
+
+
+# --- running -----------------------------------------------------------------------------------------
+
+def run_command(args: list[str]) -> tuple[int, bytes, str]:
+    """One ``trackproc`` command in-process: (exit code, stdout bytes, stderr text)."""
+    from typer.testing import CliRunner
+
+    from trackproc.cli import app as cli_app
+
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    try:
+        with CliRunner().isolation() as (out, err, _):
+            code = cli_app.main(args)
+            sys.stdout.flush()
+            sys.stderr.flush()
+            return code, out.getvalue(), err.getvalue().decode("utf-8", "replace")
+    finally:
+        root.handlers[:] = handlers
+        root.setLevel(level)
+
+
+def run_case(name: str, work: Path) -> dict:
+    """Run case ``name`` in the empty directory ``work``; its normalised outputs."""
+    inputs, commands = CASES[name]
+    for file, text in inputs.items():
+        (work / file).write_text(text)
+    subst = {"{data}": str(DATA), "{work}": str(work)}
+    record: dict = {"commands": [], "files": {}}
+    for i, template in enumerate(commands):
+        args = [_subst(a, subst) for a in template]
+        code, stdout, stderr = run_command(args)
+        if code != 0:
+            raise RuntimeError(f"case {name}, command {i + 1} ({' '.join(template[:1])}) exited {code}: {stderr.strip()}")
+        entry = {"args": template, "exit_code": code}
+        if stdout:
+            entry["stdout"] = _normalise(stdout, _stdout_kind(stdout), work)
+        record["commands"].append(entry)
+    for path in sorted(work.iterdir()):
+        if path.name not in inputs and not path.name.startswith("_"):  # _name: an intermediate
+            record["files"][path.name] = _normalise(path.read_bytes(), path.suffix.lstrip("."), work)
+    return record
+
+
+def _subst(arg: str, subst: dict[str, str]) -> str:
+    for key, value in subst.items():
+        arg = arg.replace(key, value)
+    return arg
+
+
+def _stdout_kind(data: bytes) -> str:
+    text = data.lstrip()
+    if text[:1] in (b"{", b"["):
+        return "json"
+    return "arrow" if data[:4] == b"\xff\xff\xff\xff" else "txt"
+
+
+# --- normalising ------------------------------------------------------------------------------------
+
+def _normalise(data: bytes, kind: str, work: Path):
+    if kind in ("parquet", "arrow"):
+        return _table(data, kind, work)
+    text = data.decode("utf-8")
+    text = text.replace(str(work), "{work}").replace(str(DATA), "{data}").replace(str(ROOT), "{root}")
+    if kind == "json":
+        return {"json": _clean(json.loads(text))}
+    if kind == "csv":
+        return _csv(text)
+    lines = [IGNORED_LINE.sub(r"\1<ignored>", line) for line in text.splitlines()]
+    return {"text": [_tokens(line) for line in lines]}  # a line's numbers share a scale
+
+
+def _clean(value):
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items() if k not in IGNORED_KEYS}
+    if isinstance(value, list):
+        if _is_big_matrix(value):
+            return _matrix_summary(value)
+        return [_clean(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return repr(value)  # 'nan', 'inf': compared exactly, and the file stays strict JSON
+    return value
+
+
+def _is_big_matrix(value: list) -> bool:
+    return (len(value) * len(value[0] if value and isinstance(value[0], list) else []) > MAX_MATRIX
+            and all(isinstance(row, list) and len(row) == len(value[0]) and all(map(_is_number, row))
+                    for row in value))
+
+
+def _matrix_summary(rows: list[list[float]]) -> dict:
+    """A large matrix (a covariance) as its diagonal and each row's sum and sum of |x|."""
+    return {"matrix_shape": [len(rows), len(rows[0])],
+            "diagonal": [row[i] for i, row in enumerate(rows) if i < len(row)],
+            "row_sums": [[math.fsum(row), math.fsum(abs(v) for v in row)] for row in rows]}
+
+
+_NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
+
+
+def _tokens(text: str) -> list:
+    """Words and numbers of a text, in order: numbers as floats, the rest as strings."""
+    out: list = []
+    pos = 0
+    for m in _NUMBER.finditer(text):
+        if m.start() > pos:
+            out.append(text[pos:m.start()])
+        out.append(float(m.group()))
+        pos = m.end()
+    if pos < len(text):
+        out.append(text[pos:])
+    return out
+
+
+def _cell(s: str):
+    try:
+        return _clean(float(s))
+    except ValueError:
+        return s
+
+
+def _csv(text: str) -> dict:
+    comments = [line for line in text.splitlines() if line.startswith("#")]
+    body = "\n".join(line for line in text.splitlines() if not line.startswith("#"))
+    rows = list(csv.reader(io.StringIO(body)))
+    header, rows = rows[0], rows[1:]
+    columns = {h: [_cell(r[j]) for r in rows] for j, h in enumerate(header)}
+    return {"comments": [_comment(c) for c in comments], **_columns(columns)}
+
+
+def _comment(line: str):
+    """A CSV comment line: the trackproc metadata line (``# trackproc: {json}``) as its JSON, else words
+    and numbers."""
+    head, _, rest = line.partition(":")
+    try:
+        return {head: _clean(json.loads(rest))}
+    except ValueError:
+        return _tokens(line)
+
+
+def _table(data: bytes, kind: str, work: Path) -> dict:
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    if kind == "parquet":
+        table = pq.read_table(io.BytesIO(data))
+    else:
+        table = pa.ipc.open_stream(io.BytesIO(data)).read_all()
+    meta = {}
+    for key, value in (table.schema.metadata or {}).items():
+        k, v = key.decode(), value.decode()
+        v = v.replace(str(work), "{work}").replace(str(DATA), "{data}")
+        try:
+            meta[k] = _clean(json.loads(v))
+        except ValueError:
+            meta[k] = _tokens(v)
+    meta.pop("ARROW:schema", None)
+    meta.pop("pandas", None)  # pandas' own bookkeeping (its version)
+    columns = {}
+    for name in table.column_names:
+        col = table.column(name)
+        if pa.types.is_timestamp(col.type):
+            col = col.cast(pa.int64())
+        columns[name] = [_clean(v) for v in col.to_pylist()]
+    return {"schema": [f"{f.name}:{f.type}" for f in table.schema], "metadata": meta, **_columns(columns)}
+
+
+def _columns(columns: dict[str, list]) -> dict:
+    n = len(next(iter(columns.values()), []))
+    if n <= MAX_ROWS:
+        return {"rows": n, "columns": columns}
+    keep = sorted({round(i * (n - 1) / (MAX_ROWS - 1)) for i in range(MAX_ROWS)})
+    sums = {}
+    for name, values in columns.items():
+        nums = [v for v in values if _is_number(v)]
+        # numbers: their sum and sum of |x| (one list: sum|x| is the scale of sum); anything else
+        # (times, names, empty cells): a digest of the column with its numbers blanked, compared exactly
+        text = "\x1f".join("#" if _is_number(v) else str(v) for v in values)
+        sums[name] = {"numbers": [math.fsum(nums), math.fsum(abs(v) for v in nums)] if nums else [],
+                      "count": len(nums)}
+        if len(nums) < n:
+            sums[name]["text_sha256"] = hashlib.sha256(text.encode()).hexdigest()[:16]
+    return {"rows": n, "kept_rows": keep, "columns": {k: [v[i] for i in keep] for k, v in columns.items()},
+            "column_sums": sums}
+
+
+# --- comparing --------------------------------------------------------------------------------------
+
+def compare(expected, actual, path: str = "", scale: float | None = None) -> list[str]:
+    """Differences between two normalised records: numbers within RTOL (relative) or FLOOR x the scale
+    of their array (the largest |x| of the list they belong to); everything else exactly."""
+    if isinstance(expected, dict):
+        if not isinstance(actual, dict):
+            return [f"{path}: expected an object, found {type(actual).__name__}"]
+        out = []
+        for key in sorted(set(expected) | set(actual), key=str):
+            if key not in actual:
+                out.append(f"{path}/{key}: missing")
+            elif key not in expected:
+                out.append(f"{path}/{key}: not in the recorded output")
+            else:
+                out += compare(expected[key], actual[key], f"{path}/{key}")
+        return out
+    if isinstance(expected, list):
+        if not isinstance(actual, list) or len(actual) != len(expected):
+            n = len(actual) if isinstance(actual, list) else type(actual).__name__
+            return [f"{path}: expected {len(expected)} items, found {n}"]
+        nums = [abs(v) for v in expected if _is_number(v)]
+        sub = max(nums) if nums else None
+        out = []
+        for i, (e, a) in enumerate(zip(expected, actual)):
+            out += compare(e, a, f"{path}[{i}]", sub)
+            if len(out) > 20:
+                return out + ["..."]
+        return out
+    if _is_number(expected) and _is_number(actual):
+        tol = RTOL * max(abs(expected), abs(actual)) + FLOOR * (scale or 0.0)
+        if abs(expected - actual) <= tol:
+            return []
+        rel = abs(expected - actual) / max(abs(expected), 1e-300)
+        return [f"{path}: recorded {expected!r}, now {actual!r} (relative difference {rel:.2e})"]
+    if expected != actual or type(expected) is not type(actual):
+        return [f"{path}: recorded {expected!r}, now {actual!r}"]
+    return []
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+# --- recording --------------------------------------------------------------------------------------
+
+def golden_path(name: str) -> Path:
+    return HERE / f"{name}.json"
+
+
+def record(names: list[str]) -> None:
+    for name in names:
+        with tempfile.TemporaryDirectory() as a, tempfile.TemporaryDirectory() as b:
+            first = run_case(name, Path(a))
+            second = run_case(name, Path(b))
+        diff = compare(first, second)
+        if diff:
+            raise SystemExit(f"case {name} is not deterministic:\n  " + "\n  ".join(diff[:10]))
+        text = json.dumps(first, separators=(",", ":"), sort_keys=True, allow_nan=False)
+        golden_path(name).write_text(text + "\n")
+        print(f"{name}: {len(text) / 1024:.1f} kB", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    wanted = sys.argv[1:]
+    record([n for n in CASES if not wanted or any(w in n for w in wanted)])

@@ -1,0 +1,73 @@
+"""The recorded output set (tests/golden/): every case re-run in-process and compared with its recording,
+numbers within 1e-12 relative (absolute floor 1e-12 of their column's or array's largest value), text
+exactly. A difference is a behaviour change: fix it, or re-record with ``tests/golden/record.py`` and
+say why in the commit message."""
+
+from __future__ import annotations
+
+import copy
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+_spec = importlib.util.spec_from_file_location("golden_record", Path(__file__).parent / "golden" / "record.py")
+record = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(record)
+
+
+@pytest.mark.parametrize("name", sorted(record.CASES))
+def test_outputs_match_the_recording(name, tmp_path):
+    path = record.golden_path(name)
+    assert path.exists(), f"{path.name} missing: run PYTHONPATH=src python tests/golden/record.py {name}"
+    expected = json.loads(path.read_text())
+    actual = json.loads(json.dumps(record.run_case(name, tmp_path)))  # the recording's JSON round trip
+    diff = record.compare(expected, actual)
+    assert not diff, f"{name}: outputs differ from the recording:\n  " + "\n  ".join(diff)
+
+
+def test_every_recording_has_a_case_and_the_set_stays_small():
+    files = sorted(p for p in record.HERE.glob("*.json"))
+    assert {p.stem for p in files} == set(record.CASES)
+    assert sum(p.stat().st_size for p in files) < 200_000
+
+
+def _first_number(node, path=()):
+    """Path to the first non-zero number (and its array's scale) in a recording."""
+    if isinstance(node, dict):
+        items = sorted(node.items())
+    elif isinstance(node, list):
+        items = list(enumerate(node))
+    else:
+        return None
+    for key, value in items:
+        if record._is_number(value) and value != 0 and abs(value) > 1:
+            return path + (key,)
+        found = _first_number(value, path + (key,))
+        if found:
+            return found
+    return None
+
+
+def _set(node, path, value):
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+
+
+def test_comparison_flags_a_change_of_1e_11_and_passes_1e_14():
+    expected = json.loads(record.golden_path("refine_seed004").read_text())
+    where = _first_number(expected["files"]["pw.json"])
+    assert where, "no number found"
+    full = ("files", "pw.json") + where
+    value = expected
+    for key in full:
+        value = value[key]
+    for relative, flagged in ((1e-11, True), (-1e-11, True), (1e-14, False)):
+        changed = copy.deepcopy(expected)
+        _set(changed, full, value * (1 + relative))
+        assert bool(record.compare(expected, changed)) is flagged, (full, relative)
+    changed = copy.deepcopy(expected)
+    _set(changed, ("files", "pw.json", "json", "frame"), "EME2000")
+    assert record.compare(expected, changed)
