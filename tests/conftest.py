@@ -1,9 +1,18 @@
-"""Shared fixtures: run the ``trackproc`` CLI in-process, write small input files."""
+"""Shared fixtures: run the ``trackproc`` CLI in-process, write small input files; the ``slow`` tier."""
 
 from __future__ import annotations
 
 import logging
+import os
+import re
 import sys
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # One BLAS thread per xdist worker: -n 2 on 2 cores with OpenBLAS's own threads oversubscribes the
+    # cores (tests measured up to 30x slower). Set before numpy is first imported; results are unchanged
+    # (the recorded set of tests/test_golden.py passes either way).
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,3 +76,52 @@ def write(tmp_path: Path):
 def stations_csv(write) -> Path:
     """Stations ZHY (40 N, 116 E, 50 m) and KIR (67.8 N, 20.9 E, 400 m)."""
     return write("stations.csv", STATIONS_CSV)
+
+
+# --- the slow tier ----------------------------------------------------------------------------------
+# ``python -m pytest -m "not slow"`` is the fast tier (under a minute on 2 cores); the whole suite is the
+# default. A test is slow when it is statistical (Monte Carlo: many solves), reads the real data or runs
+# a peer tool (markers ``realdata``/``validation``), or is a subprocess/pipeline test that takes seconds.
+# Assigned here, by module and name, so that test files need no marker lines.
+
+#: Monte Carlo and other statistical tests, by name.
+STATISTICAL = re.compile(r"by_monte_carlo|monte_carlo_(nees|error_rates|within|agrees|beats|decisions)|_draws|"
+                         r"chi2_band|chi2_2|calibrated|scatter|noise_statistics|"
+                         r"^test_simulated_doppler_from_trackproc_simulate_fitted_to_the_noise_level$")
+#: Tests that run trackproc (or bash) in subprocesses, or process pools and clusters, for seconds.
+SLOW_SUBPROCESS = {
+    "test_cli_recipes.py": None,                                   # None: the whole module
+    "test_ingest.py": {"test_real_pipe_ingest_to_info", "test_real_pipe_closed_early_is_quiet"},
+    "test_smooth_cli.py": {"test_real_pipe_ingest_to_smooth",
+                           "test_real_pipe_simulate_to_smooth_every_kind_at_the_noise_level"},
+    "test_estimate_cli.py": {"test_real_pipe_simulate_into_estimate"},
+    "test_simulate.py": {"test_subprocess_pipe_into_ingest_and_info"},
+    "test_propagate_cli.py": {"test_subprocess_pipe_arrow_stream"},
+    "test_accuracy_cli.py": {"test_real_pipe"},
+    "test_cli_basics.py": {"test_reader_closing_the_pipe_early_ends_quietly_with_141"},
+    "test_batch.py": {
+        "test_dask_cluster_and_process_pool_give_the_serial_results", "test_a_dying_worker_fails_only_its_own_input",
+        "test_a_killed_run_resumes_where_it_stopped", "test_two_overlapping_runs_do_not_corrupt_each_other",
+        "test_changing_the_config_or_an_input_redoes_only_what_it_touches",
+        "test_thirty_passes_five_broken_then_rerun_skips_then_force_redoes",
+        "test_changing_a_refine_setting_redoes_only_the_refinements",
+        "test_refine_step_writes_refined_states_and_fails_only_the_pass_it_cannot_refine",
+        "test_estimate_windows_non_convergence_reported_then_redone_alone", "test_nightly_recipe",
+        "test_progress_bar_only_on_a_terminal"},
+}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        module = item.path.name
+        name = getattr(item, "originalname", item.name)
+        reasons = []
+        if STATISTICAL.search(name):
+            reasons.append(pytest.mark.statistical)
+        names = SLOW_SUBPROCESS.get(module, ())
+        if names is None or name in names:
+            reasons.append(pytest.mark.subprocess)
+        if reasons or item.get_closest_marker("realdata") or item.get_closest_marker("validation"):
+            for mark in reasons:
+                item.add_marker(mark)
+            item.add_marker(pytest.mark.slow)

@@ -45,6 +45,17 @@ def test_pipeline_recipe(tmp_path):
     assert float(err @ np.linalg.solve(cov, err)) < 22.5  # chi2(6) at 0.999
     biases = dict(zip(sol["parameters"], sol["values"]))
     assert abs(biases["range_bias:CPH"] - 120) < 3 and abs(biases["range_bias:ZHY"] + 80) < 3
+    # ... and the error matrix tight, not only covering: position sigma below one range's noise (5 m), each
+    # bias sigma within [1, 2) x its sigma with the orbit known, 1/sqrt(sum 1/sigma^2) of the station's ranges
+    import pandas as pd
+
+    sigma = dict(zip(sol["parameters"], sol["sigma"]))
+    passes = pd.read_parquet(ROOT / "sample_data" / "multistation.parquet")
+    ranges = passes[passes["kind"] == "range"]
+    assert max(sol["sigma"][:3]) < ranges["sigma"].min(), sol["sigma"][:3]
+    for station in ("CPH", "ZHY", "KIR"):
+        known = 1.0 / np.sqrt(np.sum(ranges.loc[ranges["station"] == station, "sigma"].to_numpy() ** -2.0))
+        assert 1.0 <= sigma[f"range_bias:{station}"] / known < 2.0, (station, sigma[f"range_bias:{station}"], known)
     assert (out / "solution.oem").read_text().startswith("CCSDS_OEM_VERS")
     # the one-pass refinement: within its error matrix of the truth (the same state at 09:30), two
     # directions reported as not seen, and the Doppler drift of sample_data/make.sh recovered

@@ -40,6 +40,13 @@ def files(tmp_path_factory):
     return d
 
 
+def _bias_sigma_orbit_known(d, station: str, name: str = "passes.parquet") -> float:
+    """Sigma of a station's range bias if the orbit were known: 1/sqrt(sum 1/sigma^2) of its ranges."""
+    frame = pd.read_parquet(d / name)
+    ranges = frame[(frame["station"] == station) & (frame["kind"] == "range")]
+    return float(1.0 / np.sqrt(np.sum(ranges["sigma"].to_numpy() ** -2.0)))
+
+
 def test_estimate_writes_state_opm_residuals_plot_and_summary(run_cli, files, tmp_path):
     out, opm, res_csv, res_pq, png = (tmp_path / n for n in ("sol.json", "sol.opm", "res.csv", "res.parquet",
                                                                "res.png"))
@@ -65,6 +72,13 @@ def test_estimate_writes_state_opm_residuals_plot_and_summary(run_cli, files, tm
         name, value = b.split("=")
         i = state.parameters.index(f"range_bias:{name}")
         assert abs(state.values[i] - float(value)) < 3 * state.sigma[i]
+    # ... and tight, not only covering: position sigma below one range's noise (10 m), velocity sigma below
+    # one Doppler sample's (0.1 Hz = 1.4 cm/s), each bias sigma within [1, 2) x its bound with the orbit known
+    assert np.all(state.sigma[:3] < 10.0) and np.all(state.sigma[3:6] < 0.1 * 299792458.0 / 2.2e9), state.sigma
+    for b in BIASES:
+        name = b.split("=")[0]
+        ratio = state.sigma[state.parameters.index(f"range_bias:{name}")] / _bias_sigma_orbit_known(files, name)
+        assert 1.0 <= ratio < 2.0, (name, ratio)
 
     parsed = parse_opm(opm.read_text())
     np.testing.assert_allclose(parsed["r_m"], state.r_m, rtol=1e-15)
@@ -204,5 +218,6 @@ def test_initial_state_from_a_tle(run_cli, files, tmp_path):
         state = read_state(str(out))
         i = state.parameters.index("range_bias:MAD")
         assert abs(state.values[i] - 60.0) < 3 * state.sigma[i]
+        assert 1.0 <= state.sigma[i] / _bias_sigma_orbit_known(tmp_path, "MAD", "iss.parquet") < 2.0
     first = pd.read_parquet(passes)["time"].min()
     assert state.epoch == first.tz_convert("UTC").tz_localize(None).to_datetime64()

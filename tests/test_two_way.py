@@ -10,6 +10,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from test_estimate import EOP, GUESS, STATIONS, TRUTH  # the estimate tests' scenario
 from test_observation import _stations, _Trajectory
@@ -348,13 +349,26 @@ def test_two_way_doppler_offset_and_drift_per_pass():
 
 # ----------------------------------------------------------------------------- the command line
 
-def _check_truth(out: Path, truth: Path, biases: dict):
+def _check_truth(out: Path, truth: Path, biases: dict, passes: Path):
     state = read_state(str(out))
     err = state.rv - read_state(str(truth)).rv
     assert np.all(np.abs(err) < 3 * state.sigma[:6]), err / state.sigma[:6]
     for name, value in biases.items():
         i = state.parameters.index(f"range_bias:{name}")
         assert abs(state.values[i] - value) < 3 * state.sigma[i], (name, state.values[i], state.sigma[i])
+    # ... and tight, not only covering: position sigma below one range's noise, velocity sigma below one
+    # range-rate sample's (two-way Doppler: sigma c/(2f), 2.2 GHz), each bias sigma within [1, 2) x its
+    # sigma with the orbit known, 1/sqrt(sum 1/sigma^2) of the station's ranges
+    frame = pd.read_parquet(passes)
+    ranges = frame[frame["kind"] == "range"]
+    rates = frame[frame["kind"].isin(["range_rate", "doppler"])]
+    rate_sigma = np.where(rates["kind"] == "doppler", rates["sigma"] * C_LIGHT / (2 * 2.2e9), rates["sigma"])
+    assert len(ranges) == 0 or np.all(state.sigma[:3] < ranges["sigma"].min()), state.sigma[:3]
+    assert np.all(state.sigma[3:6] < rate_sigma.min()), state.sigma[3:6]
+    for name in biases:
+        known = 1.0 / np.sqrt(np.sum(ranges.loc[ranges["station"] == name, "sigma"].to_numpy() ** -2.0))
+        ratio = state.sigma[state.parameters.index(f"range_bias:{name}")] / known
+        assert 1.0 <= ratio < 2.0, (name, ratio)
     doc = json.loads(out.read_text())
     assert doc["diagnostics"]["converged"] is True and 0.6 < doc["diagnostics"]["variance_factor"] < 1.5
     assert doc["estimation"]["light_time"].startswith("two-way")
@@ -375,7 +389,7 @@ def test_cli_simulate_two_way_range_and_range_rate_into_estimate(run_cli, tmp_pa
     res = run_cli(["estimate", passes, "--initial", SAMPLE / "stale.json", "--range-bias", "--dut1", "0.1",
                    "-o", out])
     assert res.exit_code == 0, res.stderr
-    _check_truth(out, truth, biases)
+    _check_truth(out, truth, biases, passes)
     for model in ("instantaneous",):           # the other range-rate model, told at the command line
         res = run_cli(["simulate", "--state", SAMPLE / "truth.json", "--stations", SAMPLE / "stations.csv",
                        "--duration", "21600", "--step", "30", "--mode", "two-way", "--kinds", "range_rate",
@@ -384,7 +398,7 @@ def test_cli_simulate_two_way_range_and_range_rate_into_estimate(run_cli, tmp_pa
         res = run_cli(["estimate", passes, "--initial", truth, "--range-rate-model", model, "--dut1", "0.1",
                        "-o", out])
         assert res.exit_code == 0, res.stderr
-        _check_truth(out, truth, {})
+        _check_truth(out, truth, {}, passes)
 
 
 def test_cli_two_way_doppler_through_ingest_into_estimate(run_cli, tmp_path):
@@ -407,7 +421,7 @@ def test_cli_two_way_doppler_through_ingest_into_estimate(run_cli, tmp_path):
                        "-o", out])
         if mode == "two-way":
             assert res.exit_code == 0, res.stderr
-            state = _check_truth(out, truth, biases)
+            state = _check_truth(out, truth, biases, passes)
             assert "doppler" in json.loads(out.read_text())["diagnostics"]["rms"]["KIR"]
             assert state.parameters[:6] == ["x", "y", "z", "vx", "vy", "vz"]
         else:
