@@ -15,8 +15,9 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import PassTable
 from trackproc.io.statefile import State
 from trackproc.io.stations import Station
-from trackproc.pipeline.estimate import (EstimateOptions, build_problem, estimate, rtn_covariance, rtn_matrix,
-                                         summary_text)
+from trackproc.dynamics.rtn import rtn_covariance
+from trackproc.dynamics.rtn import rtn_rotation as rtn_matrix
+from trackproc.pipeline.estimate import EstimateOptions, build_problem, estimate, summary_text
 from trackproc.pipeline.simulate import SimulateOptions, simulate
 
 EPOCH = "2026-03-20T09:30:00.000Z"

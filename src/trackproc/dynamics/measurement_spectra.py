@@ -72,7 +72,8 @@ constant matrix and re-expanding about another point is ``u @ B(delta)``,
 ``E = sum_m (-1)^m/m! D^m M(T)^m``.
 
 Limits: one-way measurements (no two-way round trip); aberration and refraction neglected,
-as in :mod:`trackproc.models.measurements`; the station must never coincide with the
+as in :mod:`trackproc.models.observables` (whose conventions and range-rate models these series
+follow); the station must never coincide with the
 satellite (``D2(0) > 0``).
 """
 
@@ -86,14 +87,15 @@ import erfa
 import numpy as np
 
 from trackproc.constants import C_LIGHT
+from trackproc.dynamics import geodesy
 from trackproc.dynamics import spectra as sp
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.frames import OMEGA_ERA, _r3
+from trackproc.vocabulary import RANGE_RATE_MODELS  # noqa: F401  (re-exported)
 
 __all__ = ["RANGE_RATE_MODELS", "StationModel", "Prediction", "rotation_spectra", "predict",
            "segment_spectra", "LIGHT_TIME_TERMS"]
 
-RANGE_RATE_MODELS = ("doppler", "instantaneous")
 #: Terms m = 0..LIGHT_TIME_TERMS of the Taylor shift r(t - T) = sum (-T)^m/m! r^(m)(t).
 LIGHT_TIME_TERMS = 4
 #: Maximum passes of the light-time fixed point (converges in 4 from T = 0).
@@ -224,7 +226,8 @@ def rotation_spectra(theta_rad, omega_rad_s, n: int) -> tuple[np.ndarray, np.nda
     sidereal angle of seed 004 eq. 7 with ``omega = q Omega``.
 
     >>> import numpy as np
-    >>> from trackproc.dynamics import spectra as sp
+    >>> from trackproc.dynamics import geodesy
+from trackproc.dynamics import spectra as sp
     >>> c, s = rotation_spectra(0.3, 7.29e-5, 6)
     >>> sn, cs = sp.sin_cos(np.array([0.3, 7.29e-5, 0, 0, 0, 0]))
     >>> bool(np.allclose(c, cs, rtol=1e-13, atol=0) and np.allclose(s, sn, rtol=1e-13, atol=0))
@@ -647,8 +650,9 @@ def predict(trajectory, station: StationModel, t_s, *, range_rate_model: str = "
 
     Implements seed 004 eqs. 7-13 (module docstring); raises ValueError for an unknown model.
     """
-    if range_rate_model not in RANGE_RATE_MODELS:
-        raise ValueError(f"unknown range-rate model {range_rate_model!r}; expected one of {RANGE_RATE_MODELS}")
+    from trackproc.models.observables import check_range_rate_model
+
+    check_range_rate_model(range_rate_model)
     t_in = np.atleast_1d(np.asarray(t_s, float))
     if t_in.ndim != 1 or t_in.size == 0 or not np.all(np.isfinite(t_in)):
         raise ValueError("t_s must be a non-empty 1-D array of finite times")
@@ -734,10 +738,7 @@ def predict(trajectory, station: StationModel, t_s, *, range_rate_model: str = "
     if range_rate_model == "instantaneous":
         rr = rr * factor
     enu = station.to_enu(rho, t, centres_s=segs.centre_s[seg_index])
-    e, nn, up = enu[:, 0], enu[:, 1], enu[:, 2]
-    az = np.mod(np.arctan2(e, nn), 2 * np.pi)
-    az = np.where(az >= 2 * np.pi, 0.0, az)
-    el = np.arctan2(up, np.hypot(e, nn))
+    az, el, _ = geodesy.enu_to_azel(enu)
 
     inv = np.empty_like(order)
     inv[order] = np.arange(order.size)

@@ -94,21 +94,14 @@ def acceleration(r_m, *, force: str = "j2", mu_m3_s2: float = MU_EARTH, j2: floa
                  re_m: float = RE_EARTH) -> np.ndarray:
     """Acceleration (m/s^2) of the force model at positions ``r_m`` shaped ``(..., 3)``.
 
-    The right-hand side whose spectrum the integrator builds; used by tests and by
-    conventional integrators for comparison.
+    The right-hand side whose spectrum the integrator builds (:func:`trackproc.dynamics.gravity.acceleration`);
+    used by tests and by conventional integrators for comparison.
     """
-    r = np.asarray(r_m, dtype=float)
-    s = np.sum(r * r, axis=-1, keepdims=True)
-    rn = np.sqrt(s)
-    a = -mu_m3_s2 * r / (s * rn)
-    if force == "j2":
-        z2s = r[..., 2:3] ** 2 / s
-        k = -1.5 * j2 * mu_m3_s2 * re_m ** 2 / (s * s * rn)
-        fac = np.concatenate([1.0 - 5.0 * z2s, 1.0 - 5.0 * z2s, 3.0 - 5.0 * z2s], axis=-1)
-        a = a + k * r * fac
-    elif force != "two-body":
+    from trackproc.dynamics import gravity
+
+    if force not in FORCES:
         raise ValueError(f"unknown force model {force!r}; expected one of {FORCES}")
-    return a
+    return gravity.acceleration(r_m, mu_m3_s2, j2 if force == "j2" else 0.0, re_m)
 
 
 @lru_cache(maxsize=32)

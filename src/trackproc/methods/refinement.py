@@ -718,13 +718,14 @@ def profile_mixture(solve_fixed: Callable[[float], tuple], x_hat, sigma: float, 
     return out
 
 
-def observability(jacobian, sigma, names, rtn_matrix, reference_covariance, posterior_covariance, *,
+def observability(jacobian, sigma, names, rtn, reference_covariance, posterior_covariance, *,
                   other_scales=None, reference: str = "", threshold: float = 1.0,
                   station_axis=None, state=None) -> Observability:
     """Observability of the state from one pass.
 
     ``jacobian`` (N, n) of the model at the solution (state x..vz in the first 6 columns, GCRF),
-    ``sigma`` (N,) the data sigmas, ``rtn_matrix`` (3, 3) rows radial/along/cross,
+    ``sigma`` (N,) the data sigmas, ``rtn`` (6, 6) the map of GCRF state errors to RTN ones
+    (:func:`trackproc.dynamics.rtn.rtn_jacobian` with ``rotating=False``),
     ``reference_covariance`` (6, 6) GCRF: the a-priori covariance (or a nominal one) that sets
     the units; ``posterior_covariance`` (6, 6) GCRF; ``other_scales`` (n - 6,) column scales
     of the other parameters for the plain singular values.
@@ -752,8 +753,7 @@ def observability(jacobian, sigma, names, rtn_matrix, reference_covariance, post
         full = js
     sv_full = np.linalg.svd(full, compute_uv=False)
     _, s, vt = np.linalg.svd(js_proj, full_matrices=False)
-    big = np.zeros((6, 6))
-    big[:3, :3] = big[3:, 3:] = np.asarray(rtn_matrix, float)
+    big = np.asarray(rtn, float)
     directions = (big @ chol @ vt.T).T                           # rows: RTN of L u_i
     ref_rtn = np.sqrt(np.clip(np.diag(big @ ref @ big.T), 0.0, None))
     post_rtn = np.sqrt(np.clip(np.diag(big @ np.asarray(posterior_covariance, float) @ big.T), 0.0, None))

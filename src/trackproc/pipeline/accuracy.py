@@ -336,9 +336,8 @@ def _monte_carlo(traj, state, cov0, t, nominal, options, track) -> dict:
             o1 += do.sum(0)
             o2 += np.einsum("bmi,bmj->mij", do, do)
         if corr is not None:
-            dr_rtn = np.einsum("mij,bmj->bmi", rot, d[..., :3])
-            dv_rtn = np.einsum("mij,bmj->bmi", rot, d[..., 3:])
-            dd = np.concatenate([d, dr_rtn, dv_rtn], axis=-1)                 # (B, M, 12)
+            d_rtn = np.einsum("mij,bmj->bmi", rot, d)                          # the 6 x 6 RTN map, as to_rtn
+            dd = np.concatenate([d, d_rtn], axis=-1)                          # (B, M, 12)
             corr["s1"] += dd.sum(0)
             for c in range(12):                                               # BLAS: (M x B)(B x M)
                 dc = np.ascontiguousarray(dd[:, :, c])

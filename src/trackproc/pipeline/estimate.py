@@ -47,6 +47,7 @@ import pandas as pd
 
 from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 from trackproc.errors import InputError, ProcessingError
+from trackproc.dynamics.rtn import rtn_covariance
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
 
@@ -457,25 +458,6 @@ class EstimateResult:
     two_stage: Optional[object] = None
     two_stage_solution: Optional[object] = None
     warnings: list = field(default_factory=list)
-
-
-def rtn_matrix(r, v) -> np.ndarray:
-    """Rows: radial, along-track (N × R) and cross-track (r × v / |r × v|) unit vectors."""
-    r = np.asarray(r, float)
-    v = np.asarray(v, float)
-    rad = r / np.linalg.norm(r)
-    h = np.cross(r, v)
-    cross = h / np.linalg.norm(h)
-    return np.stack([rad, np.cross(cross, rad), cross])
-
-
-def rtn_covariance(r, v, cov6) -> np.ndarray:
-    """6 × 6 covariance rotated to radial/along/cross (position and velocity blocks alike)."""
-    m = rtn_matrix(r, v)
-    big = np.zeros((6, 6))
-    big[:3, :3] = big[3:, 3:] = m
-    out = big @ np.asarray(cov6, float) @ big.T
-    return 0.5 * (out + out.T)
 
 
 def _rms_table(problem: Problem, sol) -> dict:

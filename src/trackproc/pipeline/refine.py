@@ -801,7 +801,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     from trackproc.dynamics import timescales as ts
     from trackproc.io.statefile import State, format_epoch
     from trackproc.methods import refinement as rf
-    from trackproc.pipeline.estimate import UNITS, residual_frame, rtn_covariance, rtn_matrix
+    from trackproc.dynamics.rtn import rtn_covariance, rtn_jacobian
+    from trackproc.pipeline.estimate import UNITS, residual_frame
 
     opt = ref.options
     problem = ref.problem
@@ -863,7 +864,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     _, _, sig_data, _, _ = ref.data()
     keep = ~sol.edited
     obs = rf.observability(sol.jacobian[keep][:, :npb], np.asarray(sig_data)[keep] * sigma_scale, problem.names,
-                           rtn_matrix(x[:3], x[3:6]), reference, cov[:6, :6],
+                           rtn_jacobian(x[:3], x[3:6], rotating=False), reference, cov[:6, :6],
                            other_scales=problem.params.scales()[6:], reference=ref_name,
                            station_axis=ref.station_axis, state=x[:6])
     if opt.circular:
@@ -871,7 +872,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                          "the covariance is zero across them (it is conditional on a circular orbit)")
     if ref.priors and opt.cost == "pointwise" and obs.unobservable:
         obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
-    big = np.kron(np.eye(2), rtn_matrix(x[:3], x[3:6]))           # GCRF -> RTN for (r, v)
+    big = rtn_jacobian(x[:3], x[3:6], rotating=False)             # GCRF -> RTN for (r, v)
     covariance_note = "linear (the inverse of the whitened normal matrix at the solution)"
     if opt.covariance == "profile" and opt.cost == "pointwise" and not opt.circular and obs.unobservable and ref.priors:
         # the estimate slides along a curved valley where the pass sees nothing: the linear
