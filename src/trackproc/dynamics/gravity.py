@@ -19,8 +19,8 @@ __all__ = ["acceleration", "jerk"]
 def acceleration(r, mu: float = MU_EARTH, j2: float = 0.0, re: float = RE_EARTH) -> np.ndarray:
     """Gravitational acceleration (m/s²) at positions ``r`` (m, shape (..., 3)).
 
-    Two-body plus, when ``j2 != 0``, the J2 zonal term about the z axis (Vallado eq. 8-30; the
-    right-hand side of seed 004 eq. 6 and seed 000 eq. 1 with the J2 term).
+    Two-body plus, when ``j2 != 0``, the J2 zonal term about the z axis (Vallado eq. 8-30).
+    Implements seed 004 eq. 4 (two-body motion ``r'' = -mu r / r^3``), extended by J2.
     """
     r = np.asarray(r, float)
     x, y, z = r[..., 0], r[..., 1], r[..., 2]

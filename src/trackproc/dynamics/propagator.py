@@ -44,6 +44,7 @@ from trackproc.dynamics import taylor
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.frames import QuasiInertialFrame, earth_rotation
 from trackproc.errors import ProcessingError
+from trackproc.io.isotime import iso_utc
 
 __all__ = ["FORCES", "Trajectory", "Steps", "propagate", "propagate_state", "force_parameters", "reference_frame"]
 
@@ -149,7 +150,7 @@ class Trajectory:
             if run.outcome is not taylor.Outcome.SUCCESS:
                 reached = self.times_utc(run.t_end_s)
                 raise ProcessingError(
-                    f"propagation stopped ({run.outcome.value}) at {np.datetime_as_string(reached, 'ms')}Z "
+                    f"propagation stopped ({run.outcome.value}) at {iso_utc(reached, 3)} "
                     f"(t = {run.t_end_s:.3f} s from the epoch) after {run.n_steps} steps",
                     {"outcome": run.outcome.value, "t_reached_s": run.t_end_s, "steps": run.n_steps})
         return self

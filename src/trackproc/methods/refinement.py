@@ -102,13 +102,13 @@ def range_rate_samples(epoch, r_itrf_m, t_s, mode: str, eop=None):
     :func:`trackproc.pipeline.estimate.build_problem` does), for
     :func:`~trackproc.models.observation.evaluate` (values unset: zeros, unit sigmas)."""
     from trackproc.dynamics import timescales as ts
-    from trackproc.models import measurements as mm
+    from trackproc.dynamics.geodesy import station_gcrf
     from trackproc.models import observation as ob
 
     t_s = np.atleast_1d(np.asarray(t_s, float))
     epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns")))
     jd1, jd2 = ts.add_seconds_utc(epoch_jd, t_s)
-    track = mm.station_gcrf(np.asarray(r_itrf_m, float), jd1, jd2, eop)
+    track = station_gcrf(np.asarray(r_itrf_m, float), jd1, jd2, eop)
     k = t_s.size
     return ob.MeasurementSet(t_s=t_s.copy(), kind=np.full(k, "range_rate", dtype=object),
                              station=np.full(k, "station", dtype=object), pass_id=np.full(k, "", dtype=object),

@@ -23,69 +23,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from trackproc.constants import C_LIGHT
+from trackproc.dynamics.geodesy import StationTrack, station_gcrf  # noqa: F401  (re-exported)
 from trackproc.models import light_time as lt
 from trackproc.models.light_time import LIGHT_TIME_TOL_S  # noqa: F401  (re-exported)
 from trackproc.models.observables import (azel, check_mode, doppler_hz, range_rate_from_doppler,  # noqa: F401
                                           range_rate_partials, range_rate_value, up_rate_partials, wrap_2pi)
 from trackproc.vocabulary import LINK_MODES as MODES  # noqa: F401
 from trackproc.vocabulary import RANGE_RATE_MODELS  # noqa: F401
-
-
-# --------------------------------------------------------------------------- stations
-
-@dataclass(frozen=True)
-class StationTrack:
-    """Stations in GCRF at the reception times: ``r`` (m), ``v`` (m/s), ``a`` (m/s²) of shape
-    (N, 3) or (S, N, 3), and ``gcrf_to_itrf`` (N, 3, 3), the rotation at those times."""
-
-    r: np.ndarray
-    v: np.ndarray
-    a: np.ndarray
-    gcrf_to_itrf: np.ndarray
-
-
-def station_gcrf(r_itrf, jd1, jd2, eop=None) -> StationTrack:
-    """Station position, velocity and acceleration in GCRF at UTC dates.
-
-    Parameters
-    ----------
-    r_itrf : (3,) or (S, 3) ITRF positions (m) of S stations fixed on the Earth.
-    jd1, jd2 : (N,) UTC two-part Julian dates (reception times).
-    eop : :class:`~trackproc.dynamics.timescales.EarthOrientation` or None.
-
-    Position and velocity are the exact IAU 2006/2000A transform
-    (:func:`~trackproc.dynamics.frames.itrf_to_gcrf`, one Earth-orientation evaluation shared
-    by all stations); the acceleration is the centripetal ``ω × v`` about the rotation axis
-    (used only to move the station over a round-trip light time). Repeated dates (a range
-    and a range-rate sample share their reception time) are evaluated once: the Earth
-    orientation (``erfa.c2i06a`` per date) is the cost here.
-    """
-    from trackproc.dynamics import frames
-
-    r_itrf = np.asarray(r_itrf, float)
-    jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
-    jd1, jd2 = jd1.reshape(-1), jd2.reshape(-1)
-    n = jd1.size
-    inverse = None
-    if n > 1:
-        dates, inverse = np.unique(np.stack([jd1, jd2], -1), axis=0, return_inverse=True)
-        inverse = inverse.reshape(-1)
-        if dates.shape[0] == n:
-            inverse = None
-        else:
-            jd1, jd2 = dates[:, 0], dates[:, 1]
-    m = jd1.size
-    shape = (m, 3) if r_itrf.ndim == 1 else (r_itrf.shape[0], m, 3)
-    r_src = np.broadcast_to(r_itrf if r_itrf.ndim == 1 else r_itrf[:, None, :], shape)
-    rot = frames.earth_rotation(jd1, jd2, eop)
-    r, v = frames.itrf_to_gcrf(r_src, np.zeros(shape), jd1, jd2, eop, rotation=rot)
-    matrix = rot.matrix
-    mid = n // 2 if inverse is None else inverse[n // 2]
-    axis = rot.q[mid][2]  # the CIP (rotation axis) in GCRF, mid-span
-    if inverse is not None:
-        r, v, matrix = r[..., inverse, :], v[..., inverse, :], matrix[inverse]
-    a = np.cross(frames.OMEGA_ERA * axis, v)
-    return StationTrack(r=r, v=v, a=a, gcrf_to_itrf=matrix)
 
 
 # --------------------------------------------------------------------------- light time

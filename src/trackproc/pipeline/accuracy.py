@@ -281,16 +281,15 @@ def _station_track(station, times, nominal, earth, eop) -> dict:
     """Station in GCRF at the grid times, nominal range / range-rate / elevation and partials."""
     from trackproc.dynamics import geodesy
     from trackproc.dynamics import timescales as ts
-    from trackproc.models import measurements as mm
+    from trackproc.models.observables import azel
 
-    lat, lon = math.radians(station.lat_deg), math.radians(station.lon_deg)
-    r_itrf = geodesy.geodetic_to_itrf(lat, lon, station.height_m, earth)
+    lat, lon, r_itrf = geodesy.station_itrf(station, earth)
     jd1, jd2 = ts.datetime64_to_jd_utc(times)
-    st = mm.station_gcrf(r_itrf, jd1, jd2, eop)
+    st = geodesy.station_gcrf(r_itrf, jd1, jd2, eop)
     d = nominal[:, :3] - st.r
     rng = np.linalg.norm(d, axis=-1)
     rr = np.sum(d * (nominal[:, 3:] - st.v), axis=-1) / rng
-    _, el = mm.azel(d, st.gcrf_to_itrf, lat, lon)
+    _, el = azel(d, st.gcrf_to_itrf, lat, lon)
     return {"name": station.name if hasattr(station, "name") else None, "r": st.r, "v": st.v,
             "range_m": rng, "range_rate_m_s": rr, "elevation_rad": el,
             "jacobian": ac.range_range_rate_jacobian(nominal[:, :3], nominal[:, 3:], st.r, st.v),

@@ -585,8 +585,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     for n_, s_ in sub.stations().items():
         known.setdefault(n_, s_)
     st = known[station]
-    lat, lon = math.radians(st.lat_deg), math.radians(st.lon_deg)
-    r_itrf = geodesy.geodetic_to_itrf(lat, lon, st.height_m, opt.earth)
+    lat, lon, r_itrf = geodesy.station_itrf(st, opt.earth)
     t_meas = problem.meas.t_s
     epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))
     station_model = ms.StationModel.build(r_itrf, lat, lon, epoch_jd, problem.frame.q, float(t_meas.min()) - 60.0,
@@ -1077,7 +1076,6 @@ def traverse_station(state, *, cross_track_m: float = 600e3, side: str = "left",
     from trackproc.dynamics import frames, geodesy, propagator
     from trackproc.dynamics import timescales as ts
     from trackproc.io.stations import Station
-    from trackproc.models import measurements as mm
     from trackproc.models import observation as ob
 
     jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(np.datetime64(state.epoch, "ns")))
@@ -1100,7 +1098,7 @@ def traverse_station(state, *, cross_track_m: float = 600e3, side: str = "left",
     def rate(s):
         lat, lon = site(s)
         r_st_itrf = geodesy.geodetic_to_itrf(lat, lon, height_m, earth)
-        trk = mm.station_gcrf(r_st_itrf, np.array([jd[0]]), np.array([jd[1]]), eop)
+        trk = geodesy.station_gcrf(r_st_itrf, np.array([jd[0]]), np.array([jd[1]]), eop)
         geo = ob.solve_light_time(traj, np.array([0.0]), trk.r)
         return float(ob.range_rate_value(geo.state[:, :3], geo.state[:, 3:], trk.r, trk.v, range_rate_model)[0])
 
