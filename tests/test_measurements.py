@@ -60,7 +60,7 @@ def test_instantaneous_model_drops_the_light_time_factor(t):
     leg = mm.light_time_down(r[None], v[None], a[None], j[None], st.r)
     factor = 1 + leg.u[0] @ leg.state[:, 3:][0] / C_LIGHT
     assert inst.range_rate_m_s[0] == pytest.approx(doppler.range_rate_m_s[0] * factor, abs=1e-9)
-    assert abs(inst.range_rate_m_s[0] - doppler.range_rate_m_s[0]) < 0.2     # DESIGN: up to ~0.15 m/s in LEO
+    assert abs(inst.range_rate_m_s[0] - doppler.range_rate_m_s[0]) < 0.2     # README: up to ~0.15 m/s in LEO
 
 
 @pytest.mark.parametrize("t", [0.0, 300.0, 3000.0])

@@ -3,7 +3,7 @@
 Every module that checks or offers one of these names (the CLI's choices, the readers'
 validation, the models' ``ValueError`` messages, the batch configuration) draws it from here,
 so a name cannot be spelled two ways. The names are a contract (README "Data contract",
-DESIGN.md): add freely, never rename. Pure data, no imports: cheap for ``--help``.
+docs/*.md): add freely, never rename. Pure data, no imports: cheap for ``--help``.
 """
 
 from __future__ import annotations

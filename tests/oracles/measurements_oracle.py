@@ -302,7 +302,7 @@ class Observables:
 def observables(r_sat, v_sat, a_sat, j_sat, r_st, v_st, a_st, gcrf_to_itrf_matrix, lat_rad, lon_rad, *,
                 carrier_hz: float, mode: str = "one-way", range_rate_model: str = "doppler",
                 c: float = C_LIGHT) -> Observables:
-    """All observables of one station at the reception times (DESIGN.md one-way model).
+    """All observables of one station at the reception times (README one-way model).
 
     Satellite state (position, velocity, acceleration, jerk) and station state (position,
     velocity, acceleration) are GCRF at ``t_r`` with matching shapes (..., 3);

@@ -19,7 +19,10 @@ DEG = np.pi / 180.0
 
 
 def geodetic_to_itrf(lat_rad, lon_rad, height_m, earth: str = "wgs84") -> np.ndarray:
-    """Geodetic latitude, longitude (rad) and height (m) -> ITRF position (m), shape (..., 3)."""
+    """Geodetic latitude, longitude (rad) and height (m) -> ITRF position (m), shape (..., 3).
+
+    Implements seed 004 eq. 8 (the station on the sphere R = 6371 km, ``earth="sphere"``), WGS-84 by default.
+    """
     lat, lon, h = np.broadcast_arrays(*(np.asarray(x, float) for x in (lat_rad, lon_rad, height_m)))
     if earth == "sphere":
         rr = R_SPHERE + h
@@ -38,7 +41,10 @@ def itrf_to_geodetic(r_m, earth: str = "wgs84"):
 
 
 def enu_matrix(lat_rad, lon_rad) -> np.ndarray:
-    """Rows: east, north, up unit vectors in ITRF at a geodetic (or spherical) position."""
+    """Rows: east, north, up unit vectors in ITRF at a geodetic (or spherical) position.
+
+    Implements seed 004 eq. 10 (Greenwich -> topocentric axes at the station).
+    """
     sl, cl = np.sin(lat_rad), np.cos(lat_rad)
     so, co = np.sin(lon_rad), np.cos(lon_rad)
     z = np.zeros_like(sl)
@@ -48,13 +54,19 @@ def enu_matrix(lat_rad, lon_rad) -> np.ndarray:
 
 
 def itrf_to_enu(r_sat_itrf, r_st_itrf, lat_rad, lon_rad) -> np.ndarray:
-    """Topocentric east/north/up (m) of a point seen from a station, both in ITRF."""
+    """Topocentric east/north/up (m) of a point seen from a station, both in ITRF.
+
+    Implements seed 004 eq. 10.
+    """
     d = np.asarray(r_sat_itrf, float) - np.asarray(r_st_itrf, float)
     return np.einsum("...ij,...j->...i", enu_matrix(lat_rad, lon_rad), d)
 
 
 def enu_to_azel(enu):
-    """ENU (m) -> azimuth (rad, from north through east, [0, 2π)), elevation (rad), range (m)."""
+    """ENU (m) -> azimuth (rad, from north through east, [0, 2π)), elevation (rad), range (m).
+
+    Implements the azimuth/elevation of seed 004 eq. 10's topocentric vector (and seed 003's elevation).
+    """
     e, n, u = np.moveaxis(np.asarray(enu, float), -1, 0)
     rng = np.sqrt(e * e + n * n + u * u)
     az = np.mod(np.arctan2(e, n), 2 * np.pi)
@@ -68,7 +80,10 @@ def enu_to_azel(enu):
 def station_itrf(stations, earth: str = "wgs84"):
     """Geodetic latitude, longitude (rad) and ITRF position (m) of stations-table rows (objects
     with ``lat_deg``, ``lon_deg``, ``height_m``): one row gives ``(lat, lon, (3,))``, a sequence
-    of rows ``((S,), (S,), (S, 3))``; ``earth`` ``"wgs84"`` or ``"sphere"``."""
+    of rows ``((S,), (S,), (S, 3))``; ``earth`` ``"wgs84"`` or ``"sphere"``.
+
+    Implements seed 004 eq. 8 (sphere) or the WGS-84 ellipsoid.
+    """
     if hasattr(stations, "lat_deg"):
         lat, lon = stations.lat_deg * DEG, stations.lon_deg * DEG
         return lat, lon, geodetic_to_itrf(lat, lon, stations.height_m, earth)

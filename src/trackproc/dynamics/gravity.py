@@ -40,6 +40,8 @@ def jerk(r, v, mu: float = MU_EARTH, j2: float = 0.0, re: float = RE_EARTH) -> n
 
     Analytic: two-body ``-mu (v/r³ - 3 r (r·v)/r⁵)``; J2 by the product rule on the
     expression in :func:`acceleration`.
+
+    Implements the time derivative of seed 004 eq. 4 (with J2).
     """
     r = np.asarray(r, float)
     v = np.asarray(v, float)

@@ -3,7 +3,7 @@ light-time range and range-rate, and their sensitivities to the initial state.
 
 Seed 004 eqs. 7-13 in general form, on the per-step spectra of the Taylor engine
 (:mod:`trackproc.dynamics.taylor`, through :class:`trackproc.dynamics.propagator.Trajectory`).
-All spectra have H = 1 s (Taylor coefficients; SEEDS.md notation) and live in the
+All spectra have H = 1 s (Taylor coefficients; docs/equations.md, notation) and live in the
 quasi-inertial frame of the trajectory (GCRF rotated by ``q_ref``, the precession-nutation
 matrix of its reference epoch).
 
@@ -31,7 +31,7 @@ Topocentric vector, range, range-rate (seed 004 eqs. 11-12)
     ``rho(t) = r_sat(t_e) - r_st(t)``, ``D2 = rho . rho`` (Cauchy products),
     ``D = sqrt(D2)`` (square-root rule, eq. 12), ``Vr(K) = (K+1) D(K+1)`` (derivative rule).
 
-One-way light time (DESIGN.md "Frames, time, forces", normative)
+One-way light time (README "Units, sign conventions, time and frames"; :mod:`trackproc.models.light_time`)
     A sample is time-tagged at reception ``t`` and the satellite is taken at the emission time
     ``t_e = t - T(t)``, ``c T = |r_sat(t - T) - r_st(t)|``. Here ``T`` is itself a spectrum:
     the composition ``r_sat(t - T(t)) = sum_m (-T)^m / m! r_sat^(m)(t)`` is a Taylor shift done
@@ -113,7 +113,7 @@ _MAX_SPLIT_ROUNDS = 40
 
 @lru_cache(maxsize=16)
 def _derivative_matrix(n: int) -> np.ndarray:
-    """D with ``(u @ D)[K] = (K+1) U(K+1)``: the derivative rule (SEEDS.md notation)."""
+    """D with ``(u @ D)[K] = (K+1) U(K+1)``: the derivative rule (docs/equations.md, notation)."""
     d = np.zeros((n, n))
     k = np.arange(n - 1)
     d[k + 1, k] = k + 1.0
@@ -127,7 +127,7 @@ def _toeplitz_index(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def product_matrix(v) -> np.ndarray:
-    """``M(v)`` (..., n, n) with ``u @ M(v) = u * v`` (Cauchy product, SEEDS.md notation).
+    """``M(v)`` (..., n, n) with ``u @ M(v) = u * v`` (Cauchy product, docs/equations.md, notation).
 
     Upper-triangular Toeplitz: ``M[l, K] = V(K - l)`` for ``K >= l``. ``M(u) M(v) = M(u*v)``:
     truncated series and these matrices form the same commutative algebra.
@@ -152,6 +152,8 @@ def shift_matrix(delta_s, n: int) -> np.ndarray:
     """``B(delta)`` (..., n, n): ``u @ B`` re-expands a spectrum about ``t* + delta``.
 
     ``B[j, K] = C(j, K) delta^(j - K)`` (Taylor's theorem for the polynomial the spectrum is).
+
+    Implements the re-expansion of a spectrum about another centre (docs/equations.md, notation).
     """
     d = np.asarray(delta_s, float)[..., None, None]
     j, k = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
@@ -303,6 +305,8 @@ class StationModel:
     ``q_ref`` (GCRF -> quasi-inertial), ``frozen``, ``era0_rad``/``omega_rad_s`` (the angle
     at t = 0 and its rate), ``nodes_s`` with ``pn_nodes`` (K, 3, 3) = ``q_ref Q(t)^T``,
     ``p_nodes`` (K, 3) = ``W(t)^T r_itrf`` and ``w_nodes`` (K, 3, 3) = ``W(t)``.
+
+    Implements seed 004 eqs. 7-10 (station and topocentric frame as spectra).
     """
 
     r_itrf_m: np.ndarray
@@ -404,6 +408,8 @@ class StationModel:
 
         ``d_itrf = W R3(theta) P^T d``. With ``centres_s`` (N,), the angle is taken linear and
         the slow rotation quadratic about those points (as in the spectra; fewer ERFA calls).
+
+        Implements seed 004 eq. 10.
         """
         from trackproc.dynamics import geodesy
 

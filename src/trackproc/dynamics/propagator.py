@@ -8,7 +8,7 @@ around it, once, for every command that propagates:
    :class:`~trackproc.dynamics.frames.QuasiInertialFrame` of a reference epoch (GCRF rotated by
    that epoch's bias-precession-nutation matrix ``q``; by default the state's own epoch, as
    :func:`trackproc.pipeline.simulate.simulate` does), so J2 acts about the rotation axis of
-   that epoch (DESIGN.md "Frames, time, forces"). Results are rotated back to GCRF: states by
+   that epoch (README "Units, sign conventions, time and frames"). Results are rotated back to GCRF: states by
    ``blockdiag(q, q)^T``, the STM as ``Q^T Phi Q`` with ``Q = blockdiag(q, q)``.
 2. **Time.** ``t_s`` are SI seconds from the state's epoch (through TAI, so leap seconds
    count), or UTC ``datetime64`` labels wherever times are taken;
@@ -219,6 +219,8 @@ class Trajectory:
         """State transition matrix ``Phi(t, epoch) = d state(t) / d state(epoch)``, ``(..., 6, 6)``.
 
         In GCRF (default) ``Phi_gcrf = Q^T Phi_qi Q``; needs ``propagate(..., stm=True)``.
+
+        Implements seed 004 eqs. 19-21 (first-order sensitivities of the spectra).
         """
         if not self.has_stm:
             raise ValueError("this trajectory carries no STM; propagate with stm=True")

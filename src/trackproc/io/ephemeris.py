@@ -1,6 +1,6 @@
 """Ephemeris tables (the output of ``trackproc propagate``) and CCSDS OEM (KVN) text.
 
-Columns, in this order (GCRF, SI units; DESIGN.md "Data contracts"):
+Columns, in this order (GCRF, SI units; README "Data contract" and docs/propagate.md):
 
 ==============================  =================  ==============================================
 column                          unit               present

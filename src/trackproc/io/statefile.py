@@ -1,6 +1,6 @@
 """State files (JSON): an orbit state, its estimated parameters and error matrix, in GCRF.
 
-Layout (DESIGN.md "Data contracts", "A state file"), keys in this order when written::
+Layout (README "Data contract", "State file"), keys in this order when written::
 
     {"schema_version": 1,
      "epoch": "2026-03-20T09:30:00.000Z",           # UTC, ISO 8601

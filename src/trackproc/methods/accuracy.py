@@ -141,7 +141,7 @@ def correlation_spectrum(spec1, spec2=None, cov=None) -> np.ndarray:
     -------
     array ``(..., A, B, n1 + n2 - 1)``
         ``R(K) = m_q(K) - (m_x(., t1) * m_x(., t2))(K) = sum_j (W_aj * W_bj)(K)``, complete
-        Cauchy products (SEEDS.md "product") of the normalised random parts
+        Cauchy products (docs/equations.md, notation: "product") of the normalised random parts
         ``W = dX/dV L``. Exact for spectra affine in V (see the module docstring on eq. 24).
     """
     w1 = _weights(spec1, cov)
@@ -257,7 +257,7 @@ def seed000_variance_exact(t_s, sigma1_m: float, sigma2_m_s: float, n_rad_s: flo
     """Ground truth of seed 000's example: ``D_x(t) = s1^2 cos^2(n t) + s2^2 sin^2(n t) / n^2`` (m^2).
 
     The exact variance of ``x(t) = (x0 - v1) cos(n t) + (g0 - v2) sin(n t) / n`` for
-    independent ``v1, v2`` (SEEDS.md, seed 000 item 3). The printed series (33)-(34) have
+    independent ``v1, v2`` (seed 000 item 3; docs/equations.md). The printed series (33)-(34) have
     coefficient typos and are not used.
     """
     nt = float(n_rad_s) * np.asarray(t_s, dtype=float)
@@ -373,7 +373,7 @@ def state_spectra(propagation, t_s) -> np.ndarray:
     with respect to the quasi-inertial initial state. For each time t, in the step expanded
     about ``t_s``, with ``H = t - t_s``: the position discretes ``X_H(K) = H^K X_1(K)`` and the
     velocity discretes by the derivative rule ``V_H(K) = (K+1)/H X_H(K+1) = (K+1) H^K X_1(K+1)``
-    (SEEDS.md notation), each with its derivatives with respect to the initial state (the
+    (docs/equations.md, notation), each with its derivatives with respect to the initial state (the
     engine's sensitivity spectra, seed 004 eqs. 19-21 to first order).
 
     Returns

@@ -191,7 +191,10 @@ def circular_constraints(x, mu_m3_s2: float, *, state_index=(0, 1, 2, 3, 4, 5), 
 
 
 def constraint_scales(x, mu_m3_s2: float, *, state_index=(0, 1, 2, 3, 4, 5), rka_index: int = 6) -> np.ndarray:
-    """Scales that make eq. 5 relative: ``(r_ka², μ/r_ka, |r| |v|)``."""
+    """Scales that make eq. 5 relative: ``(r_ka², μ/r_ka, |r| |v|)``.
+
+    Implements seed 004 eq. 5 (the constraints' natural scales).
+    """
     x = np.asarray(x, float)
     idx = list(state_index)
     rka = abs(float(x[rka_index]))
@@ -563,7 +566,10 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
 def circular_tolerance_covariance(x, mu_m3_s2: float, eccentricity: float, *, state_index=(0, 1, 2, 3, 4, 5)):
     """Covariance (3, 3) of the constraint values of eq. 5 for an orbit that is circular only to
     ``eccentricity``: with r_ka = |r| the first is exact; ``|v|² - μ/r = (μ/r) e cos E`` and
-    ``r·v = √(μ r) e sin E`` to first order in e, for an unknown eccentric anomaly E (variance e²/2)."""
+    ``r·v = √(μ r) e sin E`` to first order in e, for an unknown eccentric anomaly E (variance e²/2).
+
+    Implements seed 004 eq. 5 (as soft constraints).
+    """
     x = np.asarray(x, float)
     r = float(np.linalg.norm(x[list(state_index)[:3]]))
     e2 = float(eccentricity) ** 2 / 2.0

@@ -67,6 +67,8 @@ def solve_down_leg(state_at: Callable[[np.ndarray], np.ndarray], r_st, tau0, *, 
     ``state_at(tau)`` gives the satellite's GCRF state (..., 6) ``tau`` seconds before the
     reception times; ``tau0`` is the starting light time. Raises ``ArithmeticError`` if the
     iteration does not converge in ``max_iter`` steps.
+
+    Implements the light-time range of seed 004 eqs. 11-12 and seed 002 eq. 17 (which omit the light time).
     """
     r_st = np.asarray(r_st, float)
     tau = np.asarray(tau0, float)
@@ -117,6 +119,8 @@ def solve_up_leg(r_b, r_st, v_st, a_st, tau_down_s, *, c: float = C_LIGHT, tol_s
 
     ``r_st, v_st, a_st`` (..., 3): the station in GCRF at ``t_r``; ``tau_down_s`` the down leg's
     light time. Raises ``ArithmeticError`` if the iteration does not converge.
+
+    Implements the two-way up leg (seed 004 item 1's two-way link).
     """
     r_b, r_st, v_st, a_st = (np.asarray(x, float) for x in (r_b, r_st, v_st, a_st))
     tau_d = np.asarray(tau_down_s, float)

@@ -192,7 +192,10 @@ def two_way_range_rate_partials(r_b, v_b, r_st, v_st, r_st_t, v_st_t, a_st, mode
 # ----------------------------------------------------------------------------- Doppler
 
 def doppler_factor(mode: str = "one-way") -> float:
-    """``k`` of eq. (4): 1 one-way, 2 two-way (the round trip doubles the shift)."""
+    """``k`` of eq. (4): 1 one-way, 2 two-way (the round trip doubles the shift).
+
+    Implements seed 004 item 1 (``c/(2 f0)`` two-way, ``c/f0`` one-way).
+    """
     return {"one-way": 1.0, "two-way": 2.0}[mode]
 
 

@@ -266,6 +266,8 @@ def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | No
     ValueError).
     ``epochs`` maps a drift name to its reference time (s). A driver touching no sample raises
     ValueError (it would be unobservable).
+
+    Implements seed 002 eqs. 10-11 (the offsets D0 of the extended state, and Doppler offsets).
     """
     from trackproc.models.parameters import split_name
 
@@ -319,6 +321,8 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
     no column). Two-way samples (``meas.two_way``) take the round trip, eqs. (7)-(13), and need
     ``meas.a_st``. Returns ``(computed (N,), jacobian (N, n_columns), geometry)``, the geometry
     being the down leg's (:class:`EmissionGeometry`; for two-way samples ``t_e`` is the bounce).
+
+    Implements seed 002 eq. 17 (with light time, station motion and the offsets) and its Jacobian (eq. 10).
     """
     _check_model(range_rate_model)
     n = len(meas)

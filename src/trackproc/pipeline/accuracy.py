@@ -38,6 +38,7 @@ import pandas as pd
 from trackproc.io.tables import arrow_table_bytes
 from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 from trackproc.constants import MU_EARTH, force_model_constants
+from trackproc.vocabulary import FORCES
 from trackproc.errors import InputError
 from trackproc.io.statefile import STATE_PARAMETERS
 from trackproc.methods import accuracy as ac
@@ -137,8 +138,8 @@ def _check_options(options: AccuracyOptions) -> None:
                          expected=f"at most {MAX_TIMES} steps over --span")
     if options.method not in METHODS:
         raise InputError("unknown method", column="--method", found=options.method, expected=" | ".join(METHODS))
-    if options.force not in ("two-body", "j2"):
-        raise InputError("unknown force model", column="--force", found=options.force, expected="two-body or j2")
+    if options.force not in FORCES:
+        raise InputError("unknown force model", column="--force", found=options.force, expected=" or ".join(FORCES))
     if options.monte_carlo is not None and not (2 <= int(options.monte_carlo) <= MAX_MONTE_CARLO):
         raise InputError("invalid sample count", column="--monte-carlo", found=options.monte_carlo,
                          expected=f"an integer in [2, {MAX_MONTE_CARLO}]")

@@ -45,11 +45,10 @@ from typing import Optional
 import numpy as np
 
 from trackproc.errors import InputError, ProcessingError
+from trackproc.vocabulary import EARTHS, FORCES  # noqa: F401  (re-exported)
 
 DEG = math.pi / 180.0
 MODELS = ("planar", "3d")
-FORCES = ("two-body", "j2")
-EARTHS = ("wgs84", "sphere")
 FIELDS = ("impact_time", "velocity_kms", "velocity_m_s", "angle_deg", "p_m", "e", "phi_deg", "model",
           "displacement_m", "station", "pass_id", "direction", "latitude_deg", "heading_deg", "radius_m",
           "sigma_rad", "tau_s", "force", "earth", "kinds", "comment", "schema_version")

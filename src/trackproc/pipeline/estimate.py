@@ -51,10 +51,11 @@ from trackproc.io.isotime import iso_utc
 from trackproc.dynamics.rtn import rtn_covariance
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
+from trackproc.vocabulary import DOPPLER_BIASES, KIND_UNITS
 
 #: Unit of each kind's values (SI).
-UNITS = {"range": "m", "range_rate": "m/s", "doppler": "Hz", "azimuth": "rad", "elevation": "rad"}
-DOPPLER_BIAS = ("offset", "offset+drift")
+UNITS = KIND_UNITS
+DOPPLER_BIAS = DOPPLER_BIASES
 DOPPLER_BIAS_PER = ("pass", "station")
 #: Margin (s) added before the first sample so that emission times are covered.
 _LIGHT_TIME_MARGIN_S = 1.0

@@ -32,6 +32,7 @@ import numpy as np
 import pandas as pd
 
 from trackproc.errors import InputError
+from trackproc.vocabulary import LINK_MODES
 from trackproc.io.isotime import iso_utc
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable, base_meta
 from trackproc.io.raw import RawMeasurements
@@ -46,7 +47,7 @@ DUPLICATE_TIME = "duplicated timestamp"
 
 #: Unit as written -> factor to SI (to report values as the user wrote them).
 UNIT_FACTORS = {unit: factor for _, factor, unit in UNIT_SPELLINGS.values()}
-MODES = ("one-way", "two-way")
+MODES = LINK_MODES
 
 
 @dataclass

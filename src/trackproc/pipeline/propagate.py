@@ -27,6 +27,7 @@ from typing import Optional
 import numpy as np
 import pandas as pd
 
+from trackproc import vocabulary
 from trackproc.constants import C_LIGHT, force_model_constants
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.isotime import iso_utc
@@ -99,13 +100,15 @@ def _check_options(options: PropagateOptions) -> None:
         raise InputError("no sample times", column="--at", expected="a pass file with at least one sample")
     if not (1e-18 < options.tol < 1e-3):
         raise InputError("out of range", column="--tol", found=options.tol, expected="a tolerance in (1e-18, 1e-3)")
-    if options.force not in ("two-body", "j2"):
-        raise InputError("unknown force model", column="--force", found=options.force, expected="two-body or j2")
-    if options.earth not in ("wgs84", "sphere"):
-        raise InputError("unknown Earth model", column="--earth", found=options.earth, expected="wgs84 or sphere")
-    if options.range_rate_model not in ("doppler", "instantaneous"):
+    if options.force not in vocabulary.FORCES:
+        raise InputError("unknown force model", column="--force", found=options.force,
+                         expected=" or ".join(vocabulary.FORCES))
+    if options.earth not in vocabulary.EARTHS:
+        raise InputError("unknown Earth model", column="--earth", found=options.earth,
+                         expected=" or ".join(vocabulary.EARTHS))
+    if options.range_rate_model not in vocabulary.RANGE_RATE_MODELS:
         raise InputError("unknown range-rate model", column="--range-rate-model", found=options.range_rate_model,
-                         expected="doppler or instantaneous")
+                         expected=" or ".join(vocabulary.RANGE_RATE_MODELS))
     if options.station is None:
         for flag, given in (("--carrier-hz", options.carrier_hz is not None), ("--visible-only", options.visible_only)):
             if given:

@@ -53,18 +53,20 @@ from typing import Mapping, Optional
 import numpy as np
 import pandas as pd
 
+from trackproc import vocabulary
 from trackproc.constants import C_LIGHT
+from trackproc.vocabulary import REFINE_DOPPLER_BIASES
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import PassTable
 
 COSTS = ("pointwise", "integral")
-DOPPLER_BIAS = ("none", "offset", "offset+drift")
+DOPPLER_BIAS = REFINE_DOPPLER_BIASES
 #: Range-rate-like kinds a Doppler station gives, in order of preference.
 RANGE_RATE_KINDS = ("doppler", "range_rate")
 #: ``--circular`` is reported as contradicted by the pass below this p-value (:func:`circular_consistency`).
 CIRCULAR_TEST_P = 1e-3
 #: Links (the pass metadata's ``doppler_mode``): both costs take either.
-LINK_MODES = ("one-way", "two-way")
+LINK_MODES = vocabulary.LINK_MODES
 #: The a-priori of a stale state that carries no covariance, as independent 1-sigma errors of
 #: its non-singular orbital elements (:func:`trackproc.methods.refinement.element_covariance`):
 #: a state a day or so old (a TLE, an old solution) is off by kilometres along-track (the

@@ -37,12 +37,13 @@ from typing import Mapping, Optional
 import numpy as np
 import pandas as pd
 
+from trackproc import vocabulary
 from trackproc.constants import force_model_constants
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.isotime import iso_utc
 
 #: Kinds in canonical order (the order noise is drawn in).
-KINDS = ("range", "range_rate", "doppler", "elevation", "azimuth")
+KINDS = vocabulary.KINDS
 DEG = np.pi / 180.0
 #: Default noise sigmas, SI (angles in degrees): the CLI defaults.
 DEFAULT_SIGMAS = {"range": 10.0, "range_rate": 0.01, "doppler": 0.1, "angle_deg": 0.01}
@@ -137,11 +138,12 @@ def _check_options(options: SimulateOptions, stations: Mapping) -> None:
     if bad or not options.kinds:
         raise InputError("unknown measurement kind", column="--kinds", found=",".join(bad) or "(none)",
                          expected="a comma list of " + ",".join(KINDS))
-    if options.mode not in ("one-way", "two-way"):
-        raise InputError("unknown mode", column="--mode", found=options.mode, expected="one-way or two-way")
-    if options.range_rate_model not in ("doppler", "instantaneous"):
+    if options.mode not in vocabulary.LINK_MODES:
+        raise InputError("unknown mode", column="--mode", found=options.mode,
+                         expected=" or ".join(vocabulary.LINK_MODES))
+    if options.range_rate_model not in vocabulary.RANGE_RATE_MODELS:
         raise InputError("unknown range-rate model", column="--range-rate-model", found=options.range_rate_model,
-                         expected="doppler or instantaneous")
+                         expected=" or ".join(vocabulary.RANGE_RATE_MODELS))
     for name, bias in options.range_bias_m.items():
         if name not in stations:
             raise InputError("range bias for an unknown station", column="--range-bias", found=name,
