@@ -248,3 +248,23 @@ def test_errors_exit_2(run_cli, files, tmp_path, args, fragments):
     for fragment in fragments:
         assert fragment in res.stderr, (fragment, res.stderr)
     assert not (tmp_path / "out.csv").exists()
+
+
+def test_monte_carlo_correlation_agrees_with_the_stm(run_cli, files, tmp_path):
+    """--correlation with Monte Carlo: the RTN covariance function of the draws (position and the
+    rotating-frame velocity, as the linear methods) agrees with Phi P0 Phi^T within its sampling
+    error (it used to crash applying the 6 x 6 RTN map to 3-vectors)."""
+    docs = {}
+    for method, extra in (("stm", []), ("monte-carlo", ["--monte-carlo", "4000", "--seed", "3"])):
+        corr = tmp_path / f"{method}.json"
+        res = run_cli(["accuracy", files["cov"], "--span", "3000", "--step", "600", "--method", method, *extra,
+                       "--correlation", corr, "-o", tmp_path / f"{method}.csv"])
+        assert res.exit_code == 0, res.stderr
+        docs[method] = json.loads(corr.read_text())
+    assert docs["monte-carlo"]["metadata"]["correlation"]["method"] == "monte-carlo"
+    rel_sd = np.sqrt(2.0 / 3999)                                # sampling sd of a variance
+    for name in ("radial_m2", "along_m2", "cross_m2", "v_radial_m2_s2", "v_along_m2_s2", "x_m2"):
+        lin, mc = np.array(docs["stm"]["covariance"][name]), np.array(docs["monte-carlo"]["covariance"][name])
+        np.testing.assert_allclose(np.diag(mc), np.diag(lin), rtol=5 * rel_sd, err_msg=name)
+        scale = np.sqrt(np.outer(np.diag(lin), np.diag(lin)))
+        assert np.max(np.abs(mc - lin) / scale) < 5 * rel_sd * np.sqrt(2), name

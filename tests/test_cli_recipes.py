@@ -32,7 +32,7 @@ def test_pipeline_recipe(tmp_path):
     assert by_file[["value", "smoothed", "residual"]].equals(by_pipe[["value", "smoothed", "residual"]])
     assert (out / "smooth.json").stat().st_size > 0
     assert "KIR-007" in run.stdout  # info of the shipped multi-station set
-    # the estimate from the refined state (DESIGN.md's smooth -> refine -> estimate chain, the
+    # the estimate from the refined state (README's smooth -> refine -> estimate chain, the
     # refined covariance as a-priori) lands on the truth within its own error matrix
     import json
 

@@ -15,8 +15,9 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import PassTable
 from trackproc.io.statefile import State
 from trackproc.io.stations import Station
-from trackproc.pipeline.estimate import (EstimateOptions, build_problem, estimate, rtn_covariance, rtn_matrix,
-                                         summary_text)
+from trackproc.dynamics.rtn import rtn_covariance
+from trackproc.dynamics.rtn import rtn_rotation as rtn_matrix
+from trackproc.pipeline.estimate import EstimateOptions, build_problem, estimate, summary_text
 from trackproc.pipeline.simulate import SimulateOptions, simulate
 
 EPOCH = "2026-03-20T09:30:00.000Z"
@@ -125,7 +126,7 @@ def test_range_rate_model_mismatch_shows_in_the_residuals():
     wrong = build_problem(tables(sim), TRUTH, None, EstimateOptions(range_rate_model="doppler"), EOP)
     r_right = right.meas.observed - right.model(right.x0)[0]
     r_wrong = wrong.meas.observed - wrong.model(wrong.x0)[0]
-    assert np.abs(r_right).max() < 1e-6 and np.abs(r_wrong).max() > 0.02      # DESIGN.md: up to ~0.15 m/s
+    assert np.abs(r_right).max() < 1e-6 and np.abs(r_wrong).max() > 0.02      # README: up to ~0.15 m/s
 
 
 def test_doppler_offset_and_drift_per_pass_recovered():

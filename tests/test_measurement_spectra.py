@@ -196,7 +196,7 @@ def test_models_differ_by_the_light_time_factor():
     dop = ms.predict(traj, st, PASS, range_rate_model="doppler")
     inst = ms.predict(traj, st, PASS, range_rate_model="instantaneous")
     diff = np.abs(inst.range_rate_m_s - dop.range_rate_m_s)
-    assert 0.01 < diff.max() < 0.2                    # DESIGN.md: up to ~0.15 m/s in LEO
+    assert 0.01 < diff.max() < 0.2                    # README: up to ~0.15 m/s in LEO
 
 
 def test_without_light_time_is_the_seed004_geometry():

@@ -6,7 +6,7 @@ import pytest
 
 from trackproc.constants import C_LIGHT, OMEGA_EARTH
 from trackproc.dynamics import propagator
-from trackproc.models import measurements as mm
+from oracles import measurements_oracle as mm  # the independent implementation
 from trackproc.models import observation as ob
 
 RNG = np.random.default_rng(11)

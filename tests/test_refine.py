@@ -17,7 +17,7 @@ from trackproc.io.passfile import PassTable
 from trackproc.io.statefile import State
 from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Options
-from trackproc.pipeline.estimate import rtn_matrix
+from trackproc.dynamics.rtn import rtn_rotation as rtn_matrix
 from trackproc.pipeline.refine import RefineOptions, finish, prepare, refine, summary_text, traverse_station
 from trackproc.pipeline.simulate import SimulateOptions, simulate
 

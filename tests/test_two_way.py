@@ -18,7 +18,7 @@ from test_observation import _stations, _Trajectory
 from trackproc.constants import C_LIGHT, OMEGA_EARTH
 from trackproc.io.passfile import PassTable
 from trackproc.io.statefile import read_state
-from trackproc.models import measurements as mm
+from oracles import measurements_oracle as mm  # the independent implementation
 from trackproc.models import observation as ob
 from trackproc.pipeline.estimate import EstimateOptions, build_problem, estimate
 from trackproc.pipeline.simulate import SimulateOptions, simulate

@@ -9,25 +9,19 @@ from typing import Optional
 
 import typer
 
-
-class Force(str, Enum):
-    two_body = "two-body"
-    j2 = "j2"
+from trackproc import vocabulary
 
 
-class Earth(str, Enum):
-    wgs84 = "wgs84"
-    sphere = "sphere"
+def choices(name: str, values) -> type[Enum]:
+    """A ``str`` Enum of option values drawn from :mod:`trackproc.vocabulary` (typer's choices);
+    member names are the values with ``-`` and ``+`` as ``_`` (``Force.two_body``)."""
+    return Enum(name, [(v.replace("-", "_").replace("+", "_"), v) for v in values], type=str)
 
 
-class RangeRateModel(str, Enum):
-    doppler = "doppler"
-    instantaneous = "instantaneous"
-
-
-class DopplerMode(str, Enum):
-    one_way = "one-way"
-    two_way = "two-way"
+Force = choices("Force", vocabulary.FORCES)
+Earth = choices("Earth", vocabulary.EARTHS)
+RangeRateModel = choices("RangeRateModel", vocabulary.RANGE_RATE_MODELS)
+DopplerMode = choices("DopplerMode", vocabulary.LINK_MODES)
 
 
 class TableFormat(str, Enum):

@@ -9,15 +9,14 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModel, named_values,
-                                  resolve_output)
+from trackproc import vocabulary
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModel, choices,
+                                  named_values, resolve_output)
 
 log = logging.getLogger("trackproc")
 
 
-class DopplerBias(str, Enum):
-    offset = "offset"
-    offset_drift = "offset+drift"
+DopplerBias = choices("DopplerBias", vocabulary.DOPPLER_BIASES)
 
 
 class BiasPer(str, Enum):

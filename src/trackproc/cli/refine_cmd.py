@@ -9,7 +9,8 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModel, named_values,
+from trackproc import vocabulary
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModel, choices, named_values,
                                   resolve_output)
 
 log = logging.getLogger("trackproc")
@@ -20,10 +21,7 @@ class Cost(str, Enum):
     integral = "integral"
 
 
-class DopplerBias(str, Enum):
-    none = "none"
-    offset = "offset"
-    offset_drift = "offset+drift"
+DopplerBias = choices("DopplerBias", vocabulary.REFINE_DOPPLER_BIASES)
 
 
 class Kind(str, Enum):

@@ -114,6 +114,8 @@ def earth_rotation(jd1, jd2, eop: ts.EarthOrientation | None = None, rates: bool
     :func:`_q_rate`), the ERA rate ``OMEGA_ERA * (1 + d(UT1-TAI)/dt)`` (the UT1 rate of a
     tabulated EOP; zero excess for a constant UT1-UTC) and ``dW/dt`` by central differences
     of polar motion and s' over ±60 s.
+
+    Implements seed 004 eq. 7 in general form (IAU 2006/2000A, UT1, polar motion).
     """
     eop = eop or ts.EarthOrientation()
     jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
@@ -146,6 +148,8 @@ def gcrf_to_itrf(r, v, jd1, jd2, eop=None, *, rotation: EarthRotation | None = N
     ``r``, ``v`` have shape (N, 3) for N dates, (3,) for one, or (..., N, 3) to transform
     several points (e.g. stations) at the same N dates. ``rotation`` (from
     :func:`earth_rotation` at these dates, with rates) saves recomputing it.
+
+    Implements seed 004 eq. 7 (inertial -> Greenwich) in general form.
     """
     rot = rotation if rotation is not None else earth_rotation(jd1, jd2, eop)
     r, v = np.atleast_2d(r), np.atleast_2d(v)
@@ -159,7 +163,10 @@ def gcrf_to_itrf(r, v, jd1, jd2, eop=None, *, rotation: EarthRotation | None = N
 
 def itrf_to_gcrf(r, v, jd1, jd2, eop=None, *, rotation: EarthRotation | None = None):
     """Position (m) and velocity (m/s) from ITRF to GCRF at UTC two-part JDs (shapes as
-    :func:`gcrf_to_itrf`)."""
+    :func:`gcrf_to_itrf`).
+
+    Implements seed 004 eq. 7 (Greenwich -> inertial) in general form.
+    """
     rot = rotation if rotation is not None else earth_rotation(jd1, jd2, eop)
     r, v = np.atleast_2d(r), np.atleast_2d(v)
     r3 = _r3(rot.era)
@@ -232,9 +239,11 @@ class QuasiInertialFrame:
 
     In it the Earth's rotation axis is z (so J2 acts about z) and ITRF is reached by a plain
     rotation through the Earth Rotation Angle, linear in time: ``ERA(t) = era0 + ω t`` with t
-    in SI seconds from the reference epoch (see DESIGN.md). Precession-nutation and polar
+    in SI seconds from the reference epoch (README "Units, sign conventions, time and frames"). Precession-nutation and polar
     motion are frozen at the reference epoch: choose it mid-pass; the frozen terms drift by
     about 0.15 arcsec a day (about 5 m at LEO radius after a day, < 1 cm over a 15-minute pass).
+
+    Implements seed 004 eq. 7 (the sidereal angle ``S = q Ω t + S0``) in its exact form: ERA linear in SI time.
     """
 
     ref_jd_utc: tuple

@@ -7,16 +7,22 @@ Earth (R = 6371 km; seed 004 eq. 8).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import erfa
 import numpy as np
 
 from trackproc.constants import R_SPHERE
 
 WGS84 = 1  # ERFA ellipsoid identifier
+DEG = np.pi / 180.0
 
 
 def geodetic_to_itrf(lat_rad, lon_rad, height_m, earth: str = "wgs84") -> np.ndarray:
-    """Geodetic latitude, longitude (rad) and height (m) -> ITRF position (m), shape (..., 3)."""
+    """Geodetic latitude, longitude (rad) and height (m) -> ITRF position (m), shape (..., 3).
+
+    Implements seed 004 eq. 8 (the station on the sphere R = 6371 km, ``earth="sphere"``), WGS-84 by default.
+    """
     lat, lon, h = np.broadcast_arrays(*(np.asarray(x, float) for x in (lat_rad, lon_rad, height_m)))
     if earth == "sphere":
         rr = R_SPHERE + h
@@ -35,7 +41,10 @@ def itrf_to_geodetic(r_m, earth: str = "wgs84"):
 
 
 def enu_matrix(lat_rad, lon_rad) -> np.ndarray:
-    """Rows: east, north, up unit vectors in ITRF at a geodetic (or spherical) position."""
+    """Rows: east, north, up unit vectors in ITRF at a geodetic (or spherical) position.
+
+    Implements seed 004 eq. 10 (Greenwich -> topocentric axes at the station).
+    """
     sl, cl = np.sin(lat_rad), np.cos(lat_rad)
     so, co = np.sin(lon_rad), np.cos(lon_rad)
     z = np.zeros_like(sl)
@@ -45,16 +54,95 @@ def enu_matrix(lat_rad, lon_rad) -> np.ndarray:
 
 
 def itrf_to_enu(r_sat_itrf, r_st_itrf, lat_rad, lon_rad) -> np.ndarray:
-    """Topocentric east/north/up (m) of a point seen from a station, both in ITRF."""
+    """Topocentric east/north/up (m) of a point seen from a station, both in ITRF.
+
+    Implements seed 004 eq. 10.
+    """
     d = np.asarray(r_sat_itrf, float) - np.asarray(r_st_itrf, float)
     return np.einsum("...ij,...j->...i", enu_matrix(lat_rad, lon_rad), d)
 
 
 def enu_to_azel(enu):
-    """ENU (m) -> azimuth (rad, from north through east, [0, 2π)), elevation (rad), range (m)."""
+    """ENU (m) -> azimuth (rad, from north through east, [0, 2π)), elevation (rad), range (m).
+
+    Implements the azimuth/elevation of seed 004 eq. 10's topocentric vector (and seed 003's elevation).
+    """
     e, n, u = np.moveaxis(np.asarray(enu, float), -1, 0)
     rng = np.sqrt(e * e + n * n + u * u)
     az = np.mod(np.arctan2(e, n), 2 * np.pi)
     az = np.where(az >= 2 * np.pi, 0.0, az)  # mod of a tiny negative number rounds up to 2π
     el = np.arctan2(u, np.hypot(e, n))
     return az, el, rng
+
+
+# --------------------------------------------------------------------------- stations
+
+def station_itrf(stations, earth: str = "wgs84"):
+    """Geodetic latitude, longitude (rad) and ITRF position (m) of stations-table rows (objects
+    with ``lat_deg``, ``lon_deg``, ``height_m``): one row gives ``(lat, lon, (3,))``, a sequence
+    of rows ``((S,), (S,), (S, 3))``; ``earth`` ``"wgs84"`` or ``"sphere"``.
+
+    Implements seed 004 eq. 8 (sphere) or the WGS-84 ellipsoid.
+    """
+    if hasattr(stations, "lat_deg"):
+        lat, lon = stations.lat_deg * DEG, stations.lon_deg * DEG
+        return lat, lon, geodetic_to_itrf(lat, lon, stations.height_m, earth)
+    lat = np.array([s.lat_deg for s in stations], float) * DEG
+    lon = np.array([s.lon_deg for s in stations], float) * DEG
+    h = np.array([s.height_m for s in stations], float)
+    return lat, lon, geodetic_to_itrf(lat, lon, h, earth)
+
+
+@dataclass(frozen=True)
+class StationTrack:
+    """Stations in GCRF at the reception times: ``r`` (m), ``v`` (m/s), ``a`` (m/s²) of shape
+    (N, 3) or (S, N, 3), and ``gcrf_to_itrf`` (N, 3, 3), the rotation at those times."""
+
+    r: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    gcrf_to_itrf: np.ndarray
+
+
+def station_gcrf(r_itrf, jd1, jd2, eop=None) -> StationTrack:
+    """Station position, velocity and acceleration in GCRF at UTC dates.
+
+    Parameters
+    ----------
+    r_itrf : (3,) or (S, 3) ITRF positions (m) of S stations fixed on the Earth.
+    jd1, jd2 : (N,) UTC two-part Julian dates (reception times).
+    eop : :class:`~trackproc.dynamics.timescales.EarthOrientation` or None.
+
+    Position and velocity are the exact IAU 2006/2000A transform
+    (:func:`~trackproc.dynamics.frames.itrf_to_gcrf`, one Earth-orientation evaluation shared
+    by all stations); the acceleration is the centripetal ``ω × v`` about the rotation axis
+    (used only to move the station over a round-trip light time). Repeated dates (a range
+    and a range-rate sample share their reception time) are evaluated once: the Earth
+    orientation (``erfa.c2i06a`` per date) is the cost here.
+    """
+    from trackproc.dynamics import frames
+
+    r_itrf = np.asarray(r_itrf, float)
+    jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
+    jd1, jd2 = jd1.reshape(-1), jd2.reshape(-1)
+    n = jd1.size
+    inverse = None
+    if n > 1:
+        dates, inverse = np.unique(np.stack([jd1, jd2], -1), axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        if dates.shape[0] == n:
+            inverse = None
+        else:
+            jd1, jd2 = dates[:, 0], dates[:, 1]
+    m = jd1.size
+    shape = (m, 3) if r_itrf.ndim == 1 else (r_itrf.shape[0], m, 3)
+    r_src = np.broadcast_to(r_itrf if r_itrf.ndim == 1 else r_itrf[:, None, :], shape)
+    rot = frames.earth_rotation(jd1, jd2, eop)
+    r, v = frames.itrf_to_gcrf(r_src, np.zeros(shape), jd1, jd2, eop, rotation=rot)
+    matrix = rot.matrix
+    mid = n // 2 if inverse is None else inverse[n // 2]
+    axis = rot.q[mid][2]  # the CIP (rotation axis) in GCRF, mid-span
+    if inverse is not None:
+        r, v, matrix = r[..., inverse, :], v[..., inverse, :], matrix[inverse]
+    a = np.cross(frames.OMEGA_ERA * axis, v)
+    return StationTrack(r=r, v=v, a=a, gcrf_to_itrf=matrix)

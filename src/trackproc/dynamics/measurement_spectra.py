@@ -3,7 +3,7 @@ light-time range and range-rate, and their sensitivities to the initial state.
 
 Seed 004 eqs. 7-13 in general form, on the per-step spectra of the Taylor engine
 (:mod:`trackproc.dynamics.taylor`, through :class:`trackproc.dynamics.propagator.Trajectory`).
-All spectra have H = 1 s (Taylor coefficients; SEEDS.md notation) and live in the
+All spectra have H = 1 s (Taylor coefficients; docs/equations.md, notation) and live in the
 quasi-inertial frame of the trajectory (GCRF rotated by ``q_ref``, the precession-nutation
 matrix of its reference epoch).
 
@@ -31,7 +31,7 @@ Topocentric vector, range, range-rate (seed 004 eqs. 11-12)
     ``rho(t) = r_sat(t_e) - r_st(t)``, ``D2 = rho . rho`` (Cauchy products),
     ``D = sqrt(D2)`` (square-root rule, eq. 12), ``Vr(K) = (K+1) D(K+1)`` (derivative rule).
 
-One-way light time (DESIGN.md "Frames, time, forces", normative)
+One-way light time (README "Units, sign conventions, time and frames"; :mod:`trackproc.models.light_time`)
     A sample is time-tagged at reception ``t`` and the satellite is taken at the emission time
     ``t_e = t - T(t)``, ``c T = |r_sat(t - T) - r_st(t)|``. Here ``T`` is itself a spectrum:
     the composition ``r_sat(t - T(t)) = sum_m (-T)^m / m! r_sat^(m)(t)`` is a Taylor shift done
@@ -72,7 +72,8 @@ constant matrix and re-expanding about another point is ``u @ B(delta)``,
 ``E = sum_m (-1)^m/m! D^m M(T)^m``.
 
 Limits: one-way measurements (no two-way round trip); aberration and refraction neglected,
-as in :mod:`trackproc.models.measurements`; the station must never coincide with the
+as in :mod:`trackproc.models.observables` (whose conventions and range-rate models these series
+follow); the station must never coincide with the
 satellite (``D2(0) > 0``).
 """
 
@@ -86,14 +87,15 @@ import erfa
 import numpy as np
 
 from trackproc.constants import C_LIGHT
+from trackproc.dynamics import geodesy
 from trackproc.dynamics import spectra as sp
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.frames import OMEGA_ERA, _r3
+from trackproc.vocabulary import RANGE_RATE_MODELS  # noqa: F401  (re-exported)
 
 __all__ = ["RANGE_RATE_MODELS", "StationModel", "Prediction", "rotation_spectra", "predict",
            "segment_spectra", "LIGHT_TIME_TERMS"]
 
-RANGE_RATE_MODELS = ("doppler", "instantaneous")
 #: Terms m = 0..LIGHT_TIME_TERMS of the Taylor shift r(t - T) = sum (-T)^m/m! r^(m)(t).
 LIGHT_TIME_TERMS = 4
 #: Maximum passes of the light-time fixed point (converges in 4 from T = 0).
@@ -111,7 +113,7 @@ _MAX_SPLIT_ROUNDS = 40
 
 @lru_cache(maxsize=16)
 def _derivative_matrix(n: int) -> np.ndarray:
-    """D with ``(u @ D)[K] = (K+1) U(K+1)``: the derivative rule (SEEDS.md notation)."""
+    """D with ``(u @ D)[K] = (K+1) U(K+1)``: the derivative rule (docs/equations.md, notation)."""
     d = np.zeros((n, n))
     k = np.arange(n - 1)
     d[k + 1, k] = k + 1.0
@@ -125,7 +127,7 @@ def _toeplitz_index(n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def product_matrix(v) -> np.ndarray:
-    """``M(v)`` (..., n, n) with ``u @ M(v) = u * v`` (Cauchy product, SEEDS.md notation).
+    """``M(v)`` (..., n, n) with ``u @ M(v) = u * v`` (Cauchy product, docs/equations.md, notation).
 
     Upper-triangular Toeplitz: ``M[l, K] = V(K - l)`` for ``K >= l``. ``M(u) M(v) = M(u*v)``:
     truncated series and these matrices form the same commutative algebra.
@@ -150,6 +152,8 @@ def shift_matrix(delta_s, n: int) -> np.ndarray:
     """``B(delta)`` (..., n, n): ``u @ B`` re-expands a spectrum about ``t* + delta``.
 
     ``B[j, K] = C(j, K) delta^(j - K)`` (Taylor's theorem for the polynomial the spectrum is).
+
+    Implements the re-expansion of a spectrum about another centre (docs/equations.md, notation).
     """
     d = np.asarray(delta_s, float)[..., None, None]
     j, k = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
@@ -224,7 +228,8 @@ def rotation_spectra(theta_rad, omega_rad_s, n: int) -> tuple[np.ndarray, np.nda
     sidereal angle of seed 004 eq. 7 with ``omega = q Omega``.
 
     >>> import numpy as np
-    >>> from trackproc.dynamics import spectra as sp
+    >>> from trackproc.dynamics import geodesy
+from trackproc.dynamics import spectra as sp
     >>> c, s = rotation_spectra(0.3, 7.29e-5, 6)
     >>> sn, cs = sp.sin_cos(np.array([0.3, 7.29e-5, 0, 0, 0, 0]))
     >>> bool(np.allclose(c, cs, rtol=1e-13, atol=0) and np.allclose(s, sn, rtol=1e-13, atol=0))
@@ -300,6 +305,8 @@ class StationModel:
     ``q_ref`` (GCRF -> quasi-inertial), ``frozen``, ``era0_rad``/``omega_rad_s`` (the angle
     at t = 0 and its rate), ``nodes_s`` with ``pn_nodes`` (K, 3, 3) = ``q_ref Q(t)^T``,
     ``p_nodes`` (K, 3) = ``W(t)^T r_itrf`` and ``w_nodes`` (K, 3, 3) = ``W(t)``.
+
+    Implements seed 004 eqs. 7-10 (station and topocentric frame as spectra).
     """
 
     r_itrf_m: np.ndarray
@@ -401,6 +408,8 @@ class StationModel:
 
         ``d_itrf = W R3(theta) P^T d``. With ``centres_s`` (N,), the angle is taken linear and
         the slow rotation quadratic about those points (as in the spectra; fewer ERFA calls).
+
+        Implements seed 004 eq. 10.
         """
         from trackproc.dynamics import geodesy
 
@@ -647,8 +656,9 @@ def predict(trajectory, station: StationModel, t_s, *, range_rate_model: str = "
 
     Implements seed 004 eqs. 7-13 (module docstring); raises ValueError for an unknown model.
     """
-    if range_rate_model not in RANGE_RATE_MODELS:
-        raise ValueError(f"unknown range-rate model {range_rate_model!r}; expected one of {RANGE_RATE_MODELS}")
+    from trackproc.models.observables import check_range_rate_model
+
+    check_range_rate_model(range_rate_model)
     t_in = np.atleast_1d(np.asarray(t_s, float))
     if t_in.ndim != 1 or t_in.size == 0 or not np.all(np.isfinite(t_in)):
         raise ValueError("t_s must be a non-empty 1-D array of finite times")
@@ -734,10 +744,7 @@ def predict(trajectory, station: StationModel, t_s, *, range_rate_model: str = "
     if range_rate_model == "instantaneous":
         rr = rr * factor
     enu = station.to_enu(rho, t, centres_s=segs.centre_s[seg_index])
-    e, nn, up = enu[:, 0], enu[:, 1], enu[:, 2]
-    az = np.mod(np.arctan2(e, nn), 2 * np.pi)
-    az = np.where(az >= 2 * np.pi, 0.0, az)
-    el = np.arctan2(up, np.hypot(e, nn))
+    az, el, _ = geodesy.enu_to_azel(enu)
 
     inv = np.empty_like(order)
     inv[order] = np.arange(order.size)

@@ -8,7 +8,7 @@ around it, once, for every command that propagates:
    :class:`~trackproc.dynamics.frames.QuasiInertialFrame` of a reference epoch (GCRF rotated by
    that epoch's bias-precession-nutation matrix ``q``; by default the state's own epoch, as
    :func:`trackproc.pipeline.simulate.simulate` does), so J2 acts about the rotation axis of
-   that epoch (DESIGN.md "Frames, time, forces"). Results are rotated back to GCRF: states by
+   that epoch (README "Units, sign conventions, time and frames"). Results are rotated back to GCRF: states by
    ``blockdiag(q, q)^T``, the STM as ``Q^T Phi Q`` with ``Q = blockdiag(q, q)``.
 2. **Time.** ``t_s`` are SI seconds from the state's epoch (through TAI, so leap seconds
    count), or UTC ``datetime64`` labels wherever times are taken;
@@ -44,6 +44,7 @@ from trackproc.dynamics import taylor
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.frames import QuasiInertialFrame, earth_rotation
 from trackproc.errors import ProcessingError
+from trackproc.io.isotime import iso_utc
 
 __all__ = ["FORCES", "Trajectory", "Steps", "propagate", "propagate_state", "force_parameters", "reference_frame"]
 
@@ -149,7 +150,7 @@ class Trajectory:
             if run.outcome is not taylor.Outcome.SUCCESS:
                 reached = self.times_utc(run.t_end_s)
                 raise ProcessingError(
-                    f"propagation stopped ({run.outcome.value}) at {np.datetime_as_string(reached, 'ms')}Z "
+                    f"propagation stopped ({run.outcome.value}) at {iso_utc(reached, 3)} "
                     f"(t = {run.t_end_s:.3f} s from the epoch) after {run.n_steps} steps",
                     {"outcome": run.outcome.value, "t_reached_s": run.t_end_s, "steps": run.n_steps})
         return self
@@ -218,6 +219,8 @@ class Trajectory:
         """State transition matrix ``Phi(t, epoch) = d state(t) / d state(epoch)``, ``(..., 6, 6)``.
 
         In GCRF (default) ``Phi_gcrf = Q^T Phi_qi Q``; needs ``propagate(..., stm=True)``.
+
+        Implements seed 004 eqs. 19-21 (first-order sensitivities of the spectra).
         """
         if not self.has_stm:
             raise ValueError("this trajectory carries no STM; propagate with stm=True")

@@ -4,7 +4,7 @@ A *spectrum* is the array of DT discretes of a function z(t) around a point t*::
 
     Z(K) = H^K / K! * d^K z/dt^K (t*),        z(t) = sum_K ((t - t*)/H)^K Z(K)
 
-(``../shared/spec/SEEDS.md``, notation section). With H = 1 (in the time unit, seconds in
+(docs/equations.md, "Notation"). With H = 1 (in the time unit, seconds in
 trackproc) a spectrum is the list of Taylor coefficients; every function here works with
 H = 1 unless it takes an ``h`` argument, and :func:`rescale` converts between scales.
 
@@ -52,7 +52,7 @@ def _common(u, v):
 def taylor_unit(m: int, n: int) -> np.ndarray:
     """The Taylor unit delta(K - m) with ``n`` coefficients: 1 at K = m, 0 elsewhere.
 
-    Implements the notation section of SEEDS.md ("Taylor unit"): the spectrum of
+    Implements the notation of docs/equations.md ("Taylor unit"): the spectrum of
     ((t - t*)/H)^m. ``constant(c, n) = c * taylor_unit(0, n)``.
     """
     if not 0 <= m < n:
@@ -65,7 +65,7 @@ def taylor_unit(m: int, n: int) -> np.ndarray:
 def constant(c, n: int) -> np.ndarray:
     """Spectrum of a constant c (any shape): ``c * delta(K)``, shape ``c.shape + (n,)``.
 
-    Implements the notation section of SEEDS.md ("constants enter as c*delta(K)").
+    Implements the notation of docs/equations.md ("constants enter as c*delta(K)").
     """
     c = np.asarray(c, dtype=float)
     out = np.zeros(c.shape + (n,))
@@ -76,7 +76,7 @@ def constant(c, n: int) -> np.ndarray:
 def cauchy_k(u, v, k: int) -> np.ndarray:
     """The K-th coefficient of the product u*v: ``sum_{l=0..K} U(l) V(K-l)``.
 
-    Implements the DT product rule (SEEDS.md notation, "product"; seed 004 eq. 6 uses it for
+    Implements the DT product rule (docs/equations.md, notation, "product"; seed 004 eq. 6 uses it for
     X * r^-3). Only ``U(0..K)`` and ``V(0..K)`` are read, so it can run inside a recurrence
     whose higher coefficients are not known yet. Returns the broadcast leading shape.
     """
@@ -90,7 +90,7 @@ def cauchy_k(u, v, k: int) -> np.ndarray:
 def cauchy(u, v) -> np.ndarray:
     """Spectrum of the product u*v (Cauchy product, truncated to the common length).
 
-    Implements the DT product rule (SEEDS.md notation, "product", written ``*``):
+    Implements the DT product rule (docs/equations.md, notation, "product", written ``*``):
     ``(U*V)(K) = sum_{l=0..K} U(l) V(K-l)``.
     """
     u, v, n = _common(u, v)
@@ -105,7 +105,7 @@ def quotient_k(q, u, v, k: int) -> np.ndarray:
     """The K-th coefficient of q = u/v from ``Q(0..K-1)``.
 
     ``Q(K) = (U(K) - sum_{l=0..K-1} Q(l) V(K-l)) / V(0)`` (the product rule solved for the
-    unknown factor; SEEDS.md notation, "product"). ``q`` must hold at least K coefficients.
+    unknown factor; docs/equations.md, notation, "product"). ``q`` must hold at least K coefficients.
     """
     q, u, v = _as_series(q), _as_series(u), _as_series(v)
     acc = u[..., k]
@@ -118,7 +118,7 @@ def quotient_k(q, u, v, k: int) -> np.ndarray:
 def quotient(u, v) -> np.ndarray:
     """Spectrum of u/v, for V(0) != 0.
 
-    Implements the product rule (SEEDS.md notation) solved for the quotient:
+    Implements the product rule (docs/equations.md, notation) solved for the quotient:
     ``Q(K) = (U(K) - sum_{l=0..K-1} Q(l) V(K-l)) / V(0)``.
     """
     u, v, n = _common(u, v)
@@ -136,6 +136,8 @@ def power_weights(a, k: int) -> np.ndarray:
     ``a`` may be an array of exponents (shape ``A``); the result has shape ``A + (K,)``. The
     integrator precomputes them once per order, so the K-th power coefficient of several
     exponents is a single contraction (see :func:`power_k`).
+
+    Implements the power rule's weights (docs/equations.md, notation: "power u^a").
     """
     a = np.asarray(a, dtype=float)
     l = np.arange(k, dtype=float)
@@ -145,7 +147,7 @@ def power_weights(a, k: int) -> np.ndarray:
 def power_k(w, u, a: float, k: int) -> np.ndarray:
     """The K-th coefficient (K >= 1) of w = u^a from ``W(0..K-1)`` and ``U(0..K)``.
 
-    Implements the power rule of SEEDS.md notation ("power u^a"; used for r^-3 in the general
+    Implements the power rule of docs/equations.md, notation ("power u^a"; used for r^-3 in the general
     form of seed 004 eq. 6):
     ``W(K) = 1/(K U(0)) sum_{l=0..K-1} (a(K-l) - l) U(K-l) W(l)``.
     """
@@ -158,7 +160,7 @@ def power_k(w, u, a: float, k: int) -> np.ndarray:
 def power(u, a: float) -> np.ndarray:
     """Spectrum of u^a for a real exponent a.
 
-    Implements the power rule (SEEDS.md notation, "power u^a"):
+    Implements the power rule (docs/equations.md, notation, "power u^a"):
     ``W(0) = U(0)^a; W(K) = 1/(K U(0)) sum_{l=0..K-1} (a(K-l) - l) U(K-l) W(l)``.
     It gives r^-3 = (r^2)^(-3/2), r^-5, ... in the general (non-circular) form of seed 004
     eq. 6. Preconditions: U(0) > 0 for a non-integer a, U(0) != 0 for a negative integer;
@@ -256,7 +258,7 @@ def exp(u) -> np.ndarray:
 def derivative(z, h: float = 1.0) -> np.ndarray:
     """Spectrum of dz/dt: ``P{z'}(K) = (K+1)/H Z(K+1)``; one coefficient fewer than z.
 
-    Implements the derivative rule of SEEDS.md notation; seed 004 eq. 12 uses it for the
+    Implements the derivative rule of docs/equations.md, notation; seed 004 eq. 12 uses it for the
     range-rate ``Vr(K) = (K+1)/H D(K+1)``.
     """
     z = _as_series(z)
@@ -282,7 +284,7 @@ def integral(z, z0=0.0, h: float = 1.0) -> np.ndarray:
 def rescale(z, h: float) -> np.ndarray:
     """Change the time scale of a spectrum: ``Z_H(K) = H^K Z_1(K)``.
 
-    With the DT definition (SEEDS.md notation) the discretes at scale H are H^K times the
+    With the DT definition (docs/equations.md, notation) the discretes at scale H are H^K times the
     Taylor coefficients; ``rescale(z, 1/H)`` goes back. The function value at
     ``t* + H tau`` is then ``sum_K tau^K Z_H(K)``.
     """
@@ -294,7 +296,7 @@ def vandermonde(dt, n: int, h: float = 1.0, derivative: int = 0) -> np.ndarray:
     """Matrix ``V`` with ``V @ Z = d^m z/dt^m`` at offsets ``dt`` for spectra Z of length n.
 
     ``V[i, K] = K!/(K-m)! dt_i^(K-m) / H^K`` (zero for K < m). Dense output of a batch of
-    spectra is then one matrix product (the inverse transform, SEEDS.md notation). Shape
+    spectra is then one matrix product (the inverse transform, docs/equations.md, notation). Shape
     ``(len(dt), n)``.
     """
     x = np.asarray(dt, dtype=float).reshape(-1)
@@ -316,7 +318,7 @@ def vandermonde(dt, n: int, h: float = 1.0, derivative: int = 0) -> np.ndarray:
 def evaluate(z, dt, h: float = 1.0, derivative: int = 0) -> np.ndarray:
     """Inverse transform (Horner): ``z^(m)(t* + dt) = d^m/dt^m sum_K (dt/H)^K Z(K)``.
 
-    Implements the inverse DT of SEEDS.md notation (seed 004 eq. 13). ``z`` has shape
+    Implements the inverse DT of docs/equations.md, notation (seed 004 eq. 13). ``z`` has shape
     ``(..., K)``; ``dt`` any shape; the result has shape ``z.shape[:-1] + dt.shape``.
     """
     z = _as_series(z)

@@ -1,7 +1,7 @@
 """Adaptive Taylor (DT) integrator for two-body + J2 motion, with dense output and the STM.
 
 The equations of motion, in a quasi-inertial frame whose z axis is the Earth's rotation
-axis (the caller converts frames; see DESIGN.md "Frames, time, forces")::
+axis (the caller converts frames; README "Units, sign conventions, time and frames")::
 
     r'' = -mu r / |r|^3 + a_J2,
     a_J2 = -3/2 J2 mu Re^2 / r^5 [x (1 - 5 z^2/r^2), y (1 - 5 z^2/r^2), z (3 - 5 z^2/r^2)]
@@ -10,8 +10,8 @@ are turned into a *P-model* (seed 000 eq. 14): with H = 1 s the spectrum of the 
 obeys ``X(K+2) = A(K) / ((K+1)(K+2))`` where A is the spectrum of the acceleration (seed 004
 eq. 6, written for the general case instead of the paper's constant r):
 
-    s = x*x + y*y + z*z                 (Cauchy products, SEEDS.md notation)
-    w3, w5, w7 = s^(-3/2), s^(-5/2), s^(-7/2)   (power rule, SEEDS.md notation)
+    s = x*x + y*y + z*z                 (Cauchy products, docs/equations.md, notation)
+    w3, w5, w7 = s^(-3/2), s^(-5/2), s^(-7/2)   (power rule, docs/equations.md, notation)
     T = z*z * w7
     h_xy = -mu w3 + k (w5 - 5 T),  h_z = h_xy + 2 k w5,   k = -3/2 J2 mu Re^2
     A_x = x * h_xy,  A_y = y * h_xy,  A_z = z * h_z
@@ -58,14 +58,15 @@ from functools import lru_cache
 
 import numpy as np
 
+from trackproc import vocabulary
 from trackproc.constants import J2, MU_EARTH, RE_EARTH
 from trackproc.errors import ProcessingError
 
 __all__ = ["Outcome", "Propagation", "propagate", "default_order", "acceleration", "FORCES",
            "STATE_PARAMETERS"]
 
-FORCES = ("two-body", "j2")
-STATE_PARAMETERS = ("x", "y", "z", "vx", "vy", "vz")
+FORCES = vocabulary.FORCES
+STATE_PARAMETERS = vocabulary.STATE_NAMES
 _EXPONENTS = (-1.5, -2.5, -3.5)
 
 
@@ -94,21 +95,14 @@ def acceleration(r_m, *, force: str = "j2", mu_m3_s2: float = MU_EARTH, j2: floa
                  re_m: float = RE_EARTH) -> np.ndarray:
     """Acceleration (m/s^2) of the force model at positions ``r_m`` shaped ``(..., 3)``.
 
-    The right-hand side whose spectrum the integrator builds; used by tests and by
-    conventional integrators for comparison.
+    The right-hand side whose spectrum the integrator builds (:func:`trackproc.dynamics.gravity.acceleration`);
+    used by tests and by conventional integrators for comparison.
     """
-    r = np.asarray(r_m, dtype=float)
-    s = np.sum(r * r, axis=-1, keepdims=True)
-    rn = np.sqrt(s)
-    a = -mu_m3_s2 * r / (s * rn)
-    if force == "j2":
-        z2s = r[..., 2:3] ** 2 / s
-        k = -1.5 * j2 * mu_m3_s2 * re_m ** 2 / (s * s * rn)
-        fac = np.concatenate([1.0 - 5.0 * z2s, 1.0 - 5.0 * z2s, 3.0 - 5.0 * z2s], axis=-1)
-        a = a + k * r * fac
-    elif force != "two-body":
+    from trackproc.dynamics import gravity
+
+    if force not in FORCES:
         raise ValueError(f"unknown force model {force!r}; expected one of {FORCES}")
-    return a
+    return gravity.acceleration(r_m, mu_m3_s2, j2 if force == "j2" else 0.0, re_m)
 
 
 @lru_cache(maxsize=32)
@@ -129,6 +123,8 @@ def _series_state(r0, v0, p, mu, kj2):
 
     Works with the batch axis innermost (contiguous), so every contraction over the
     coefficient index is a multiply-add of whole batch vectors.
+
+    Implements seed 004 eq. 6 (two-body spectrum, r^-3 by the power rule) with J2, batched.
     """
     b = r0.shape[0]
     n = p + 2
@@ -192,7 +188,10 @@ _G_2B_IDX = np.array([0 * 5 + 0, 1 * 5 + 1, 2 * 5 + 2, 4 * 5 + 3, 5 * 5 + 3, 0 *
 
 
 def _series_state_single(r0, v0, p, mu, kj2):
-    """Same result as :func:`_series_state` for B = 1, with scalar bookkeeping per order."""
+    """Same result as :func:`_series_state` for B = 1, with scalar bookkeeping per order.
+
+    Implements seed 004 eq. 6 (two-body spectrum, r^-3 by the power rule) with J2.
+    """
     n = p + 2
     x0, y0, z0 = (float(c) for c in r0[0])
     matmul = np.matmul

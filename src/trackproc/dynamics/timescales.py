@@ -1,4 +1,4 @@
-"""Time scales: UTC <-> TAI <-> TT with leap seconds, UT1 from UTC, Earth orientation data.
+"""Time scales: UTC <-> TAI <-> TT (and GPS -> UTC) with leap seconds, UT1 from UTC, Earth orientation data.
 
 Times cross this module as two-part Julian dates ``(jd1, jd2)`` (SOFA/ERFA convention: a
 UTC two-part date is a "quasi-JD" whose day has 86401 s on a leap-second day) or as numpy
@@ -17,6 +17,10 @@ from trackproc.constants import DAY_S
 
 #: Seconds of TT minus TAI (exact, by definition).
 TT_MINUS_TAI_S = 32.184
+#: Nanoseconds of each supported time scale minus TAI: GPS = TAI - 19 s (IS-GPS-200), TT = TAI + 32.184 s (IAU).
+SCALE_MINUS_TAI_NS = {"TAI": 0, "GPS": -19_000_000_000, "TT": 32_184_000_000}
+_NS = 1_000_000_000
+_DAY_NS = 86_400 * _NS
 
 
 def datetime64_to_jd_utc(t) -> tuple[np.ndarray, np.ndarray]:
@@ -71,6 +75,39 @@ def tai_minus_utc_s(jd1, jd2) -> np.ndarray:
     """TAI - UTC in seconds (the accumulated leap seconds) at the given UTC dates."""
     iy, im, id_, fd = erfa.jd2cal(jd1, jd2)
     return erfa.dat(iy, im, id_, fd)
+
+
+def scale_ns_to_utc_ns(naive, time_system: str):
+    """Epochs of a time scale (int64 ns since 1970 on the scale's own uniform calendar) -> UTC
+    ns since 1970 (naive, POSIX-like); ``time_system`` one of UTC, TAI, GPS, TT. None before 1960
+    (outside the leap-second table).
+
+    TAI - UTC comes from ERFA's leap-second table, looked up at the UTC date: guess with the
+    TAI date, then look up again at the guessed UTC date (exact except inside a leap second,
+    which lands on the first second of the next day).
+    """
+    if time_system == "UTC":
+        return naive
+    tai = naive - SCALE_MINUS_TAI_NS[time_system]
+    dat = tai_minus_utc_ns(tai)
+    if dat is None:
+        return None
+    dat = tai_minus_utc_ns(tai - dat)
+    return None if dat is None else (tai - dat).astype(np.int64)
+
+
+def tai_minus_utc_ns(utc_like):
+    """TAI - UTC (int64 ns) at UTC epochs given as int64 ns since 1970; None before 1960."""
+    days = np.floor_divide(utc_like, _DAY_NS)
+    d = days.astype("datetime64[D]")
+    year = d.astype("datetime64[Y]").astype(np.int64) + 1970
+    month = d.astype("datetime64[M]").astype(np.int64) % 12 + 1
+    day = (d - d.astype("datetime64[M]")).astype(np.int64) + 1
+    fd = (utc_like - days * _DAY_NS) / _DAY_NS
+    if np.any(year < 1960):
+        return None
+    seconds = erfa.dat(year.astype(np.int32), month.astype(np.int32), day.astype(np.int32), fd)
+    return np.round(np.asarray(seconds, dtype="float64") * _NS).astype(np.int64)
 
 
 def utc_to_ut1(jd1, jd2, dut1_s):

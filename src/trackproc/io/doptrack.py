@@ -118,9 +118,9 @@ def _number(value, source: str, key: str, expected: str) -> float:
 
 def _iso(value) -> object:
     if isinstance(value, (dt.datetime, dt.date, pd.Timestamp)):
-        stamp = pd.Timestamp(value)
-        stamp = stamp.tz_localize("UTC") if stamp.tzinfo is None else stamp.tz_convert("UTC")
-        return stamp.strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+        from trackproc.io.isotime import iso_utc
+
+        return iso_utc(value, 6)
     if isinstance(value, dict):
         return {str(k): _iso(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

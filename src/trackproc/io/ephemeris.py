@@ -1,6 +1,6 @@
 """Ephemeris tables (the output of ``trackproc propagate``) and CCSDS OEM (KVN) text.
 
-Columns, in this order (GCRF, SI units; DESIGN.md "Data contracts"):
+Columns, in this order (GCRF, SI units; README "Data contract" and docs/propagate.md):
 
 ==============================  =================  ==============================================
 column                          unit               present
@@ -49,6 +49,7 @@ import pyarrow as pa
 
 from trackproc.io.tables import arrow_table_bytes
 from trackproc.errors import InputError
+from trackproc.io.isotime import iso_utc
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
 
 __all__ = ["COLUMNS", "STATE_NAMES", "STM_COLUMNS", "SIGMA_COLUMNS", "COV_COLUMNS", "MEASUREMENT_COLUMNS",
@@ -218,9 +219,7 @@ def _numeric_text(cells) -> bool:
 
 def _oem_epoch(t) -> str:
     """UTC ISO 8601 without zone letter, milliseconds at least, more digits only when needed."""
-    from trackproc.io.statefile import format_epoch
-
-    return format_epoch(t)[:-1]
+    return iso_utc(t, suffix="")
 
 
 def _num(value: float) -> str:
@@ -268,7 +267,7 @@ def oem_text(eph: Ephemeris, *, object_name: str = "UNKNOWN", object_id: str = "
     lines = [f"CCSDS_OEM_VERS = {OEM_VERSION}"]
     for c in comments:
         lines.extend(f"COMMENT {part}" for part in str(c).splitlines())
-    lines += [f"CREATION_DATE = {np.datetime_as_string(stamp, unit='ms')}", f"ORIGINATOR = {originator}", "",
+    lines += [f"CREATION_DATE = {iso_utc(stamp, 3, suffix='')}", f"ORIGINATOR = {originator}", "",
               "META_START", f"OBJECT_NAME = {object_name}", f"OBJECT_ID = {object_id}", "CENTER_NAME = EARTH",
               "REF_FRAME = GCRF", "TIME_SYSTEM = UTC", f"START_TIME = {_oem_epoch(t64[0])}",
               f"STOP_TIME = {_oem_epoch(t64[-1])}", "META_STOP", ""]

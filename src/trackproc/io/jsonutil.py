@@ -18,7 +18,9 @@ def json_ready(value):
     if isinstance(value, np.ndarray):
         return json_ready(value.tolist())
     if isinstance(value, np.datetime64):
-        return np.datetime_as_string(value.astype("datetime64[ns]"), unit="ns") + "Z"
+        from trackproc.io.isotime import iso_utc
+
+        return iso_utc(value, 9)
     if isinstance(value, np.generic):
         return json_ready(value.item())
     if isinstance(value, float) and not math.isfinite(value):

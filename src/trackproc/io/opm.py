@@ -26,6 +26,7 @@ from datetime import datetime, timezone
 import numpy as np
 
 from trackproc.errors import InputError
+from trackproc.io.isotime import iso_utc
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
 
 __all__ = ["COVARIANCE_KEYS", "opm_text", "write_opm", "parse_opm", "read_opm"]
@@ -38,8 +39,7 @@ _STATE_KEYS = _AXES
 
 
 def _epoch_text(t) -> str:
-    text = np.datetime_as_string(np.datetime64(t, "ns"), unit="us")
-    return text
+    return iso_utc(t, 6, suffix="")
 
 
 def _num(value: float) -> str:
@@ -54,7 +54,7 @@ def opm_text(state, *, object_name: str = "UNKNOWN", object_id: str = "UNKNOWN",
     parameters (if any) are listed in COMMENT lines with their sigmas.
     """
     created = creation_date or datetime.now(timezone.utc).replace(tzinfo=None)
-    created_text = np.datetime_as_string(np.datetime64(created, "ms"), unit="ms")
+    created_text = iso_utc(created, 3, suffix="")
     lines = [f"CCSDS_OPM_VERS = {VERSION}"]
     for c in comments:
         for part in str(c).splitlines():

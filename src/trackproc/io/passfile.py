@@ -41,6 +41,7 @@ import pyarrow as pa
 from trackproc.io.tables import arrow_table_bytes
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
+from trackproc.io.isotime import iso_utc_array
 from trackproc.io.raw import KIND_UNITS
 from trackproc.io.tabular import (CSV_META_PREFIX, META_KEY, Problems, column_numbers, column_strings,
                                   column_times, source_table)
@@ -132,14 +133,7 @@ def to_arrow(table: PassTable) -> pa.Table:
 
 def iso_times(times: pd.Series) -> np.ndarray:
     """UTC timestamps as ISO 8601 strings with ``Z``, at the coarsest exact precision (s..ns)."""
-    ns = times.dt.tz_convert("UTC").dt.tz_localize(None).dt.as_unit("ns").to_numpy()
-    ints = ns.astype(np.int64)
-    unit = "ns"
-    for candidate, step in (("s", 10**9), ("ms", 10**6), ("us", 10**3)):
-        if np.all(ints % step == 0):
-            unit = candidate
-            break
-    return np.char.add(np.datetime_as_string(ns, unit=unit), "Z")
+    return iso_utc_array(times.dt.tz_convert("UTC").dt.tz_localize(None).dt.as_unit("ns").to_numpy())
 
 
 def _csv_cell(value) -> str:

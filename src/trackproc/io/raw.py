@@ -11,13 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 #: Canonical measurement kinds and their SI unit (``value`` and ``sigma`` columns).
-KIND_UNITS = {
-    "range": "m",
-    "range_rate": "m/s",
-    "doppler": "Hz",
-    "elevation": "rad",
-    "azimuth": "rad",
-}
+from trackproc.vocabulary import KIND_UNITS  # noqa: F401  (re-exported)
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """State files (JSON): an orbit state, its estimated parameters and error matrix, in GCRF.
 
-Layout (DESIGN.md "Data contracts", "A state file"), keys in this order when written::
+Layout (README "Data contract", "State file"), keys in this order when written::
 
     {"schema_version": 1,
      "epoch": "2026-03-20T09:30:00.000Z",           # UTC, ISO 8601
@@ -35,6 +35,7 @@ import numpy as np
 
 from trackproc.io.jsonutil import json_ready
 from trackproc.errors import InputError
+from trackproc.io.isotime import iso_utc as format_epoch  # noqa: F401  (the state file's epoch text)
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
 
 SCHEMA_VERSION = 1
@@ -137,16 +138,6 @@ def parse_epoch(text: str, *, file: str | None = None, column: str = "epoch") ->
     if np.isnat(t):
         raise InputError("invalid epoch", file=file, column=column, found=text, expected=expected)
     return t - np.timedelta64(offset_s, "s")
-
-
-def format_epoch(t) -> str:
-    """``datetime64`` (UTC) -> ISO 8601 with ``Z``, milliseconds at least, more digits only when needed."""
-    t = np.datetime64(t, "ns")
-    text = np.datetime_as_string(t, unit="ns")
-    date, frac = text.split(".")
-    frac = frac.rstrip("0")
-    frac = frac + "0" * (3 - len(frac)) if len(frac) < 3 else frac
-    return f"{date}.{frac}Z"
 
 
 # --------------------------------------------------------------------------- reading

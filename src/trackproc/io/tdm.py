@@ -88,9 +88,6 @@ __all__ = ["read_tdm"]
 
 _NS = 1_000_000_000
 _DAY_NS = 86_400 * _NS
-#: GPS time = TAI - 19 s (IS-GPS-200); TT = TAI + 32.184 s (IAU).
-_GPS_MINUS_TAI_NS = -19 * _NS
-_TT_MINUS_TAI_NS = 32_184_000_000
 #: Largest accepted |received - nominal| / nominal: 1e-3 is 300 km/s one-way, far above any
 #: Earth-orbit or interplanetary Doppler, far below any turnaround ratio (240/221 is 8.6 %).
 _MAX_RELATIVE_DOPPLER = 1e-3
@@ -683,10 +680,12 @@ class _Converter:
     def _convert(self, seg: _Segment, cfg: _Config):
         import numpy as np
 
+        from trackproc.dynamics import timescales
+
         if not seg.obs:
             return
         naive = np.array([o.naive_ns for o in seg.obs], dtype="int64")
-        utc = _to_utc_ns(naive, cfg.time_system)
+        utc = timescales.scale_ns_to_utc_ns(naive, cfg.time_system)
         if utc is None:
             raise self.error("epoch outside the UTC leap-second table (before 1960)",
                              row=seg.obs[0].row, column=seg.obs[0].key)
@@ -869,41 +868,3 @@ def _ramped_frequency(times, tx_freq, tx_rate):
 
     anchor = np.minimum(times, ft[k])  # = ft[k]; = t (no ramp) before the first sample
     return fv[k] + ramp(times) - ramp(anchor)
-
-
-def _to_utc_ns(naive, time_system: str):
-    """Epochs (ns since 1970 on the scale's uniform calendar) -> UTC ns since 1970."""
-    import numpy as np
-
-    if time_system == "UTC":
-        return naive
-    if time_system == "GPS":
-        tai = naive - _GPS_MINUS_TAI_NS
-    elif time_system == "TT":
-        tai = naive - _TT_MINUS_TAI_NS
-    else:
-        tai = naive
-    # TAI - UTC from ERFA's leap-second table, looked up at the UTC date: guess with the
-    # TAI date, then look up again at the guessed UTC date (exact except inside a leap
-    # second, which lands on the first second of the next day).
-    dat = _tai_minus_utc_ns(tai)
-    if dat is None:
-        return None
-    dat = _tai_minus_utc_ns(tai - dat)
-    return None if dat is None else (tai - dat).astype(np.int64)
-
-
-def _tai_minus_utc_ns(utc_like):
-    import erfa
-    import numpy as np
-
-    days = np.floor_divide(utc_like, _DAY_NS)
-    d = days.astype("datetime64[D]")
-    year = d.astype("datetime64[Y]").astype(np.int64) + 1970
-    month = d.astype("datetime64[M]").astype(np.int64) % 12 + 1
-    day = (d - d.astype("datetime64[M]")).astype(np.int64) + 1
-    fd = (utc_like - days * _DAY_NS) / _DAY_NS
-    if np.any(year < 1960):
-        return None
-    seconds = erfa.dat(year.astype(np.int32), month.astype(np.int32), day.astype(np.int32), fd)
-    return np.round(np.asarray(seconds, dtype="float64") * _NS).astype(np.int64)

@@ -58,6 +58,7 @@ import math
 import numpy as np
 
 from trackproc.dynamics import spectra as sp
+from trackproc.dynamics.rtn import rtn_jacobian, rtn_rotation, to_rtn  # noqa: F401  (re-exported)
 
 __all__ = [
     "normalizing_factor", "mean_spectrum", "correlation_spectrum", "correlation", "variance",
@@ -140,7 +141,7 @@ def correlation_spectrum(spec1, spec2=None, cov=None) -> np.ndarray:
     -------
     array ``(..., A, B, n1 + n2 - 1)``
         ``R(K) = m_q(K) - (m_x(., t1) * m_x(., t2))(K) = sum_j (W_aj * W_bj)(K)``, complete
-        Cauchy products (SEEDS.md "product") of the normalised random parts
+        Cauchy products (docs/equations.md, notation: "product") of the normalised random parts
         ``W = dX/dV L``. Exact for spectra affine in V (see the module docstring on eq. 24).
     """
     w1 = _weights(spec1, cov)
@@ -256,7 +257,7 @@ def seed000_variance_exact(t_s, sigma1_m: float, sigma2_m_s: float, n_rad_s: flo
     """Ground truth of seed 000's example: ``D_x(t) = s1^2 cos^2(n t) + s2^2 sin^2(n t) / n^2`` (m^2).
 
     The exact variance of ``x(t) = (x0 - v1) cos(n t) + (g0 - v2) sin(n t) / n`` for
-    independent ``v1, v2`` (SEEDS.md, seed 000 item 3). The printed series (33)-(34) have
+    independent ``v1, v2`` (seed 000 item 3; docs/equations.md). The printed series (33)-(34) have
     coefficient typos and are not used.
     """
     nt = float(n_rad_s) * np.asarray(t_s, dtype=float)
@@ -372,7 +373,7 @@ def state_spectra(propagation, t_s) -> np.ndarray:
     with respect to the quasi-inertial initial state. For each time t, in the step expanded
     about ``t_s``, with ``H = t - t_s``: the position discretes ``X_H(K) = H^K X_1(K)`` and the
     velocity discretes by the derivative rule ``V_H(K) = (K+1)/H X_H(K+1) = (K+1) H^K X_1(K+1)``
-    (SEEDS.md notation), each with its derivatives with respect to the initial state (the
+    (docs/equations.md, notation), each with its derivatives with respect to the initial state (the
     engine's sensitivity spectra, seed 004 eqs. 19-21 to first order).
 
     Returns
@@ -523,55 +524,6 @@ def covariance_sd(cov, n_samples: int) -> np.ndarray:
 
 
 # =========================================================================== frames, stations, output
-
-def rtn_rotation(r, v) -> np.ndarray:
-    """Rows of the radial / along-track / cross-track unit vectors at states ``r, v (..., 3)``.
-
-    ``R = r/|r|``, ``C = r x v / |r x v|``, ``A = C x R`` (along-track: the velocity direction
-    for a circular orbit). Returns ``(..., 3, 3)``; ``M @ dr`` resolves a vector along R, A, C.
-    """
-    r = np.asarray(r, dtype=float)
-    v = np.asarray(v, dtype=float)
-    er = r / np.linalg.norm(r, axis=-1, keepdims=True)
-    h = np.cross(r, v)
-    ec = h / np.linalg.norm(h, axis=-1, keepdims=True)
-    ea = np.cross(ec, er)
-    return np.stack([er, ea, ec], axis=-2)
-
-
-def rtn_jacobian(r, v, rotating: bool = True) -> np.ndarray:
-    """6 x 6 map of inertial state errors to RTN errors at the nominal ``r, v (..., 3)``.
-
-    Position: ``dr_rtn = M dr`` (rows of :func:`rtn_rotation`). Velocity, ``rotating=True``:
-    the rate of change of the RTN position error, ``M dv - w x (M dr)`` with the frame's
-    angular velocity ``w = (0, 0, |r x v| / r^2)`` in RTN (two-body; the slow turn of the plane
-    under J2 is ~1e-3 of it) -- the Clohessy-Wiltshire convention, in which an along-track
-    drift shows as a constant along-track rate, not as a growing radial velocity.
-    ``rotating=False``: the inertial velocity error resolved on the same axes, ``M dv``.
-    Returns ``(..., 6, 6)``.
-    """
-    m = rtn_rotation(r, v)
-    big = np.zeros(m.shape[:-2] + (6, 6))
-    big[..., :3, :3] = m
-    big[..., 3:, 3:] = m
-    if rotating:
-        r = np.asarray(r, dtype=float)
-        w = np.linalg.norm(np.cross(r, np.asarray(v, float)), axis=-1) / np.sum(r * r, axis=-1)
-        # -[w]x M with [w]x = w [[0,-1,0],[1,0,0],[0,0,0]]: rows (w M_1, -w M_0, 0)
-        big[..., 3, :3] = w[..., None] * m[..., 1, :]
-        big[..., 4, :3] = -w[..., None] * m[..., 0, :]
-    return big
-
-
-def to_rtn(cov, r, v, rotating: bool = True) -> np.ndarray:
-    """6 x 6 covariances ``(..., 6, 6)`` resolved along the RTN axes of the nominal ``r, v``.
-
-    ``J P J^T`` with ``J`` from :func:`rtn_jacobian` (by default the velocity block is the rate
-    of the RTN position errors; ``rotating=False``: inertial velocity errors on RTN axes).
-    """
-    big = rtn_jacobian(r, v, rotating)
-    return np.einsum("...ij,...jk,...lk->...il", big, np.asarray(cov, float), big)
-
 
 def range_range_rate_jacobian(r, v, r_st, v_st) -> np.ndarray:
     """Partials of range and range-rate with respect to the satellite state: ``(..., 2, 6)``.

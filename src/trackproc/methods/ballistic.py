@@ -107,6 +107,8 @@ def conic_to_impact(p_m, e, radius_m: float = R_PLANAR, mu: float = MU_EARTH):
 
     From ``y = 1 - e cos θ_f = p/R`` and ``x = e sin θ_f`` (App. A): ``tan α = x / y``,
     ``V² = (μ/p)(x² + y²)``. Raises ``ValueError`` when the orbit does not reach ``r = R``.
+
+    Implements seed 003 App. A (inverse).
     """
     p = np.asarray(p_m, float)
     e = np.asarray(e, float)
@@ -130,12 +132,18 @@ def final_anomaly(p_m, e, radius_m: float = R_PLANAR):
 # --------------------------------------------------------------------------- eqs. 9-10
 
 def radius(theta, p_m, e):
-    """Eq. 9: ``r = p / (1 - e cos θ)`` (m), θ from apogee."""
+    """Eq. 9: ``r = p / (1 - e cos θ)`` (m), θ from apogee.
+
+    Implements seed 003 eq. 9: ``r(θ) = p / (1 - e cos θ)``.
+    """
     return p_m / (1.0 - e * np.cos(theta))
 
 
 def angular_rate(theta, p_m, e, mu: float = MU_EARTH):
-    """Eq. 10: ``dθ/dt = sqrt(μ/p³) (1 - e cos θ)²`` (rad/s)."""
+    """Eq. 10: ``dθ/dt = sqrt(μ/p³) (1 - e cos θ)²`` (rad/s).
+
+    Implements seed 003 eq. 10: ``dθ/dt = sqrt(mu)/p^1.5 (1 - e cos θ)^2``.
+    """
     return np.sqrt(mu / p_m ** 3) * (1.0 - e * np.cos(theta)) ** 2
 
 
@@ -148,6 +156,8 @@ def time_from_apogee(theta, p_m, e, mu: float = MU_EARTH):
     """Time (s) from apogee to the anomaly θ ∈ (-π, π): the closed-form solution of eq. 10.
 
     ``η = 2 atan2(sqrt(1+e) sin(θ/2), sqrt(1-e) cos(θ/2))``, ``t = (η + e sin η) / n``.
+
+    Implements seed 003 eq. 10 (integrated in closed form).
     """
     theta = np.asarray(theta, float)
     eta = 2.0 * np.arctan2(np.sqrt(1.0 + e) * np.sin(theta / 2), np.sqrt(1.0 - e) * np.cos(theta / 2))
@@ -183,6 +193,8 @@ def anomaly_by_ode(t_s, t0_s: float, theta0: float, p_m: float, e: float, mu: fl
 
     The paper's own route; here a cross-check of :func:`anomaly_at` (dense output of DOP853,
     7th order, whose interpolation error at this tolerance is far below 1e-9 rad).
+
+    Implements seed 003 eq. 10 (integrated numerically, as a check).
     """
     from scipy.integrate import solve_ivp
 
@@ -202,6 +214,8 @@ def elevation(theta, phi, p_m, e, radius_m: float = R_PLANAR):
 
     ``ε = atan2(r cos(φ-θ) - R, r |sin(φ-θ)|)``; equal to the paper's ``tan ε`` while the
     object approaches (``sin(φ - θ) > 0``).
+
+    Implements seed 003 eq. 11: ``tan ε = (r cos(φ - θ) - R) / (r sin(φ - θ))``.
     """
     r = radius(theta, p_m, e)
     d = np.asarray(phi, float) - np.asarray(theta, float)
@@ -213,6 +227,8 @@ def horizon_anomalies(phi, p_m, e, radius_m: float = R_PLANAR):
 
     θ₀ (rise) and θ₂ from the quadratic in ``x = tan(θ/2)``; for ``φ = θ_f``, θ₂ = θ_f.
     Raises ``ValueError`` when the discriminant is negative (the orbit never rises).
+
+    Implements seed 003 App. B.
     """
     c = radius_m / p_m
     a = np.cos(phi) + e * c
@@ -235,6 +251,8 @@ class PlanarEncounter:
     ``p_m, e``: the conic; ``phi_impact``: the observer's angle at impact under H0 (θ_f for the
     unfavourable orbit); ``observer_rate``: ``±ω_E cos(lat)`` (rad/s; + with, - against, 0 a
     stationary observer); ``radius_m``, ``mu``.
+
+    Implements seed 003 eqs. 9-11 and App. A-B for one encounter.
     """
 
     p_m: float
@@ -248,7 +266,10 @@ class PlanarEncounter:
     def from_impact(cls, velocity_m_s: float, angle_rad: float, *, latitude_rad: float | None = None,
                     direction: str = "none", radius_m: float = R_PLANAR, mu: float = MU_EARTH,
                     omega_rad_s: float = OMEGA_EARTH) -> "PlanarEncounter":
-        """The unfavourable orbit (φ = θ_f) of impact speed V and angle α (App. A)."""
+        """The unfavourable orbit (φ = θ_f) of impact speed V and angle α (App. A).
+
+        Implements seed 003 App. A.
+        """
         p, e = impact_to_conic(velocity_m_s, angle_rad, radius_m, mu)
         p, e = float(p), float(e)
         return cls(p, e, float(final_anomaly(p, e, radius_m)),
@@ -282,6 +303,8 @@ class PlanarEncounter:
         Stationary observer: App. B's θ₀ turned into time by eq. 10's closed form. Moving
         observer: the last upward zero of ε(s) before impact, bracketed on a grid from the
         launch point (θ = -θ_f) and refined by Brent's method.
+
+        Implements seed 003 App. B with eq. 10.
         """
         t_imp = self.impact_from_apogee_s
         if self.observer_rate == 0.0:
@@ -300,7 +323,10 @@ class PlanarEncounter:
 
 
 def observer_speed(latitude_rad: float | None, direction: str = "none", omega_rad_s: float = OMEGA_EARTH) -> float:
-    """In-plane angular rate of the fictitious observer: ``±ω_E cos(lat)`` (rad/s), 0 if stationary."""
+    """In-plane angular rate of the fictitious observer: ``±ω_E cos(lat)`` (rad/s), 0 if stationary.
+
+    Implements seed 003 item 7 (the observer's in-plane speed).
+    """
     sign = DIRECTIONS[direction]
     if sign == 0 or latitude_rad is None:
         return 0.0
@@ -327,6 +353,8 @@ def observer_motion_error(t_s, elevation_rad, range_m, latitude_rad: float, *, r
     ``side = +1`` (converging from the same side, "with") gives errors of the same order.
     Returns ``(Δd, Δl, Δε)``: ``Δd = d_f - d_H`` (m), the shift ``Δl = Δd / cos ε`` (m) and
     the elevation error ``Δε = (Δd / d) tan ε`` (rad), as the paper's Fig. 2.
+
+    Implements seed 003 App. C (its Table 1).
     """
     t = np.asarray(t_s, float)
     el = np.asarray(elevation_rad, float)

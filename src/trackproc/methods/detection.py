@@ -42,7 +42,10 @@ GL_PANELS = 24
 # --------------------------------------------------------------------------- error probabilities
 
 def gamma_from_errors(alpha: float, beta: float | None = None) -> float:
-    """γ needed for false-alarm α and miss β: ``Φ⁻¹(1-α) + Φ⁻¹(1-β)`` (β = α: ``2 Φ⁻¹(1-α)``)."""
+    """γ needed for false-alarm α and miss β: ``Φ⁻¹(1-α) + Φ⁻¹(1-β)`` (β = α: ``2 Φ⁻¹(1-α)``).
+
+    Implements seed 003 eq. 7 (solved for γ).
+    """
     beta = alpha if beta is None else beta
     for name, value in (("alpha", alpha), ("beta", beta)):
         if not 0.0 < value < 0.5:
@@ -56,7 +59,10 @@ def equal_error(gamma) -> float:
 
 
 def miss_probability(alpha: float, gamma: float) -> float:
-    """β = Φ(Φ⁻¹(1 - α) - γ) for the threshold of false-alarm probability α."""
+    """β = Φ(Φ⁻¹(1 - α) - γ) for the threshold of false-alarm probability α.
+
+    Implements seed 003 eq. 7 (unequal error probabilities).
+    """
     return float(ndtr(ndtri(1.0 - alpha) - gamma))
 
 
@@ -68,6 +74,8 @@ class Statistic:
 
     ``s``: S; ``c_n``: C_n = E[S|H1]; ``sigma0``: σ₀; ``variance``: σ₀² C_n (both hypotheses);
     ``gamma``: sqrt(C_n)/σ₀; ``n``: samples used; ``uniform_sigma``: whether w_i = 1.
+
+    Implements seed 003 eqs. 2-4.
     """
 
     s: float
@@ -108,6 +116,8 @@ def statistic(x, a, b, sigma) -> Statistic:
     ``x, a, b, sigma``: arrays of one shape (the last axis is the samples; leading axes batch
     Monte Carlo draws of ``x``), angles in rad. Azimuth differences must be wrapped by the
     caller. Returns :class:`Statistic` (``s`` an array when ``x`` has leading axes).
+
+    Implements seed 003 eqs. 2-4.
     """
     x = np.asarray(x, float)
     a, b, sigma = (np.asarray(v, float) for v in (a, b, sigma))
@@ -166,6 +176,8 @@ def information_distance(delta_fn, t_start_s: float, t_end_s: float, *, panels: 
     ``u = ln(-t)`` (``dt = -t du``) with composite Gauss-Legendre (``panels`` × ``nodes``),
     which the tests check against scipy's adaptive ``quad`` to 1e-9 relative. An empty window
     (``t_end <= t_start``) gives 0.
+
+    Implements seed 003 eqs. 5-6.
     """
     if not t_end_s < 0:
         raise ValueError("the window must end before impact (t_end = -tau < 0)")
@@ -184,10 +196,16 @@ def information_distance(delta_fn, t_start_s: float, t_end_s: float, *, panels: 
 
 
 def requirement_g(distance: float, gamma: float) -> float:
-    """Eq. 8: ``g = σ sqrt(Δt) = ‖Δε‖ / γ`` (rad·s^½)."""
+    """Eq. 8: ``g = σ sqrt(Δt) = ‖Δε‖ / γ`` (rad·s^½).
+
+    Implements seed 003 eq. 8.
+    """
     return float(distance) / float(gamma)
 
 
 def sample_spacing(g: float, sigma_rad: float) -> float:
-    """Δt = (g / σ)² (s): the spacing that meets the requirement with noise σ (Fig. 3)."""
+    """Δt = (g / σ)² (s): the spacing that meets the requirement with noise σ (Fig. 3).
+
+    Implements seed 003 eq. 8 (solved for Δt).
+    """
     return (float(g) / float(sigma_rad)) ** 2

@@ -102,13 +102,13 @@ def range_rate_samples(epoch, r_itrf_m, t_s, mode: str, eop=None):
     :func:`trackproc.pipeline.estimate.build_problem` does), for
     :func:`~trackproc.models.observation.evaluate` (values unset: zeros, unit sigmas)."""
     from trackproc.dynamics import timescales as ts
-    from trackproc.models import measurements as mm
+    from trackproc.dynamics.geodesy import station_gcrf
     from trackproc.models import observation as ob
 
     t_s = np.atleast_1d(np.asarray(t_s, float))
     epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns")))
     jd1, jd2 = ts.add_seconds_utc(epoch_jd, t_s)
-    track = mm.station_gcrf(np.asarray(r_itrf_m, float), jd1, jd2, eop)
+    track = station_gcrf(np.asarray(r_itrf_m, float), jd1, jd2, eop)
     k = t_s.size
     return ob.MeasurementSet(t_s=t_s.copy(), kind=np.full(k, "range_rate", dtype=object),
                              station=np.full(k, "station", dtype=object), pass_id=np.full(k, "", dtype=object),
@@ -191,7 +191,10 @@ def circular_constraints(x, mu_m3_s2: float, *, state_index=(0, 1, 2, 3, 4, 5), 
 
 
 def constraint_scales(x, mu_m3_s2: float, *, state_index=(0, 1, 2, 3, 4, 5), rka_index: int = 6) -> np.ndarray:
-    """Scales that make eq. 5 relative: ``(r_ka², μ/r_ka, |r| |v|)``."""
+    """Scales that make eq. 5 relative: ``(r_ka², μ/r_ka, |r| |v|)``.
+
+    Implements seed 004 eq. 5 (the constraints' natural scales).
+    """
     x = np.asarray(x, float)
     idx = list(state_index)
     rka = abs(float(x[rka_index]))
@@ -563,7 +566,10 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
 def circular_tolerance_covariance(x, mu_m3_s2: float, eccentricity: float, *, state_index=(0, 1, 2, 3, 4, 5)):
     """Covariance (3, 3) of the constraint values of eq. 5 for an orbit that is circular only to
     ``eccentricity``: with r_ka = |r| the first is exact; ``|v|² - μ/r = (μ/r) e cos E`` and
-    ``r·v = √(μ r) e sin E`` to first order in e, for an unknown eccentric anomaly E (variance e²/2)."""
+    ``r·v = √(μ r) e sin E`` to first order in e, for an unknown eccentric anomaly E (variance e²/2).
+
+    Implements seed 004 eq. 5 (as soft constraints).
+    """
     x = np.asarray(x, float)
     r = float(np.linalg.norm(x[list(state_index)[:3]]))
     e2 = float(eccentricity) ** 2 / 2.0
@@ -718,13 +724,14 @@ def profile_mixture(solve_fixed: Callable[[float], tuple], x_hat, sigma: float, 
     return out
 
 
-def observability(jacobian, sigma, names, rtn_matrix, reference_covariance, posterior_covariance, *,
+def observability(jacobian, sigma, names, rtn, reference_covariance, posterior_covariance, *,
                   other_scales=None, reference: str = "", threshold: float = 1.0,
                   station_axis=None, state=None) -> Observability:
     """Observability of the state from one pass.
 
     ``jacobian`` (N, n) of the model at the solution (state x..vz in the first 6 columns, GCRF),
-    ``sigma`` (N,) the data sigmas, ``rtn_matrix`` (3, 3) rows radial/along/cross,
+    ``sigma`` (N,) the data sigmas, ``rtn`` (6, 6) the map of GCRF state errors to RTN ones
+    (:func:`trackproc.dynamics.rtn.rtn_jacobian` with ``rotating=False``),
     ``reference_covariance`` (6, 6) GCRF: the a-priori covariance (or a nominal one) that sets
     the units; ``posterior_covariance`` (6, 6) GCRF; ``other_scales`` (n - 6,) column scales
     of the other parameters for the plain singular values.
@@ -752,8 +759,7 @@ def observability(jacobian, sigma, names, rtn_matrix, reference_covariance, post
         full = js
     sv_full = np.linalg.svd(full, compute_uv=False)
     _, s, vt = np.linalg.svd(js_proj, full_matrices=False)
-    big = np.zeros((6, 6))
-    big[:3, :3] = big[3:, 3:] = np.asarray(rtn_matrix, float)
+    big = np.asarray(rtn, float)
     directions = (big @ chol @ vt.T).T                           # rows: RTN of L u_i
     ref_rtn = np.sqrt(np.clip(np.diag(big @ ref @ big.T), 0.0, None))
     post_rtn = np.sqrt(np.clip(np.diag(big @ np.asarray(posterior_covariance, float) @ big.T), 0.0, None))

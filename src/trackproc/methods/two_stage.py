@@ -115,6 +115,8 @@ def compress(a2, pi_diag, e, pi_offsets):
     without any cancellation (no explicit Woodbury subtraction). Returns ``(Ã2 = R_θθ, I)``:
     in :func:`two_stage_update` it gives the same K', ΔK as ``(A2, D + E Π Eᵀ)`` with an m × m S
     instead of an n2 × n2 one.
+
+    Implements seed 002 eq. 18 (a pass reduced to its information).
     """
     a2 = np.asarray(a2, float)
     w = 1.0 / np.sqrt(np.asarray(pi_diag, float))
@@ -135,6 +137,8 @@ def accumulate(estimates, covariance_passes, groups, names):
     (diagonal noise part plus any correlated part), ``groups`` (P,) the station of each pass,
     ``names`` the N stations in order. Weights ``1/var_p`` (the diagonal). Returns
     ``(means (N,), Π (N, N), M (N, P))`` with ``means = M estimates``, ``Π = M C Mᵀ``.
+
+    Implements seed 002 eqs. 17-18 (stage 1: the offsets accumulated over passes).
     """
     est = np.asarray(estimates, float)
     c = np.asarray(covariance_passes, float)
@@ -162,7 +166,10 @@ class TwoStage:
     """Report of the two-stage method: parameter ``names`` (the motion block), ``k`` (without the
     ranges), ``k_prime`` (stage 2), ``delta_k``, the stage-1 offsets ``biases`` (station ->
     value), their error matrix ``pi`` (stations order ``stations``), per-pass table ``passes``
-    and the round-off check ``identity_error`` = max |K' - (K - ΔK)| / max |K|."""
+    and the round-off check ``identity_error`` = max |K' - (K - ΔK)| / max |K|.
+
+    Implements seed 002 eqs. 17-22.
+    """
 
     names: list
     k: np.ndarray

@@ -1,9 +1,12 @@
 """Estimation measurement models: values with analytic partials, and bias modifiers.
 
-The same physics as the simulator's :mod:`trackproc.models.measurements` (DESIGN.md
-"Frames, time, forces", normative), written for the estimator: every model returns its value
-and its partial derivatives, all vectors in GCRF (m, m/s, s), every sample time-tagged at
-**reception** ``t_r`` on the ground.
+The estimator's view of the one measurement physics: the light time is
+:mod:`trackproc.models.light_time` and the observables with their partials are
+:mod:`trackproc.models.observables` (both shared with the simulator,
+:mod:`trackproc.models.measurements`); this module adds what only estimation needs — the
+total derivatives through the light time with respect to the initial state (eqs. 6, 11-12),
+the bias modifiers, and :func:`evaluate`, which models a whole :class:`MeasurementSet`. All
+vectors in GCRF (m, m/s, s), every sample time-tagged at **reception** ``t_r`` on the ground.
 
 Geometry (one-way, down leg). The signal received at ``t_r`` left the satellite at
 ``t_e = t_r - ρ/c``, with ``ρ = |r(t_e) - r_st(t_r)|`` and ``û = (r(t_e) - r_st(t_r)) / ρ``:
@@ -99,6 +102,14 @@ from typing import Optional, Sequence
 import numpy as np
 
 from trackproc.constants import C_LIGHT
+from trackproc.models import light_time as lt
+from trackproc.models.light_time import LIGHT_TIME_TOL_S, UpLeg, solve_up_leg  # noqa: F401  (re-exported)
+from trackproc.models.observables import (azel_partials, azel_value, range_partials,  # noqa: F401  (re-exported)
+                                          range_rate_partials, range_rate_value, two_way_range_partials,
+                                          two_way_range_rate_partials, up_rate_partials, wrap_pi)
+from trackproc.models.observables import check_range_rate_model as _check_model
+from trackproc.vocabulary import ESTIMATE_KIND_ORDER, LINK_KINDS, RANGE_RATE_MODELS  # noqa: F401
+from trackproc.vocabulary import LINK_MODES as MODES
 
 __all__ = ["KINDS", "RANGE_RATE_MODELS", "MODES", "MeasurementSet", "BiasModifier", "EmissionGeometry", "UpLeg",
            "range_partials", "range_rate_value", "range_rate_partials", "azel_value", "azel_partials",
@@ -106,102 +117,12 @@ __all__ = ["KINDS", "RANGE_RATE_MODELS", "MODES", "MeasurementSet", "BiasModifie
            "solve_up_leg", "round_trip_jacobian", "two_way_range_partials", "up_rate_partials",
            "two_way_range_rate_partials"]
 
-#: Measurement kinds the estimator models.
-KINDS = ("range", "range_rate", "doppler", "azimuth", "elevation")
-RANGE_RATE_MODELS = ("doppler", "instantaneous")
-#: Link modes: the satellite transmits (one-way) or transponds the station's signal (two-way).
-MODES = ("one-way", "two-way")
-#: Kinds a two-way link changes (angles are the down leg's in both modes).
-LINK_KINDS = ("range", "range_rate", "doppler")
-#: Light-time convergence threshold, s (as the simulator).
-LIGHT_TIME_TOL_S = 1e-12
+#: Measurement kinds the estimator models (in the order its reports list them).
+KINDS = ESTIMATE_KIND_ORDER
 
 
 def _dot(a, b):
     return np.einsum("...i,...i->...", a, b)
-
-
-def wrap_pi(angle_rad):
-    """Angle in [-π, π) (residuals of azimuth)."""
-    return np.mod(np.asarray(angle_rad, float) + np.pi, 2.0 * np.pi) - np.pi
-
-
-# ----------------------------------------------------------------------------- geometry
-
-def range_partials(r_e, r_st):
-    """Range ``ρ`` (m), unit vector ``û`` and ``∂ρ/∂r_e = û`` (fixed ``t_e``), shapes (...,), (..., 3)."""
-    d = np.asarray(r_e, float) - np.asarray(r_st, float)
-    rho = np.linalg.norm(d, axis=-1)
-    u = d / rho[..., None]
-    return rho, u, u
-
-
-def range_rate_value(r_e, v_e, r_st, v_st, model: str = "doppler", c: float = C_LIGHT):
-    """One-way range-rate (m/s, positive receding): eq. (2) ``doppler`` or (3) ``instantaneous``."""
-    _check_model(model)
-    d = np.asarray(r_e, float) - np.asarray(r_st, float)
-    u = d / np.linalg.norm(d, axis=-1)[..., None]
-    rr = _dot(u, np.asarray(v_e, float) - np.asarray(v_st, float))
-    if model == "doppler":
-        rr = rr / (1.0 + _dot(u, v_e) / c)
-    return rr
-
-
-def range_rate_partials(r_e, v_e, r_st, v_st, model: str = "doppler", c: float = C_LIGHT):
-    """Range-rate and its partials ``∂ρ̇/∂r_e`` and ``∂ρ̇/∂v_e`` at fixed ``t_e`` (module docstring).
-
-    Returns ``(rr, d_rr_d_r (..., 3), d_rr_d_v (..., 3))``.
-    """
-    _check_model(model)
-    r_e, v_e, r_st, v_st = (np.asarray(x, float) for x in (r_e, v_e, r_st, v_st))
-    d = r_e - r_st
-    rho = np.linalg.norm(d, axis=-1)[..., None]
-    u = d / rho
-    dv = v_e - v_st
-    num = _dot(u, dv)[..., None]
-    # P w = w - u (u·w): derivative of û along r_e, times rho
-    proj_dv = dv - u * num
-    if model == "instantaneous":
-        return num[..., 0], proj_dv / rho, u.copy()
-    den = 1.0 + _dot(u, v_e)[..., None] / c
-    rr = num / den
-    proj_v = v_e - u * _dot(u, v_e)[..., None]
-    d_r = (proj_dv - rr * proj_v / c) / (rho * den)
-    d_v = u * (1.0 - rr / c) / den
-    return rr[..., 0], d_r, d_v
-
-
-def azel_value(direction_gcrf, gcrf_to_enu):
-    """Azimuth (rad, [0, 2π), from north through east) and elevation (rad) of a GCRF direction;
-    ``gcrf_to_enu`` (..., 3, 3) = E · M, the rotation to the station's east-north-up frame."""
-    enu = np.einsum("...ij,...j->...i", gcrf_to_enu, direction_gcrf)
-    e, n, up = enu[..., 0], enu[..., 1], enu[..., 2]
-    az = np.mod(np.arctan2(e, n), 2.0 * np.pi)
-    az = np.where(az >= 2.0 * np.pi, 0.0, az)
-    return az, np.arctan2(up, np.hypot(e, n))
-
-
-def azel_partials(direction_gcrf, gcrf_to_enu):
-    """Azimuth, elevation and their gradients with respect to the GCRF direction vector.
-
-    ``∂az/∂enu = (n, -e, 0)/h²``, ``∂el/∂enu = (-e u, -n u, h²)/(h ρ²)``, h = √(e² + n²), then
-    times ``gcrf_to_enu``. Returns ``(az, el, d_az (..., 3), d_el (..., 3))``.
-    """
-    m = np.asarray(gcrf_to_enu, float)
-    enu = np.einsum("...ij,...j->...i", m, direction_gcrf)
-    e, n, up = enu[..., 0], enu[..., 1], enu[..., 2]
-    h2 = e * e + n * n
-    h = np.sqrt(h2)
-    rho2 = h2 + up * up
-    g_az = np.stack([n / h2, -e / h2, np.zeros_like(e)], -1)
-    g_el = np.stack([-e * up / (h * rho2), -n * up / (h * rho2), h / rho2], -1)
-    az, el = azel_value(direction_gcrf, m)
-    return az, el, np.einsum("...i,...ij->...j", g_az, m), np.einsum("...i,...ij->...j", g_el, m)
-
-
-def _check_model(model: str) -> None:
-    if model not in RANGE_RATE_MODELS:
-        raise ValueError(f"unknown range-rate model {model!r}; expected one of {RANGE_RATE_MODELS}")
 
 
 # ----------------------------------------------------------------------------- light time
@@ -235,26 +156,12 @@ def solve_light_time(trajectory, t_r_s, r_st, *, c: float = C_LIGHT, tol_s: floa
     """
     t_r = np.asarray(t_r_s, float)
     r_st = np.asarray(r_st, float)
-    s = trajectory.state(t_r)
-    tau = np.linalg.norm(s[:, :3] - r_st, axis=-1) / c
-    for it in range(1, max_iter + 1):
-        s = trajectory.state(t_r - tau)
-        d = s[:, :3] - r_st
-        rho = np.linalg.norm(d, axis=-1)
-        u = d / rho[:, None]
-        step = (c * tau - rho) / (c + _dot(u, s[:, 3:]))
-        tau = tau - step
-        if np.all(np.abs(step) < tol_s):
-            break
-    else:
-        raise ArithmeticError("light-time iteration did not converge")
-    t_e = t_r - tau
-    s = trajectory.state(t_e)
-    sdot = trajectory.state(t_e, derivative=1)
-    d = s[:, :3] - r_st
-    rho = np.linalg.norm(d, axis=-1)
-    return EmissionGeometry(t_e_s=t_e, tau_s=tau, state=s, state_dot=sdot, rho_m=rho, u=d / rho[:, None],
-                            iterations=it)
+    tau0 = np.linalg.norm(trajectory.state(t_r)[:, :3] - r_st, axis=-1) / c
+    leg = lt.solve_down_leg(lambda tau: trajectory.state(t_r - tau), r_st, tau0, c=c, tol_s=tol_s,
+                            max_iter=max_iter)
+    t_e = t_r - leg.tau_s
+    return EmissionGeometry(t_e_s=t_e, tau_s=leg.tau_s, state=leg.state, state_dot=trajectory.state(t_e, derivative=1),
+                            rho_m=leg.rho_m, u=leg.u, iterations=leg.iterations)
 
 
 def emission_jacobian(u, v_e, state_dot_e, phi_e, c: float = C_LIGHT):
@@ -359,6 +266,8 @@ def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | No
     ValueError).
     ``epochs`` maps a drift name to its reference time (s). A driver touching no sample raises
     ValueError (it would be unobservable).
+
+    Implements seed 002 eqs. 10-11 (the offsets D0 of the extended state, and Doppler offsets).
     """
     from trackproc.models.parameters import split_name
 
@@ -412,6 +321,8 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
     no column). Two-way samples (``meas.two_way``) take the round trip, eqs. (7)-(13), and need
     ``meas.a_st``. Returns ``(computed (N,), jacobian (N, n_columns), geometry)``, the geometry
     being the down leg's (:class:`EmissionGeometry`; for two-way samples ``t_e`` is the bounce).
+
+    Implements seed 002 eq. 17 (with light time, station motion and the offsets) and its Jacobian (eq. 10).
     """
     _check_model(range_rate_model)
     n = len(meas)
@@ -489,57 +400,6 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
 
 # ----------------------------------------------------------------------------- two-way (eqs. 7-13)
 
-@dataclass(frozen=True)
-class UpLeg:
-    """Result of :func:`solve_up_leg` (arrays along the two-way samples).
-
-    ``tau_s`` up-leg light times, ``rho_m`` up-leg ranges, ``u`` unit vectors from the station at
-    ``t_t`` to the bounce point, ``r_st``/``v_st`` (N, 3) the station ``R(T)``, ``V(T)`` at
-    ``t_t`` (eq. 7), ``iterations`` Newton iterations taken.
-    """
-
-    tau_s: np.ndarray
-    rho_m: np.ndarray
-    u: np.ndarray
-    r_st: np.ndarray
-    v_st: np.ndarray
-    iterations: int
-
-
-def _station_back(r_st, v_st, a_st, big_t):
-    """Station ``T`` seconds before ``t_r``: ``R = r - v T + a T²/2``, ``V = v - a T`` (eq. 7)."""
-    t = np.asarray(big_t, float)[:, None]
-    return r_st - v_st * t + a_st * (t * t / 2.0), v_st - a_st * t
-
-
-def solve_up_leg(r_b, r_st, v_st, a_st, tau_down_s, *, c: float = C_LIGHT, tol_s: float = LIGHT_TIME_TOL_S,
-                 max_iter: int = 10) -> UpLeg:
-    """Up leg of two-way samples: the signal that reached the satellite at ``r_b`` (N, 3) at the
-    bounce time left the station ``τ_u`` earlier, eq. (7).
-
-    ``r_st, v_st, a_st`` (N, 3): the station in GCRF at ``t_r``; ``tau_down_s`` (N,) the down
-    leg's light time. Newton on ``g(τ) = c τ - |r_b - R(τ_d + τ)|``, ``g' = c - û_u·V``, from
-    ``τ = τ_d`` (the simulator's iteration); raises ``ArithmeticError`` if it does not converge.
-    """
-    r_b, r_st, v_st, a_st = (np.asarray(x, float) for x in (r_b, r_st, v_st, a_st))
-    tau_d = np.asarray(tau_down_s, float)
-    tau = tau_d.copy()
-    for it in range(1, max_iter + 1):
-        big_r, big_v = _station_back(r_st, v_st, a_st, tau_d + tau)
-        d = r_b - big_r
-        rho = np.linalg.norm(d, axis=-1)
-        step = (c * tau - rho) / (c - _dot(d / rho[:, None], big_v))
-        tau = tau - step
-        if np.all(np.abs(step) < tol_s):
-            break
-    else:
-        raise ArithmeticError("two-way up-leg light-time iteration did not converge")
-    big_r, big_v = _station_back(r_st, v_st, a_st, tau_d + tau)
-    d = r_b - big_r
-    rho = np.linalg.norm(d, axis=-1)
-    return UpLeg(tau_s=tau, rho_m=rho, u=d / rho[:, None], r_st=big_r, v_st=big_v, iterations=it)
-
-
 def round_trip_jacobian(u_down, u_up, v_st_t, dstate_r, c: float = C_LIGHT):
     """``dT/dp`` (N, P) of the round-trip light time, eq. (11).
 
@@ -549,56 +409,3 @@ def round_trip_jacobian(u_down, u_up, v_st_t, dstate_r, c: float = C_LIGHT):
     """
     num = np.einsum("ni,nip->np", np.asarray(u_down) + np.asarray(u_up), dstate_r)
     return num / (c - _dot(u_up, v_st_t))[:, None]
-
-
-def two_way_range_partials(rho_down, u_down, rho_up, u_up, v_st_t):
-    """Two-way range ``(ρ_d + ρ_u)/2`` (eq. 8), ``∂/∂r_b = (û_d + û_u)/2`` and ``∂/∂T = û_u·V/2``
-    (the station recedes along ``-V`` as ``T`` grows). Returns ``(range, d_r (N, 3), d_t (N,))``."""
-    u_down, u_up = np.asarray(u_down, float), np.asarray(u_up, float)
-    return (0.5 * (np.asarray(rho_down, float) + np.asarray(rho_up, float)), 0.5 * (u_down + u_up),
-            0.5 * _dot(u_up, v_st_t))
-
-
-def up_rate_partials(r_b, v_b, r_st_t, v_st_t, a_st, rr_down, model: str = "doppler", c: float = C_LIGHT):
-    """Up-leg rate ``ρ̇_u`` (eq. 9) and its partials, eq. (13).
-
-    ``r_b, v_b`` the bounce state, ``r_st_t, v_st_t`` the station ``R, V`` at ``t_t``, ``a_st``
-    its acceleration, ``rr_down`` the down leg's rate ``ρ̇_d``. Returns ``(rr_u, d_r, d_v,
-    d_rr_down (N,), d_t (N,))``: ``∂ρ̇_u/∂r_b``, ``∂ρ̇_u/∂v_b`` (N, 3) at fixed ``T`` and ``ρ̇_d``,
-    ``∂ρ̇_u/∂ρ̇_d`` and ``∂ρ̇_u/∂T`` at fixed bounce state.
-    """
-    _check_model(model)
-    r_b, v_b, big_r, big_v, a_st = (np.asarray(x, float) for x in (r_b, v_b, r_st_t, v_st_t, a_st))
-    d = r_b - big_r
-    rho = np.linalg.norm(d, axis=-1)[:, None]
-    u = d / rho
-    dv = v_b - big_v
-    w = _dot(u, dv)
-    if model == "instantaneous":
-        rr, q, d_v, d_big_v, d_rrd = w, dv, u.copy(), -u, np.zeros_like(w)
-    else:
-        e = _dot(u, big_v)
-        k = ((1.0 - np.asarray(rr_down, float) / c) / (1.0 - e / c))[:, None]
-        rr = k[:, 0] * w
-        s = (rr / (c - e))[:, None]                 # ∂ρ̇_u/∂e
-        q = k * dv + s * big_v
-        d_v = k * u
-        d_big_v = (s - k) * u
-        d_rrd = -w / (c - e)
-    d_r = (q - u * _dot(u, q)[:, None]) / rho       # P_u q / ρ_u
-    d_t = _dot(d_r, big_v) - _dot(d_big_v, a_st)    # ∂R/∂T = -V, ∂R enters as -∂r_b; ∂V/∂T = -a_st
-    return rr, d_r, d_v, d_rrd, d_t
-
-
-def two_way_range_rate_partials(r_b, v_b, r_st, v_st, r_st_t, v_st_t, a_st, model: str = "doppler",
-                                c: float = C_LIGHT):
-    """Two-way range-rate ``(ρ̇_d + ρ̇_u)/2`` (eq. 9) with ``∂/∂r_b``, ``∂/∂v_b`` (N, 3) at fixed
-    ``T`` and ``∂/∂T`` (N,) at fixed bounce state (module docstring, after eq. 13).
-
-    ``r_st, v_st`` the station at ``t_r`` (down leg), ``r_st_t, v_st_t`` at ``t_t`` (up leg),
-    ``a_st`` its acceleration. Returns ``(rr, d_r, d_v, d_t)``.
-    """
-    rr_d, dd_r, dd_v = range_rate_partials(r_b, v_b, r_st, v_st, model, c)
-    rr_u, du_r, du_v, du_dd, du_t = up_rate_partials(r_b, v_b, r_st_t, v_st_t, a_st, rr_d, model, c)
-    chain = (1.0 + du_dd)[:, None]                  # ρ̇_d enters directly and through ρ̇_u
-    return 0.5 * (rr_d + rr_u), 0.5 * (dd_r * chain + du_r), 0.5 * (dd_v * chain + du_v), 0.5 * du_t

@@ -30,15 +30,16 @@ from typing import Iterable, Iterator, Optional
 
 import numpy as np
 
+from trackproc import vocabulary
+
 __all__ = ["ParameterDriver", "ParameterSet", "DuplicateParameterError", "STATE_NAMES", "KINDS",
            "state_drivers", "range_bias", "doppler_offset", "doppler_drift", "az_bias", "el_bias",
            "split_name"]
 
 #: Names of the six state components, in order.
-STATE_NAMES = ("x", "y", "z", "vx", "vy", "vz")
+STATE_NAMES = vocabulary.STATE_NAMES
 #: Parameter families with a key after ``:``, and their units.
-KINDS = {"range_bias": "m", "doppler_offset": "Hz", "doppler_drift": "Hz/s", "az_bias": "rad",
-         "el_bias": "rad"}
+KINDS = vocabulary.BIAS_UNITS
 #: Default scales (about one expected sigma): state m and m/s, then by family.
 DEFAULT_SCALES = {"position": 100.0, "velocity": 0.1, "range_bias": 10.0, "doppler_offset": 1.0,
                   "doppler_drift": 1e-3, "az_bias": 1e-4, "el_bias": 1e-4}

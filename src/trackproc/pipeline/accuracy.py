@@ -38,6 +38,7 @@ import pandas as pd
 from trackproc.io.tables import arrow_table_bytes
 from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 from trackproc.constants import MU_EARTH, force_model_constants
+from trackproc.vocabulary import FORCES
 from trackproc.errors import InputError
 from trackproc.io.statefile import STATE_PARAMETERS
 from trackproc.methods import accuracy as ac
@@ -137,8 +138,8 @@ def _check_options(options: AccuracyOptions) -> None:
                          expected=f"at most {MAX_TIMES} steps over --span")
     if options.method not in METHODS:
         raise InputError("unknown method", column="--method", found=options.method, expected=" | ".join(METHODS))
-    if options.force not in ("two-body", "j2"):
-        raise InputError("unknown force model", column="--force", found=options.force, expected="two-body or j2")
+    if options.force not in FORCES:
+        raise InputError("unknown force model", column="--force", found=options.force, expected=" or ".join(FORCES))
     if options.monte_carlo is not None and not (2 <= int(options.monte_carlo) <= MAX_MONTE_CARLO):
         raise InputError("invalid sample count", column="--monte-carlo", found=options.monte_carlo,
                          expected=f"an integer in [2, {MAX_MONTE_CARLO}]")
@@ -281,16 +282,15 @@ def _station_track(station, times, nominal, earth, eop) -> dict:
     """Station in GCRF at the grid times, nominal range / range-rate / elevation and partials."""
     from trackproc.dynamics import geodesy
     from trackproc.dynamics import timescales as ts
-    from trackproc.models import measurements as mm
+    from trackproc.models.observables import azel
 
-    lat, lon = math.radians(station.lat_deg), math.radians(station.lon_deg)
-    r_itrf = geodesy.geodetic_to_itrf(lat, lon, station.height_m, earth)
+    lat, lon, r_itrf = geodesy.station_itrf(station, earth)
     jd1, jd2 = ts.datetime64_to_jd_utc(times)
-    st = mm.station_gcrf(r_itrf, jd1, jd2, eop)
+    st = geodesy.station_gcrf(r_itrf, jd1, jd2, eop)
     d = nominal[:, :3] - st.r
     rng = np.linalg.norm(d, axis=-1)
     rr = np.sum(d * (nominal[:, 3:] - st.v), axis=-1) / rng
-    _, el = mm.azel(d, st.gcrf_to_itrf, lat, lon)
+    _, el = azel(d, st.gcrf_to_itrf, lat, lon)
     return {"name": station.name if hasattr(station, "name") else None, "r": st.r, "v": st.v,
             "range_m": rng, "range_rate_m_s": rr, "elevation_rad": el,
             "jacobian": ac.range_range_rate_jacobian(nominal[:, :3], nominal[:, 3:], st.r, st.v),
@@ -336,9 +336,8 @@ def _monte_carlo(traj, state, cov0, t, nominal, options, track) -> dict:
             o1 += do.sum(0)
             o2 += np.einsum("bmi,bmj->mij", do, do)
         if corr is not None:
-            dr_rtn = np.einsum("mij,bmj->bmi", rot, d[..., :3])
-            dv_rtn = np.einsum("mij,bmj->bmi", rot, d[..., 3:])
-            dd = np.concatenate([d, dr_rtn, dv_rtn], axis=-1)                 # (B, M, 12)
+            d_rtn = np.einsum("mij,bmj->bmi", rot, d)                          # the 6 x 6 RTN map, as to_rtn
+            dd = np.concatenate([d, d_rtn], axis=-1)                          # (B, M, 12)
             corr["s1"] += dd.sum(0)
             for c in range(12):                                               # BLAS: (M x B)(B x M)
                 dc = np.ascontiguousarray(dd[:, :, c])

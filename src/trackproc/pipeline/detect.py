@@ -45,11 +45,10 @@ from typing import Optional
 import numpy as np
 
 from trackproc.errors import InputError, ProcessingError
+from trackproc.vocabulary import EARTHS, FORCES  # noqa: F401  (re-exported)
 
 DEG = math.pi / 180.0
 MODELS = ("planar", "3d")
-FORCES = ("two-body", "j2")
-EARTHS = ("wgs84", "sphere")
 FIELDS = ("impact_time", "velocity_kms", "velocity_m_s", "angle_deg", "p_m", "e", "phi_deg", "model",
           "displacement_m", "station", "pass_id", "direction", "latitude_deg", "heading_deg", "radius_m",
           "sigma_rad", "tau_s", "force", "earth", "kinds", "comment", "schema_version")
@@ -298,8 +297,8 @@ class StationGeometry:
     def of(cls, station, earth: str = "wgs84") -> "StationGeometry":
         from trackproc.dynamics import geodesy
 
-        lat, lon = station.lat_deg * DEG, station.lon_deg * DEG
-        return cls(station.name, lat, lon, np.asarray(geodesy.geodetic_to_itrf(lat, lon, station.height_m, earth)))
+        lat, lon, r_itrf = geodesy.station_itrf(station, earth)
+        return cls(station.name, lat, lon, np.asarray(r_itrf))
 
     @property
     def geocentric_latitude(self) -> float:
@@ -311,10 +310,10 @@ def model_3d(nominal: Nominal, geometry: StationGeometry, s_rel, displacement_m:
     from trackproc.dynamics import frames
     from trackproc.dynamics import timescales as ts
     from trackproc.methods import ballistic as bl
-    from trackproc.models import measurements as mm
+    from trackproc.dynamics.geodesy import station_gcrf
 
     jd_t = ts.datetime64_to_jd_utc(np.datetime64(nominal.impact_time, "ns"))
-    at_t = mm.station_gcrf(geometry.r_itrf, jd_t[0], jd_t[1], eop)
+    at_t = station_gcrf(geometry.r_itrf, jd_t[0], jd_t[1], eop)
     try:
         r_imp, v_imp = bl.impact_state_3d(
             at_t.r[0], at_t.v[0], nominal.velocity_m_s, nominal.angle_rad, direction=nominal.direction,
@@ -324,7 +323,7 @@ def model_3d(nominal: Nominal, geometry: StationGeometry, s_rel, displacement_m:
         raise InputError(str(exc), file=nominal.source, column="direction") from None
     s = np.asarray(s_rel, float)
     jd1, jd2 = ts.add_seconds_utc(jd_t, s)
-    track = mm.station_gcrf(geometry.r_itrf, jd1, jd2, eop)
+    track = station_gcrf(geometry.r_itrf, jd1, jd2, eop)
     q = frames.QuasiInertialFrame.at(jd_t[0], jd_t[1], eop).q
     try:
         return bl.ballistic_azel(s, r_imp, v_imp, track.r, track.v, track.a, track.gcrf_to_itrf,

@@ -47,12 +47,15 @@ import pandas as pd
 
 from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 from trackproc.errors import InputError, ProcessingError
+from trackproc.io.isotime import iso_utc
+from trackproc.dynamics.rtn import rtn_covariance
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
+from trackproc.vocabulary import DOPPLER_BIASES, KIND_UNITS
 
 #: Unit of each kind's values (SI).
-UNITS = {"range": "m", "range_rate": "m/s", "doppler": "Hz", "azimuth": "rad", "elevation": "rad"}
-DOPPLER_BIAS = ("offset", "offset+drift")
+UNITS = KIND_UNITS
+DOPPLER_BIAS = DOPPLER_BIASES
 DOPPLER_BIAS_PER = ("pass", "station")
 #: Margin (s) added before the first sample so that emission times are covered.
 _LIGHT_TIME_MARGIN_S = 1.0
@@ -288,7 +291,6 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     """
     from trackproc.dynamics import geodesy, propagator
     from trackproc.dynamics import timescales as ts
-    from trackproc.models import measurements as mm
 
     opt = options or EstimateOptions()
     if opt.doppler_bias not in (None,) + DOPPLER_BIAS:
@@ -338,9 +340,8 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     for name in sorted(set(station_col)):
         rows = np.flatnonzero(station_col == name)
         st = known[name]
-        lat, lon = math.radians(st.lat_deg), math.radians(st.lon_deg)
-        r_itrf = geodesy.geodetic_to_itrf(lat, lon, st.height_m, opt.earth)
-        track = mm.station_gcrf(r_itrf, jd1[rows], jd2[rows], eop)
+        lat, lon, r_itrf = geodesy.station_itrf(st, opt.earth)
+        track = geodesy.station_gcrf(r_itrf, jd1[rows], jd2[rows], eop)
         r_st[rows], v_st[rows], a_st[rows] = track.r, track.v, track.a
         enu[rows] = geodesy.enu_matrix(lat, lon) @ track.gcrf_to_itrf
     meas = ob.MeasurementSet(t_s=t_s, kind=frame["kind"].astype(str).to_numpy(dtype=object), station=station_col,
@@ -457,25 +458,6 @@ class EstimateResult:
     two_stage: Optional[object] = None
     two_stage_solution: Optional[object] = None
     warnings: list = field(default_factory=list)
-
-
-def rtn_matrix(r, v) -> np.ndarray:
-    """Rows: radial, along-track (N × R) and cross-track (r × v / |r × v|) unit vectors."""
-    r = np.asarray(r, float)
-    v = np.asarray(v, float)
-    rad = r / np.linalg.norm(r)
-    h = np.cross(r, v)
-    cross = h / np.linalg.norm(h)
-    return np.stack([rad, np.cross(cross, rad), cross])
-
-
-def rtn_covariance(r, v, cov6) -> np.ndarray:
-    """6 × 6 covariance rotated to radial/along/cross (position and velocity blocks alike)."""
-    m = rtn_matrix(r, v)
-    big = np.zeros((6, 6))
-    big[:3, :3] = big[3:, 3:] = m
-    out = big @ np.asarray(cov6, float) @ big.T
-    return 0.5 * (out + out.T)
 
 
 def _rms_table(problem: Problem, sol) -> dict:
@@ -769,7 +751,7 @@ def summary_text(result: EstimateResult) -> str:
     d = st.diagnostics
     units = d["units"]
     lines = [f"trackproc estimate: {'converged' if sol.converged else 'NOT converged'} in {sol.iterations} "
-             f"iterations ({sol.message}); epoch {np.datetime_as_string(st.epoch, 'ms')}Z, GCRF, "
+             f"iterations ({sol.message}); epoch {iso_utc(st.epoch, 3)}, GCRF, "
              f"force {st.force_model}, range-rate model {result.problem.range_rate_model}"]
     for name, value, sigma, unit in zip(sol.names, sol.values, sol.sigma, units):
         lines.append(f"  {name:<28s}{_fmt(value, sigma, unit)}")

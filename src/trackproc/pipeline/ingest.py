@@ -32,6 +32,8 @@ import numpy as np
 import pandas as pd
 
 from trackproc.errors import InputError
+from trackproc.vocabulary import LINK_MODES
+from trackproc.io.isotime import iso_utc
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable, base_meta
 from trackproc.io.raw import RawMeasurements
 from trackproc.io.stations import Station
@@ -45,7 +47,7 @@ DUPLICATE_TIME = "duplicated timestamp"
 
 #: Unit as written -> factor to SI (to report values as the user wrote them).
 UNIT_FACTORS = {unit: factor for _, factor, unit in UNIT_SPELLINGS.values()}
-MODES = ("one-way", "two-way")
+MODES = LINK_MODES
 
 
 @dataclass
@@ -292,7 +294,7 @@ def _add_duplicates(problems: Problems, frame: pd.DataFrame) -> None:
                 f"{frame['kind'].iat[i]} (first at {source[j]} row {rows[j]})")
 
     problems.add(DUPLICATE_TIME, mask, column=frame["value_column"].to_numpy(dtype=object),
-                 found=lambda i: times.iat[i].strftime("%Y-%m-%dT%H:%M:%S.%fZ"),
+                 found=lambda i: iso_utc(times.iat[i], 6),
                  expected="one sample per station, kind and time", detail=detail)
 
 

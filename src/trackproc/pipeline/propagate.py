@@ -27,8 +27,10 @@ from typing import Optional
 import numpy as np
 import pandas as pd
 
+from trackproc import vocabulary
 from trackproc.constants import C_LIGHT, force_model_constants
 from trackproc.errors import InputError, ProcessingError
+from trackproc.io.isotime import iso_utc
 
 DEG = np.pi / 180.0
 #: Below this geocentric distance (m) the orbit is taken to have entered the Earth.
@@ -98,13 +100,15 @@ def _check_options(options: PropagateOptions) -> None:
         raise InputError("no sample times", column="--at", expected="a pass file with at least one sample")
     if not (1e-18 < options.tol < 1e-3):
         raise InputError("out of range", column="--tol", found=options.tol, expected="a tolerance in (1e-18, 1e-3)")
-    if options.force not in ("two-body", "j2"):
-        raise InputError("unknown force model", column="--force", found=options.force, expected="two-body or j2")
-    if options.earth not in ("wgs84", "sphere"):
-        raise InputError("unknown Earth model", column="--earth", found=options.earth, expected="wgs84 or sphere")
-    if options.range_rate_model not in ("doppler", "instantaneous"):
+    if options.force not in vocabulary.FORCES:
+        raise InputError("unknown force model", column="--force", found=options.force,
+                         expected=" or ".join(vocabulary.FORCES))
+    if options.earth not in vocabulary.EARTHS:
+        raise InputError("unknown Earth model", column="--earth", found=options.earth,
+                         expected=" or ".join(vocabulary.EARTHS))
+    if options.range_rate_model not in vocabulary.RANGE_RATE_MODELS:
         raise InputError("unknown range-rate model", column="--range-rate-model", found=options.range_rate_model,
-                         expected="doppler or instantaneous")
+                         expected=" or ".join(vocabulary.RANGE_RATE_MODELS))
     if options.station is None:
         for flag, given in (("--carrier-hz", options.carrier_hz is not None), ("--visible-only", options.visible_only)):
             if given:
@@ -177,7 +181,7 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
     if np.any(radius < MIN_RADIUS_M):
         i = int(np.argmin(radius))
         raise ProcessingError(f"the orbit enters the Earth: |r| = {radius[i] / 1e3:.1f} km at "
-                              f"{_iso(times[i])} (below {MIN_RADIUS_M / 1e3:.0f} km)")
+                              f"{iso_utc(times[i])} (below {MIN_RADIUS_M / 1e3:.0f} km)")
 
     columns = {"time": pd.DatetimeIndex(times).tz_localize("UTC")}
     for k, name in enumerate(("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s")):
@@ -203,8 +207,7 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
         from trackproc.dynamics import geodesy
 
         st = options.station
-        lat, lon = float(st.lat_deg) * DEG, float(st.lon_deg) * DEG
-        r_itrf = geodesy.geodetic_to_itrf(lat, lon, float(st.height_m), options.earth)
+        lat, lon, r_itrf = geodesy.station_itrf(st, options.earth)
         model = ms.StationModel.build(r_itrf, lat, lon, traj.epoch_jd_utc, traj.frame.q, t_s.min(), t_s.max(),
                                       eop=eop)
         try:
@@ -231,7 +234,7 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
         if not keep.any():
             raise ProcessingError(
                 f"no visible pass: the satellite never rises above the {options.elevation_mask_deg:g} deg mask of "
-                f"{options.station.name} between {_iso(times[0])} and {_iso(times[-1])} (maximum elevation "
+                f"{options.station.name} between {iso_utc(times[0])} and {iso_utc(times[-1])} (maximum elevation "
                 f"{np.degrees(prediction.elevation_rad.max()):.1f} deg); try a longer --span or a lower "
                 "--elevation-mask-deg")
         frame = frame[keep].reset_index(drop=True)
@@ -240,12 +243,6 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
     meta = _meta(initial, options, traj, eop, cov0 is not None, times)
     return PropagateResult(ephemeris=Ephemeris(frame, meta), trajectory=traj, t_s=t_s, prediction=prediction,
                            covariance=cov)
-
-
-def _iso(t) -> str:
-    from trackproc.io.statefile import format_epoch
-
-    return format_epoch(t)
 
 
 def _meta(initial, options, traj, eop, has_cov, times) -> dict:
@@ -262,10 +259,10 @@ def _meta(initial, options, traj, eop, has_cov, times) -> dict:
         "time_scale": "UTC",
         "frame": "GCRF",
         "units": units,
-        "initial_state": {"epoch": _iso(initial.epoch), "position_m": [float(x) for x in initial.r_m],
+        "initial_state": {"epoch": iso_utc(initial.epoch), "position_m": [float(x) for x in initial.r_m],
                           "velocity_m_s": [float(x) for x in initial.v_m_s],
                           "source": initial.source or initial.extra.get("source")},
-        "start": _iso(times[0]), "end": _iso(times[-1]), "samples": len(times),
+        "start": iso_utc(times[0]), "end": iso_utc(times[-1]), "samples": len(times),
         "force_model": FORCE_LABELS.get(options.force, options.force),
         "constants": force_model_constants(options.force),
         "earth_orientation": getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
@@ -273,7 +270,7 @@ def _meta(initial, options, traj, eop, has_cov, times) -> dict:
             "method": "adaptive Taylor series (differential transformation, seed 000 eq. 14), dense output",
             "tol": float(options.tol), "order": int(traj.order), "steps": int(traj.n_steps),
             "integration_frame": "GCRF rotated by the bias-precession-nutation matrix of the state's epoch "
-                                 f"({_iso(traj.epoch)}); J2 about that rotation axis",
+                                 f"({iso_utc(traj.epoch)}); J2 about that rotation axis",
         },
         "trackproc_version": __version__,
     }

@@ -53,18 +53,20 @@ from typing import Mapping, Optional
 import numpy as np
 import pandas as pd
 
+from trackproc import vocabulary
 from trackproc.constants import C_LIGHT
+from trackproc.vocabulary import REFINE_DOPPLER_BIASES
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import PassTable
 
 COSTS = ("pointwise", "integral")
-DOPPLER_BIAS = ("none", "offset", "offset+drift")
+DOPPLER_BIAS = REFINE_DOPPLER_BIASES
 #: Range-rate-like kinds a Doppler station gives, in order of preference.
 RANGE_RATE_KINDS = ("doppler", "range_rate")
 #: ``--circular`` is reported as contradicted by the pass below this p-value (:func:`circular_consistency`).
 CIRCULAR_TEST_P = 1e-3
 #: Links (the pass metadata's ``doppler_mode``): both costs take either.
-LINK_MODES = ("one-way", "two-way")
+LINK_MODES = vocabulary.LINK_MODES
 #: The a-priori of a stale state that carries no covariance, as independent 1-sigma errors of
 #: its non-singular orbital elements (:func:`trackproc.methods.refinement.element_covariance`):
 #: a state a day or so old (a TLE, an old solution) is off by kilometres along-track (the
@@ -585,8 +587,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     for n_, s_ in sub.stations().items():
         known.setdefault(n_, s_)
     st = known[station]
-    lat, lon = math.radians(st.lat_deg), math.radians(st.lon_deg)
-    r_itrf = geodesy.geodetic_to_itrf(lat, lon, st.height_m, opt.earth)
+    lat, lon, r_itrf = geodesy.station_itrf(st, opt.earth)
     t_meas = problem.meas.t_s
     epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))
     station_model = ms.StationModel.build(r_itrf, lat, lon, epoch_jd, problem.frame.q, float(t_meas.min()) - 60.0,
@@ -801,7 +802,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     from trackproc.dynamics import timescales as ts
     from trackproc.io.statefile import State, format_epoch
     from trackproc.methods import refinement as rf
-    from trackproc.pipeline.estimate import UNITS, residual_frame, rtn_covariance, rtn_matrix
+    from trackproc.dynamics.rtn import rtn_covariance, rtn_jacobian
+    from trackproc.pipeline.estimate import UNITS, residual_frame
 
     opt = ref.options
     problem = ref.problem
@@ -863,7 +865,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     _, _, sig_data, _, _ = ref.data()
     keep = ~sol.edited
     obs = rf.observability(sol.jacobian[keep][:, :npb], np.asarray(sig_data)[keep] * sigma_scale, problem.names,
-                           rtn_matrix(x[:3], x[3:6]), reference, cov[:6, :6],
+                           rtn_jacobian(x[:3], x[3:6], rotating=False), reference, cov[:6, :6],
                            other_scales=problem.params.scales()[6:], reference=ref_name,
                            station_axis=ref.station_axis, state=x[:6])
     if opt.circular:
@@ -871,7 +873,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                          "the covariance is zero across them (it is conditional on a circular orbit)")
     if ref.priors and opt.cost == "pointwise" and obs.unobservable:
         obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
-    big = np.kron(np.eye(2), rtn_matrix(x[:3], x[3:6]))           # GCRF -> RTN for (r, v)
+    big = rtn_jacobian(x[:3], x[3:6], rotating=False)             # GCRF -> RTN for (r, v)
     covariance_note = "linear (the inverse of the whitened normal matrix at the solution)"
     if opt.covariance == "profile" and opt.cost == "pointwise" and not opt.circular and obs.unobservable and ref.priors:
         # the estimate slides along a curved valley where the pass sees nothing: the linear
@@ -1076,7 +1078,6 @@ def traverse_station(state, *, cross_track_m: float = 600e3, side: str = "left",
     from trackproc.dynamics import frames, geodesy, propagator
     from trackproc.dynamics import timescales as ts
     from trackproc.io.stations import Station
-    from trackproc.models import measurements as mm
     from trackproc.models import observation as ob
 
     jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(np.datetime64(state.epoch, "ns")))
@@ -1099,7 +1100,7 @@ def traverse_station(state, *, cross_track_m: float = 600e3, side: str = "left",
     def rate(s):
         lat, lon = site(s)
         r_st_itrf = geodesy.geodetic_to_itrf(lat, lon, height_m, earth)
-        trk = mm.station_gcrf(r_st_itrf, np.array([jd[0]]), np.array([jd[1]]), eop)
+        trk = geodesy.station_gcrf(r_st_itrf, np.array([jd[0]]), np.array([jd[1]]), eop)
         geo = ob.solve_light_time(traj, np.array([0.0]), trk.r)
         return float(ob.range_rate_value(geo.state[:, :3], geo.state[:, 3:], trk.r, trk.v, range_rate_model)[0])
 

@@ -157,7 +157,10 @@ def resolve_gamma(options: RequirementsOptions) -> tuple[float, float, float]:
 
 
 def paper_table_for(options: RequirementsOptions, gamma: float) -> Optional[str]:
-    """``"table2"``/``"table3"`` when the options are the paper's (Δ* = 500 m, γ = 5, default R)."""
+    """``"table2"``/``"table3"`` when the options are the paper's (Δ* = 500 m, γ = 5, default R).
+
+    Implements seed 003 Tables 2-3 (the published values).
+    """
     if options.displacement_m != 500.0 or abs(gamma - 5.0) > 1e-9 or options.radius_m not in (None, 6371000.0):
         return None
     if options.latitude_deg is None:
@@ -192,7 +195,10 @@ def cell(velocity_m_s: float, angle_rad: float, tau_s: float, displacement_m: fl
 
 
 def requirements(options: RequirementsOptions) -> RequirementsResult:
-    """g for every (τ, α, V) of the grid (τ outermost, then α, then V, as the paper's tables)."""
+    """g for every (τ, α, V) of the grid (τ outermost, then α, then V, as the paper's tables).
+
+    Implements seed 003 eq. 8 over a grid (Tables 2-3).
+    """
     _check(options)
     gamma, alpha, beta = resolve_gamma(options)
     table = paper_table_for(options, gamma)

@@ -37,11 +37,13 @@ from typing import Mapping, Optional
 import numpy as np
 import pandas as pd
 
+from trackproc import vocabulary
 from trackproc.constants import force_model_constants
 from trackproc.errors import InputError, ProcessingError
+from trackproc.io.isotime import iso_utc
 
 #: Kinds in canonical order (the order noise is drawn in).
-KINDS = ("range", "range_rate", "doppler", "elevation", "azimuth")
+KINDS = vocabulary.KINDS
 DEG = np.pi / 180.0
 #: Default noise sigmas, SI (angles in degrees): the CLI defaults.
 DEFAULT_SIGMAS = {"range": 10.0, "range_rate": 0.01, "doppler": 0.1, "angle_deg": 0.01}
@@ -136,11 +138,12 @@ def _check_options(options: SimulateOptions, stations: Mapping) -> None:
     if bad or not options.kinds:
         raise InputError("unknown measurement kind", column="--kinds", found=",".join(bad) or "(none)",
                          expected="a comma list of " + ",".join(KINDS))
-    if options.mode not in ("one-way", "two-way"):
-        raise InputError("unknown mode", column="--mode", found=options.mode, expected="one-way or two-way")
-    if options.range_rate_model not in ("doppler", "instantaneous"):
+    if options.mode not in vocabulary.LINK_MODES:
+        raise InputError("unknown mode", column="--mode", found=options.mode,
+                         expected=" or ".join(vocabulary.LINK_MODES))
+    if options.range_rate_model not in vocabulary.RANGE_RATE_MODELS:
         raise InputError("unknown range-rate model", column="--range-rate-model", found=options.range_rate_model,
-                         expected="doppler or instantaneous")
+                         expected=" or ".join(vocabulary.RANGE_RATE_MODELS))
     for name, bias in options.range_bias_m.items():
         if name not in stations:
             raise InputError("range bias for an unknown station", column="--range-bias", found=name,
@@ -196,11 +199,8 @@ def simulate(initial, stations: Mapping, options: SimulateOptions, eop=None) -> 
 
     # the stations
     names = sorted(stations)
-    lat = np.array([stations[n].lat_deg for n in names]) * DEG
-    lon = np.array([stations[n].lon_deg for n in names]) * DEG
-    h = np.array([stations[n].height_m for n in names], float)
-    r_itrf = geodesy.geodetic_to_itrf(lat, lon, h, options.earth)
-    track = mm.station_gcrf(r_itrf, jd1, jd2, eop)
+    lat, lon, r_itrf = geodesy.station_itrf([stations[n] for n in names], options.earth)
+    track = geodesy.station_gcrf(r_itrf, jd1, jd2, eop)
     obs = mm.observables(r_sat, v_sat, a_sat, j_sat, track.r, track.v, track.a, track.gcrf_to_itrf,
                          lat[:, None], lon[:, None], carrier_hz=options.carrier_hz, mode=options.mode,
                          range_rate_model=options.range_rate_model)
@@ -211,7 +211,7 @@ def simulate(initial, stations: Mapping, options: SimulateOptions, eop=None) -> 
     if not visible.any():
         raise ProcessingError(
             f"no visible pass: the satellite never rises above the {options.elevation_mask_deg:g} deg mask "
-            f"of {', '.join(names)} between {_iso(times[0])} and {_iso(times[-1])} "
+            f"of {', '.join(names)} between {iso_utc(times[0])} and {iso_utc(times[-1])} "
             f"(maximum elevation {np.degrees(obs.elevation_rad.max()):.1f} deg); try a longer --duration, "
             "a lower --elevation-mask-deg or other stations")
 
@@ -266,12 +266,6 @@ def simulate(initial, stations: Mapping, options: SimulateOptions, eop=None) -> 
     return Simulation(frame=frame, meta=meta, truth=truth, truth_values=truth_values, grid=grid)
 
 
-def _iso(t) -> str:
-    from trackproc.io.statefile import format_epoch
-
-    return format_epoch(t)
-
-
 def _meta(options, stations, names, visible, pass_ids_all, start, times, truth, initial, eop, sigmas) -> dict:
     from trackproc.io.passfile import base_meta
     from trackproc.io.statefile import FORCE_LABELS
@@ -286,12 +280,12 @@ def _meta(options, stations, names, visible, pass_ids_all, start, times, truth, 
     eop_source = getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)"
     simulation = {
         "generator": "trackproc simulate",
-        "start": _iso(start), "end": _iso(times[-1]),
+        "start": iso_utc(start), "end": iso_utc(times[-1]),
         "duration_s": float(options.duration_s), "step_s": float(options.step_s),
         "elevation_mask_deg": float(options.elevation_mask_deg),
         "kinds": [k for k in KINDS if k in options.kinds],
-        "initial_epoch": _iso(initial.epoch),
-        "truth_epoch": _iso(truth.epoch),
+        "initial_epoch": iso_utc(initial.epoch),
+        "truth_epoch": iso_utc(truth.epoch),
         "truth_position_m": [float(x) for x in truth.r_m],
         "truth_velocity_m_s": [float(x) for x in truth.v_m_s],
         "seed": options.seed,
@@ -300,7 +294,7 @@ def _meta(options, stations, names, visible, pass_ids_all, start, times, truth, 
         "range_bias_m": {k: float(v) for k, v in sorted(options.range_bias_m.items())},
         "frequency_offset_hz": float(options.freq_offset_hz),
         "frequency_drift_hz_s": float(options.freq_drift_hz_s),
-        "frequency_drift_epoch": _iso(start),
+        "frequency_drift_epoch": iso_utc(start),
         "earth": options.earth if options.earth != "sphere" else
         "sphere (R = 6371 km station coordinates and vertical; Earth orientation still IAU 2006/2000A)",
         "passes": len(passes),

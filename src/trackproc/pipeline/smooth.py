@@ -36,6 +36,7 @@ import numpy as np
 import pandas as pd
 
 from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
+from trackproc.io.isotime import iso_utc
 from trackproc.io.jsonutil import json_ready
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable
@@ -340,8 +341,7 @@ def _coverage(t_used: np.ndarray, t_star: float) -> tuple[float, float]:
 
 
 def _iso(ts: pd.Timestamp) -> str:
-    ts = pd.Timestamp(ts).tz_convert("UTC")
-    return ts.strftime("%Y-%m-%dT%H:%M:%S.") + f"{ts.microsecond:06d}{ts.nanosecond:03d}Z"
+    return iso_utc(ts, 9)
 
 
 def _at(epoch: pd.Timestamp, t_s: float) -> pd.Timestamp:

@@ -1,0 +1,42 @@
+"""The project's vocabulary, defined once: the names that appear in files, options and messages.
+
+Every module that checks or offers one of these names (the CLI's choices, the readers'
+validation, the models' ``ValueError`` messages, the batch configuration) draws it from here,
+so a name cannot be spelled two ways. The names are a contract (README "Data contract",
+docs/*.md): add freely, never rename. Pure data, no imports: cheap for ``--help``.
+"""
+
+from __future__ import annotations
+
+#: Measurement kinds of the canonical pass file (``kind`` column), in canonical order.
+KINDS = ("range", "range_rate", "doppler", "elevation", "azimuth")
+#: The same kinds in the order the estimator's reports and plots list them (azimuth first).
+ESTIMATE_KIND_ORDER = ("range", "range_rate", "doppler", "azimuth", "elevation")
+#: SI unit of each kind's ``value`` and ``sigma`` columns.
+KIND_UNITS = {"range": "m", "range_rate": "m/s", "doppler": "Hz", "elevation": "rad", "azimuth": "rad"}
+#: Kinds a two-way link changes (angles are the down leg's in both modes).
+LINK_KINDS = ("range", "range_rate", "doppler")
+#: Angle kinds (their residuals wrap: azimuth at 2π).
+ANGLE_KINDS = ("elevation", "azimuth")
+
+#: Link modes (the pass metadata's ``doppler_mode``, ``--mode``): the satellite transmits
+#: (one-way) or transponds the station's signal back to it (two-way, round trip).
+LINK_MODES = ("one-way", "two-way")
+#: Range-rate models (``--range-rate-model``): ``doppler`` the derivative of the light-time
+#: range (default), ``instantaneous`` Orekit's one-way ``RangeRate`` (no light-time factor).
+RANGE_RATE_MODELS = ("doppler", "instantaneous")
+
+#: Force models (``--force``).
+FORCES = ("two-body", "j2")
+#: Earth figures for stations (``--earth``): WGS-84 ellipsoid or the papers' 6371 km sphere.
+EARTHS = ("wgs84", "sphere")
+
+#: Names of the six state components, in order (parameter names, covariance rows).
+STATE_NAMES = ("x", "y", "z", "vx", "vy", "vz")
+#: Bias parameter families (``family:KEY``) and their SI units.
+BIAS_UNITS = {"range_bias": "m", "doppler_offset": "Hz", "doppler_drift": "Hz/s", "az_bias": "rad",
+              "el_bias": "rad"}
+#: Doppler-bias choices (``--doppler-bias``): a transmitter frequency offset, or offset and drift.
+DOPPLER_BIASES = ("offset", "offset+drift")
+#: ``refine``'s Doppler-bias choices: also ``none`` (a coherent two-way link has no offset).
+REFINE_DOPPLER_BIASES = ("none",) + DOPPLER_BIASES
