@@ -10,6 +10,7 @@ stations) through ingest -> smooth -> refine, about a second of work each.
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
 import signal
@@ -186,3 +187,40 @@ def test_sigkill_of_the_driver_ends_its_workers(many, tmp_path):
         proc.wait(timeout=30)
         kill_all(descendants)
     assert proc.returncode == -signal.SIGKILL
+
+
+def test_sigterm_while_waiting_for_the_lock_or_working_alone(many, tmp_path):
+    import fcntl
+
+    exe = Path(sys.executable).with_name("trackproc")
+    out = tmp_path / "out"
+    out.mkdir()
+    holder = os.open(out / ".batch.lock", os.O_RDWR | os.O_CREAT)  # another run holds the directory
+    try:
+        fcntl.flock(holder, fcntl.LOCK_EX)
+        with open(tmp_path / "wait.log", "w") as log:
+            proc = subprocess.Popen([str(exe), "batch", str(many), "--wait"], stderr=log)
+        deadline = time.monotonic() + 60
+        while "waiting for" not in (tmp_path / "wait.log").read_text():
+            assert proc.poll() is None and time.monotonic() < deadline, (tmp_path / "wait.log").read_text()
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=30) == 143
+    finally:
+        os.close(holder)
+    assert "stopped by SIGTERM" in (tmp_path / "wait.log").read_text().strip().splitlines()[-1]
+    assert not manifests(out)
+    # --workers 1: the task runs in the driver itself, and no step may take the signal for its failure
+    with open(tmp_path / "serial.log", "w") as log:
+        proc = subprocess.Popen([str(exe), "batch", str(many), "--workers", "1"], stderr=log)
+    deadline = time.monotonic() + 180
+    while not manifests(out):
+        assert proc.poll() is None and time.monotonic() < deadline, (tmp_path / "serial.log").read_text()
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=30) == 143
+    done = len(manifests(out))
+    assert 1 <= done < N_INPUTS and not list(out.rglob(".*.tmp"))
+    assert all(json.loads(m.read_text())["status"] == "ok" for m in manifests(out))
+    rerun = subprocess.run([str(exe), "batch", str(many)], capture_output=True, text=True, timeout=600)
+    assert rerun.returncode == 0 and f"{done} up to date, {N_INPUTS - done} to do" in rerun.stderr, rerun.stderr

@@ -15,8 +15,13 @@ Adding a step is an adapter and one :func:`~trackproc.pipeline.batch.chain.regis
 
 plus its settings section in :mod:`trackproc.pipeline.batch.schema` (the schema gives the
 TOML keys, the flags and the environment variables). The position in
-:data:`~trackproc.pipeline.batch.chain.CHAIN` fixes where it runs. The pipeline modules are
-imported inside the adapters: they are heavy and the CLI imports this package at start-up.
+:data:`~trackproc.pipeline.batch.chain.CHAIN` fixes where it runs.
+
+The pipeline modules (numpy, pandas, scipy) are imported inside the adapters, on purpose: a
+process must fix its BLAS thread count before numpy loads
+(:func:`~trackproc.pipeline.batch.executors.single_thread_blas`, in the driver and in each
+worker's initializer, and the fork server preloads this module), and a driver that hands every
+task to workers never needs them.
 """
 
 from __future__ import annotations

@@ -2,8 +2,8 @@
 
 Every task is a pure function of its payload (input bytes, settings, file contents) and the
 driver alone writes files, so every way of running (this process, a pool, a Dask cluster) gives
-the same bytes. The pass-file reader (pandas, pyarrow) is imported where a task needs it: the
-CLI imports this package at start-up.
+the same bytes. The pass-file reader (pandas, pyarrow) is imported where a task needs it, as
+the steps' modules are (see :mod:`.steps`).
 """
 
 from __future__ import annotations
