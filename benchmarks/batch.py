@@ -63,7 +63,7 @@ def make_passes(directory: Path, n: int, step_s: float) -> int:
 
 
 def settings_for(directory: Path, output: Path, **flags):
-    from trackproc.pipeline.batch_config import resolve
+    from trackproc.pipeline.batch.config import resolve
 
     base = {"batch.inputs": [str(directory / "inbox")], "batch.output": str(output), "batch.force": True,
             "ingest.stations": str(directory / "stations.csv"), "ingest.carrier_hz": 2.2e9,

@@ -26,7 +26,7 @@ from pathlib import Path
 import pytest
 
 from trackproc.pipeline import batch as batch_module
-from trackproc.pipeline.batch_config import SCHEMA
+from trackproc.pipeline.batch.schema import SCHEMA
 
 ROOT = Path(__file__).resolve().parents[1]
 STATIONS = ("station,lat_deg,lon_deg,height_m\nCPH,55.7,12.55,30\nZHY,50.25,28.66,230\nKIR,67.857,20.964,400\n"
@@ -328,7 +328,7 @@ def test_a_killed_run_resumes_where_it_stopped(passes, tmp_path):
 # ----------------------------------------------------------------------------- settings
 
 def test_settings_precedence_flag_env_config_default(tmp_path):
-    from trackproc.pipeline.batch_config import resolve
+    from trackproc.pipeline.batch.config import resolve
 
     config = tmp_path / "c.toml"
     config.write_text('[batch]\nworkers = 3\ninputs = ["in"]\n[smooth]\nclip = 5.0\ndegree = 8\n')
@@ -436,7 +436,7 @@ def test_an_unexpected_error_is_reported_and_retried_next_run(passes, tmp_path, 
         calls.append(ctx.name)
         if ctx.name.startswith("CPH") and len(calls) < 10:
             raise RuntimeError("disk on fire")
-        return batch_module._smooth(ctx, opt)
+        return batch_module.smooth_step(ctx, opt)
 
     monkeypatch.setitem(batch_module.STEPS, "smooth", batch_module.Step("smooth", "input", flaky))
     out = tmp_path / "out"
@@ -744,7 +744,7 @@ class _Crash:
 
 
 def test_a_dying_worker_fails_only_its_own_input(passes):
-    from trackproc.pipeline.batch_config import resolve
+    from trackproc.pipeline.batch.config import resolve
 
     settings = resolve(None, {"ingest.stations": str(passes / "stations.csv"), "ingest.carrier_hz": 2.2e9,
                               "ingest.mode": "one-way"}, environ={})
@@ -762,9 +762,9 @@ def test_a_dying_worker_fails_only_its_own_input(passes):
     tasks = [task(p) for p in paths]
     tasks.insert(1, task(paths[0], crash=True))
     results = {}
-    executor = batch_module._PoolExecutor(2)
+    executor = batch_module.PoolExecutor(2)
     try:
-        batch_module._execute(executor, tasks, lambda t: t, lambda t, r: results.__setitem__(t.name, r))
+        batch_module.execute(executor, tasks, lambda t: t, lambda t, r: results.__setitem__(t.name, r))
     finally:
         executor.close()
     assert sorted(results) == sorted(t.name for t in tasks)

@@ -1,6 +1,6 @@
 """``trackproc batch``: a directory or glob of passes through ingest -> smooth (-> refine) (-> estimate), cron-grade.
 
-The flags are generated from :data:`trackproc.pipeline.batch_config.SCHEMA`, the same table that
+The flags are generated from :data:`trackproc.pipeline.batch.schema.SCHEMA`, the same table that
 defines the TOML keys and the ``TRACKPROC_BATCH_*`` environment variables, so the three can never
 drift apart. Precedence: flag > environment > config file > default.
 """
@@ -16,7 +16,7 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
-from trackproc.pipeline.batch_config import CONFIG_ENV, SCHEMA
+from trackproc.pipeline.batch.schema import CONFIG_ENV, SCHEMA
 
 log = logging.getLogger("trackproc")
 
@@ -41,7 +41,8 @@ def batch_command(**kwargs) -> None:
     (one per window), OUTPUT/summary.json and OUTPUT/summary.csv.
 
     Exit status: 0 all inputs (and windows) done, 3 some failed (each reported with its reason),
-    1 all failed or another run holds the output directory, 2 usage error.
+    1 all failed or another run holds the output directory, 2 usage error, 128 + N stopped by
+    signal N (143 SIGTERM, 129 SIGHUP, 130 Ctrl-C) after stopping its workers: run it again to resume.
 
     Example:
 
@@ -55,7 +56,7 @@ def batch_command(**kwargs) -> None:
     config = kwargs.pop("config")
     flags = {opt.name: kwargs[opt.dest] for opt in SCHEMA}
 
-    from trackproc.pipeline.batch_config import resolve
+    from trackproc.pipeline.batch.config import resolve
 
     settings = resolve(config, flags)
     handler, restore = _log_handler(settings.get("batch.log"))
@@ -63,17 +64,20 @@ def batch_command(**kwargs) -> None:
     if progress is not None:
         handler.progress = progress
     try:
-        from trackproc.pipeline.batch import run_batch, single_thread_blas
+        from trackproc.pipeline.batch import Interrupted, run_batch, single_thread_blas
 
         if "numpy" not in sys.modules:  # one BLAS thread here too: --workers 1 computes as the workers do
             single_thread_blas()
 
-        result = run_batch(settings, progress=progress.update if progress else None)
+        try:
+            exit_code = run_batch(settings, progress=progress.update if progress else None).exit_code
+        except Interrupted as exc:  # logged by run_batch; the shell's code for a death by that signal
+            exit_code = exc.exit_code
     finally:
         if progress is not None:
             progress.finish()
         restore()
-    raise typer.Exit(result.exit_code)
+    raise typer.Exit(exit_code)
 
 
 def _show_progress() -> bool:
