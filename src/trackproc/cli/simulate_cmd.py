@@ -46,7 +46,7 @@ def simulate_command(
     freq_offset_hz: float = typer.Option(0.0, "--freq-offset-hz",
                                          help="Frequency offset added to every Doppler sample, Hz."),
     freq_drift_hz_s: float = typer.Option(0.0, "--freq-drift-hz-s", help="Frequency drift from --start, Hz/s."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Random seed (same seed, same output)."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, max=2**63 - 1, help="Random seed (same seed, same output)."),
     force=ForceOpt,
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
