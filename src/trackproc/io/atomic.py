@@ -186,17 +186,60 @@ def write_text(path: str | os.PathLike, text: str) -> None:
     write_bytes(path, text.encode("utf-8"))
 
 
-def read_input_bytes(path: str | os.PathLike) -> bytes:
-    """All bytes of a file, or of stdin for ``-`` (Parquet needs the whole buffer)."""
+#: Default largest input read (MiB); ``TRACKPROC_MAX_INPUT_MB`` overrides it.
+DEFAULT_MAX_INPUT_MB = 256
+
+
+def max_input_bytes() -> int:
+    """The largest input file or stdin stream read, in bytes: ``TRACKPROC_MAX_INPUT_MB`` (MiB),
+    default :data:`DEFAULT_MAX_INPUT_MB`. A bound, so that ``/dev/zero`` or a runaway pipe is an
+    input error instead of exhausting the machine."""
     from trackproc.errors import InputError
 
-    if is_stdio(path):
-        return sys.stdin.buffer.read()
+    text = os.environ.get("TRACKPROC_MAX_INPUT_MB", "")
+    if not text:
+        return DEFAULT_MAX_INPUT_MB << 20
     try:
-        return Path(path).read_bytes()
+        mb = float(text)
+        if not (mb > 0 and mb < 1 << 40):
+            raise ValueError
+    except ValueError:
+        raise InputError("invalid environment variable", column="TRACKPROC_MAX_INPUT_MB", found=text,
+                         expected="a positive size in MiB") from None
+    return int(mb * (1 << 20))
+
+
+def _read_bounded(handle, limit: int, name: str) -> bytes:
+    from trackproc.errors import InputError
+
+    chunks, total = [], 0
+    while True:
+        chunk = handle.read(min(1 << 20, limit + 1 - total))
+        if not chunk:
+            return b"".join(chunks)
+        chunks.append(chunk)
+        total += len(chunk)
+        if total > limit:
+            raise InputError(f"input larger than the limit of {limit / (1 << 20):g} MiB", file=name,
+                             expected="a smaller input, or a larger TRACKPROC_MAX_INPUT_MB")
+
+
+def read_input_bytes(path: str | os.PathLike, limit: int | None = None) -> bytes:
+    """All bytes of a file, or of stdin for ``-`` (Parquet needs the whole buffer), at most
+    ``limit`` bytes (default :func:`max_input_bytes`): beyond it an input error."""
+    from trackproc.errors import InputError
+
+    limit = max_input_bytes() if limit is None else limit
+    if is_stdio(path):
+        return _read_bounded(sys.stdin.buffer, limit, "<stdin>")
+    try:
+        with open(path, "rb") as handle:
+            return _read_bounded(handle, limit, str(path))
     except FileNotFoundError:
         raise InputError("file not found", file=str(path)) from None
     except IsADirectoryError:
         raise InputError("is a directory, expected a file", file=str(path)) from None
     except PermissionError:
         raise InputError("permission denied", file=str(path)) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {(exc.strerror or str(exc)).lower()}", file=str(path)) from None
