@@ -71,11 +71,45 @@ def _register() -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Console-script entry point: runs the app, maps every failure to an exit code and one line
-    on stderr (the guard of issue 14: no traceback, whatever the input)."""
+    on stderr (the guard of issue 14: no traceback, whatever the input).
+
+    Called without ``argv`` (as the ``trackproc`` script), the process ends here by ``os._exit``
+    once stdout, stderr and the log are flushed: the interpreter's own teardown of Arrow's C++
+    threads aborted the process (exit 134, "terminate called without an active exception") in a
+    few percent of runs after an input error. ``batch`` keeps the normal exit (its pool's
+    finalizers must run).
+    """
+    if argv is None:
+        code = _main(sys.argv[1:])
+        if _command_name(_hoist_global_flags(sys.argv[1:])) != "batch" and not _has_children():
+            _hard_exit(code)
+        return code
+    return _main(argv)
+
+
+def _has_children() -> bool:
+    mp = sys.modules.get("multiprocessing")
+    try:
+        return bool(mp is not None and mp.active_children())
+    except Exception:  # noqa: BLE001 - be conservative: keep the normal exit
+        return True
+
+
+def _hard_exit(code: int) -> None:
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    logging.shutdown()
+    os._exit(code)
+
+
+def _main(argv: list[str]) -> int:
     from trackproc.cli import guard
 
     _register()
-    argv = _hoist_global_flags(sys.argv[1:] if argv is None else list(argv))
+    argv = _hoist_global_flags(list(argv))
     command = _command_name(argv)
     stdout = sys.stdout
     restore = guard.install_signal_handlers()
