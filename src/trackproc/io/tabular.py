@@ -314,7 +314,7 @@ def table_meta(schema: pa.Schema) -> dict:
         return {}
     try:
         meta = json.loads(raw)
-    except ValueError:
+    except (ValueError, RecursionError):
         return {}
     return meta if isinstance(meta, dict) else {}
 
@@ -329,7 +329,7 @@ def source_table(data: bytes, source: str) -> SourceTable:
             if comment.startswith(CSV_META_PREFIX):
                 try:
                     meta = json.loads(comment[len(CSV_META_PREFIX):])
-                except ValueError:
+                except (ValueError, RecursionError):
                     meta = {}
         columns = {name.lower(): Column(name, text=text.cells[name]) for name in text.columns}
         return SourceTable(source, columns, text.rows, text.header_row, meta)
