@@ -44,14 +44,21 @@ class InputError(TrackprocError):
         if self.row is not None:
             where.append(f"row {self.row}")
         if self.column is not None:
-            where.append(f"column '{self.column}'")
+            where.append(f"{'option' if str(self.column).startswith('-') else 'column'} '{self.column}'")
         parts = [": ".join([", ".join(where)] if where else [])]
         text = self.detail
         if self.found is not None:
-            text += ("; " if text else "") + f"found {self.found!r}"
+            text += ("; " if text else "") + f"found {_shorten(repr(self.found))}"
         if self.expected is not None:
             text += ("; " if text else "") + f"expected {self.expected}"
         return (parts[0] + ": " + text) if where else text
+
+
+def _shorten(text: str, limit: int = 80) -> str:
+    """A found value as shown in a one-line message: a 200 kB cell is cut, its length said."""
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text)} characters)"
 
 
 class ProcessingError(TrackprocError):
@@ -62,3 +69,38 @@ class ProcessingError(TrackprocError):
     def __init__(self, message: str, diagnostics: dict | None = None):
         self.diagnostics = diagnostics or {}
         super().__init__(message)
+
+
+class OutputError(TrackprocError):
+    """An output could not be written (a directory, under a file, a full or read-only disk).
+
+    Exit 2 when the path itself cannot be a file (the user named a directory, or a path under a
+    file); exit 1 when the system refused (no space, read-only, permission, I/O error).
+    """
+
+    exit_code = EXIT_PROCESSING
+
+    def __init__(self, path: str, exc: OSError):
+        import errno
+
+        self.path, self.errno = str(path), exc.errno
+        usage = {errno.EISDIR, errno.ENOTDIR, errno.ENAMETOOLONG, errno.EEXIST, errno.EINVAL}
+        self.exit_code = EXIT_INPUT if exc.errno in usage else EXIT_PROCESSING
+        what = (exc.strerror or type(exc).__name__).lower()
+        super().__init__(f"{self.path}: cannot write output: {what}; "
+                         "expected a writable file path (nothing was written)")
+
+
+class Terminated(BaseException):
+    """SIGTERM/SIGINT/SIGHUP arrived: unwinds like KeyboardInterrupt, so that every open output
+    removes its temporary file, then the CLI exits 128 + signal number."""
+
+    def __init__(self, signum: int):
+        import signal
+
+        self.signum = signum
+        try:
+            self.name = signal.Signals(signum).name
+        except ValueError:
+            self.name = f"signal {signum}"
+        super().__init__(self.name)

@@ -69,7 +69,7 @@ def accuracy_command(
     monte_carlo: Optional[int] = typer.Option(None, "--monte-carlo", metavar="N",
                                               help="Monte Carlo draws (default 1000 with --method monte-carlo|all; "
                                                    "with spectral or stm: adds mc_ columns)."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Random seed of the Monte Carlo draws."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, max=2**63 - 1, help="Random seed of the Monte Carlo draws."),
     sigma_position_m: Optional[str] = typer.Option(
         None, "--sigma-position-m", metavar="S|SX,SY,SZ",
         help="Initial position sigma, m (one value, or three); with --sigma-velocity-m-s replaces the file's "

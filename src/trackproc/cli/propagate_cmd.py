@@ -154,6 +154,7 @@ def propagate_command(
 
             table = read_stations(stations)
         station = resolve_station(at_station, table, pass_table)
+    _check_extent(initial.epoch, start_t, span, step, at_times, carrier_hz, object_name, object_id)
     options = PropagateOptions(
         span_s=span, step_s=step, start=start_t, at_times=at_times, force=force.value, earth=earth.value, tol=tol,
         stm=stm, station=station, carrier_hz=carrier_hz, range_rate_model=range_rate_model.value,
@@ -170,6 +171,32 @@ def propagate_command(
     log.info("%d rows, %s .. %s, %d Taylor steps (%s) -> %s (%s)", len(eph.frame), eph.meta["start"],
              eph.meta["end"], result.trajectory.n_steps, eph.meta["force_model"],
              "stdout" if out == "-" else out, out_format.value)
+
+
+def _check_extent(epoch, start_t, span, step, at_times, carrier_hz, object_name, object_id) -> None:
+    """Refuse before computing what would run for hours (a span of decades), and names that
+    would forge OEM lines."""
+    import numpy as np
+
+    from trackproc.io.validate import check_carrier, check_name, check_rows, check_span
+
+    if carrier_hz is not None:
+        check_carrier(carrier_hz)
+    for flag, value in (("--object-name", object_name), ("--object-id", object_id)):
+        if value is not None:
+            check_name(value, "OEM " + flag[2:].replace("-", " "), column=flag)
+    offset = 0.0
+    if start_t is not None:
+        offset = float((np.datetime64(start_t, "ns") - np.datetime64(epoch, "ns")) / np.timedelta64(1, "s"))
+    if span is not None:
+        check_span(span, "propagation span", column="--span")
+        check_span(abs(offset) + abs(span), "propagation from the state's epoch (--start + --span)", column="--start")
+        if step is not None and step != 0 and np.isfinite(step):
+            check_rows(abs(span / step), "output rows", column="--step")
+    if at_times is not None and len(at_times):
+        times = np.asarray(at_times).astype("datetime64[ns]")
+        far = float(np.max(np.abs((times - np.datetime64(epoch, "ns")) / np.timedelta64(1, "s"))))
+        check_span(far, "propagation from the state's epoch to the pass", column="--at")
 
 
 __all__ = ["propagate_command", "EphemerisFormat", "TableFormat"]

@@ -46,7 +46,7 @@ def simulate_command(
     freq_offset_hz: float = typer.Option(0.0, "--freq-offset-hz",
                                          help="Frequency offset added to every Doppler sample, Hz."),
     freq_drift_hz_s: float = typer.Option(0.0, "--freq-drift-hz-s", help="Frequency drift from --start, Hz/s."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Random seed (same seed, same output)."),
+    seed: Optional[int] = typer.Option(None, "--seed", min=0, max=2**63 - 1, help="Random seed (same seed, same output)."),
     force=ForceOpt,
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
@@ -119,6 +119,7 @@ def simulate_command(
         from trackproc.io.tle import read_tle, tle_state
 
         initial = tle_state(read_tle(tle), at=start_t, eop=orientation)
+    _check_extent(initial.epoch, start_t, duration, step, carrier_hz)
     table = read_stations(stations)
     biases = {}
     for item in range_bias:
@@ -151,6 +152,23 @@ def simulate_command(
     log.info("%d samples, %d passes, %d stations -> %s (%s)", len(frame), frame["pass_id"].nunique(),
              frame["station"].nunique(), "stdout" if out == "-" else out,
              "wide csv" if wide else out_format.value)
+
+
+def _check_extent(epoch, start_t, duration, step, carrier_hz) -> None:
+    """Refuse before computing what would run for hours (decades from the state's epoch) or
+    cannot be a radio link (a carrier in GHz given as Hz)."""
+    import numpy as np
+
+    from trackproc.io.validate import check_carrier, check_rows, check_span
+
+    check_carrier(carrier_hz)
+    check_span(duration, "simulated span", column="--duration")
+    if start_t is not None:
+        offset = float((np.datetime64(start_t, "ns") - np.datetime64(epoch, "ns")) / np.timedelta64(1, "s"))
+        check_span(abs(offset) + abs(duration), "propagation from the state's epoch to the end (--start + --duration)",
+                   column="--start")
+    if step > 0:
+        check_rows(duration / step, "time steps", column="--step")
 
 
 def _simulate_ballistic(nominal_path, hypothesis, displacement_m, stations, step, elevation_mask_deg, kinds,

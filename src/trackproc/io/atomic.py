@@ -21,37 +21,128 @@ def is_stdio(path: str | os.PathLike | None) -> bool:
     return path is not None and str(path) == STDIO
 
 
+class _Transaction:
+    """Outputs of one command: each is complete in its temporary file; all are renamed into place
+    at the end, or all removed (a failing second output must not leave the first one written)."""
+
+    def __init__(self):
+        self.pid = os.getpid()
+        self.pending: list[tuple[str, Path]] = []
+        self.decided = False
+        self.ok = True
+
+    def commit_if(self, ok: bool) -> None:
+        self.decided, self.ok = True, ok
+
+    def rollback(self) -> None:
+        for tmp, _ in self.pending:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+        self.pending.clear()
+
+    def commit(self) -> None:
+        pending, self.pending = self.pending, []
+        for i, (tmp, target) in enumerate(pending):
+            try:
+                os.replace(tmp, target)
+            except OSError as exc:
+                self.pending = pending[i + 1:]
+                self.rollback()
+                with contextlib.suppress(OSError):
+                    os.unlink(tmp)
+                from trackproc.errors import OutputError
+
+                raise OutputError(str(target), exc) from None
+
+
+_transaction: _Transaction | None = None
+
+
+@contextlib.contextmanager
+def all_or_none(enabled: bool = True) -> Iterator[_Transaction]:
+    """Within the block, every :func:`open_atomic` output of this process is held in its temporary
+    file; they become the targets together when the block ends normally (and ``commit_if`` was
+    not given False), else they are all removed. Child processes write straight through."""
+    global _transaction
+    txn = _Transaction()
+    previous = _transaction
+    if enabled:
+        _transaction = txn
+    try:
+        yield txn
+    except BaseException:
+        txn.rollback()
+        raise
+    else:
+        if txn.ok:
+            txn.commit()
+        else:
+            txn.rollback()
+    finally:
+        _transaction = previous
+
+
 @contextlib.contextmanager
 def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
     """Binary file handle that becomes ``path`` only if the block completes.
 
-    ``path == "-"`` yields stdout's binary buffer (nothing to rename).
+    ``path == "-"`` yields stdout's binary buffer (nothing to rename). An OSError on the output
+    side (a directory, a path under a file, a full or read-only disk) is an
+    :class:`~trackproc.errors.OutputError` naming the path.
     """
+    from trackproc.errors import OutputError
+
     if is_stdio(path):
         out = _WholeWrites(sys.stdout.buffer)
         yield out
         out.flush()
         return
     target = Path(path)
-    if target.exists() and not target.is_file():
+    if target.exists() and not target.is_file() and not target.is_dir():
         # a device, FIFO or /dev/stdout: there is nothing to replace atomically (and renaming
         # over /dev/null would destroy it): write straight through
-        with open(target, "wb") as handle:
-            yield handle
+        try:
+            handle = open(target, "wb")
+        except OSError as exc:
+            raise OutputError(str(path), exc) from None
+        try:
+            with handle:
+                yield handle
+        except OSError as exc:  # /dev/full: ENOSPC on write or on close
+            raise OutputError(str(path), exc) from None
         return
+    if target.is_dir():
+        import errno
+
+        raise OutputError(str(path), IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR)))
     directory = target.parent if str(target.parent) else Path(".")
-    directory.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
     try:
-        os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
-        with os.fdopen(fd, "wb") as handle:
-            yield handle
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, target)
+        directory.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    except FileExistsError as exc:  # a parent is a file
+        import errno
+
+        raise OutputError(str(path), NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR))) from exc
+    except OSError as exc:
+        raise OutputError(str(path), exc) from None
+    txn = _transaction if _transaction is not None and _transaction.pid == os.getpid() else None
+    try:
+        try:
+            os.fchmod(fd, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
+            with os.fdopen(fd, "wb") as handle:
+                yield handle
+                handle.flush()
+                os.fsync(handle.fileno())
+            if txn is not None:
+                txn.pending.append((tmp, target))
+            else:
+                os.replace(tmp, target)
+        except OSError as exc:
+            raise OutputError(str(path), exc) from None
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
+        if txn is None or (tmp, target) not in txn.pending:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
         raise
 
 
@@ -95,17 +186,60 @@ def write_text(path: str | os.PathLike, text: str) -> None:
     write_bytes(path, text.encode("utf-8"))
 
 
-def read_input_bytes(path: str | os.PathLike) -> bytes:
-    """All bytes of a file, or of stdin for ``-`` (Parquet needs the whole buffer)."""
+#: Default largest input read (MiB); ``TRACKPROC_MAX_INPUT_MB`` overrides it.
+DEFAULT_MAX_INPUT_MB = 256
+
+
+def max_input_bytes() -> int:
+    """The largest input file or stdin stream read, in bytes: ``TRACKPROC_MAX_INPUT_MB`` (MiB),
+    default :data:`DEFAULT_MAX_INPUT_MB`. A bound, so that ``/dev/zero`` or a runaway pipe is an
+    input error instead of exhausting the machine."""
     from trackproc.errors import InputError
 
-    if is_stdio(path):
-        return sys.stdin.buffer.read()
+    text = os.environ.get("TRACKPROC_MAX_INPUT_MB", "")
+    if not text:
+        return DEFAULT_MAX_INPUT_MB << 20
     try:
-        return Path(path).read_bytes()
+        mb = float(text)
+        if not (mb > 0 and mb < 1 << 40):
+            raise ValueError
+    except ValueError:
+        raise InputError("invalid environment variable", column="TRACKPROC_MAX_INPUT_MB", found=text,
+                         expected="a positive size in MiB") from None
+    return int(mb * (1 << 20))
+
+
+def _read_bounded(handle, limit: int, name: str) -> bytes:
+    from trackproc.errors import InputError
+
+    chunks, total = [], 0
+    while True:
+        chunk = handle.read(min(1 << 20, limit + 1 - total))
+        if not chunk:
+            return b"".join(chunks)
+        chunks.append(chunk)
+        total += len(chunk)
+        if total > limit:
+            raise InputError(f"input larger than the limit of {limit / (1 << 20):g} MiB", file=name,
+                             expected="a smaller input, or a larger TRACKPROC_MAX_INPUT_MB")
+
+
+def read_input_bytes(path: str | os.PathLike, limit: int | None = None) -> bytes:
+    """All bytes of a file, or of stdin for ``-`` (Parquet needs the whole buffer), at most
+    ``limit`` bytes (default :func:`max_input_bytes`): beyond it an input error."""
+    from trackproc.errors import InputError
+
+    limit = max_input_bytes() if limit is None else limit
+    if is_stdio(path):
+        return _read_bounded(sys.stdin.buffer, limit, "<stdin>")
+    try:
+        with open(path, "rb") as handle:
+            return _read_bounded(handle, limit, str(path))
     except FileNotFoundError:
         raise InputError("file not found", file=str(path)) from None
     except IsADirectoryError:
         raise InputError("is a directory, expected a file", file=str(path)) from None
     except PermissionError:
         raise InputError("permission denied", file=str(path)) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {(exc.strerror or str(exc)).lower()}", file=str(path)) from None

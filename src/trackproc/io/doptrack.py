@@ -33,6 +33,7 @@ import pandas as pd
 
 from trackproc.errors import InputError
 from trackproc.io.raw import RawMeasurements
+from trackproc.io.validate import check_iso_year, check_name, check_station, check_year
 from trackproc.io.tabular import (NONFINITE_VALUE, UNPARSEABLE_TIME, WRONG_TYPE, Column, Problems,
                                   SourceTable, column_numbers, parse_text_table)
 
@@ -61,21 +62,49 @@ def find_sidecar(data_path: Path) -> Path | None:
     return None
 
 
-def load_sidecar(path: Path) -> dict:
-    """The YAML sidecar as a dict (InputError with the line on a syntax error)."""
+#: Largest time offset from tracking.epoch accepted, s (a pass lasts minutes).
+MAX_OFFSET_S = 86400.0
+#: Largest YAML sidecar read, bytes (a real one is under 1 kB).
+MAX_SIDECAR_BYTES = 1 << 20
+
+
+def _safe_loader():
+    """PyYAML's SafeLoader without aliases: ``*name`` repeats a node without copying it, so a chain
+    of aliases in an 800-byte file expands to gigabytes once the value is used as text."""
     import yaml
 
+    class NoAliasLoader(yaml.SafeLoader):
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.AliasEvent):
+                event = self.peek_event()
+                raise yaml.constructor.ConstructorError(
+                    None, None, "YAML aliases (*name) are not accepted in a DopTrack sidecar", event.start_mark)
+            return super().compose_node(parent, index)
+
+    return NoAliasLoader
+
+
+def load_sidecar(path: Path) -> dict:
+    """The YAML sidecar as a dict (InputError with the line on a syntax error), loaded safely:
+    bounded size, no aliases, no tags beyond plain YAML."""
+    import yaml
+
+    from trackproc.io.atomic import read_input_bytes
+
+    data = read_input_bytes(path, limit=MAX_SIDECAR_BYTES)
     try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
         raise InputError(f"cannot read the DopTrack sidecar ({exc.__class__.__name__})",
-                         file=str(path)) from None
+                         file=str(path), expected="UTF-8 YAML text") from None
     try:
-        doc = yaml.safe_load(text)
+        doc = yaml.load(text, Loader=_safe_loader())  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         raise InputError(f"invalid YAML ({getattr(exc, 'problem', None) or exc})", file=str(path),
                          row=mark.line + 1 if mark else None) from None
+    except RecursionError:
+        raise InputError("YAML nested too deeply", file=str(path), expected="a DopTrack sidecar") from None
     if not isinstance(doc, dict):
         raise InputError("not a DopTrack sidecar", file=str(path), found=type(doc).__name__,
                          expected="a YAML mapping with satellite, station and tracking")
@@ -93,10 +122,17 @@ def _get(doc: dict, dotted: str, source: str, expected: str):
 
 
 def _utc(value, source: str, key: str) -> pd.Timestamp:
-    """A YAML time (datetime or ISO string; naive = UTC) as a UTC timestamp."""
+    """A YAML time (datetime or ISO string; naive = UTC) as a UTC timestamp, within 1678-2261."""
+    if not isinstance(value, (str, dt.datetime, dt.date)):
+        raise InputError("wrong type in the DopTrack sidecar", file=source, column=key, found=value,
+                         expected="YYYY-MM-DD hh:mm:ss[.ffffff] (UTC)")
+    check_year(value.year if isinstance(value, (dt.datetime, dt.date)) else 2000, file=source, column=key,
+               found=str(value))
+    if isinstance(value, str):
+        check_iso_year(value, file=source, column=key)
     try:
         stamp = pd.Timestamp(value)
-    except (ValueError, TypeError):
+    except (ValueError, TypeError, OverflowError):
         raise InputError("unparseable time in the DopTrack sidecar", file=source, column=key,
                          found=value, expected="YYYY-MM-DD hh:mm:ss[.ffffff] (UTC)") from None
     if pd.isna(stamp):
@@ -107,8 +143,8 @@ def _utc(value, source: str, key: str) -> pd.Timestamp:
 
 def _number(value, source: str, key: str, expected: str) -> float:
     try:
-        out = float(value)
-    except (TypeError, ValueError):
+        out = math.nan if isinstance(value, bool) or not isinstance(value, (int, float, str)) else float(value)
+    except (TypeError, ValueError, OverflowError):
         out = math.nan
     if not math.isfinite(out):
         raise InputError("invalid number in the DopTrack sidecar", file=source, column=key,
@@ -145,9 +181,19 @@ def read_doptrack(data: bytes, source: str, *, data_path: Path | None = None,
                          expected=f"<same name>.yml in {where}, or --sidecar FILE")
     doc = load_sidecar(side_path)
     side = str(side_path)
+    for key in ("station", "tracking", "station.position"):
+        node = doc
+        for part in key.split("."):
+            node = node.get(part) if isinstance(node, dict) else None
+        if node is not None and not isinstance(node, dict):
+            raise InputError("wrong type in the DopTrack sidecar", file=side, column=key, found=node,
+                             expected="a mapping")
     epoch = _utc(_get(doc, "tracking.epoch", side, "the UTC time that 'time' counts from"), side,
                  "tracking.epoch")
-    station = str(_get(doc, "station.name", side, "the station name"))
+    station = _get(doc, "station.name", side, "the station name")
+    if isinstance(station, int) and not isinstance(station, bool):
+        station = str(station)
+    check_name(station, "station name", file=side, column="station.name")
     position = {
         "lat_deg": _number(_get(doc, "station.position.latitude", side, "degrees"), side,
                            "station.position.latitude", "degrees in [-90, 90]"),
@@ -156,7 +202,17 @@ def read_doptrack(data: bytes, source: str, *, data_path: Path | None = None,
         "height_m": _number(_get(doc, "station.position.altitude", side, "metres"), side,
                             "station.position.altitude", "metres above the WGS-84 ellipsoid"),
     }
-    satellite = str((doc.get("satellite") or {}).get("name", ""))
+    check_station(station, position["lat_deg"], position["lon_deg"], position["height_m"], file=side,
+                  columns={"lat_deg": "station.position.latitude", "lon_deg": "station.position.longitude",
+                           "height_m": "station.position.altitude"})
+    satellite_doc = doc.get("satellite") or {}
+    if not isinstance(satellite_doc, dict):
+        raise InputError("wrong type in the DopTrack sidecar", file=side, column="satellite", found=satellite_doc,
+                         expected="a mapping with name, noradid, tle")
+    satellite = satellite_doc.get("name", "")
+    if not isinstance(satellite, str):
+        raise InputError("wrong type in the DopTrack sidecar", file=side, column="satellite.name",
+                         found=satellite, expected="the satellite name (text)")
     if carrier_hz is None:
         carrier_hz = NOMINAL_CARRIERS_HZ.get(satellite.lower())
         if carrier_hz is None:
@@ -172,6 +228,10 @@ def read_doptrack(data: bytes, source: str, *, data_path: Path | None = None,
     problems = Problems(table.rows, source)
     seconds, missing_t, wrong_t = column_numbers(table, table.columns["time"])
     bad_time = missing_t | wrong_t | ~np.isfinite(seconds)
+    far = ~bad_time & (np.abs(np.where(bad_time, 0.0, seconds)) > MAX_OFFSET_S)
+    problems.add(UNPARSEABLE_TIME, far, column="time", found=text.cells["time"],
+                 expected=f"seconds since tracking.epoch within +-{MAX_OFFSET_S:g} s (a pass)")
+    bad_time |= far
     problems.add(UNPARSEABLE_TIME, bad_time, column="time", found=text.cells["time"],
                  expected="seconds since tracking.epoch")
     frequency, missing_f, wrong_f = column_numbers(table, table.columns["frequency"])
@@ -192,7 +252,8 @@ def read_doptrack(data: bytes, source: str, *, data_path: Path | None = None,
         "unit": "Hz",
         "pass_id": (data_path or side_path).stem,
     })[keep].reset_index(drop=True)
-    tracking = {k: v for k, v in (doc.get("tracking") or {}).items()}
+    tracking = doc.get("tracking") or {}
+    tracking = {k: v for k, v in tracking.items()}
     details = _iso({
         "sidecar": side,
         "satellite": satellite,

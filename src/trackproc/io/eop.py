@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from pathlib import Path
 
 from trackproc.errors import InputError
@@ -59,7 +61,7 @@ def earth_orientation(eop_path=None, dut1_s=None):
     if eop_path is not None:
         return read_finals2000a(eop_path), None
     if dut1_s is not None:
-        if abs(dut1_s) > 0.9:
+        if not math.isfinite(dut1_s) or abs(dut1_s) > 0.9:
             raise InputError("UT1-UTC out of range", column="--dut1", found=dut1_s,
                              expected="|UT1-UTC| <= 0.9 s")
         return EarthOrientation.constant(dut1_s), None

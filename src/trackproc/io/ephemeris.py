@@ -254,6 +254,10 @@ def oem_text(eph: Ephemeris, *, object_name: str = "UNKNOWN", object_id: str = "
     Positions and velocities are converted to km and km/s, covariances to km^2, km^2/s, km^2/s^2
     (CCSDS 502.0 section 5.2.4-5.2.5); see the module docstring for the layout.
     """
+    from trackproc.io.validate import check_name
+
+    for key, text in (("OBJECT_NAME", object_name), ("OBJECT_ID", object_id), ("ORIGINATOR", originator)):
+        check_name(str(text), "OEM " + key, column=key)   # a newline would forge a KVN line
     frame = eph.frame
     if len(frame) == 0:
         raise ValueError("an OEM needs at least one ephemeris line")

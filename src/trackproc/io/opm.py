@@ -53,6 +53,10 @@ def opm_text(state, *, object_name: str = "UNKNOWN", object_id: str = "UNKNOWN",
     ``state.state_covariance`` (m, m/s) is converted to km and km/s; the other estimated
     parameters (if any) are listed in COMMENT lines with their sigmas.
     """
+    from trackproc.io.validate import check_name
+
+    for key, text in (("OBJECT_NAME", object_name), ("OBJECT_ID", object_id), ("ORIGINATOR", originator)):
+        check_name(str(text), "OPM " + key, column=key)   # a newline would forge a KVN line
     created = creation_date or datetime.now(timezone.utc).replace(tzinfo=None)
     created_text = iso_utc(created, 3, suffix="")
     lines = [f"CCSDS_OPM_VERS = {VERSION}"]

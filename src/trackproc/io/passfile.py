@@ -68,7 +68,8 @@ class PassTable:
         """Stations recorded at ingest, name -> :class:`trackproc.io.stations.Station`."""
         from trackproc.io.stations import Station
 
-        return {name: Station.from_dict(name, values)
+        source = str(self.meta.get("source") or "<pass file>")
+        return {name: Station.from_meta(name, values, source)
                 for name, values in (self.meta.get("stations") or {}).items()}
 
 
@@ -210,12 +211,64 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
                      found=table.columns[name].text if table.columns[name].text is not None else "null",
                      expected="a number (SI units)")
         data_columns[name] = values
+    _check_samples(problems, data_columns, table, source)
     problems.resolve(drop_invalid=False)
     frame = pd.DataFrame(data_columns)
     for key, column in table.columns.items():
         if key not in COLUMNS:
             frame[column.name] = _extra_column(column)
+    _check_meta(meta, frame, table.rows, source)
     return PassTable(frame, meta)
+
+
+def _check_samples(problems, columns: dict, table, source: str) -> None:
+    """Values a pass file can hold: finite, sigma > 0, ranges >= 0, angles in their domains,
+    |range-rate| <= 12 km/s; station names printable."""
+    from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_name
+
+    kinds = columns["kind"].to_numpy(dtype=object)
+    value, sigma = np.asarray(columns["value"], float), np.asarray(columns["sigma"], float)
+    given = np.isfinite(value)
+    problems.add("non-finite value", ~given, column="value", found=value, expected="a finite number")
+    problems.add("invalid sigma", ~(np.isfinite(sigma) & (sigma > 0)), column="sigma",
+                 found=sigma, expected="a finite sigma > 0")
+    problems.add("negative range", given & (kinds == "range") & (value < 0), column="value", found=value,
+                 expected="a range >= 0 m")
+    problems.add("elevation out of range", given & (kinds == "elevation") & (np.abs(value) > np.pi / 2 + 1e-12),
+                 column="value", found=value, expected="an elevation in [-pi/2, pi/2] rad")
+    problems.add("azimuth out of range", given & (kinds == "azimuth") & ((value < -np.pi) | (value > 2 * np.pi)),
+                 column="value", found=value, expected="an azimuth in [-pi, 2 pi] rad")
+    problems.add("implausible range-rate", given & (kinds == "range_rate") & (np.abs(value) > MAX_LOS_SPEED_M_S),
+                 column="value", found=value,
+                 expected=f"|range-rate| <= {MAX_LOS_SPEED_M_S:g} m/s (an Earth orbit)")
+    names = columns["station"].to_numpy(dtype=object)
+    for name in pd.unique(names):
+        check_name(name, "station name", file=source, row=int(table.rows[int(np.flatnonzero(names == name)[0])]), column="station")
+
+
+def _check_meta(meta: dict, frame: pd.DataFrame, rows, source: str) -> None:
+    """Metadata types and plausibility: stations (coordinates near the ellipsoid), the carrier
+    (a radio carrier in Hz) and the Doppler it implies (a line-of-sight speed <= 12 km/s)."""
+    from trackproc.io.stations import Station
+    from trackproc.io.validate import check_carrier, check_los_speed
+
+    stations = meta.get("stations")
+    if stations is not None:
+        if not isinstance(stations, dict):
+            raise InputError("invalid metadata", file=source, column="stations", found=stations,
+                             expected="an object: station name -> {lat_deg, lon_deg, height_m}")
+        for name, values in stations.items():
+            Station.from_meta(name, values, source)
+    mode = meta.get("doppler_mode")
+    if mode is not None and mode not in ("one-way", "two-way"):
+        raise InputError("invalid metadata", file=source, column="doppler_mode", found=mode,
+                         expected="one-way or two-way")
+    carrier = meta.get("carrier_hz")
+    if carrier is not None:
+        carrier = check_carrier(carrier, file=source, column="carrier_hz")
+        doppler = (frame["kind"] == "doppler").to_numpy()
+        check_los_speed(frame["value"].to_numpy()[doppler], "doppler", carrier_hz=carrier, mode=mode,
+                        file=source, rows=np.asarray(rows)[doppler], column="value")
 
 
 def _extra_column(column) -> pd.Series:

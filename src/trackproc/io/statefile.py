@@ -37,6 +37,7 @@ from trackproc.io.jsonutil import json_ready
 from trackproc.errors import InputError
 from trackproc.io.isotime import iso_utc as format_epoch  # noqa: F401  (the state file's epoch text)
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
+from trackproc.io.validate import check_iso_year, check_orbit_state
 
 SCHEMA_VERSION = 1
 STATE_PARAMETERS = ("x", "y", "z", "vx", "vy", "vz")
@@ -131,6 +132,7 @@ def parse_epoch(text: str, *, file: str | None = None, column: str = "epoch") ->
                          found=text, expected="an epoch outside the leap second")
     if len(s) < 10 or not s[:4].isdigit() or s[4] != "-":
         raise InputError("invalid epoch", file=file, column=column, found=text, expected=expected)
+    check_iso_year(s, file=file, column=column)
     try:
         t = np.datetime64(s, "ns")
     except ValueError:
@@ -195,6 +197,8 @@ def parse_state(data: bytes | str, source: str = "<state>", eop=None) -> State:
         row = getattr(exc, "lineno", None)
         raise InputError(f"not valid JSON ({getattr(exc, 'msg', exc)})", file=file, row=row,
                          expected="a JSON state file") from None
+    except RecursionError:
+        raise InputError("JSON nested too deeply", file=file, expected="a JSON state file (a few levels of nesting)") from None
     if not isinstance(doc, dict):
         raise InputError("not a state file", file=file, found=type(doc).__name__, expected="a JSON object")
     version = doc.get("schema_version", SCHEMA_VERSION)
@@ -212,6 +216,8 @@ def parse_state(data: bytes | str, source: str = "<state>", eop=None) -> State:
     if np.linalg.norm(r) < 1.0e5:
         raise InputError("position is not an orbit", file=file, column="position_m", found=_short(doc["position_m"]),
                          expected="metres from the Earth's centre (|r| > 100 km; kilometres given?)")
+    if frame != "ITRF":   # an Earth-fixed velocity lacks the rotation: checked after conversion
+        check_orbit_state(r, v, file=file)
 
     params = doc.get("parameters")
     if params is not None:
@@ -292,6 +298,8 @@ def parse_state(data: bytes | str, source: str = "<state>", eop=None) -> State:
                              file=file, column="parameters", found=_short(params),
                              expected="all of x, y, z, vx, vy, vz, or frame GCRF")
 
+    if frame == "ITRF":
+        check_orbit_state(r, v, file=file)
     eop_source = doc.get("earth_orientation")
     extra = {k: doc[k] for k in doc if k not in _KNOWN_KEYS}
     if frame != "GCRF":

@@ -14,6 +14,7 @@ from typing import Optional
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
+from trackproc.io.validate import check_name, check_station
 
 REQUIRED = ("station", "lat_deg", "lon_deg", "height_m")
 
@@ -40,6 +41,27 @@ class Station:
         """Inverse of :meth:`as_dict` (as read back from pass-file metadata)."""
         return cls(name, float(values["lat_deg"]), float(values["lon_deg"]), float(values["height_m"]),
                    None if values.get("range_bias_m") is None else float(values["range_bias_m"]))
+
+    @classmethod
+    def from_meta(cls, name, values, source: str) -> "Station":
+        """A station as recorded in a file's metadata, checked (types, names, plausibility)."""
+        check_name(name, "station name", file=source, column="stations")
+        if not isinstance(values, dict):
+            raise InputError("invalid station in the metadata", file=source, column=f"stations.{name}",
+                             found=values, expected="an object with lat_deg, lon_deg, height_m")
+        for key in ("lat_deg", "lon_deg", "height_m"):
+            value = values.get(key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise InputError("invalid station in the metadata", file=source, column=f"stations.{name}.{key}",
+                                 found=value, expected="a number")
+        check_station(name, values["lat_deg"], values["lon_deg"], values["height_m"], file=source,
+                      prefix=f"stations.{name}.")
+        bias = values.get("range_bias_m")
+        if bias is not None and (isinstance(bias, bool) or not isinstance(bias, (int, float))
+                                 or not math.isfinite(bias)):
+            raise InputError("invalid station in the metadata", file=source,
+                             column=f"stations.{name}.range_bias_m", found=bias, expected="a finite number or null")
+        return cls.from_dict(name, values)
 
 
 _LIMITS = {
@@ -87,6 +109,8 @@ def parse_stations(data: bytes, source: str) -> dict[str, Station]:
                 raise InputError("invalid station coordinate", file=source, row=row, column=by_key[key],
                                  found=cell[key], expected=expected)
             numbers[key] = value
+        check_name(name, "station name", file=source, row=row, column=by_key["station"])
+        check_station(name, numbers["lat_deg"], numbers["lon_deg"], numbers["height_m"], file=source, row=row)
         stations[name] = Station(name, numbers["lat_deg"], numbers["lon_deg"], numbers["height_m"],
                                  numbers.get("range_bias_m"))
         first_row[name] = row

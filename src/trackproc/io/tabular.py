@@ -42,6 +42,7 @@ import pyarrow.compute as pc
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
+from trackproc.io.validate import FIRST_YEAR, LAST_YEAR
 from trackproc.io.raw import KIND_UNITS, RawMeasurements
 
 log = logging.getLogger("trackproc")
@@ -205,12 +206,16 @@ def parse_text_table(data: bytes, source: str, *, header: list[str] | None = Non
             lines[i] = ""
     reader = csv.reader(io.StringIO("\n".join(lines)), skipinitialspace=True)
     records, starts, last = [], [], 0
-    for record in reader:
-        start, last = last + 1, reader.line_num
-        if not any(cell.strip() for cell in record):
-            continue
-        records.append([cell.strip() for cell in record])
-        starts.append(start)
+    try:
+        for record in reader:
+            start, last = last + 1, reader.line_num
+            if not any(cell.strip() for cell in record):
+                continue
+            records.append([cell.strip() for cell in record])
+            starts.append(start)
+    except csv.Error as exc:   # a cell beyond csv.field_size_limit (128 kB), a NUL byte
+        raise InputError(f"unreadable CSV ({exc})", file=source, row=last + 1,
+                         expected=f"CSV cells of at most {csv.field_size_limit()} characters, no NUL") from None
     header_row = 0
     if header is None:
         if not records:
@@ -309,7 +314,7 @@ def table_meta(schema: pa.Schema) -> dict:
         return {}
     try:
         meta = json.loads(raw)
-    except ValueError:
+    except (ValueError, RecursionError):
         return {}
     return meta if isinstance(meta, dict) else {}
 
@@ -324,7 +329,7 @@ def source_table(data: bytes, source: str) -> SourceTable:
             if comment.startswith(CSV_META_PREFIX):
                 try:
                     meta = json.loads(comment[len(CSV_META_PREFIX):])
-                except ValueError:
+                except (ValueError, RecursionError):
                     meta = {}
         columns = {name.lower(): Column(name, text=text.cells[name]) for name in text.columns}
         return SourceTable(source, columns, text.rows, text.header_row, meta)
@@ -359,26 +364,48 @@ def column_times(table: SourceTable, column: Column, problems: Problems, index=N
     ``index`` maps the problems' positions to the table's rows (default: one to one).
     """
     if column.text is not None:
-        parsed = pd.to_datetime(pd.Series(column.text, dtype=object), utc=True, format="ISO8601",
-                                errors="coerce")
+        text = pd.Series(column.text, dtype=object)
+        # beyond 1678-2261 a nanosecond timestamp wraps or raises: such rows are unparseable times
+        year = pd.to_numeric(text.astype(str).str.extract(r"^\s*([+-]?\d{4,})-", expand=False), errors="coerce")
+        text = text.where(~((year < FIRST_YEAR) | (year > LAST_YEAR)), "")
+        try:
+            parsed = pd.to_datetime(text, utc=True, format="ISO8601", errors="coerce")
+        except (ValueError, OverflowError):   # OutOfBoundsDatetime despite errors="coerce"
+            parsed = pd.Series([_one_time(t) for t in text], dtype="datetime64[ns, UTC]")
         values = parsed.dt.tz_localize(None).dt.as_unit("ns").to_numpy()
     elif pa.types.is_timestamp(column.array.type):
-        try:
-            arr = column.array.cast(pa.timestamp("ns", tz=column.array.type.tz))
-        except pa.ArrowInvalid:
-            raise InputError("time outside the representable range", file=table.source,
-                             column=column.name, expected=TIME_EXPECTED) from None
-        values = arr.to_numpy(zero_copy_only=False).astype("datetime64[ns]")
+        # Out-of-range stamps (year 3000 in ms or us) become NaT and are reported by row; a failing
+        # cast is not used for this (its exception left Arrow aborting at exit in ~7 % of runs).
+        unit = column.array.type.unit
+        ticks = pc.cast(column.array, pa.int64()).to_numpy(zero_copy_only=False)
+        ticks = np.where(np.isnan(ticks.astype(float)), 0, ticks).astype(np.int64) if ticks.dtype != np.int64 \
+            else ticks
+        lo = np.datetime64(f"{FIRST_YEAR}-01-01", unit).astype(np.int64)
+        hi = np.datetime64(f"{LAST_YEAR + 1}-01-01", unit).astype(np.int64)
+        outside = (ticks < lo) | (ticks >= hi)
+        values = np.where(outside, np.int64(0), ticks).astype(f"datetime64[{unit}]").astype("datetime64[ns]")
+        values[outside | column.array.is_null().to_numpy(zero_copy_only=False)] = np.datetime64("NaT")
     else:
         raise _wrong_type(table, column, "a timestamp column or ISO 8601 strings")
     bad = np.isnat(values)
     if index is not None:
         bad = bad[index]
     found = column.text if column.text is not None else None
-    problems.add(UNPARSEABLE_TIME, bad, column=column.name,
-                 found=_indexed(found, index) if found is not None else "null",
-                 expected=TIME_EXPECTED)
+    if found is not None:
+        found = _indexed(found, index)
+    elif index is None:
+        found = lambda i: "null" if not column.array[i].is_valid else str(column.array[i])  # noqa: E731
+    else:
+        found = "null or out of range"
+    problems.add(UNPARSEABLE_TIME, bad, column=column.name, found=found, expected=TIME_EXPECTED)
     return values
+
+
+def _one_time(text) -> pd.Timestamp:
+    try:
+        return pd.to_datetime(text, utc=True, format="ISO8601")
+    except (ValueError, OverflowError, TypeError):
+        return pd.NaT
 
 
 def _indexed(array, index):

@@ -82,6 +82,7 @@ from dataclasses import dataclass, field
 
 from trackproc.constants import C_LIGHT
 from trackproc.errors import InputError
+from trackproc.io.validate import check_iso_year
 from trackproc.io.raw import RawMeasurements
 
 __all__ = ["read_tdm"]
@@ -268,6 +269,12 @@ class _Parser:
                         raise self.error(
                             "data line inside a META block (missing META_STOP/DATA_START?)",
                             row=row, column=key, found=_clip(line))
+                    import difflib
+
+                    close = difflib.get_close_matches(key, sorted(_META_KEYS), n=1, cutoff=0.85)
+                    if close:   # ANGLE_TYP for ANGLE_TYPE: a typo must not change the meaning silently
+                        raise self.error("unknown TDM metadata keyword", row=row, column=key, found=key,
+                                         expected=f"{close[0]} (a CCSDS 503.0-B-2 metadata keyword)")
                     self._skip(key)
                 seg.meta[key] = (value, row)
             elif state == "data":
@@ -330,6 +337,13 @@ class _Parser:
             raise self.error("metadata keyword inside a DATA block", row=row, column=key,
                              found=value, expected="KEYWORD = EPOCH VALUE")
         if key not in _USED_KEYS:
+            if key not in _DATA_KEYS:
+                import difflib
+
+                close = difflib.get_close_matches(key, sorted(_USED_KEYS | _DATA_KEYS), n=1, cutoff=0.8)
+                if close:   # RANGEE for RANGE: a typo must not drop the measurement without a word
+                    raise self.error("unknown TDM data keyword", row=row, column=key, found=key,
+                                     expected=f"{close[0]} (a CCSDS 503.0-B-2 data keyword)")
             self._skip(key)
             return
         parts = value.split()
@@ -344,6 +358,7 @@ class _Parser:
         if naive_ns == "leap":
             raise self.error("a leap-second epoch (ss = 60) cannot be represented", row=row,
                              column=key, found=epoch)
+        check_iso_year(epoch, file=self.source, row=row, column=key)
         if not _NUMBER_RE.match(number):
             raise self.error("non-numeric value", row=row, column=key, found=number,
                              expected="a number")
@@ -478,6 +493,9 @@ class _Converter:
             "row": np.array([r[4] for r in self.rows], dtype="int64"),
         })
 
+        self.warnings.extend(f"non-standard TDM keyword {key} skipped ({n} lines)"
+                             for key, n in sorted(self.skipped.items())
+                             if key not in _DATA_KEYS | _META_KEYS | _HEADER_KEYS)
         meta = {
             "source": self.source,
             "format": "CCSDS TDM (KVN)",

@@ -120,6 +120,8 @@ def parse_nominal(data: bytes | str, source: str = "<nominal>") -> Nominal:
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"not valid JSON ({getattr(exc, 'msg', exc)})", file=source,
                          row=getattr(exc, "lineno", None), expected="a JSON object (NOMINAL.json)") from None
+    except RecursionError:
+        raise InputError("JSON nested too deeply", file=source, expected="a JSON object (NOMINAL.json)") from None
     if not isinstance(doc, dict):
         raise InputError("not a nominal-trajectory file", file=source, found=type(doc).__name__,
                          expected="a JSON object")
@@ -155,7 +157,9 @@ def parse_nominal(data: bytes | str, source: str = "<nominal>") -> Nominal:
             return None
         if not isinstance(value, str) or not value.strip():
             raise InputError("invalid value", file=source, column=key, found=value, expected="a non-empty string")
-        return value.strip()
+        from trackproc.io.validate import check_name
+
+        return check_name(value.strip(), key.replace("_", " "), file=source, column=key)
 
     if "impact_time" not in doc:
         raise InputError("missing field", file=source, column="impact_time",
@@ -247,6 +251,27 @@ def seconds_from_impact(times, impact_time) -> np.ndarray:
 
     return np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(np.asarray(times, "datetime64[ns]")),
                                        ts.datetime64_to_jd_utc(np.datetime64(impact_time, "ns"))), float)
+
+
+def flight_time_s(nominal: Nominal) -> float:
+    """Seconds from launch to impact of the nominal conic: twice the time from apogee to impact
+    (the arc is symmetric about apogee; seed 003 App. A conic, eq. 10 time). A 1 % margin covers the
+    3-D model's station radius differing from the planar one."""
+    from trackproc.methods import ballistic as bl
+
+    radius = nominal.radius_m or bl.R_PLANAR
+    try:
+        if nominal.velocity_m_s is not None:
+            p, e = bl.impact_to_conic(nominal.velocity_m_s, nominal.angle_rad, radius)
+        else:
+            p, e = nominal.p_m, nominal.e
+        t_imp = float(bl.time_from_apogee(bl.final_anomaly(float(p), float(e), radius), float(p), float(e)))
+    except (ValueError, ArithmeticError) as exc:
+        raise InputError(str(exc), file=nominal.source, column="e") from None
+    if not (math.isfinite(t_imp) and t_imp > 0):
+        raise InputError("the nominal trajectory has no flight time", file=nominal.source, column="velocity_kms",
+                         found=t_imp, expected="a sub-orbital arc from the surface to the surface")
+    return 2.0 * t_imp * 1.01
 
 
 def planar_encounter(nominal: Nominal, station=None, *, radius_m: float | None = None,
@@ -421,6 +446,14 @@ def detect(table, nominal: Nominal, options: DetectOptions | None = None, *, sou
         raise InputError("no samples before impact_time - tau_s", file=source, column="time",
                          found=f"{format_epoch(times.min())} .. {format_epoch(times.max())}",
                          expected=f"samples before {format_epoch(nominal.impact_time)} minus {nominal.tau_s:g} s")
+    flight = flight_time_s(nominal)
+    early = keep & (s_all < -flight)
+    if early.any():
+        i = int(np.flatnonzero(early)[0])
+        raise InputError(f"{int(early.sum())} samples before the launch of the nominal trajectory "
+                         f"(a flight of {flight:.1f} s ending at {format_epoch(nominal.impact_time)})",
+                         file=source, column="time", found=format_epoch(times[i]),
+                         expected="samples of the flight (check impact_time in the nominal file and the pass)")
     rows = rows[keep]
     s = s_all[keep]
     kinds = rows["kind"].to_numpy(dtype=str)

@@ -37,11 +37,15 @@ from trackproc.io.isotime import iso_utc
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable, base_meta
 from trackproc.io.raw import RawMeasurements
 from trackproc.io.stations import Station
+from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_carrier, check_los_speed
 from trackproc.io.tabular import (DEG, NONFINITE_SIGMA, NONFINITE_VALUE, UNIT_SPELLINGS, UNKNOWN_KIND,
                                   Problems, add_counts)
 
 NONPOSITIVE_SIGMA = "non-positive sigma"
 ELEVATION_RANGE = "elevation out of range"
+NEGATIVE_RANGE = "negative range"
+AZIMUTH_RANGE = "azimuth out of range"
+RANGE_RATE_SPEED = "implausible range-rate"
 UNKNOWN_STATION = "unknown station"
 DUPLICATE_TIME = "duplicated timestamp"
 
@@ -163,7 +167,7 @@ def _check_options(options: IngestOptions) -> None:
     positive("--sigma-doppler-hz", options.sigma_doppler_hz, "Hz")
     positive("--sigma-angle-deg", options.sigma_angle_deg, "deg")
     if options.carrier_hz is not None:
-        positive("--carrier-hz", options.carrier_hz, "Hz")
+        check_carrier(options.carrier_hz)
     if options.doppler_mode is not None and options.doppler_mode not in MODES:
         raise InputError("invalid option", column="--mode", found=options.doppler_mode,
                          expected=" or ".join(MODES))
@@ -175,12 +179,7 @@ def _known_stations(raws: Sequence[RawMeasurements], table: Mapping[str, Station
     known: dict[str, Station] = {}
     for raw in raws:
         for name, values in (raw.meta.get("stations") or {}).items():
-            try:
-                known.setdefault(name, Station.from_dict(name, values))
-            except (KeyError, TypeError, ValueError):
-                raise InputError("invalid station definition in the input", file=raw.source,
-                                 column=f"stations.{name}", found=values,
-                                 expected="lat_deg, lon_deg, height_m") from None
+            known.setdefault(name, Station.from_meta(name, values, raw.source))
     for name, station in table.items():
         other = known.get(name)
         if other is not None and (abs(other.lat_deg - station.lat_deg) > 1e-6
@@ -260,6 +259,16 @@ def _validate(frame: pd.DataFrame, known: Mapping[str, Station], drop_invalid: b
                  found=value_written,
                  expected=lambda i: ("an elevation in [-90, 90] deg" if in_deg[i]
                                      else "an elevation in [-pi/2, pi/2] rad"))
+    finite = np.isfinite(value)
+    problems.add(NEGATIVE_RANGE, finite & (kind == "range") & (value < 0), column=value_col, found=value_written,
+                 expected="a range >= 0")
+    problems.add(AZIMUTH_RANGE, finite & (kind == "azimuth") & ((value < -math.pi) | (value > 2 * math.pi)),
+                 column=value_col, found=value_written,
+                 expected=lambda i: ("an azimuth in [-180, 360] deg" if in_deg[i]
+                                     else "an azimuth in [-pi, 2 pi] rad"))
+    problems.add(RANGE_RATE_SPEED, finite & (kind == "range_rate") & (np.abs(value) > MAX_LOS_SPEED_M_S),
+                 column=value_col, found=value_written,
+                 expected=f"|range-rate| <= {MAX_LOS_SPEED_M_S / 1000:g} km/s (an Earth orbit); is the unit right?")
     station = frame["station"].to_numpy(dtype=object)
     names = sorted(known)
     listed = ", ".join(names[:20]) + (" ..." if len(names) > 20 else "")
@@ -325,7 +334,14 @@ def _doppler_settings(raws: Sequence[RawMeasurements], frame: pd.DataFrame, opti
             raise InputError("Doppler samples need the link mode", column="--mode",
                              expected="--mode one-way or --mode two-way", **where)
     carrier = settings["carrier_hz"]
-    return (None if carrier is None else float(carrier)), settings["doppler_mode"]
+    if carrier is not None:
+        carrier = check_carrier(carrier, column="--carrier-hz" if options.carrier_hz is not None else "carrier_hz")
+        for source in pd.unique(frame["source"][doppler]):
+            mine = doppler & (frame["source"] == source).to_numpy()
+            check_los_speed(frame["value"].to_numpy()[mine], "doppler", carrier_hz=carrier,
+                            mode=settings["doppler_mode"], file=source, rows=frame["row"].to_numpy()[mine],
+                            column=str(frame["value_column"].to_numpy()[mine][0]))
+    return carrier, settings["doppler_mode"]
 
 
 def _same(a, b) -> bool:
