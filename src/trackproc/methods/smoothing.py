@@ -61,6 +61,7 @@ flagged, never removed.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -83,6 +84,8 @@ MIN_EFFECTIVE_SAMPLES_PER_COEFFICIENT = 2.0
 MAX_REJECTED_FRACTION = 0.1
 #: An AR(1) estimate within this many standard errors (1 / sqrt(n - p)) of white noise is white.
 RHO_SIGNIFICANCE = 2.0
+#: A TCA whose spread over neighbouring degrees exceeds this many formal sigmas is ``uncertain``.
+TCA_SPREAD_RATIO = 3.0
 #: Largest AR(1) correlation of consecutive samples (keeps the whitening transform finite).
 MAX_RHO = 0.99
 #: Iterations of the rejection loop before giving up (the last fit is kept, and said so).
@@ -535,6 +538,14 @@ def closest_approach(fit: PolynomialFit, kind: str, doppler_mode: str = "one-way
     return ClosestApproach(definition=definition, order=order, t_s=float(t_star), value=float(fit(t_star)),
                            cov=cov_u * fit.variance_factor, cov_unscaled=cov_u, slope=slope,
                            n_candidates=len(candidates))
+
+
+def tca_uncertain(fit: PolynomialFit, ca: ClosestApproach, spread_s: float) -> bool:
+    """True when the TCA's formal sigma does not describe its error: its spread over neighbouring
+    degrees exceeds ``TCA_SPREAD_RATIO`` (3) sigmas (the curve, not the noise, limits it), or the
+    residual correlation could not be modelled (``fit.noise.unresolved``: the sigma assumes white
+    noise that is not; in simulation such TCAs were off by 4-9 sigma)."""
+    return bool(fit.noise.unresolved or (math.isfinite(spread_s) and spread_s > TCA_SPREAD_RATIO * ca.sigma_s))
 
 
 def degree_spread_width(degree: int) -> int:

@@ -14,7 +14,7 @@ Status of each fit, in the summary and the metadata:
   in a data gap longer than ``tca_max_gap_s`` or closer than that to either end of the data, so
   it would be an interpolation or extrapolation of the polynomial), ``tca_uncertain`` (the TCA
   moves over neighbouring degrees by more than ``TCA_SPREAD_RATIO`` times its formal sigma: the
-  curve, not the noise, limits it; ``tca.status = uncertain``), ``largest_gap`` (one data gap
+  curve, not the noise, limits it; or the noise is ``curve_unresolved``; ``tca.status = uncertain``), ``largest_gap`` (one data gap
   covers more than half of the pass), ``curve_unresolved`` (the residuals are correlated, but
   correlated noise and curve the polynomial does not follow cannot be told apart with these
   samples: the noise is taken as white and the sigmas may be too small), ``many_rejected`` (more than 10 % of the samples exceed the
@@ -46,14 +46,13 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable
 from trackproc.io.raw import KIND_UNITS
 from trackproc.methods.smoothing import (DEFAULT_MAX_DEGREE, ClosestApproach, PolynomialFit, SmoothingError,
-                                         closest_approach, smooth_pass, tca_degree_spread)
+                                         TCA_SPREAD_RATIO, closest_approach, smooth_pass,
+                                         tca_degree_spread, tca_uncertain)
 
 #: Kinds that have a time of closest approach.
 TCA_KINDS = ("range_rate", "range", "doppler")
 #: Default limits of the TCA observability check and of the per-pass warnings.
 DEFAULT_TCA_MAX_GAP_S = 30.0
-#: A TCA whose spread over degrees d-2..d+2 exceeds this many formal sigmas is ``uncertain``.
-TCA_SPREAD_RATIO = 3.0
 LARGEST_GAP_FRACTION = 0.5
 #: Columns added to the sample table.
 ADDED_COLUMNS = ("smoothed", "residual", "flag")
@@ -327,7 +326,7 @@ def _fit_group(group: pd.DataFrame, station, pass_id, kind, options: SmoothOptio
                                      f"(need {options.tca_max_gap_s:g} s on each side): not observed")
             out.tca = ca
             out.tca_spread = tca_degree_spread(t_s, y, sigma, fit, kind, doppler_mode)
-            if out.tca_spread[0] > TCA_SPREAD_RATIO * ca.sigma_s:
+            if tca_uncertain(fit, ca, out.tca_spread[0]):
                 out.warnings.append("tca_uncertain")
         except SmoothingError as exc:
             out.tca_error = str(exc)
@@ -481,8 +480,9 @@ def _summary(fits, options: SmoothOptions, meta, source, doppler_mode, carrier_h
                              "vanishes, from covariance_scaled; value sigma includes its correlation with t*",
                     "degree_spread": "standard deviation of t* (and of the value there) over refits with degree "
                                      "-2..+2 on the same samples: model error, not in sigma",
-                    "status": f"ok, or uncertain when degree_spread_s > {TCA_SPREAD_RATIO:g} sigma_s (use "
-                              "uncertainty_s = hypot(sigma_s, degree_spread_s)); not_observed",
+                    "status": f"ok, or uncertain when degree_spread_s > {TCA_SPREAD_RATIO:g} sigma_s or the noise "
+                              "is curve_unresolved (use uncertainty_s = hypot(sigma_s, degree_spread_s)); "
+                              "not_observed",
                     "max_gap_s": options.tca_max_gap_s},
         },
         "doppler_mode": doppler_mode,
