@@ -12,9 +12,14 @@ Status of each fit, in the summary and the metadata:
 - ``ok``: fitted, no warning;
 - ``suspect``: fitted, with warnings: ``tca_not_observed`` (no TCA inside the pass, or it falls
   in a data gap longer than ``tca_max_gap_s`` or closer than that to either end of the data, so
-  it would be an interpolation or extrapolation of the polynomial), ``largest_gap`` (one data gap
-  covers more than half of the pass), ``many_rejected`` (more than 20 % of the samples rejected),
-  ``clip_not_converged`` (the rejected set kept changing);
+  it would be an interpolation or extrapolation of the polynomial), ``tca_uncertain`` (the TCA
+  moves over neighbouring degrees by more than ``TCA_SPREAD_RATIO`` times its formal sigma: the
+  curve, not the noise, limits it; or the noise is ``curve_unresolved``; ``tca.status = uncertain``), ``largest_gap`` (one data gap
+  covers more than half of the pass), ``curve_unresolved`` (the residuals are correlated, but
+  correlated noise and curve the polynomial does not follow cannot be told apart with these
+  samples: the noise is taken as white and the sigmas may be too small), ``many_rejected`` (more than 10 % of the samples exceed the
+  rejection threshold: only the worst 10 % are flagged, the rest kept), ``clip_not_converged``
+  (the rejected set kept changing);
 - ``failed``: not fitted (too few points for the degree, a single time, too few left after
   rejection, rank deficient); the other passes proceed.
 
@@ -42,21 +47,28 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable
 from trackproc.io.raw import KIND_UNITS
 from trackproc.methods.smoothing import (DEFAULT_MAX_DEGREE, ClosestApproach, PolynomialFit, SmoothingError,
-                                         closest_approach, smooth_pass, tca_degree_spread)
+                                         TCA_SPREAD_RATIO, closest_approach, smooth_pass,
+                                         tca_degree_spread, tca_uncertain)
 
 #: Kinds that have a time of closest approach.
 TCA_KINDS = ("range_rate", "range", "doppler")
 #: Default limits of the TCA observability check and of the per-pass warnings.
 DEFAULT_TCA_MAX_GAP_S = 30.0
-MANY_REJECTED_FRACTION = 0.2
 LARGEST_GAP_FRACTION = 0.5
 #: Columns added to the sample table.
 ADDED_COLUMNS = ("smoothed", "residual", "flag")
 
-DEGREE_CRITERION = ("BIC with the variance factor profiled out: n ln(chi2_d / n) + (d + 1) ln n, "
-                    "minimum over d = 0..max_degree")
-CLIP_RULE = ("iterative: reject |r/sigma| > K * 1.4826 * MAD(r/sigma of the samples in use); "
-             "every sample re-tested against each new fit until the rejected set is stable")
+DEGREE_CRITERION = ("BIC with the variance factor profiled out: n ln(chi2_d / n) + (d + 1) ln n, chi2_d the "
+                    "generalized (AR(1)-whitened) residual sum of squares, minimum over d = 0..cap, "
+                    "cap = min(max_degree, floor(n_eff / 3) - 1): at least 3 effective samples per coefficient")
+CLIP_RULE = ("iterative: reject |u| > K * 1.4826 * MAD(u of the samples in use), u = r / (sigma sqrt(1 - h)) "
+             "(leverage h; sqrt(1 + h) for samples out of the fit); every sample re-tested against each new "
+             "fit until the rejected set is stable; at most 10 % of a pass (beyond: the worst 10 %, and "
+             "warning many_rejected)")
+NOISE_MODEL = ("r / sigma = stationary AR(1) (first-order Gauss-Markov): correlation rho^(dt / step_s); rho by "
+               "the method of moments on the residuals of the white-noise fit, corrected for the fit's projection; "
+               "rho = 0 (white) unless 2 standard errors above; rho > 0: generalized least squares, "
+               "n_eff = 1 + sum (1 - a_i) / (1 + a_i), a_i = rho^(dt_i / step_s)")
 
 
 @dataclass
@@ -315,6 +327,8 @@ def _fit_group(group: pd.DataFrame, station, pass_id, kind, options: SmoothOptio
                                      f"(need {options.tca_max_gap_s:g} s on each side): not observed")
             out.tca = ca
             out.tca_spread = tca_degree_spread(t_s, y, sigma, fit, kind, doppler_mode)
+            if tca_uncertain(fit, ca, out.tca_spread[0]):
+                out.warnings.append("tca_uncertain")
         except SmoothingError as exc:
             out.tca_error = str(exc)
             out.warnings.append("tca_not_observed")
@@ -323,8 +337,10 @@ def _fit_group(group: pd.DataFrame, station, pass_id, kind, options: SmoothOptio
     largest = float(np.max(np.diff(tu))) if tu.size > 1 else span
     if span > 0 and largest > LARGEST_GAP_FRACTION * span:
         out.warnings.append("largest_gap")
-    if fit.n_rejected > MANY_REJECTED_FRACTION * t_s.size:
+    if fit.rejection_capped:
         out.warnings.append("many_rejected")
+    if fit.noise.unresolved:
+        out.warnings.append("curve_unresolved")
     if not fit.clip_converged:
         out.warnings.append("clip_not_converged")
     out.status = "suspect" if out.warnings else "ok"
@@ -348,7 +364,22 @@ def _at(epoch: pd.Timestamp, t_s: float) -> pd.Timestamp:
     return pd.Timestamp(epoch) + pd.Timedelta(int(round(t_s * 1e9)), unit="ns")
 
 
-def _fit_record(f: PassFit, carrier_hz, doppler_mode) -> dict:
+def _finite(x):
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def _notes(fit: PolynomialFit, max_degree: int) -> list:
+    if not (fit.degree_scores and fit.degree_at_limit):
+        return []
+    if fit.degree_cap is not None and fit.degree_cap < max_degree:
+        return [f"degree_at_limit: BIC still falls at degree {fit.degree}, the largest the {fit.n_used} samples "
+                f"({fit.n_eff:.0f} effective) support with 3 per coefficient; the curve may be under-fitted "
+                "(its residuals and degree spread show it)"]
+    return [f"degree_at_limit: BIC still falls at degree {fit.degree}, the search limit; the curve may "
+            "be under-fitted (try a larger --max-degree, or shorter passes)"]
+
+
+def _fit_record(f: PassFit, carrier_hz, doppler_mode, max_degree: int = DEFAULT_MAX_DEGREE) -> dict:
     unit = KIND_UNITS.get(f.kind, "")
     rec = {"station": f.station, "pass_id": f.pass_id, "kind": f.kind, "unit": unit, "status": f.status,
            "error": f.error, "reason": f.reason, "warnings": list(f.warnings), "n_samples": int(f.t_s.size),
@@ -367,8 +398,16 @@ def _fit_record(f: PassFit, carrier_hz, doppler_mode) -> dict:
         "domain_utc": [_iso(_at(f.epoch, fit.domain_s[0])), _iso(_at(f.epoch, fit.domain_s[1]))],
         "degree": fit.degree,
         "degree_selection": ({"criterion": "bic", "at_limit": bool(fit.degree_at_limit),
+                              "cap": fit.degree_cap, "max_degree": int(max_degree),
                               "bic": {str(k): float(v) for k, v in fit.degree_scores.items()}}
                              if fit.degree_scores else {"criterion": "fixed"}),
+        "noise": {"model": "white" if fit.noise.white else "ar1", "rho": fit.noise.rho,
+                  "unresolved": bool(fit.noise.unresolved),
+                  "rho_estimate": fit.noise.rho_estimate, "step_s": fit.noise.step_s,
+                  "lag1_observed": _finite(fit.noise.lag1_observed),
+                  "estimated_at_degree": fit.noise.degree},
+        "rho": fit.noise.rho,
+        "n_eff": fit.n_eff,
         "coefficients": fit.coef.tolist(),
         "covariance_unscaled": fit.cov_unscaled.tolist(),
         "covariance_scaled": fit.cov_scaled.tolist(),
@@ -377,22 +416,24 @@ def _fit_record(f: PassFit, carrier_hz, doppler_mode) -> dict:
         "rms": fit.rms, "weighted_rms": fit.wrms,
         "robust_scale": fit.robust_scale if math.isfinite(fit.robust_scale) else None,
         "iterations": fit.iterations, "clip_converged": bool(fit.clip_converged),
+        "n_over_threshold": fit.n_over_threshold, "rejection_capped": bool(fit.rejection_capped),
         "condition_number": fit.condition_number,
         "largest_gap_s": float(np.max(np.diff(tu))) if tu.size > 1 else 0.0,
         "residual_lag1_correlation": lag1,
-        "notes": ([f"degree_at_limit: BIC still falls at degree {fit.degree}, the search limit; the curve may "
-                   "be under-fitted (try a larger --max-degree, or shorter passes)"]
-                  if fit.degree_scores and fit.degree_at_limit else []),
+        "notes": _notes(fit, max_degree),
     })
     if f.kind in TCA_KINDS:
         if f.tca is None:
             rec["tca"] = {"status": "not_observed", "error": f.tca_error}
         else:
             ca = f.tca
-            tca = {"status": "ok", "definition": ca.definition, "time_utc": _iso(_at(f.epoch, ca.t_s)),
+            spread = f.tca_spread[0]
+            tca = {"status": "uncertain" if "tca_uncertain" in f.warnings else "ok", "definition": ca.definition, "time_utc": _iso(_at(f.epoch, ca.t_s)),
                    "t_s": ca.t_s, "sigma_s": ca.sigma_s, "sigma_s_unscaled": ca.sigma_s_unscaled,
                    "gap_s": f.tca_gap_s, "candidates": ca.n_candidates,
-                   "degree_spread_s": f.tca_spread[0], "degree_spread_fits": f.tca_spread[2],
+                   "degree_spread_s": spread, "degree_spread_fits": f.tca_spread[2],
+                   "uncertainty_s": math.hypot(ca.sigma_s, spread) if math.isfinite(spread) else ca.sigma_s,
+                   "spread_to_sigma": spread / ca.sigma_s if math.isfinite(spread) and ca.sigma_s > 0 else None,
                    "value": ca.value, "value_sigma": ca.value_sigma, "value_unit": unit,
                    "value_degree_spread": f.tca_spread[1],
                    "correlation_t_value": float(ca.cov[0, 1] / math.sqrt(ca.cov[0, 0] * ca.cov[1, 1]))
@@ -426,8 +467,10 @@ def _summary(fits, options: SmoothOptions, meta, source, doppler_mode, carrier_h
             "max_degree": int(options.max_degree),
             "clip": options.clip if options.clip else None,
             "clip_rule": CLIP_RULE if options.clip else "no rejection",
-            "covariance": "covariance_unscaled = (A^T W A)^-1 from the a-priori sigmas; covariance_scaled = "
-                          "variance_factor * covariance_unscaled, variance_factor = chi2 / dof",
+            "covariance": "covariance_unscaled = (A^T W A)^-1 from the a-priori sigmas (W = (S C S)^-1 with the AR(1) "
+                          "correlation C; diag(1/sigma^2) when white); covariance_scaled = variance_factor * "
+                          "covariance_unscaled, variance_factor = chi2 / dof (chi2 generalized)",
+            "noise": NOISE_MODEL,
             "tca": {"range_rate": "zero of the fitted range-rate (negative to positive)",
                     "range": "minimum of the fitted range",
                     "doppler": ("zero of the fitted Doppler" if doppler_mode == "two-way" else
@@ -437,12 +480,15 @@ def _summary(fits, options: SmoothOptions, meta, source, doppler_mode, carrier_h
                              "vanishes, from covariance_scaled; value sigma includes its correlation with t*",
                     "degree_spread": "standard deviation of t* (and of the value there) over refits with degree "
                                      "-2..+2 on the same samples: model error, not in sigma",
+                    "status": f"ok, or uncertain when degree_spread_s > {TCA_SPREAD_RATIO:g} sigma_s or the noise "
+                              "is curve_unresolved (use uncertainty_s = hypot(sigma_s, degree_spread_s)); "
+                              "not_observed",
                     "max_gap_s": options.tca_max_gap_s},
         },
         "doppler_mode": doppler_mode,
         "carrier_hz": carrier_hz,
         "counts": {"fits": len(fits), **counts},
-        "fits": [_fit_record(f, carrier_hz, doppler_mode) for f in fits],
+        "fits": [_fit_record(f, carrier_hz, doppler_mode, options.max_degree) for f in fits],
     }
 
 
