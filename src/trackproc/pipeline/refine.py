@@ -441,60 +441,36 @@ class Refinement:
         lo, hi = self.problem.params.bounds()
         return (np.r_[lo, [-np.inf] * (len(self.names) - lo.size)], np.r_[hi, [np.inf] * (len(self.names) - hi.size)])
 
-    def solve_gls(self, observed=None, prior_centre=None, x0=None, sigma_scale=1.0, max_editing_rounds: int = 4):
-        """Generalised least squares with the correlated-noise model (:mod:`trackproc.methods.noise`):
-        the whitened problem of the kept samples (:meth:`whitened`) by the same solver, and the
-        k-sigma editing on the innovations ``L⁻¹ r`` of every sample (the whitening refactored on
-        the kept ones, repeated until the edited set settles). Implements seed 002 eqs. 4-9
-        with a full measurement covariance ``K``.
-
-        The returned :class:`~trackproc.methods.least_squares.Solution` has the samples' own
-        ``computed``/``residual``, ``normalized`` = the innovations, and, for the kept samples,
-        ``jacobian`` rows = the whitened rows times the samples' sigma, so that wherever the
-        Jacobian is divided by the sigmas (the observability report) it is the whitened one."""
+    def solve_gls(self, observed=None, prior_centre=None, x0=None, sigma_scale=1.0):
+        """Generalised least squares with the correlated-noise model (:attr:`noise`):
+        :func:`trackproc.methods.least_squares.solve_gls` (whitened kept samples, editing on the
+        innovations) with this refinement's solver (constrained under ``circular``)."""
         from dataclasses import replace as dc_replace
 
-        from trackproc.methods.least_squares import Options, solve
+        from trackproc.methods.least_squares import Options, solve, solve_gls
         from trackproc.methods.refinement import CachedModel, geodesic_retraction, solve_kkt
 
-        model, y, sigma, _, clip = self.data()
+        model, y, _, _, clip = self.data()
         if observed is not None:
             y = np.asarray(observed, float)
-        sigma = np.asarray(sigma, float)
         priors = self.priors_at(prior_centre)
-        start = self.x0 if x0 is None else np.asarray(x0, float)
-        n = y.size
-        mask = np.zeros(n, bool) if self.noise_edited is None else np.asarray(self.noise_edited, bool).copy()
         lo, hi = self.bounds()
-        kkt = None
-        for _ in range(max_editing_rounds):
-            keep = ~mask
-            model_w, y_w = self.whitened(keep, sigma_scale, y)
+        opts = Options(max_iterations=self.options.max_iterations, clip=None, rank_rtol=self.options.rank_rtol)
+
+        def fit(model_w, y_w, start):
             cached = CachedModel(model_w)
             ones = np.ones(y_w.size)
-            opts = Options(max_iterations=self.options.max_iterations, clip=None, rank_rtol=self.options.rank_rtol)
             retract = geodesic_retraction(cached, ones, self.scales, priors)
             if self.options.circular:
                 kkt = solve_kkt(cached, start, y_w, ones, names=self.names, constraints=self.constraints,
                                 constraint_scale=self.constraint_scale, scales=self.scales, priors=priors,
                                 options=opts, retract=retract)
-                sol_w = kkt.solution
-            else:
-                sol_w = solve(cached, start, y_w, ones, names=self.names, scales=self.scales, priors=priors,
-                              bounds=(lo, hi), options=opts, retract=retract)
-            h, jac = model(sol_w.values)
-            r = y - h
-            z = self.noise.innovations(r) / sigma_scale
-            if not clip:
-                break
-            wrms = float(np.sqrt(np.mean(z[keep] ** 2)))
-            new = z_mask = np.abs(z) > clip * max(1.0, wrms)
-            if np.array_equal(z_mask, mask) or int(new.sum()) > 0.5 * n:
-                break
-            mask, start = new, sol_w.values
-        jac_rep = np.array(jac, float)
-        jac_rep[keep] = sol_w.jacobian * (sigma[keep] * sigma_scale)[:, None]
-        sol = dc_replace(sol_w, computed=h, residual=r, normalized=z, edited=mask.copy(), jacobian=jac_rep)
+                return kkt.solution, kkt
+            return solve(cached, start, y_w, ones, names=self.names, scales=self.scales, priors=priors,
+                         bounds=(lo, hi), options=opts, retract=retract), None
+
+        sol, kkt = solve_gls(model, self.x0 if x0 is None else np.asarray(x0, float), y, self.noise, fit, clip=clip,
+                             sigma_scale=sigma_scale, edited=self.noise_edited)
         if kkt is not None:
             kkt = dc_replace(kkt, solution=sol)
         return sol, kkt
@@ -950,24 +926,27 @@ def _scatter(q, keep):
     return out
 
 
-def solve_noise(table, initial, ref: Refinement, stations=None, eop=None, source: str = "<pass>", rounds: int = 2):
+def solve_noise(table, initial, ref: Refinement, stations=None, eop=None, source: str = "<pass>", rounds: int = 2,
+                observed=None, prior_centre=None, x0=None):
     """:func:`solve_weighted` with the noise model of the pass (:func:`noise_model`): a first
     (white) fit, the model by REML, a drift if the pass wants one (the problem prepared again
-    with ``offset+drift``), then GLS, the model refitted on its residuals (``rounds`` in all).
-    A pass whose noise is white and needs no drift keeps the white fit unchanged.
+    from ``table``/``initial`` with ``offset+drift``), then GLS, the model refitted on its
+    residuals (``rounds`` in all). A pass whose noise is white and needs no drift keeps the
+    white fit unchanged. ``observed``, ``prior_centre``, ``x0`` as in :meth:`Refinement.solve`
+    (Monte Carlo: the problem must then already carry the drift it needs).
     Returns ``(Refinement, Solution, KKTResult or None, sigma scale)``."""
-    sol, kkt, scale = solve_weighted(ref)
+    sol, kkt, scale = solve_weighted(ref, observed, prior_centre, x0)
     if ref.options.cost != "pointwise" or (ref.options.noise == "white" and ref.options.oscillator_noise is None):
         return ref, sol, kkt, scale
-    for k in range(rounds):
+    for _ in range(rounds):
         noisy, want_drift = noise_model(ref, sol, scale)
-        if want_drift:
+        if want_drift and observed is None:
             ref = prepare(table, initial, stations, replace(ref.options, doppler_bias="offset+drift"), eop, source)
             noisy = replace(ref, noise=noisy.noise, noise_edited=noisy.noise_edited, noise_report=noisy.noise_report)
         elif not noisy.correlated() and not ref.correlated():
             return noisy, sol, kkt, scale                 # white, no drift to add: the white fit stands
         ref = noisy
-        sol, kkt, scale = solve_weighted(ref)
+        sol, kkt, scale = solve_weighted(ref, observed, prior_centre, x0)
     return ref, sol, kkt, scale
 
 
@@ -994,14 +973,14 @@ def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0
     return out
 
 
-def solve_weighted(ref: Refinement):
+def solve_weighted(ref: Refinement, observed=None, prior_centre=None, x0=None):
     """:meth:`Refinement.solve`, repeated with the sample sigmas scaled by √(variance factor) while
     that exceeds :data:`REWEIGHT_THRESHOLD` (pointwise with ``reweight``). Returns
-    ``(Solution, KKTResult or None, sigma scale)``."""
+    ``(Solution, KKTResult or None, sigma scale)``. ``observed``, ``prior_centre``, ``x0`` as in
+    :meth:`Refinement.solve` (Monte Carlo)."""
     scale = 1.0
-    x0 = None
     for _ in range(MAX_REWEIGHT):
-        sol, kkt = ref.solve(sigma_scale=scale, x0=x0)
+        sol, kkt = ref.solve(observed=observed, prior_centre=prior_centre, sigma_scale=scale, x0=x0)
         vf = sol.variance_factor
         if not (ref.options.reweight and ref.options.cost == "pointwise" and math.isfinite(vf)
                 and vf > REWEIGHT_THRESHOLD):
