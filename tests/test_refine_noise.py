@@ -148,7 +148,7 @@ def test_refine_with_wander_ar1_and_quantisation_is_honest_fast():
 def test_refine_with_wander_ar1_and_quantisation_nees_in_its_chi2_band():
     """100 draws: mean NEES of the state (6) and of state + offset + drift (8) in the 99 %
     chi-square band of the mean, every state within 4 sigma (chi2(6) at 0.99994)."""
-    nees6, nees8, models, white = _nees_draws(100, 2026, 1.0)
+    nees6, nees8, models, white = _nees_draws(100, 2026, 2.0)
     lo6, hi6 = stats.chi2.ppf([0.005, 0.995], 6 * 100) / 100
     lo8, hi8 = stats.chi2.ppf([0.005, 0.995], 8 * 100) / 100
     print(f"NEES6 mean {nees6.mean():.2f} in [{lo6:.2f}, {hi6:.2f}]; NEES8 mean {nees8.mean():.2f} in "
