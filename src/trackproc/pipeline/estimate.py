@@ -179,9 +179,17 @@ class Problem:
         if noise is not None and not noise.is_white:
             opts = Options(max_iterations=max_iterations, clip=None, rank_rtol=rank_rtol)
 
+            from trackproc.methods.refinement import CachedModel, geodesic_retraction
+
+            pri = self.priors if priors is None else priors
+
             def fit(model_w, y_w, start):
-                return solve(model_w, start, y_w, np.ones(y_w.size), names=self.names, scales=self.params.scales(),
-                             priors=self.priors if priors is None else priors, bounds=(lo, hi), options=opts), None
+                # the step follows the curved valleys the correlated weighting leaves (as refine's)
+                cached = CachedModel(model_w)
+                ones = np.ones(y_w.size)
+                return solve(cached, start, y_w, ones, names=self.names, scales=self.params.scales(), priors=pri,
+                             bounds=(lo, hi), options=opts,
+                             retract=geodesic_retraction(cached, ones, self.params.scales(), pri)), None
 
             return solve_gls(self.model, self.x0 if x0 is None else x0, y, noise, fit, clip=clip, edited=edited)[0]
         return solve(self.model, self.x0 if x0 is None else x0, y, self.meas.sigma, names=self.names,

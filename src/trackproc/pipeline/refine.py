@@ -901,7 +901,8 @@ def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinem
     # fitted directions (GLS variance under C over that of independent samples of the residuals' scatter)
     q = nz._basis(x[keep])
     qw = cov.whitener(keep)(_scatter(q, keep))
-    s2 = float(r[keep] @ r[keep]) / max(int(keep.sum()) - q.shape[1], 1)
+    e = r[keep] - q @ (q.T @ r[keep])                  # the scatter left by the fitted directions
+    s2 = float(e @ e) / max(int(keep.sum()) - q.shape[1], 1)
     inflation = float(np.trace(np.linalg.inv(qw.T @ qw))) / (q.shape[1] * s2)
     n_eff = float(keep.sum()) / inflation
     report = nf.as_dict()
