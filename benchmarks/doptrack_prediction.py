@@ -12,7 +12,8 @@ never used while developing):
   pass is held back and predicted.
 
 A pair counts as "not worse" when the ratio (ours / TLE) is <= 1.1. Usage:
-``PYTHONPATH=src python benchmarks/doptrack_prediction.py [dev|holdout|both]`` (a few minutes).
+``PYTHONPATH=src python benchmarks/doptrack_prediction.py [dev|holdout|both] [OSCILLATOR_NOISE]``
+(a few minutes; the optional second argument is refine's ``--oscillator-noise``).
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ def refine_table(dev: bool):
         ta, tle = _load(a)
         tb, _ = _load(b)
         t0 = time.process_time()
-        res = refine(ta, tle_state(tle, eop=EOP), None, RefineOptions(), EOP, source=a)
+        res = refine(ta, tle_state(tle, eop=EOP), None, RefineOptions(oscillator_noise=OSCILLATOR), EOP, source=a)
         cpu = time.process_time() - t0
         tle_hz = _predicted_rms(tb, res.state, tle)
         ours = _predicted_rms(tb, res.state)
@@ -84,8 +85,13 @@ def estimate_table(dev: bool):
     return ratio
 
 
+#: ``--oscillator-noise`` for the refine table (None: estimated per pass, the default)
+OSCILLATOR = None
+
 if __name__ == "__main__":
     which = sys.argv[1] if len(sys.argv) > 1 else "both"
+    if len(sys.argv) > 2:
+        OSCILLATOR = float(sys.argv[2])
     for dev in ([True] if which == "dev" else [False] if which == "holdout" else [True, False]):
         refine_table(dev)
         estimate_table(dev)

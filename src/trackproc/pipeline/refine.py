@@ -897,19 +897,19 @@ def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinem
         drift_t = float(beta[-1] / sd) if sd > 0 else 0.0
         want_drift = (opt.noise == "auto" and opt.doppler_bias is None
                       and abs(drift_t) > max(DRIFT_T, math.sqrt(math.log(max(keep.sum(), 3)))))
-    # effective number of independent samples: n divided by the mean variance inflation of the
-    # fitted directions (GLS variance under C over that of independent samples of the residuals' scatter)
-    q = nz._basis(x[keep])
-    qw = cov.whitener(keep)(_scatter(q, keep))
-    e = r[keep] - q @ (q.T @ r[keep])                  # the scatter left by the fitted directions
-    s2 = float(e @ e) / max(int(keep.sum()) - q.shape[1], 1)
-    inflation = float(np.trace(np.linalg.inv(qw.T @ qw))) / (q.shape[1] * s2)
-    n_eff = float(keep.sum()) / inflation
+    # effective number of independent samples of the noise the orbit sees: (tr C')²/tr(C'²) with
+    # C' = P C P, P the projection that removes the explicit offset and drift (Bayley & Hammersley)
+    kk = np.flatnonzero(keep)
+    bias_cols = np.column_stack([np.ones(kk.size), t[kk] - t0])
+    qb, _ = np.linalg.qr(bias_cols)
+    c = nf.model.covariance(t[kk], t0)
+    cq = c - qb @ (qb.T @ c)
+    cp = cq - (cq @ qb) @ qb.T
+    n_eff = nz.effective_samples(cp)
     report = nf.as_dict()
     report.update({"effective_samples": n_eff, "effective_samples_definition":
-                   "n / (tr((Q^T C^-1 Q)^-1) / (p s^2)): n over the mean variance inflation of the p fitted "
-                   "directions Q (state, offset, drift; orthonormal) under the noise model C, against independent "
-                   "samples of the residuals' scatter s", "option": opt.noise,
+                   "(tr C')^2 / tr(C'^2), C' the noise covariance of the kept samples without the explicit offset "
+                   "and drift (Bayley & Hammersley 1946): n for white noise", "option": opt.noise,
                    "oscillator_noise_given": walk, "link": _link_mode(ref)})
     if drift_t is not None:
         report["drift_t"] = drift_t
@@ -918,13 +918,6 @@ def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinem
         ("+wander" if nf.model.walk > 0 else "")
     model = None if nf.model.is_white else cov
     return replace(ref, noise=model, noise_edited=np.asarray(sol.edited, bool).copy(), noise_report=report), want_drift
-
-
-def _scatter(q, keep):
-    """Rows of ``q`` (kept samples) back at their places among all samples (zeros elsewhere)."""
-    out = np.zeros((keep.size, q.shape[1]))
-    out[keep] = q
-    return out
 
 
 def solve_noise(table, initial, ref: Refinement, stations=None, eop=None, source: str = "<pass>", rounds: int = 2,
