@@ -129,7 +129,10 @@ def test_doptrack_state_offset_drift_from_the_tle(stamps):
     tle = tles[0]
     first = min(t.frame["time"].min() for t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
     initial = tle_state(tle, at=first, eop=eop)
-    opts = EstimateOptions(doppler_bias="offset+drift", epoch="first",
+    # independent samples (--noise white): the post-fit RMS is what a weighted fit minimises; under
+    # the correlated model (the default) the residuals keep the oscillator's wander by design, and
+    # the criterion is the prediction of a held-back pass (tests/test_refine_realdata.py)
+    opts = EstimateOptions(doppler_bias="offset+drift", epoch="first", noise="white",
                            apriori_sigma={"position": 2000.0, "velocity": 2.0})
     named = [(s, t) for s, t in zip(stamps, tables)]
     res = estimate(named, initial, None, opts, eop)

@@ -97,24 +97,97 @@ def _pairs():
     return out
 
 
-def test_doptrack_refined_state_predicts_the_next_pass_better_than_the_tle():
+#: The development passes (1-10 April 2020); 11-15 April is the hold-out, evaluated only by
+#: benchmarks/doptrack_prediction.py and reported in docs/refine.md.
+LAST_DEV_DAY = "20200410"
+#: The pass the data README calls bad (hundreds of m/s).
+BAD_PASSES = ("202004011959",)
+
+
+def is_dev(stamp: str) -> bool:
+    return stamp[:8] <= LAST_DEV_DAY
+
+
+def evenings():
+    """Groups of at least two consecutive passes, each within :data:`MAX_PAIR_GAP_S` of the previous."""
+    stamps = sorted(p.stem.rsplit("_", 1)[-1] for p in (DOPTRACK / "data").glob("Delfi-C3_32789_*.csv"))
+    groups, cur = [], []
+    for s in stamps:
+        if s in BAD_PASSES:
+            continue
+        if cur and (dt.datetime.strptime(s, "%Y%m%d%H%M")
+                    - dt.datetime.strptime(cur[-1], "%Y%m%d%H%M")).total_seconds() > MAX_PAIR_GAP_S:
+            groups.append(cur)
+            cur = []
+        cur.append(s)
+    groups.append(cur)
+    return [g for g in groups if len(g) >= 2]
+
+
+def estimate_held_back(group, noise="auto"):
+    """``estimate`` over every pass of ``group`` but the last (the TLE of the first at its first
+    sample, with the default a-priori covariance of ``refine`` for a state without one, as a
+    state file with that covariance and --apriori-initial; offset and drift per pass), and the
+    held-back last pass's Doppler RMS predicted by it and by the TLE. Returns ``(tle Hz, ours Hz,
+    EstimateResult)``."""
+    from trackproc.constants import MU_EARTH
+    from trackproc.io.statefile import State
+    from trackproc.pipeline.estimate import estimate
+    from trackproc.pipeline.refine import default_apriori_covariance
+
+    fit, held = group[:-1], group[-1]
+    loaded = [_load(s) for s in fit]
+    table_b, _ = _load(held)
+    tle = loaded[0][1]
+    first = min(t.frame["time"].min() for t, _ in loaded).tz_convert("UTC").tz_localize(None).to_datetime64()
+    st = tle_state(tle, at=first, eop=EOP)
+    initial = State.from_vectors(st.epoch, st.r_m, st.v_m_s,
+                                 covariance=default_apriori_covariance(np.r_[st.r_m, st.v_m_s], MU_EARTH))
+    opts = EstimateOptions(doppler_bias="offset+drift", epoch="first", apriori_initial=True, noise=noise)
+    res = estimate([(s, t) for s, (t, _) in zip(fit, loaded)], initial, None, opts, EOP)
+    return _predicted_rms(table_b, res.state, tle), _predicted_rms(table_b, res.state), res
+
+
+def test_doptrack_refine_predicts_the_next_pass_no_worse_than_the_tle():
+    """Issue 13's criterion on the development pairs: with the defaults (noise model by REML,
+    GLS) the refined orbit predicts the next pass no worse than the TLE by more than 10 % in at
+    least 90 % of the pairs, median ratio <= 0.95. (The white fit with offset and drift, the
+    previous default, was worse than the TLE by 2-6x after low passes.)"""
     rows = []
     for a, b in _pairs():
+        if not is_dev(a):
+            continue
         table_a, tle = _load(a)
         table_b, _ = _load(b)
-        res = refine(table_a, tle_state(tle, eop=EOP), None, RefineOptions(doppler_bias="offset+drift"), EOP, source=a)
+        res = refine(table_a, tle_state(tle, eop=EOP), None, RefineOptions(), EOP, source=a)
         d = res.state.diagnostics
+        tle_hz, ours = _predicted_rms(table_b, res.state, tle), _predicted_rms(table_b, res.state)
         rows.append({"pass": a, "next": b, "max_elevation_deg": round(d["max_elevation_deg"], 1),
-                     "tle_hz": round(_predicted_rms(table_b, res.state, tle), 2),
-                     "refined_hz": round(_predicted_rms(table_b, res.state), 2),
+                     "tle_hz": round(tle_hz, 2), "refined_hz": round(ours, 2), "ratio": ours / tle_hz,
+                     "noise": d["noise"]["model"], "transmitter": d["noise"]["transmitter"],
                      "low_pass_warning": any("a low pass" in w for w in res.warnings)})
     print("DopTrack next-pass Doppler RMS (Hz), TLE vs refined:\n" + "\n".join(json.dumps(r) for r in rows))
-    assert len(rows) >= 15
-    high = [r for r in rows if r["max_elevation_deg"] >= LOW_PASS_DEG]
-    low = [r for r in rows if r["max_elevation_deg"] < LOW_PASS_DEG]
-    assert len(high) >= 8
-    # every pass high enough to determine the orbit improves the next pass's prediction
-    assert all(r["refined_hz"] < r["tle_hz"] for r in high), high
-    assert np.median([r["refined_hz"] for r in high]) < 0.9 * np.median([r["tle_hz"] for r in high])
+    assert len(rows) >= 7
+    ratio = np.array([r["ratio"] for r in rows])
+    assert (ratio <= 1.1).mean() >= 0.9, rows
+    assert np.median(ratio) <= 0.95, rows
+    # the drift of the onboard oscillator is found in every pass, and a correlated model where the
+    # residuals are correlated
+    assert all(r["transmitter"].startswith("offset+drift") for r in rows)
+    assert any(r["noise"] != "white" for r in rows)
     # a low pass is said to be one
-    assert all(r["low_pass_warning"] for r in low) and not any(r["low_pass_warning"] for r in high)
+    assert all(r["low_pass_warning"] == (r["max_elevation_deg"] < LOW_PASS_DEG) for r in rows)
+
+
+def test_doptrack_estimate_predicts_a_held_back_pass_within_1_2x_the_tle():
+    """Issue 13's criterion on the development evenings: every pass but the last estimated
+    together, the last held back and predicted no worse than 1.2x the TLE."""
+    rows = []
+    for group in evenings():
+        if not is_dev(group[0]):
+            continue
+        tle_hz, ours, res = estimate_held_back(group)
+        rows.append((group, round(tle_hz, 2), round(ours, 2)))
+    print("DopTrack held-back pass (Hz), TLE vs estimate:", rows)
+    assert len(rows) >= 6
+    assert all(o <= 1.2 * t for _, t, o in rows), rows

@@ -19,6 +19,14 @@ log = logging.getLogger("trackproc")
 DopplerBias = choices("DopplerBias", vocabulary.DOPPLER_BIASES)
 
 
+class Noise(str, Enum):
+    auto = "auto"
+    white = "white"
+    ar1 = "ar1"
+    walk = "walk"
+    ar1_walk = "ar1+walk"
+
+
 class BiasPer(str, Enum):
     pass_ = "pass"
     station = "station"
@@ -41,6 +49,14 @@ def estimate_command(
     doppler_bias_per: BiasPer = typer.Option(BiasPer.pass_, "--doppler-bias-per",
                                              help="One Doppler offset (drift) per pass or per station."),
     angle_bias: bool = typer.Option(False, "--angle-bias", help="Estimate azimuth and elevation biases per station."),
+    noise: Noise = typer.Option(
+        Noise.auto, "--noise",
+        help="Noise model of each pass's Doppler/range-rate samples: auto = chosen per pass by REML among white, "
+             "AR(1) and (one-way, with --doppler-bias) a random walk of the transmitter frequency, then GLS; white = "
+             "independent samples; or that model. See docs/estimate.md."),
+    oscillator_noise: Optional[float] = typer.Option(
+        None, "--oscillator-noise", metavar="HZ_PER_SQRT_S",
+        help="Random-walk intensity of the transmitter frequency (Hz/sqrt(s)) instead of estimating it."),
     apriori_sigma: List[str] = typer.Option(
         [], "--apriori-sigma", metavar="NAME=SIGMA",
         help="A-priori 1-sigma (SI units) of a parameter (x, vx, range_bias:KIR), a family (range_bias, "
@@ -137,7 +153,7 @@ def estimate_command(
         apriori_initial=apriori_initial, force=force.value, earth=earth.value,
         range_rate_model=range_rate_model.value if range_rate_model else None, max_iterations=max_iterations,
         clip=clip if clip > 0 else None, epoch=epoch, kinds=kind_list, compare_doppler_only=compare_doppler_only,
-        two_stage=two_stage)
+        two_stage=two_stage, noise=noise.value, oscillator_noise=oscillator_noise)
     result = estimate(tables, state0, station_table, options, orientation)
 
     png = plot_bytes(result) if plot is not None else None

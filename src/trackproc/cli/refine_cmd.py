@@ -39,6 +39,14 @@ class Covariance(str, Enum):
     linear = "linear"
 
 
+class Noise(str, Enum):
+    auto = "auto"
+    white = "white"
+    ar1 = "ar1"
+    walk = "walk"
+    ar1_walk = "ar1+walk"
+
+
 @app.command("refine")
 def refine_command(
     input: str = typer.Argument(..., metavar="PASS",
@@ -84,6 +92,14 @@ def refine_command(
         Covariance.profile, "--covariance",
         help="Pointwise without --circular: profile = the linear covariance plus the curvature along the directions "
              "the pass cannot see (5 extra solves per direction); linear = the inverse normal matrix only."),
+    noise: Noise = typer.Option(
+        Noise.auto, "--noise",
+        help="Noise model of the samples (pointwise): auto = chosen per pass by REML among white, AR(1) "
+             "(exponentially correlated), random walk of the transmitter frequency (one-way) and both, then GLS; "
+             "white = independent samples (the plain weighted fit); or that model. See docs/refine.md."),
+    oscillator_noise: Optional[float] = typer.Option(
+        None, "--oscillator-noise", metavar="HZ_PER_SQRT_S",
+        help="Random-walk intensity of the transmitter frequency (Hz/sqrt(s)) instead of estimating it."),
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Pointwise: edit samples beyond K x max(1, WRMS) sigmas. 0: off."),
@@ -156,7 +172,8 @@ def refine_command(
         force=force.value, earth=earth.value, range_rate_model=range_rate_model.value if range_rate_model else None,
         max_iterations=max_iterations, clip=clip if clip > 0 else None, pass_id=pass_id,
         kind=kind.value if kind else None, quadrature_order=quadrature_order, quadrature_panel_s=quadrature_panel,
-        max_gap_s=max_gap, reweight=reweight, covariance=covariance.value)
+        max_gap_s=max_gap, reweight=reweight, covariance=covariance.value, noise=noise.value,
+        oscillator_noise=oscillator_noise)
     result = refine(table, state0, station_table, options, orientation, source=source)
 
     state = result.state if output_epoch is OutputEpoch.traverse else result.stale_epoch_state

@@ -45,7 +45,7 @@ import numpy as np
 
 from trackproc.errors import ProcessingError
 
-__all__ = ["Options", "Prior", "Solution", "solve", "whitened_svd", "combination_text"]
+__all__ = ["Options", "Prior", "Solution", "solve", "solve_gls", "whitened_svd", "combination_text"]
 
 
 @dataclass
@@ -508,3 +508,53 @@ def _raise_rank(s, vt, names, scales, rtol, it):
         f"unobservable combination(s) of the scaled parameters: {text}; add data, fix or drop a parameter, "
         "or give it an a-priori sigma",
         {"iteration": it, "singular_values": s.tolist(), "unobservable": combos})
+
+
+# ----------------------------------------------------------------------------- correlated samples
+
+def solve_gls(model: Callable[[np.ndarray], tuple], x0, observed, covariance, fit, *, clip: Optional[float] = 4.0,
+              sigma_scale: float = 1.0, edited=None, max_editing_rounds: int = 4):
+    """Generalised least squares: the samples' covariance ``covariance`` (a
+    :class:`trackproc.methods.noise.PassCovariance`) is not diagonal. Seed 002 eqs. 4-9 with a
+    full ``K``: the kept samples are whitened (``L⁻¹ y``, ``L⁻¹ h(x)``, ``L⁻¹ J``, ``K = L Lᵀ``
+    times ``sigma_scale²``), which makes them independent of unit sigma, and solved by
+    ``fit(model_w, y_w, start) -> (Solution, extra)`` (:func:`solve`, or a constrained solver).
+    The k-sigma editing (``clip``) is made on the innovations ``L⁻¹ r`` of every sample (the
+    standardised one-step prediction errors; an outlier stands out at its own sample), the
+    whitening refactored on the kept samples, until the edited set settles.
+
+    Returns ``(Solution, extra)``: the solution of the last whitened fit with the samples' own
+    ``computed``/``residual``, ``normalized`` = the innovations, ``edited``, and ``jacobian``
+    whose kept rows are the whitened rows times the samples' sigma (so that dividing by the
+    sigmas, as diagnostics do, gives the whitened Jacobian).
+    """
+    from dataclasses import replace as dc_replace
+
+    y = np.asarray(observed, float)
+    sigma = np.asarray(covariance.sigma, float)
+    n = y.size
+    mask = np.zeros(n, bool) if edited is None else np.asarray(edited, bool).copy()
+    start = np.asarray(x0, float)
+    k = 1.0 / sigma_scale
+    for _ in range(max_editing_rounds):
+        keep = ~mask
+        w = covariance.whitener(keep)
+
+        def model_w(x, w=w):
+            h_, jac_ = model(x)
+            return w(h_) * k, w(jac_) * k
+
+        sol_w, extra = fit(model_w, w(y) * k, start)
+        h, jac = model(sol_w.values)
+        r = y - h
+        z = covariance.innovations(r) * k
+        if not clip:
+            break
+        wrms = float(np.sqrt(np.mean(z[keep] ** 2)))
+        new = np.abs(z) > clip * max(1.0, wrms)
+        if np.array_equal(new, mask) or int(new.sum()) > 0.5 * n:
+            break
+        mask, start = new, sol_w.values
+    jac_rep = np.array(jac, float)
+    jac_rep[keep] = sol_w.jacobian * (sigma[keep] * sigma_scale)[:, None]
+    return dc_replace(sol_w, computed=h, residual=r, normalized=z, edited=mask.copy(), jacobian=jac_rep), extra

@@ -78,6 +78,11 @@ class EstimateOptions:
     epoch (None = the initial state's; ``"first"`` = the first sample; or a UTC datetime64);
     ``kinds``: kinds to use (None = all); ``range_rate_model``: None = from the pass files
     (default doppler); ``compare_doppler_only``, ``two_stage``: the seed 002 reports.
+    ``noise``: the noise model of each pass's Doppler/range-rate samples (:func:`pass_noise`):
+    ``"auto"`` (chosen per pass by REML among white, AR(1), and for one-way passes with a
+    frequency offset a random walk of the transmitter frequency and both; then GLS), ``"white"``
+    (independent samples), or one of ``"ar1"``, ``"walk"``, ``"ar1+walk"``;
+    ``oscillator_noise``: the random-walk intensity (Hz/√s) instead of estimating it.
     """
 
     range_bias: bool | Sequence[str] = False
@@ -96,6 +101,8 @@ class EstimateOptions:
     compare_doppler_only: bool = False
     two_stage: bool = False
     rank_rtol: float = 1e-9
+    noise: str = "auto"
+    oscillator_noise: Optional[float] = None
 
 
 # ----------------------------------------------------------------------------- the problem
@@ -163,13 +170,31 @@ class Problem:
         return h, jac
 
     def solve(self, observed=None, *, max_iterations: int = 20, clip: Optional[float] = 4.0,
-              rank_rtol: float = 1e-9, x0=None, priors=None):
+              rank_rtol: float = 1e-9, x0=None, priors=None, noise=None, edited=None):
         """:func:`~trackproc.methods.least_squares.solve` on this problem (``observed``
-        replaces the samples' values, e.g. for Monte Carlo)."""
-        from trackproc.methods.least_squares import Options, solve
+        replaces the samples' values, e.g. for Monte Carlo); with ``noise`` (a correlated
+        :class:`~trackproc.methods.noise.PassCovariance`), generalised least squares
+        (:func:`~trackproc.methods.least_squares.solve_gls`, starting from the ``edited`` samples)."""
+        from trackproc.methods.least_squares import Options, solve, solve_gls
 
         y = self.meas.observed if observed is None else np.asarray(observed, float)
         lo, hi = self.params.bounds()
+        if noise is not None and not noise.is_white:
+            opts = Options(max_iterations=max_iterations, clip=None, rank_rtol=rank_rtol)
+
+            from trackproc.methods.refinement import CachedModel, geodesic_retraction
+
+            pri = self.priors if priors is None else priors
+
+            def fit(model_w, y_w, start):
+                # the step follows the curved valleys the correlated weighting leaves (as refine's)
+                cached = CachedModel(model_w)
+                ones = np.ones(y_w.size)
+                return solve(cached, start, y_w, ones, names=self.names, scales=self.params.scales(), priors=pri,
+                             bounds=(lo, hi), options=opts,
+                             retract=geodesic_retraction(cached, ones, self.params.scales(), pri)), None
+
+            return solve_gls(self.model, self.x0 if x0 is None else x0, y, noise, fit, clip=clip, edited=edited)[0]
         return solve(self.model, self.x0 if x0 is None else x0, y, self.meas.sigma, names=self.names,
                      scales=self.params.scales(), priors=self.priors if priors is None else priors,
                      periodic=self.meas.periodic, bounds=(lo, hi),
@@ -293,6 +318,12 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     from trackproc.dynamics import timescales as ts
 
     opt = options or EstimateOptions()
+    if opt.noise not in ("auto", "white", "ar1", "walk", "ar1+walk"):
+        raise InputError("unknown noise model", column="--noise", found=opt.noise,
+                         expected="auto, white, ar1, walk or ar1+walk")
+    if opt.oscillator_noise is not None and not (math.isfinite(opt.oscillator_noise) and opt.oscillator_noise > 0):
+        raise InputError("the oscillator noise must be positive", column="--oscillator-noise",
+                         found=opt.oscillator_noise, expected="a random-walk intensity > 0 in Hz per sqrt(s)")
     if opt.doppler_bias not in (None,) + DOPPLER_BIAS:
         raise InputError("unknown Doppler bias model", column="--doppler-bias", found=opt.doppler_bias,
                          expected=" or ".join(DOPPLER_BIAS))
@@ -506,6 +537,16 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     opt = options or EstimateOptions()
     problem = build_problem(tables, initial, stations, opt, eop)
     sol = problem.solve(max_iterations=opt.max_iterations, clip=opt.clip, rank_rtol=opt.rank_rtol)
+    noise_report = None
+    if opt.noise != "white" or opt.oscillator_noise is not None:
+        previous = None
+        for _ in range(2):            # REML on the residuals, GLS, REML again on its residuals
+            cov, noise_report = pass_noise(problem, sol, opt)
+            if cov is None and previous is None:
+                break                 # white: the weighted fit stands
+            sol = problem.solve(max_iterations=opt.max_iterations, clip=opt.clip, rank_rtol=opt.rank_rtol,
+                                noise=cov, edited=sol.edited, x0=sol.values)
+            previous = cov
     problem.params.set_values(sol.values)
     x = sol.values
     names = sol.names
@@ -540,6 +581,8 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
                                              "along_m_s": math.sqrt(rtn[4, 4]), "cross_m_s": math.sqrt(rtn[5, 5])},
         "units": problem.params.units(),
     }
+    if noise_report is not None:
+        diagnostics["noise"] = noise_report
     comparison = _compare(problem, sol) if opt.compare_doppler_only else None
     two, sol2 = _two_stage(problem, sol, opt) if opt.two_stage else (None, None)
     if comparison is not None:
@@ -565,6 +608,50 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     return EstimateResult(state=state, solution=sol, problem=problem, residuals=residual_frame(problem, sol),
                           rtn_covariance=rtn, comparison=comparison, two_stage=two, two_stage_solution=sol2,
                           warnings=warnings)
+
+
+NOISE_MODELS = ("auto", "white", "ar1", "walk", "ar1+walk")
+
+
+def pass_noise(problem: Problem, sol, opt: EstimateOptions):
+    """The noise model of every pass's Doppler and range-rate samples from the residuals of
+    ``sol`` (:func:`trackproc.methods.noise.fit_noise`: REML with the pass's Jacobian columns as
+    fixed effects; the random walk of the transmitter frequency only for one-way passes with a
+    frequency offset). Returns ``(PassCovariance or None when every pass is white, report)``;
+    the report lists each pass's model and effective number of samples."""
+    from trackproc.methods import noise as nz
+
+    meas = problem.meas
+    keep_all = ~np.asarray(sol.edited, bool)
+    rr = np.isin(meas.kind, ["doppler", "range_rate"])
+    blocks, report = [], {}
+    names = problem.names
+    _, jac_all = problem.model(np.asarray(sol.values, float))     # (a GLS solution's own rows are whitened)
+    for st, pid in sorted(set(zip(meas.station[rr], meas.pass_id[rr]))):
+        rows = np.flatnonzero(rr & (meas.station == st) & (meas.pass_id == pid))
+        keep = keep_all[rows]
+        if keep.sum() < 20:
+            continue
+        t = meas.t_s[rows]
+        jac = np.asarray(jac_all, float)[rows]
+        one_way = not bool(np.any(meas.two_way[rows]))
+        osc = one_way and any(n in (f"doppler_offset:{pid}", f"doppler_offset:{st}") for n in names)
+        if opt.noise == "auto":
+            models = nz.MODELS if osc else ("white", "ar1")
+        elif opt.noise == "white":
+            models = ("white",)
+        else:
+            models = (opt.noise,)
+        nf = nz.fit_noise(t[keep], np.asarray(sol.residual, float)[rows][keep], jac[keep], models=models,
+                          walk=opt.oscillator_noise if osc else None, t0=float(t.min()))
+        d = nf.as_dict()
+        d.pop("candidates", None)
+        report[f"{st}/{pid}"] = d
+        if not nf.model.is_white:
+            blocks.append((rows, nf.model, float(t.min())))
+    if not blocks:
+        return None, report
+    return nz.PassCovariance(meas.sigma, meas.t_s, blocks), report
 
 
 def _light_time_note(meas) -> str:

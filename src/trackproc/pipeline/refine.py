@@ -104,6 +104,12 @@ class RefineOptions:
     ``covariance``: ``"profile"`` (pointwise without ``circular``: the linear covariance plus the
     curvature along the directions the pass cannot see, :meth:`Refinement.profile_covariance`)
     or ``"linear"``.
+    ``noise`` (pointwise): the samples' noise model (:mod:`trackproc.methods.noise`): ``"auto"``
+    (chosen per pass by REML among white, AR(1), oscillator random walk and both, and, for
+    one-way Doppler without ``doppler_bias``, offset or offset+drift), ``"white"`` (independent
+    samples: the weighted least squares of before), or one of ``"ar1"``, ``"walk"``,
+    ``"ar1+walk"`` (that model, its parameters by REML); ``oscillator_noise``: the random-walk
+    intensity of the transmitter frequency (Hz/√s) instead of estimating it.
     """
 
     cost: str = "pointwise"
@@ -125,6 +131,8 @@ class RefineOptions:
     reweight: bool = True
     rank_rtol: float = 1e-12
     covariance: str = "profile"
+    noise: str = "auto"
+    oscillator_noise: Optional[float] = None
 
 
 @dataclass
@@ -347,6 +355,12 @@ class Refinement:
     station_axis: np.ndarray
     integral: Optional[dict] = None
     warnings: list = field(default_factory=list)
+    #: correlated-noise model of the samples (:class:`~trackproc.methods.noise.PassCovariance`), None = white
+    noise: Optional[object] = None
+    #: samples edited when the noise model was fitted (the GLS starts from them)
+    noise_edited: Optional[np.ndarray] = None
+    #: what :func:`choose_noise` found (written to the diagnostics)
+    noise_report: Optional[dict] = None
 
     @property
     def n_problem(self) -> int:
@@ -377,10 +391,33 @@ class Refinement:
         meas = self.problem.meas
         return self.pointwise_model, meas.observed, meas.sigma, meas.periodic, self.options.clip
 
+    def correlated(self) -> bool:
+        """True when the samples carry a correlated-noise model (the solve is then GLS)."""
+        return self.noise is not None and not self.noise.is_white and self.options.cost == "pointwise"
+
+    def whitened(self, keep, sigma_scale=1.0, observed=None):
+        """The GLS system of the kept samples: ``(model_w, y_w)`` with ``model_w(x) = (L⁻¹ h, L⁻¹ J)``
+        and ``y_w = L⁻¹ y`` (``C = L Lᵀ`` of :attr:`noise` over the kept samples, times
+        ``sigma_scale²``): independent samples of unit sigma."""
+        model, y, _, _, _ = self.data()
+        if observed is not None:
+            y = np.asarray(observed, float)
+        w = self.noise.whitener(np.asarray(keep, bool))
+        k = 1.0 / sigma_scale
+
+        def model_w(x):
+            h, jac = model(x)
+            return w(h) * k, w(jac) * k
+
+        return model_w, w(y) * k
+
     def solve(self, observed=None, prior_centre=None, x0=None, sigma_scale=1.0):
         """Solve (``observed`` replaces the data: the samples, or the curve at the nodes;
         ``prior_centre`` (6,) the stale state at the traverse epoch; ``sigma_scale`` multiplies
-        the data sigmas). Returns ``(Solution, KKTResult or None)``."""
+        the data sigmas). Returns ``(Solution, KKTResult or None)``. With a correlated-noise
+        model (:meth:`correlated`) the problem is solved by GLS (:meth:`solve_gls`)."""
+        if self.correlated():
+            return self.solve_gls(observed, prior_centre, x0, sigma_scale)
         from trackproc.methods.least_squares import Options, solve
         from trackproc.methods.refinement import CachedModel, geodesic_retraction, solve_kkt
 
@@ -398,10 +435,47 @@ class Refinement:
                             constraint_scale=self.constraint_scale, scales=self.scales, priors=priors,
                             periodic=periodic, options=opts, retract=retract)
             return kkt.solution, kkt
-        lo, hi = self.problem.params.bounds()
-        lo, hi = np.r_[lo, [-np.inf] * (len(self.names) - lo.size)], np.r_[hi, [np.inf] * (len(self.names) - hi.size)]
+        lo, hi = self.bounds()
         return solve(model, start, y, sigma, names=self.names, scales=self.scales, priors=priors, periodic=periodic,
                      bounds=(lo, hi), options=opts, retract=retract), None
+
+    def bounds(self):
+        lo, hi = self.problem.params.bounds()
+        return (np.r_[lo, [-np.inf] * (len(self.names) - lo.size)], np.r_[hi, [np.inf] * (len(self.names) - hi.size)])
+
+    def solve_gls(self, observed=None, prior_centre=None, x0=None, sigma_scale=1.0):
+        """Generalised least squares with the correlated-noise model (:attr:`noise`):
+        :func:`trackproc.methods.least_squares.solve_gls` (whitened kept samples, editing on the
+        innovations) with this refinement's solver (constrained under ``circular``)."""
+        from dataclasses import replace as dc_replace
+
+        from trackproc.methods.least_squares import Options, solve, solve_gls
+        from trackproc.methods.refinement import CachedModel, geodesic_retraction, solve_kkt
+
+        model, y, _, _, clip = self.data()
+        if observed is not None:
+            y = np.asarray(observed, float)
+        priors = self.priors_at(prior_centre)
+        lo, hi = self.bounds()
+        opts = Options(max_iterations=self.options.max_iterations, clip=None, rank_rtol=self.options.rank_rtol)
+
+        def fit(model_w, y_w, start):
+            cached = CachedModel(model_w)
+            ones = np.ones(y_w.size)
+            retract = geodesic_retraction(cached, ones, self.scales, priors)
+            if self.options.circular:
+                kkt = solve_kkt(cached, start, y_w, ones, names=self.names, constraints=self.constraints,
+                                constraint_scale=self.constraint_scale, scales=self.scales, priors=priors,
+                                options=opts, retract=retract)
+                return kkt.solution, kkt
+            return solve(cached, start, y_w, ones, names=self.names, scales=self.scales, priors=priors,
+                         bounds=(lo, hi), options=opts, retract=retract), None
+
+        sol, kkt = solve_gls(model, self.x0 if x0 is None else np.asarray(x0, float), y, self.noise, fit, clip=clip,
+                             sigma_scale=sigma_scale, edited=self.noise_edited)
+        if kkt is not None:
+            kkt = dc_replace(kkt, solution=sol)
+        return sol, kkt
 
     def priors_at(self, prior_centre=None) -> list:
         """The a-priori terms, centred on ``prior_centre`` (6,) instead of the stale state if given."""
@@ -437,6 +511,10 @@ class Refinement:
         def kept(x):
             h, jac = model(x)
             return h[keep], jac[keep]
+
+        if self.correlated():        # GLS: the whitened kept samples, unit sigmas
+            kept, y = self.whitened(keep, sigma_scale, np.asarray(sol.computed, float) + np.asarray(sol.residual, float))
+            sigma, periodic = np.ones(y.size), None
 
         x_hat = np.asarray(sol.values, float)
         cov = np.asarray(sol.covariance, float)
@@ -493,6 +571,11 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     opt = options or RefineOptions()
     if opt.cost not in COSTS:
         raise InputError("unknown cost", column="--cost", found=opt.cost, expected=" or ".join(COSTS))
+    if opt.noise not in NOISE_MODELS:
+        raise InputError("unknown noise model", column="--noise", found=opt.noise, expected=", ".join(NOISE_MODELS))
+    if opt.oscillator_noise is not None and not (math.isfinite(opt.oscillator_noise) and opt.oscillator_noise > 0):
+        raise InputError("the oscillator noise must be positive", column="--oscillator-noise",
+                         found=opt.oscillator_noise, expected="a random-walk intensity > 0 in Hz per sqrt(s)")
     if opt.covariance not in ("linear", "profile"):
         raise InputError("unknown covariance", column="--covariance", found=opt.covariance,
                          expected="linear or profile")
@@ -742,7 +825,7 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     :class:`ProcessingError` (exit 1) when the refinement fails (no convergence, rank deficiency).
     """
     ref = prepare(table, initial, stations, options, eop, source)
-    sol, kkt, scale = solve_weighted(ref)
+    ref, sol, kkt, scale = solve_noise(table, initial, ref, stations, eop, source)
     consistency = None
     if ref.options.circular:
         # the same assembled problem without the constraints and r_ka (always the last parameter)
@@ -750,6 +833,116 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
                        scales=ref.scales[:-1])
         consistency = circular_consistency(free, sol, scale)
     return finish(ref, sol, kkt, scale, consistency=consistency)
+
+
+#: Noise models of ``--noise`` (``auto`` chooses among them by REML).
+NOISE_MODELS = ("auto", "white", "ar1", "walk", "ar1+walk")
+#: A drift is added to a one-way pass's offset when its GLS estimate exceeds this many sigmas
+#: (and √(ln n), the BIC threshold): p = 0.001, so that a pass without drift keeps the offset alone.
+DRIFT_T = 3.29
+
+
+def _oscillator(ref: Refinement) -> bool:
+    """A one-way link with a transmitter offset: the frequency can wander."""
+    return _link_mode(ref) == "one-way" and any(n.startswith("doppler_offset") for n in ref.problem.names)
+
+
+def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinement, bool]:
+    """The noise model of the pass from the residuals of a fit ``sol`` (:func:`trackproc.methods.noise.fit_noise`:
+    REML, the fixed effects being the Jacobian columns of the state, the offset and a drift),
+    and whether the pass wants a drift it does not have (the GLS estimate of a drift, with the
+    a-priori, beyond :data:`DRIFT_T` sigmas; only under ``noise="auto"`` without ``doppler_bias``).
+    Returns ``(the Refinement with the model, drift wanted)``; the model is reported in
+    ``noise_report``."""
+    from trackproc.methods import noise as nz
+    from trackproc.methods.least_squares import _prior_rows, _prior_rhs
+
+    opt = ref.options
+    meas = ref.problem.meas
+    keep = ~np.asarray(sol.edited, bool)
+    t = meas.t_s
+    t0 = float(t.min())
+    osc = _oscillator(ref)
+    r = np.asarray(sol.residual, float)
+    npb = ref.n_problem
+    _, jac = ref.pointwise_model(sol.values)
+    x = np.asarray(jac, float)[:, :npb]
+    has_drift = any(n.startswith("doppler_drift") for n in ref.problem.names)
+    if osc and not has_drift:        # the drift column (Hz/s; the offset's column times t - t0)
+        i_off = [i for i, n in enumerate(ref.problem.names) if n.startswith("doppler_offset")][0]
+        x = np.column_stack([x, x[:, i_off] * (t - t0)])
+    if opt.noise == "auto":
+        models = nz.MODELS if osc else ("white", "ar1")
+    elif opt.noise == "white":
+        models = ("white",)
+    else:
+        models = (opt.noise,)
+    walk = opt.oscillator_noise
+    nf = nz.fit_noise(t[keep], r[keep], x[keep], models=models, walk=walk, t0=t0)
+    cov = nz.PassCovariance(meas.sigma, t, [(np.arange(t.size), nf.model, t0)])
+    want_drift = False
+    drift_t = None
+    if osc and not has_drift:
+        w = cov.whitener(keep)
+        a = w(x)
+        b = w(r)
+        pa, factors = _prior_rows(ref.priors, len(ref.names), np.ones(len(ref.names)))
+        if pa.shape[0]:
+            pa = np.column_stack([pa[:, :npb], np.zeros(pa.shape[0])])
+            a = np.vstack([a, pa])
+            b = np.concatenate([b, _prior_rhs(factors, np.asarray(sol.values, float))])
+        u, sv, vt = np.linalg.svd(a, full_matrices=False)
+        ok = sv > 1e-10 * sv[0]
+        beta = vt[ok].T @ ((u[:, ok].T @ b) / sv[ok])
+        sd = float(np.sqrt(np.sum((vt[ok, -1] / sv[ok]) ** 2)))
+        drift_t = float(beta[-1] / sd) if sd > 0 else 0.0
+        want_drift = (opt.noise == "auto" and opt.doppler_bias is None
+                      and abs(drift_t) > max(DRIFT_T, math.sqrt(math.log(max(keep.sum(), 3)))))
+    # effective number of independent samples of the noise the orbit sees: (tr C')²/tr(C'²) with
+    # C' = P C P, P the projection that removes the explicit offset and drift (Bayley & Hammersley)
+    kk = np.flatnonzero(keep)
+    bias_cols = np.column_stack([np.ones(kk.size), t[kk] - t0])
+    qb, _ = np.linalg.qr(bias_cols)
+    c = nf.model.covariance(t[kk], t0)
+    cq = c - qb @ (qb.T @ c)
+    cp = cq - (cq @ qb) @ qb.T
+    n_eff = nz.effective_samples(cp)
+    report = nf.as_dict()
+    report.update({"effective_samples": n_eff, "effective_samples_definition":
+                   "(tr C')^2 / tr(C'^2), C' the noise covariance of the kept samples without the explicit offset "
+                   "and drift (Bayley & Hammersley 1946): n for white noise", "option": opt.noise,
+                   "oscillator_noise_given": walk, "link": _link_mode(ref)})
+    if drift_t is not None:
+        report["drift_t"] = drift_t
+    bias = [n.split(":")[0] for n in ref.problem.names if n.startswith("doppler_")]
+    report["transmitter"] = ("offset+drift" if (want_drift or has_drift) else "offset" if bias else "none") + \
+        ("+wander" if nf.model.walk > 0 else "")
+    model = None if nf.model.is_white else cov
+    return replace(ref, noise=model, noise_edited=np.asarray(sol.edited, bool).copy(), noise_report=report), want_drift
+
+
+def solve_noise(table, initial, ref: Refinement, stations=None, eop=None, source: str = "<pass>", rounds: int = 2,
+                observed=None, prior_centre=None, x0=None):
+    """:func:`solve_weighted` with the noise model of the pass (:func:`noise_model`): a first
+    (white) fit, the model by REML, a drift if the pass wants one (the problem prepared again
+    from ``table``/``initial`` with ``offset+drift``), then GLS, the model refitted on its
+    residuals (``rounds`` in all). A pass whose noise is white and needs no drift keeps the
+    white fit unchanged. ``observed``, ``prior_centre``, ``x0`` as in :meth:`Refinement.solve`
+    (Monte Carlo: the problem must then already carry the drift it needs).
+    Returns ``(Refinement, Solution, KKTResult or None, sigma scale)``."""
+    sol, kkt, scale = solve_weighted(ref, observed, prior_centre, x0)
+    if ref.options.cost != "pointwise" or (ref.options.noise == "white" and ref.options.oscillator_noise is None):
+        return ref, sol, kkt, scale
+    for _ in range(rounds):
+        noisy, want_drift = noise_model(ref, sol, scale)
+        if want_drift and observed is None:
+            ref = prepare(table, initial, stations, replace(ref.options, doppler_bias="offset+drift"), eop, source)
+            noisy = replace(ref, noise=noisy.noise, noise_edited=noisy.noise_edited, noise_report=noisy.noise_report)
+        elif not noisy.correlated() and not ref.correlated():
+            return noisy, sol, kkt, scale                 # white, no drift to add: the white fit stands
+        ref = noisy
+        sol, kkt, scale = solve_weighted(ref, observed, prior_centre, x0)
+    return ref, sol, kkt, scale
 
 
 def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0) -> dict:
@@ -775,14 +968,14 @@ def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0
     return out
 
 
-def solve_weighted(ref: Refinement):
+def solve_weighted(ref: Refinement, observed=None, prior_centre=None, x0=None):
     """:meth:`Refinement.solve`, repeated with the sample sigmas scaled by √(variance factor) while
     that exceeds :data:`REWEIGHT_THRESHOLD` (pointwise with ``reweight``). Returns
-    ``(Solution, KKTResult or None, sigma scale)``."""
+    ``(Solution, KKTResult or None, sigma scale)``. ``observed``, ``prior_centre``, ``x0`` as in
+    :meth:`Refinement.solve` (Monte Carlo)."""
     scale = 1.0
-    x0 = None
     for _ in range(MAX_REWEIGHT):
-        sol, kkt = ref.solve(sigma_scale=scale, x0=x0)
+        sol, kkt = ref.solve(observed=observed, prior_centre=prior_centre, sigma_scale=scale, x0=x0)
         vf = sol.variance_factor
         if not (ref.options.reweight and ref.options.cost == "pointwise" and math.isfinite(vf)
                 and vf > REWEIGHT_THRESHOLD):
@@ -964,6 +1157,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         "sigma_rtn": dict(zip(rf.RTN_NAMES, np.sqrt(np.clip(np.diag(rtn), 0.0, None)).tolist())),
         "units": units, "warnings": warnings,
     }
+    if ref.noise_report is not None:                  # the noise model of the pass (methods/noise.py)
+        diagnostics["noise"] = ref.noise_report
     method = {"cost": opt.cost, "circular": bool(opt.circular),
               "solver": ("Gauss-Newton with equality constraints, KKT by the null-space method (seed 004 eqs. 15-17)"
                          if opt.circular else "Gauss-Newton by QR/SVD with Levenberg-Marquardt damping"),

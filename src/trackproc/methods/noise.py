@@ -1,0 +1,404 @@
+"""Measurement noise that is not white: an oscillator that wanders and time-correlated noise.
+
+A one-way Doppler link measures the received frequency against an onboard oscillator whose
+frequency is not a constant: beside an offset and a drift (explicit parameters of the
+estimator) it wanders (temperature, ageing), and the residuals of a real pass are correlated
+from sample to sample. Weighing such samples as independent makes the covariance far too small
+and lets the orbit absorb the wander. The covariance of the samples of one pass (times ``t``,
+``t0`` the first one, which is also the epoch of the explicit offset and drift) is modelled as
+
+    C_ij = σ_w² δ_ij  +  σ_a² exp(-|t_i - t_j| / τ)  +  q² min(t_i - t0, t_j - t0)
+
+* white noise ``σ_w`` (2 Hz quantisation alone is 2/√12 = 0.58 Hz);
+* a first-order Gauss-Markov (exponentially correlated, AR(1) on a regular grid with
+  ``ρ = exp(-Δt/τ)``) component ``σ_a, τ``: uneven sampling and gaps need nothing special;
+* a random walk of the transmitter frequency of intensity ``q`` (unit/√s): the covariance of
+  a Wiener process started at ``t0`` (its initial value is the explicit offset).
+
+This dense per-pass form is the batch form of "frequency nodes with a random-walk prior between
+them" with the nodes marginalised out (a Kalman smoother would give the same estimate and
+covariance): generalised least squares with ``C`` (Aitken 1935) by whitening with the Cholesky
+factor, ``C = L Lᵀ``: residuals and Jacobian rows become ``L⁻¹ r``, ``L⁻¹ J``.
+
+The hyper-parameters are estimated by restricted maximum likelihood (REML; Patterson &
+Thompson 1971, Harville 1977) on the residuals of a first fit, the fixed effects being the
+columns of the estimator's design for the pass (state, offset, drift), so that what the orbit
+or the offset can absorb is not taken for noise:
+
+    ℓ_R(θ) = -½ [ log|C| + log|Xᵀ C⁻¹ X| + rᵀ P r ],   P = C⁻¹ - C⁻¹X(XᵀC⁻¹X)⁻¹XᵀC⁻¹
+
+with the overall scale profiled out (``σ̂² = rᵀ P̃ r / (n - p)``). The model (white, + AR(1),
++ random walk, + both) is chosen per pass by the restricted likelihood with a penalty: a
+component is added only when twice the log-likelihood gain exceeds both the BIC penalty
+(Schwarz 1978: ``k ln n``) and the 99.9 % point of χ² with its number of parameters, so that
+white noise stays white (the white path is then exactly the weighted least squares of before):
+among the correlated models that pass this test, the most general. An AR(1) of a time constant much longer than the pass and a random walk are nearly
+the same process once the offset is estimated, and at short lags a walk plus white noise
+resembles an AR(1): one pass rarely tells them apart, and the model that carries both keeps the
+covariance honest whichever it is.
+
+For speed the likelihood is evaluated on at most :data:`MAX_REML_SAMPLES` samples (runs of
+consecutive samples spread over the pass: the exact restricted likelihood of that subset, which
+keeps the shortest lags), the final fit uses every sample.
+
+Pure numpy/scipy.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Optional, Sequence
+
+import numpy as np
+from scipy.linalg import cho_factor, solve_triangular
+
+__all__ = ["NoiseModel", "NoiseFit", "PassCovariance", "fit_noise", "restricted_loglik", "MODELS",
+           "effective_samples", "lag1_correlation"]
+
+#: Models, by the components they add to white noise.
+MODELS = ("white", "ar1", "walk", "ar1+walk")
+#: Samples the restricted likelihood is evaluated on (a subset of runs when the pass has more).
+MAX_REML_SAMPLES = 320
+#: Length of the runs of consecutive samples of the subset.
+RUN_LENGTH = 4
+#: A component is added when 2 Δℓ_R exceeds the χ² point of this probability (and BIC).
+SELECTION_P = 0.999
+
+
+@dataclass(frozen=True)
+class NoiseModel:
+    """The covariance of one pass's samples (see the module docstring): white ``white``,
+    exponentially correlated ``ar_sigma`` with time constant ``ar_tau_s``, random walk
+    ``walk`` (unit/√s). Units are the samples' (Hz for Doppler)."""
+
+    white: float
+    ar_sigma: float = 0.0
+    ar_tau_s: float = 0.0
+    walk: float = 0.0
+
+    @property
+    def name(self) -> str:
+        parts = (["ar1"] if self.ar_sigma > 0 and self.ar_tau_s > 0 else []) + (["walk"] if self.walk > 0 else [])
+        return "+".join(parts) or "white"
+
+    @property
+    def is_white(self) -> bool:
+        return self.name == "white"
+
+    def covariance(self, t_s, t0: Optional[float] = None) -> np.ndarray:
+        """``C`` at the times ``t_s`` (s); the random walk starts at ``t0`` (default the first time)."""
+        t = np.asarray(t_s, float)
+        t0 = float(t.min()) if t0 is None else float(t0)
+        c = np.diag(np.full(t.size, self.white ** 2))
+        if self.ar_sigma > 0 and self.ar_tau_s > 0:
+            c += self.ar_sigma ** 2 * np.exp(-np.abs(t[:, None] - t[None, :]) / self.ar_tau_s)
+        if self.walk > 0:
+            dt = np.clip(t - t0, 0.0, None)
+            c += self.walk ** 2 * np.minimum(dt[:, None], dt[None, :])
+        return c
+
+    def as_dict(self) -> dict:
+        return {"model": self.name, "white": self.white, "ar1_sigma": self.ar_sigma, "ar1_tau_s": self.ar_tau_s,
+                "ar1_rho_1s": math.exp(-1.0 / self.ar_tau_s) if self.ar_sigma > 0 and self.ar_tau_s > 0 else 0.0,
+                "walk_per_sqrt_s": self.walk}
+
+
+def effective_samples(cov: np.ndarray) -> float:
+    """Effective number of independent samples of a covariance: ``(tr C)² / tr(C²)``
+    (= n for independent samples of equal variance, 1 for fully correlated ones; Bayley &
+    Hammersley 1946)."""
+    c = np.asarray(cov, float)
+    return float(np.trace(c) ** 2 / np.sum(c * c))
+
+
+def lag1_correlation(t_s, r, max_gap_s: Optional[float] = None) -> float:
+    """Sample correlation of consecutive residuals (pairs closer than ``max_gap_s``, default
+    twice the median step)."""
+    t = np.asarray(t_s, float)
+    r = np.asarray(r, float) - np.mean(r)
+    if r.size < 3:
+        return math.nan
+    dt = np.diff(t)
+    gap = 2.0 * float(np.median(dt)) if max_gap_s is None else max_gap_s
+    ok = dt <= gap
+    if ok.sum() < 2:
+        return math.nan
+    return float(np.sum(r[:-1][ok] * r[1:][ok]) / np.sum(r * r) * r.size / ok.sum())
+
+
+# ----------------------------------------------------------------------------- REML
+
+def _basis(x: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the column space of the fixed effects (REML depends on nothing else)."""
+    x = np.asarray(x, float)
+    if x.shape[1] == 0:
+        return x
+    norms = np.linalg.norm(x, axis=0)
+    x = x[:, norms > 0] / norms[norms > 0]
+    u, s, _ = np.linalg.svd(x, full_matrices=False)
+    return u[:, s > 1e-9 * s[0]] if s.size else u
+
+
+class _Reml:
+    """The restricted likelihood of one set of residuals, with the time-difference matrices
+    computed once (the likelihood is evaluated many times while the hyper-parameters are sought)."""
+
+    def __init__(self, t, r, x, t0):
+        self.t, self.r, self.x = t, r, x
+        self.n, self.p = x.shape
+        self.lag = np.abs(t[:, None] - t[None, :])
+        dt = np.clip(t - t0, 0.0, None)
+        self.walk = np.minimum(dt[:, None], dt[None, :])
+
+    def covariance(self, model: NoiseModel) -> np.ndarray:
+        c = model.white ** 2 * np.eye(self.n)
+        if model.ar_sigma > 0 and model.ar_tau_s > 0:
+            c += model.ar_sigma ** 2 * np.exp(-self.lag / model.ar_tau_s)
+        if model.walk > 0:
+            c += model.walk ** 2 * self.walk
+        return c
+
+    def __call__(self, model: NoiseModel, profile: bool = True) -> tuple[float, float]:
+        """``(ℓ_R, ŝ)``: see :func:`restricted_loglik`; ``profile=False``: the scale is 1."""
+        n, p = self.n, self.p
+        try:
+            chol, _ = cho_factor(self.covariance(model), lower=True, check_finite=False)
+        except np.linalg.LinAlgError:
+            return -math.inf, math.nan
+        xw = solve_triangular(chol, self.x, lower=True, check_finite=False)
+        rw = solve_triangular(chol, self.r, lower=True, check_finite=False)
+        q, rr = np.linalg.qr(xw)
+        e = rw - q @ (q.T @ rw)
+        m = n - p
+        rss = float(e @ e)
+        if not (rss > 0 and m > 0):
+            return -math.inf, math.nan
+        logdet = 2.0 * float(np.sum(np.log(np.diag(chol)))) + 2.0 * float(np.sum(np.log(np.abs(np.diag(rr)))))
+        if not profile:
+            return -0.5 * (logdet + rss), 1.0
+        s2 = rss / m
+        return -0.5 * (m * math.log(s2) + logdet + m), math.sqrt(s2)
+
+
+def restricted_loglik(model, t, r, x, t0=None, profile: bool = True) -> tuple[float, float]:
+    """Restricted log-likelihood (module docstring; the constant ``-½(n-p) log 2π`` left out) of
+    residuals ``r`` at times ``t`` with fixed-effect columns ``x`` (an orthonormal basis, see
+    :func:`_basis`) and the covariance ``s² C`` of the :class:`NoiseModel` ``model``, the scale
+    ``s`` profiled out (``profile``; else ``s = 1``). Returns ``(ℓ_R, ŝ)``.
+    Implements REML (Patterson & Thompson 1971; Harville 1977)."""
+    t = np.asarray(t, float)
+    return _Reml(t, np.asarray(r, float), np.asarray(x, float), float(t.min()) if t0 is None else t0)(model, profile)
+
+
+def _subset(t: np.ndarray, max_n: int = MAX_REML_SAMPLES, run: int = RUN_LENGTH) -> np.ndarray:
+    """Indices of runs of ``run`` consecutive samples spread evenly over the pass (all when few)."""
+    n = t.size
+    if n <= max_n:
+        return np.arange(n)
+    starts = np.unique(np.linspace(0, n - run, max_n // run).round().astype(int))
+    return np.unique((starts[:, None] + np.arange(run)[None, :]).ravel())
+
+
+@dataclass
+class NoiseFit:
+    """The chosen :class:`NoiseModel` of one pass and the evidence: restricted log-likelihood
+    of each candidate (``candidates``: name -> dict), the samples used, the lag-1 correlation of
+    the residuals, the effective number of independent samples under the chosen model."""
+
+    model: NoiseModel
+    candidates: dict
+    n: int
+    n_reml: int
+    lag1: float
+    n_effective: float
+    how: str
+    notes: list = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        out = self.model.as_dict()
+        out.update({"how": self.how, "samples": self.n, "samples_reml": self.n_reml, "lag1_correlation": self.lag1,
+                    "effective_samples_bayley": self.n_effective, "candidates": self.candidates})
+        if self.notes:
+            out["notes"] = list(self.notes)
+        return out
+
+
+def _optimise(fun, start, bounds):
+    from scipy.optimize import minimize
+
+    best = minimize(fun, np.asarray(start, float), method="Nelder-Mead",
+                    options={"xatol": 0.05, "fatol": 0.02, "maxfev": 30 * len(start)})
+    z = np.clip(best.x, [b[0] for b in bounds], [b[1] for b in bounds])
+    return z, -float(fun(z))
+
+
+def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Optional[float] = None,
+              white_floor: float = 0.0, t0: Optional[float] = None, p_select: float = SELECTION_P) -> NoiseFit:
+    """Estimate and choose the noise model of one pass by REML (module docstring).
+
+    ``t_s`` (n,) times, ``residual`` (n,) residuals of a first fit, ``design`` (n, p) its
+    fixed-effect columns (the Jacobian rows of the pass: state, offset, drift; only their column
+    space matters), ``models`` the candidates, ``walk`` a given random-walk intensity
+    (``--oscillator-noise``: then the walk is not estimated and every candidate carries it),
+    ``white_floor`` a lower bound of ``σ_w`` (quantisation), ``t0`` the start of the walk.
+    """
+    from scipy.stats import chi2 as chi2_dist
+
+    t = np.asarray(t_s, float)
+    r = np.asarray(residual, float)
+    n = t.size
+    t0 = float(t.min()) if t0 is None else float(t0)
+    idx = _subset(t)
+    ts, rs = t[idx], r[idx]
+    xs = _basis(np.asarray(design, float)[idx])
+    m = max(ts.size - xs.shape[1], 1)
+    span = max(float(ts.max() - ts.min()), 1.0)
+    step = max(float(np.median(np.diff(t))) if n > 1 else 1.0, 1e-3)
+    tau_lo, tau_hi = math.log(0.5 * step), math.log(2.0 * span)
+
+    reml = _Reml(ts, rs, xs, t0)
+    sd = max(float(np.std(rs)), 1e-12)
+    cands: dict = {}
+    fitted: dict = {}
+    for name in models:
+        has_ar = "ar1" in name
+        has_walk = "walk" in name and walk is None
+        given = walk is not None
+
+        def build(z, has_ar=has_ar, has_walk=has_walk, given=given) -> NoiseModel:
+            # z: log(σ_a/σ_w)², log τ (AR); log(q/σ_w)² (walk); log σ_w (when the walk is given)
+            w = math.exp(z[-1]) if given else 1.0
+            a = math.sqrt(math.exp(z[0])) * w if has_ar else 0.0
+            tau = math.exp(z[1]) if has_ar else 0.0
+            q = walk if given else (math.sqrt(math.exp(z[2 if has_ar else 0])) if has_walk else 0.0)
+            return NoiseModel(w, a, tau, q or 0.0)
+
+        def neg(z, build=build, given=given):
+            return -reml(build(z), profile=not given)[0]
+
+        starts = [[]]
+        bounds: list = []
+        if has_ar:        # coarse start in τ: the likelihood has local maxima there
+            starts = [[math.log(a), tt] for tt in np.linspace(tau_lo, tau_hi, 4) for a in (1e-3, 0.3, 3.0)]
+            bounds += [(-12.0, 12.0), (tau_lo, tau_hi)]
+        if has_walk:
+            starts = [z + [math.log(b / step)] for z in starts for b in (1e-4, 1e-1)]
+            bounds += [(-40.0, 20.0)]
+        if given:
+            starts = [z + [math.log(sd)] for z in starts]
+            bounds += [(math.log(sd) - 20.0, math.log(sd) + 5.0)]
+        if has_ar and has_walk and not given:     # nested starts: the AR(1) alone, the walk alone
+            for other in ("ar1", "walk"):
+                if other in fitted:
+                    o = fitted[other][0]
+                    a_r = max(o.ar_sigma / o.white, 1e-3) ** 2 if o.ar_sigma > 0 else 1e-3
+                    tau_r = o.ar_tau_s if o.ar_tau_s > 0 else math.exp(tau_hi)
+                    q_r = max(o.walk / o.white, 1e-6) ** 2 if o.walk > 0 else 1e-6
+                    starts.append([math.log(a_r), math.log(tau_r), math.log(q_r)])
+        if not bounds:
+            ll, s = reml(NoiseModel(1.0))
+            nm, k = NoiseModel(s), 1
+        else:
+            z0 = min(starts, key=lambda z: neg(np.asarray(z)))
+            z, ll = _optimise(neg, z0, bounds)
+            nm = build(z)
+            s = 1.0 if given else reml(nm)[1]
+            nm = NoiseModel(nm.white * s, nm.ar_sigma * s, nm.ar_tau_s, nm.walk * s if not given else nm.walk)
+            k = len(z) + (0 if given else 1)
+        if white_floor > 0 and nm.white < white_floor:
+            nm = replace(nm, white=white_floor)
+        fitted[name] = (nm, ll, k)
+        cands[name] = {"loglik_restricted": ll, "parameters": k, **nm.as_dict()}
+
+    # choice: a correlated model must beat the simplest candidate by 2 Δℓ_R > max(d ln m, χ²_p(d))
+    # (BIC, and at least the χ² point, so that white noise stays white); among those that do,
+    # the most general one (with both components when it passes: an AR(1) and a walk are hard
+    # to tell apart on one pass, and taking the one for the other leaves the offset and drift
+    # overconfident, checked by Monte Carlo in tests/test_refine_noise.py)
+    base = min(models, key=lambda name: fitted[name][2])
+    _, ll_base, k_base = fitted[base]
+    passing = [base]
+    for name in models:
+        _, ll, k = fitted[name]
+        d = k - k_base
+        if d > 0 and 2.0 * (ll - ll_base) > max(d * math.log(m), float(chi2_dist.ppf(p_select, d))):
+            passing.append(name)
+    chosen = base if len(passing) == 1 else max(passing[1:], key=lambda name: (fitted[name][2], fitted[name][1]))
+    model = fitted[chosen][0]
+    cov = model.covariance(t, t0)
+    return NoiseFit(model=model, candidates=cands, n=n, n_reml=int(ts.size), lag1=lag1_correlation(t, r),
+                    n_effective=effective_samples(cov), how="REML" if walk is None else "REML, walk given")
+
+
+# ----------------------------------------------------------------------------- whitening
+
+class PassCovariance:
+    """The covariance of all samples: blocks (index arrays with a :class:`NoiseModel` and the
+    walk's start) and independent samples (``sigma``) elsewhere; whitening of kept samples.
+
+    ``whitener(keep)`` returns ``w(M)``: the rows of ``M`` at the kept samples (in their original
+    order) multiplied by ``L⁻¹`` of their covariance block by block (``C = L Lᵀ``). Factors are
+    cached per set of kept samples.
+    """
+
+    def __init__(self, sigma, t_s, blocks: Sequence[tuple] = ()):
+        self.sigma = np.asarray(sigma, float)
+        self.t = np.asarray(t_s, float)
+        self.blocks = [(np.asarray(i, int), m, t0) for i, m, t0 in blocks]
+        self._cache: dict = {}
+
+    @property
+    def is_white(self) -> bool:
+        return all(m.is_white for _, m, _ in self.blocks)
+
+    def _factors(self, keep: np.ndarray):
+        key = keep.tobytes()
+        hit = self._cache.get(key)
+        if hit is None:
+            pos = np.cumsum(keep) - 1               # position of a kept sample among the kept ones
+            in_block = np.zeros(keep.size, bool)
+            fac = []
+            for idx, model, t0 in self.blocks:
+                in_block[idx] = True
+                k = idx[keep[idx]]
+                if k.size == 0:
+                    continue
+                c = model.covariance(self.t[k], t0)
+                fac.append((pos[k], np.linalg.cholesky(c)))
+            diag = np.flatnonzero(keep & ~in_block)
+            hit = (fac, pos[diag], self.sigma[diag])
+            if len(self._cache) > 16:
+                self._cache.clear()
+            self._cache[key] = hit
+        return hit
+
+    def whitener(self, keep):
+        keep = np.asarray(keep, bool)
+        fac, dpos, dsig = self._factors(keep)
+
+        def apply(m):
+            m = np.asarray(m, float)[keep]
+            out = np.empty_like(m)
+            for pos, chol in fac:
+                out[pos] = solve_triangular(chol, m[pos], lower=True, check_finite=False)
+            out[dpos] = m[dpos] / (dsig if m.ndim == 1 else dsig[:, None])
+            return out
+
+        return apply
+
+    def innovations(self, r) -> np.ndarray:
+        """Normalized residuals of every sample: ``L⁻¹ r`` over all samples (the standardised
+        one-step prediction errors, in time order within a block; white: ``r/σ``)."""
+        return self.whitener(np.ones(self.sigma.size, bool))(r)
+
+    def effective_samples(self, keep=None) -> float:
+        keep = np.ones(self.sigma.size, bool) if keep is None else np.asarray(keep, bool)
+        total = 0.0
+        in_block = np.zeros(keep.size, bool)
+        for idx, model, t0 in self.blocks:
+            in_block[idx] = True
+            k = idx[keep[idx]]
+            if k.size:
+                total += effective_samples(model.covariance(self.t[k], t0))
+        return total + float((keep & ~in_block).sum())
