@@ -59,7 +59,7 @@ ADDED_COLUMNS = ("smoothed", "residual", "flag")
 
 DEGREE_CRITERION = ("BIC with the variance factor profiled out: n ln(chi2_d / n) + (d + 1) ln n, chi2_d the "
                     "generalized (AR(1)-whitened) residual sum of squares, minimum over d = 0..cap, "
-                    "cap = min(max_degree, floor(n_eff / 3) - 1): at least 3 effective samples per coefficient")
+                    "cap = min(max_degree, floor(n_eff / 2) - 1): at least 2 effective samples per coefficient")
 CLIP_RULE = ("iterative: reject |u| > K * 1.4826 * MAD(u of the samples in use), u = r / (sigma sqrt(1 - h)) "
              "(leverage h; sqrt(1 + h) for samples out of the fit); every sample re-tested against each new "
              "fit until the rejected set is stable; at most 10 % of a pass (beyond: the worst 10 %, and "
@@ -380,7 +380,7 @@ def _notes(fit: PolynomialFit, max_degree: int) -> list:
         return []
     if fit.degree_cap is not None and fit.degree_cap < max_degree:
         return [f"degree_at_limit: BIC still falls at degree {fit.degree}, the largest the {fit.n_used} samples "
-                f"({fit.n_eff:.0f} effective) support with 3 per coefficient; the curve may be under-fitted "
+                f"({fit.n_eff:.0f} effective) support with 2 per coefficient; the curve may be under-fitted "
                 "(its residuals and degree spread show it)"]
     return [f"degree_at_limit: BIC still falls at degree {fit.degree}, the search limit; the curve may "
             "be under-fitted (try a larger --max-degree, or shorter passes)"]
