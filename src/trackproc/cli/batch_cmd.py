@@ -113,7 +113,10 @@ def _log_handler(path: Optional[str]):
             raise InputError(f"cannot open the log file: {exc.strerror}", file=path, column="--log") from None
     else:
         stream = sys.stderr
+    from trackproc.pipeline.batch.report import OneLineFilter
+
     handler = _Handler(stream)
+    handler.addFilter(OneLineFilter())  # every record one line, whichever trackproc logger made it
     formatter = logging.Formatter("%(asctime)s trackproc batch[%(process)d]: %(levelname)s: %(message)s",
                                   "%Y-%m-%dT%H:%M:%SZ")
     formatter.converter = time.gmtime

@@ -28,6 +28,10 @@ whitened system is further transformed by the exact inverse Cholesky factor of `
 covariance and the curve's sigma carry the correlation; the effective number of independent
 samples is ``n_eff = 1 + sum_i (1 - a_i) / (1 + a_i)`` (``n (1 - rho) / (1 + rho)`` for a regular
 pass).
+Residual correlation can also be curve the polynomial does not follow. The AR(1) model is refused
+(``NoiseModel.unresolved``: white noise kept, and the caller told) when its correlation reaches
+``MAX_RHO``, when it would cap the degree below the white-noise choice while the BIC still falls,
+or when its variance factor exceeds the white fit's by more than ``MAX_VARIANCE_RATIO`` (4).
 
 Degree selection (``degree="auto"``): the Bayesian information criterion with the variance factor
 profiled out, ``BIC(d) = n ln(chi2_d / n) + (d + 1) ln n``, minimized over ``d = 0..cap``, where
@@ -36,7 +40,7 @@ likelihood, so correlated noise is not paid for with extra terms. It depends onl
 weights, so a wrong overall sigma level does not change the chosen degree; and it compares every
 degree with every other, so it is not stopped early by a vanishing odd or even coefficient as a
 sequential F-test is (an S-curve has nearly zero even terms). The cap keeps at least
-``MIN_EFFECTIVE_SAMPLES_PER_COEFFICIENT`` (3) effective samples per coefficient, ``d + 1 <= n_eff / 3``,
+``MIN_EFFECTIVE_SAMPLES_PER_COEFFICIENT`` (2) effective samples per coefficient, ``d + 1 <= n_eff / 2``,
 and at most ``max_degree``: with the cap the profiled BIC cannot run to near-interpolation, where
 ``ln chi2_d`` falls without bound (before it, 25 samples were fitted at degree 20 and 32 at 29).
 
@@ -78,7 +82,7 @@ BASES = {
 
 #: Default upper bound of the degree search of ``degree="auto"``.
 DEFAULT_MAX_DEGREE = 30
-#: ``degree="auto"`` keeps at least this many effective samples per coefficient: d + 1 <= n_eff / 3.
+#: ``degree="auto"`` keeps at least this many effective samples per coefficient: d + 1 <= n_eff / 2.
 MIN_EFFECTIVE_SAMPLES_PER_COEFFICIENT = 2.0
 #: The rejection never flags more than this fraction of a pass.
 MAX_REJECTED_FRACTION = 0.1
@@ -308,7 +312,7 @@ def smooth_pass(t_s, y, sigma, degree: int | str = "auto", *, clip: float | None
                 domain_s=None, noise: NoiseModel | str | None = "auto") -> PolynomialFit:
     """Fit a pass robustly: fixed or BIC-selected degree, AR(1) noise, bounded K-sigma rejection.
 
-    ``degree`` an integer or ``"auto"`` (BIC over 0..``max_degree``, capped at ``n_eff / 3``
+    ``degree`` an integer or ``"auto"`` (BIC over 0..``max_degree``, capped at ``n_eff / 2``
     coefficients); ``clip`` the rejection threshold K in robust standard deviations of the
     studentized residuals (None or 0: no rejection; never more than 10 % of the pass);
     ``noise`` ``"auto"`` (AR(1) estimated from the residuals, white when not significant),
@@ -380,7 +384,7 @@ def select_degree(t_s, y, sigma, *, basis: str = "chebyshev", max_degree: int = 
     factorization of the whitened design matrix at the largest degree gives every nested fit:
     ``chi2_d = |y_w|^2 - |(Q^T y_w)[:d+1]|^2``. The search stops at the smallest of ``max_degree``,
     ``n_distinct - 2`` (each candidate keeps a degree of freedom) and the effective-sample cap
-    ``floor(n_eff / 3) - 1`` (:func:`degree_cap`). Returns (degree, {degree: BIC}, at_limit) where
+    ``floor(n_eff / 2) - 1`` (:func:`degree_cap`). Returns (degree, {degree: BIC}, at_limit) where
     ``at_limit`` says the minimum is at the upper end of the search (more terms might help).
     """
     t, y, s = _check_arrays(t_s, y, sigma)
@@ -411,8 +415,8 @@ def select_degree(t_s, y, sigma, *, basis: str = "chebyshev", max_degree: int = 
 def degree_cap(t_s, max_degree: int = DEFAULT_MAX_DEGREE, noise: NoiseModel | None = None) -> int:
     """Largest degree ``degree="auto"`` may choose for samples at ``t_s``.
 
-    The smallest of ``max_degree``, ``n_distinct - 2`` and ``floor(n_eff / 3) - 1`` (at least
-    three effective samples per coefficient; ``n_eff`` from the AR(1) ``noise``, ``n`` for white).
+    The smallest of ``max_degree``, ``n_distinct - 2`` and ``floor(n_eff / 2) - 1`` (at least
+    two effective samples per coefficient; ``n_eff`` from the AR(1) ``noise``, ``n`` for white).
     Raises :class:`SmoothingError` when not even a constant can be fitted and tested.
     """
     t = np.asarray(t_s, float)

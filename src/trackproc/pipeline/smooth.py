@@ -47,8 +47,8 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable
 from trackproc.io.raw import KIND_UNITS
 from trackproc.methods.smoothing import (DEFAULT_MAX_DEGREE, ClosestApproach, PolynomialFit, SmoothingError,
-                                         TCA_SPREAD_RATIO, closest_approach, smooth_pass,
-                                         tca_degree_spread, tca_uncertain)
+                                         TCA_SPREAD_RATIO, closest_approach, degree_spread_width,
+                                         smooth_pass, tca_degree_spread, tca_uncertain)
 
 #: Kinds that have a time of closest approach.
 TCA_KINDS = ("range_rate", "range", "doppler")
@@ -60,7 +60,7 @@ ADDED_COLUMNS = ("smoothed", "residual", "flag")
 
 DEGREE_CRITERION = ("BIC with the variance factor profiled out: n ln(chi2_d / n) + (d + 1) ln n, chi2_d the "
                     "generalized (AR(1)-whitened) residual sum of squares, minimum over d = 0..cap, "
-                    "cap = min(max_degree, floor(n_eff / 3) - 1): at least 3 effective samples per coefficient")
+                    "cap = min(max_degree, floor(n_eff / 2) - 1): at least 2 effective samples per coefficient")
 CLIP_RULE = ("iterative: reject |u| > K * 1.4826 * MAD(u of the samples in use), u = r / (sigma sqrt(1 - h)) "
              "(leverage h; sqrt(1 + h) for samples out of the fit); every sample re-tested against each new "
              "fit until the rejected set is stable; at most 10 % of a pass (beyond: the worst 10 %, and "
@@ -105,7 +105,7 @@ class PassFit:
     reason: str | None = None
     fit: PolynomialFit | None = None
     tca: ClosestApproach | None = None
-    tca_error: str | None = None
+    tca_error: str | None = None          # why the TCA is not observed, or uncertain
     tca_gap_s: float | None = None
     tca_spread: tuple = (float("nan"), float("nan"), 0)   # (s, value unit, degrees) over degree +- 2
     warnings: list = field(default_factory=list)
@@ -329,6 +329,13 @@ def _fit_group(group: pd.DataFrame, station, pass_id, kind, options: SmoothOptio
             out.tca_spread = tca_degree_spread(t_s, y, sigma, fit, kind, doppler_mode)
             if tca_uncertain(fit, ca, out.tca_spread[0]):
                 out.warnings.append("tca_uncertain")
+                spread, width = out.tca_spread[0], degree_spread_width(fit.degree)
+                why = (f"moves by {spread:.3g} s over degrees {max(0, fit.degree - width)}-{fit.degree + width}, "
+                       f"{spread / ca.sigma_s:.1f} times its sigma of {ca.sigma_s:.3g} s"
+                       if math.isfinite(spread) and spread > TCA_SPREAD_RATIO * ca.sigma_s else
+                       "has a sigma that assumes white noise, and the residuals are correlated (curve_unresolved)")
+                out.tca_error = (f"{where} {why}: uncertain (uncertainty_s "
+                                 f"{math.hypot(ca.sigma_s, spread) if math.isfinite(spread) else ca.sigma_s:.3g} s)")
         except SmoothingError as exc:
             out.tca_error = str(exc)
             out.warnings.append("tca_not_observed")
@@ -373,7 +380,7 @@ def _notes(fit: PolynomialFit, max_degree: int) -> list:
         return []
     if fit.degree_cap is not None and fit.degree_cap < max_degree:
         return [f"degree_at_limit: BIC still falls at degree {fit.degree}, the largest the {fit.n_used} samples "
-                f"({fit.n_eff:.0f} effective) support with 3 per coefficient; the curve may be under-fitted "
+                f"({fit.n_eff:.0f} effective) support with 2 per coefficient; the curve may be under-fitted "
                 "(its residuals and degree spread show it)"]
     return [f"degree_at_limit: BIC still falls at degree {fit.degree}, the search limit; the curve may "
             "be under-fitted (try a larger --max-degree, or shorter passes)"]
@@ -434,6 +441,7 @@ def _fit_record(f: PassFit, carrier_hz, doppler_mode, max_degree: int = DEFAULT_
                    "degree_spread_s": spread, "degree_spread_fits": f.tca_spread[2],
                    "uncertainty_s": math.hypot(ca.sigma_s, spread) if math.isfinite(spread) else ca.sigma_s,
                    "spread_to_sigma": spread / ca.sigma_s if math.isfinite(spread) and ca.sigma_s > 0 else None,
+                   "note": f.tca_error,
                    "value": ca.value, "value_sigma": ca.value_sigma, "value_unit": unit,
                    "value_degree_spread": f.tca_spread[1],
                    "correlation_t_value": float(ca.cov[0, 1] / math.sqrt(ca.cov[0, 0] * ca.cov[1, 1]))

@@ -5,9 +5,10 @@ Exit status (:attr:`BatchResult.exit_code`): 0 every input and window ok, 3 some
 failed.
 
 Names come from the inputs (file names, and error messages quoting them), and a file name may
-hold a newline: every message of the ``trackproc.batch`` logger and every cell of summary.csv
-is one line (:func:`printable`), so no input can forge a log line or a summary row. The JSON
-files escape control characters by themselves.
+hold a newline: every message of the ``trackproc.batch`` logger (and, through the CLI's
+handler, of any trackproc logger during a batch) and every cell of summary.csv is one line
+(:func:`printable`), so no input can forge a log line or a summary row. The JSON files escape
+control characters by themselves.
 """
 
 from __future__ import annotations
