@@ -20,7 +20,8 @@ app = typer.Typer(
     name="trackproc",
     help="Satellite tracking passes in, orbits with honest error matrices out.",
     pretty_exceptions_enable=False,
-    add_completion=False,
+    rich_markup_mode=None,
+    add_completion=True,
     no_args_is_help=True,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
@@ -36,7 +37,7 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def _root(
-    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+    version: bool = typer.Option(False, "--version", "-V", callback=_version, is_eager=True,
                                  help="Print the version and exit."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only errors on stderr."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Debug messages on stderr."),
@@ -64,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = _hoist_global_flags(sys.argv[1:] if argv is None else list(argv))
     stdout = sys.stdout
     try:
-        app(args=argv, prog_name="trackproc", standalone_mode=True)
+        plain_help(typer.main.get_command(app))(args=argv, prog_name="trackproc", standalone_mode=True)
     except SystemExit as exit_:
         if sys.stdout is not stdout:
             # click met EPIPE on stdout, swapped in a pacifying wrapper and exits 1: the reader went away
@@ -82,6 +83,48 @@ def main(argv: list[str] | None = None) -> int:
         print("trackproc: interrupted", file=sys.stderr)
         return 130
     return _flush_stdout()
+
+
+#: Typer's own type labels (``<float>``) -> the metavars a Unix reader expects.
+_METAVARS = {"str": "TEXT", "float": "FLOAT", "int": "INTEGER", "bool": "BOOLEAN", "path": "PATH",
+             "float range": "FLOAT", "int range": "INTEGER", "datetime": "TIME",
+             "list[str]": "TEXT", "list[float]": "FLOAT", "list[int]": "INTEGER"}
+
+
+def plain_help(command):
+    """Help that reads in a pipe and at any width (issue 16): readable metavars (``FLOAT``,
+    ``[a|b]`` for choices, never a Python type), arguments shown by name alone, and the indented
+    shell examples of a docstring kept verbatim (click's ``\\b`` paragraphs) instead of rewrapped
+    mid-command. Plain click formatting (no boxes) is set on the app itself."""
+    import click
+
+    for param in getattr(command, "params", []):
+        kind = getattr(param, "param_type_name", "")
+        if kind == "argument":
+            param.display_type_rich = lambda ctx: None
+        elif (kind == "option" and not getattr(param, "is_flag", False) and param.metavar is None
+              and hasattr(param, "display_type")):
+            label = param.display_type(click.Context(command)).strip("<>")
+            param.metavar = _METAVARS.get(label) or (f"[{label}]" if "|" in label else label.upper() or None)
+    if getattr(command, "help", None):
+        command.help = _keep_examples(command.help)
+    for sub in getattr(command, "commands", {}).values():
+        plain_help(sub)
+    return command
+
+
+def _keep_examples(text: str) -> str:
+    """Mark each indented paragraph of a docstring (a shell example) with click's ``\\b`` so it is
+    printed as written."""
+    import inspect
+
+    out = []
+    for para in inspect.cleandoc(text).split("\n\n"):
+        lines = para.split("\n")
+        if lines[0] != "\b" and all(l.startswith("    ") for l in lines if l.strip()):
+            para = "\b\n" + para
+        out.append(para)
+    return "\n\n".join(out)
 
 
 _GLOBAL_FLAGS = ("--quiet", "-q", "--verbose", "-v")
