@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import os
 import sys
+import warnings
 
 import typer
 
@@ -52,6 +53,8 @@ def _root(
         level = os.environ["TRACKPROC_LOG_LEVEL"].upper()
     logging.basicConfig(level=level, format="trackproc: %(levelname)s: %(message)s",
                         stream=sys.stderr, force=True)
+    # warnings of the lower layers (e.g. dates beyond the EOP table) as one log line each
+    warnings.showwarning = lambda message, category, *args, **kwargs: log.warning(str(message))
 
 
 def _register() -> None:
