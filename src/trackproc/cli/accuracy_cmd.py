@@ -108,11 +108,11 @@ def accuracy_command(
     cross-checked by Phi P0 Phi^T and Monte Carlo. One row per time; other methods as stm_ / mc_
     prefixed columns.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc accuracy solution.json --span 86400 --step 60 --method all --plot sigma.png -o sigma.parquet
+        trackproc accuracy sample_data/stale.json --span 86400 --step 600 --method all -o sigma.parquet
 
-        trackproc accuracy --seed-example --plot example.png -o example.csv
+        trackproc accuracy --seed-example -o example.csv
     """
     if plot == "-":
         raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")

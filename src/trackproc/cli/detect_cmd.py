@@ -36,11 +36,11 @@ def detect_command(
 
     The decision is data, not an error: the exit status is 0 for H0 and for H1.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc simulate --ballistic nominal.json --stations st.csv --hypothesis h1 --step 1 \\
-            --elevation-mask-deg 0 --seed 1 -o pass.parquet
-        trackproc detect pass.parquet --nominal nominal.json --false-alarm 0.001 -o result.json
+        trackproc simulate --ballistic sample_data/nominal.json --stations sample_data/stations.csv \\
+            --hypothesis h1 --step 1 --elevation-mask-deg 0 --seed 1 -o ballistic.parquet
+        trackproc detect ballistic.parquet --nominal sample_data/nominal.json --false-alarm 0.001 -o result.json
     """
     if false_alarm is not None and equal_error:
         raise typer.BadParameter("give either --false-alarm or --equal-error", param_hint="--false-alarm")

@@ -83,13 +83,14 @@ def estimate_command(
     A one-screen summary goes to stderr. Exit status 1 when the estimation fails (too few
     data, rank deficiency with the unobservable combinations named, no convergence).
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc estimate passes/*.parquet --initial refined.json --range-bias \\
+        trackproc estimate sample_data/multistation.parquet --initial sample_data/truth.json --range-bias \\
             --opm solution.opm --residuals residuals.csv -o solution.json
 
-        trackproc simulate --state s.json --stations st.csv --duration 21600 --range-bias KIR=100 \\
-            | trackproc estimate - --initial s.json --range-bias -o -
+        trackproc simulate --state sample_data/truth.json --stations sample_data/stations.csv \\
+            --duration 21600 --range-bias KIR=100 --seed 1 \\
+            | trackproc estimate - --initial sample_data/truth.json --range-bias -o -
     """
     if plot == "-":
         raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")

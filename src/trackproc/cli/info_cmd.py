@@ -15,11 +15,12 @@ def info_command(
     """Summarise a pass file: stations, passes (start, end, duration, samples per kind), max elevation;
     or an ephemeris from `trackproc propagate`: span, step, radius and altitude range.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc info pass.parquet
+        trackproc info sample_data/multistation.parquet
 
-        trackproc ingest raw.csv --stations stations.csv -o - | trackproc info - --json
+        trackproc ingest sample_data/elevation_pass.csv --stations sample_data/stations.csv -o - \\
+            | trackproc info - --json
     """
     import json
     import sys

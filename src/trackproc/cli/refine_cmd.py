@@ -120,14 +120,18 @@ def refine_command(
     A one-screen summary goes to stderr. Exit status 1 when the refinement fails
     (no convergence, rank deficiency), 2 for invalid input.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
+        trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
+            --carrier-hz 2.2e9 --mode one-way -o pass.parquet
         trackproc smooth pass.parquet -o smoothed.parquet
-        trackproc refine smoothed.parquet --initial stale.json -o refined.json
+        trackproc refine smoothed.parquet --initial sample_data/stale.json -o refined.json
 
-        trackproc refine pass.parquet --initial delfi.tle --doppler-bias offset+drift --residuals res.csv -o -
+        trackproc refine pass.parquet --initial sample_data/stale.json --doppler-bias offset+drift \\
+            --residuals res.csv -o -
 
-        trackproc refine smoothed.parquet --initial stale.json --cost integral --circular -o seed004.json
+        trackproc refine smoothed.parquet --initial sample_data/stale.json --cost integral --circular \\
+            -o seed004.json
     """
     out = resolve_output(output, "output state file")
     if residuals == "-" and out == "-":

@@ -68,11 +68,12 @@ def smooth_command(
     Exit status: 0 when at least one pass was fitted (failed passes are reported on stderr and in
     the summary with status "failed"); 1 when none could be fitted; 2 for invalid input or options.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc smooth pass.parquet --summary smooth.json -o smooth.parquet
+        trackproc smooth sample_data/multistation.parquet --summary smooth.json -o smooth.parquet
 
-        trackproc ingest raw.csv --stations st.csv | trackproc smooth - --grid 1 --plot pass.png > curve.parquet
+        trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
+            --carrier-hz 2.2e9 --mode one-way | trackproc smooth - --grid 1 > curve.parquet
     """
     degree_value = _degree(degree)
     kind_list = [k.strip() for item in (kinds or []) for k in item.split(",") if k.strip()]
