@@ -70,6 +70,12 @@ def named_values(items: list, flag: str) -> dict:
 def resolve_output(output: Optional[str], what: str = "output") -> str:
     """``-o`` given: use it. Not given: stdout when it is not a terminal, else a usage error."""
     if output is not None:
+        if output != "-":
+            parent = Path(output).parent
+            if str(parent) not in ("", ".") and not parent.is_dir():
+                # a mistyped directory is not created silently
+                raise typer.BadParameter(f"directory {str(parent)!r} of {output!r} does not exist; "
+                                         "expected an existing directory", param_hint="-o/--output")
         return output
     if not sys.stdout.isatty():
         return "-"
@@ -84,6 +90,9 @@ def table_format_for(output: str, requested: Optional[TableFormat]) -> TableForm
     is redirected to a regular file (``trackproc smooth - > out.parquet``) the format follows
     that file's suffix, and is Parquet when the suffix says nothing.
     """
+    if output == "-" and sys.stdout.isatty() and requested is not TableFormat.csv:
+        raise typer.BadParameter("stdout is a terminal: binary Parquet/Arrow is not written there; "
+                                 "expected -o FILE, a pipe, or --format csv", param_hint="-o/--output")
     if requested is not None:
         return requested
     if output == "-":
@@ -98,6 +107,11 @@ def table_format_for(output: str, requested: Optional[TableFormat]) -> TableForm
         return TableFormat.csv
     if suffix in (".arrow", ".arrows", ".ipc", ".feather"):
         return TableFormat.arrow
+    if suffix not in ("", ".parquet", ".pq"):
+        # ``-o x.txt`` would otherwise silently get Parquet bytes
+        raise typer.BadParameter(f"cannot tell the table format from the suffix {suffix!r} of {output!r}; "
+                                 "expected .parquet, .pq, .csv, .arrow, .arrows, .ipc or .feather, or --format",
+                                 param_hint="-o/--output")
     return TableFormat.parquet
 
 

@@ -374,7 +374,8 @@ def _columns(prefix, cov, rtn, obs) -> dict:
 
 
 def _frame(times, t, nominal, covs, rtn, obs, track, options, mc) -> pd.DataFrame:
-    cols = {"time": pd.DatetimeIndex(times).tz_localize("UTC"), "elapsed_s": t}
+    # elapsed time to the nanosecond the times carry (not 600.0000000000026 from the JD arithmetic)
+    cols = {"time": pd.DatetimeIndex(times).tz_localize("UTC"), "elapsed_s": np.round(t, 9)}
     for k, (name, unit, _) in enumerate(COMPONENTS):
         cols[f"{name}_{unit}"] = nominal[:, k]
     first = options.methods[0]
