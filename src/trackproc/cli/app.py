@@ -42,12 +42,17 @@ def _root(
                                  help="Print the version and exit."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only errors on stderr."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Debug messages on stderr."),
+    no_metadata: bool = typer.Option(False, "--no-metadata",
+                                     help="CSV outputs without the '# trackproc: {...}' first line (plain "
+                                          "CSV for spreadsheets; also TRACKPROC_CSV_METADATA=0)."),
 ) -> None:
     """Satellite tracking passes in, orbits with honest error matrices out.
 
     Exit codes: 0 ok, 1 processing failure, 2 usage or invalid input,
     3 partial failure in batch.
     """
+    if no_metadata:
+        os.environ["TRACKPROC_CSV_METADATA"] = "0"   # read by the CSV writers (io.tabular.csv_metadata_line)
     level = logging.ERROR if quiet else logging.DEBUG if verbose else logging.INFO
     if os.environ.get("TRACKPROC_LOG_LEVEL"):
         level = os.environ["TRACKPROC_LOG_LEVEL"].upper()
@@ -130,11 +135,11 @@ def _keep_examples(text: str) -> str:
     return "\n\n".join(out)
 
 
-_GLOBAL_FLAGS = ("--quiet", "-q", "--verbose", "-v")
+_GLOBAL_FLAGS = ("--quiet", "-q", "--verbose", "-v", "--no-metadata")
 
 
 def _hoist_global_flags(argv: list[str]) -> list[str]:
-    """Let ``--quiet``/``--verbose`` follow the command too (``trackproc ingest x.csv -q``):
+    """Let ``--quiet``/``--verbose``/``--no-metadata`` follow the command too (``trackproc ingest x.csv -q``):
     they are moved before it, where the root callback reads them (up to a ``--``)."""
     end = argv.index("--") if "--" in argv else len(argv)
     flags = [a for a in argv[:end] if a in _GLOBAL_FLAGS]

@@ -42,7 +42,7 @@ from trackproc.io.tables import arrow_table_bytes
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
 from trackproc.io.raw import KIND_UNITS
-from trackproc.io.tabular import (CSV_META_PREFIX, META_KEY, Problems, column_numbers, column_strings,
+from trackproc.io.tabular import (META_KEY, csv_metadata_line, Problems, column_numbers, column_strings,
                                   column_times, source_table)
 
 SCHEMA_VERSION = 1
@@ -150,13 +150,47 @@ def _csv_cell(value) -> str:
     return "" if value is None else str(value)
 
 
+#: Angle kinds, and the columns that carry an angle on their rows (value and what smooth adds).
+ANGLE_KINDS = ("elevation", "azimuth")
+ANGLE_COLUMNS = ("value", "sigma", "smoothed", "residual")
+
+
+def angles_in_degrees(frame: pd.DataFrame) -> pd.DataFrame:
+    """Angle rows for a person's eyes (the CSV edge): kind ``elevation_deg`` / ``azimuth_deg``
+    with value, sigma, smoothed and residual in degrees; radians stay in Parquet/Arrow."""
+    rows = frame["kind"].isin(ANGLE_KINDS).to_numpy()
+    if not rows.any():
+        return frame
+    frame = frame.copy()
+    frame.loc[rows, "kind"] = frame.loc[rows, "kind"] + "_deg"
+    for column in ANGLE_COLUMNS:
+        if column in frame.columns and frame[column].dtype.kind == "f":
+            # 1e-12 deg (2e-14 rad) is below any angle measurement; it hides the conversion's float
+            # noise (14.999999999999998 for an input of 15)
+            frame.loc[rows, column] = np.round(np.degrees(frame.loc[rows, column].to_numpy(dtype=np.float64)), 12)
+    return frame
+
+
+def angles_in_radians(frame: pd.DataFrame) -> pd.DataFrame:
+    """The inverse of :func:`angles_in_degrees`, for a trackproc CSV read back."""
+    kinds = frame["kind"].to_numpy(dtype=object)
+    rows = np.isin(kinds, [k + "_deg" for k in ANGLE_KINDS])
+    if not rows.any():
+        return frame
+    frame.loc[rows, "kind"] = [k[:-4] for k in kinds[rows]]
+    for column in ANGLE_COLUMNS:
+        if column in frame.columns and frame[column].dtype.kind == "f":
+            frame.loc[rows, column] = np.radians(frame.loc[rows, column].to_numpy(dtype=np.float64))
+    return frame
+
+
 def pass_table_bytes(table: PassTable, fmt: str = "parquet") -> bytes:
     """The encoded file: ``parquet``, ``arrow`` (IPC stream) or ``csv``."""
     fmt = getattr(fmt, "value", fmt)
     if fmt == "csv":
-        frame = table.frame
+        frame = angles_in_degrees(table.frame)
         out = io.StringIO()
-        out.write(f"# {CSV_META_PREFIX} {meta_json(table.meta)}\n")
+        out.write(csv_metadata_line(meta_json(table.meta)))
         writer = csv.writer(out, lineterminator="\n")
         columns = list(COLUMNS) + [c for c in frame.columns if c not in COLUMNS]
         writer.writerow(columns)
@@ -208,6 +242,8 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
     for name in ("station", "pass_id", "kind"):
         data_columns[name] = pd.Series(column_strings(table, table.columns[name]), dtype=object).astype(str)
     kinds = data_columns["kind"].to_numpy(dtype=object)
+    degrees = np.isin(kinds, [k + "_deg" for k in ANGLE_KINDS])   # a trackproc CSV's angle rows
+    kinds = np.where(degrees, [str(k)[:-4] for k in kinds], kinds)
     problems.add("unknown kind", ~np.isin(kinds, KINDS), column="kind", found=kinds,
                  expected="one of " + ", ".join(KINDS))
     for name in ("value", "sigma"):
@@ -221,7 +257,7 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
     for key, column in table.columns.items():
         if key not in COLUMNS:
             frame[column.name] = _extra_column(column)
-    return PassTable(frame, meta)
+    return PassTable(angles_in_radians(frame), meta)
 
 
 def _extra_column(column) -> pd.Series:

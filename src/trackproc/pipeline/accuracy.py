@@ -585,7 +585,7 @@ def table_bytes(frame: pd.DataFrame, meta: dict, fmt: str) -> bytes:
 
     from trackproc.io.jsonutil import dumps, json_ready
     from trackproc.io.passfile import iso_times, meta_json
-    from trackproc.io.tabular import CSV_META_PREFIX, META_KEY
+    from trackproc.io.tabular import META_KEY, csv_metadata_line
 
     fmt = getattr(fmt, "value", fmt)
     meta_text = meta_json(json_ready(meta))
@@ -597,7 +597,7 @@ def table_bytes(frame: pd.DataFrame, meta: dict, fmt: str) -> bytes:
         import csv
 
         out = io.StringIO()
-        out.write(f"# {CSV_META_PREFIX} {meta_text}\n")
+        out.write(csv_metadata_line(meta_text))
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(list(frame.columns))
         cells = [iso_times(frame[c]) if c.startswith("time") else frame[c].to_numpy() for c in frame.columns]
