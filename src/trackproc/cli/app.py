@@ -73,7 +73,14 @@ def main(argv: list[str] | None = None) -> int:
     argv = _hoist_global_flags(sys.argv[1:] if argv is None else list(argv))
     stdout = sys.stdout
     try:
-        plain_help(typer.main.get_command(app))(args=argv, prog_name="trackproc", standalone_mode=True)
+        from trackproc.cli.config import default_map
+
+        from trackproc.cli.progress import ticker
+
+        command = plain_help(typer.main.get_command(app))
+        name = next((a for a in argv if not a.startswith("-")), None)
+        with ticker(name, enabled=not any(a in ("-q", "--quiet") for a in argv)):
+            command(args=argv, prog_name="trackproc", standalone_mode=True, default_map=default_map(command))
     except SystemExit as exit_:
         if sys.stdout is not stdout:
             # click met EPIPE on stdout, swapped in a pacifying wrapper and exits 1: the reader went away
