@@ -73,7 +73,8 @@ def estimate_command(
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Write the residuals (Parquet, or CSV by the .csv suffix)."),
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
-                                       help="Plot residuals by station (needs matplotlib: trackproc[plot])."),
+                                       help="Plot the residuals per kind in their units, RMS per pass (needs matplotlib: "
+                                            "pip install 'trackproc[plot]')."),
     output: Optional[str] = OutputOpt,
 ) -> None:
     """Estimate the orbit state at an epoch and the selected biases from one or more passes
@@ -116,7 +117,8 @@ def estimate_command(
     from trackproc.io.residuals import write_residuals
     from trackproc.io.stations import read_stations
     from trackproc.io.statefile import format_epoch, read_state_or_tle, write_state
-    from trackproc.pipeline.estimate import EstimateOptions, estimate, plot_bytes, require_matplotlib, summary_text
+    from trackproc.pipeline.estimate import EstimateOptions, estimate, require_matplotlib, summary_text
+    from trackproc.report.plots import residuals_png
 
     if plot is not None:
         require_matplotlib()
@@ -142,7 +144,7 @@ def estimate_command(
         two_stage=two_stage)
     result = estimate(tables, state0, station_table, options, orientation)
 
-    png = plot_bytes(result) if plot is not None else None
+    png = residuals_png(result.residuals) if plot is not None else None
     write_state(result.state, out, force=force.value, eop_source=orientation.source)
     if opm is not None:
         write_opm(result.state, opm, object_name=object_name, object_id=object_id,

@@ -1,0 +1,37 @@
+"""Report figures (issue 16): residuals per kind in their own units (degrees for angles) with the
+RMS of each pass, checked against numpy on a frame whose residuals are known."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from trackproc.report.plots import residuals_png, rms_by_pass  # noqa: E402
+
+
+def _frame():
+    rng = np.random.default_rng(1)
+    t = pd.date_range("2026-03-20T09:30:00Z", periods=200, freq="10s")
+    rows = []
+    for kind, sigma in (("range", 5.0), ("elevation", np.radians(0.01))):
+        for i, time in enumerate(t):
+            rows.append({"time": time, "station": "ZHY" if i < 100 else "KIR",
+                         "pass_id": "ZHY-001" if i < 100 else "KIR-001", "kind": kind,
+                         "residual": rng.normal(0, sigma), "edited": i == 7})
+    return pd.DataFrame(rows)
+
+
+def test_rms_per_pass_in_display_units():
+    frame = _frame()
+    rms = rms_by_pass(frame)
+    el = frame[(frame["kind"] == "elevation") & (frame["pass_id"] == "ZHY-001") & ~frame["edited"]]
+    assert rms[("elevation", "ZHY-001")][0] == pytest.approx(np.degrees(np.sqrt(np.mean(el["residual"] ** 2))))
+    assert rms[("elevation", "ZHY-001")][1] == 99          # the edited sample left out
+    assert 0.007 < rms[("elevation", "KIR-001")][0] < 0.013   # degrees, not radians
+    assert 4.0 < rms[("range", "KIR-001")][0] < 6.0
+
+
+def test_png_is_written():
+    png = residuals_png(_frame())
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
