@@ -699,8 +699,11 @@ def plot_bytes(result: AccuracyResult) -> bytes:
     panels = [("position", [("radial", "m"), ("along", "m"), ("cross", "m")], "sigma, m"),
               ("velocity", [("v_radial", "m_s"), ("v_along", "m_s"), ("v_cross", "m_s")], "sigma, m/s")]
     if "sigma_range_m" in f.columns:
-        panels.append((f"station {result.meta['station']['name']}", [("range", "m"), ("range_rate", "m_s")],
-                       "sigma, m | m/s"))
+        # one unit per panel; the station's sigmas only while the satellite is above its horizon
+        name = result.meta["station"]["name"]
+        panels.append((f"station {name}: range (while visible)", [("range", "m")], "sigma, m"))
+        panels.append((f"station {name}: range-rate (while visible)", [("range_rate", "m_s")], "sigma, m/s"))
+    visible = (f["elevation_deg"].to_numpy() > 0.0) if "elevation_deg" in f.columns else np.ones(len(f), bool)
     fig, axes = plt.subplots(len(panels), 1, figsize=(9, 3.4 * len(panels)), sharex=True, squeeze=False)
     styles = {"spectral": dict(ls="-", lw=1.6), "stm": dict(ls="--", lw=1.2), "monte-carlo": dict(ls="", marker=".")}
     colors = ["C0", "C1", "C2"]
@@ -711,7 +714,10 @@ def plot_bytes(result: AccuracyResult) -> bytes:
                 if col not in f.columns:
                     continue
                 label = f"{name} ({method})"
-                ax.plot(hours, f[col].to_numpy(), color=colors[k], label=label, **styles[method])
+                values = f[col].to_numpy(dtype=float)
+                if title.startswith("station"):
+                    values = np.where(visible, values, np.nan)   # below the horizon: no measurement
+                ax.plot(hours, values, color=colors[k], label=label, **styles[method])
         ax.set_yscale("log")
         ax.set_ylabel(ylabel)
         ax.set_title(f"{title}: 1-sigma of the predicted state", fontsize=10)
