@@ -58,7 +58,7 @@ def help_blocks() -> dict[str, str]:
 def outputs_named(script: str) -> list[str]:
     """Files an example says it writes: -o/--output/--summary/--opm/--residuals/--plot FILE and > FILE."""
     words = shlex.split(script.replace("\\\n", " "), comments=False)
-    names = [b for a, b in zip(words, words[1:]) if a in ("-o", "--output", "--summary", "--opm", "--residuals", ">")]
+    names = [b for a, b in zip(words, words[1:]) if a in ("-o", "--output", "--summary", "--opm", "--residuals", "--plot", ">")]
     return [n for n in names if n != "-" and not n.startswith("-")]
 
 

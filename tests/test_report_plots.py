@@ -35,3 +35,18 @@ def test_rms_per_pass_in_display_units():
 def test_png_is_written():
     png = residuals_png(_frame())
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+
+
+def test_refine_figure_from_a_refinement(tmp_path):
+    """``refine --plot`` on the shipped pass: the figure is written beside the state file."""
+    from pathlib import Path
+
+    from trackproc.cli.app import main
+
+    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    passfile = tmp_path / "p.parquet"
+    assert main(["-q", "ingest", str(sample / "doppler_pass.csv"), "--stations", str(sample / "stations.csv"),
+                 "--carrier-hz", "2.2e9", "--mode", "one-way", "-o", str(passfile)]) == 0
+    assert main(["-q", "refine", str(passfile), "--initial", str(sample / "stale.json"), "--doppler-bias",
+                 "offset+drift", "--plot", str(tmp_path / "r.png"), "-o", str(tmp_path / "r.json")]) == 0
+    assert (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG" and (tmp_path / "r.json").exists()

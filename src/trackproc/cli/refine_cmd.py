@@ -109,6 +109,9 @@ def refine_command(
              "the file holds the other one too."),
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Write the residuals at the samples (Parquet, or CSV by the suffix)."),
+    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
+                                       help="Plot the data with the refined model, the residuals and what the pass "
+                                            "cannot see (needs matplotlib: pip install 'trackproc[plot]')."),
     output: Optional[str] = OutputOpt,
 ) -> None:
     """Refine a stale orbit state from one Doppler (or range-rate) pass of one station, one- or
@@ -125,7 +128,7 @@ def refine_command(
         trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
             --carrier-hz 2.2e9 --mode one-way -o pass.parquet
         trackproc smooth pass.parquet -o smoothed.parquet
-        trackproc refine smoothed.parquet --initial sample_data/stale.json -o refined.json
+        trackproc refine smoothed.parquet --initial sample_data/stale.json --plot refine.png -o refined.json
 
         trackproc refine pass.parquet --initial sample_data/stale.json --doppler-bias offset+drift \\
             --residuals res.csv -o -
@@ -138,6 +141,12 @@ def refine_command(
         raise typer.BadParameter("stdout already carries the state file; give --residuals a file",
                                  param_hint="--residuals")
     sigmas = named_values(apriori_sigma, "--apriori-sigma")
+    if plot == "-":
+        raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
+    if plot is not None:
+        from trackproc.pipeline.plotting import require_matplotlib
+
+        require_matplotlib()
 
     import sys
 
@@ -172,6 +181,11 @@ def refine_command(
                 "cost": cost.value, "force_model": force.value, "range_rate_model": result.problem.range_rate_model,
                 "sources": [source]}
         write_residuals(result.residuals, residuals, meta)
+    if plot is not None:
+        from trackproc.io.atomic import write_bytes
+        from trackproc.report.plots import refine_png
+
+        write_bytes(plot, refine_png(result.residuals, result.state.diagnostics))
     if log.isEnabledFor(logging.INFO):
         sys.stderr.write(summary_text(result))
         sys.stderr.flush()

@@ -81,3 +81,73 @@ def residuals_png(frame) -> bytes:
     fig.suptitle("residuals, observed - computed (RMS per pass in the legend)", fontsize=10)
     fig.tight_layout()
     return encode(fig)
+
+
+RTN = (("radial_m", "R", "m"), ("along_m", "T", "m"), ("cross_m", "N", "m"),
+       ("radial_m_s", "R", "m/s"), ("along_m_s", "T", "m/s"), ("cross_m_s", "N", "m/s"))
+
+
+def refine_png(residuals, diagnostics: dict) -> bytes:
+    """``refine --plot``: the pass's data and the refined orbit's model through it, the residuals
+    with their RMS, and what the pass can and cannot see: the correction (refined - stale) split
+    into its seen and unseen parts against the posterior and a-priori sigmas, per radial /
+    along-track / cross-track component."""
+    plt = pyplot()
+    frame = residuals.sort_values("time")
+    kind = str(frame["kind"].iloc[0])
+    label, unit, factor = DISPLAY.get(kind, (kind, "", 1.0))
+    t0 = frame["time"].min()
+    t = (frame["time"] - t0).dt.total_seconds().to_numpy()
+    edited = frame["edited"].to_numpy(dtype=bool)
+    observed = frame["observed"].to_numpy(dtype=float) * factor
+    computed = frame["computed"].to_numpy(dtype=float) * factor
+    residual = frame["residual"].to_numpy(dtype=float) * factor
+    obs = diagnostics.get("observability") or {}
+    fig = plt.figure(figsize=(11, 10))
+    grid = fig.add_gridspec(3, 2, height_ratios=[1.2, 1.0, 1.1])
+    ax = fig.add_subplot(grid[0, :])
+    ax.plot(t[~edited], observed[~edited], ".", ms=2, color="0.4", label="data")
+    if edited.any():
+        ax.plot(t[edited], observed[edited], "x", ms=4, color="red", label=f"edited ({int(edited.sum())})")
+    ax.plot(t, computed, "-", lw=1.2, color="C0", label="refined orbit (model)")
+    traverse = (diagnostics.get("traverse") or {}).get("epoch")
+    if traverse:
+        import pandas as pd
+
+        tt = (pd.Timestamp(traverse) - t0).total_seconds()
+        ax.axvline(tt, color="green", lw=0.8, label="traverse point")
+    ax.set_ylabel(f"{label} [{unit}]")
+    ax.set_title(f"{label} of the pass and the refined orbit", fontsize=10)
+    ax.legend(fontsize=7)
+    ax = fig.add_subplot(grid[1, :], sharex=ax)
+    rms = float(np.sqrt(np.mean(residual[~edited] ** 2))) if (~edited).any() else float("nan")
+    span = 5 * rms if np.isfinite(rms) and rms > 0 else 1.0
+    ax.plot(t[~edited], residual[~edited], ".", ms=2, color="C0")
+    if edited.any():
+        ax.plot(t[edited], np.clip(residual[edited], -span, span), "x", ms=4, color="red")
+    ax.axhline(0.0, color="0.3", lw=0.6)
+    ax.set_ylim(-span, span)
+    ax.set_ylabel(f"residual [{unit}]")
+    ax.set_xlabel(f"s since {t0.isoformat()}")
+    ax.set_title(f"residuals, RMS {rms:.3g} {unit}", fontsize=10)
+    correction = obs.get("correction_rtn") or {}
+    posterior, reference = obs.get("posterior_sigma_rtn") or {}, obs.get("reference_sigma_rtn") or {}
+    for col, (unit_rtn, keys) in enumerate((("m", RTN[:3]), ("m/s", RTN[3:]))):
+        ax = fig.add_subplot(grid[2, col])
+        x = np.arange(3)
+        seen = [abs((correction.get("seen") or {}).get(k, np.nan)) for k, _, _ in keys]
+        unseen = [abs((correction.get("unseen") or {}).get(k, np.nan)) for k, _, _ in keys]
+        ax.bar(x - 0.2, seen, 0.4, label="|correction| the pass sees", color="C0")
+        ax.bar(x + 0.2, unseen, 0.4, label="|correction| it cannot see (a-priori)", color="C1")
+        ax.plot(x, [posterior.get(k, np.nan) for k, _, _ in keys], "k_", ms=22, mew=2, label="posterior sigma")
+        ax.plot(x, [reference.get(k, np.nan) for k, _, _ in keys], "_", color="0.6", ms=22, mew=2,
+                label="a-priori sigma")
+        ax.set_xticks(x, [f"{name} [{unit_rtn}]" for _, name, _ in keys])
+        ax.set_yscale("log")
+        ax.set_title(("position" if col == 0 else "velocity") + ": refined - stale", fontsize=10)
+        if col == 0:
+            ax.legend(fontsize=7)
+    unseen_text = "; ".join(obs.get("unobservable") or []) or "none"
+    fig.suptitle(f"trackproc refine - not seen by the pass: {unseen_text}", fontsize=10)
+    fig.tight_layout()
+    return encode(fig)
