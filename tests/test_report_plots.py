@@ -50,3 +50,18 @@ def test_refine_figure_from_a_refinement(tmp_path):
     assert main(["-q", "refine", str(passfile), "--initial", str(sample / "stale.json"), "--doppler-bias",
                  "offset+drift", "--plot", str(tmp_path / "r.png"), "-o", str(tmp_path / "r.json")]) == 0
     assert (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG" and (tmp_path / "r.json").exists()
+
+
+def test_detect_figure(tmp_path):
+    from pathlib import Path
+
+    from trackproc.cli.app import main
+
+    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    passfile = tmp_path / "b.parquet"
+    assert main(["-q", "simulate", "--ballistic", str(sample / "nominal.json"), "--stations",
+                 str(sample / "stations.csv"), "--hypothesis", "h1", "--step", "2", "--elevation-mask-deg", "0",
+                 "--seed", "1", "-o", str(passfile)]) == 0
+    assert main(["-q", "detect", str(passfile), "--nominal", str(sample / "nominal.json"), "--plot",
+                 str(tmp_path / "d.png"), "-o", str(tmp_path / "d.json")]) == 0
+    assert (tmp_path / "d.png").read_bytes()[:4] == b"\x89PNG"

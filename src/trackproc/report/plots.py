@@ -151,3 +151,42 @@ def refine_png(residuals, diagnostics: dict) -> bytes:
     fig.suptitle(f"trackproc refine - not seen by the pass: {unseen_text}", fontsize=10)
     fig.tight_layout()
     return encode(fig)
+
+
+def detect_png(samples: dict, document: dict) -> bytes:
+    """``detect --plot`` (seed 003): per angle kind, the measured minus the nominal (H0) angle and the
+    displaced (H1) minus the nominal, in degrees against the time to impact, with the 1-sigma band;
+    then the statistic S against its normal laws under H0 and H1 and the threshold."""
+    plt = pyplot()
+    kinds = [k for k in ("elevation", "azimuth") if (samples["kinds"] == k).any()]
+    fig, axes = plt.subplots(len(kinds) + 1, 1, figsize=(10, 3.2 * (len(kinds) + 1)), squeeze=False)
+    deg = 180.0 / np.pi
+    for ax, kind in zip(axes[:-1, 0], kinds):
+        m = samples["kinds"] == kind
+        s = samples["s"][m]
+        ax.fill_between(s, -samples["sigma"][m] * deg, samples["sigma"][m] * deg, color="0.85", label="±1 sigma")
+        ax.plot(s, (samples["x"][m] - samples["a"][m]) * deg, ".", ms=2, color="C0", label="measured - H0")
+        ax.plot(s, (samples["b"][m] - samples["a"][m]) * deg, "-", color="C3",
+                label=f"H1 - H0 ({document['displacement_m']:g} m displacement)")
+        ax.axhline(0.0, color="0.3", lw=0.6)
+        ax.set_ylabel(f"{kind} [deg]")
+        ax.set_xlabel("s from the nominal impact time")
+        ax.legend(fontsize=7)
+    ax = axes[-1, 0]
+    st = document["statistic"]
+    std = st["std"]
+    lo = min(st["mean_h0"], st["S"]) - 4 * std
+    hi = max(st["mean_h1"], st["S"]) + 4 * std
+    grid = np.linspace(lo, hi, 400)
+    for mean, name, colour in ((st["mean_h0"], "H0", "C0"), (st["mean_h1"], "H1", "C3")):
+        ax.plot(grid, np.exp(-0.5 * ((grid - mean) / std) ** 2) / (std * np.sqrt(2 * np.pi)), color=colour,
+                label=f"S under {name}")
+    ax.axvline(document["threshold"], color="k", ls="--", lw=1, label="threshold")
+    ax.axvline(st["S"], color="green", lw=2, label=f"S observed -> {document['decision']}")
+    ax.set_xlabel("S [rad^2]")
+    ax.set_title(f"false alarm {document['false_alarm_probability']:.3g}, miss {document['miss_probability']:.3g}, "
+                 f"gamma {document['gamma']:.3g}", fontsize=10)
+    ax.legend(fontsize=7)
+    fig.suptitle(f"trackproc detect: {document['station']} {document['pass_id']}", fontsize=10)
+    fig.tight_layout()
+    return encode(fig)
