@@ -65,3 +65,19 @@ def test_detect_figure(tmp_path):
     assert main(["-q", "detect", str(passfile), "--nominal", str(sample / "nominal.json"), "--plot",
                  str(tmp_path / "d.png"), "-o", str(tmp_path / "d.json")]) == 0
     assert (tmp_path / "d.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_smooth_figures_one_per_pass_png_and_pdf(tmp_path):
+    from pathlib import Path
+
+    from trackproc.cli.app import main
+
+    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    assert main(["-q", "smooth", str(sample / "multistation.parquet"), "--kinds", "elevation", "--plot",
+                 str(tmp_path / "s.png"), "-o", str(tmp_path / "s.parquet")]) == 0
+    pngs = sorted(p.name for p in tmp_path.glob("s-*.png"))
+    assert len(pngs) == 14 and all(p.endswith("-elevation.png") for p in pngs)   # 14 passes, one figure each
+    assert main(["-q", "smooth", str(sample / "multistation.parquet"), "--kinds", "elevation", "--plot",
+                 str(tmp_path / "s.pdf"), "-o", str(tmp_path / "s2.parquet")]) == 0
+    pdf = (tmp_path / "s.pdf").read_bytes()
+    assert pdf[:4] == b"%PDF" and pdf.count(b"/Type /Page\n") + pdf.count(b"/Type /Page ") + pdf.count(b"/Type/Page") >= 1

@@ -190,3 +190,74 @@ def detect_png(samples: dict, document: dict) -> bytes:
     fig.suptitle(f"trackproc detect: {document['station']} {document['pass_id']}", fontsize=10)
     fig.tight_layout()
     return encode(fig)
+
+
+def smooth_figure(fit_item, values):
+    """One pass and kind of ``smooth``: the data (rejected samples marked), the fitted curve, the TCA,
+    and the residuals with their RMS; angles in degrees."""
+    plt = pyplot()
+    f = fit_item
+    label, unit, factor = DISPLAY.get(f.kind, (f.kind, "", 1.0))
+    values = np.asarray(values, float) * factor
+    fig, (ax_data, ax_res) = plt.subplots(1, 2, figsize=(13, 3.6), gridspec_kw={"width_ratios": [3, 2]})
+    title = f"{f.label}  [{f.status}]"
+    if f.fit is None:
+        ax_data.plot(f.t_s, values, ".", ms=2, color="0.5")
+        ax_data.set_title(f"{title}: {f.error}", fontsize=9)
+        ax_res.set_axis_off()
+    else:
+        used = f.fit.used
+        ax_data.plot(f.t_s[used], values[used], ".", ms=2, label="used")
+        if (~used).any():
+            ax_data.plot(f.t_s[~used], values[~used], "x", ms=4, color="red", label=f"rejected ({int((~used).sum())})")
+        grid = np.linspace(*f.fit.domain_s, 600)
+        ax_data.plot(grid, f.fit(grid) * factor, "-", color="black", lw=1, label=f"degree {f.fit.degree}")
+        lo, hi = np.nanmin(values), np.nanmax(values)
+        pad = 0.1 * (hi - lo) if hi > lo else 1.0
+        ax_data.set_ylim(lo - pad, hi + pad)
+        if f.tca is not None:
+            ax_data.axvline(f.tca.t_s, color="green", lw=0.8, label=f"TCA ±{f.tca.sigma_s:.3g} s")
+        ax_data.set_title(title + (f"  {', '.join(f.warnings)}" if f.warnings else ""), fontsize=9)
+        ax_data.legend(fontsize=7, loc="best")
+        residual = f.fit.residual * factor
+        ax_res.plot(f.t_s[used], residual[used], ".", ms=2)
+        if (~used).any():
+            ax_res.plot(f.t_s[~used], residual[~used], "x", ms=4, color="red")
+        span = 6 * max(f.fit.rms * factor, 1e-300)
+        ax_res.set_ylim(-span, span)
+        ax_res.set_title(f"residual, RMS {f.fit.rms * factor:.3g} {unit}", fontsize=9)
+        ax_res.set_xlabel("s from the first sample of the pass")
+    ax_data.set_ylabel(f"{label} [{unit}]")
+    ax_data.set_xlabel("s from the first sample of the pass")
+    fig.tight_layout()
+    return fig
+
+
+def smooth_plots(result, path: str) -> dict:
+    """``smooth --plot``: one figure per pass and kind. ``*.pdf``: one page each in one file; a PNG
+    path with one fit: that figure; with several: ``NAME-<pass>-<kind>.png`` beside it (a
+    1170 x 6912 px stack is unreadable). Returns {file name: bytes} to write."""
+    from pathlib import Path
+
+    plt = pyplot()
+    frame = result.samples.frame
+    fits = list(result.fits)
+    target = Path(path)
+    if target.suffix.lower() == ".pdf":
+        from matplotlib.backends.backend_pdf import PdfPages
+
+        buffer = io.BytesIO()
+        with PdfPages(buffer) as pdf:
+            for f in fits:
+                fig = smooth_figure(f, frame["value"].to_numpy()[f.rows])
+                pdf.savefig(fig)
+                plt.close(fig)
+        return {str(target): buffer.getvalue()}
+    if len(fits) == 1:
+        return {str(target): encode(smooth_figure(fits[0], frame["value"].to_numpy()[fits[0].rows]))}
+    out = {}
+    for f in fits:
+        name = f"{target.stem}-{f.label}".replace(" ", "-").replace("/", "-")
+        out[str(target.with_name(name + (target.suffix or ".png")))] = encode(
+            smooth_figure(f, frame["value"].to_numpy()[f.rows]))
+    return out
