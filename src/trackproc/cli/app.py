@@ -38,10 +38,11 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def _root(
+    ctx: typer.Context,
     version: bool = typer.Option(False, "--version", "-V", callback=_version, is_eager=True,
                                  help="Print the version and exit."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only errors on stderr."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Debug messages on stderr."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Progress and debug messages on stderr."),
     no_metadata: bool = typer.Option(False, "--no-metadata",
                                      help="CSV outputs without the '# trackproc: {...}' first line (plain "
                                           "CSV for spreadsheets; also TRACKPROC_CSV_METADATA=0)."),
@@ -53,7 +54,10 @@ def _root(
     """
     if no_metadata:
         os.environ["TRACKPROC_CSV_METADATA"] = "0"   # read by the CSV writers (io.tabular.csv_metadata_line)
-    level = logging.ERROR if quiet else logging.DEBUG if verbose else logging.INFO
+    # Quiet by default: warnings, errors and the commands' own summaries. batch keeps its per-input
+    # INFO lines (the cron log is its record of what was done).
+    default = logging.INFO if ctx.invoked_subcommand == "batch" else logging.WARNING
+    level = logging.ERROR if quiet else logging.DEBUG if verbose else default
     if os.environ.get("TRACKPROC_LOG_LEVEL"):
         level = os.environ["TRACKPROC_LOG_LEVEL"].upper()
     logging.basicConfig(level=level, format="trackproc: %(levelname)s: %(message)s",

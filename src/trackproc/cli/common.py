@@ -129,3 +129,13 @@ def _stdout_file() -> Optional[str]:
         return os.readlink(f"/proc/self/fd/{sys.stdout.fileno()}")
     except OSError:
         return "stdout.parquet"  # a regular file of unknown name: Parquet
+
+
+def summary(text: str) -> None:
+    """A command's own result for people, on stderr: shown by default (unlike INFO lines), hidden by
+    ``--quiet``."""
+    import logging
+
+    if logging.getLogger("trackproc").isEnabledFor(logging.WARNING):
+        sys.stderr.write(text if text.endswith("\n") else text + "\n")
+        sys.stderr.flush()

@@ -88,6 +88,8 @@ def detect_command(
         from trackproc.report.plots import detect_png
 
         write_bytes(plot, detect_png(result.samples, doc))
-    log.info("%s %s: S = %.4g, threshold %.4g -> %s (gamma %.3g, alpha %.3g, beta %.3g)", doc["station"],
-             doc["pass_id"], doc["statistic"]["S"], doc["threshold"], doc["decision"], doc["gamma"],
-             doc["false_alarm_probability"], doc["miss_probability"])
+    from trackproc.cli.common import summary
+
+    summary("%s %s: S = %.4g, threshold %.4g -> %s (gamma %.3g, alpha %.3g, beta %.3g)" % (
+        doc["station"], doc["pass_id"], doc["statistic"]["S"], doc["threshold"], doc["decision"], doc["gamma"],
+        doc["false_alarm_probability"], doc["miss_probability"]))

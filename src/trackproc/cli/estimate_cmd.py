@@ -156,6 +156,6 @@ def estimate_command(
         write_residuals(result.residuals, residuals, meta)
     if png is not None:
         write_bytes(plot, png)
-    if log.isEnabledFor(logging.INFO):
+    if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
         sys.stderr.write(summary_text(result))
         sys.stderr.flush()

@@ -186,6 +186,6 @@ def refine_command(
         from trackproc.report.plots import refine_png
 
         write_bytes(plot, refine_png(result.residuals, result.state.diagnostics))
-    if log.isEnabledFor(logging.INFO):
+    if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
         sys.stderr.write(summary_text(result))
         sys.stderr.flush()
