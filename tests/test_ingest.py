@@ -166,7 +166,7 @@ def test_parquet_via_stdin_and_csv_round_trip(write, stations_csv, run_cli, tmp_
     assert run_cli(["ingest", "-", "-o", csv_out], input=parquet.read_bytes()).exit_code == 0
     text = csv_out.read_text()
     assert text.startswith("# trackproc: {")
-    assert "2026-03-20T09:30:00Z,ZHY,ZHY-001,elevation,0.17453292519943295," in text
+    assert "2026-03-20T09:30:00Z,ZHY,ZHY-001,elevation_deg,10.0," in text   # degrees at the CSV edge
     # CSV (with its metadata line) ingested again: identical samples and stations
     back = tmp_path / "back.parquet"
     assert run_cli(["ingest", csv_out, "-o", back]).exit_code == 0

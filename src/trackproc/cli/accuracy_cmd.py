@@ -108,11 +108,11 @@ def accuracy_command(
     cross-checked by Phi P0 Phi^T and Monte Carlo. One row per time; other methods as stm_ / mc_
     prefixed columns.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc accuracy solution.json --span 86400 --step 60 --method all --plot sigma.png -o sigma.parquet
+        trackproc accuracy sample_data/stale.json --span 86400 --step 600 --method all -o sigma.parquet
 
-        trackproc accuracy --seed-example --plot example.png -o example.csv
+        trackproc accuracy --seed-example -o example.csv
     """
     if plot == "-":
         raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
@@ -164,11 +164,13 @@ def accuracy_command(
                               correlation=correlation is not None)
     result = accuracy(initial, options, table, orientation, stations_source=stations)
 
-    log.info("initial covariance: %s", result.meta["initial_covariance"]["source"])
+    from trackproc.cli.common import summary
+
+    summary(f"initial covariance: {result.meta['initial_covariance']['source']}")
     checks = result.meta["checks"]
     if "spectral_vs_stm_max_relative_sigma_difference" in checks:
-        log.info("spectral vs stm: largest relative sigma difference %.2e",
-                 checks["spectral_vs_stm_max_relative_sigma_difference"])
+        summary(f"spectral vs stm: largest relative sigma difference "
+                f"{checks['spectral_vs_stm_max_relative_sigma_difference']:.2e}")
     if "monte_carlo_vs_linear_max_abs_z" in checks:
         z = checks["monte_carlo_vs_linear_max_abs_z"]
         sd = checks["monte_carlo_variance_relative_sd"]
@@ -178,7 +180,7 @@ def accuracy_command(
             log.warning("%s: beyond the statistical bound, the first-order methods miss a nonlinearity "
                         "over this span", text)
         else:
-            log.info(text)
+            summary(text)
     png = plot_bytes(result) if plot is not None else None
     write_bytes(out, table_bytes(result.frame, result.meta, out_format))
     if correlation is not None:

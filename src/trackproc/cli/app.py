@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 import os
 import sys
+import warnings
 
 import typer
 
@@ -20,7 +21,8 @@ app = typer.Typer(
     name="trackproc",
     help="Satellite tracking passes in, orbits with honest error matrices out.",
     pretty_exceptions_enable=False,
-    add_completion=False,
+    rich_markup_mode=None,
+    add_completion=True,
     no_args_is_help=True,
     context_settings={"help_option_names": ["-h", "--help"]},
 )
@@ -36,22 +38,33 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def _root(
-    version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+    ctx: typer.Context,
+    version: bool = typer.Option(False, "--version", "-V", callback=_version, is_eager=True,
                                  help="Print the version and exit."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only errors on stderr."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Debug messages on stderr."),
+    verbose: bool = typer.Option(False, "--verbose", "-v", help="Progress and debug messages on stderr."),
+    no_metadata: bool = typer.Option(False, "--no-metadata",
+                                     help="CSV outputs without the '# trackproc: {...}' first line (plain "
+                                          "CSV for spreadsheets; also TRACKPROC_CSV_METADATA=0)."),
 ) -> None:
     """Satellite tracking passes in, orbits with honest error matrices out.
 
     Exit codes: 0 ok, 1 processing failure, 2 usage or invalid input,
     3 partial failure in batch.
     """
-    level = logging.ERROR if quiet else logging.DEBUG if verbose else logging.INFO
+    if no_metadata:
+        os.environ["TRACKPROC_CSV_METADATA"] = "0"   # read by the CSV writers (io.tabular.csv_metadata_line)
+    # Quiet by default: warnings, errors and the commands' own summaries. batch keeps its per-input
+    # INFO lines (the cron log is its record of what was done).
+    default = logging.INFO if ctx.invoked_subcommand == "batch" else logging.WARNING
+    level = logging.ERROR if quiet else logging.DEBUG if verbose else default
     if os.environ.get("TRACKPROC_LOG_LEVEL"):
         level = os.environ["TRACKPROC_LOG_LEVEL"].upper()
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(_OneLineFormatter("trackproc: %(levelname)s: %(message)s"))
     logging.basicConfig(level=level, handlers=[handler], force=True)
+    # warnings of the lower layers (e.g. dates beyond the EOP table) as one log line each
+    warnings.showwarning = lambda message, category, *args, **kwargs: log.warning(str(message))
 
 
 class _OneLineFormatter(logging.Formatter):
@@ -117,7 +130,13 @@ def _main(argv: list[str]) -> int:
         # A command with several outputs writes all of them or none; batch commits per input
         # (a killed run resumes from what is done), so it opts out.
         with guard.outputs_all_or_none(enabled=command != "batch") as outputs:
-            result = app(args=argv, prog_name="trackproc", standalone_mode=False)
+            from trackproc.cli.config import default_map
+            from trackproc.cli.progress import ticker
+
+            root = plain_help(typer.main.get_command(app))
+            with ticker(command, enabled=not any(a in ("-q", "--quiet") for a in argv)):
+                result = root(args=argv, prog_name="trackproc", standalone_mode=False,
+                              default_map=default_map(root))
             code = result if isinstance(result, int) and not isinstance(result, bool) else 0
             outputs.commit_if(code == 0)
     except SystemExit as exit_:
@@ -149,11 +168,53 @@ def _command_name(argv: list[str]) -> str | None:
     return None
 
 
-_GLOBAL_FLAGS = ("--quiet", "-q", "--verbose", "-v")
+#: Typer's own type labels (``<float>``) -> the metavars a Unix reader expects.
+_METAVARS = {"str": "TEXT", "float": "FLOAT", "int": "INTEGER", "bool": "BOOLEAN", "path": "PATH",
+             "float range": "FLOAT", "int range": "INTEGER", "datetime": "TIME",
+             "list[str]": "TEXT", "list[float]": "FLOAT", "list[int]": "INTEGER"}
+
+
+def plain_help(command):
+    """Help that reads in a pipe and at any width (issue 16): readable metavars (``FLOAT``,
+    ``[a|b]`` for choices, never a Python type), arguments shown by name alone, and the indented
+    shell examples of a docstring kept verbatim (click's ``\\b`` paragraphs) instead of rewrapped
+    mid-command. Plain click formatting (no boxes) is set on the app itself."""
+    import click
+
+    for param in getattr(command, "params", []):
+        kind = getattr(param, "param_type_name", "")
+        if kind == "argument":
+            param.display_type_rich = lambda ctx: None
+        elif (kind == "option" and not getattr(param, "is_flag", False) and param.metavar is None
+              and hasattr(param, "display_type")):
+            label = param.display_type(click.Context(command)).strip("<>")
+            param.metavar = _METAVARS.get(label) or (f"[{label}]" if "|" in label else label.upper() or None)
+    if getattr(command, "help", None):
+        command.help = _keep_examples(command.help)
+    for sub in getattr(command, "commands", {}).values():
+        plain_help(sub)
+    return command
+
+
+def _keep_examples(text: str) -> str:
+    """Mark each indented paragraph of a docstring (a shell example) with click's ``\\b`` so it is
+    printed as written."""
+    import inspect
+
+    out = []
+    for para in inspect.cleandoc(text).split("\n\n"):
+        lines = para.split("\n")
+        if lines[0] != "\b" and all(l.startswith("    ") for l in lines if l.strip()):
+            para = "\b\n" + para
+        out.append(para)
+    return "\n\n".join(out)
+
+
+_GLOBAL_FLAGS = ("--quiet", "-q", "--verbose", "-v", "--no-metadata")
 
 
 def _hoist_global_flags(argv: list[str]) -> list[str]:
-    """Let ``--quiet``/``--verbose`` follow the command too (``trackproc ingest x.csv -q``):
+    """Let ``--quiet``/``--verbose``/``--no-metadata`` follow the command too (``trackproc ingest x.csv -q``):
     they are moved before it, where the root callback reads them (up to a ``--``)."""
     end = argv.index("--") if "--" in argv else len(argv)
     flags = [a for a in argv[:end] if a in _GLOBAL_FLAGS]

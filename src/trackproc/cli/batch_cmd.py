@@ -44,14 +44,12 @@ def batch_command(**kwargs) -> None:
     1 all failed or another run holds the output directory, 2 usage error, 128 + N stopped by
     signal N (143 SIGTERM, 129 SIGHUP, 130 Ctrl-C) after stopping its workers: run it again to resume.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc batch nightly.toml
+        trackproc batch sample_data/nightly.toml -o nightly-out
 
-        trackproc batch --input 'inbox/*.csv' --stations stations.csv --carrier-hz 2.2e9 \\
-            --mode one-way -o out --workers 4
-
-        trackproc batch nightly.toml --scheduler tcp://10.0.0.5:8786 --force
+        trackproc batch --input 'sample_data/*.csv' --stations sample_data/stations.csv \\
+            --carrier-hz 2.2e9 --mode one-way -o out --workers 2
     """
     config = kwargs.pop("config")
     flags = {opt.name: kwargs[opt.dest] for opt in SCHEMA}

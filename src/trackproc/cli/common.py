@@ -64,6 +64,12 @@ def named_values(items: list, flag: str) -> dict:
 def resolve_output(output: Optional[str], what: str = "output") -> str:
     """``-o`` given: use it. Not given: stdout when it is not a terminal, else a usage error."""
     if output is not None:
+        if output != "-":
+            parent = Path(output).parent
+            if str(parent) not in ("", ".") and not parent.is_dir():
+                # a mistyped directory is not created silently
+                raise typer.BadParameter(f"directory {str(parent)!r} of {output!r} does not exist; "
+                                         "expected an existing directory", param_hint="-o/--output")
         return output
     if not sys.stdout.isatty():
         return "-"
@@ -78,6 +84,9 @@ def table_format_for(output: str, requested: Optional[TableFormat]) -> TableForm
     is redirected to a regular file (``trackproc smooth - > out.parquet``) the format follows
     that file's suffix, and is Parquet when the suffix says nothing.
     """
+    if output == "-" and sys.stdout.isatty() and requested is not TableFormat.csv:
+        raise typer.BadParameter("stdout is a terminal: binary Parquet/Arrow is not written there; "
+                                 "expected -o FILE, a pipe, or --format csv", param_hint="-o/--output")
     if requested is not None:
         return requested
     if output == "-":
@@ -92,6 +101,11 @@ def table_format_for(output: str, requested: Optional[TableFormat]) -> TableForm
         return TableFormat.csv
     if suffix in (".arrow", ".arrows", ".ipc", ".feather"):
         return TableFormat.arrow
+    if suffix not in ("", ".parquet", ".pq"):
+        # ``-o x.txt`` would otherwise silently get Parquet bytes
+        raise typer.BadParameter(f"cannot tell the table format from the suffix {suffix!r} of {output!r}; "
+                                 "expected .parquet, .pq, .csv, .arrow, .arrows, .ipc or .feather, or --format",
+                                 param_hint="-o/--output")
     return TableFormat.parquet
 
 
@@ -109,3 +123,13 @@ def _stdout_file() -> Optional[str]:
         return os.readlink(f"/proc/self/fd/{sys.stdout.fileno()}")
     except OSError:
         return "stdout.parquet"  # a regular file of unknown name: Parquet
+
+
+def summary(text: str) -> None:
+    """A command's own result for people, on stderr: shown by default (unlike INFO lines), hidden by
+    ``--quiet``."""
+    import logging
+
+    if logging.getLogger("trackproc").isEnabledFor(logging.WARNING):
+        sys.stderr.write(text if text.endswith("\n") else text + "\n")
+        sys.stderr.flush()

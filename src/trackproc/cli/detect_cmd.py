@@ -28,6 +28,9 @@ def detect_command(
                                               help="Measurement sigma, rad (default: the pass's sigma column)."),
     eop: Optional[str] = EopOpt,
     dut1: Optional[float] = Dut1Opt,
+    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
+                                       help="Plot measured and displaced angles against the nominal, and S against "
+                                            "its laws under H0 and H1 (needs matplotlib: pip install 'trackproc[plot]')."),
     output: Optional[str] = typer.Option(None, "-o", "--output", help="RESULT.json, or - for stdout (default)."),
 ) -> None:
     """Decide between H0 (the nominal trajectory) and H1 (displaced by Delta*) from a measured
@@ -36,11 +39,12 @@ def detect_command(
 
     The decision is data, not an error: the exit status is 0 for H0 and for H1.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc simulate --ballistic nominal.json --stations st.csv --hypothesis h1 --step 1 \\
-            --elevation-mask-deg 0 --seed 1 -o pass.parquet
-        trackproc detect pass.parquet --nominal nominal.json --false-alarm 0.001 -o result.json
+        trackproc simulate --ballistic sample_data/nominal.json --stations sample_data/stations.csv \\
+            --hypothesis h1 --step 1 --elevation-mask-deg 0 --seed 1 -o ballistic.parquet
+        trackproc detect ballistic.parquet --nominal sample_data/nominal.json --false-alarm 0.001 \\
+            --plot detect.png -o result.json
     """
     if false_alarm is not None and equal_error:
         raise typer.BadParameter("give either --false-alarm or --equal-error", param_hint="--false-alarm")
@@ -48,6 +52,12 @@ def detect_command(
         raise typer.BadParameter(f"expected a probability in (0, 1), got {false_alarm}", param_hint="--false-alarm")
     if sigma_rad is not None and not sigma_rad > 0:
         raise typer.BadParameter(f"expected a sigma > 0 rad, got {sigma_rad}", param_hint="--sigma-rad")
+    if plot == "-":
+        raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
+    if plot is not None:
+        from trackproc.pipeline.plotting import require_matplotlib
+
+        require_matplotlib()
     if input == "-" and nominal == "-":
         raise typer.BadParameter("stdin (-) can be read only once", param_hint="--nominal")
 
@@ -73,6 +83,13 @@ def detect_command(
                     source="<stdin>" if is_stdio(input) else input, eop=orientation)
     doc = result.document
     write_text(output or "-", result_json(doc))
-    log.info("%s %s: S = %.4g, threshold %.4g -> %s (gamma %.3g, alpha %.3g, beta %.3g)", doc["station"],
-             doc["pass_id"], doc["statistic"]["S"], doc["threshold"], doc["decision"], doc["gamma"],
-             doc["false_alarm_probability"], doc["miss_probability"])
+    if plot is not None:
+        from trackproc.io.atomic import write_bytes
+        from trackproc.report.plots import detect_png
+
+        write_bytes(plot, detect_png(result.samples, doc))
+    from trackproc.cli.common import summary
+
+    summary("%s %s: S = %.4g, threshold %.4g -> %s (gamma %.3g, alpha %.3g, beta %.3g)" % (
+        doc["station"], doc["pass_id"], doc["statistic"]["S"], doc["threshold"], doc["decision"], doc["gamma"],
+        doc["false_alarm_probability"], doc["miss_probability"]))

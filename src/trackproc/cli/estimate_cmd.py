@@ -88,7 +88,8 @@ def estimate_command(
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Write the residuals (Parquet, or CSV by the .csv suffix)."),
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
-                                       help="Plot residuals by station (needs matplotlib: trackproc[plot])."),
+                                       help="Plot the residuals per kind in their units, RMS per pass (needs matplotlib: "
+                                            "pip install 'trackproc[plot]')."),
     output: Optional[str] = OutputOpt,
 ) -> None:
     """Estimate the orbit state at an epoch and the selected biases from one or more passes
@@ -98,13 +99,14 @@ def estimate_command(
     A one-screen summary goes to stderr. Exit status 1 when the estimation fails (too few
     data, rank deficiency with the unobservable combinations named, no convergence).
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc estimate passes/*.parquet --initial refined.json --range-bias \\
+        trackproc estimate sample_data/multistation.parquet --initial sample_data/truth.json --range-bias \\
             --opm solution.opm --residuals residuals.csv -o solution.json
 
-        trackproc simulate --state s.json --stations st.csv --duration 21600 --range-bias KIR=100 \\
-            | trackproc estimate - --initial s.json --range-bias -o -
+        trackproc simulate --state sample_data/truth.json --stations sample_data/stations.csv \\
+            --duration 21600 --range-bias KIR=100 --seed 1 \\
+            | trackproc estimate - --initial sample_data/truth.json --range-bias -o -
     """
     if plot == "-":
         raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
@@ -130,7 +132,8 @@ def estimate_command(
     from trackproc.io.residuals import write_residuals
     from trackproc.io.stations import read_stations
     from trackproc.io.statefile import format_epoch, read_state_or_tle, write_state
-    from trackproc.pipeline.estimate import EstimateOptions, estimate, plot_bytes, require_matplotlib, summary_text
+    from trackproc.pipeline.estimate import EstimateOptions, estimate, require_matplotlib, summary_text
+    from trackproc.report.plots import residuals_png
 
     if plot is not None:
         require_matplotlib()
@@ -156,7 +159,7 @@ def estimate_command(
         two_stage=two_stage, noise=noise.value, oscillator_noise=oscillator_noise)
     result = estimate(tables, state0, station_table, options, orientation)
 
-    png = plot_bytes(result) if plot is not None else None
+    png = residuals_png(result.residuals) if plot is not None else None
     write_state(result.state, out, force=force.value, eop_source=orientation.source)
     if opm is not None:
         write_opm(result.state, opm, object_name=object_name, object_id=object_id,
@@ -168,6 +171,6 @@ def estimate_command(
         write_residuals(result.residuals, residuals, meta)
     if png is not None:
         write_bytes(plot, png)
-    if log.isEnabledFor(logging.INFO):
+    if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
         sys.stderr.write(summary_text(result))
         sys.stderr.flush()

@@ -64,11 +64,14 @@ def ingest_command(
     Doppler sign convention: Doppler = received - nominal carrier; range-rate positive when
     receding (one-way: range_rate = -c*doppler/carrier).
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc ingest raw.csv --stations stations.csv --carrier-hz 2.2e9 --mode one-way -o pass.parquet
+        trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
+            --carrier-hz 2.2e9 --mode one-way -o pass.parquet
 
-        cat raw.csv | trackproc ingest - --stations stations.csv | trackproc info -
+        cat sample_data/doppler_pass.csv \\
+            | trackproc ingest - --stations sample_data/stations.csv --carrier-hz 2.2e9 --mode one-way \\
+            | trackproc info -
     """
     if inputs.count("-") > 1:
         raise typer.BadParameter("stdin (-) can be read only once", param_hint="INPUT")

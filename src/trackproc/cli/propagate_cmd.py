@@ -91,16 +91,19 @@ def propagate_command(
     time, x_m .. vz_m_s in GCRF, optionally the STM, the propagated covariance (when the state
     file has one) and a station's predicted measurements.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc propagate state.json --span 86400 --step 60 -o day.parquet
+        trackproc propagate sample_data/truth.json --span 86400 --step 60 -o day.parquet
 
-        trackproc propagate state.json --span 600 --step 1 --at-station ZHY --stations stations.csv \\
-            --carrier-hz 2.2e9 --visible-only -o pass.csv
+        trackproc propagate sample_data/truth.json --span 600 --step 1 --at-station ZHY \\
+            --stations sample_data/stations.csv --carrier-hz 2.2e9 --visible-only -o zhy.csv
 
-        trackproc propagate solution.json --at pass.parquet --at-station ZHY --format oem -o pass.oem
+        trackproc propagate sample_data/truth.json --at sample_data/multistation.parquet --at-station ZHY \\
+            -o zhy_predicted.csv
 
-        trackproc propagate iss.tle --span -3600 --step 10 -o - > back.arrows
+        trackproc propagate sample_data/truth.json --span 86400 --step 600 --format oem -o day.oem
+
+        trackproc propagate sample_data/iss.tle --span -3600 --step 10 -o - > back.arrows
 
     Exit status: 0 ok; 2 bad options or input; 1 propagation failure (the Taylor run stopped,
     the orbit enters the Earth, or --visible-only found no pass).

@@ -123,6 +123,9 @@ def refine_command(
              "the file holds the other one too."),
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Write the residuals at the samples (Parquet, or CSV by the suffix)."),
+    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
+                                       help="Plot the data with the refined model, the residuals and what the pass "
+                                            "cannot see (needs matplotlib: pip install 'trackproc[plot]')."),
     output: Optional[str] = OutputOpt,
 ) -> None:
     """Refine a stale orbit state from one Doppler (or range-rate) pass of one station, one- or
@@ -134,20 +137,30 @@ def refine_command(
     A one-screen summary goes to stderr. Exit status 1 when the refinement fails
     (no convergence, rank deficiency), 2 for invalid input.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
+        trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
+            --carrier-hz 2.2e9 --mode one-way -o pass.parquet
         trackproc smooth pass.parquet -o smoothed.parquet
-        trackproc refine smoothed.parquet --initial stale.json -o refined.json
+        trackproc refine smoothed.parquet --initial sample_data/stale.json --plot refine.png -o refined.json
 
-        trackproc refine pass.parquet --initial delfi.tle --doppler-bias offset+drift --residuals res.csv -o -
+        trackproc refine pass.parquet --initial sample_data/stale.json --doppler-bias offset+drift \\
+            --residuals res.csv -o -
 
-        trackproc refine smoothed.parquet --initial stale.json --cost integral --circular -o seed004.json
+        trackproc refine smoothed.parquet --initial sample_data/stale.json --cost integral --circular \\
+            -o seed004.json
     """
     out = resolve_output(output, "output state file")
     if residuals == "-" and out == "-":
         raise typer.BadParameter("stdout already carries the state file; give --residuals a file",
                                  param_hint="--residuals")
     sigmas = named_values(apriori_sigma, "--apriori-sigma")
+    if plot == "-":
+        raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
+    if plot is not None:
+        from trackproc.pipeline.plotting import require_matplotlib
+
+        require_matplotlib()
 
     import sys
 
@@ -183,6 +196,11 @@ def refine_command(
                 "cost": cost.value, "force_model": force.value, "range_rate_model": result.problem.range_rate_model,
                 "sources": [source]}
         write_residuals(result.residuals, residuals, meta)
-    if log.isEnabledFor(logging.INFO):
+    if plot is not None:
+        from trackproc.io.atomic import write_bytes
+        from trackproc.report.plots import refine_png
+
+        write_bytes(plot, refine_png(result.residuals, result.state.diagnostics))
+    if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
         sys.stderr.write(summary_text(result))
         sys.stderr.flush()

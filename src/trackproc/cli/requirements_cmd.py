@@ -71,13 +71,13 @@ def requirements_command(
     A sensor with noise sigma (rad) and sample spacing dt (s) detects the displacement with the
     chosen error probabilities when sigma sqrt(dt) <= g, i.e. dt <= (g/sigma)^2.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
         trackproc requirements --format md --compare-paper
 
         trackproc requirements --velocity-kms 3 --angle-deg 48 --tau-s 30 --alpha 0.001 --beta 0.01
 
-        trackproc requirements --latitude 60 --direction against --tau-s 30 -o table3_against.csv --plot fig3.png
+        trackproc requirements --latitude 60 --direction against --tau-s 30 -o table3_against.csv
     """
     if plot == "-":
         raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")

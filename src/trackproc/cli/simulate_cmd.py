@@ -79,12 +79,13 @@ def simulate_command(
     The orbit is propagated by DOP853 at rtol 1e-13 (two-body or J2); stations by IAU 2006/2000A.
     Samples above the elevation mask form passes numbered STATION-001, -002, ...
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc simulate --state truth.json --stations stations.csv --duration 86400 --step 10 \\
-            --seed 1 --range-bias ZHY=25 --truth truth_at_start.json -o passes.parquet
+        trackproc simulate --state sample_data/truth.json --stations sample_data/stations.csv \\
+            --duration 86400 --step 10 --seed 1 --range-bias ZHY=25 --truth truth_at_start.json \\
+            -o passes.parquet
 
-        trackproc simulate --tle iss.tle --stations stations.csv --duration 21600 \\
+        trackproc simulate --tle sample_data/iss.tle --stations sample_data/stations.csv --duration 21600 \\
             | trackproc ingest - | trackproc info -
     """
     if ballistic is not None:

@@ -53,8 +53,10 @@ def smooth_command(
         help="A TCA inside a data gap longer than S s, or within S s of either end of the data, is 'not observed'."),
     summary: Optional[str] = typer.Option(None, "--summary", metavar="SUMMARY.json",
                                           help="JSON summary per pass and kind (- for stdout when -o is a file)."),
-    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
-                                       help="Plot data, fit and residuals (needs matplotlib: trackproc[plot])."),
+    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png|FILE.pdf",
+                                       help="Plot data, fit and residuals, one figure per pass and kind: a PDF "
+                                            "of one page each, or FILE-<pass>-<kind>.png files (needs matplotlib: "
+                                            "pip install 'trackproc[plot]')."),
     fmt: Optional[TableFormat] = typer.Option(
         None, "--format", help="Output format (default: from the suffix; Arrow stream on stdout)."),
     output: Optional[str] = OutputOpt,
@@ -68,11 +70,12 @@ def smooth_command(
     Exit status: 0 when at least one pass was fitted (failed passes are reported on stderr and in
     the summary with status "failed"); 1 when none could be fitted; 2 for invalid input or options.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc smooth pass.parquet --summary smooth.json -o smooth.parquet
+        trackproc smooth sample_data/multistation.parquet --summary smooth.json -o smooth.parquet
 
-        trackproc ingest raw.csv --stations st.csv | trackproc smooth - --grid 1 --plot pass.png > curve.parquet
+        trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
+            --carrier-hz 2.2e9 --mode one-way | trackproc smooth - --grid 1 > curve.parquet
     """
     degree_value = _degree(degree)
     kind_list = [k.strip() for item in (kinds or []) for k in item.split(",") if k.strip()]
@@ -90,7 +93,7 @@ def smooth_command(
 
     from trackproc.io.atomic import is_stdio, write_bytes, write_text
     from trackproc.io.passfile import read_pass_table, write_pass_table
-    from trackproc.pipeline.smooth import SmoothOptions, plot_bytes, require_matplotlib, smooth, summary_json
+    from trackproc.pipeline.smooth import SmoothOptions, require_matplotlib, smooth, summary_json
 
     if plot is not None:
         require_matplotlib()
@@ -105,12 +108,17 @@ def smooth_command(
         elif f.status == "suspect":
             detail = f"; {f.tca_error}" if f.tca_error else ""
             log.warning("%s: suspect (%s)%s", f.label, ", ".join(f.warnings), detail)
-    png = plot_bytes(result) if plot is not None else None
+    if plot is not None:
+        from trackproc.report.plots import smooth_plots
+
+        figures = smooth_plots(result, plot)
     write_pass_table(result.table, out, out_format.value)
     if summary is not None:
         write_text(summary, summary_json(result.summary))
-    if png is not None:
-        write_bytes(plot, png)
+    if plot is not None:
+        for name, data in figures.items():
+            write_bytes(name, data)
+        log.info("plot: %s", ", ".join(figures))
     counts = result.summary["counts"]
     log.info("%d fits: %d ok, %d suspect, %d failed -> %s (%s)", counts["fits"], counts["ok"], counts["suspect"],
              counts["failed"], "stdout" if out == "-" else out, out_format.value)

@@ -19,7 +19,7 @@ import numpy as np
 from trackproc.constants import MU_EARTH
 from trackproc.errors import ProcessingError
 
-__all__ = ["stumpff", "universal_anomaly", "propagate", "specific_energy",
+__all__ = ["stumpff", "universal_anomaly", "propagate", "specific_energy", "classical_elements",
            "angular_momentum", "period"]
 
 # |z| below which c2, c3 come from their Taylor series (the closed forms cancel near 0).
@@ -195,3 +195,47 @@ def propagate(state0, dt_s, mu_m3_s2: float = MU_EARTH) -> np.ndarray:
     if dt.ndim == 0:
         out = out[..., 0, :]
     return out
+
+
+def classical_elements(r_m, v_m_s, mu_m3_s2: float = MU_EARTH) -> dict:
+    """Osculating classical elements of one state (Vallado 2013, algorithm 9 "RV2COE").
+
+    Returns a (semi-major axis, m; negative for a hyperbola), e, i, RAAN, argument of perigee,
+    true, eccentric-free mean anomaly and argument of latitude u = omega + nu (well defined on a
+    circular orbit, where omega and nu are not), angles in degrees for people, and the period.
+    RAAN is undefined for an equatorial orbit and omega for a circular one: those are None.
+    """
+    r = np.asarray(r_m, float)
+    v = np.asarray(v_m_s, float)
+    rn, vn = float(np.linalg.norm(r)), float(np.linalg.norm(v))
+    h = np.cross(r, v)
+    hn = float(np.linalg.norm(h))
+    node = np.cross([0.0, 0.0, 1.0], h)
+    nn = float(np.linalg.norm(node))
+    e_vec = ((vn * vn - mu_m3_s2 / rn) * r - float(r @ v) * v) / mu_m3_s2
+    e = float(np.linalg.norm(e_vec))
+    energy = vn * vn / 2.0 - mu_m3_s2 / rn
+    a = -mu_m3_s2 / (2.0 * energy) if energy != 0.0 else math.inf
+    inc = math.acos(max(-1.0, min(1.0, h[2] / hn)))
+    tiny = 1e-11
+
+    def angle(x, y, flip):
+        value = math.acos(max(-1.0, min(1.0, x / y)))
+        return 2.0 * math.pi - value if flip else value
+
+    raan = angle(node[0], nn, node[1] < 0) if nn > tiny * hn else None
+    argp = angle(float(node @ e_vec), nn * e, e_vec[2] < 0) if (raan is not None and e > tiny) else None
+    nu = angle(float(e_vec @ r), e * rn, float(r @ v) < 0) if e > tiny else None
+    if raan is not None:
+        u = angle(float(node @ r), nn * rn, r[2] < 0)
+    else:  # equatorial: the true longitude from the x axis
+        u = angle(r[0], rn, (r[1] < 0) != (h[2] < 0))
+    mean = None
+    if nu is not None and e < 1.0:
+        ecc_anom = 2.0 * math.atan2(math.sqrt(1.0 - e) * math.sin(nu / 2.0), math.sqrt(1.0 + e) * math.cos(nu / 2.0))
+        mean = (ecc_anom - e * math.sin(ecc_anom)) % (2.0 * math.pi)
+    deg = lambda x: None if x is None else math.degrees(x)  # noqa: E731
+    return {"a_m": a, "e": e, "i_deg": deg(inc), "raan_deg": deg(raan), "argp_deg": deg(argp),
+            "true_anomaly_deg": deg(nu), "mean_anomaly_deg": deg(mean), "arg_latitude_deg": deg(u),
+            "period_s": 2.0 * math.pi * math.sqrt(a ** 3 / mu_m3_s2) if 0.0 < a < math.inf else None,
+            "frame": "GCRF (osculating, two-body)"}

@@ -8,9 +8,11 @@ ERFA's built-in table (``erfa.dat``), which pyerfa keeps up to date.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import erfa
+
 import numpy as np
 
 from trackproc.constants import DAY_S
@@ -130,6 +132,10 @@ def add_seconds_utc(ref_jd_utc: tuple, dt_s) -> tuple[np.ndarray, np.ndarray]:
     return tai_to_utc(b1 + whole, b2 + (dt_s - whole * DAY_S) / DAY_S)
 
 
+class EopCoverageWarning(UserWarning):
+    """Dates outside the tabulated Earth orientation (values held at the table's end)."""
+
+
 @dataclass(frozen=True)
 class EarthOrientation:
     """UT1-UTC and polar motion as functions of UTC MJD (IERS EOP tabulation, or constants).
@@ -167,6 +173,12 @@ class EarthOrientation:
             z = np.zeros(jd1.shape)
             return z + self.constant_dut1_s, z, z
         mjd = jd1 - 2400000.5 + jd2
+        if mjd.size and (mjd.min() < self.mjd[0] - 1 or mjd.max() > self.mjd[-1] + 1):
+            # held at the table's end value: say so (UT1-UTC drifts ~1 ms/day, ~0.5 m/day at the equator)
+            warnings.warn(EopCoverageWarning(
+                f"dates outside the Earth-orientation table ({self.source}: MJD {self.mjd[0]:.0f}-"
+                f"{self.mjd[-1]:.0f}): UT1-UTC and polar motion held at the end value; give --eop with a "
+                "table covering them"), stacklevel=2)
         ut1_tai = np.interp(mjd, self.mjd, self.ut1_minus_tai_s)
         dut1 = ut1_tai + tai_minus_utc_s(jd1, jd2)
         return dut1, np.interp(mjd, self.mjd, self.xp_rad), np.interp(mjd, self.mjd, self.yp_rad)

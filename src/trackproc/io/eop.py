@@ -8,7 +8,8 @@ from pathlib import Path
 
 from trackproc.errors import InputError
 
-NO_EOP_WARNING = ("no --eop file or --dut1 given: UT1-UTC and polar motion taken as zero "
+NO_EOP_WARNING = ("no --eop file or --dut1 given and no EOP package (astropy-iers-data) installed: "
+                  "UT1-UTC and polar motion taken as zero "
                   "(ignoring UT1-UTC, up to 0.9 s, costs up to ~400 m at the equator)")
 
 
@@ -52,8 +53,52 @@ def read_finals2000a(path: str | Path):
     return eop_from_table(mjd, dut1, xp, yp, source=f"IERS finals2000A {Path(path).name}")
 
 
+def bundled_earth_orientation():
+    """The IERS finals2000A table shipped by the maintained ``astropy-iers-data`` package (Bulletin A
+    with its year of predictions, refreshed with each release), or None when it is not installed.
+
+    Parsing its 20,000 rows takes ~0.1 s, so the parsed table is cached as ``.npz`` under
+    ``$XDG_CACHE_HOME/trackproc`` (``~/.cache/trackproc``), keyed by the package version; a cache
+    that cannot be written is simply not used."""
+    try:
+        import astropy_iers_data
+    except ImportError:
+        return None
+    import os
+    import tempfile
+
+    import numpy as np
+
+    from trackproc.dynamics.timescales import EarthOrientation
+
+    version = astropy_iers_data.__version__
+    source = f"IERS finals2000A from astropy-iers-data {version}"
+    cache_dir = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "trackproc"
+    cache = cache_dir / f"eop-astropy-iers-data-{version}.npz"
+    try:
+        with np.load(cache) as z:
+            return EarthOrientation(mjd=z["mjd"], ut1_minus_tai_s=z["ut1_minus_tai_s"], xp_rad=z["xp_rad"],
+                                    yp_rad=z["yp_rad"], source=source)
+    except (OSError, KeyError, ValueError):
+        pass
+    table = read_finals2000a(astropy_iers_data.IERS_A_FILE)
+    table = EarthOrientation(mjd=table.mjd, ut1_minus_tai_s=table.ut1_minus_tai_s, xp_rad=table.xp_rad,
+                             yp_rad=table.yp_rad, source=source)
+    try:
+        cache_dir.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=cache_dir, suffix=".npz", delete=False) as tmp:
+            np.savez(tmp, mjd=table.mjd, ut1_minus_tai_s=table.ut1_minus_tai_s, xp_rad=table.xp_rad,
+                     yp_rad=table.yp_rad)
+        os.replace(tmp.name, cache)
+    except OSError:
+        pass
+    return table
+
+
 def earth_orientation(eop_path=None, dut1_s=None):
-    """The Earth orientation for the --eop / --dut1 options, and a warning text when neither is given."""
+    """The Earth orientation for the --eop / --dut1 options; with neither, the IERS table of the
+    ``astropy-iers-data`` package (no warning: dates outside it are warned about where they are
+    used), else zero UT1-UTC with a warning text."""
     from trackproc.dynamics.timescales import EarthOrientation
 
     if eop_path is not None and dut1_s is not None:
@@ -65,4 +110,7 @@ def earth_orientation(eop_path=None, dut1_s=None):
             raise InputError("UT1-UTC out of range", column="--dut1", found=dut1_s,
                              expected="|UT1-UTC| <= 0.9 s")
         return EarthOrientation.constant(dut1_s), None
+    bundled = bundled_earth_orientation()
+    if bundled is not None:
+        return bundled, None
     return EarthOrientation(), NO_EOP_WARNING

@@ -123,11 +123,11 @@ def to_arrow(eph: Ephemeris) -> pa.Table:
 
 def _csv_bytes(eph: Ephemeris) -> bytes:
     from trackproc.io.passfile import iso_times, meta_json
-    from trackproc.io.tabular import CSV_META_PREFIX
+    from trackproc.io.tabular import csv_metadata_line
 
     frame = eph.frame
     out = io.StringIO()
-    out.write(f"# {CSV_META_PREFIX} {meta_json(eph.meta)}\n")
+    out.write(csv_metadata_line(meta_json(eph.meta)))
     writer = csv.writer(out, lineterminator="\n")
     columns = list(frame.columns)
     writer.writerow(columns)

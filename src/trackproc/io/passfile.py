@@ -43,7 +43,7 @@ from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
 from trackproc.io.isotime import iso_utc_array
 from trackproc.io.raw import KIND_UNITS
-from trackproc.io.tabular import (CSV_META_PREFIX, META_KEY, Problems, column_numbers, column_strings,
+from trackproc.io.tabular import (META_KEY, csv_metadata_line, Problems, column_numbers, column_strings,
                                   column_times, source_table)
 
 SCHEMA_VERSION = 1
@@ -145,13 +145,34 @@ def _csv_cell(value) -> str:
     return "" if value is None else str(value)
 
 
+#: Angle kinds, and the columns that carry an angle on their rows (value and what smooth adds).
+ANGLE_KINDS = ("elevation", "azimuth")
+ANGLE_COLUMNS = ("value", "sigma", "smoothed", "residual")
+
+
+def angles_in_degrees(frame: pd.DataFrame) -> pd.DataFrame:
+    """Angle rows for a person's eyes (the CSV edge): kind ``elevation_deg`` / ``azimuth_deg``
+    with value, sigma, smoothed and residual in degrees; radians stay in Parquet/Arrow."""
+    rows = frame["kind"].isin(ANGLE_KINDS).to_numpy()
+    if not rows.any():
+        return frame
+    frame = frame.copy()
+    frame.loc[rows, "kind"] = frame.loc[rows, "kind"] + "_deg"
+    for column in ANGLE_COLUMNS:
+        if column in frame.columns and frame[column].dtype.kind == "f":
+            # 1e-12 deg (2e-14 rad) is below any angle measurement; it hides the conversion's float
+            # noise (14.999999999999998 for an input of 15)
+            frame.loc[rows, column] = np.round(np.degrees(frame.loc[rows, column].to_numpy(dtype=np.float64)), 12)
+    return frame
+
+
 def pass_table_bytes(table: PassTable, fmt: str = "parquet") -> bytes:
     """The encoded file: ``parquet``, ``arrow`` (IPC stream) or ``csv``."""
     fmt = getattr(fmt, "value", fmt)
     if fmt == "csv":
-        frame = table.frame
+        frame = angles_in_degrees(table.frame)
         out = io.StringIO()
-        out.write(f"# {CSV_META_PREFIX} {meta_json(table.meta)}\n")
+        out.write(csv_metadata_line(meta_json(table.meta)))
         writer = csv.writer(out, lineterminator="\n")
         columns = list(COLUMNS) + [c for c in frame.columns if c not in COLUMNS]
         writer.writerow(columns)
@@ -203,6 +224,8 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
     for name in ("station", "pass_id", "kind"):
         data_columns[name] = pd.Series(column_strings(table, table.columns[name]), dtype=object).astype(str)
     kinds = data_columns["kind"].to_numpy(dtype=object)
+    degrees = np.isin(kinds, [k + "_deg" for k in ANGLE_KINDS])   # a trackproc CSV's angle rows
+    kinds = np.where(degrees, [str(k)[:-4] for k in kinds], kinds)
     problems.add("unknown kind", ~np.isin(kinds, KINDS), column="kind", found=kinds,
                  expected="one of " + ", ".join(KINDS))
     for name in ("value", "sigma"):
@@ -211,12 +234,19 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
                      found=table.columns[name].text if table.columns[name].text is not None else "null",
                      expected="a number (SI units)")
         data_columns[name] = values
+    if degrees.any():   # a trackproc CSV's angle rows are in degrees (the CSV edge): radians inside
+        data_columns["kind"] = pd.Series(kinds, dtype=object).astype(str)
+        for name in ("value", "sigma"):
+            data_columns[name] = np.where(degrees, np.radians(data_columns[name]), data_columns[name])
     _check_samples(problems, data_columns, table, source)
     problems.resolve(drop_invalid=False)
     frame = pd.DataFrame(data_columns)
     for key, column in table.columns.items():
         if key not in COLUMNS:
             frame[column.name] = _extra_column(column)
+    for name in ANGLE_COLUMNS[2:]:   # what smooth added on those rows (smoothed, residual)
+        if degrees.any() and name in frame.columns and frame[name].dtype.kind == "f":
+            frame.loc[degrees, name] = np.radians(frame.loc[degrees, name].to_numpy(dtype=np.float64))
     _check_meta(meta, frame, table.rows, source)
     return PassTable(frame, meta)
 

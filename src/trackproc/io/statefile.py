@@ -48,7 +48,8 @@ FORCE_LABELS = {"two-body": "two-body", "j2": "two-body+J2"}
 _FORCE_KEYS = {"two-body": "two-body", "twobody": "two-body", "keplerian": "two-body",
                "j2": "j2", "two-body+j2": "j2", "twobody+j2": "j2"}
 _KNOWN_KEYS = ("schema_version", "epoch", "frame", "position_m", "velocity_m_s", "parameters", "values",
-               "sigma", "covariance", "force_model", "constants", "earth_orientation", "diagnostics")
+               "sigma", "covariance", "force_model", "constants", "earth_orientation", "diagnostics",
+               "elements")   # derived on output (osculating elements), never read back
 #: Tolerances of the covariance checks (relative to the largest diagonal scale).
 _SYMMETRY_RTOL = 1e-9
 _PSD_RTOL = 1e-10
@@ -382,6 +383,15 @@ def read_state_or_tle(path: str, eop=None, at=None) -> State:
 
 # --------------------------------------------------------------------------- writing
 
+def orbital_elements(state: State) -> dict:
+    """Osculating classical elements of the state, for people (degrees); derived, never read back."""
+    from trackproc.constants import MU_EARTH
+    from trackproc.dynamics.kepler import classical_elements
+
+    mu = (state.constants or {}).get("mu_m3_s2", MU_EARTH)
+    return classical_elements(state.r_m, state.v_m_s, mu)
+
+
 def state_document(state: State, force: str | None = None, eop_source: str | None = None) -> dict:
     """The JSON object of ``state`` (GCRF), keys in the documented order.
 
@@ -393,7 +403,8 @@ def state_document(state: State, force: str | None = None, eop_source: str | Non
     force = force if force is not None else state.force_model
     key = force_key(FORCE_LABELS.get(force, force)) if force is not None else None
     doc = {"schema_version": SCHEMA_VERSION, "epoch": format_epoch(state.epoch), "frame": "GCRF",
-           "position_m": state.r_m, "velocity_m_s": state.v_m_s, "parameters": list(state.parameters)}
+           "position_m": state.r_m, "velocity_m_s": state.v_m_s, "elements": orbital_elements(state),
+           "parameters": list(state.parameters)}
     values = state.values
     if values is None:
         values = np.full(len(state.parameters), np.nan)

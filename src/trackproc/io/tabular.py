@@ -52,6 +52,17 @@ META_KEY = b"trackproc"
 #: Prefix of the comment line that carries the same metadata in a trackproc CSV.
 CSV_META_PREFIX = "trackproc:"
 
+
+def csv_metadata_line(meta_text: str) -> str:
+    """The ``# trackproc: {...}`` first line of a CSV output, or nothing when the run asked for
+    plain CSV (``--no-metadata`` / ``TRACKPROC_CSV_METADATA=0``: spreadsheets and pandas read it
+    without options; the metadata then lives only in Parquet/Arrow outputs)."""
+    import os
+
+    if os.environ.get("TRACKPROC_CSV_METADATA", "1").strip().lower() in ("0", "false", "no", "off"):
+        return ""
+    return f"# {CSV_META_PREFIX} {meta_text}\n"
+
 DEG = math.pi / 180.0
 
 #: Unit-suffixed spelling -> (canonical kind, factor to SI, unit as written).

@@ -373,7 +373,8 @@ def _columns(prefix, cov, rtn, obs) -> dict:
 
 
 def _frame(times, t, nominal, covs, rtn, obs, track, options, mc) -> pd.DataFrame:
-    cols = {"time": pd.DatetimeIndex(times).tz_localize("UTC"), "elapsed_s": t}
+    # elapsed time to the nanosecond the times carry (not 600.0000000000026 from the JD arithmetic)
+    cols = {"time": pd.DatetimeIndex(times).tz_localize("UTC"), "elapsed_s": np.round(t, 9)}
     for k, (name, unit, _) in enumerate(COMPONENTS):
         cols[f"{name}_{unit}"] = nominal[:, k]
     first = options.methods[0]
@@ -583,7 +584,7 @@ def table_bytes(frame: pd.DataFrame, meta: dict, fmt: str) -> bytes:
 
     from trackproc.io.jsonutil import dumps, json_ready
     from trackproc.io.passfile import iso_times, meta_json
-    from trackproc.io.tabular import CSV_META_PREFIX, META_KEY
+    from trackproc.io.tabular import META_KEY, csv_metadata_line
 
     fmt = getattr(fmt, "value", fmt)
     meta_text = meta_json(json_ready(meta))
@@ -595,7 +596,7 @@ def table_bytes(frame: pd.DataFrame, meta: dict, fmt: str) -> bytes:
         import csv
 
         out = io.StringIO()
-        out.write(f"# {CSV_META_PREFIX} {meta_text}\n")
+        out.write(csv_metadata_line(meta_text))
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(list(frame.columns))
         cells = [iso_times(frame[c]) if c.startswith("time") else frame[c].to_numpy() for c in frame.columns]
@@ -697,8 +698,11 @@ def plot_bytes(result: AccuracyResult) -> bytes:
     panels = [("position", [("radial", "m"), ("along", "m"), ("cross", "m")], "sigma, m"),
               ("velocity", [("v_radial", "m_s"), ("v_along", "m_s"), ("v_cross", "m_s")], "sigma, m/s")]
     if "sigma_range_m" in f.columns:
-        panels.append((f"station {result.meta['station']['name']}", [("range", "m"), ("range_rate", "m_s")],
-                       "sigma, m | m/s"))
+        # one unit per panel; the station's sigmas only while the satellite is above its horizon
+        name = result.meta["station"]["name"]
+        panels.append((f"station {name}: range (while visible)", [("range", "m")], "sigma, m"))
+        panels.append((f"station {name}: range-rate (while visible)", [("range_rate", "m_s")], "sigma, m/s"))
+    visible = (f["elevation_deg"].to_numpy() > 0.0) if "elevation_deg" in f.columns else np.ones(len(f), bool)
     fig, axes = plt.subplots(len(panels), 1, figsize=(9, 3.4 * len(panels)), sharex=True, squeeze=False)
     styles = {"spectral": dict(ls="-", lw=1.6), "stm": dict(ls="--", lw=1.2), "monte-carlo": dict(ls="", marker=".")}
     colors = ["C0", "C1", "C2"]
@@ -709,7 +713,10 @@ def plot_bytes(result: AccuracyResult) -> bytes:
                 if col not in f.columns:
                     continue
                 label = f"{name} ({method})"
-                ax.plot(hours, f[col].to_numpy(), color=colors[k], label=label, **styles[method])
+                values = f[col].to_numpy(dtype=float)
+                if title.startswith("station"):
+                    values = np.where(visible, values, np.nan)   # below the horizon: no measurement
+                ax.plot(hours, values, color=colors[k], label=label, **styles[method])
         ax.set_yscale("log")
         ax.set_ylabel(ylabel)
         ax.set_title(f"{title}: 1-sigma of the predicted state", fontsize=10)

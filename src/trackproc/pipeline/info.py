@@ -182,3 +182,152 @@ def ephemeris_info(frame, meta: dict, source: str) -> dict:
         "force_model": meta.get("force_model"),
         "extra_columns": extra,
     }
+
+
+# --------------------------------------------------------------------------- other file kinds
+
+
+def _state_summary(r_m, v_m_s, mu: float | None = None) -> dict:
+    from trackproc.constants import MU_EARTH, WGS84_A
+    from trackproc.dynamics.kepler import classical_elements
+
+    r = float(np.linalg.norm(r_m))
+    el = classical_elements(np.asarray(r_m, float), np.asarray(v_m_s, float), mu or MU_EARTH)
+    rounded = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in el.items()}
+    return {"radius_km": round(r / 1e3, 3), "above_equatorial_radius_km": round((r - WGS84_A) / 1e3, 3),
+            "speed_m_s": round(float(np.linalg.norm(v_m_s)), 3), "elements": rounded}
+
+
+def state_info(data: bytes, source: str) -> dict:
+    """A state file (JSON): epoch, frame, the state, its osculating elements, the estimated
+    parameters with their sigmas, the force model and the solution's quality when recorded."""
+    import json
+
+    from trackproc.io.statefile import parse_state
+
+    state = parse_state(data, source)
+    doc = json.loads(data)
+    out = {"file": source, "kind": "state (JSON)", "epoch": doc.get("epoch"), "frame": doc.get("frame"),
+           "position_m": [float(x) for x in state.r_m], "velocity_m_s": [float(x) for x in state.v_m_s]}
+    out.update(_state_summary(state.r_m, state.v_m_s, (state.constants or {}).get("mu_m3_s2")))
+    sigma = state.sigma
+    if sigma is None and state.covariance is not None:
+        sigma = np.sqrt(np.clip(np.diag(state.covariance), 0.0, None))
+    if sigma is not None:
+        out["sigma"] = {p: float(s) for p, s in zip(state.parameters, sigma)}
+    out["covariance"] = state.covariance is not None
+    out["force_model"] = doc.get("force_model")
+    for key in ("quality", "earth_orientation"):
+        if key in doc:
+            out[key] = doc[key]
+    converged = (doc.get("diagnostics") or {}).get("converged")
+    if converged is not None:
+        out["converged"] = converged
+    return out
+
+
+def tle_info(data: bytes, source: str) -> dict:
+    """A TLE: name, catalogue number, epoch, the mean elements as written (TEME, SGP4 theory)."""
+    from trackproc.io.statefile import format_epoch
+    from trackproc.io.tle import parse_tle, tle_epoch
+
+    tle = parse_tle(data.decode("ascii", errors="replace"), source)
+    l2 = tle.line2
+    return {"file": source, "kind": "TLE (SGP4 mean elements, TEME)", "name": tle.name, "catalogue_number": tle.satnum,
+            "epoch": format_epoch(tle_epoch(tle)), "inclination_deg": float(l2[8:16]), "raan_deg": float(l2[17:25]),
+            "eccentricity": float("0." + l2[26:33].strip()), "argp_deg": float(l2[34:42]),
+            "mean_anomaly_deg": float(l2[43:51]), "mean_motion_rev_per_day": float(l2[52:63]),
+            "bstar": tle.line1[53:61].strip()}
+
+
+def opm_info(data: bytes, source: str) -> dict:
+    """A CCSDS OPM (KVN): object, epoch, frame, the state, its elements and sigmas."""
+    from trackproc.io.opm import parse_opm
+
+    opm = parse_opm(data.decode("utf-8", errors="replace"), source)
+    out = {"file": source, "kind": f"CCSDS OPM {opm['version']}", **opm["meta"],
+           "epoch": str(opm["epoch"]) + "Z", "frame": opm["ref_frame"], "time_system": opm["time_system"],
+           "position_m": [float(x) for x in opm["r_m"]], "velocity_m_s": [float(x) for x in opm["v_m_s"]]}
+    out.update(_state_summary(opm["r_m"], opm["v_m_s"]))
+    cov = opm["covariance"]
+    out["covariance"] = cov is not None
+    if cov is not None:
+        names = ("x", "y", "z", "vx", "vy", "vz")
+        out["sigma"] = {n: float(s) for n, s in zip(names, np.sqrt(np.clip(np.diag(cov), 0, None)))}
+    return out
+
+
+def _kvn_values(text: str) -> tuple[dict, list[str]]:
+    """Keyword values (first occurrence) and the data lines of a CCSDS KVN message."""
+    values, data = {}, []
+    for line in text.splitlines():
+        stripped = line.strip()
+        if not stripped or stripped.startswith("COMMENT"):
+            continue
+        key, sep, value = stripped.partition("=")
+        if sep:
+            values.setdefault(key.strip(), value.strip())
+        elif stripped[:1].isdigit():
+            data.append(stripped)
+    return values, data
+
+
+def oem_info(data: bytes, source: str) -> dict:
+    """A CCSDS OEM (KVN): object, frame, the span and the number of states (and covariances)."""
+    text = data.decode("utf-8", errors="replace")
+    values, lines = _kvn_values(text)
+    states = [l for l in lines if len(l.split()) >= 7 and "T" in l.split()[0]]
+    epochs = [l.split()[0] for l in states]
+    return {"file": source, "kind": f"CCSDS OEM {values.get('CCSDS_OEM_VERS', '?')}",
+            "object_name": values.get("OBJECT_NAME"), "object_id": values.get("OBJECT_ID"),
+            "center": values.get("CENTER_NAME"), "frame": values.get("REF_FRAME"),
+            "time_system": values.get("TIME_SYSTEM"), "states": len(states),
+            "start": epochs[0] if epochs else None, "end": epochs[-1] if epochs else None,
+            "covariance_blocks": text.count("COVARIANCE_START")}
+
+
+def tdm_info(data: bytes, source: str) -> dict:
+    """A CCSDS TDM (KVN): participants, path, the samples per kind and station, the span."""
+    from trackproc.io.tdm import read_tdm
+
+    raw = read_tdm(data, source)
+    frame = raw.frame
+    values, _ = _kvn_values(data.decode("utf-8", errors="replace"))
+    per_station = {str(s): {str(k): int(n) for k, n in g["kind"].value_counts().sort_index().items()}
+                   for s, g in frame.groupby("station")}
+    times = iso_times(frame["time"]) if len(frame) else []
+    return {"file": source, "kind": f"CCSDS TDM {values.get('CCSDS_TDM_VERS', '?')}",
+            "time_system": values.get("TIME_SYSTEM"), "samples": int(len(frame)),
+            "start": str(min(times)) if len(times) else None, "end": str(max(times)) if len(times) else None,
+            "samples_per_station": per_station, "doppler_mode": raw.meta.get("doppler_mode"),
+            "carrier_hz": raw.meta.get("carrier_hz")}
+
+
+def file_kind(data: bytes) -> str:
+    """What a file is, from its first bytes: state, tle, opm, oem, tdm or table (pass file /
+    ephemeris in Parquet, Arrow or CSV)."""
+    head = data.lstrip()[:4096]
+    if head.startswith(b"{"):
+        return "state"
+    for kind in (b"OPM", b"OEM", b"TDM"):
+        if head.startswith(b"CCSDS_" + kind + b"_VERS"):
+            return kind.decode().lower()
+    lines = [l.strip() for l in head.decode("ascii", errors="replace").splitlines() if l.strip()]
+    if 2 <= len(lines) <= 3 and lines[-2].startswith("1 ") and lines[-1].startswith("2 "):
+        return "tle"
+    return "table"
+
+
+def format_mapping(summary: dict) -> str:
+    """A flat ``key  value`` listing for people (nested mappings one level deep)."""
+    out = []
+    for key, value in summary.items():
+        if isinstance(value, dict) and value and all(not isinstance(v, (dict, list)) for v in value.values()):
+            out.append(f"{key}")
+            out.extend(f"  {k:<26}{v}" for k, v in value.items())
+        elif isinstance(value, dict) and value and all(isinstance(v, dict) for v in value.values()):
+            out.append(f"{key}")
+            out.extend(f"  {k:<26}" + ", ".join(f"{a} {b}" for a, b in v.items()) for k, v in value.items())
+        else:
+            out.append(f"{key:<28}{value}")
+    return "\n".join(out) + "\n"

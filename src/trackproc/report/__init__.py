@@ -1,0 +1,6 @@
+"""The report layer: figures and text for people, from the plain results of ``pipeline``.
+
+Between ``cli`` and ``pipeline`` in the layer contract: nothing below imports it. Angles are
+shown in degrees, every axis names its unit, and matplotlib (the optional ``plot`` extra,
+``pip install 'trackproc[plot]'``) is imported only when a figure is drawn.
+"""

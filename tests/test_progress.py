@@ -1,0 +1,29 @@
+"""Progress only on a terminal (issue 16): a run over two seconds shows an elapsed-time line on a
+TTY's stderr and erases it; in a pipe nothing."""
+
+import io
+import time
+
+from trackproc.cli.progress import ticker
+
+
+class _Tty(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_terminal_sees_progress_then_a_clean_line():
+    out = _Tty()
+    with ticker("accuracy", stream=out, after_s=0.2):
+        time.sleep(1.5)
+    text = out.getvalue()
+    assert "trackproc accuracy: working" in text
+    assert text.endswith("\r") and text.rstrip("\r ").count("\r") >= 1
+
+
+def test_pipe_quiet_short_and_batch_see_nothing():
+    for stream, kw, command, wait in ((io.StringIO(), {}, "accuracy", 0.5), (_Tty(), {"enabled": False}, "accuracy", 0.5),
+                                      (_Tty(), {}, "accuracy", 0.05), (_Tty(), {}, "batch", 0.5)):
+        with ticker(command, stream=stream, after_s=0.2, **kw):
+            time.sleep(wait)
+        assert stream.getvalue() == ""
