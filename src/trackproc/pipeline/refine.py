@@ -511,7 +511,8 @@ class Refinement:
             return h[keep], jac[keep]
 
         if self.correlated():        # GLS: the whitened kept samples, unit sigmas
-            kept, y = self.whitened(keep, sigma_scale, np.asarray(sol.computed, float) + np.asarray(sol.residual, float))
+            y_all = np.asarray(sol.computed, float) + np.asarray(sol.residual, float)
+            kept, y = self.whitened(keep, sigma_scale, y_all)
             sigma, periodic = np.ones(y.size), None
 
         x_hat = np.asarray(sol.values, float)
@@ -897,19 +898,8 @@ def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinem
         drift_t = float(beta[-1] / sd) if sd > 0 else 0.0
         want_drift = (opt.noise == "auto" and opt.doppler_bias is None
                       and abs(drift_t) > max(DRIFT_T, math.sqrt(math.log(max(keep.sum(), 3)))))
-    # effective number of independent samples of the noise the orbit sees: (tr C')²/tr(C'²) with
-    # C' = P C P, P the projection that removes the explicit offset and drift (Bayley & Hammersley)
-    kk = np.flatnonzero(keep)
-    bias_cols = np.column_stack([np.ones(kk.size), t[kk] - t0])
-    qb, _ = np.linalg.qr(bias_cols)
-    c = nf.model.covariance(t[kk], t0)
-    cq = c - qb @ (qb.T @ c)
-    cp = cq - (cq @ qb) @ qb.T
-    n_eff = nz.effective_samples(cp)
     report = nf.as_dict()
-    report.update({"effective_samples": n_eff, "effective_samples_definition":
-                   "(tr C')^2 / tr(C'^2), C' the noise covariance of the kept samples without the explicit offset "
-                   "and drift (Bayley & Hammersley 1946): n for white noise", "option": opt.noise,
+    report.update({"option": opt.noise,
                    "oscillator_noise_given": walk, "link": _link_mode(ref)})
     if drift_t is not None:
         report["drift_t"] = drift_t
