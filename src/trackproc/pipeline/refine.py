@@ -357,7 +357,7 @@ class Refinement:
     noise: Optional[object] = None
     #: samples edited when the noise model was fitted (the GLS starts from them)
     noise_edited: Optional[np.ndarray] = None
-    #: what :func:`choose_noise` found (written to the diagnostics)
+    #: what :func:`noise_model` found (written to the diagnostics)
     noise_report: Optional[dict] = None
 
     @property
