@@ -31,9 +31,10 @@ with the overall scale profiled out (``σ̂² = rᵀ P̃ r / (n - p)``). The mod
 + random walk, + both) is chosen per pass by the restricted likelihood with a penalty: a
 component is added only when twice the log-likelihood gain exceeds both the BIC penalty
 (Schwarz 1978: ``k ln n``) and the 99.9 % point of χ² with its number of parameters, so that
-white noise stays white (the white path is then exactly the weighted least squares of before):
-among the correlated models that pass this test, the most general. An AR(1) of a time constant much longer than the pass and a random walk are nearly
-the same process once the offset is estimated, and at short lags a walk plus white noise
+white noise stays white (the white path is then exactly the weighted least squares of before);
+among the correlated models that pass this test, the most general. An AR(1) of a time constant
+much longer than the pass and a random walk are nearly the same process once the offset is
+estimated, and at short lags a walk plus white noise
 resembles an AR(1): one pass rarely tells them apart, and the model that carries both keeps the
 covariance honest whichever it is.
 
@@ -54,7 +55,7 @@ import numpy as np
 from scipy.linalg import cho_factor, solve_triangular
 
 __all__ = ["NoiseModel", "NoiseFit", "PassCovariance", "fit_noise", "restricted_loglik", "MODELS",
-           "effective_samples", "lag1_correlation"]
+           "effective_samples", "effective_samples_beyond", "lag1_correlation"]
 
 #: Models, by the components they add to white noise.
 MODELS = ("white", "ar1", "walk", "ar1+walk")
@@ -110,6 +111,18 @@ def effective_samples(cov: np.ndarray) -> float:
     Hammersley 1946)."""
     c = np.asarray(cov, float)
     return float(np.trace(c) ** 2 / np.sum(c * c))
+
+
+def effective_samples_beyond(model: "NoiseModel", t_s, t0: Optional[float] = None) -> float:
+    """Effective number of independent samples of the noise an orbit sees once the explicit
+    offset and drift are estimated: :func:`effective_samples` of ``P C P``, ``P`` the projection
+    that removes a constant and a line in time (n for white noise)."""
+    t = np.asarray(t_s, float)
+    t0 = float(t.min()) if t0 is None else float(t0)
+    q, _ = np.linalg.qr(np.column_stack([np.ones(t.size), t - t0]))
+    c = model.covariance(t, t0)
+    cq = c - q @ (q.T @ c)
+    return effective_samples(cq - (cq @ q) @ q.T)
 
 
 def lag1_correlation(t_s, r, max_gap_s: Optional[float] = None) -> float:
@@ -204,7 +217,8 @@ def _subset(t: np.ndarray, max_n: int = MAX_REML_SAMPLES, run: int = RUN_LENGTH)
 class NoiseFit:
     """The chosen :class:`NoiseModel` of one pass and the evidence: restricted log-likelihood
     of each candidate (``candidates``: name -> dict), the samples used, the lag-1 correlation of
-    the residuals, the effective number of independent samples under the chosen model."""
+    the residuals, the effective number of independent samples under the chosen model
+    (:func:`effective_samples_beyond`)."""
 
     model: NoiseModel
     candidates: dict
@@ -218,7 +232,11 @@ class NoiseFit:
     def as_dict(self) -> dict:
         out = self.model.as_dict()
         out.update({"how": self.how, "samples": self.n, "samples_reml": self.n_reml, "lag1_correlation": self.lag1,
-                    "effective_samples_bayley": self.n_effective, "candidates": self.candidates})
+                    "effective_samples": self.n_effective,
+                    "effective_samples_definition": "(tr C')^2 / tr(C'^2), C' the noise covariance of the kept "
+                                                    "samples without the explicit offset and drift (Bayley & "
+                                                    "Hammersley 1946): n for white noise",
+                    "candidates": self.candidates})
         if self.notes:
             out["notes"] = list(self.notes)
         return out
@@ -326,9 +344,9 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
             passing.append(name)
     chosen = base if len(passing) == 1 else max(passing[1:], key=lambda name: (fitted[name][2], fitted[name][1]))
     model = fitted[chosen][0]
-    cov = model.covariance(t, t0)
     return NoiseFit(model=model, candidates=cands, n=n, n_reml=int(ts.size), lag1=lag1_correlation(t, r),
-                    n_effective=effective_samples(cov), how="REML" if walk is None else "REML, walk given")
+                    n_effective=effective_samples_beyond(model, t, t0),
+                    how="REML" if walk is None else "REML, walk given")
 
 
 # ----------------------------------------------------------------------------- whitening
