@@ -6,20 +6,20 @@ import logging
 import os
 import re
 import sys
-
-if os.environ.get("PYTEST_XDIST_WORKER"):
-    # One BLAS thread per xdist worker: -n 2 on 2 cores with OpenBLAS's own threads oversubscribes the
-    # cores (tests measured up to 30x slower). Set before numpy is first imported; results are unchanged
-    # (the recorded set of tests/test_golden.py passes either way).
-    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(_var, "1")
 from dataclasses import dataclass
 from pathlib import Path
 
-import pytest
-from typer.testing import CliRunner
+# One BLAS thread per test process (unless set by the caller): the matrices here are small, and with
+# -n 2 on 2 cores OpenBLAS's own threads oversubscribe the cores and spin (tests/test_smoothing.py with
+# -n 2 on a loaded machine: 104 s wall, 31.5 s CPU with 2 threads; 22 s, 5.4 s with 1). Set before numpy
+# is first imported; the results are unchanged (tests/test_golden.py passes either way).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from trackproc.cli import app as cli_app
+import pytest  # noqa: E402
+from typer.testing import CliRunner  # noqa: E402
+
+from trackproc.cli import app as cli_app  # noqa: E402
 
 cli_app._register()
 
