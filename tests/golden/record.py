@@ -21,6 +21,7 @@ import io
 import json
 import logging
 import math
+import os
 import re
 import sys
 import tempfile
@@ -98,7 +99,8 @@ CASES: dict[str, tuple[dict[str, str], list[list[str]]]] = {
     "propagate_at_station": ({}, [
         ["propagate", "{data}/truth.json", "--span", "3600", "--step", "120", "--at-station", "CPH",
          "--stations", "{data}/stations.csv", "--carrier-hz", "2.2e9", "--dut1", "0", "-o", "{work}/pred.csv"],
-        ["propagate", "{data}/stale.json", "--span", "-1800", "--step", "300", "--stm", "-o", "{work}/stm.csv"],
+        ["propagate", "{data}/stale.json", "--span", "-1800", "--step", "300", "--stm", "--dut1", "0",
+         "-o", "{work}/stm.csv"],
         ["propagate", "{data}/truth_at_start.json", "--span", "3600", "--step", "600", "--format", "oem",
          "--dut1", "0", "-o", "{work}/eph.oem"],
     ]),
@@ -127,16 +129,19 @@ CASES: dict[str, tuple[dict[str, str], list[list[str]]]] = {
 
 # --- running -----------------------------------------------------------------------------------------
 
-def run_command(args: list[str]) -> tuple[int, bytes, str]:
-    """One ``trackproc`` command in-process: (exit code, stdout bytes, stderr text)."""
+def run_command(args: list[str], work: Path) -> tuple[int, bytes, str]:
+    """One ``trackproc`` command in-process: (exit code, stdout bytes, stderr text). The user's settings
+    are kept out: no TRACKPROC_* variable, and no config file (XDG_CONFIG_HOME is the empty ``work``)."""
     from typer.testing import CliRunner
 
     from trackproc.cli import app as cli_app
 
+    env = {name: None for name in os.environ if name.startswith("TRACKPROC_")}
+    env["XDG_CONFIG_HOME"] = str(work / ".config")
     root = logging.getLogger()
     handlers, level = list(root.handlers), root.level
     try:
-        with CliRunner().isolation() as (out, err, _):
+        with CliRunner().isolation(env=env) as (out, err, _):
             code = cli_app.main(args)
             sys.stdout.flush()
             sys.stderr.flush()
@@ -155,7 +160,7 @@ def run_case(name: str, work: Path) -> dict:
     record: dict = {"commands": [], "files": {}}
     for i, template in enumerate(commands):
         args = [_subst(a, subst) for a in template]
-        code, stdout, stderr = run_command(args)
+        code, stdout, stderr = run_command(args, work)
         if code != 0:
             raise RuntimeError(f"case {name}, command {i + 1} ({' '.join(template[:1])}) exited {code}: {stderr.strip()}")
         entry = {"args": template, "exit_code": code}
