@@ -24,7 +24,8 @@ def test_outputs_match_the_recording(name, tmp_path):
     expected = json.loads(path.read_text())
     actual = json.loads(json.dumps(record.run_case(name, tmp_path)))  # the recording's JSON round trip
     diff = record.compare(expected, actual)
-    assert not diff, f"{name}: outputs differ from the recording:\n  " + "\n  ".join(diff)
+    assert not diff, (f"{name}: outputs differ from the recording (if intended, re-record with "
+                      f"PYTHONPATH=src python tests/golden/record.py {name} and say why):\n  " + "\n  ".join(diff))
 
 
 def test_every_recording_has_a_case_and_the_set_stays_small():
