@@ -147,3 +147,11 @@ def pytest_collection_modifyitems(config, items):
             for mark in reasons:
                 item.add_marker(mark)
             item.add_marker(pytest.mark.slow)
+    # a renamed test would drop out of the slow tier silently: say so
+    seen = {(item.path.name, getattr(item, "originalname", item.name)) for item in items}
+    modules = {module for module, _ in seen}
+    for module, names in SLOW_SUBPROCESS.items():
+        missing = sorted(n for n in names or () if module in modules and (module, n) not in seen)
+        if missing:
+            config.issue_config_time_warning(pytest.PytestConfigWarning(
+                f"tests/conftest.py SLOW_SUBPROCESS names tests not in {module}: {', '.join(missing)}"), stacklevel=2)
