@@ -6,20 +6,20 @@ import logging
 import os
 import re
 import sys
-
-if os.environ.get("PYTEST_XDIST_WORKER"):
-    # One BLAS thread per xdist worker: -n 2 on 2 cores with OpenBLAS's own threads oversubscribes the
-    # cores (tests measured up to 30x slower). Set before numpy is first imported; results are unchanged
-    # (the recorded set of tests/test_golden.py passes either way).
-    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(_var, "1")
 from dataclasses import dataclass
 from pathlib import Path
 
-import pytest
-from typer.testing import CliRunner
+# One BLAS thread per test process (unless set by the caller): the matrices here are small, and with
+# -n 2 on 2 cores OpenBLAS's own threads oversubscribe the cores and spin (tests/test_smoothing.py with
+# -n 2 on a loaded machine: 104 s wall, 31.5 s CPU with 2 threads; 22 s, 5.4 s with 1). Set before numpy
+# is first imported; the results are unchanged (tests/test_golden.py passes either way).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
-from trackproc.cli import app as cli_app
+import pytest  # noqa: E402
+from typer.testing import CliRunner  # noqa: E402
+
+from trackproc.cli import app as cli_app  # noqa: E402
 
 cli_app._register()
 
@@ -111,8 +111,30 @@ SLOW_SUBPROCESS = {
 }
 
 
+# --- the layers -------------------------------------------------------------------------------------
+# Each test module is marked with the highest layer of src/trackproc it exercises (layer_cli ... layer_dynamics;
+# the CLI when it runs commands), read from its imports: ``pytest -m layer_dynamics`` runs the bottom
+# layer's tests. (The files stay flat in tests/ while other work edits them; this is the map for a move.)
+LAYERS = ("cli", "pipeline", "io", "methods", "models", "dynamics")
+_LAYER_IMPORT = re.compile(r"trackproc\.(" + "|".join(LAYERS) + r")\b")
+_layer_cache: dict[Path, str | None] = {}
+
+
+def layer_of(path: Path) -> str | None:
+    if path not in _layer_cache:
+        text = path.read_text(encoding="utf-8")
+        found = set(_LAYER_IMPORT.findall(text))
+        if re.search(r"\brun_cli\b|\bcli_app\b|subprocess", text):
+            found.add("cli")
+        _layer_cache[path] = min(found, key=LAYERS.index) if found else None
+    return _layer_cache[path]
+
+
 def pytest_collection_modifyitems(config, items):
     for item in items:
+        layer = layer_of(item.path)
+        if layer:
+            item.add_marker(getattr(pytest.mark, f"layer_{layer}"))
         module = item.path.name
         name = getattr(item, "originalname", item.name)
         reasons = []
@@ -125,3 +147,11 @@ def pytest_collection_modifyitems(config, items):
             for mark in reasons:
                 item.add_marker(mark)
             item.add_marker(pytest.mark.slow)
+    # a renamed test would drop out of the slow tier silently: say so
+    seen = {(item.path.name, getattr(item, "originalname", item.name)) for item in items}
+    modules = {module for module, _ in seen}
+    for module, names in SLOW_SUBPROCESS.items():
+        missing = sorted(n for n in names or () if module in modules and (module, n) not in seen)
+        if missing:
+            config.issue_config_time_warning(pytest.PytestConfigWarning(
+                f"tests/conftest.py SLOW_SUBPROCESS names tests not in {module}: {', '.join(missing)}"), stacklevel=2)

@@ -24,7 +24,8 @@ def test_outputs_match_the_recording(name, tmp_path):
     expected = json.loads(path.read_text())
     actual = json.loads(json.dumps(record.run_case(name, tmp_path)))  # the recording's JSON round trip
     diff = record.compare(expected, actual)
-    assert not diff, f"{name}: outputs differ from the recording:\n  " + "\n  ".join(diff)
+    assert not diff, (f"{name}: outputs differ from the recording (if intended, re-record with "
+                      f"PYTHONPATH=src python tests/golden/record.py {name} and say why):\n  " + "\n  ".join(diff))
 
 
 def test_every_recording_has_a_case_and_the_set_stays_small():
@@ -71,3 +72,16 @@ def test_comparison_flags_a_change_of_1e_11_and_passes_1e_14():
     changed = copy.deepcopy(expected)
     _set(changed, ("files", "pw.json", "json", "frame"), "EME2000")
     assert record.compare(expected, changed)
+
+
+def test_comparison_rules():
+    compare = record.compare
+    assert compare({"a": [1.0, 1e6]}, {"a": [1.0 + 1e-7, 1e6]}) == []          # floor: 1e-12 of the array's 1e6
+    assert compare({"a": [1.0, 1e6]}, {"a": [1.0 + 1e-5, 1e6]})
+    assert compare({"text": [["x ", 1.0, " ", 1e6]]}, {"text": [["x ", 1.0 + 1e-7, " ", 1e6]]})  # text: no floor
+    assert compare({"relative": [1e-16]}, {"relative": [5e-13]}) == []         # rounding noise by construction
+    assert compare({"relative": [1e-16]}, {"relative": [5e-12]})
+    assert compare({"s": "a"}, {"s": "b"}) and compare({"n": 1}, {"n": True}) and compare({"a": [1]}, {"a": [1, 2]})
+    assert compare({"a": 1}, {"a": 1, "b": 2}) and compare({"a": 1, "b": 2}, {"a": 1})
+    assert record._tokens("EPOCH = 2026-03-20T09:30:00.000 J2 x -4.5e-3") == [
+        "EPOCH = 2026-03-20T09:30:00.000 J2 x ", -4.5e-3]
