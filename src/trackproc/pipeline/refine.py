@@ -76,6 +76,13 @@ LINK_MODES = ("one-way", "two-way")
 #: state and the pass are weighed by the pass's actual scatter, not by nominal sigmas.
 REWEIGHT_THRESHOLD = 1.5
 MAX_REWEIGHT = 6
+#: At most this many re-solves with the a-priori scaled by its variance component (:func:`solve_adapted`).
+MAX_APRIORI_ADAPT = 8
+MAX_ADAPT_ITERATIONS = 12
+#: :func:`refine` re-solves at the refined orbit's own zero range-rate until it is within this of
+#: the solution epoch (at most :data:`MAX_TRAVERSE_ITERATIONS` times; else ``traverse_mismatch``).
+TRAVERSE_TOLERANCE_S = 0.5
+MAX_TRAVERSE_ITERATIONS = 3
 #: A pass whose highest elevation is below this gives a weak refinement (see docs/refine.md).
 LOW_PASS_DEG = 25.0
 DEFAULT_APRIORI_ELEMENTS = {"a_m": 50.0, "ex": 5e-5, "ey": 5e-5, "i_rad": 1e-4, "raan_rad": 1e-4, "u_rad": 4e-4}
@@ -123,6 +130,11 @@ class RefineOptions:
     reweight: bool = True
     rank_rtol: float = 1e-12
     covariance: str = "profile"
+    #: The solution epoch instead of the smoothed curve's traverse point (UTC datetime64; set by
+    #: :func:`refine` when it moves the epoch to the refined orbit's own zero range-rate).
+    traverse_epoch: Optional[np.datetime64] = None
+    #: Refuse (keep the stale state) when the pass cannot improve it (:func:`refusal_test`).
+    allow_refusal: bool = True
 
 
 @dataclass
@@ -163,6 +175,7 @@ class RefineResult:
     covariance: np.ndarray
     names: list
     warnings: list = field(default_factory=list)
+    quality: object = None
 
 
 # ----------------------------------------------------------------------------- the pass
@@ -277,7 +290,9 @@ def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source
                          used_t_s=np.sort(pf.t_s[pf.fit.used]))
 
 
-def _traverse_epoch(curve: SmoothedCurve, warnings: list) -> tuple[np.datetime64, str]:
+def _traverse_epoch(curve: SmoothedCurve, warnings: list, override=None) -> tuple[np.datetime64, str]:
+    if override is not None:
+        return np.datetime64(override, "ns"), "the refined orbit's own zero range-rate (iterated)"
     if curve.tca is not None:
         t = curve.tca.t_s
         how = curve.tca.definition
@@ -533,7 +548,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
         raise ProcessingError(f"too few samples in the pass: {len(frame)} (at least 8 are needed)")
 
     curve = smoothed_curve(sub, kind, station, pass_id, source)
-    t_traverse, how = _traverse_epoch(curve, warnings)
+    t_traverse, how = _traverse_epoch(curve, warnings, opt.traverse_epoch)
 
     # the stale state: a TLE is evaluated by SGP4 at the traverse epoch
     if _is_tle_state(initial):
@@ -737,18 +752,84 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
            source: str = "<pass>") -> RefineResult:
     """Refine ``initial`` (a GCRF :class:`~trackproc.io.statefile.State`, or a TLE's) from one pass.
 
+    The consistency gates (docs/refine.md, "Quality"): the a-priori is scaled by its variance
+    component when the pass contradicts it (:func:`solve_adapted`); the solution epoch follows the
+    refined orbit's own zero range-rate; and when the pass cannot improve the stale state
+    (:func:`stale_improvement` not significant, or an a-priori conflict the pass cannot carry), the
+    stale state is kept with its covariance (``refused`` in the diagnostics and the quality).
+    The result's ``quality`` (:func:`refine_quality`) says what was found.
+
     Returns :class:`RefineResult`; raises :class:`InputError` (exit 2) for invalid input and
     :class:`ProcessingError` (exit 1) when the refinement fails (no convergence, rank deficiency).
     """
-    ref = prepare(table, initial, stations, options, eop, source)
-    sol, kkt, scale = solve_weighted(ref)
+    opt = options or RefineOptions()
+    ref = prepare(table, initial, stations, opt, eop, source)
+    ref, sol, kkt, scale, adaptation, improvement, refusal = _solve_gated(ref)
+    # the solution epoch is the refined orbit's own traverse point: re-solve there until it stays
+    moves = []
+    for _ in range(MAX_TRAVERSE_ITERATIONS if refusal is None else 0):
+        t_model = _model_traverse(ref, sol.values)
+        if t_model is None or abs(t_model) <= TRAVERSE_TOLERANCE_S:
+            break
+        epoch = ref.problem.epoch + np.timedelta64(int(round(t_model * 1e9)), "ns")
+        try:
+            moved = prepare(table, initial, stations, replace(opt, traverse_epoch=epoch), eop, source)
+            moved.warnings[:] = list(ref.warnings)
+            moved_out = _solve_gated(moved, adaptation["factor"] if adaptation else 1.0)
+        except ProcessingError:
+            break                                        # the quality reports the mismatch left
+        moves.append(float(t_model))
+        ref, sol, kkt, scale, adaptation, improvement, refusal = moved_out
+        if refusal is not None:
+            break
     consistency = None
     if ref.options.circular:
         # the same assembled problem without the constraints and r_ka (always the last parameter)
         free = replace(ref, options=replace(ref.options, circular=False), names=ref.names[:-1], x0=ref.x0[:-1],
                        scales=ref.scales[:-1])
         consistency = circular_consistency(free, sol, scale)
-    return finish(ref, sol, kkt, scale, consistency=consistency)
+    return finish(ref, sol, kkt, scale, consistency=consistency, adaptation=adaptation, traverse_moves=moves,
+                  improvement=improvement, refusal=refusal)
+
+
+def _may_refuse(ref: Refinement) -> bool:
+    """Refusal applies to the pointwise cost with a stale a-priori on the whole state, unconstrained."""
+    opt = ref.options
+    return (opt.allow_refusal and opt.cost == "pointwise" and not opt.circular
+            and _state_prior_covariance([ref.priors[k] for k in _state_prior_indices(ref)]) is not None)
+
+
+def _solve_gated(ref: Refinement, start_factor: float = 1.0):
+    """Solve with the gates: the improvement test first (a pass that cannot tell the refined
+    state from the stale one is refused before the a-priori is questioned), then the a-priori
+    adaptation (a conflict the pass cannot carry is refused). Returns ``(ref, sol, kkt, scale,
+    adaptation, improvement, refusal)``; ``refusal`` None or ``{"reason", "code",
+    "state_covariance"}``."""
+    may = _may_refuse(ref)
+    original = _state_prior_covariance([ref.priors[k] for k in _state_prior_indices(ref)]) if may else None
+    work = _scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
+    first = solve_weighted(work)
+    improvement = stale_improvement(work, first[0], first[2]) if work.priors else None
+    if may and improvement is not None and not improvement["significant"]:
+        i = improvement
+        w = i["whiteness"]
+        return work, first[0], first[1], first[2], None, improvement, {
+            "code": "not_significant", "state_covariance": original,
+            "reason": (f"the pass does not tell the refined state from the stale one: delta chi2 {i['delta_chi2']:.4g}"
+                       f", {i['delta_chi2_effective']:.3g} after the residuals' time correlation (lag-1 "
+                       f"{w['lag1_autocorrelation']:.2f}, {w['effective_samples']:.0f} independent samples of "
+                       f"{w['n']}), below the 99.9 % point {i['limit']:.3g} of chi2({i['dof']})")}
+    work, sol, kkt, scale, adaptation = solve_adapted(ref, start_factor, first=(work,) + tuple(first))
+    if adaptation is not None:
+        improvement = stale_improvement(work, sol, scale) if work.priors else improvement
+        if may and not adaptation.get("resolved", True):
+            return work, sol, kkt, scale, adaptation, improvement, {
+                "code": "apriori_conflict", "state_covariance": original,
+                "reason": (f"the pass contradicts the stale state's a-priori (chi2 {adaptation['chi2_before']:.4g} "
+                           f"over {adaptation['rows']}, limit {adaptation['limit']:.3g}) and cannot carry a looser "
+                           f"one ({adaptation.get('failure', 'no consistent scale')}); the stale covariance is kept "
+                           "as given")}
+    return work, sol, kkt, scale, adaptation, improvement, None
 
 
 def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0) -> dict:
@@ -774,12 +855,137 @@ def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0
     return out
 
 
-def solve_weighted(ref: Refinement):
+def stale_improvement(ref: Refinement, sol, sigma_scale: float = 1.0, n_seen: int = 6) -> Optional[dict]:
+    """:func:`~trackproc.methods.quality.improvement_test` of a pointwise solution: the data's χ²
+    at the stale state (at the solution epoch, the Doppler offset/drift refitted — they enter
+    linearly) against the refined state's, on the same samples and sigmas, deflated by the
+    correlation of the refined residuals (:func:`~trackproc.methods.quality.whiteness`), with
+    ``n_seen`` (the state directions the pass sees) degrees of freedom. None for the integral cost."""
+    from trackproc.methods import quality as qm
+
+    if ref.options.cost != "pointwise":
+        return None
+    _, y, sigma, _, _ = ref.data()
+    keep = ~np.asarray(sol.edited, bool)
+    s = np.asarray(sigma, float)[keep] * sigma_scale
+    npb = ref.n_problem
+    x = np.asarray(sol.values, float)[:npb].copy()
+    x[:6] = ref.x0[:6]
+    h, jac = ref.problem.model(x)
+    r = (np.asarray(y, float) - h)[keep] / s
+    bias, bias_cov = np.zeros(0), np.zeros((0, 0))
+    if npb > 6:
+        a = jac[keep][:, 6:npb] / s[:, None]
+        db = np.linalg.lstsq(a, r, rcond=None)[0]
+        r = r - a @ db
+        bias, bias_cov = x[6:npb] + db, np.linalg.pinv(a.T @ a)
+    chi2_stale = float(r @ r)
+    rr = np.asarray(sol.residual, float)[keep] / s
+    w = qm.whiteness(rr)
+    out = qm.improvement_test(chi2_stale, float(rr @ rr), max(n_seen, 1), qm.correlation_inflation(
+        w["lag1_autocorrelation"]))
+    out["whiteness"] = w
+    out["stale_nuisance"] = {"values": bias.tolist(), "covariance": bias_cov.tolist()}
+    return out
+
+
+def _state_prior_indices(ref: Refinement) -> list:
+    """Positions in ``ref.priors`` of the a-priori terms on the state alone (indices < 6)."""
+    return [k for k, p in enumerate(ref.priors) if np.all(np.asarray(p.index) < 6)]
+
+
+def _state_prior_chi2(ref: Refinement, x) -> tuple[float, int, float]:
+    """``(chi2, rows)`` of the state a-priori terms at the solution ``x``."""
+    chi2, rows = 0.0, 0
+    for k in _state_prior_indices(ref):
+        p = ref.priors[k]
+        idx = np.asarray(p.index, int)
+        d = np.asarray(x, float)[idx] - np.asarray(p.centre, float)
+        chi2 += float(d @ np.linalg.solve(np.asarray(p.covariance, float), d))
+        rows += idx.size
+    return chi2, rows
+
+
+def _scaled_priors(ref: Refinement, factor: float) -> Refinement:
+    """``ref`` with the covariance of its state a-priori terms multiplied by ``factor``."""
+    from trackproc.methods.least_squares import Prior
+
+    priors = list(ref.priors)
+    for k in _state_prior_indices(ref):
+        p = priors[k]
+        priors[k] = Prior(p.index, p.centre, np.asarray(p.covariance, float) * factor)
+    return replace(ref, priors=priors)
+
+
+def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=None):
+    """:func:`solve_weighted`, then, when the a-priori test rejects (the state's a-priori share of
+    χ² above the 99.9 % point of χ²(rows)), the a-priori covariance is scaled by its
+    maximum-likelihood variance component (Helmert/Förstner:
+    :func:`~trackproc.methods.quality.prior_variance_component`, iterated to a fixed point,
+    never below 1) and the problem solved again: a stale state further off than its a-priori says
+    is weighed by how far off the data show it to be, and the covariance covers that.
+    ``start_factor`` starts from an already scaled a-priori; ``first`` ``(work, sol, kkt, scale)``
+    a solution already made with it. Returns ``(Refinement with the a-priori used, Solution,
+    KKTResult or None, sigma scale, adaptation dict or None)``."""
+    from trackproc.methods import quality as qm
+
+    if first is not None:
+        work, sol, kkt, scale = first
+    else:
+        work = _scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
+        sol, kkt, scale = solve_weighted(work, x0=x0)
+    if not (ref.priors and _state_prior_indices(ref)):
+        return work, sol, kkt, scale, None
+    chi2, rows = _state_prior_chi2(work, sol.values)
+    limit = qm.chi2_limit(rows)
+    if chi2 <= limit and start_factor == 1.0:
+        return work, sol, kkt, scale, None
+    first = {"chi2": chi2, "rows": rows, "limit": limit}
+    factor = start_factor
+    history = []
+    kept = (work, sol, kkt, scale)
+    for _ in range(MAX_APRIORI_ADAPT):
+        pcov = _state_prior_covariance([work.priors[k] for k in _state_prior_indices(work)])
+        red = (qm.prior_redundancy(np.asarray(work.covariance(sol, kkt), float)[:6, :6], pcov)
+               if pcov is not None else math.nan)
+        k_hat = qm.prior_variance_component(chi2, red)
+        history.append({"factor": factor, "chi2": chi2, "redundancy": red, "component": k_hat})
+        if k_hat is None or abs(k_hat - 1.0) < 0.1 or (k_hat < 1.0 and factor <= 1.0):
+            break
+        factor = max(1.0, factor * k_hat)
+        try:
+            trial = _scaled_priors(ref, factor)
+            # from the previous solution a consistent scale converges in a few iterations
+            quick = replace(trial, options=replace(ref.options, max_iterations=min(ref.options.max_iterations,
+                                                                                     MAX_ADAPT_ITERATIONS)))
+            sol, kkt, scale = solve_weighted(quick, x0=sol.values)
+            work = trial
+        except ProcessingError as exc:
+            # the pass alone cannot carry a looser a-priori: keep the last solution, say so
+            work, sol, kkt, scale = kept
+            history.append({"factor": factor, "failed": str(exc)})
+            factor = history[-2]["factor"] if len(history) > 1 else start_factor
+            chi2, rows = _state_prior_chi2(work, sol.values)
+            return work, sol, kkt, scale, {
+                "method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
+                "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": first["chi2"], "chi2_after": chi2,
+                "rows": rows, "limit": first["limit"], "iterations": history, "resolved": False,
+                "failure": f"the refinement with the a-priori scaled by {history[-1]['factor']:.3g} failed: {exc}"}
+        kept = (work, sol, kkt, scale)
+        chi2, rows = _state_prior_chi2(work, sol.values)
+    adaptation = {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
+                  "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": first["chi2"],
+                  "chi2_after": chi2, "rows": rows, "limit": first["limit"], "iterations": history,
+                  "resolved": bool(chi2 <= first["limit"] or (history and history[-1].get("component") is not None
+                                                             and abs(history[-1]["component"] - 1.0) < 0.1))}
+    return work, sol, kkt, scale, adaptation
+
+
+def solve_weighted(ref: Refinement, x0=None):
     """:meth:`Refinement.solve`, repeated with the sample sigmas scaled by √(variance factor) while
     that exceeds :data:`REWEIGHT_THRESHOLD` (pointwise with ``reweight``). Returns
     ``(Solution, KKTResult or None, sigma scale)``."""
     scale = 1.0
-    x0 = None
     for _ in range(MAX_REWEIGHT):
         sol, kkt = ref.solve(sigma_scale=scale, x0=x0)
         vf = sol.variance_factor
@@ -792,7 +998,8 @@ def solve_weighted(ref: Refinement):
 
 
 def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None,
-           prior_centre=None) -> RefineResult:
+           prior_centre=None, adaptation: dict | None = None, traverse_moves: list | None = None,
+           improvement: dict | None = None, refusal: dict | None = None) -> RefineResult:
     """Outputs of a solved :class:`Refinement` (states, covariance, report, residuals);
     ``consistency`` the :func:`circular_consistency` of a ``--circular`` solution;
     ``prior_centre`` the a-priori centre the solution was solved with (:meth:`Refinement.solve`)."""
@@ -810,11 +1017,27 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     names = list(ref.names)
     npb = ref.n_problem
     cov = ref.covariance(sol, kkt)
+    if refusal is not None:
+        # the pass cannot improve the stale state: keep it with its a-priori covariance, the
+        # Doppler offset/drift fitted at it
+        x = np.asarray(sol.values, float).copy()
+        x[:6] = ref.x0[:6]
+        cov = np.zeros_like(np.asarray(cov, float))
+        cov[:6, :6] = refusal["state_covariance"]
+        nuisance = (improvement or {}).get("stale_nuisance") or {}
+        if len(nuisance.get("values", [])) == npb - 6 and npb > 6:
+            x[6:npb] = nuisance["values"]
+            cov[6:npb, 6:npb] = np.asarray(nuisance["covariance"], float)
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     units = problem.params.units() + (["m"] if opt.circular else [])
 
     # residuals at the samples (both costs)
-    if opt.cost == "pointwise":
+    if refusal is not None:
+        h, _ = problem.model(x[:npb])
+        r = problem.meas.observed - h
+        samples = SimpleNamespace(computed=h, residual=r, normalized=r / (problem.meas.sigma * sigma_scale),
+                                  edited=np.asarray(sol.edited, bool))
+    elif opt.cost == "pointwise":
         samples = sol
     else:
         h, _ = problem.model(x[:npb])
@@ -873,7 +1096,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
     big = np.kron(np.eye(2), rtn_matrix(x[:3], x[3:6]))           # GCRF -> RTN for (r, v)
     covariance_note = "linear (the inverse of the whitened normal matrix at the solution)"
-    if opt.covariance == "profile" and opt.cost == "pointwise" and not opt.circular and obs.unobservable and ref.priors:
+    if (opt.covariance == "profile" and opt.cost == "pointwise" and not opt.circular and obs.unobservable and ref.priors
+            and refusal is None):
         # the estimate slides along a curved valley where the pass sees nothing: the linear
         # covariance misses that curvature along the best-determined combinations
         try:
@@ -888,6 +1112,12 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     # (a large unseen part means the a-priori, not the data, put the state there)
     obs.correction_rtn = {part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))
                           for part, d in zip(("seen", "unseen"), obs.split(x[:6] - ref.x0[:6]))}
+    if refusal is not None:
+        refusal = dict(refusal)
+        refusal.pop("state_covariance", None)
+        refusal["refused_correction_rtn"] = {
+            part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))
+            for part, d in zip(("seen", "unseen"), obs.split(np.asarray(sol.values, float)[:6] - ref.x0[:6]))}
 
     # the state at the stale epoch
     dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(ref.stale_epoch),
@@ -909,6 +1139,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                 "sigma_s": float(ref.curve.tca.sigma_s) if ref.curve.tca is not None else None,
                 "curve": ref.curve.source,
                 "refined_orbit_zero_range_rate_s": t_model,
+                "moved_s": list(traverse_moves or []),
                 "refined_orbit_zero_range_rate_utc": (format_epoch(problem.epoch + np.timedelta64(
                     int(round(t_model * 1e9)), "ns")) if t_model is not None else None)}
 
@@ -948,6 +1179,10 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         warnings.append(f"{len(obs.unobservable)} state direction(s) are weakly determined by the pass alone "
                         "(see the observability report); consider --apriori")
 
+    quality = refine_quality(ref, sol, sigma_scale=sigma_scale, adaptation=adaptation, improvement=improvement,
+                             refusal=refusal, t_model=t_model, max_el=max_el, consistency=consistency)
+    if refusal is not None:
+        warnings.append(f"the stale state is kept: {refusal['reason']}")
     rtn = rtn_covariance(x[:3], x[3:6], cov[:6, :6])
     diagnostics = {
         "converged": bool(sol.converged), "message": sol.message, "iterations": int(sol.iterations),
@@ -957,6 +1192,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         "samples": int(problem.meas.observed.size), "edited": int((~kept).sum()),
         "sigma_scale": sigma_scale, "max_elevation_deg": max_el,
         "residual_rms": {"value": rms, "unit": UNITS[ref.kind], "range_rate_m_s": rms * rr_factor},
+        "apriori_adaptation": adaptation, "improvement": _without_nuisance(improvement), "refused": refusal,
         "traverse": traverse, "constraints": constraints, "observability": obs.as_dict(),
         "covariance_rtn": rtn,
         "sigma_rtn": dict(zip(rf.RTN_NAMES, np.sqrt(np.clip(np.diag(rtn), 0.0, None)).tolist())),
@@ -1002,6 +1238,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                              "velocity_m_s": ref.initial.v_m_s.tolist(),
                              "source": ref.initial.source or (ref.initial.extra or {}).get("source")}}
     eop_source = getattr(problem.eop, "source", None) or "none (UT1-UTC = 0, no polar motion)"
+    extra["quality"] = quality.as_dict()
     state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=names, values=values, sigma=sigma,
                                covariance=cov, force_model=opt.force, constants=force_model_constants(opt.force),
                                eop_source=eop_source, diagnostics=diagnostics, extra=extra)
@@ -1010,10 +1247,92 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                                      covariance=cov_s, force_model=opt.force,
                                      constants=force_model_constants(opt.force), eop_source=eop_source,
                                      diagnostics=diagnostics,
-                                     extra={"refinement": method, "at_traverse_epoch": format_epoch(problem.epoch)})
+                                     extra={"refinement": method, "at_traverse_epoch": format_epoch(problem.epoch),
+                                            "quality": quality.as_dict()})
     return RefineResult(state=state, stale_epoch_state=stale_state, solution=sol, problem=problem, curve=ref.curve,
                         residuals=residuals, observability=obs, constraints=constraints, covariance=cov, names=names,
-                        warnings=warnings)
+                        warnings=warnings, quality=quality)
+
+
+def _without_nuisance(improvement):
+    if improvement is None:
+        return None
+    return {k: v for k, v in improvement.items() if k != "stale_nuisance"}
+
+
+def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, improvement=None, refusal=None,
+                   t_model=None, max_el=None, consistency=None):
+    """The :class:`~trackproc.methods.quality.Quality` of a refinement: a-priori conflict (and
+    its adaptation), variance factor of the nominal sigmas, residual whiteness, traverse-epoch
+    mismatch, low pass, circular-constraint conflict, edited samples, refusal."""
+    from trackproc.methods import quality as qm
+
+    q = qm.Quality()
+    opt = ref.options
+    if refusal is not None:
+        q.add("refused", "suspect", f"the stale state is kept: {refusal['reason']}")
+    # a-priori conflict
+    if adaptation is not None:
+        a = adaptation
+        if a.get("resolved", True):
+            q.add("apriori_conflict", "ok",
+                  f"the pass contradicted the a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
+                  f"{a['limit']:.3g}); its covariance was scaled by {a['factor']:.3g} (sigmas x{a['sigma_factor']:.3g}, "
+                  "maximum-likelihood variance component)", value=a["chi2_before"], limit=a["limit"])
+        else:
+            q.add("apriori_conflict", "suspect" if refusal is not None else "rejected",
+                  f"the pass contradicts the a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
+                  f"{a['limit']:.3g}) and cannot carry a looser one ({a.get('failure', '')})",
+                  value=a["chi2_before"], limit=a["limit"])
+    elif sol.n_prior:
+        chi2, rows = _state_prior_chi2(ref, sol.values)
+        if rows:
+            limit = qm.chi2_limit(rows)
+            q.add("apriori_conflict", "ok" if chi2 <= limit else "rejected",
+                  f"a-priori chi2 {chi2:.4g} over {rows} (limit {limit:.3g})", value=chi2, limit=limit)
+    # the variance factor of the nominal sigmas (reweighting hides it in the solution's own)
+    if sol.dof > 0 and math.isfinite(sol.variance_factor):
+        vf = float(sol.variance_factor) * sigma_scale ** 2
+        limit = qm.variance_factor_limit(sol.dof)
+        if opt.cost == "integral":
+            q.add("variance_factor", "ok", f"variance factor {vf:.3g} of the curve (the integral cost's pseudo-sigmas "
+                  "are not a test of the data)", value=vf, limit=None)
+        else:
+            q.add("variance_factor", "ok" if vf <= limit else "suspect",
+                  f"a-posteriori variance factor {vf:.3g} with the samples' own sigmas (99.9 % limit {limit:.3g})"
+                  + (f"; sigmas scaled by {sigma_scale:.3g} to their actual scatter" if sigma_scale > 1 else ""),
+                  value=vf, limit=limit)
+    # whiteness of the residuals
+    if improvement is not None and "whiteness" in improvement:
+        w = improvement["whiteness"]
+    else:
+        keep = ~np.asarray(sol.edited, bool)
+        w = qm.whiteness(np.asarray(sol.normalized, float)[keep]) if opt.cost == "pointwise" else None
+    if w is not None:
+        qm.add_whiteness(q, w)
+    # the epoch: the refined orbit's own traverse point
+    if ref.curve.tca is not None or opt.traverse_epoch is not None:
+        if t_model is None:
+            q.add("traverse_mismatch", "suspect", "the refined orbit's range-rate does not vanish within 60 s of the "
+                  "solution epoch", value=None, limit=TRAVERSE_TOLERANCE_S)
+        else:
+            q.add("traverse_mismatch", "ok" if abs(t_model) <= TRAVERSE_TOLERANCE_S else "suspect",
+                  f"the refined orbit's own zero range-rate is {t_model:+.3g} s from the solution epoch",
+                  value=abs(t_model), limit=TRAVERSE_TOLERANCE_S)
+    if max_el is not None:
+        q.add("low_pass", "ok" if max_el >= LOW_PASS_DEG else "suspect",
+              f"highest elevation {max_el:.1f} deg" + (" (one low pass determines the orbit poorly)"
+                                                       if max_el < LOW_PASS_DEG else ""),
+              value=max_el, limit=LOW_PASS_DEG)
+    if consistency is not None and "p_value" in consistency:
+        bad = consistency["p_value"] < CIRCULAR_TEST_P
+        q.add("circular_conflict", "suspect" if bad else "ok",
+              f"circular-orbit constraints: delta chi2 {consistency['delta_chi2']:.4g} over 2, p = "
+              f"{consistency['p_value']:.2g}", value=consistency["p_value"], limit=CIRCULAR_TEST_P)
+    if opt.cost == "pointwise" and sol.n_edited > 0.1 * sol.n_measurements:
+        q.add("edited", "suspect", f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)",
+              value=int(sol.n_edited), limit=0.1 * sol.n_measurements)
+    return q
 
 
 # ----------------------------------------------------------------------------- text
