@@ -109,6 +109,10 @@ def refine_command(
              "the file holds the other one too."),
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Write the residuals at the samples (Parquet, or CSV by the suffix)."),
+    strict: bool = typer.Option(
+        False, "--strict",
+        help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' solution always exits 1); the output "
+             "is written either way."),
     output: Optional[str] = OutputOpt,
 ) -> None:
     """Refine a stale orbit state from one Doppler (or range-rate) pass of one station, one- or
@@ -117,8 +121,11 @@ def refine_command(
     report (what one pass cannot see, in radial/along/cross-track terms), the residuals and the
     iterations.
 
-    A one-screen summary goes to stderr. Exit status 1 when the refinement fails
-    (no convergence, rank deficiency), 2 for invalid input.
+    A one-screen summary goes to stderr. The state file carries a ``quality`` verdict (ok,
+    suspect, rejected) with its reasons; when the pass cannot improve the stale state, the
+    stale state is kept with its covariance (quality: refused). Exit status 1 when the
+    refinement fails (no convergence, rank deficiency) or its verdict is 'rejected' (or
+    'suspect' with --strict; the output is written), 2 for invalid input.
 
     Example:
 
@@ -171,3 +178,8 @@ def refine_command(
     if log.isEnabledFor(logging.INFO):
         sys.stderr.write(summary_text(result))
         sys.stderr.flush()
+    verdict = result.quality.verdict
+    if verdict == "rejected" or (strict and verdict == "suspect"):
+        log.error(f"{result.quality.text()}: the solution is written with its verdict; exit 1"
+                  + (" (--strict)" if verdict == "suspect" else ""))
+        raise typer.Exit(1)

@@ -58,8 +58,8 @@ class Quality:
 
 
 def _plain(v):
-    if v is None:
-        return None
+    if v is None or isinstance(v, str):
+        return v
     if isinstance(v, (list, tuple, np.ndarray)):
         return [_plain(a) for a in np.asarray(v).tolist()]
     if isinstance(v, (bool, np.bool_)):

@@ -825,10 +825,8 @@ def _solve_gated(ref: Refinement, start_factor: float = 1.0):
         if may and not adaptation.get("resolved", True):
             return work, sol, kkt, scale, adaptation, improvement, {
                 "code": "apriori_conflict", "state_covariance": original,
-                "reason": (f"the pass contradicts the stale state's a-priori (chi2 {adaptation['chi2_before']:.4g} "
-                           f"over {adaptation['rows']}, limit {adaptation['limit']:.3g}) and cannot carry a looser "
-                           f"one ({adaptation.get('failure', 'no consistent scale')}); the stale covariance is kept "
-                           "as given")}
+                "reason": "the pass contradicts the stale state's a-priori and cannot carry a looser one "
+                          "(apriori_conflict); the stale covariance is kept as given"}
     return work, sol, kkt, scale, adaptation, improvement, None
 
 
@@ -970,7 +968,8 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
                 "method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
                 "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": first["chi2"], "chi2_after": chi2,
                 "rows": rows, "limit": first["limit"], "iterations": history, "resolved": False,
-                "failure": f"the refinement with the a-priori scaled by {history[-1]['factor']:.3g} failed: {exc}"}
+                "failure": f"with the a-priori scaled by {history[-1]['factor']:.3g} the refinement failed: "
+                           f"{str(exc).split(' (')[0]}"}
         kept = (work, sol, kkt, scale)
         chi2, rows = _state_prior_chi2(work, sol.values)
     adaptation = {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
@@ -1270,7 +1269,7 @@ def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, im
     q = qm.Quality()
     opt = ref.options
     if refusal is not None:
-        q.add("refused", "suspect", f"the stale state is kept: {refusal['reason']}")
+        q.add("refused", "suspect", f"the stale state is kept: {refusal['reason']}", value=refusal.get("code"))
     # a-priori conflict
     if adaptation is not None:
         a = adaptation
@@ -1374,6 +1373,8 @@ def summary_text(result: RefineResult) -> str:
     lines.append(f"  at the stale epoch {stale['epoch']}: r = [{r_text}] m, v = [{v_text}] m/s")
     for w in result.warnings:
         lines.append(f"  warning: {w}")
+    if result.quality is not None:
+        lines.append(f"  {result.quality.text()}")
     return "\n".join(lines) + "\n"
 
 
