@@ -613,14 +613,15 @@ def estimate_quality(problem: Problem, sol):
     kept = ~np.asarray(sol.edited, bool)
     z = np.asarray(sol.normalized, float)
     passes = []
-    for key in sorted(set(zip(meas.station.astype(str), meas.pass_id.astype(str)))):
-        rows = kept & (meas.station.astype(str) == key[0]) & (meas.pass_id.astype(str) == key[1])
+    station, pass_id, kind = meas.station.astype(str), meas.pass_id.astype(str), meas.kind.astype(str)
+    for key in sorted(set(zip(station, pass_id, kind))):
+        rows = kept & (station == key[0]) & (pass_id == key[1]) & (kind == key[2])
         if not rows.any():
             continue
         idx = np.flatnonzero(rows)
         idx = idx[np.argsort(problem.times[idx], kind="stable")]
         w = qm.whiteness(z[idx])
-        passes.append({"pass": f"{key[0]}/{key[1]}", "n": int(idx.size), "chi2": float(z[idx] @ z[idx]),
+        passes.append({"pass": f"{key[0]}/{key[1]} {key[2]}", "n": int(idx.size), "chi2": float(z[idx] @ z[idx]),
                        "whiteness": w})
     total = sum(p["chi2"] for p in passes)
     if len(passes) > 1 and total > 0 and sol.dof > 0 and sol.variance_factor > vf_limit:
