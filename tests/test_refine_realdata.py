@@ -97,24 +97,59 @@ def _pairs():
     return out
 
 
-def test_doptrack_refined_state_predicts_the_next_pass_better_than_the_tle():
+#: The project's hold-out: passes of these days are evaluated only at the end (issue 13).
+HOLD_OUT_FROM = "20200411"
+
+
+def _next_pass_rows(pairs, bias):
     rows = []
-    for a, b in _pairs():
+    for a, b in pairs:
         table_a, tle = _load(a)
         table_b, _ = _load(b)
-        res = refine(table_a, tle_state(tle, eop=EOP), None, RefineOptions(doppler_bias="offset+drift"), EOP, source=a)
+        res = refine(table_a, tle_state(tle, eop=EOP), None, RefineOptions(doppler_bias=bias), EOP, source=a)
         d = res.state.diagnostics
+        tle_hz, refined_hz = _predicted_rms(table_b, res.state, tle), _predicted_rms(table_b, res.state)
         rows.append({"pass": a, "next": b, "max_elevation_deg": round(d["max_elevation_deg"], 1),
-                     "tle_hz": round(_predicted_rms(table_b, res.state, tle), 2),
-                     "refined_hz": round(_predicted_rms(table_b, res.state), 2),
+                     "tle_hz": round(tle_hz, 2), "refined_hz": round(refined_hz, 2),
+                     # a refusal keeps the TLE's state: it counts as equal (the Taylor propagation of the
+                     # kept SGP4 state differs from SGP4 itself by ~1 %)
+                     "ratio": 1.0 if d["refused"] else round(refined_hz / tle_hz, 3),
+                     "refused": (d["refused"] or {}).get("code"), "quality": res.quality.verdict,
                      "low_pass_warning": any("a low pass" in w for w in res.warnings)})
-    print("DopTrack next-pass Doppler RMS (Hz), TLE vs refined:\n" + "\n".join(json.dumps(r) for r in rows))
-    assert len(rows) >= 15
-    high = [r for r in rows if r["max_elevation_deg"] >= LOW_PASS_DEG]
-    low = [r for r in rows if r["max_elevation_deg"] < LOW_PASS_DEG]
-    assert len(high) >= 8
-    # every pass high enough to determine the orbit improves the next pass's prediction
-    assert all(r["refined_hz"] < r["tle_hz"] for r in high), high
-    assert np.median([r["refined_hz"] for r in high]) < 0.9 * np.median([r["tle_hz"] for r in high])
-    # a low pass is said to be one
-    assert all(r["low_pass_warning"] for r in low) and not any(r["low_pass_warning"] for r in high)
+    print(f"DopTrack next-pass Doppler RMS (Hz), TLE vs refined (--doppler-bias {bias or 'default'}):\n"
+          + "\n".join(json.dumps(r) for r in rows))
+    return rows
+
+
+def test_doptrack_development_passes_refine_never_predicts_worse_than_the_tle():
+    """Development passes (1-10 April): with the default model (offset) and with offset+drift,
+    no refinement predicts the next pass more than 10 % worse than the TLE: a pass that cannot
+    improve the stale state (its correction not significant once its correlated residuals are
+    counted, or an a-priori conflict it cannot carry) is refused and the TLE's state kept.
+    Measured: default, all 7 refused (residuals after an offset alone have lag-1 correlation
+    0.98-1.0); offset+drift, 5 refined (ratios 0.60-1.05), 2 refused, median 0.93."""
+    pairs = [(a, b) for a, b in _pairs() if a[:8] < HOLD_OUT_FROM]
+    assert len(pairs) >= 6
+    for bias in (None, "offset+drift"):
+        rows = _next_pass_rows(pairs, bias)
+        assert all(r["ratio"] <= 1.1 for r in rows), rows
+        # every refusal and every low pass is said to be one
+        assert all(r["quality"] == "suspect" for r in rows if r["refused"])
+        low = [r for r in rows if r["max_elevation_deg"] < LOW_PASS_DEG]
+        assert all(r["low_pass_warning"] for r in low)
+        if bias == "offset+drift":
+            assert np.median([r["ratio"] for r in rows]) <= 0.95
+
+
+def test_doptrack_hold_out_passes_next_pass_prediction():
+    """The hold-out (11-15 April), evaluated once at the end (issue 13's target: not worse than
+    the TLE by more than 10 % in at least 90 % of the pairs; a refusal counts as equal)."""
+    pairs = [(a, b) for a, b in _pairs() if a[:8] >= HOLD_OUT_FROM]
+    assert len(pairs) >= 6
+    for bias in (None, "offset+drift"):
+        rows = _next_pass_rows(pairs, bias)
+        ratios = [r["ratio"] for r in rows]
+        print(f"hold-out, {bias or 'default'}: median ratio {np.median(ratios):.3f}, "
+              f"{sum(x <= 1.1 for x in ratios)} of {len(ratios)} not worse than 1.1 x the TLE, "
+              f"{sum(bool(r['refused']) for r in rows)} refused")
+        assert sum(x <= 1.1 for x in ratios) >= 0.9 * len(ratios), rows
