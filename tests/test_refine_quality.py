@@ -122,7 +122,9 @@ def test_table1_without_covariance_within_4_sigma(method):
 @pytest.mark.slow
 def test_table1_without_covariance_monte_carlo_within_4_sigma():
     """25 noise draws of the Table 1 pass, the stale state without covariance, three methods:
-    every component within 4 sigma; the mean NEES of the state below twice its dimension."""
+    every component within 4 sigma; the mean NEES of the state below twice its dimension.
+    Measured: largest |error|/sigma 2.76 (pointwise, mean NEES 9.2), 1.85 (pointwise --circular),
+    3.27 (integral --circular)."""
     worst, nees = {m: 0.0 for m in METHODS}, {m: [] for m in METHODS}
     for seed in range(1, 26):
         _, _, sim = scenario(seed=seed)

@@ -496,8 +496,9 @@ class Refinement:
 
 
 def prepare(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
-            source: str = "<pass>") -> Refinement:
-    """Assemble a :class:`Refinement` (see the module docstring); :class:`InputError` for bad input."""
+            source: str = "<pass>", curve: Optional[SmoothedCurve] = None) -> Refinement:
+    """Assemble a :class:`Refinement` (see the module docstring); :class:`InputError` for bad input.
+    ``curve``: the pass's smoothed curve when already made (:func:`refine`'s re-solves)."""
     from trackproc.dynamics import geodesy, propagator
     from trackproc.dynamics import measurement_spectra as ms
     from trackproc.dynamics import timescales as ts
@@ -547,7 +548,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     if len(frame) < 8:
         raise ProcessingError(f"too few samples in the pass: {len(frame)} (at least 8 are needed)")
 
-    curve = smoothed_curve(sub, kind, station, pass_id, source)
+    curve = curve if curve is not None else smoothed_curve(sub, kind, station, pass_id, source)
     t_traverse, how = _traverse_epoch(curve, warnings, opt.traverse_epoch)
 
     # the stale state: a TLE is evaluated by SGP4 at the traverse epoch
@@ -773,7 +774,8 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
             break
         epoch = ref.problem.epoch + np.timedelta64(int(round(t_model * 1e9)), "ns")
         try:
-            moved = prepare(table, initial, stations, replace(opt, traverse_epoch=epoch), eop, source)
+            moved = prepare(table, initial, stations, replace(opt, traverse_epoch=epoch), eop, source,
+                            curve=ref.curve)
             moved.warnings[:] = list(ref.warnings)
             moved_out = _solve_gated(moved, adaptation["factor"] if adaptation else 1.0)
         except ProcessingError:
@@ -1287,8 +1289,10 @@ def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, im
         chi2, rows = _state_prior_chi2(ref, sol.values)
         if rows:
             limit = qm.chi2_limit(rows)
-            q.add("apriori_conflict", "ok" if chi2 <= limit else "rejected",
-                  f"a-priori chi2 {chi2:.4g} over {rows} (limit {limit:.3g})", value=chi2, limit=limit)
+            # a refused refinement writes the stale state: the conflict is the rejected solution's
+            q.add("apriori_conflict", "ok" if chi2 <= limit else "suspect" if refusal is not None else "rejected",
+                  f"a-priori chi2 {chi2:.4g} over {rows} (limit {limit:.3g})"
+                  + (" of the refused solution" if refusal is not None else ""), value=chi2, limit=limit)
     # the variance factor of the nominal sigmas (reweighting hides it in the solution's own)
     if sol.dof > 0 and math.isfinite(sol.variance_factor):
         vf = float(sol.variance_factor) * sigma_scale ** 2
