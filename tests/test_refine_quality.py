@@ -189,6 +189,10 @@ def test_cli_quality_in_the_state_file_and_strict(run_cli, table1_files, tmp_pat
     assert doc["quality"]["verdict"] == "ok", doc["quality"]
     assert r.exit_code == 0 and "quality: ok" in r.stderr
     assert any(x["code"] == "apriori_conflict" for x in doc["quality"]["reasons"])
+    assert list(doc).index("quality") < list(doc).index("diagnostics")
+    from trackproc.io.statefile import read_state
+
+    assert read_state(str(out)).extra["quality"]["verdict"] == "ok"          # reads back as a state file
     # a refused refinement: exit 0, verdict suspect; --strict: exit 1, the file written all the same
     out2 = tmp_path / "kept.json"
     r = run_cli(["refine", str(d / "pass.parquet"), "--initial", str(d / "near.json"), "-o", str(out2)])

@@ -1184,6 +1184,13 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                              refusal=refusal, t_model=t_model, max_el=max_el, consistency=consistency)
     if refusal is not None:
         warnings.append(f"the stale state is kept: {refusal['reason']}")
+    apriori_note = ref.apriori_note
+    if adaptation is not None and adaptation.get("factor", 1.0) > 1.0 and refusal is None:
+        a = adaptation
+        warnings.append(f"the pass contradicted the a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, 99.9 % limit "
+                        f"{a['limit']:.3g}): its covariance was scaled by {a['factor']:.3g} (sigmas x"
+                        f"{a['sigma_factor']:.3g}; maximum-likelihood variance component) and the pass refined again")
+        apriori_note += f"; scaled by {a['factor']:.3g} (the pass contradicted it)"
     rtn = rtn_covariance(x[:3], x[3:6], cov[:6, :6])
     diagnostics = {
         "converged": bool(sol.converged), "message": sol.message, "iterations": int(sol.iterations),
@@ -1202,7 +1209,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     method = {"cost": opt.cost, "circular": bool(opt.circular),
               "solver": ("Gauss-Newton with equality constraints, KKT by the null-space method (seed 004 eqs. 15-17)"
                          if opt.circular else "Gauss-Newton by QR/SVD with Levenberg-Marquardt damping"),
-              "apriori": ref.apriori_note, "covariance": covariance_note,
+              "apriori": apriori_note, "covariance": covariance_note,
               "kind": ref.kind, "station": ref.station_name, "pass_id": ref.pass_id,
               "range_rate_model": problem.range_rate_model, "force_model": opt.force, "earth": opt.earth,
               "doppler_bias": [n for n in problem.names if n.startswith("doppler_")],
