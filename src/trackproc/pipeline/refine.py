@@ -821,6 +821,25 @@ def _solve_gated(ref: Refinement, start_factor: float = 1.0):
                        f", {i['delta_chi2_effective']:.3g} after the residuals' time correlation (lag-1 "
                        f"{w['lag1_autocorrelation']:.2f}, {w['effective_samples']:.0f} independent samples of "
                        f"{w['n']}), below the 99.9 % point {i['limit']:.3g} of chi2({i['dof']})")}
+    if may and improvement is not None:
+        # an a-priori conflict is evidence against the a-priori only if the data's own noise model
+        # holds: time-correlated residuals overstate the data's information just as much, and
+        # loosening the a-priori would then let the pass move the state by its own systematic
+        # errors (docs/refine.md, "Quality")
+        from trackproc.methods import quality as qm
+
+        chi2, rows = _state_prior_chi2(work, first[0].values)
+        w = improvement["whiteness"]
+        correlated = (w["lag1_autocorrelation"] > qm.WHITENESS_RHO
+                      or (np.isfinite(w["runs_z"]) and abs(w["runs_z"]) > qm.RUNS_Z))
+        if rows and chi2 > qm.chi2_limit(rows) and correlated:
+            return work, first[0], first[1], first[2], None, improvement, {
+                "code": "apriori_conflict_correlated", "state_covariance": original,
+                "reason": (f"the pass contradicts the stale state's a-priori (chi2 {chi2:.4g} over {rows}, limit "
+                           f"{qm.chi2_limit(rows):.3g}) but its residuals are correlated in time (lag-1 "
+                           f"{w['lag1_autocorrelation']:.2f}, runs-test z {w['runs_z']:.1f}): the data's noise model "
+                           "is as doubtful as the a-priori, so neither the refined state nor a loosened a-priori "
+                           "can be trusted")}
     work, sol, kkt, scale, adaptation = solve_adapted(ref, start_factor, first=(work,) + tuple(first))
     if adaptation is not None:
         improvement = stale_improvement(work, sol, scale) if work.priors else improvement
