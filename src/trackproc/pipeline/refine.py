@@ -833,13 +833,22 @@ def _solve_gated(ref: Refinement, start_factor: float = 1.0):
         correlated = (w["lag1_autocorrelation"] > qm.WHITENESS_RHO
                       or (np.isfinite(w["runs_z"]) and abs(w["runs_z"]) > qm.RUNS_Z))
         if rows and chi2 > qm.chi2_limit(rows) and correlated:
+            # the kept covariance: the a-priori scaled by its variance component with the data's
+            # information deflated by the correlation (never below the a-priori as given)
+            pcov = _state_prior_covariance([work.priors[k] for k in _state_prior_indices(work)])
+            red = qm.prior_redundancy(np.asarray(work.covariance(first[0], first[1]), float)[:6, :6], pcov)
+            comp = qm.prior_variance_component(chi2 / improvement["inflation"], red) or 1.0
+            factor = max(1.0, comp)
             return work, first[0], first[1], first[2], None, improvement, {
-                "code": "apriori_conflict_correlated", "state_covariance": original,
+                "code": "apriori_conflict_correlated", "state_covariance": original * factor,
+                "covariance_factor": factor,
                 "reason": (f"the pass contradicts the stale state's a-priori (chi2 {chi2:.4g} over {rows}, limit "
                            f"{qm.chi2_limit(rows):.3g}) but its residuals are correlated in time (lag-1 "
                            f"{w['lag1_autocorrelation']:.2f}, runs-test z {w['runs_z']:.1f}): the data's noise model "
                            "is as doubtful as the a-priori, so neither the refined state nor a loosened a-priori "
-                           "can be trusted")}
+                           "can be trusted; the stale covariance is scaled by "
+                           f"{factor:.3g} (its variance component with the data's information deflated by "
+                           f"{improvement['inflation']:.3g})")}
     work, sol, kkt, scale, adaptation = solve_adapted(ref, start_factor, first=(work,) + tuple(first))
     if adaptation is not None:
         improvement = stale_improvement(work, sol, scale) if work.priors else improvement
