@@ -922,7 +922,7 @@ def _state_prior_indices(ref: Refinement) -> list:
     return [k for k, p in enumerate(ref.priors) if np.all(np.asarray(p.index) < 6)]
 
 
-def _state_prior_chi2(ref: Refinement, x) -> tuple[float, int, float]:
+def _state_prior_chi2(ref: Refinement, x) -> tuple[float, int]:
     """``(chi2, rows)`` of the state a-priori terms at the solution ``x``."""
     chi2, rows = 0.0, 0
     for k in _state_prior_indices(ref):
@@ -968,7 +968,7 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
     limit = qm.chi2_limit(rows)
     if chi2 <= limit and start_factor == 1.0:
         return work, sol, kkt, scale, None
-    first = {"chi2": chi2, "rows": rows, "limit": limit}
+    start = {"chi2": chi2, "rows": rows, "limit": limit}
     factor = start_factor
     history = []
     kept = (work, sol, kkt, scale)
@@ -996,16 +996,16 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
             chi2, rows = _state_prior_chi2(work, sol.values)
             return work, sol, kkt, scale, {
                 "method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
-                "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": first["chi2"], "chi2_after": chi2,
-                "rows": rows, "limit": first["limit"], "iterations": history, "resolved": False,
+                "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start["chi2"], "chi2_after": chi2,
+                "rows": rows, "limit": start["limit"], "iterations": history, "resolved": False,
                 "failure": f"with the a-priori scaled by {history[-1]['factor']:.3g} the refinement failed: "
                            f"{str(exc).split(' (')[0]}"}
         kept = (work, sol, kkt, scale)
         chi2, rows = _state_prior_chi2(work, sol.values)
     adaptation = {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
-                  "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": first["chi2"],
-                  "chi2_after": chi2, "rows": rows, "limit": first["limit"], "iterations": history,
-                  "resolved": bool(chi2 <= first["limit"] or (history and history[-1].get("component") is not None
+                  "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start["chi2"],
+                  "chi2_after": chi2, "rows": rows, "limit": start["limit"], "iterations": history,
+                  "resolved": bool(chi2 <= start["limit"] or (history and history[-1].get("component") is not None
                                                              and abs(history[-1]["component"] - 1.0) < 0.1))}
     return work, sol, kkt, scale, adaptation
 
