@@ -148,33 +148,39 @@ def estimate_held_back(group, noise="auto"):
     return _predicted_rms(table_b, res.state, tle), _predicted_rms(table_b, res.state), res
 
 
-def test_doptrack_refine_predicts_the_next_pass_no_worse_than_the_tle():
-    """Issue 13's criterion on the development pairs: with the defaults (noise model by REML,
-    GLS) the refined orbit predicts the next pass no worse than the TLE by more than 10 % in at
-    least 90 % of the pairs, median ratio <= 0.95. (The white fit with offset and drift, the
-    previous default, was worse than the TLE by 2-6x after low passes.)"""
+def _next_pass_rows(pairs, bias=None):
     rows = []
-    for a, b in _pairs():
-        if not is_dev(a):
-            continue
+    for a, b in pairs:
         table_a, tle = _load(a)
         table_b, _ = _load(b)
-        res = refine(table_a, tle_state(tle, eop=EOP), None, RefineOptions(), EOP, source=a)
+        res = refine(table_a, tle_state(tle, eop=EOP), None, RefineOptions(doppler_bias=bias), EOP, source=a)
         d = res.state.diagnostics
-        tle_hz, ours = _predicted_rms(table_b, res.state, tle), _predicted_rms(table_b, res.state)
+        tle_hz, refined_hz = _predicted_rms(table_b, res.state, tle), _predicted_rms(table_b, res.state)
         rows.append({"pass": a, "next": b, "max_elevation_deg": round(d["max_elevation_deg"], 1),
-                     "tle_hz": round(tle_hz, 2), "refined_hz": round(ours, 2), "ratio": ours / tle_hz,
+                     "tle_hz": round(tle_hz, 2), "refined_hz": round(refined_hz, 2),
+                     # a refusal keeps the TLE's state: it counts as equal (the Taylor propagation of the
+                     # kept SGP4 state differs from SGP4 itself by ~1 %)
+                     "ratio": 1.0 if d["refused"] else round(refined_hz / tle_hz, 3),
+                     "refused": (d["refused"] or {}).get("code"), "quality": res.quality.verdict,
                      "noise": d["noise"]["model"], "transmitter": d["noise"]["transmitter"],
                      "low_pass_warning": any("a low pass" in w for w in res.warnings)})
-    print("DopTrack next-pass Doppler RMS (Hz), TLE vs refined:\n" + "\n".join(json.dumps(r) for r in rows))
+    print(f"DopTrack next-pass Doppler RMS (Hz), TLE vs refined (--doppler-bias {bias or 'default'}):\n"
+          + "\n".join(json.dumps(r) for r in rows))
+    return rows
+
+
+def test_doptrack_refine_predicts_the_next_pass_no_worse_than_the_tle():
+    """Issue 13's criterion on the development pairs (1-10 April) with the defaults (noise model
+    and drift by REML, GLS, the consistency gates): not worse than the TLE by more than 10 % in at
+    least 90 % of the pairs, median ratio <= 0.95; a refusal keeps the TLE's state and counts as
+    equal. (The white fit with offset and drift, the previous default, was worse than the TLE by
+    2-6x after low passes.)"""
+    rows = _next_pass_rows([(a, b) for a, b in _pairs() if is_dev(a)])
     assert len(rows) >= 7
     ratio = np.array([r["ratio"] for r in rows])
     assert (ratio <= 1.1).mean() >= 0.9, rows
     assert np.median(ratio) <= 0.95, rows
-    # the drift of the onboard oscillator is found in every pass, and a correlated model where the
-    # residuals are correlated
-    assert all(r["transmitter"].startswith("offset+drift") for r in rows)
-    assert any(r["noise"] != "white" for r in rows)
+    assert all(r["quality"] == "suspect" for r in rows if r["refused"])
     # a low pass is said to be one
     assert all(r["low_pass_warning"] == (r["max_elevation_deg"] < LOW_PASS_DEG) for r in rows)
 

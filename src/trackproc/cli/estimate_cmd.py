@@ -90,14 +90,21 @@ def estimate_command(
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
                                        help="Plot the residuals per kind in their units, RMS per pass (needs matplotlib: "
                                             "pip install 'trackproc[plot]')."),
+    strict: bool = typer.Option(
+        False, "--strict",
+        help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' solution always exits 1); the outputs "
+             "are written either way."),
     output: Optional[str] = OutputOpt,
 ) -> None:
     """Estimate the orbit state at an epoch and the selected biases from one or more passes
     (batch weighted least squares with per-station range biases, seed 002), and write a state
     file with every parameter, its sigma, the full covariance and the diagnostics.
 
-    A one-screen summary goes to stderr. Exit status 1 when the estimation fails (too few
-    data, rank deficiency with the unobservable combinations named, no convergence).
+    A one-screen summary goes to stderr. The state file (and the OPM, as a COMMENT) carries a
+    ``quality`` verdict (ok, suspect, rejected) with its reasons. Exit status 1 when the
+    estimation fails (too few data, rank deficiency with the unobservable combinations named,
+    no convergence) or its verdict is 'rejected' (or 'suspect' with --strict; the outputs are
+    written).
 
     Examples (run from the repository root, on the shipped sample_data/):
 
@@ -174,3 +181,8 @@ def estimate_command(
     if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
         sys.stderr.write(summary_text(result))
         sys.stderr.flush()
+    verdict = result.quality.verdict
+    if verdict == "rejected" or (strict and verdict == "suspect"):
+        log.error(f"{result.quality.text()}: the solution is written with its verdict; exit 1"
+                  + (" (--strict)" if verdict == "suspect" else ""))
+        raise typer.Exit(1)

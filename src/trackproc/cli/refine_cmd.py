@@ -126,6 +126,10 @@ def refine_command(
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
                                        help="Plot the data with the refined model, the residuals and what the pass "
                                             "cannot see (needs matplotlib: pip install 'trackproc[plot]')."),
+    strict: bool = typer.Option(
+        False, "--strict",
+        help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' solution always exits 1); the output "
+             "is written either way."),
     output: Optional[str] = OutputOpt,
 ) -> None:
     """Refine a stale orbit state from one Doppler (or range-rate) pass of one station, one- or
@@ -134,8 +138,11 @@ def refine_command(
     report (what one pass cannot see, in radial/along/cross-track terms), the residuals and the
     iterations.
 
-    A one-screen summary goes to stderr. Exit status 1 when the refinement fails
-    (no convergence, rank deficiency), 2 for invalid input.
+    A one-screen summary goes to stderr. The state file carries a ``quality`` verdict (ok,
+    suspect, rejected) with its reasons; when the pass cannot improve the stale state, the
+    stale state is kept with its covariance (quality: refused). Exit status 1 when the
+    refinement fails (no convergence, rank deficiency) or its verdict is 'rejected' (or
+    'suspect' with --strict; the output is written), 2 for invalid input.
 
     Examples (run from the repository root, on the shipped sample_data/):
 
@@ -204,3 +211,8 @@ def refine_command(
     if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
         sys.stderr.write(summary_text(result))
         sys.stderr.flush()
+    verdict = result.quality.verdict
+    if verdict == "rejected" or (strict and verdict == "suspect"):
+        log.error(f"{result.quality.text()}: the solution is written with its verdict; exit 1"
+                  + (" (--strict)" if verdict == "suspect" else ""))
+        raise typer.Exit(1)

@@ -71,6 +71,9 @@ def opm_text(state, *, object_name: str = "UNKNOWN", object_id: str = "UNKNOWN",
 
         label = FORCE_LABELS.get(state.force_model, state.force_model)
         lines.append(f"COMMENT force model {label}")
+    quality = (state.extra or {}).get("quality") if hasattr(state, "extra") else None
+    if isinstance(quality, dict) and quality.get("verdict"):
+        lines.append(f"COMMENT {quality_comment(quality)}")
     lines.append(f"EPOCH = {_epoch_text(state.epoch)}")
     rv_km = np.concatenate([state.r_m, state.v_m_s]) / 1000.0
     for key, value, unit in zip(_STATE_KEYS, rv_km, ["km"] * 3 + ["km/s"] * 3):
@@ -92,6 +95,13 @@ def opm_text(state, *, object_name: str = "UNKNOWN", object_id: str = "UNKNOWN",
         for key, i, j in COVARIANCE_KEYS:
             lines.append(f"{key} = {_num(ckm[i, j])}")
     return "\n".join(lines) + "\n"
+
+
+def quality_comment(quality: dict) -> str:
+    """The OPM comment of a ``quality`` verdict (one line, machine-readable):
+    ``QUALITY verdict=suspect reasons=low_pass,whiteness`` (the reasons not ``ok``)."""
+    bad = [r.get("code", "?") for r in quality.get("reasons", []) if r.get("severity", "suspect") != "ok"]
+    return f"QUALITY verdict={quality['verdict']} reasons={','.join(bad) if bad else 'none'}"
 
 
 def write_opm(state, path: str, **kwargs) -> None:

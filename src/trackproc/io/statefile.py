@@ -433,6 +433,8 @@ def state_document(state: State, force: str | None = None, eop_source: str | Non
     source = eop_source if eop_source is not None else state.eop_source
     if source is not None:
         doc["earth_orientation"] = source
+    if "quality" in state.extra:
+        doc["quality"] = state.extra["quality"]           # the verdict first, for a reader and for cron
     doc["diagnostics"] = state.diagnostics or {}
     for k in sorted(state.extra):
         if k not in doc:

@@ -489,6 +489,7 @@ class EstimateResult:
     two_stage: Optional[object] = None
     two_stage_solution: Optional[object] = None
     warnings: list = field(default_factory=list)
+    quality: Optional[object] = None
 
 
 def _rms_table(problem: Problem, sol) -> dict:
@@ -583,6 +584,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     }
     if noise_report is not None:
         diagnostics["noise"] = noise_report
+    quality = estimate_quality(problem, sol)
     comparison = _compare(problem, sol) if opt.compare_doppler_only else None
     two, sol2 = _two_stage(problem, sol, opt) if opt.two_stage else (None, None)
     if comparison is not None:
@@ -599,7 +601,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         "apriori": {n: s for n, s, m in zip(names, problem.params.apriori()[2], problem.params.apriori()[0]) if m},
         "apriori_initial": bool(opt.apriori_initial),
         "sources": sorted({str(s) for s in problem.sources}),
-    }}
+    }, "quality": quality.as_dict()}
     state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=list(names), values=x, sigma=sol.sigma,
                                covariance=sol.covariance, force_model=opt.force,
                                constants=force_model_constants(opt.force),
@@ -607,7 +609,66 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
                                diagnostics=diagnostics, extra=extra)
     return EstimateResult(state=state, solution=sol, problem=problem, residuals=residual_frame(problem, sol),
                           rtn_covariance=rtn, comparison=comparison, two_stage=two, two_stage_solution=sol2,
-                          warnings=warnings)
+                          warnings=warnings, quality=quality)
+
+
+def estimate_quality(problem: Problem, sol):
+    """The :class:`~trackproc.methods.quality.Quality` of a batch solution: convergence, a-priori
+    conflict (``rejected``: the covariance leans on an a-priori the data contradict), variance
+    factor against its 99.9 % point, the pass that dominates the misfit (named), residual
+    whiteness per pass (the worst named), edited samples."""
+    from trackproc.methods import quality as qm
+
+    q = qm.Quality()
+    if not sol.converged:
+        q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
+    if sol.n_prior:
+        limit = qm.chi2_limit(sol.n_prior)
+        q.add("apriori_conflict", "ok" if sol.chi2_prior <= limit else "rejected",
+              f"a-priori chi2 {sol.chi2_prior:.4g} over {sol.n_prior} constraints (99.9 % limit {limit:.3g})"
+              + ("" if sol.chi2_prior <= limit else ": the data and the a-priori disagree, the covariance that leans "
+                 "on the a-priori does not hold"), value=sol.chi2_prior, limit=limit)
+    vf_limit = qm.variance_factor_limit(sol.dof) if sol.dof > 0 else None
+    if sol.dof > 0 and math.isfinite(sol.variance_factor):
+        q.add("variance_factor", "ok" if sol.variance_factor <= vf_limit else "suspect",
+              f"a-posteriori variance factor {sol.variance_factor:.4g} (99.9 % limit {vf_limit:.3g})",
+              value=sol.variance_factor, limit=vf_limit)
+    # per pass: its share of the misfit and the whiteness of its residuals (time order)
+    meas = problem.meas
+    kept = ~np.asarray(sol.edited, bool)
+    z = np.asarray(sol.normalized, float)
+    passes = []
+    station, pass_id, kind = meas.station.astype(str), meas.pass_id.astype(str), meas.kind.astype(str)
+    for key in sorted(set(zip(station, pass_id, kind))):
+        rows = kept & (station == key[0]) & (pass_id == key[1]) & (kind == key[2])
+        if not rows.any():
+            continue
+        idx = np.flatnonzero(rows)
+        idx = idx[np.argsort(problem.times[idx], kind="stable")]
+        w = qm.whiteness(z[idx])
+        passes.append({"pass": f"{key[0]}/{key[1]} {key[2]}", "n": int(idx.size), "chi2": float(z[idx] @ z[idx]),
+                       "whiteness": w})
+    total = sum(p["chi2"] for p in passes)
+    if len(passes) > 1 and total > 0 and sol.dof > 0 and sol.variance_factor > vf_limit:
+        worst = max(passes, key=lambda p: p["chi2"] / p["n"])
+        share = worst["chi2"] / total
+        if share > 0.5:
+            q.add("dominant_pass", "suspect",
+                  f"pass {worst['pass']} carries {100 * share:.0f} % of the misfit with {worst['n']} of "
+                  f"{sum(p['n'] for p in passes)} samples (variance factor {worst['chi2'] / worst['n']:.3g}): "
+                  "check it, or leave it out", value=share, limit=0.5)
+    if passes:
+        worst = max(passes, key=lambda p: (p["whiteness"]["lag1_autocorrelation"]
+                                          if math.isfinite(p["whiteness"]["lag1_autocorrelation"]) else -1.0))
+        if math.isfinite(worst["whiteness"]["lag1_autocorrelation"]):
+            before = len(q.reasons)
+            qm.add_whiteness(q, worst["whiteness"])
+            if len(q.reasons) > before:
+                q.reasons[-1]["message"] = f"pass {worst['pass']}: " + q.reasons[-1]["message"]
+    if sol.n_edited > 0.1 * sol.n_measurements:
+        q.add("edited", "suspect", f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)",
+              value=int(sol.n_edited), limit=0.1 * sol.n_measurements)
+    return q
 
 
 NOISE_MODELS = ("auto", "white", "ar1", "walk", "ar1+walk")
@@ -868,4 +929,6 @@ def summary_text(result: EstimateResult) -> str:
             lines.append(f"    stage-1 range_bias:{sname} = {b:.3f} ± {p:.3g} m")
     for w in result.warnings:
         lines.append(f"  warning: {w}")
+    if result.quality is not None:
+        lines.append(f"  {result.quality.text()}")
     return "\n".join(lines) + "\n"

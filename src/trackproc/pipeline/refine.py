@@ -78,6 +78,13 @@ LINK_MODES = vocabulary.LINK_MODES
 #: state and the pass are weighed by the pass's actual scatter, not by nominal sigmas.
 REWEIGHT_THRESHOLD = 1.5
 MAX_REWEIGHT = 6
+#: At most this many re-solves with the a-priori scaled by its variance component (:func:`solve_adapted`).
+MAX_APRIORI_ADAPT = 8
+MAX_ADAPT_ITERATIONS = 12
+#: :func:`refine` re-solves at the refined orbit's own zero range-rate until it is within this of
+#: the solution epoch (at most :data:`MAX_TRAVERSE_ITERATIONS` times; else ``traverse_mismatch``).
+TRAVERSE_TOLERANCE_S = 0.5
+MAX_TRAVERSE_ITERATIONS = 3
 #: A pass whose highest elevation is below this gives a weak refinement (see docs/refine.md).
 LOW_PASS_DEG = 25.0
 DEFAULT_APRIORI_ELEMENTS = {"a_m": 50.0, "ex": 5e-5, "ey": 5e-5, "i_rad": 1e-4, "raan_rad": 1e-4, "u_rad": 4e-4}
@@ -133,6 +140,11 @@ class RefineOptions:
     covariance: str = "profile"
     noise: str = "auto"
     oscillator_noise: Optional[float] = None
+    #: The solution epoch instead of the smoothed curve's traverse point (UTC datetime64; set by
+    #: :func:`refine` when it moves the epoch to the refined orbit's own zero range-rate).
+    traverse_epoch: Optional[np.datetime64] = None
+    #: Refuse (keep the stale state) when the pass cannot improve it (:func:`refusal_test`).
+    allow_refusal: bool = True
 
 
 @dataclass
@@ -173,6 +185,7 @@ class RefineResult:
     covariance: np.ndarray
     names: list
     warnings: list = field(default_factory=list)
+    quality: object = None
 
 
 # ----------------------------------------------------------------------------- the pass
@@ -287,7 +300,9 @@ def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source
                          used_t_s=np.sort(pf.t_s[pf.fit.used]))
 
 
-def _traverse_epoch(curve: SmoothedCurve, warnings: list) -> tuple[np.datetime64, str]:
+def _traverse_epoch(curve: SmoothedCurve, warnings: list, override=None) -> tuple[np.datetime64, str]:
+    if override is not None:
+        return np.datetime64(override, "ns"), "the refined orbit's own zero range-rate (iterated)"
     if curve.tca is not None:
         t = curve.tca.t_s
         how = curve.tca.definition
@@ -562,8 +577,9 @@ class Refinement:
 
 
 def prepare(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
-            source: str = "<pass>") -> Refinement:
-    """Assemble a :class:`Refinement` (see the module docstring); :class:`InputError` for bad input."""
+            source: str = "<pass>", curve: Optional[SmoothedCurve] = None) -> Refinement:
+    """Assemble a :class:`Refinement` (see the module docstring); :class:`InputError` for bad input.
+    ``curve``: the pass's smoothed curve when already made (:func:`refine`'s re-solves)."""
     from trackproc.dynamics import geodesy, propagator
     from trackproc.dynamics import measurement_spectra as ms
     from trackproc.dynamics import timescales as ts
@@ -618,8 +634,8 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     if len(frame) < 8:
         raise ProcessingError(f"too few samples in the pass: {len(frame)} (at least 8 are needed)")
 
-    curve = smoothed_curve(sub, kind, station, pass_id, source)
-    t_traverse, how = _traverse_epoch(curve, warnings)
+    curve = curve if curve is not None else smoothed_curve(sub, kind, station, pass_id, source)
+    t_traverse, how = _traverse_epoch(curve, warnings, opt.traverse_epoch)
 
     # the stale state: a TLE is evaluated by SGP4 at the traverse epoch
     if _is_tle_state(initial):
@@ -822,18 +838,116 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
            source: str = "<pass>") -> RefineResult:
     """Refine ``initial`` (a GCRF :class:`~trackproc.io.statefile.State`, or a TLE's) from one pass.
 
+    The consistency gates (docs/refine.md, "Quality"): the a-priori is scaled by its variance
+    component when the pass contradicts it (:func:`solve_adapted`); the solution epoch follows the
+    refined orbit's own zero range-rate; and when the pass cannot improve the stale state
+    (an a-priori conflict the pass cannot carry, or one on residuals correlated beyond the pass's noise model), the
+    stale state is kept with its covariance (``refused`` in the diagnostics and the quality).
+    The result's ``quality`` (:func:`refine_quality`) says what was found.
+
     Returns :class:`RefineResult`; raises :class:`InputError` (exit 2) for invalid input and
     :class:`ProcessingError` (exit 1) when the refinement fails (no convergence, rank deficiency).
     """
-    ref = prepare(table, initial, stations, options, eop, source)
+    opt = options or RefineOptions()
+    ref = prepare(table, initial, stations, opt, eop, source)
+    # the pass's noise model (REML) and transmitter drift first, then the gates on that solution
     ref, sol, kkt, scale = solve_noise(table, initial, ref, stations, eop, source)
+    ref, sol, kkt, scale, adaptation, improvement, refusal = _solve_gated(ref, first=(sol, kkt, scale))
+    # the solution epoch is the refined orbit's own traverse point: re-solve there until it stays
+    moves = []
+    for _ in range(MAX_TRAVERSE_ITERATIONS if refusal is None else 0):
+        t_model = _model_traverse(ref, sol.values)
+        if t_model is None or abs(t_model) <= TRAVERSE_TOLERANCE_S:
+            break
+        epoch = ref.problem.epoch + np.timedelta64(int(round(t_model * 1e9)), "ns")
+        try:
+            # the same transmitter model (a drift the pass wanted) and a noise model refitted there
+            bias = "offset+drift" if any(n.startswith("doppler_drift") for n in ref.names) else opt.doppler_bias
+            moved = prepare(table, initial, stations, replace(opt, traverse_epoch=epoch, doppler_bias=bias), eop,
+                            source, curve=ref.curve)
+            moved.warnings[:] = list(ref.warnings)
+            moved, *first = solve_noise(table, initial, moved, stations, eop, source)
+            factor = adaptation["factor"] if adaptation else 1.0
+            moved_out = _solve_gated(moved, factor, first=tuple(first) if factor == 1.0 else None)
+        except ProcessingError:
+            break                                        # the quality reports the mismatch left
+        moves.append(float(t_model))
+        ref, sol, kkt, scale, adaptation, improvement, refusal = moved_out
+        if refusal is not None:
+            break
     consistency = None
     if ref.options.circular:
         # the same assembled problem without the constraints and r_ka (always the last parameter)
         free = replace(ref, options=replace(ref.options, circular=False), names=ref.names[:-1], x0=ref.x0[:-1],
                        scales=ref.scales[:-1])
         consistency = circular_consistency(free, sol, scale)
-    return finish(ref, sol, kkt, scale, consistency=consistency)
+    return finish(ref, sol, kkt, scale, consistency=consistency, adaptation=adaptation, traverse_moves=moves,
+                  improvement=improvement, refusal=refusal)
+
+
+def _may_refuse(ref: Refinement) -> bool:
+    """Refusal applies to the pointwise cost with a stale a-priori on the whole state, unconstrained."""
+    opt = ref.options
+    return (opt.allow_refusal and opt.cost == "pointwise" and not opt.circular
+            and _state_prior_covariance([ref.priors[k] for k in _state_prior_indices(ref)]) is not None)
+
+
+def _solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
+    """Solve with the gates: the improvement test (reported), then the a-priori: a conflict on
+    residuals still correlated after the pass's noise model is refused (the data's noise model is
+    as doubtful as the a-priori), otherwise the a-priori is adapted (a conflict the pass cannot
+    carry is refused). ``ref`` carries the pass's noise
+    model (:func:`solve_noise`; the solves are then GLS and the tests read whitened residuals);
+    ``first`` ``(sol, kkt, scale)`` a solution of ``ref`` already made. Returns ``(ref, sol, kkt,
+    scale, adaptation, improvement, refusal)``; ``refusal`` None or ``{"reason", "code",
+    "state_covariance"}``."""
+    may = _may_refuse(ref)
+    original = _state_prior_covariance([ref.priors[k] for k in _state_prior_indices(ref)]) if may else None
+    work = _scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
+    if first is None or start_factor != 1.0:
+        first = solve_weighted(work)
+    improvement = stale_improvement(work, first[0], first[2]) if work.priors else None
+    # A pass that does not significantly tell the refined state from the stale one is no reason to
+    # keep the stale state: the posterior already weighs the pass by its information (measured on
+    # the DopTrack development pairs: refusing those kept 4 of 7 states whose refinement predicted
+    # the next pass 9-35 % better). The test is reported (quality reason ``improvement``).
+    if may and improvement is not None:
+        # an a-priori conflict is evidence against the a-priori only if the data's own noise model
+        # holds: time-correlated residuals overstate the data's information just as much, and
+        # loosening the a-priori would then let the pass move the state by its own systematic
+        # errors (docs/refine.md, "Quality")
+        from trackproc.methods import quality as qm
+
+        chi2, rows = _state_prior_chi2(work, first[0].values)
+        w = improvement["whiteness"]
+        correlated = (w["lag1_autocorrelation"] > qm.WHITENESS_RHO
+                      or (np.isfinite(w["runs_z"]) and abs(w["runs_z"]) > qm.RUNS_Z))
+        if rows and chi2 > qm.chi2_limit(rows) and correlated:
+            # the kept covariance: the a-priori scaled by its variance component with the data's
+            # information deflated by the correlation (never below the a-priori as given)
+            pcov = _state_prior_covariance([work.priors[k] for k in _state_prior_indices(work)])
+            red = qm.prior_redundancy(np.asarray(work.covariance(first[0], first[1]), float)[:6, :6], pcov)
+            comp = qm.prior_variance_component(chi2 / improvement["inflation"], red) or 1.0
+            factor = max(1.0, comp)
+            return work, first[0], first[1], first[2], None, improvement, {
+                "code": "apriori_conflict_correlated", "state_covariance": original * factor,
+                "covariance_factor": factor,
+                "reason": (f"the pass contradicts the stale state's a-priori (chi2 {chi2:.4g} over {rows}, limit "
+                           f"{qm.chi2_limit(rows):.3g}) but its residuals are correlated in time (lag-1 "
+                           f"{w['lag1_autocorrelation']:.2f}, runs-test z {w['runs_z']:.1f}): the data's noise model "
+                           "is as doubtful as the a-priori, so neither the refined state nor a loosened a-priori "
+                           "can be trusted; the stale covariance is scaled by "
+                           f"{factor:.3g} (its variance component with the data's information deflated by "
+                           f"{improvement['inflation']:.3g})")}
+    work, sol, kkt, scale, adaptation = solve_adapted(ref, start_factor, first=(work,) + tuple(first))
+    if adaptation is not None:
+        improvement = stale_improvement(work, sol, scale) if work.priors else improvement
+        if may and not adaptation.get("resolved", True):
+            return work, sol, kkt, scale, adaptation, improvement, {
+                "code": "apriori_conflict", "state_covariance": original,
+                "reason": "the pass contradicts the stale state's a-priori and cannot carry a looser one "
+                          "(apriori_conflict); the stale covariance is kept as given"}
+    return work, sol, kkt, scale, adaptation, improvement, None
 
 
 #: Noise models of ``--noise`` (``auto`` chooses among them by REML).
@@ -960,6 +1074,144 @@ def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0
     return out
 
 
+def stale_improvement(ref: Refinement, sol, sigma_scale: float = 1.0, n_seen: int = 6) -> Optional[dict]:
+    """:func:`~trackproc.methods.quality.improvement_test` of a pointwise solution: the data's χ²
+    at the stale state (at the solution epoch, the Doppler offset/drift refitted — they enter
+    linearly) against the refined state's, on the same samples and sigmas, deflated by the
+    correlation of the refined residuals (:func:`~trackproc.methods.quality.whiteness`), with
+    ``n_seen`` (the state directions the pass sees) degrees of freedom. None for the integral cost."""
+    from trackproc.methods import quality as qm
+
+    if ref.options.cost != "pointwise":
+        return None
+    _, y, sigma, _, _ = ref.data()
+    keep = ~np.asarray(sol.edited, bool)
+    s = np.asarray(sigma, float)[keep] * sigma_scale
+    if ref.correlated():
+        # GLS: the residuals whitened by the pass's noise model (independent, unit sigma)
+        whiten = ref.noise.whitener(keep)
+
+        def white(v):
+            return whiten(v) / sigma_scale
+    else:
+        def white(v):
+            v = np.asarray(v, float)[keep]
+            return v / (s[:, None] if v.ndim == 2 else s)
+    npb = ref.n_problem
+    x = np.asarray(sol.values, float)[:npb].copy()
+    x[:6] = ref.x0[:6]
+    h, jac = ref.problem.model(x)
+    r = white(np.asarray(y, float) - h)
+    bias, bias_cov = np.zeros(0), np.zeros((0, 0))
+    if npb > 6:
+        a = white(np.asarray(jac, float)[:, 6:npb])
+        db = np.linalg.lstsq(a, r, rcond=None)[0]
+        r = r - a @ db
+        bias, bias_cov = x[6:npb] + db, np.linalg.pinv(a.T @ a)
+    chi2_stale = float(r @ r)
+    computed = np.asarray(sol.computed, float)
+    rr = white(np.asarray(y, float) - computed) if ref.correlated() else np.asarray(sol.residual, float)[keep] / s
+    w = qm.whiteness(rr)
+    out = qm.improvement_test(chi2_stale, float(rr @ rr), max(n_seen, 1), qm.correlation_inflation(
+        w["lag1_autocorrelation"]))
+    out["whiteness"] = w
+    out["stale_nuisance"] = {"values": bias.tolist(), "covariance": bias_cov.tolist()}
+    return out
+
+
+def _state_prior_indices(ref: Refinement) -> list:
+    """Positions in ``ref.priors`` of the a-priori terms on the state alone (indices < 6)."""
+    return [k for k, p in enumerate(ref.priors) if np.all(np.asarray(p.index) < 6)]
+
+
+def _state_prior_chi2(ref: Refinement, x) -> tuple[float, int]:
+    """``(chi2, rows)`` of the state a-priori terms at the solution ``x``."""
+    chi2, rows = 0.0, 0
+    for k in _state_prior_indices(ref):
+        p = ref.priors[k]
+        idx = np.asarray(p.index, int)
+        d = np.asarray(x, float)[idx] - np.asarray(p.centre, float)
+        chi2 += float(d @ np.linalg.solve(np.asarray(p.covariance, float), d))
+        rows += idx.size
+    return chi2, rows
+
+
+def _scaled_priors(ref: Refinement, factor: float) -> Refinement:
+    """``ref`` with the covariance of its state a-priori terms multiplied by ``factor``."""
+    from trackproc.methods.least_squares import Prior
+
+    priors = list(ref.priors)
+    for k in _state_prior_indices(ref):
+        p = priors[k]
+        priors[k] = Prior(p.index, p.centre, np.asarray(p.covariance, float) * factor)
+    return replace(ref, priors=priors)
+
+
+def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=None):
+    """:func:`solve_weighted`, then, when the a-priori test rejects (the state's a-priori share of
+    χ² above the 99.9 % point of χ²(rows)), the a-priori covariance is scaled by its
+    maximum-likelihood variance component (Helmert/Förstner:
+    :func:`~trackproc.methods.quality.prior_variance_component`, iterated to a fixed point,
+    never below 1) and the problem solved again: a stale state further off than its a-priori says
+    is weighed by how far off the data show it to be, and the covariance covers that.
+    ``start_factor`` starts from an already scaled a-priori; ``first`` ``(work, sol, kkt, scale)``
+    a solution already made with it. Returns ``(Refinement with the a-priori used, Solution,
+    KKTResult or None, sigma scale, adaptation dict or None)``."""
+    from trackproc.methods import quality as qm
+
+    if first is not None:
+        work, sol, kkt, scale = first
+    else:
+        work = _scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
+        sol, kkt, scale = solve_weighted(work, x0=x0)
+    if not (ref.priors and _state_prior_indices(ref)):
+        return work, sol, kkt, scale, None
+    chi2, rows = _state_prior_chi2(work, sol.values)
+    limit = qm.chi2_limit(rows)
+    if chi2 <= limit and start_factor == 1.0:
+        return work, sol, kkt, scale, None
+    start = {"chi2": chi2, "rows": rows, "limit": limit}
+    factor = start_factor
+    history = []
+    kept = (work, sol, kkt, scale)
+    for _ in range(MAX_APRIORI_ADAPT):
+        pcov = _state_prior_covariance([work.priors[k] for k in _state_prior_indices(work)])
+        red = (qm.prior_redundancy(np.asarray(work.covariance(sol, kkt), float)[:6, :6], pcov)
+               if pcov is not None else math.nan)
+        k_hat = qm.prior_variance_component(chi2, red)
+        history.append({"factor": factor, "chi2": chi2, "redundancy": red, "component": k_hat})
+        if k_hat is None or abs(k_hat - 1.0) < 0.1 or (k_hat < 1.0 and factor <= 1.0):
+            break
+        factor = max(1.0, factor * k_hat)
+        try:
+            trial = _scaled_priors(ref, factor)
+            # from the previous solution a consistent scale converges in a few iterations
+            quick = replace(trial, options=replace(ref.options, max_iterations=min(ref.options.max_iterations,
+                                                                                     MAX_ADAPT_ITERATIONS)))
+            sol, kkt, scale = solve_weighted(quick, x0=sol.values)
+            work = trial
+        except ProcessingError as exc:
+            # the pass alone cannot carry a looser a-priori: keep the last solution, say so
+            work, sol, kkt, scale = kept
+            history.append({"factor": factor, "failed": str(exc)})
+            factor = history[-2]["factor"] if len(history) > 1 else start_factor
+            chi2, rows = _state_prior_chi2(work, sol.values)
+            return work, sol, kkt, scale, {
+                "method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
+                "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start["chi2"], "chi2_after": chi2,
+                "rows": rows, "limit": start["limit"], "iterations": history, "resolved": False,
+                "failure": f"with the a-priori scaled by {history[-1]['factor']:.3g} the refinement failed: "
+                           f"{str(exc).split(' (')[0]}"}
+        kept = (work, sol, kkt, scale)
+        chi2, rows = _state_prior_chi2(work, sol.values)
+    adaptation = {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
+                  "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start["chi2"],
+                  "chi2_after": chi2, "rows": rows, "limit": start["limit"], "iterations": history,
+                  "resolved": bool(chi2 <= start["limit"] or (history and history[-1].get("component") is not None
+                                                             and abs(history[-1]["component"] - 1.0) < 0.1))}
+    return work, sol, kkt, scale, adaptation
+
+
 def solve_weighted(ref: Refinement, observed=None, prior_centre=None, x0=None):
     """:meth:`Refinement.solve`, repeated with the sample sigmas scaled by √(variance factor) while
     that exceeds :data:`REWEIGHT_THRESHOLD` (pointwise with ``reweight``). Returns
@@ -978,7 +1230,8 @@ def solve_weighted(ref: Refinement, observed=None, prior_centre=None, x0=None):
 
 
 def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None,
-           prior_centre=None) -> RefineResult:
+           prior_centre=None, adaptation: dict | None = None, traverse_moves: list | None = None,
+           improvement: dict | None = None, refusal: dict | None = None) -> RefineResult:
     """Outputs of a solved :class:`Refinement` (states, covariance, report, residuals);
     ``consistency`` the :func:`circular_consistency` of a ``--circular`` solution;
     ``prior_centre`` the a-priori centre the solution was solved with (:meth:`Refinement.solve`)."""
@@ -997,11 +1250,27 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     names = list(ref.names)
     npb = ref.n_problem
     cov = ref.covariance(sol, kkt)
+    if refusal is not None:
+        # the pass cannot improve the stale state: keep it with its a-priori covariance, the
+        # Doppler offset/drift fitted at it
+        x = np.asarray(sol.values, float).copy()
+        x[:6] = ref.x0[:6]
+        cov = np.zeros_like(np.asarray(cov, float))
+        cov[:6, :6] = refusal["state_covariance"]
+        nuisance = (improvement or {}).get("stale_nuisance") or {}
+        if len(nuisance.get("values", [])) == npb - 6 and npb > 6:
+            x[6:npb] = nuisance["values"]
+            cov[6:npb, 6:npb] = np.asarray(nuisance["covariance"], float)
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     units = problem.params.units() + (["m"] if opt.circular else [])
 
     # residuals at the samples (both costs)
-    if opt.cost == "pointwise":
+    if refusal is not None:
+        h, _ = problem.model(x[:npb])
+        r = problem.meas.observed - h
+        samples = SimpleNamespace(computed=h, residual=r, normalized=r / (problem.meas.sigma * sigma_scale),
+                                  edited=np.asarray(sol.edited, bool))
+    elif opt.cost == "pointwise":
         samples = sol
     else:
         h, _ = problem.model(x[:npb])
@@ -1060,7 +1329,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
     big = rtn_jacobian(x[:3], x[3:6], rotating=False)             # GCRF -> RTN for (r, v)
     covariance_note = "linear (the inverse of the whitened normal matrix at the solution)"
-    if opt.covariance == "profile" and opt.cost == "pointwise" and not opt.circular and obs.unobservable and ref.priors:
+    if (opt.covariance == "profile" and opt.cost == "pointwise" and not opt.circular and obs.unobservable and ref.priors
+            and refusal is None):
         # the estimate slides along a curved valley where the pass sees nothing: the linear
         # covariance misses that curvature along the best-determined combinations
         try:
@@ -1075,6 +1345,12 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     # (a large unseen part means the a-priori, not the data, put the state there)
     obs.correction_rtn = {part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))
                           for part, d in zip(("seen", "unseen"), obs.split(x[:6] - ref.x0[:6]))}
+    if refusal is not None:
+        refusal = dict(refusal)
+        refusal.pop("state_covariance", None)
+        refusal["refused_correction_rtn"] = {
+            part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))
+            for part, d in zip(("seen", "unseen"), obs.split(np.asarray(sol.values, float)[:6] - ref.x0[:6]))}
 
     # the state at the stale epoch
     dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(ref.stale_epoch),
@@ -1096,6 +1372,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                 "sigma_s": float(ref.curve.tca.sigma_s) if ref.curve.tca is not None else None,
                 "curve": ref.curve.source,
                 "refined_orbit_zero_range_rate_s": t_model,
+                "moved_s": list(traverse_moves or []),
                 "refined_orbit_zero_range_rate_utc": (format_epoch(problem.epoch + np.timedelta64(
                     int(round(t_model * 1e9)), "ns")) if t_model is not None else None)}
 
@@ -1135,6 +1412,17 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         warnings.append(f"{len(obs.unobservable)} state direction(s) are weakly determined by the pass alone "
                         "(see the observability report); consider --apriori")
 
+    quality = refine_quality(ref, sol, sigma_scale=sigma_scale, adaptation=adaptation, improvement=improvement,
+                             refusal=refusal, t_model=t_model, max_el=max_el, consistency=consistency)
+    if refusal is not None:
+        warnings.append(f"the stale state is kept: {refusal['reason']}")
+    apriori_note = ref.apriori_note
+    if adaptation is not None and adaptation.get("factor", 1.0) > 1.0 and refusal is None:
+        a = adaptation
+        warnings.append(f"the pass contradicted the a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, 99.9 % limit "
+                        f"{a['limit']:.3g}): its covariance was scaled by {a['factor']:.3g} (sigmas x"
+                        f"{a['sigma_factor']:.3g}; maximum-likelihood variance component) and the pass refined again")
+        apriori_note += f"; scaled by {a['factor']:.3g} (the pass contradicted it)"
     rtn = rtn_covariance(x[:3], x[3:6], cov[:6, :6])
     diagnostics = {
         "converged": bool(sol.converged), "message": sol.message, "iterations": int(sol.iterations),
@@ -1144,6 +1432,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         "samples": int(problem.meas.observed.size), "edited": int((~kept).sum()),
         "sigma_scale": sigma_scale, "max_elevation_deg": max_el,
         "residual_rms": {"value": rms, "unit": UNITS[ref.kind], "range_rate_m_s": rms * rr_factor},
+        "apriori_adaptation": adaptation, "improvement": _without_nuisance(improvement), "refused": refusal,
         "traverse": traverse, "constraints": constraints, "observability": obs.as_dict(),
         "covariance_rtn": rtn,
         "sigma_rtn": dict(zip(rf.RTN_NAMES, np.sqrt(np.clip(np.diag(rtn), 0.0, None)).tolist())),
@@ -1154,7 +1443,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     method = {"cost": opt.cost, "circular": bool(opt.circular),
               "solver": ("Gauss-Newton with equality constraints, KKT by the null-space method (seed 004 eqs. 15-17)"
                          if opt.circular else "Gauss-Newton by QR/SVD with Levenberg-Marquardt damping"),
-              "apriori": ref.apriori_note, "covariance": covariance_note,
+              "apriori": apriori_note, "covariance": covariance_note,
               "kind": ref.kind, "station": ref.station_name, "pass_id": ref.pass_id,
               "range_rate_model": problem.range_rate_model, "force_model": opt.force, "earth": opt.earth,
               "doppler_bias": [n for n in problem.names if n.startswith("doppler_")],
@@ -1191,6 +1480,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                              "velocity_m_s": ref.initial.v_m_s.tolist(),
                              "source": ref.initial.source or (ref.initial.extra or {}).get("source")}}
     eop_source = getattr(problem.eop, "source", None) or "none (UT1-UTC = 0, no polar motion)"
+    extra["quality"] = quality.as_dict()
     state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=names, values=values, sigma=sigma,
                                covariance=cov, force_model=opt.force, constants=force_model_constants(opt.force),
                                eop_source=eop_source, diagnostics=diagnostics, extra=extra)
@@ -1199,10 +1489,102 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                                      covariance=cov_s, force_model=opt.force,
                                      constants=force_model_constants(opt.force), eop_source=eop_source,
                                      diagnostics=diagnostics,
-                                     extra={"refinement": method, "at_traverse_epoch": format_epoch(problem.epoch)})
+                                     extra={"refinement": method, "at_traverse_epoch": format_epoch(problem.epoch),
+                                            "quality": quality.as_dict()})
     return RefineResult(state=state, stale_epoch_state=stale_state, solution=sol, problem=problem, curve=ref.curve,
                         residuals=residuals, observability=obs, constraints=constraints, covariance=cov, names=names,
-                        warnings=warnings)
+                        warnings=warnings, quality=quality)
+
+
+def _without_nuisance(improvement):
+    if improvement is None:
+        return None
+    return {k: v for k, v in improvement.items() if k != "stale_nuisance"}
+
+
+def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, improvement=None, refusal=None,
+                   t_model=None, max_el=None, consistency=None):
+    """The :class:`~trackproc.methods.quality.Quality` of a refinement: a-priori conflict (and
+    its adaptation), variance factor of the nominal sigmas, residual whiteness, traverse-epoch
+    mismatch, low pass, circular-constraint conflict, edited samples, refusal."""
+    from trackproc.methods import quality as qm
+
+    q = qm.Quality()
+    opt = ref.options
+    if refusal is not None:
+        q.add("refused", "suspect", f"the stale state is kept: {refusal['reason']}", value=refusal.get("code"))
+    # a-priori conflict
+    if adaptation is not None:
+        a = adaptation
+        if a.get("resolved", True):
+            q.add("apriori_conflict", "ok",
+                  f"the pass contradicted the a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
+                  f"{a['limit']:.3g}); its covariance was scaled by {a['factor']:.3g} (sigmas x{a['sigma_factor']:.3g}, "
+                  "maximum-likelihood variance component)", value=a["chi2_before"], limit=a["limit"])
+        else:
+            q.add("apriori_conflict", "suspect" if refusal is not None else "rejected",
+                  f"the pass contradicts the a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
+                  f"{a['limit']:.3g}) and cannot carry a looser one ({a.get('failure', '')})",
+                  value=a["chi2_before"], limit=a["limit"])
+    elif sol.n_prior:
+        chi2, rows = _state_prior_chi2(ref, sol.values)
+        if rows:
+            limit = qm.chi2_limit(rows)
+            # a refused refinement writes the stale state: the conflict is the rejected solution's
+            q.add("apriori_conflict", "ok" if chi2 <= limit else "suspect" if refusal is not None else "rejected",
+                  f"a-priori chi2 {chi2:.4g} over {rows} (limit {limit:.3g})"
+                  + (" of the refused solution" if refusal is not None else ""), value=chi2, limit=limit)
+    # the variance factor of the nominal sigmas (reweighting hides it in the solution's own)
+    if sol.dof > 0 and math.isfinite(sol.variance_factor):
+        vf = float(sol.variance_factor) * sigma_scale ** 2
+        limit = qm.variance_factor_limit(sol.dof)
+        if opt.cost == "integral":
+            q.add("variance_factor", "ok", f"variance factor {vf:.3g} of the curve (the integral cost's pseudo-sigmas "
+                  "are not a test of the data)", value=vf, limit=None)
+        else:
+            q.add("variance_factor", "ok" if vf <= limit else "suspect",
+                  f"a-posteriori variance factor {vf:.3g} with the samples' own sigmas (99.9 % limit {limit:.3g})"
+                  + (f"; sigmas scaled by {sigma_scale:.3g} to their actual scatter" if sigma_scale > 1 else ""),
+                  value=vf, limit=limit)
+    # whiteness of the residuals
+    if improvement is not None and "whiteness" in improvement:
+        w = improvement["whiteness"]
+    else:
+        keep = ~np.asarray(sol.edited, bool)
+        w = qm.whiteness(np.asarray(sol.normalized, float)[keep]) if opt.cost == "pointwise" else None
+    if w is not None:
+        qm.add_whiteness(q, w)
+    if improvement is not None and refusal is None and "significant" in improvement:
+        q.add("improvement", "ok",
+              f"the pass {'tells' if improvement['significant'] else 'does not significantly tell'} the refined "
+              f"state from the stale one (delta chi2 {improvement['delta_chi2']:.4g}, "
+              f"{improvement['delta_chi2_effective']:.3g} after the residuals' correlation; 99.9 % point "
+              f"{improvement['limit']:.3g})" + ("" if improvement["significant"] else
+                                                 ": the a-priori carries most of the refined state"),
+              value=improvement["delta_chi2_effective"], limit=improvement["limit"])
+    # the epoch: the refined orbit's own traverse point
+    if ref.curve.tca is not None or opt.traverse_epoch is not None:
+        if t_model is None:
+            q.add("traverse_mismatch", "suspect", "the refined orbit's range-rate does not vanish within 60 s of the "
+                  "solution epoch", value=None, limit=TRAVERSE_TOLERANCE_S)
+        else:
+            q.add("traverse_mismatch", "ok" if abs(t_model) <= TRAVERSE_TOLERANCE_S else "suspect",
+                  f"the refined orbit's own zero range-rate is {t_model:+.3g} s from the solution epoch",
+                  value=abs(t_model), limit=TRAVERSE_TOLERANCE_S)
+    if max_el is not None:
+        q.add("low_pass", "ok" if max_el >= LOW_PASS_DEG else "suspect",
+              f"highest elevation {max_el:.1f} deg" + (" (one low pass determines the orbit poorly)"
+                                                       if max_el < LOW_PASS_DEG else ""),
+              value=max_el, limit=LOW_PASS_DEG)
+    if consistency is not None and "p_value" in consistency:
+        bad = consistency["p_value"] < CIRCULAR_TEST_P
+        q.add("circular_conflict", "suspect" if bad else "ok",
+              f"circular-orbit constraints: delta chi2 {consistency['delta_chi2']:.4g} over 2, p = "
+              f"{consistency['p_value']:.2g}", value=consistency["p_value"], limit=CIRCULAR_TEST_P)
+    if opt.cost == "pointwise" and sol.n_edited > 0.1 * sol.n_measurements:
+        q.add("edited", "suspect", f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)",
+              value=int(sol.n_edited), limit=0.1 * sol.n_measurements)
+    return q
 
 
 # ----------------------------------------------------------------------------- text
@@ -1244,6 +1626,8 @@ def summary_text(result: RefineResult) -> str:
     lines.append(f"  at the stale epoch {stale['epoch']}: r = [{r_text}] m, v = [{v_text}] m/s")
     for w in result.warnings:
         lines.append(f"  warning: {w}")
+    if result.quality is not None:
+        lines.append(f"  {result.quality.text()}")
     return "\n".join(lines) + "\n"
 
 

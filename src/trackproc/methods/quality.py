@@ -1,0 +1,189 @@
+"""Consistency gates of a solution: the statistics and the machine-readable ``quality`` verdict.
+
+Pure functions on what any least-squares solver gives (residuals, a-priori share of chi2,
+covariance), so they hold whatever noise model produced the residuals:
+
+* :func:`prior_variance_component` — the maximum-likelihood (Helmert/Förstner) variance
+  component of the a-priori block: how much the a-priori covariance must be scaled for the
+  data to agree with it.
+* :func:`lag1_autocorrelation`, :func:`runs_test`, :func:`effective_samples` — whiteness of
+  the normalised residuals and the number of independent samples they are worth.
+* :class:`Quality` — the verdict ``ok`` / ``suspect`` / ``rejected`` with its reasons, each
+  ``{"code", "message", "value", "limit", "severity"}``; the worst reason decides.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+VERDICTS = ("ok", "suspect", "rejected")
+#: Significance of the chi-square gates (a-priori conflict, variance factor): 99.9 %.
+GATE_PROBABILITY = 0.999
+#: Lag-1 autocorrelation of the normalised residuals above which they are not white.
+WHITENESS_RHO = 0.3
+#: The runs test's |z| above which the residual signs are not random.
+RUNS_Z = 3.29
+
+
+@dataclass
+class Quality:
+    """The verdict and its reasons (the worst reason's severity is the verdict)."""
+
+    reasons: list = field(default_factory=list)
+
+    def add(self, code: str, severity: str, message: str, value=None, limit=None) -> None:
+        if severity not in VERDICTS:
+            raise ValueError(f"unknown severity {severity!r}")
+        self.reasons.append({"code": code, "severity": severity, "message": message,
+                             "value": _plain(value), "limit": _plain(limit)})
+
+    @property
+    def verdict(self) -> str:
+        worst = 0
+        for r in self.reasons:
+            worst = max(worst, VERDICTS.index(r["severity"]))
+        return VERDICTS[worst]
+
+    def as_dict(self) -> dict:
+        return {"verdict": self.verdict, "reasons": [dict(r) for r in self.reasons]}
+
+    def text(self) -> str:
+        """One line for stderr: ``quality: suspect (low_pass, whiteness)``."""
+        bad = [r["code"] for r in self.reasons if r["severity"] != "ok"]
+        return f"quality: {self.verdict}" + (f" ({', '.join(bad)})" if bad else "")
+
+
+def _plain(v):
+    if v is None or isinstance(v, str):
+        return v
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_plain(a) for a in np.asarray(v).tolist()]
+    if isinstance(v, (bool, np.bool_)):
+        return bool(v)
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    f = float(v)
+    return f if math.isfinite(f) else None
+
+
+def chi2_limit(dof: int, probability: float = GATE_PROBABILITY) -> float:
+    """The ``probability`` quantile of χ²(dof)."""
+    from scipy.stats import chi2
+
+    return float(chi2.ppf(probability, max(int(dof), 1)))
+
+
+def variance_factor_limit(dof: int, probability: float = GATE_PROBABILITY) -> float:
+    """Upper ``probability`` quantile of the variance factor χ²(dof)/dof of a consistent fit."""
+    return chi2_limit(dof, probability) / max(int(dof), 1)
+
+
+def prior_redundancy(posterior_cov_block: np.ndarray, prior_cov: np.ndarray) -> float:
+    """Redundancy number of an a-priori block on parameters directly: ``n - tr(C_post P)``, with
+    ``C_post`` the posterior covariance of those parameters and ``P`` the a-priori weight
+    (Förstner 1979; Koch, Parameter Estimation and Hypothesis Testing, 1999, eq. 3.287 with an
+    identity design). It is the part of the a-priori rows the data can check: 0 when the data
+    see nothing of it, ``n`` when they fix it alone."""
+    c = np.asarray(posterior_cov_block, float)
+    p = np.linalg.inv(np.asarray(prior_cov, float))
+    return float(c.shape[0] - np.trace(c @ p))
+
+
+def prior_variance_component(chi2_prior: float, redundancy: float) -> Optional[float]:
+    """Helmert/Förstner estimate of the a-priori block's variance component,
+    ``σ²_p = vᵀ P v / r_p`` (Koch 1999, eq. 3.291): the factor by which the a-priori covariance
+    must be scaled for its share of χ² to equal its redundancy. None when the data cannot check
+    the a-priori (redundancy below 0.05)."""
+    if not (redundancy > 0.05) or not math.isfinite(chi2_prior):
+        return None
+    return float(chi2_prior / redundancy)
+
+
+def lag1_autocorrelation(x) -> float:
+    """Lag-1 autocorrelation of a series (mean removed); NaN for fewer than 3 values."""
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    if x.size < 3:
+        return math.nan
+    x = x - x.mean()
+    den = float(x @ x)
+    return float(x[:-1] @ x[1:] / den) if den > 0 else math.nan
+
+
+def runs_test(x) -> float:
+    """Wald–Wolfowitz runs test of the signs of ``x`` about its median: the normal score ``z``
+    of the number of runs (Wald & Wolfowitz 1940); strongly negative when the residuals come in
+    long runs of one sign (a systematic error), NaN for fewer than 10 values."""
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    s = x > np.median(x)
+    n1, n2 = int(s.sum()), int((~s).sum())
+    n = n1 + n2
+    if n < 10 or n1 == 0 or n2 == 0:
+        return math.nan
+    runs = 1 + int(np.count_nonzero(s[1:] != s[:-1]))
+    mean = 2.0 * n1 * n2 / n + 1.0
+    var = 2.0 * n1 * n2 * (2.0 * n1 * n2 - n) / (n * n * (n - 1.0))
+    return float((runs - mean) / math.sqrt(var)) if var > 0 else math.nan
+
+
+def effective_samples(n: int, rho: float) -> float:
+    """Independent samples an AR(1) series of ``n`` with lag-1 correlation ``rho`` is worth for
+    its mean: ``n (1 - ρ)/(1 + ρ)`` (e.g. von Storch & Zwiers 1999, eq. 6.13); ``n`` for ρ <= 0."""
+    if not math.isfinite(rho) or rho <= 0:
+        return float(n)
+    rho = min(rho, 0.999)
+    return float(max(1.0, n * (1.0 - rho) / (1.0 + rho)))
+
+
+def whiteness(normalized) -> dict:
+    """Lag-1 autocorrelation, runs-test z and effective sample count of normalised residuals."""
+    r = np.asarray(normalized, float)
+    r = r[np.isfinite(r)]
+    rho = lag1_autocorrelation(r)
+    return {"n": int(r.size), "lag1_autocorrelation": rho, "runs_z": runs_test(r),
+            "effective_samples": effective_samples(r.size, rho)}
+
+
+def add_whiteness(q: Quality, w: dict) -> None:
+    """The residual-whiteness reason (``suspect`` when lag-1 ρ > :data:`WHITENESS_RHO` or the
+    runs test rejects at |z| > :data:`RUNS_Z`)."""
+    rho, z = w["lag1_autocorrelation"], w["runs_z"]
+    if not math.isfinite(rho):
+        return
+    bad = rho > WHITENESS_RHO or (math.isfinite(z) and abs(z) > RUNS_Z)
+    q.add("whiteness", "suspect" if bad else "ok",
+          (f"the residuals are correlated in time (lag-1 autocorrelation {rho:.2f}, runs-test z {z:.1f}; worth "
+           f"{w['effective_samples']:.0f} independent samples of {w['n']}): a covariance that assumes white noise "
+           "is optimistic") if bad else
+          f"residuals white enough (lag-1 autocorrelation {rho:.2f}, runs-test z {z:.1f})",
+          value=rho, limit=WHITENESS_RHO)
+
+
+def correlation_inflation(rho: float) -> float:
+    """Factor by which white-noise information overstates that of an AR(1) series with lag-1
+    correlation ``rho``: ``(1 + ρ)/(1 - ρ)`` (the inverse of :func:`effective_samples`' ratio);
+    1 for ρ <= 0."""
+    if not math.isfinite(rho) or rho <= 0:
+        return 1.0
+    rho = min(rho, 0.999)
+    return float((1.0 + rho) / (1.0 - rho))
+
+
+def improvement_test(chi2_stale: float, chi2_refined: float, dof: int, inflation: float = 1.0,
+                     probability: float = GATE_PROBABILITY) -> dict:
+    """Does the pass need the correction? The likelihood-ratio statistic of the stale state
+    (nuisance parameters refitted) against the refined one, ``Δχ² = χ²(stale) - χ²(refined)``,
+    is χ²(``dof``) when the stale state is right; time-correlated residuals make it ``inflation``
+    times too large (:func:`correlation_inflation`), so ``Δχ²/inflation`` is compared with the
+    ``probability`` point. ``significant`` False: the data cannot tell the refined state from
+    the stale one."""
+    delta = float(chi2_stale - chi2_refined)
+    eff = delta / max(float(inflation), 1.0)
+    limit = chi2_limit(dof, probability)
+    return {"delta_chi2": delta, "inflation": float(inflation), "delta_chi2_effective": eff, "dof": int(dof),
+            "limit": limit, "significant": bool(eff > limit)}

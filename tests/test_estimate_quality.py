@@ -1,0 +1,71 @@
+"""``estimate``'s ``quality`` verdict (issue 13, item 3): ok on consistent simulated passes (state
+file, OPM comment), ``rejected`` (exit 1, outputs written) when the a-priori is contradicted,
+``suspect`` with the pass that dominates the misfit named, and ``--strict``."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from trackproc.io.opm import parse_opm
+from trackproc.io.passfile import PassTable, read_pass_table, write_pass_table
+
+from test_estimate_cli import files  # noqa: F401  (the module's simulated passes)
+
+
+def _run(run_cli, files, tmp_path, *extra, passes=None):
+    out, opm = tmp_path / "sol.json", tmp_path / "sol.opm"
+    r = run_cli(["estimate", passes or files / "passes.parquet", "--initial", files / "guess.json", "--range-bias",
+                 "--doppler-bias", "offset", "--dut1", "0.1", "--opm", opm, "-o", out, *extra])
+    return r, out, opm
+
+
+def test_consistent_passes_are_ok_in_the_state_file_and_the_opm(run_cli, files, tmp_path):
+    r, out, opm = _run(run_cli, files, tmp_path, "--strict")
+    assert r.exit_code == 0, r.stderr
+    q = json.loads(out.read_text())["quality"]
+    assert q["verdict"] == "ok", q
+    codes = {x["code"] for x in q["reasons"]}
+    assert {"variance_factor", "whiteness"} <= codes
+    text = opm.read_text()
+    assert "COMMENT QUALITY verdict=ok reasons=none" in text
+    assert parse_opm(text)["r_m"] is not None
+    assert "quality: ok" in r.stderr
+
+
+def test_contradicted_apriori_is_rejected_exit_1_with_the_outputs_written(run_cli, files, tmp_path):
+    """The guess is ~900 m off the truth; a 1 m / 1 mm/s a-priori around it is contradicted."""
+    r, out, opm = _run(run_cli, files, tmp_path, "--apriori-sigma", "position=1", "--apriori-sigma", "velocity=0.001")
+    assert r.exit_code == 1
+    q = json.loads(out.read_text())["quality"]
+    assert q["verdict"] == "rejected"
+    conflict = [x for x in q["reasons"] if x["code"] == "apriori_conflict"][0]
+    assert conflict["value"] > conflict["limit"] and conflict["severity"] == "rejected"
+    assert "COMMENT QUALITY verdict=rejected reasons=apriori_conflict" in opm.read_text()
+    assert "rejected" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_corrupted_pass_is_named_and_strict_turns_suspect_into_exit_1(run_cli, files, tmp_path):
+    """One pass's Doppler gets a 0.01 Hz/s ramp (0.1 Hz noise; no editing) (no per-pass offset absorbs it): the misfit is
+    that pass's, named in ``dominant_pass``; the verdict is suspect, exit 0, and 1 with --strict."""
+    table = read_pass_table(str(files / "passes.parquet"))
+    frame = table.frame.copy()
+    dop = frame["kind"].astype(str) == "doppler"
+    first = sorted(set(frame.loc[dop, "pass_id"].astype(str)))[0]
+    rows = dop & (frame["pass_id"].astype(str) == first)
+    t = (frame.loc[rows, "time"] - frame.loc[rows, "time"].min()).dt.total_seconds().to_numpy()
+    frame.loc[rows, "value"] = frame.loc[rows, "value"].to_numpy() + 0.01 * (t - t.mean())
+    bad = tmp_path / "bad.parquet"
+    write_pass_table(PassTable(frame, table.meta), str(bad))
+    r, out, _ = _run(run_cli, files, tmp_path, "--clip", "0", passes=bad)
+    assert r.exit_code == 0, r.stderr
+    q = json.loads(out.read_text())["quality"]
+    assert q["verdict"] == "suspect", q
+    dom = [x for x in q["reasons"] if x["code"] == "dominant_pass"]
+    station = frame.loc[rows, "station"].astype(str).iloc[0]
+    assert dom and f"{station}/{first} doppler" in dom[0]["message"] and dom[0]["value"] > 0.5
+    r, out, _ = _run(run_cli, files, tmp_path, "--clip", "0", "--strict", passes=bad)
+    assert r.exit_code == 1 and "--strict" in r.stderr
+    assert json.loads(out.read_text())["quality"]["verdict"] == "suspect"
+    assert np.isfinite(json.loads(out.read_text())["values"]).all()
