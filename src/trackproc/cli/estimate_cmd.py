@@ -185,4 +185,7 @@ def estimate_command(
     if verdict == "rejected" or (strict and verdict == "suspect"):
         log.error(f"{result.quality.text()}: the solution is written with its verdict; exit 1"
                   + (" (--strict)" if verdict == "suspect" else ""))
+        from trackproc.io.atomic import commit_outputs
+
+        commit_outputs()   # the outputs are complete and carry the verdict: written, then exit 1
         raise typer.Exit(1)

@@ -58,6 +58,13 @@ class _Transaction:
 _transaction: _Transaction | None = None
 
 
+def commit_outputs() -> None:
+    """Rename the outputs written so far into place now. For a command that ends with a non-zero
+    exit on its verdict (quality ``rejected``, ``--strict``): its outputs are complete and say why."""
+    if _transaction is not None:
+        _transaction.commit()
+
+
 @contextlib.contextmanager
 def all_or_none(enabled: bool = True) -> Iterator[_Transaction]:
     """Within the block, every :func:`open_atomic` output of this process is held in its temporary
