@@ -49,6 +49,7 @@ import numpy as np
 
 from trackproc.constants import C_LIGHT
 from trackproc.dynamics import geodesy
+from trackproc.dynamics.geodesy import wrap_2pi  # noqa: F401  (re-exported)
 from trackproc.vocabulary import LINK_MODES, RANGE_RATE_MODELS
 
 __all__ = ["check_range_rate_model", "check_mode", "range_partials", "range_rate_value", "range_rate_partials",
@@ -73,12 +74,6 @@ def check_mode(mode: str) -> None:
 
 
 # ----------------------------------------------------------------------------- angles
-
-def wrap_2pi(angle_rad):
-    """Angle in [0, 2π): ``np.mod`` can return exactly 2π for tiny negative input; map it to 0."""
-    a = np.mod(np.asarray(angle_rad, float), 2 * np.pi)
-    return np.where(a >= 2 * np.pi, 0.0, a)
-
 
 def wrap_pi(angle_rad):
     """Angle in [-π, π) (residuals of azimuth)."""
