@@ -1,4 +1,4 @@
-"""ISO 8601 time text (io/isotime.py) against pandas' and numpy's own formatting."""
+"""ISO 8601 time text (isotime.py) against pandas' and numpy's own formatting."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from trackproc.io.isotime import iso_utc, iso_utc_array
+from trackproc.isotime import iso_utc, iso_utc_array
 
 RNG = np.random.default_rng(5)
 #: random instants 1972..2050 at nanosecond resolution

@@ -35,7 +35,7 @@ import numpy as np
 
 from trackproc.io.jsonutil import json_ready
 from trackproc.errors import InputError
-from trackproc.io.isotime import iso_utc as format_epoch  # noqa: F401  (the state file's epoch text)
+from trackproc.isotime import iso_utc as format_epoch  # noqa: F401  (the state file's epoch text)
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
 
 SCHEMA_VERSION = 1

@@ -50,7 +50,7 @@ import numpy as np
 from trackproc.constants import C_LIGHT
 from trackproc.dynamics import geodesy
 from trackproc.dynamics.geodesy import wrap_2pi  # noqa: F401  (re-exported)
-from trackproc.vocabulary import LINK_MODES, RANGE_RATE_MODELS
+from trackproc.vocabulary import check_mode, check_range_rate_model  # noqa: F401  (re-exported)
 
 __all__ = ["check_range_rate_model", "check_mode", "range_partials", "range_rate_value", "range_rate_partials",
            "two_way_range_partials", "up_rate_partials", "two_way_range_rate_partials", "doppler_factor",
@@ -59,18 +59,6 @@ __all__ = ["check_range_rate_model", "check_mode", "range_partials", "range_rate
 
 def _dot(a, b):
     return np.einsum("...i,...i->...", a, b)
-
-
-def check_range_rate_model(model: str) -> None:
-    """``ValueError`` naming the choices unless ``model`` is one of :data:`RANGE_RATE_MODELS`."""
-    if model not in RANGE_RATE_MODELS:
-        raise ValueError(f"unknown range-rate model {model!r}; expected one of {RANGE_RATE_MODELS}")
-
-
-def check_mode(mode: str) -> None:
-    """``ValueError`` naming the choices unless ``mode`` is one of :data:`LINK_MODES`."""
-    if mode not in LINK_MODES:
-        raise ValueError(f"unknown mode {mode!r}; expected one of {LINK_MODES}")
 
 
 # ----------------------------------------------------------------------------- angles
