@@ -87,3 +87,22 @@ def test_constant_eop_has_no_polar_motion():
     eop = ts.EarthOrientation.constant(-0.2)
     d, xp, yp = eop.at(*jd("2026-03-20T00:00:00"))
     assert float(d) == -0.2 and float(xp) == 0.0 and float(yp) == 0.0
+
+
+@pytest.mark.parametrize("scale", ["TAI", "GPS", "TT"])
+def test_scale_ns_to_utc_against_erfa(scale):
+    """TAI/GPS/TT epochs (ns on the scale's calendar) -> UTC, against ERFA's taiutc/tttai,
+    across the 2016-12-31 leap second."""
+    import erfa
+
+    utc = np.array(["2016-12-31T23:59:00", "2017-01-01T00:00:30", "2020-06-01T12:00:00.25"], dtype="datetime64[ns]")
+    offset = {"TAI": 0.0, "GPS": -19.0, "TT": 32.184}[scale]
+    # the same instants on the scale's calendar, by ERFA
+    u1, u2 = ts.datetime64_to_jd_utc(utc)
+    a1, a2 = erfa.utctai(u1, u2)
+    tai_ns = np.array([np.datetime64("2000-01-01T12:00:00", "ns")
+                       + np.timedelta64(int(round(((x - 2451545.0) + y) * 86400e9)), "ns") for x, y in zip(a1, a2)])
+    naive = tai_ns.astype(np.int64) + int(round(offset * 1e9))
+    back = ts.scale_ns_to_utc_ns(naive, scale)
+    assert np.all(np.abs(back - utc.astype(np.int64)) <= 1000)          # within 1 us (JD round-off)
+    assert ts.scale_ns_to_utc_ns(naive, "UTC") is naive

@@ -3,7 +3,8 @@
 Every module that checks or offers one of these names (the CLI's choices, the readers'
 validation, the models' ``ValueError`` messages, the batch configuration) draws it from here,
 so a name cannot be spelled two ways. The names are a contract (README "Data contract",
-docs/*.md): add freely, never rename. Pure data, no imports: cheap for ``--help``.
+docs/*.md): add freely, never rename. Pure data and two checks, no imports: cheap for
+``--help``, and a leaf every layer may import.
 """
 
 from __future__ import annotations
@@ -40,3 +41,15 @@ BIAS_UNITS = {"range_bias": "m", "doppler_offset": "Hz", "doppler_drift": "Hz/s"
 DOPPLER_BIASES = ("offset", "offset+drift")
 #: ``refine``'s Doppler-bias choices: also ``none`` (a coherent two-way link has no offset).
 REFINE_DOPPLER_BIASES = ("none",) + DOPPLER_BIASES
+
+
+def check_range_rate_model(model: str) -> None:
+    """``ValueError`` naming the choices unless ``model`` is one of :data:`RANGE_RATE_MODELS`."""
+    if model not in RANGE_RATE_MODELS:
+        raise ValueError(f"unknown range-rate model {model!r}; expected one of {RANGE_RATE_MODELS}")
+
+
+def check_mode(mode: str) -> None:
+    """``ValueError`` naming the choices unless ``mode`` is one of :data:`LINK_MODES`."""
+    if mode not in LINK_MODES:
+        raise ValueError(f"unknown mode {mode!r}; expected one of {LINK_MODES}")

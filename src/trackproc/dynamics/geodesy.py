@@ -69,10 +69,15 @@ def enu_to_azel(enu):
     """
     e, n, u = np.moveaxis(np.asarray(enu, float), -1, 0)
     rng = np.sqrt(e * e + n * n + u * u)
-    az = np.mod(np.arctan2(e, n), 2 * np.pi)
-    az = np.where(az >= 2 * np.pi, 0.0, az)  # mod of a tiny negative number rounds up to 2π
+    az = wrap_2pi(np.arctan2(e, n))
     el = np.arctan2(u, np.hypot(e, n))
     return az, el, rng
+
+
+def wrap_2pi(angle_rad):
+    """Angle in [0, 2π): ``np.mod`` of a tiny negative number rounds up to exactly 2π; map it to 0."""
+    a = np.mod(np.asarray(angle_rad, float), 2 * np.pi)
+    return np.where(a >= 2 * np.pi, 0.0, a)
 
 
 # --------------------------------------------------------------------------- stations

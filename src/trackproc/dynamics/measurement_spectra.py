@@ -91,7 +91,7 @@ from trackproc.dynamics import geodesy
 from trackproc.dynamics import spectra as sp
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.frames import OMEGA_ERA, _r3
-from trackproc.vocabulary import RANGE_RATE_MODELS  # noqa: F401  (re-exported)
+from trackproc.vocabulary import RANGE_RATE_MODELS, check_range_rate_model  # noqa: F401  (re-exported)
 
 __all__ = ["RANGE_RATE_MODELS", "StationModel", "Prediction", "rotation_spectra", "predict",
            "segment_spectra", "LIGHT_TIME_TERMS"]
@@ -656,8 +656,6 @@ def predict(trajectory, station: StationModel, t_s, *, range_rate_model: str = "
 
     Implements seed 004 eqs. 7-13 (module docstring); raises ValueError for an unknown model.
     """
-    from trackproc.models.observables import check_range_rate_model
-
     check_range_rate_model(range_rate_model)
     t_in = np.atleast_1d(np.asarray(t_s, float))
     if t_in.ndim != 1 or t_in.size == 0 or not np.all(np.isfinite(t_in)):

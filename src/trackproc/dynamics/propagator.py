@@ -44,7 +44,7 @@ from trackproc.dynamics import taylor
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.frames import QuasiInertialFrame, earth_rotation
 from trackproc.errors import ProcessingError
-from trackproc.io.isotime import iso_utc
+from trackproc.isotime import iso_utc
 
 __all__ = ["FORCES", "Trajectory", "Steps", "propagate", "propagate_state", "force_parameters", "reference_frame"]
 

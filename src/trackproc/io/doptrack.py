@@ -154,7 +154,7 @@ def _number(value, source: str, key: str, expected: str) -> float:
 
 def _iso(value) -> object:
     if isinstance(value, (dt.datetime, dt.date, pd.Timestamp)):
-        from trackproc.io.isotime import iso_utc
+        from trackproc.isotime import iso_utc
 
         return iso_utc(value, 6)
     if isinstance(value, dict):

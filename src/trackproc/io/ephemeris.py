@@ -49,7 +49,7 @@ import pyarrow as pa
 
 from trackproc.io.tables import arrow_table_bytes
 from trackproc.errors import InputError
-from trackproc.io.isotime import iso_utc
+from trackproc.isotime import iso_utc
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
 
 __all__ = ["COLUMNS", "STATE_NAMES", "STM_COLUMNS", "SIGMA_COLUMNS", "COV_COLUMNS", "MEASUREMENT_COLUMNS",

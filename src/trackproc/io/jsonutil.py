@@ -18,7 +18,7 @@ def json_ready(value):
     if isinstance(value, np.ndarray):
         return json_ready(value.tolist())
     if isinstance(value, np.datetime64):
-        from trackproc.io.isotime import iso_utc
+        from trackproc.isotime import iso_utc
 
         return iso_utc(value, 9)
     if isinstance(value, np.generic):

@@ -26,7 +26,7 @@ from datetime import datetime, timezone
 import numpy as np
 
 from trackproc.errors import InputError
-from trackproc.io.isotime import iso_utc
+from trackproc.isotime import iso_utc
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
 
 __all__ = ["COVARIANCE_KEYS", "opm_text", "write_opm", "parse_opm", "read_opm"]

@@ -41,7 +41,7 @@ import pyarrow as pa
 from trackproc.io.tables import arrow_table_bytes
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
-from trackproc.io.isotime import iso_utc_array
+from trackproc.isotime import iso_utc_array
 from trackproc.io.raw import KIND_UNITS
 from trackproc.io.tabular import (META_KEY, csv_metadata_line, Problems, column_numbers, column_strings,
                                   column_times, source_table)

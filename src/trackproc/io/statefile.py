@@ -35,7 +35,7 @@ import numpy as np
 
 from trackproc.io.jsonutil import json_ready
 from trackproc.errors import InputError
-from trackproc.io.isotime import iso_utc as format_epoch  # noqa: F401  (the state file's epoch text)
+from trackproc.isotime import iso_utc as format_epoch  # noqa: F401  (the state file's epoch text)
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
 from trackproc.io.validate import check_iso_year, check_orbit_state
 
@@ -373,7 +373,12 @@ def read_state(path: str, eop=None) -> State:
 def read_state_or_tle(path: str, eop=None, at=None) -> State:
     """A JSON state file, or a TLE (2 or 3 lines) converted by SGP4 at its epoch or at ``at``."""
     source = "<stdin>" if is_stdio(path) else str(path)
-    data = read_input_bytes(path)
+    return parse_state_or_tle(read_input_bytes(path), source, eop, at)
+
+
+def parse_state_or_tle(data: bytes, source: str, eop=None, at=None) -> State:
+    """The bytes of a JSON state file (they start with ``{``), or of a TLE (2 or 3 lines) converted
+    by SGP4 at its epoch or at ``at``: the one place that tells the two apart."""
     if data.lstrip()[:1] == b"{":
         return parse_state(data, source, eop)
     from trackproc.io.tle import parse_tle, tle_state

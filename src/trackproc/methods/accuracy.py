@@ -532,17 +532,17 @@ def range_range_rate_jacobian(r, v, r_st, v_st) -> np.ndarray:
     ``rho' = u . (v - v_st)``, ``u = (r - r_st)/rho`` (seed 002 eq. 17 with the station's
     motion): ``d rho/d r = u``, ``d rho'/d r = (dv - u (u . dv)) / rho``, ``d rho'/d v = u``.
     The light time changes these partials by ``v/c`` (~3e-5 relative), below the statistics'
-    own accuracy.
+    own accuracy. The partials are :func:`trackproc.models.observables.range_partials` and
+    :func:`~trackproc.models.observables.range_rate_partials` (``instantaneous``) at ``r, v``.
     """
-    d = np.asarray(r, float) - np.asarray(r_st, float)
-    dv = np.asarray(v, float) - np.asarray(v_st, float)
-    rho = np.linalg.norm(d, axis=-1, keepdims=True)
-    u = d / rho
-    rr = np.sum(u * dv, axis=-1, keepdims=True)
-    out = np.zeros(d.shape[:-1] + (2, 6))
-    out[..., 0, :3] = u
-    out[..., 1, :3] = (dv - u * rr) / rho
-    out[..., 1, 3:] = u
+    from trackproc.models.observables import range_partials, range_rate_partials
+
+    _, _, d_rho = range_partials(r, r_st)
+    _, d_rr_r, d_rr_v = range_rate_partials(r, v, r_st, v_st, "instantaneous")
+    out = np.zeros(d_rho.shape[:-1] + (2, 6))
+    out[..., 0, :3] = d_rho
+    out[..., 1, :3] = d_rr_r
+    out[..., 1, 3:] = d_rr_v
     return out
 
 

@@ -177,7 +177,7 @@ def information_distance(delta_fn, t_start_s: float, t_end_s: float, *, panels: 
     which the tests check against scipy's adaptive ``quad`` to 1e-9 relative. An empty window
     (``t_end <= t_start``) gives 0.
 
-    Implements seed 003 eqs. 5-6.
+    Implements seed 003 eq. 5.
     """
     if not t_end_s < 0:
         raise ValueError("the window must end before impact (t_end = -tau < 0)")

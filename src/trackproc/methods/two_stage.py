@@ -116,7 +116,7 @@ def compress(a2, pi_diag, e, pi_offsets):
     in :func:`two_stage_update` it gives the same K', ΔK as ``(A2, D + E Π Eᵀ)`` with an m × m S
     instead of an n2 × n2 one.
 
-    Implements seed 002 eq. 18 (a pass reduced to its information).
+    Implements the range information ``A2ᵀ Π⁻¹ A2`` of seed 002 eq. 19 in compressed form.
     """
     a2 = np.asarray(a2, float)
     w = 1.0 / np.sqrt(np.asarray(pi_diag, float))
@@ -138,7 +138,7 @@ def accumulate(estimates, covariance_passes, groups, names):
     ``names`` the N stations in order. Weights ``1/var_p`` (the diagonal). Returns
     ``(means (N,), Π (N, N), M (N, P))`` with ``means = M estimates``, ``Π = M C Mᵀ``.
 
-    Implements seed 002 eqs. 17-18 (stage 1: the offsets accumulated over passes).
+    Implements seed 002 eq. 17 (stage 1 of the two-stage method: the offsets accumulated over passes).
     """
     est = np.asarray(estimates, float)
     c = np.asarray(covariance_passes, float)

@@ -49,7 +49,8 @@ import numpy as np
 
 from trackproc.constants import C_LIGHT
 from trackproc.dynamics import geodesy
-from trackproc.vocabulary import LINK_MODES, RANGE_RATE_MODELS
+from trackproc.dynamics.geodesy import wrap_2pi  # noqa: F401  (re-exported)
+from trackproc.vocabulary import check_mode, check_range_rate_model  # noqa: F401  (re-exported)
 
 __all__ = ["check_range_rate_model", "check_mode", "range_partials", "range_rate_value", "range_rate_partials",
            "two_way_range_partials", "up_rate_partials", "two_way_range_rate_partials", "doppler_factor",
@@ -60,25 +61,7 @@ def _dot(a, b):
     return np.einsum("...i,...i->...", a, b)
 
 
-def check_range_rate_model(model: str) -> None:
-    """``ValueError`` naming the choices unless ``model`` is one of :data:`RANGE_RATE_MODELS`."""
-    if model not in RANGE_RATE_MODELS:
-        raise ValueError(f"unknown range-rate model {model!r}; expected one of {RANGE_RATE_MODELS}")
-
-
-def check_mode(mode: str) -> None:
-    """``ValueError`` naming the choices unless ``mode`` is one of :data:`LINK_MODES`."""
-    if mode not in LINK_MODES:
-        raise ValueError(f"unknown mode {mode!r}; expected one of {LINK_MODES}")
-
-
 # ----------------------------------------------------------------------------- angles
-
-def wrap_2pi(angle_rad):
-    """Angle in [0, 2π): ``np.mod`` can return exactly 2π for tiny negative input; map it to 0."""
-    a = np.mod(np.asarray(angle_rad, float), 2 * np.pi)
-    return np.where(a >= 2 * np.pi, 0.0, a)
-
 
 def wrap_pi(angle_rad):
     """Angle in [-π, π) (residuals of azimuth)."""

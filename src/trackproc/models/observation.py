@@ -267,7 +267,7 @@ def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | No
     ``epochs`` maps a drift name to its reference time (s). A driver touching no sample raises
     ValueError (it would be unobservable).
 
-    Implements seed 002 eqs. 10-11 (the offsets D0 of the extended state, and Doppler offsets).
+    Implements seed 002 eq. 10 (the E block of the offsets D0 of the extended state; Doppler offsets alike).
     """
     from trackproc.models.parameters import split_name
 

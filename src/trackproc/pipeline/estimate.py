@@ -47,7 +47,7 @@ import pandas as pd
 
 from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 from trackproc.errors import InputError, ProcessingError
-from trackproc.io.isotime import iso_utc
+from trackproc.isotime import iso_utc
 from trackproc.dynamics.rtn import rtn_covariance
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm

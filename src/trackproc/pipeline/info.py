@@ -165,7 +165,7 @@ def ephemeris_info(frame, meta: dict, source: str) -> dict:
     v = np.linalg.norm(frame[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy(float), axis=1)
     steps = np.diff(times.dt.tz_convert("UTC").dt.tz_localize(None).to_numpy().astype(np.int64)) / 1e9
     extra = [c for c in frame.columns if c not in ("time", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s")]
-    from trackproc.io.isotime import iso_utc
+    from trackproc.isotime import iso_utc
 
     fmt = lambda t: iso_utc(t, 3)  # noqa: E731
     return {

@@ -33,7 +33,7 @@ import pandas as pd
 
 from trackproc.errors import InputError
 from trackproc.vocabulary import LINK_MODES
-from trackproc.io.isotime import iso_utc
+from trackproc.isotime import iso_utc
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable, base_meta
 from trackproc.io.raw import RawMeasurements
 from trackproc.io.stations import Station

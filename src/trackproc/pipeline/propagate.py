@@ -30,7 +30,7 @@ import pandas as pd
 from trackproc import vocabulary
 from trackproc.constants import C_LIGHT, force_model_constants
 from trackproc.errors import InputError, ProcessingError
-from trackproc.io.isotime import iso_utc
+from trackproc.isotime import iso_utc
 
 DEG = np.pi / 180.0
 #: Below this geocentric distance (m) the orbit is taken to have entered the Earth.

@@ -236,35 +236,19 @@ def _utc64(times) -> np.ndarray:
     return t.to_numpy(dtype="datetime64[ns]")
 
 
-def _fit_from_record(rec: dict):
-    from trackproc.methods.smoothing import PolynomialFit
-
-    n_used = int(rec.get("n_used") or 0)
-    cov = np.asarray(rec["covariance_unscaled"], float)
-    return PolynomialFit(basis=str(rec["basis"]), domain_s=tuple(float(a) for a in rec["domain_s"]),
-                         degree=int(rec["degree"]), coef=np.asarray(rec["coefficients"], float), cov_unscaled=cov,
-                         chi2=float(rec["chi2"]), dof=int(rec["dof"]), used=np.ones(n_used, bool),
-                         residual=np.zeros(n_used), rms=float(rec.get("rms") or math.nan),
-                         wrms=float(rec.get("weighted_rms") or math.nan),
-                         condition_number=float(rec.get("condition_number") or math.nan))
-
-
 def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source: str) -> SmoothedCurve:
     """The smoothed polynomial of the pass: from the ``smoothing`` metadata when ``smooth`` made
     it (seed 004 eq. 1), else fitted here with ``smooth``'s defaults; and its closest approach."""
+    from trackproc.io import smoothing_record
     from trackproc.methods.smoothing import SmoothingError, closest_approach
 
     meta = sub.meta or {}
     mode = str(meta.get("doppler_mode") or "one-way")
     times = _utc64(sub.frame["time"])
-    rec = None
-    for r in (meta.get("smoothing") or {}).get("fits", []) or []:
-        if (r.get("station"), r.get("pass_id"), r.get("kind")) == (station, pass_id, kind) and r.get("coefficients"):
-            rec = r
-            break
+    rec = smoothing_record.find_fit_record(meta, station, pass_id, kind)
     if rec is not None:
-        fit = _fit_from_record(rec)
-        epoch = np.datetime64(str(rec["epoch_utc"]).rstrip("Zz"), "ns")
+        fit = smoothing_record.fit_from_record(rec)
+        epoch = smoothing_record.record_epoch(rec)
         used = ~sub.frame["flag"].to_numpy(bool) if "flag" in sub.frame.columns else np.ones(len(sub.frame), bool)
         t_used = (times[used] - epoch).astype(np.int64) * 1e-9
         tca, note = None, ""
@@ -276,7 +260,7 @@ def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source
             note = str(rec["tca"].get("error") or "closest approach not observed")
         return SmoothedCurve(fit=fit, epoch=epoch, kind=kind, tca=tca, tca_note=note, source="metadata",
                              used_t_s=np.sort(t_used))
-    if ((meta.get("smoothing") or {}).get("output") == "grid"):
+    if smoothing_record.output_of(meta) == "grid":
         raise InputError("a smoothed grid without its polynomial", file=source, column="smoothing",
                          expected=f"the smoothing record of {station}/{pass_id}/{kind} in the metadata")
     from trackproc.pipeline.smooth import SmoothOptions, smooth
@@ -581,6 +565,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     """Assemble a :class:`Refinement` (see the module docstring); :class:`InputError` for bad input.
     ``curve``: the pass's smoothed curve when already made (:func:`refine`'s re-solves)."""
     from trackproc.dynamics import geodesy, propagator
+    from trackproc.io import smoothing_record
     from trackproc.dynamics import measurement_spectra as ms
     from trackproc.dynamics import timescales as ts
     from trackproc.pipeline.estimate import EstimateOptions, build_problem
@@ -608,7 +593,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     warnings: list = []
     sub, kind, station, pass_id = _select_pass(table, opt, source)
     meta = sub.meta
-    if opt.cost == "pointwise" and (meta.get("smoothing") or {}).get("output") == "grid":
+    if opt.cost == "pointwise" and smoothing_record.output_of(meta) == "grid":
         raise InputError("a smoothed grid is a curve, not samples", file=source, column="smoothing",
                          found="output = grid",
                          expected="the samples (smooth without --grid), or --cost integral")

@@ -40,7 +40,7 @@ import pandas as pd
 from trackproc import vocabulary
 from trackproc.constants import force_model_constants
 from trackproc.errors import InputError, ProcessingError
-from trackproc.io.isotime import iso_utc
+from trackproc.isotime import iso_utc
 
 #: Kinds in canonical order (the order noise is drawn in).
 KINDS = vocabulary.KINDS

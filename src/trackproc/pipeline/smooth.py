@@ -41,7 +41,7 @@ import numpy as np
 import pandas as pd
 
 from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
-from trackproc.io.isotime import iso_utc
+from trackproc.isotime import iso_utc
 from trackproc.io.jsonutil import json_ready
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable

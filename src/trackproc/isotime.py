@@ -5,6 +5,8 @@ caller's choice (it is part of each file format's contract): ``digits=None`` mil
 least and more only when needed (state files, messages), a fixed count 0-9 otherwise;
 :func:`iso_utc_array` writes a column at the coarsest precision that is exact for all of it.
 Fractions are truncated, never rounded (a time is never shown later than it is).
+A leaf module (numpy only, pandas when given a tz-aware time), like ``constants`` and
+``vocabulary``: every layer may import it.
 """
 
 from __future__ import annotations
