@@ -35,6 +35,12 @@ def info_command(
         raise InputError("a CCSDS OEM is an exchange output", file=source, row=1,
                          expected="a pass file or an ephemeris in Parquet, Arrow or CSV "
                                   "(trackproc propagate without --format oem)")
+    if data.lstrip()[:1] in (b"{", b"["):
+        raise InputError("a JSON document (a state or nominal file?) is not a pass file", file=source, row=1,
+                         expected="a pass file or an ephemeris in Parquet, Arrow or CSV (info reads those)")
+    if data.lstrip().startswith(b"CCSDS_TDM_VERS"):
+        raise InputError("a raw CCSDS TDM is not a pass file", file=source, row=1,
+                         expected="a pass file: run trackproc ingest on it first")
     try:
         table = parse_pass_table(data, source)
     except InputError as not_a_pass_file:
