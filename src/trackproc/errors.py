@@ -44,7 +44,7 @@ class InputError(TrackprocError):
         if self.row is not None:
             where.append(f"row {self.row}")
         if self.column is not None:
-            where.append(f"{'option' if str(self.column).startswith('-') else 'column'} '{self.column}'")
+            where.append(f"column '{self.column}'")
         parts = [": ".join([", ".join(where)] if where else [])]
         text = self.detail
         if self.found is not None:
