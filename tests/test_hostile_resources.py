@@ -153,3 +153,34 @@ def test_unbounded_work_is_refused_up_front(run_cli, tmp_path, args, needle):
     out = tmp_path / "o.parquet"
     result = run_cli([*args, "--dut1", "0", "-q", "-o", out])
     assert_rejected(result, 2, needle, outputs=[out])
+
+
+@pytest.mark.parametrize("grid", ["1e-7", "0", "-1", "nan"])
+def test_smooth_grid_rows_bounded(run_cli, tmp_path, grid):
+    from hostile import MULTI
+
+    out = tmp_path / "g.parquet"
+    result = run_cli(["smooth", MULTI, "--grid", grid, "-q", "-o", out])
+    assert_rejected(result, 2, "--grid", outputs=[out])
+
+
+@pytest.mark.parametrize("span", ["1e11", "-1e11", "4e7"])
+def test_accuracy_span_bounded(run_cli, tmp_path, span):
+    out = tmp_path / "a.json"
+    result = run_cli(["accuracy", TRUTH, "--span", span, "--step", "1e6", "--sigma-position-m", "100",
+                      "--sigma-velocity-m-s", "0.1", "--dut1", "0", "-q", "-o", out])
+    assert_rejected(result, 2, "--span", outputs=[out])
+
+
+def test_library_warnings_are_single_log_lines():
+    """A warning from a library (ERFA's "dubious year" with its source line) goes through the log
+    formatter: one escaped line, so stderr keeps its one-line-per-message contract."""
+    import logging
+
+    from trackproc.cli import app as cli_app
+
+    record = logging.LogRecord("py.warnings", logging.WARNING, "erfa/core.py", 133,
+                               "erfa/core.py:133: ErfaWarning: dubious year\n  warn(f'ERFA function')\n", None, None)
+    text = cli_app._OneLineFormatter("trackproc: %(levelname)s: %(message)s").format(record)
+    assert "\n" not in text and text.count("trackproc: ") == 1
+    assert "dubious year\\n  warn" in text

@@ -52,6 +52,7 @@ def _root(
     handler = logging.StreamHandler(sys.stderr)
     handler.setFormatter(_OneLineFormatter("trackproc: %(levelname)s: %(message)s"))
     logging.basicConfig(level=level, handlers=[handler], force=True)
+    logging.captureWarnings(True)   # library warnings (ERFA's "dubious year") as one escaped log line
 
 
 class _OneLineFormatter(logging.Formatter):
