@@ -184,3 +184,22 @@ def test_library_warnings_are_single_log_lines():
     text = cli_app._OneLineFormatter("trackproc: %(levelname)s: %(message)s").format(record)
     assert "\n" not in text and text.count("trackproc: ") == 1
     assert "dubious year\\n  warn" in text
+
+
+@pytest.mark.parametrize("kind", ["csv", "parquet", "tdm", "pass_csv"])
+def test_row_limit(run_cli, monkeypatch, tmp_path, kind):
+    """More rows than TRACKPROC_MAX_INPUT_ROWS: refused before parsing, naming the file."""
+    from hostile import DOPPLER_CSV, MULTI, TDM_DIR
+
+    source = {"csv": DOPPLER_CSV, "parquet": MULTI, "tdm": TDM_DIR / "oneway_doppler.tdm",
+              "pass_csv": None}[kind]
+    if source is None:
+        source = tmp_path / "p.csv"
+        source.write_text("time,station,pass_id,kind,value,sigma\n" + "".join(
+            f"2026-03-20T09:30:{i:02d}Z,CPH,CPH-001,range,1000000,10\n" for i in range(20)))
+    monkeypatch.setenv("TRACKPROC_MAX_INPUT_ROWS", "10")
+    out = tmp_path / "o.parquet"
+    command = ["smooth", source] if kind in ("parquet", "pass_csv") else ["ingest", source, "--stations", STATIONS,
+                                                                          "--carrier-hz", "2.2e9", "--mode", "one-way"]
+    result = run_cli([*command, "-q", "-o", out])
+    assert_rejected(result, 2, source.name, "TRACKPROC_MAX_INPUT_ROWS", outputs=[out])

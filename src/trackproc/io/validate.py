@@ -252,6 +252,33 @@ def check_no_repeated_samples(frames) -> None:
                      expected="each sample in one input only (it would count twice)")
 
 
+#: Default largest number of rows (samples) read from one input; ``TRACKPROC_MAX_INPUT_ROWS``
+#: overrides it. Reading is not streamed yet: ~0.7 kB of memory a row (benchmarks/ingest_memory.py),
+#: so 2e6 rows stay near 1.5 GB.
+DEFAULT_MAX_INPUT_ROWS = 2_000_000
+
+
+def max_input_rows() -> int:
+    import os
+
+    text = os.environ.get("TRACKPROC_MAX_INPUT_ROWS", "")
+    if not text:
+        return DEFAULT_MAX_INPUT_ROWS
+    value = _float(text)
+    if not (math.isfinite(value) and value >= 1):
+        raise InputError("invalid environment variable", column="TRACKPROC_MAX_INPUT_ROWS", found=text,
+                         expected="a positive number of rows")
+    return int(value)
+
+
+def check_input_rows(count: int, *, file: str | None = None) -> None:
+    """An input of more rows than :func:`max_input_rows` is refused before it is parsed."""
+    limit = max_input_rows()
+    if count > limit:
+        raise InputError(f"input of {count} rows, more than the limit of {limit}", file=file,
+                         expected="a smaller input (split it), or a larger TRACKPROC_MAX_INPUT_ROWS")
+
+
 def _float(value) -> float:
     if isinstance(value, bool):
         return math.nan
