@@ -42,3 +42,22 @@ def test_bare_command_shows_help_and_one_error_line_on_stderr(run_cli):
     assert result.exit_code == 2
     assert "Traceback" not in result.stderr
     assert sum(line.startswith("trackproc: error:") for line in result.stderr.splitlines()) == 1
+
+
+@pytest.mark.parametrize("exc, code, needle", [
+    (RuntimeError("unexpected\nsecond line"), 1, "internal error (RuntimeError): unexpected\\nsecond line"),
+    (MemoryError(), 1, "out of memory"),
+    (RecursionError("deep"), 2, "nested too deeply"),
+    (OSError(5, "Input/output error", "/mnt/x"), 1, "/mnt/x: input/output error"),
+])
+def test_unexpected_exception_is_one_line(run_cli, monkeypatch, exc, code, needle):
+    """The guard's last resort: whatever escapes a command is one escaped line and an exit code."""
+    from hostile import MULTI
+    from trackproc.pipeline import info
+
+    def boom(*args, **kwargs):
+        raise exc
+
+    monkeypatch.setattr(info, "summarize", boom)
+    result = run_cli(["info", MULTI, "-q"])
+    assert_rejected(result, code, needle)

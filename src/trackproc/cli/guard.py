@@ -43,8 +43,6 @@ def describe(exc: BaseException, command: str | None) -> tuple[str, int]:
     """The one-line message and the exit code for any exception escaping a command."""
     from typer import _click
 
-    from trackproc.errors import OutputError
-
     if isinstance(exc, TrackprocError):
         return str(exc), exc.exit_code
     if isinstance(exc, Terminated):
@@ -61,10 +59,10 @@ def describe(exc: BaseException, command: str | None) -> tuple[str, int]:
         return f"{name}{text}; see '{path} --help'", EXIT_INPUT
     if isinstance(exc, _click.exceptions.ClickException):
         return exc.format_message(), getattr(exc, "exit_code", EXIT_PROCESSING) or EXIT_PROCESSING
-    if isinstance(exc, OSError):
-        if exc.filename is not None:
-            return str(OutputError(exc.filename, exc)).replace(": cannot write output", ""), EXIT_PROCESSING
-        return f"{(exc.strerror or str(exc)).lower()}", EXIT_PROCESSING
+    if isinstance(exc, OSError):   # one that no reader or writer turned into an input/output error
+        what = (exc.strerror or str(exc) or type(exc).__name__).lower()
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        return f"{where}{what}; expected a readable input and a writable output", EXIT_PROCESSING
     if isinstance(exc, MemoryError):
         return ("out of memory; expected an input within the size limits "
                 "(TRACKPROC_MAX_INPUT_MB, see README 'Exit codes')"), EXIT_PROCESSING
