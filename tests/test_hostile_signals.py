@@ -82,3 +82,20 @@ def test_sigterm_of_a_running_command(tmp_path, signum):
     assert "Traceback" not in err
     assert not out.exists()
     assert_no_temporaries(tmp_path)
+
+
+def test_forked_child_dies_of_the_signal_silently(tmp_path):
+    """A worker forked after the handlers were installed (batch's pool) is not turned into a
+    Python exception (which would print a traceback): it dies of SIGTERM as before."""
+    restore = guard.install_signal_handlers()
+    try:
+        pid = os.fork()
+        if pid == 0:   # the child: wait to be terminated
+            time.sleep(30)
+            os._exit(0)
+        time.sleep(0.2)
+        os.kill(pid, signal.SIGTERM)
+        _, status = os.waitpid(pid, 0)
+    finally:
+        restore()
+    assert os.WIFSIGNALED(status) and os.WTERMSIG(status) == signal.SIGTERM

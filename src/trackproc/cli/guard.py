@@ -77,7 +77,16 @@ def describe(exc: BaseException, command: str | None) -> tuple[str, int]:
     return f"{where}internal error ({type(exc).__name__}): {detail}", EXIT_PROCESSING
 
 
+_INSTALLED_BY: int | None = None
+
+
 def _raise_terminated(signum, frame):  # noqa: ARG001 - signal handler signature
+    if os.getpid() != _INSTALLED_BY:
+        # a forked worker (batch's pool) inherited the handler: die of the signal as before, so a
+        # pool's terminate() stays silent
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+        return
     raise Terminated(signum)
 
 
@@ -85,6 +94,8 @@ def install_signal_handlers() -> Callable[[], None]:
     """SIGTERM, SIGINT and SIGHUP raise :class:`Terminated` in the main thread, so the ``with``
     blocks of open outputs remove their temporary files. Returns a function restoring the
     previous handlers (the CLI may run inside a test process)."""
+    global _INSTALLED_BY
+    _INSTALLED_BY = os.getpid()
     previous = {}
     for name in ("SIGTERM", "SIGINT", "SIGHUP"):
         signum = getattr(signal, name, None)
