@@ -3,14 +3,10 @@
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import pytest
 
 from hostile import STATIONS, TRUTH, assert_rejected, state_doc
-
-REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "doptrack-delfic3"
-PASS = "Delfi-C3_32789_202004011044"   # a development pass (1-10 April)
 
 SIDECAR = """satellite:
   name: Delfi-C3
