@@ -90,3 +90,9 @@ def test_overwrite_keeps_the_old_file_when_the_run_fails(run_cli, tmp_path):
     assert_rejected(result, 2, "--carrier-hz")
     assert out.read_bytes() == b"old content"
     assert_no_temporaries(tmp_path)
+
+
+def test_estimate_opm_failing_leaves_the_state_unwritten(run_cli, tmp_path):
+    out = tmp_path / "state.json"
+    result = run_cli(["estimate", MULTI, "--initial", TRUTH, "--dut1", "0", "-q", "-o", out, "--opm", "/dev/full"])
+    assert_rejected(result, 1, "/dev/full", outputs=[out], folder=tmp_path)
