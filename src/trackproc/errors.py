@@ -44,7 +44,7 @@ class InputError(TrackprocError):
         if self.row is not None:
             where.append(f"row {self.row}")
         if self.column is not None:
-            where.append(f"{'option' if str(self.column).startswith('-') else 'column'} '{self.column}'")
+            where.append(f"column '{self.column}'")
         parts = [": ".join([", ".join(where)] if where else [])]
         text = self.detail
         if self.found is not None:
@@ -54,7 +54,7 @@ class InputError(TrackprocError):
         return (parts[0] + ": " + text) if where else text
 
 
-def _shorten(text: str, limit: int = 80) -> str:
+def _shorten(text: str, limit: int = 240) -> str:
     """A found value as shown in a one-line message: a 200 kB cell is cut, its length said."""
     if len(text) <= limit:
         return text

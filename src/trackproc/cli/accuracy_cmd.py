@@ -128,6 +128,9 @@ def accuracy_command(
             raise typer.BadParameter(f"{flag} is required", param_hint=flag)
     if at_station is not None and stations is None:
         raise typer.BadParameter("--at-station needs --stations STATIONS.csv", param_hint="--stations")
+    from trackproc.io.validate import check_span
+
+    check_span(span, "prediction span", column="--span")   # decades of propagation would run for hours
     pos = _numbers(sigma_position_m, "--sigma-position-m")
     vel = _numbers(sigma_velocity_m_s, "--sigma-velocity-m-s")
     out = resolve_output(output, "output table")

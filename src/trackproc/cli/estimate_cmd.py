@@ -147,7 +147,11 @@ def estimate_command(
     orientation, warning = earth_orientation(eop, dut1)
     if warning:
         log.warning(warning)
+    from trackproc.io.validate import check_distinct_files, check_no_repeated_samples
+
+    check_distinct_files(passes, "PASS")
     tables = [("<stdin>" if is_stdio(p) else p, read_pass_table(p)) for p in passes]
+    check_no_repeated_samples([(source, t.frame) for source, t in tables])
     at = None                                       # where a TLE is evaluated by SGP4
     if epoch is not None and epoch.lower() == "first":
         at = min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()

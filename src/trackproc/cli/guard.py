@@ -43,8 +43,6 @@ def describe(exc: BaseException, command: str | None) -> tuple[str, int]:
     """The one-line message and the exit code for any exception escaping a command."""
     from typer import _click
 
-    from trackproc.errors import OutputError
-
     if isinstance(exc, TrackprocError):
         return str(exc), exc.exit_code
     if isinstance(exc, Terminated):
@@ -61,10 +59,10 @@ def describe(exc: BaseException, command: str | None) -> tuple[str, int]:
         return f"{name}{text}; see '{path} --help'", EXIT_INPUT
     if isinstance(exc, _click.exceptions.ClickException):
         return exc.format_message(), getattr(exc, "exit_code", EXIT_PROCESSING) or EXIT_PROCESSING
-    if isinstance(exc, OSError):
-        if exc.filename is not None:
-            return str(OutputError(exc.filename, exc)).replace(": cannot write output", ""), EXIT_PROCESSING
-        return f"{(exc.strerror or str(exc)).lower()}", EXIT_PROCESSING
+    if isinstance(exc, OSError):   # one that no reader or writer turned into an input/output error
+        what = (exc.strerror or str(exc) or type(exc).__name__).lower()
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        return f"{where}{what}; expected a readable input and a writable output", EXIT_PROCESSING
     if isinstance(exc, MemoryError):
         return ("out of memory; expected an input within the size limits "
                 "(TRACKPROC_MAX_INPUT_MB, see README 'Exit codes')"), EXIT_PROCESSING
@@ -79,7 +77,16 @@ def describe(exc: BaseException, command: str | None) -> tuple[str, int]:
     return f"{where}internal error ({type(exc).__name__}): {detail}", EXIT_PROCESSING
 
 
+_INSTALLED_BY: int | None = None
+
+
 def _raise_terminated(signum, frame):  # noqa: ARG001 - signal handler signature
+    if os.getpid() != _INSTALLED_BY:
+        # a forked worker (batch's pool) inherited the handler: die of the signal as before, so a
+        # pool's terminate() stays silent
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+        return
     raise Terminated(signum)
 
 
@@ -87,6 +94,8 @@ def install_signal_handlers() -> Callable[[], None]:
     """SIGTERM, SIGINT and SIGHUP raise :class:`Terminated` in the main thread, so the ``with``
     blocks of open outputs remove their temporary files. Returns a function restoring the
     previous handlers (the CLI may run inside a test process)."""
+    global _INSTALLED_BY
+    _INSTALLED_BY = os.getpid()
     previous = {}
     for name in ("SIGTERM", "SIGINT", "SIGHUP"):
         signum = getattr(signal, name, None)

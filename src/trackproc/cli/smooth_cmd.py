@@ -98,6 +98,8 @@ def smooth_command(
     if plot is not None:
         require_matplotlib()
     table = read_pass_table(input)
+    if grid is not None:
+        _check_grid_rows(table, grid)
     options = SmoothOptions(degree=degree_value, clip=clip if clip > 0 else None, kinds=kind_list or None,
                             basis=basis.value, max_degree=max_degree, grid_step_s=grid, tca_max_gap_s=tca_max_gap)
     result = smooth(table, options, source="<stdin>" if is_stdio(input) else input)
@@ -122,3 +124,21 @@ def smooth_command(
     counts = result.summary["counts"]
     log.info("%d fits: %d ok, %d suspect, %d failed -> %s (%s)", counts["fits"], counts["ok"], counts["suspect"],
              counts["failed"], "stdout" if out == "-" else out, out_format.value)
+
+
+def _check_grid_rows(table, grid) -> None:
+    """``--grid`` rows over every pass and kind, bounded before anything is computed (a grid of
+    1e-7 s would exhaust the memory)."""
+    import math
+
+    from trackproc.io.validate import check_rows
+
+    if not (isinstance(grid, (int, float)) and math.isfinite(grid) and grid > 0):
+        return   # smooth's own option check names it
+    frame = table.frame
+    if frame.empty:
+        return
+    spans = frame.groupby(["station", "pass_id", "kind"])["time"].agg(["min", "max"])
+    seconds = (spans["max"] - spans["min"]).dt.total_seconds()
+    check_rows(float((seconds / grid + 1).sum()), "grid rows", column="--grid")
+

@@ -42,7 +42,7 @@ import pyarrow.compute as pc
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
-from trackproc.io.validate import FIRST_YEAR, LAST_YEAR
+from trackproc.io.validate import FIRST_YEAR, LAST_YEAR, check_input_rows
 from trackproc.io.raw import KIND_UNITS, RawMeasurements
 
 log = logging.getLogger("trackproc")
@@ -208,6 +208,7 @@ def parse_text_table(data: bytes, source: str, *, header: list[str] | None = Non
     Blank lines and lines starting with ``#`` are skipped (their line numbers still count).
     ``header`` given: every non-comment line is data; otherwise the first one is the header.
     """
+    check_input_rows(data.count(b"\n") - 1, file=source)
     text = decode_text(data, source)
     lines = text.splitlines()
     comments = []
@@ -310,6 +311,7 @@ def load_arrow(data: bytes, source: str, container: str) -> pa.Table:
     try:
         if container == "parquet":
             import pyarrow.parquet as pq
+            check_input_rows(pq.ParquetFile(pa.BufferReader(data)).metadata.num_rows, file=source)
             return pq.read_table(pa.BufferReader(data))
         if container == "arrow-file":
             return pa.ipc.open_file(pa.BufferReader(data)).read_all()
@@ -345,6 +347,7 @@ def source_table(data: bytes, source: str) -> SourceTable:
         columns = {name.lower(): Column(name, text=text.cells[name]) for name in text.columns}
         return SourceTable(source, columns, text.rows, text.header_row, meta)
     table = load_arrow(data, source, container)
+    check_input_rows(table.num_rows, file=source)
     columns = {}
     for name in table.column_names:
         if name.strip().lower() in columns:

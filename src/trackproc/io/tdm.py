@@ -82,7 +82,7 @@ from dataclasses import dataclass, field
 
 from trackproc.constants import C_LIGHT
 from trackproc.errors import InputError
-from trackproc.io.validate import check_iso_year
+from trackproc.io.validate import check_input_rows, check_iso_year
 from trackproc.io.raw import RawMeasurements
 
 __all__ = ["read_tdm"]
@@ -210,6 +210,7 @@ class _Parser:
                              found=data[exc.start:exc.start + 4]) from None
 
     def parse(self, data: bytes):
+        check_input_rows(data.count(b"\n"), file=self.source)
         text = self._decode(data)
         header: dict = {}
         segments: list[_Segment] = []

@@ -198,6 +198,87 @@ def check_rows(count, what: str, *, column: str) -> None:
                          expected=f"at most {MAX_ROWS:g} rows (a longer step or a shorter span)")
 
 
+def check_distinct_files(paths, what: str) -> None:
+    """The same input named twice (``estimate f f``, or a link to it) would count every sample
+    twice and make every sigma sqrt(2) too small: an input error."""
+    import os
+
+    seen: dict = {}
+    for path in paths:
+        if str(path) == "-":
+            continue
+        try:
+            st = os.stat(path)
+            key = (st.st_dev, st.st_ino)
+        except OSError:
+            key = os.path.realpath(path)   # a missing file is reported by its reader
+        if key in seen:
+            raise InputError("the same file given twice", file=str(path), column=what,
+                             found=f"{seen[key]} and {path}",
+                             expected="each input once (its samples would count twice)")
+        seen[key] = str(path)
+
+
+def check_no_repeated_samples(frames) -> None:
+    """The same sample (station, kind, time) in two inputs (a copy of a pass file): an input
+    error naming both files. ``frames`` is a list of (source, DataFrame with station, kind, time)."""
+    import pandas as pd
+
+    if len(frames) < 2:
+        return
+    parts = [pd.DataFrame({"station": f["station"].astype(str).to_numpy(), "kind": f["kind"].astype(str).to_numpy(),
+                           "time": f["time"].to_numpy(), "input": i})
+             for i, (_, f) in enumerate(frames)]
+    both = pd.concat(parts, ignore_index=True)
+    repeated = both.duplicated(["station", "kind", "time"], keep=False)
+    if not repeated.any():
+        return
+    dup = both[repeated]
+    first = dup.iloc[0]
+    same = dup[(dup["station"] == first["station"]) & (dup["kind"] == first["kind"]) & (dup["time"] == first["time"])]
+    inputs = sorted(set(same["input"]))
+    if len(inputs) < 2:   # repeated inside one file: its own reader's business
+        others = dup.groupby(["station", "kind", "time"])["input"].nunique()
+        if not (others > 1).any():
+            return
+        key = others[others > 1].index[0]
+        same = dup[(dup["station"] == key[0]) & (dup["kind"] == key[1]) & (dup["time"] == key[2])]
+        inputs = sorted(set(same["input"]))
+        first = same.iloc[0]
+    n = int(both.duplicated(["station", "kind", "time"]).sum())
+    raise InputError(f"{n} samples appear in two inputs", file=frames[inputs[1]][0], column="time",
+                     found=f"station {first['station']}, {first['kind']} at {pd.Timestamp(first['time'])} "
+                           f"also in {frames[inputs[0]][0]}",
+                     expected="each sample in one input only (it would count twice)")
+
+
+#: Default largest number of rows (samples) read from one input; ``TRACKPROC_MAX_INPUT_ROWS``
+#: overrides it. Reading is not streamed yet: ~0.7 kB of memory a row (benchmarks/ingest_memory.py),
+#: so 2e6 rows stay near 1.5 GB.
+DEFAULT_MAX_INPUT_ROWS = 2_000_000
+
+
+def max_input_rows() -> int:
+    import os
+
+    text = os.environ.get("TRACKPROC_MAX_INPUT_ROWS", "")
+    if not text:
+        return DEFAULT_MAX_INPUT_ROWS
+    value = _float(text)
+    if not (math.isfinite(value) and value >= 1):
+        raise InputError("invalid environment variable", column="TRACKPROC_MAX_INPUT_ROWS", found=text,
+                         expected="a positive number of rows")
+    return int(value)
+
+
+def check_input_rows(count: int, *, file: str | None = None) -> None:
+    """An input of more rows than :func:`max_input_rows` is refused before it is parsed."""
+    limit = max_input_rows()
+    if count > limit:
+        raise InputError(f"input of {count} rows, more than the limit of {limit}", file=file,
+                         expected="a smaller input (split it), or a larger TRACKPROC_MAX_INPUT_ROWS")
+
+
 def _float(value) -> float:
     if isinstance(value, bool):
         return math.nan
