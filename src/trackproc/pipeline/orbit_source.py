@@ -118,7 +118,7 @@ class Satellite:
         """UTC ``datetime64[ns]`` of seconds from ``t0``."""
         from trackproc.dynamics import timescales as ts
 
-        return ts.jd_utc_to_datetime64(*ts.add_seconds_utc(self.jd0, np.asarray(t_s, float)))
+        return ts.jd_utc_to_datetime64(*ts.add_seconds_utc(self.jd0, np.atleast_1d(np.asarray(t_s, float))))
 
     def _states(self, t_s) -> np.ndarray:
         if self.traj is not None:
