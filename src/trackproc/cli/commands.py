@@ -18,6 +18,7 @@ from trackproc.cli import requirements_cmd  # noqa: F401
 from trackproc.cli import detect_cmd  # noqa: F401
 from trackproc.cli import batch_cmd  # noqa: F401
 from trackproc.cli import passes_cmd  # noqa: F401
+from trackproc.cli import compare_cmd  # noqa: F401
 # isort: on
 
 from trackproc.cli.app import app
@@ -34,6 +35,7 @@ SUMMARIES = {
     "requirements": "Sensor requirement g = sigma*sqrt(dt) for elevation-only detection (seed 003).",
     "detect": "Elevation-only test for an orbit displacement (seed 003).",
     "batch": "Many passes, every night: parallel, resumable, cron-grade.",
+    "compare": "Residuals of a pass against a state or TLE: RMS after the pass's own offset and drift.",
     "passes": "Pass schedule of a state or TLE: AOS/TCA/LOS, max elevation, azimuths, Doppler per station.",
 }
 

@@ -149,9 +149,9 @@ def station_itrf(station, earth: str = "wgs84") -> np.ndarray:
 
 
 def observe(sat: Satellite, station, t_s, *, carrier_hz: float = 1.0, range_rate_model: str = "doppler",
-            earth: str = "wgs84"):
-    """One-way :class:`~trackproc.models.measurements.Observables` of ``station`` at reception
-    times ``t0 + t_s`` (the foundation model, DESIGN.md one-way light time)."""
+            earth: str = "wgs84", mode: str = "one-way"):
+    """:class:`~trackproc.models.measurements.Observables` of ``station`` at reception times
+    ``t0 + t_s`` (the foundation model, DESIGN.md light time; ``mode`` one-way or two-way)."""
     from trackproc.dynamics import timescales as ts
     from trackproc.models.measurements import observables, station_gcrf
 
@@ -161,6 +161,7 @@ def observe(sat: Satellite, station, t_s, *, carrier_hz: float = 1.0, range_rate
     st = station_gcrf(station_itrf(station, earth), jd1, jd2, sat.eop)
     try:
         return observables(r, v, a, j, st.r, st.v, st.a, st.gcrf_to_itrf, float(station.lat_deg) * DEG,
-                           float(station.lon_deg) * DEG, carrier_hz=carrier_hz, range_rate_model=range_rate_model)
+                           float(station.lon_deg) * DEG, carrier_hz=carrier_hz, range_rate_model=range_rate_model,
+                           mode=mode)
     except ArithmeticError as exc:
         raise ProcessingError(f"measurement prediction failed: {exc}") from None
