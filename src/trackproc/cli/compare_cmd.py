@@ -24,7 +24,9 @@ class Remove(str, Enum):
 @app.command("compare")
 def compare_command(
     pass_file: str = typer.Argument(..., metavar="PASS", help="Pass file (Parquet, Arrow, CSV); - for stdin."),
-    prediction: str = typer.Argument(..., metavar="STATE.json|TLE", help="The prediction: a state file or a TLE."),
+    prediction: str = typer.Argument(..., metavar="STATE.json|TLE|metadata",
+                                     help="The prediction: a state file, a TLE, or 'metadata' for the TLE stored in "
+                                          "the pass file (DopTrack)."),
     remove: Remove = typer.Option(Remove.offset_drift, "--remove",
                                   help="Fitted per pass and kind and removed before the RMS: none, offset, "
                                        "offset+drift (a transmitter's frequency error)."),
@@ -52,6 +54,8 @@ def compare_command(
 
         trackproc compare sample_data/multistation.parquet sample_data/stale.json --remove none
 
+        trackproc ingest Delfi-C3_32789_202004011044.csv -o - | trackproc compare - metadata
+
     Exit status: 0 ok; 2 bad options or input; 1 propagation failure.
     """
     import json
@@ -72,7 +76,14 @@ def compare_command(
     if warning:
         log.warning(warning)
     table = read_pass_table(pass_file)
-    orbit = read_orbit(prediction, orientation)
+    if prediction == "metadata":
+        from trackproc.pipeline.orbit_source import OrbitInput, tle_from_pass_metadata
+
+        source = "<stdin>" if pass_file == "-" else pass_file
+        tle = tle_from_pass_metadata(table, source)
+        orbit = OrbitInput(tle=tle, source=tle.source)
+    else:
+        orbit = read_orbit(prediction, orientation)
     extra = read_stations(stations) if stations is not None else None
     options = CompareOptions(remove=remove.value, force=force.value if force is not None else None,
                              earth=earth.value, range_rate_model=range_rate_model.value)

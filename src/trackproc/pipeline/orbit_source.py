@@ -56,6 +56,28 @@ def read_orbit(path: str, eop=None) -> OrbitInput:
     return OrbitInput(tle=parse_tle(data.decode("utf-8", errors="replace"), source), source=source)
 
 
+def tle_from_pass_metadata(table, source: str = "<pass>"):
+    """The TLE a pass file's metadata carries (DopTrack's ``doptrack.<file>.tle``, or a top-level
+    ``tle``): the prediction the station itself used. All sources must carry the same one."""
+    from trackproc.io.tle import parse_tle
+
+    found = []
+    meta = table.meta or {}
+    if isinstance(meta.get("tle"), list):
+        found.append(tuple(meta["tle"]))
+    for entry in (meta.get("doptrack") or {}).values():
+        if isinstance(entry, dict) and isinstance(entry.get("tle"), list):
+            found.append(tuple(entry["tle"]))
+    unique = sorted(set(found))
+    if not unique:
+        raise InputError("no TLE in the pass file's metadata", file=source, column="tle",
+                         expected="a pass file ingested from DopTrack (its TLE kept), or a TLE/state file")
+    if len(unique) > 1:
+        raise InputError("the pass file's sources carry different TLEs", file=source, column="tle",
+                         found=f"{len(unique)} TLEs", expected="one TLE (compare the passes one at a time)")
+    return parse_tle("\n".join(unique[0]), f"{source} (metadata TLE)")
+
+
 def resolve_force(orbit: OrbitInput, force: Optional[str]) -> str:
     """``--force``: default ``sgp4`` for a TLE, ``j2`` for a state; ``sgp4`` needs a TLE."""
     if force is None:
