@@ -81,3 +81,31 @@ def test_bad_force_and_stm_combinations_exit_2(run_cli, files, tmp_path):
     res = run_cli(["propagate", files["tle"], "--stm", "--span", "60", "--step", "10", "-o", tmp_path / "x.csv"])
     assert res.exit_code == 2 and "--stm" in res.stderr
     assert not (tmp_path / "x.csv").exists()
+
+
+@pytest.mark.realdata
+def test_metadata_tle_of_a_doptrack_pass(run_cli, tmp_path):
+    """``propagate metadata --at PASS``: the TLE stored in a DopTrack pass file (development set),
+    by SGP4 at the pass's samples; Doppler against sgp4 + ERFA directly (geometric) < 0.3 Hz."""
+    from realdata import DOPTRACK
+    from trackproc.io.passfile import read_pass_table
+
+    raw = DOPTRACK / "data" / "Delfi-C3_32789_202004011044.csv"
+    if not raw.exists():
+        pytest.skip(f"real data not available: {raw}")
+    pass_file, out = tmp_path / "pass.parquet", tmp_path / "pred.parquet"
+    assert run_cli(["ingest", raw, "-o", pass_file]).exit_code == 0
+    res = run_cli(["propagate", "metadata", "--at", pass_file, "--at-station", "DopTrack", "--carrier-hz",
+                   "145.87e6", "--dut1", "0", "-o", out])
+    assert res.exit_code == 0, res.stderr
+    table = read_pass_table(str(pass_file))
+    (entry,) = table.meta["doptrack"].values()
+    st = table.meta["stations"]["DopTrack"]
+    frame = read_ephemeris(str(out)).frame
+    times = _times(frame)
+    assert len(frame) == len(table.frame)
+    r, v = sgp4_gcrf("\n".join(entry["tle"]), times)
+    _, _, rr = station_view(r, v, times, st["lat_deg"], st["lon_deg"], st["height_m"])
+    assert np.abs(frame["doppler_hz"] + 145.87e6 * rr / 299792458.0).max() < 0.3
+    res = run_cli(["propagate", "metadata", "--span", "10", "--step", "1", "-o", tmp_path / "x.csv"])
+    assert res.exit_code == 2

@@ -61,8 +61,9 @@ def _format(output: str, requested: Optional[EphemerisFormat]) -> EphemerisForma
 
 @app.command("propagate")
 def propagate_command(
-    state: str = typer.Argument(..., metavar="STATE.json|TLE",
-                                help="Initial state (JSON state file, any supported frame) or a TLE; - for stdin."),
+    state: str = typer.Argument(..., metavar="STATE.json|TLE|metadata",
+                                help="Initial state (JSON state file, any supported frame) or a TLE; - for stdin; "
+                                     "'metadata' with --at: the TLE stored in that pass file (DopTrack)."),
     span: Optional[float] = typer.Option(None, "--span", metavar="S",
                                          help="Span from the start, s (negative: backwards in time)."),
     step: Optional[float] = typer.Option(None, "--step", metavar="S", help="Output spacing, s (with --span)."),
@@ -156,8 +157,6 @@ def propagate_command(
     if warning:
         log.warning(warning)
     start_t = parse_epoch(start, column="--start") if start is not None else None
-    orbit = read_orbit(state, orientation)
-    force_key = resolve_force(orbit, force.value if force is not None else None)
     at_times = None
     pass_table = None
     if at is not None:
@@ -165,6 +164,17 @@ def propagate_command(
 
         pass_table = read_pass_table(at)
         at_times = pass_times(pass_table, at_station)
+    if state == "metadata":
+        from trackproc.pipeline.orbit_source import OrbitInput, tle_from_pass_metadata
+
+        if pass_table is None:
+            raise typer.BadParameter("'metadata' (the TLE stored in a pass file) needs --at PASSFILE",
+                                     param_hint="STATE")
+        tle = tle_from_pass_metadata(pass_table, "<stdin>" if at == "-" else at)
+        orbit = OrbitInput(tle=tle, source=tle.source)
+    else:
+        orbit = read_orbit(state, orientation)
+    force_key = resolve_force(orbit, force.value if force is not None else None)
     station = None
     if at_station is not None:
         table = None
