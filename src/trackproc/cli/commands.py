@@ -19,6 +19,7 @@ from trackproc.cli import detect_cmd  # noqa: F401
 from trackproc.cli import batch_cmd  # noqa: F401
 from trackproc.cli import passes_cmd  # noqa: F401
 from trackproc.cli import compare_cmd  # noqa: F401
+from trackproc.cli import identify_cmd  # noqa: F401
 # isort: on
 
 from trackproc.cli.app import app
@@ -36,6 +37,7 @@ SUMMARIES = {
     "detect": "Elevation-only test for an orbit displacement (seed 003).",
     "batch": "Many passes, every night: parallel, resumable, cron-grade.",
     "compare": "Residuals of a pass against a state or TLE: RMS after the pass's own offset and drift.",
+    "identify": "Which catalogue TLE is this pass? Ranked fits, likelihood ratios, a verdict.",
     "passes": "Pass schedule of a state or TLE: AOS/TCA/LOS, max elevation, azimuths, Doppler per station.",
 }
 
