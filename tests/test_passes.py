@@ -114,3 +114,20 @@ def test_markdown_and_bad_input(run_cli, tmp_path):
         assert res.exit_code == 2 and needle in res.stderr and "Traceback" not in res.stderr, res.stderr
         assert len(res.stderr.strip().splitlines()) <= 2
     assert not (tmp_path / "p.csv").exists()
+
+
+def test_docstring_examples_on_the_shipped_tle(run_cli, tmp_path):
+    """The examples of ``passes --help`` and ``propagate --help`` on sample_data/delfi-like.tle run."""
+    out = tmp_path / "passes.csv"
+    res = run_cli(["passes", SAMPLE / "delfi-like.tle", "--stations", SAMPLE / "stations.csv", "--span", "2d",
+                   "--carrier-hz", "145.87e6", "-o", out])
+    assert res.exit_code == 0, res.stderr
+    table = pd.read_csv(out)
+    assert len(table) >= 6 and set(table["station"]) == {"CPH", "ZHY", "KIR"}
+    # a 145.87 MHz LEO pass: |Doppler| at the horizon ~3.3 kHz, ~0 at closest approach
+    assert table["aos_doppler_hz"].max() < 4e3 and table["aos_doppler_hz"].min() > 0
+    assert table["tca_doppler_hz"].abs().max() < 1.0
+    res = run_cli(["propagate", SAMPLE / "delfi-like.tle", "--span", "86400", "--step", "10", "--at-station", "CPH",
+                   "--stations", SAMPLE / "stations.csv", "--carrier-hz", "145.87e6", "--visible-only", "-o",
+                   tmp_path / "predicted.csv"])
+    assert res.exit_code == 0, res.stderr

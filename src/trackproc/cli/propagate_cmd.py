@@ -116,8 +116,8 @@ def propagate_command(
 
         trackproc propagate iss.tle --span -3600 --step 10 -o - > back.arrows
 
-        trackproc propagate sample_data/delfi-like.tle --at sample_data/doppler_pass.csv --at-station CPH \
-            --stations sample_data/stations.csv --carrier-hz 145.87e6 -o predicted.csv
+        trackproc propagate sample_data/delfi-like.tle --span 86400 --step 10 --at-station CPH \\
+            --stations sample_data/stations.csv --carrier-hz 145.87e6 --visible-only -o predicted.csv
 
     Exit status: 0 ok; 2 bad options or input; 1 propagation failure (the Taylor run stopped,
     the orbit enters the Earth, or --visible-only found no pass).
