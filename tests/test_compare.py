@@ -50,6 +50,8 @@ def test_doppler_pass_rms_at_noise_and_offset_drift_recovered(run_cli, write, tm
     dt = (np.datetime64(p["reference_time"][:-1]) - np.datetime64("2026-03-20T09:24:00")) / np.timedelta64(1, "s")
     assert abs(p["offset"] - (150 + 0.02 * dt)) < 4 * p["offset_sigma"] and p["offset_sigma"] < 0.1
     assert abs(p["drift"] - 0.02) < 4 * p["drift_sigma"] and p["drift_sigma"] < 1e-3
+    # the file's sigmas are the noise here: a-posteriori = formal x rms_over_sigma (x sqrt(n/(n-2)))
+    assert p["offset_sigma_aposteriori"] == pytest.approx(p["offset_sigma"] * p["rms_over_sigma"], rel=0.01)
     table = pd.read_csv(out, comment="#")
     assert len(table) == n and np.allclose(table["residual"], table["observed"] - table["computed"])
     none = _summary(_ok(run_cli(["compare", pass_file, SAMPLE / "truth.json", "--remove", "none"])).stderr)

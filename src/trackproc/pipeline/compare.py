@@ -8,7 +8,9 @@
 2. Per pass and kind, the offset (and drift) the pass's own data imply are fitted by weighted
    least squares, ``r_i = b + d (t_i − t_0) + e_i`` with weights ``1/σ_i²`` and ``t_0`` the
    pass's first sample (``--remove none|offset|offset+drift``); their 1-σ are the formal ones,
-   ``sqrt(diag (AᵀWA)⁻¹)``, from the file's sigmas. A one-way Doppler pass's offset and drift
+   ``sqrt(diag (AᵀWA)⁻¹)``, from the file's sigmas, and the a-posteriori ones scaled by
+   ``sqrt(χ²/dof)`` (for files whose sigmas are not the noise; still optimistic when the residuals
+   are correlated, as a TLE's are). A one-way Doppler pass's offset and drift
    are the transmitter's frequency error, which is why a prediction is judged after removing
    them (the RMS users quote).
 3. The summary per pass and kind: samples, RMS before and after the removal, the fitted values,
@@ -53,10 +55,15 @@ def fit_trend(t_s, r, sigma, remove: str):
     coef, *_ = np.linalg.lstsq(a * w[:, None], r * w, rcond=None)
     cov = np.linalg.pinv((a * w[:, None]).T @ (a * w[:, None]))
     names = ("offset", "drift")[:columns]
+    after = r - a @ coef
+    dof = len(r) - columns
+    # a-posteriori: the formal sigmas scaled by sqrt(chi2/dof), for files whose sigmas are not the noise
+    scale = float(np.sqrt(np.sum((after * w) ** 2) / dof)) if dof > 0 else float("nan")
     for k, name in enumerate(names):
         fitted[name] = float(coef[k])
         fitted[f"{name}_sigma"] = float(np.sqrt(cov[k, k]))
-    return fitted, r - a @ coef
+        fitted[f"{name}_sigma_aposteriori"] = float(np.sqrt(cov[k, k])) * scale
+    return fitted, after
 
 
 def compare(table, orbit, options: CompareOptions, eop=None, stations: Optional[dict] = None):
