@@ -131,3 +131,38 @@ def test_docstring_examples_on_the_shipped_tle(run_cli, tmp_path):
                    "--stations", SAMPLE / "stations.csv", "--carrier-hz", "145.87e6", "--visible-only", "-o",
                    tmp_path / "predicted.csv"])
     assert res.exit_code == 0, res.stderr
+
+
+@pytest.mark.realdata
+def test_tca_of_doptrack_development_passes_against_the_measured_tca(run_cli, write, tmp_path):
+    """Real data, development set (1-10 April): the TCA ``passes`` predicts from each pass's own
+    metadata TLE (SGP4) against the upstream team's TCA measured from the recorded Doppler
+    (``tracking.tca``, an independent reference). Measured on the 25 development passes: median
+    0.67 s apart; all but two within 3 s (202004011959 is the README's known bad pass, 103 s;
+    202004032256, a 13-degree pass, 12 s)."""
+    import yaml
+
+    from realdata import DOPTRACK
+
+    files = sorted((DOPTRACK / "metadata").glob("Delfi-C3_32789_2020040*.yml")) + \
+        sorted((DOPTRACK / "metadata").glob("Delfi-C3_32789_2020041[0]*.yml"))
+    if not files:
+        pytest.skip(f"real data not available: {DOPTRACK}")
+    stations = write("st.csv", "station,lat_deg,lon_deg,height_m\nDopTrack,51.9989,4.3733585,95\n")
+    diffs = []
+    for path in files:
+        doc = yaml.safe_load(path.read_text())
+        tle = write("t.tle", doc["satellite"]["tle"]["line1"] + "\n" + doc["satellite"]["tle"]["line2"] + "\n")
+        tca = np.datetime64(str(doc["tracking"]["tca"]).replace(" ", "T"), "ns")
+        start = np.datetime_as_string(tca - np.timedelta64(15, "m"), "s") + "Z"
+        out = tmp_path / "p.csv"
+        res = run_cli(["passes", tle, "--stations", stations, "--start", start, "--span", "30m", "--dut1", "0",
+                       "-o", out])
+        assert res.exit_code == 0, res.stderr
+        table = pd.read_csv(out)
+        assert len(table) == 1, path.name
+        diffs.append(_seconds(table["tca_time"], tca)[0])
+    diffs = np.abs(diffs)
+    assert len(diffs) >= 20
+    assert np.median(diffs) < 1.5
+    assert np.mean(diffs < 3.0) >= 0.85
