@@ -54,6 +54,9 @@ def test_doppler_pass_rms_at_noise_and_offset_drift_recovered(run_cli, write, tm
     assert p["offset_sigma_aposteriori"] == pytest.approx(p["offset_sigma"] * p["rms_over_sigma"], rel=0.01)
     table = pd.read_csv(out, comment="#")
     assert len(table) == n and np.allclose(table["residual"], table["observed"] - table["computed"])
+    png = tmp_path / "fit.png"
+    _ok(run_cli(["compare", pass_file, SAMPLE / "truth.json", "--plot", png]))
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     none = _summary(_ok(run_cli(["compare", pass_file, SAMPLE / "truth.json", "--remove", "none"])).stderr)
     assert none["passes"][0]["rms"] > 100 and "offset" not in none["passes"][0]
 

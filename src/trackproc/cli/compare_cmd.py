@@ -41,6 +41,9 @@ def compare_command(
                                                help="Also write the JSON summary here (it always goes to stderr)."),
     output: Optional[str] = typer.Option(None, "-o", "--output",
                                          help="Residuals per sample (Parquet, Arrow on -, CSV by suffix)."),
+    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
+                                       help="Plot the residuals per pass and kind, before and after the removal "
+                                            "(needs matplotlib: trackproc[plot])."),
 ) -> None:
     """Compare a pass with a prediction: residuals observed - predicted per sample (-o), and per
     pass and kind the RMS after removing the pass's own fitted offset (and drift), with those
@@ -50,7 +53,7 @@ def compare_command(
 
         trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
             --carrier-hz 2.2e9 --mode one-way -o pass.parquet
-        trackproc compare pass.parquet sample_data/truth.json --summary fit.json -o residuals.csv
+        trackproc compare pass.parquet sample_data/truth.json --summary fit.json -o residuals.csv --plot fit.png
 
         trackproc compare sample_data/multistation.parquet sample_data/stale.json --remove none
 
@@ -72,6 +75,12 @@ def compare_command(
 
     if pass_file == "-" and prediction == "-":
         raise typer.BadParameter("only one input can come from stdin", param_hint="PREDICTION")
+    if plot == "-":
+        raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
+    if plot is not None:
+        from trackproc.pipeline.plotting import require_matplotlib
+
+        require_matplotlib()
     orientation, warning = earth_orientation(eop, dut1)
     if warning:
         log.warning(warning)
@@ -89,6 +98,11 @@ def compare_command(
                              earth=earth.value, range_rate_model=range_rate_model.value)
     residuals, summary = compare(table, orbit, options, orientation, extra)
     text = json.dumps(json_ready(summary), indent=2) + "\n"
+    if plot is not None:
+        from trackproc.io.atomic import write_bytes
+        from trackproc.pipeline.compare import plot_bytes
+
+        write_bytes(plot, plot_bytes(residuals, summary))
     if output is not None:
         write_residuals(residuals, output, {k: v for k, v in summary.items() if k != "passes"}, format_for(output))
     if summary_path is not None:
