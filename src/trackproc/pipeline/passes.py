@@ -145,20 +145,14 @@ def station_passes(sat, station, options: PassesOptions) -> list[dict]:
     t_max, el_max = t_max[keep], el_max[keep]
     if not len(t_max):
         return rows
-    below = el < mask
-    # AOS bracket: last grid point below the mask before the maximum; LOS: the first after it
-    idx = np.searchsorted(grid, t_max, side="right")          # first grid index after the maximum
+    # AOS bracket: the last grid point below the mask before the maximum; LOS: the first after it
+    below_t = grid[el < mask]
     aos_lo = np.full(len(t_max), np.nan)
     los_hi = np.full(len(t_max), np.nan)
-    below_idx = np.flatnonzero(below)
-    for i, (tm, j) in enumerate(zip(t_max, idx)):
-        before = below_idx[below_idx < j]
-        before = before[grid[before] < tm]
-        after = below_idx[grid[below_idx] > tm]
-        if len(before):
-            aos_lo[i] = grid[before[-1]]
-        if len(after):
-            los_hi[i] = grid[after[0]]
+    k_before = np.searchsorted(below_t, t_max, side="left") - 1
+    k_after = np.searchsorted(below_t, t_max, side="right")
+    aos_lo[k_before >= 0] = below_t[k_before[k_before >= 0]]
+    los_hi[k_after < len(below_t)] = below_t[k_after[k_after < len(below_t)]]
 
     def crossing(lo, hi):
         out = np.full(len(t_max), np.nan)
