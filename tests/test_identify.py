@@ -73,3 +73,52 @@ def test_bad_catalogue_exit_2(run_cli, write, pass_file):
     for text in ("hello\nworld\n", bad):
         res = run_cli(["identify", pass_file, "--tles", write("bad.tle", text)])
         assert res.exit_code == 2 and "bad.tle" in res.stderr and "Traceback" not in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize("phi", [0.0, 0.5, 0.8])
+def test_autocorrelation_time_of_ar1_matches_closed_form(phi):
+    """AR(1) ``x_t = phi x_{t-1} + e_t``: integrated autocorrelation time ``(1 + phi)/(1 - phi)``."""
+    import numpy as np
+
+    from trackproc.pipeline.identify import integrated_autocorrelation_time
+
+    rng = np.random.default_rng(11)
+    e = rng.standard_normal(40000)
+    x = np.empty_like(e)
+    x[0] = e[0]
+    for t in range(1, len(e)):
+        x[t] = phi * x[t - 1] + e[t]
+    tau = integrated_autocorrelation_time([x[:20000], x[20000:]], max_lag=400)
+    assert tau == pytest.approx((1 + phi) / (1 - phi), rel=0.15)
+
+
+@pytest.mark.realdata
+def test_real_pass_correlated_residuals_make_close_copies_ambiguous(run_cli, write, tmp_path):
+    """A DopTrack pass (development set) against its own metadata TLE and copies moved along-track.
+    Its residuals are TLE error, smooth in time (autocorrelation time ~100 samples): the effective
+    sample count is ~10, not 1066, so copies 0.002-0.005 deg (250-650 m) away are ambiguous, while
+    0.05 and 0.5 deg (6, 60 km) are decisively rejected."""
+    import yaml
+
+    from realdata import DOPTRACK
+
+    stamp = "202004011044"
+    raw = DOPTRACK / "data" / f"Delfi-C3_32789_{stamp}.csv"
+    if not raw.exists():
+        pytest.skip(f"real data not available: {raw}")
+    doc = yaml.safe_load((DOPTRACK / "metadata" / f"Delfi-C3_32789_{stamp}.yml").read_text())
+    l1, l2 = doc["satellite"]["tle"]["line1"], doc["satellite"]["tle"]["line2"]
+
+    def copy(number, dm):
+        b = l2[:43] + f"{float(l2[43:51]) + dm:8.4f}" + l2[51:68]
+        b = b[:2] + number + b[7:]
+        a = l1[:2] + number + l1[7:68]
+        return f"{a}{checksum(a)}\n{b}{checksum(b)}\n"
+
+    pass_file = tmp_path / "pass.parquet"
+    assert run_cli(["ingest", raw, "-o", pass_file]).exit_code == 0
+    far = _identify(run_cli, write, pass_file, copy("32789", 0.0) + copy("90001", 0.05) + copy("90002", 0.5))
+    assert far["verdict"] == "decisive" and far["best"]["satnum"] == "32789"
+    assert 3 < far["effective_samples"] < 100
+    near = _identify(run_cli, write, pass_file, copy("32789", 0.0) + copy("90001", 0.002) + copy("90002", 0.005))
+    assert near["verdict"] == "ambiguous" and len(near["runners_up"]) >= 1

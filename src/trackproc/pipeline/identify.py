@@ -9,15 +9,17 @@ Likelihood ratios. With Gaussian residuals of a common unknown scale, the profil
 candidate ``i`` is ``L_i ∝ S_i^(-n/2)``. Residuals of a TLE against a pass are not white: the
 TLE's error is a smooth function of time, so ``n`` samples carry far fewer independent pieces of
 information. ``n`` is therefore replaced by an effective sample size from the best candidate's
-residuals, ``n_eff = n (1 − ρ)/(1 + ρ)`` with ``ρ`` their lag-1 autocorrelation (AR(1)
-variance-inflation; ``n_eff = n`` for white residuals), giving
+residuals, ``n_eff = n / τ`` with ``τ = 1 + 2 Σ ρ_k`` their integrated autocorrelation time
+(Geyer's initial positive sequence; ``n_eff = n`` for white residuals), giving
 
     ln LR_i = −(n_eff / 2) ln(S_i / S_best)        (LR_best = 1)
 
 The verdict is ``decisive`` when every runner-up has ``LR < 1/100`` (Jeffreys' "decisive" odds),
 otherwise ``ambiguous``, naming the runners-up above that level. The likelihood ratio compares
 the candidates given; it says nothing about an object missing from the catalogue: ``rms_over_sigma``
-of the best candidate says whether it fits at all.
+of the best candidate says whether it fits at all. It ranks *predictions*: a TLE is itself
+kilometres off after a day, so objects whose TLEs differ by less than that cannot be told apart
+by any pass, and the best-fitting prediction need not carry the right label.
 """
 
 from __future__ import annotations
@@ -68,16 +70,31 @@ def parse_catalogue(text: str, source: str = "<catalogue>") -> list:
     return tles
 
 
-def _lag1(residuals_by_pass) -> float:
-    """Lag-1 autocorrelation of residual series (pooled over passes and kinds), in [0, 0.999]."""
-    num = den = 0.0
-    for r in residuals_by_pass:
-        if len(r) < 3:
-            continue
-        num += float(np.dot(r[1:], r[:-1]))
+def _autocorrelation(series, max_lag: int) -> np.ndarray:
+    """Pooled autocorrelation ``rho_k``, k = 0..max_lag, of residual series (passes and kinds)."""
+    num = np.zeros(max_lag + 1)
+    den = 0.0
+    for r in series:
+        r = np.asarray(r, float)
         den += float(np.dot(r, r))
-    rho = num / den if den > 0 else 0.0
-    return min(max(rho, 0.0), 0.999)
+        for k in range(min(max_lag, len(r) - 1) + 1):
+            num[k] += float(np.dot(r[k:], r[:len(r) - k]))
+    return num / den if den > 0 else np.eye(1, max_lag + 1)[0]
+
+
+def integrated_autocorrelation_time(series, max_lag: int = 1000) -> float:
+    """``tau = 1 + 2 sum_k rho_k`` summed by Geyer's initial positive sequence (pairs
+    ``rho_{2m} + rho_{2m+1}`` while positive): the factor by which correlated residuals hold fewer
+    independent samples (``n_eff = n / tau``). Geyer (1992), Statistical Science 7, 473."""
+    longest = max((len(r) for r in series), default=1)
+    rho = _autocorrelation(series, min(max_lag, max(longest - 1, 1)))
+    tau = -1.0                               # 1 + 2 sum_{k>=1} rho_k = -1 + 2 sum_{m} (rho_2m + rho_2m+1)
+    for m in range(len(rho) // 2):
+        pair = rho[2 * m] + rho[2 * m + 1]
+        if pair <= 0:
+            break
+        tau += 2 * pair
+    return max(tau, 1.0)
 
 
 def identify(table, tles: list, eop=None, remove: str = "offset+drift", range_rate_model: str = "doppler",
@@ -117,8 +134,8 @@ def identify(table, tles: list, eop=None, remove: str = "offset+drift", range_ra
     if not ok:
         raise ProcessingError("no candidate could be evaluated: " + "; ".join(r["failed"] for r in rows))
     best = ok[0]
-    rho = _lag1(series[best["_key"]])
-    n_eff = best["samples"] * (1 - rho) / (1 + rho)
+    tau = integrated_autocorrelation_time(series[best["_key"]])
+    n_eff = best["samples"] / tau
     for r in ok:
         r["ln_likelihood_ratio"] = -0.5 * n_eff * math.log(r["weighted_ss"] / best["weighted_ss"]) + 0.0
         r["likelihood_ratio"] = math.exp(r["ln_likelihood_ratio"])
@@ -131,9 +148,9 @@ def identify(table, tles: list, eop=None, remove: str = "offset+drift", range_ra
         "best": {"satnum": best["satnum"], "name": best["name"]},
         "runners_up": [{"satnum": r["satnum"], "name": r["name"], "likelihood_ratio": r["likelihood_ratio"]}
                        for r in runners],
-        "effective_samples": n_eff, "lag1_autocorrelation": rho,
+        "effective_samples": n_eff, "autocorrelation_time_samples": tau,
         "method": ("SGP4 per candidate, per-pass offset+drift removed; ln LR = -(n_eff/2) ln(S_i/S_best), "
-                   "n_eff = n (1-rho)/(1+rho) from the best candidate's residuals; decisive when every runner-up "
+                   "n_eff = n / tau, tau the integrated autocorrelation time of the best candidate's residuals; decisive when every runner-up "
                    f"has LR < {DECISIVE_LR:g}") if remove == "offset+drift" else f"as above, removing {remove}",
         "candidates": ok + [r for r in rows if "failed" in r],
     }
