@@ -196,9 +196,13 @@ def propagate_command(
             from trackproc.io.tle import tle_epoch, tle_state
 
             # The first requested time: the grid's anchor (--start, else the epoch) or --at's first sample.
-            first = at_times.min() if at_times is not None and len(at_times) else (start_t or tle_epoch(orbit.tle))
-            initial = tle_state(orbit.tle, at=first, eop=orientation)
             from trackproc.io.statefile import format_epoch
+
+            if at_times is not None and len(at_times):
+                first = at_times.min()
+            else:
+                first = start_t if start_t is not None else tle_epoch(orbit.tle)
+            initial = tle_state(orbit.tle, at=first, eop=orientation)
 
             options.force_note = (f"TLE integrated with {force_key} from its SGP4 state at {format_epoch(first)} "
                                   f"(--force {force_key}), not evaluated by SGP4")
