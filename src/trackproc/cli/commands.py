@@ -17,6 +17,9 @@ from trackproc.cli import accuracy_cmd  # noqa: F401
 from trackproc.cli import requirements_cmd  # noqa: F401
 from trackproc.cli import detect_cmd  # noqa: F401
 from trackproc.cli import batch_cmd  # noqa: F401
+from trackproc.cli import passes_cmd  # noqa: F401
+from trackproc.cli import compare_cmd  # noqa: F401
+from trackproc.cli import identify_cmd  # noqa: F401
 # isort: on
 
 from trackproc.cli.app import app
@@ -33,6 +36,9 @@ SUMMARIES = {
     "requirements": "Sensor requirement g = sigma*sqrt(dt) for elevation-only detection (seed 003).",
     "detect": "Elevation-only test for an orbit displacement (seed 003).",
     "batch": "Many passes, every night: parallel, resumable, cron-grade.",
+    "compare": "Residuals of a pass against a state or TLE: RMS after the pass's own offset and drift.",
+    "identify": "Which catalogue TLE is this pass? Ranked fits, likelihood ratios, a verdict.",
+    "passes": "Pass schedule of a state or TLE: AOS/TCA/LOS, max elevation, azimuths, Doppler per station.",
 }
 
 for _command in app.registered_commands:

@@ -14,7 +14,6 @@ from trackproc.cli.common import (
     Dut1Opt,
     EarthOpt,
     EopOpt,
-    ForceOpt,
     OutputOpt,
     RangeRateModelOpt,
     TableFormat,
@@ -23,6 +22,19 @@ from trackproc.cli.common import (
 )
 
 log = logging.getLogger("trackproc")
+
+
+class OrbitForce(str, Enum):
+    sgp4 = "sgp4"
+    two_body = "two-body"
+    j2 = "j2"
+
+
+#: ``--force`` of commands taking a STATE|TLE (default: sgp4 for a TLE, j2 for a state).
+OrbitForceOpt = typer.Option(None, "--force",
+                             help="sgp4 (default for a TLE: SGP4 at every time), j2 (default for a state) or "
+                                  "two-body; j2/two-body on a TLE integrate from its SGP4 state at the first "
+                                  "requested time.")
 
 
 class EphemerisFormat(str, Enum):
@@ -49,17 +61,18 @@ def _format(output: str, requested: Optional[EphemerisFormat]) -> EphemerisForma
 
 @app.command("propagate")
 def propagate_command(
-    state: str = typer.Argument(..., metavar="STATE.json|TLE",
-                                help="Initial state (JSON state file, any supported frame) or a TLE; - for stdin."),
+    state: str = typer.Argument(..., metavar="STATE.json|TLE|metadata",
+                                help="Initial state (JSON state file, any supported frame) or a TLE; - for stdin; "
+                                     "'metadata' with --at: the TLE stored in that pass file (DopTrack)."),
     span: Optional[float] = typer.Option(None, "--span", metavar="S",
                                          help="Span from the start, s (negative: backwards in time)."),
     step: Optional[float] = typer.Option(None, "--step", metavar="S", help="Output spacing, s (with --span)."),
     at: Optional[str] = typer.Option(None, "--at", metavar="PASSFILE",
                                      help="Instead of a grid: the sample times of a pass file."),
     start: Optional[str] = typer.Option(None, "--start", metavar="ISO",
-                                        help="First grid time, UTC ISO 8601 (default: the state's epoch; a TLE "
-                                             "is evaluated by SGP4 there)."),
-    force=ForceOpt,
+                                        help="First grid time, UTC ISO 8601 (default: the state's or TLE's "
+                                             "epoch)."),
+    force: Optional[OrbitForce] = OrbitForceOpt,
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
     dut1: Optional[float] = Dut1Opt,
@@ -87,7 +100,8 @@ def propagate_command(
                                "Arrow stream on stdout)."),
     output: Optional[str] = OutputOpt,
 ) -> None:
-    """Propagate an orbit state (two-body or J2, adaptive Taylor series) and write its ephemeris:
+    """Propagate an orbit state (two-body or J2, adaptive Taylor series) or a TLE (SGP4 at every
+    output time, unless --force j2/two-body) and write its ephemeris:
     time, x_m .. vz_m_s in GCRF, optionally the STM, the propagated covariance (when the state
     file has one) and a station's predicted measurements.
 
@@ -104,6 +118,9 @@ def propagate_command(
         trackproc propagate sample_data/truth.json --span 86400 --step 600 --format oem -o day.oem
 
         trackproc propagate sample_data/iss.tle --span -3600 --step 10 -o - > back.arrows
+
+        trackproc propagate sample_data/iss.tle --span 86400 --step 10 --at-station CPH \\
+            --stations sample_data/stations.csv --carrier-hz 145.87e6 --visible-only -o predicted.csv
 
     Exit status: 0 ok; 2 bad options or input; 1 propagation failure (the Taylor run stopped,
     the orbit enters the Earth, or --visible-only found no pass).
@@ -128,12 +145,14 @@ def propagate_command(
 
     from trackproc.io.eop import earth_orientation
     from trackproc.io.ephemeris import write_ephemeris
-    from trackproc.io.statefile import parse_epoch, read_state_or_tle
+    from trackproc.io.statefile import parse_epoch
+    from trackproc.pipeline.orbit_source import read_orbit, resolve_force
     from trackproc.pipeline.propagate import (
         PropagateOptions,
         oem_identity,
         pass_times,
         propagate,
+        propagate_tle,
         resolve_station,
     )
 
@@ -141,7 +160,6 @@ def propagate_command(
     if warning:
         log.warning(warning)
     start_t = parse_epoch(start, column="--start") if start is not None else None
-    initial = read_state_or_tle(state, orientation, at=start_t)
     at_times = None
     pass_table = None
     if at is not None:
@@ -149,6 +167,17 @@ def propagate_command(
 
         pass_table = read_pass_table(at)
         at_times = pass_times(pass_table, at_station)
+    if state == "metadata":
+        from trackproc.pipeline.orbit_source import OrbitInput, tle_from_pass_metadata
+
+        if pass_table is None:
+            raise typer.BadParameter("'metadata' (the TLE stored in a pass file) needs --at PASSFILE",
+                                     param_hint="STATE")
+        tle = tle_from_pass_metadata(pass_table, "<stdin>" if at == "-" else at)
+        orbit = OrbitInput(tle=tle, source=tle.source)
+    else:
+        orbit = read_orbit(state, orientation)
+    force_key = resolve_force(orbit, force.value if force is not None else None)
     station = None
     if at_station is not None:
         table = None
@@ -159,20 +188,48 @@ def propagate_command(
         station = resolve_station(at_station, table, pass_table)
     _check_extent(initial.epoch, start_t, span, step, at_times, carrier_hz, object_name, object_id)
     options = PropagateOptions(
-        span_s=span, step_s=step, start=start_t, at_times=at_times, force=force.value, earth=earth.value, tol=tol,
+        span_s=span, step_s=step, start=start_t, at_times=at_times, force=force_key, earth=earth.value, tol=tol,
         stm=stm, station=station, carrier_hz=carrier_hz, range_rate_model=range_rate_model.value,
         visible_only=visible_only, elevation_mask_deg=elevation_mask_deg)
-    result = propagate(initial, options, orientation)
+    if force_key == "sgp4":
+        result = propagate_tle(orbit.tle, options, orientation)
+        initial = None
+    else:
+        initial = orbit.state
+        if initial is None:
+            from trackproc.io.tle import tle_epoch, tle_state
+
+            # The first requested time: the grid's anchor (--start, else the epoch) or --at's first sample.
+            from trackproc.io.statefile import format_epoch
+
+            if at_times is not None and len(at_times):
+                first = at_times.min()
+            else:
+                first = start_t if start_t is not None else tle_epoch(orbit.tle)
+            initial = tle_state(orbit.tle, at=first, eop=orientation)
+
+            options.force_note = (f"TLE integrated with {force_key} from its SGP4 state at {format_epoch(first)} "
+                                  f"(--force {force_key}), not evaluated by SGP4")
+            log.info("%s", options.force_note)
+        result = propagate(initial, options, orientation)
 
     oem_kwargs = {}
     if out_format is EphemerisFormat.oem:
-        name, ident = oem_identity(initial, object_name, object_id)
-        oem_kwargs = {"object_name": name, "object_id": ident,
-                      "comments": [f"trackproc propagate: Taylor (DT) integration, tol {tol:g}"]}
+        if initial is None:
+            from trackproc.io.ephemeris import international_designator
+
+            name = object_name or orbit.tle.name or "UNKNOWN"
+            ident = object_id or international_designator(orbit.tle.line1) or "UNKNOWN"
+            comment = "trackproc propagate: SGP4 at every epoch (TEME -> GCRF)"
+        else:
+            name, ident = oem_identity(initial, object_name, object_id)
+            comment = f"trackproc propagate: Taylor (DT) integration, tol {tol:g}"
+        oem_kwargs = {"object_name": name, "object_id": ident, "comments": [comment]}
     write_ephemeris(result.ephemeris, out, out_format.value, **oem_kwargs)
     eph = result.ephemeris
-    log.info("%d rows, %s .. %s, %d Taylor steps (%s) -> %s (%s)", len(eph.frame), eph.meta["start"],
-             eph.meta["end"], result.trajectory.n_steps, eph.meta["force_model"],
+    steps = f"{result.trajectory.n_steps} Taylor steps" if result.trajectory is not None else "SGP4"
+    log.info("%d rows, %s .. %s, %s (%s) -> %s (%s)", len(eph.frame), eph.meta["start"],
+             eph.meta["end"], steps, eph.meta["force_model"],
              "stdout" if out == "-" else out, out_format.value)
 
 

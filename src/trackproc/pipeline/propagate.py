@@ -57,6 +57,8 @@ class PropagateOptions:
     visible_only: bool = False
     elevation_mask_deg: float = 10.0
     light_time: bool = True
+    #: Said in the metadata when a TLE is integrated instead of evaluated by SGP4.
+    force_note: Optional[str] = None
 
 
 @dataclass
@@ -100,9 +102,9 @@ def _check_options(options: PropagateOptions) -> None:
         raise InputError("no sample times", column="--at", expected="a pass file with at least one sample")
     if not (1e-18 < options.tol < 1e-3):
         raise InputError("out of range", column="--tol", found=options.tol, expected="a tolerance in (1e-18, 1e-3)")
-    if options.force not in vocabulary.FORCES:
+    if options.force not in vocabulary.FORCES + ("sgp4",):
         raise InputError("unknown force model", column="--force", found=options.force,
-                         expected=" or ".join(vocabulary.FORCES))
+                         expected=", ".join(vocabulary.FORCES) + " or sgp4 (a TLE)")
     if options.earth not in vocabulary.EARTHS:
         raise InputError("unknown Earth model", column="--earth", found=options.earth,
                          expected=" or ".join(vocabulary.EARTHS))
@@ -144,6 +146,70 @@ def pass_times(pass_table, station: Optional[str] = None) -> np.ndarray:
     return np.unique(times)
 
 
+def requested_times(options: PropagateOptions, default_start) -> np.ndarray:
+    """The output times (UTC ``datetime64[ns]``, increasing): ``--at``'s, or the grid from
+    ``--start`` (default ``default_start``, the state's or the TLE's epoch)."""
+    if options.at_times is not None:
+        return np.unique(np.asarray(options.at_times, dtype="datetime64[ns]"))
+    start = np.datetime64(options.start if options.start is not None else default_start, "ns")
+    return grid_times(start, options.span_s, options.step_s)
+
+
+def propagate_tle(tle, options: PropagateOptions, eop=None) -> PropagateResult:
+    """A TLE evaluated by SGP4 at every requested time (``--force sgp4``, the default for a TLE).
+
+    States are SGP4's (TEME -> GCRF, :func:`trackproc.pipeline.orbit_source.sgp4_states`); a
+    station's observables are the one-way foundation model
+    (:func:`trackproc.pipeline.orbit_source.observe`). No STM or covariance: SGP4 is not
+    integrated here. ``trajectory`` of the result is None.
+    """
+    from trackproc.io.ephemeris import Ephemeris
+    from trackproc.io.tle import tle_epoch
+    from trackproc.pipeline.orbit_source import OrbitInput, Satellite, observe, sgp4_states
+
+    _check_options(options)
+    if options.stm:
+        raise InputError("SGP4 has no state transition matrix here", column="--stm",
+                         expected="--force j2 or two-body (integrate from the TLE's state) for --stm")
+    times = requested_times(options, tle_epoch(tle))
+    states = sgp4_states(tle, times, eop)
+    radius = np.linalg.norm(states[:, :3], axis=1)
+    if np.any(radius < MIN_RADIUS_M):
+        i = int(np.argmin(radius))
+        raise ProcessingError(f"the orbit enters the Earth: |r| = {radius[i] / 1e3:.1f} km at "
+                              f"{iso_utc(times[i])} (below {MIN_RADIUS_M / 1e3:.0f} km)")
+    columns = {"time": pd.DatetimeIndex(times).tz_localize("UTC")}
+    for k, name in enumerate(("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s")):
+        columns[name] = states[:, k]
+    from trackproc.dynamics import timescales as ts
+
+    sat = Satellite(OrbitInput(tle=tle, source=tle.source), "sgp4", times[0], 0.0, 0.0, eop)
+    t_s = np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(times), sat.jd0), float)
+    prediction = None
+    if options.station is not None:
+        prediction = observe(sat, options.station, t_s, carrier_hz=options.carrier_hz or 1.0,
+                             range_rate_model=options.range_rate_model, earth=options.earth)
+        columns["range_m"] = prediction.range_m
+        columns["range_rate_m_s"] = prediction.range_rate_m_s
+        if options.carrier_hz is not None:
+            columns["doppler_hz"] = -options.carrier_hz * prediction.range_rate_m_s / C_LIGHT
+        columns["azimuth_deg"] = prediction.azimuth_rad / DEG
+        columns["elevation_deg"] = prediction.elevation_rad / DEG
+        columns["light_time_s"] = prediction.light_time_s
+    frame = pd.DataFrame(columns)
+    if options.visible_only:
+        keep = prediction.elevation_rad >= options.elevation_mask_deg * DEG
+        if not keep.any():
+            raise ProcessingError(
+                f"no visible pass: the satellite never rises above the {options.elevation_mask_deg:g} deg mask of "
+                f"{options.station.name} between {iso_utc(times[0])} and {iso_utc(times[-1])} (maximum elevation "
+                f"{np.degrees(prediction.elevation_rad.max()):.1f} deg); try a longer --span or a lower "
+                "--elevation-mask-deg")
+        frame = frame[keep].reset_index(drop=True)
+    meta = _meta(None, options, None, eop, False, times, tle=tle)
+    return PropagateResult(ephemeris=Ephemeris(frame, meta), trajectory=None, t_s=t_s, prediction=prediction)
+
+
 def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
     """Propagate ``initial`` (a GCRF :class:`~trackproc.io.statefile.State`) per ``options``.
 
@@ -162,11 +228,10 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
     )
 
     _check_options(options)
-    if options.at_times is not None:
-        times = np.unique(np.asarray(options.at_times, dtype="datetime64[ns]"))
-    else:
-        start = np.datetime64(options.start if options.start is not None else initial.epoch, "ns")
-        times = grid_times(start, options.span_s, options.step_s)
+    if options.force == "sgp4":
+        raise InputError("SGP4 needs a TLE", column="--force", found="sgp4",
+                         expected="a TLE input, or --force j2 / two-body for a state")
+    times = requested_times(options, initial.epoch)
     t_s = np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(times), initial.jd_utc), float)
     cov0 = initial.state_covariance
     want_stm = options.stm or cov0 is not None
@@ -245,7 +310,7 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
                            covariance=cov)
 
 
-def _meta(initial, options, traj, eop, has_cov, times) -> dict:
+def _meta(initial, options, traj, eop, has_cov, times, tle=None) -> dict:
     from trackproc import __version__
     from trackproc.io.ephemeris import SCHEMA_VERSION
     from trackproc.io.passfile import SIGN_CONVENTION
@@ -259,21 +324,35 @@ def _meta(initial, options, traj, eop, has_cov, times) -> dict:
         "time_scale": "UTC",
         "frame": "GCRF",
         "units": units,
-        "initial_state": {"epoch": iso_utc(initial.epoch), "position_m": [float(x) for x in initial.r_m],
-                          "velocity_m_s": [float(x) for x in initial.v_m_s],
-                          "source": initial.source or initial.extra.get("source")},
+        "initial_state": None,
         "start": iso_utc(times[0]), "end": iso_utc(times[-1]), "samples": len(times),
-        "force_model": FORCE_LABELS.get(options.force, options.force),
-        "constants": force_model_constants(options.force),
+        "force_model": None,
+        "constants": None,
         "earth_orientation": getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
-        "propagator": {
+        "propagator": None,
+        "trackproc_version": __version__,
+    }
+    if tle is None:
+        meta["initial_state"] = {"epoch": iso_utc(initial.epoch), "position_m": [float(x) for x in initial.r_m],
+                                 "velocity_m_s": [float(x) for x in initial.v_m_s],
+                                 "source": initial.source or initial.extra.get("source")}
+        meta["force_model"] = FORCE_LABELS.get(options.force, options.force)
+        meta["constants"] = force_model_constants(options.force)
+        meta["propagator"] = {
             "method": "adaptive Taylor series (differential transformation, seed 000 eq. 14), dense output",
             "tol": float(options.tol), "order": int(traj.order), "steps": int(traj.n_steps),
             "integration_frame": "GCRF rotated by the bias-precession-nutation matrix of the state's epoch "
                                  f"({iso_utc(traj.epoch)}); J2 about that rotation axis",
-        },
-        "trackproc_version": __version__,
-    }
+        }
+    if tle is not None:
+        from trackproc.pipeline.orbit_source import SGP4_LABEL
+
+        meta["initial_state"] = {"tle": [tle.line1, tle.line2], "name": tle.name, "source": tle.source}
+        meta["force_model"] = "SGP4"
+        meta["constants"] = {"model": "WGS-72 (SGP4's own)"}
+        meta["propagator"] = {"method": SGP4_LABEL + ", evaluated at every output time"}
+    elif options.force_note:
+        meta["initial_state"]["note"] = options.force_note
     if options.stm:
         meta["stm"] = ("stm_I_J = d x_I(t) / d x_J(epoch), I, J = 1..6 = x, y, z, vx, vy, vz (GCRF, SI units); "
                        "row I is the state at the row's time")
@@ -291,7 +370,9 @@ def _meta(initial, options, traj, eop, has_cov, times) -> dict:
         meta["range_rate_model"] = options.range_rate_model
         meta["light_time"] = ("one-way, tagged at reception: satellite at t - rho/c, station at t"
                               if options.light_time else "none (geometry at the sample time)")
-        meta["measurement_model"] = ("image-domain spectra (seed 004 eqs. 7-13) on the Taylor steps; station by "
+        meta["measurement_model"] = ("one-way foundation model (models/measurements.py: light-time iteration on "
+                                     "SGP4 states, IAU 2006/2000A station); aberration and refraction neglected"
+                                     if tle is not None else "image-domain spectra (seed 004 eqs. 7-13) on the Taylor steps; station by "
                                      "IAU 2006/2000A (Earth rotation angle exact, precession-nutation and polar "
                                      "motion interpolated); aberration and refraction neglected")
         meta["doppler_sign_convention"] = SIGN_CONVENTION

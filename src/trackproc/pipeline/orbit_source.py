@@ -1,0 +1,189 @@
+"""What a ``STATE|TLE`` argument names, as GCRF states at any UTC times, and a station's
+observables of it (shared by ``propagate``, ``passes`` and ``compare``).
+
+* A TLE is evaluated by SGP4 at every requested time (:func:`trackproc.io.tle.sgp4_teme`, then
+  TEME -> GCRF by :func:`trackproc.dynamics.frames.teme_to_gcrf`): mean elements are only
+  meaningful through the theory they were fitted with, so integrating the TLE's osculating
+  state with another force model drifts by kilometres a day (issue 18: 16.3 Hz RMS instead of
+  4.7 Hz on a pass 41 h after the epoch).
+* A state (or a TLE with ``force`` two-body/j2) is integrated once by the Taylor engine
+  (:func:`trackproc.dynamics.propagator.propagate_state`) over the requested interval and read
+  from its dense output.
+
+Observables (one-way light time, range, range-rate, Doppler, azimuth, elevation) are the
+foundation model :func:`trackproc.models.measurements.observables` (the one ``simulate`` uses),
+fed with the satellite's acceleration and jerk at the reception time; for SGP4 these come from
+central differences of its velocity over ``FD_STEP_S`` (their error moves the emission-time
+state by far below a micrometre over a LEO light time of a few milliseconds).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from trackproc.errors import InputError, ProcessingError
+
+DEG = np.pi / 180.0
+#: Step of the central differences giving SGP4's acceleration and jerk, s.
+FD_STEP_S = 1.0
+#: Force models of a ``STATE|TLE`` argument (``--force``).
+FORCES = ("sgp4", "two-body", "j2")
+SGP4_LABEL = "SGP4 (TLE mean elements, WGS-72; Vallado's sgp4 package), TEME -> GCRF via ITRF"
+
+
+@dataclass
+class OrbitInput:
+    """A read ``STATE|TLE`` argument: exactly one of ``state`` (GCRF) or ``tle``."""
+
+    state: Optional[object] = None
+    tle: Optional[object] = None
+    source: str = "<orbit>"
+
+
+def read_orbit(path: str, eop=None) -> OrbitInput:
+    """A JSON state file or a 2/3-line TLE (``-`` = stdin), told apart by the first character."""
+    from trackproc.io.atomic import is_stdio, read_input_bytes
+    from trackproc.io.statefile import parse_state
+    from trackproc.io.tle import parse_tle
+
+    source = "<stdin>" if is_stdio(path) else str(path)
+    data = read_input_bytes(path)
+    if data.lstrip()[:1] == b"{":
+        return OrbitInput(state=parse_state(data, source, eop), source=source)
+    return OrbitInput(tle=parse_tle(data.decode("utf-8", errors="replace"), source), source=source)
+
+
+def tle_from_pass_metadata(table, source: str = "<pass>"):
+    """The TLE a pass file's metadata carries (DopTrack's ``doptrack.<file>.tle``, or a top-level
+    ``tle``): the prediction the station itself used. All sources must carry the same one."""
+    from trackproc.io.tle import parse_tle
+
+    found = []
+    meta = table.meta or {}
+    if isinstance(meta.get("tle"), list):
+        found.append(tuple(meta["tle"]))
+    for entry in (meta.get("doptrack") or {}).values():
+        if isinstance(entry, dict) and isinstance(entry.get("tle"), list):
+            found.append(tuple(entry["tle"]))
+    unique = sorted(set(found))
+    if not unique:
+        raise InputError("no TLE in the pass file's metadata", file=source, column="tle",
+                         expected="a pass file ingested from DopTrack (its TLE kept), or a TLE/state file")
+    if len(unique) > 1:
+        raise InputError("the pass file's sources carry different TLEs", file=source, column="tle",
+                         found=f"{len(unique)} TLEs", expected="one TLE (compare the passes one at a time)")
+    return parse_tle("\n".join(unique[0]), f"{source} (metadata TLE)")
+
+
+def resolve_force(orbit: OrbitInput, force: Optional[str]) -> str:
+    """``--force``: default ``sgp4`` for a TLE, ``j2`` for a state; ``sgp4`` needs a TLE."""
+    if force is None:
+        return "sgp4" if orbit.tle is not None else "j2"
+    if force not in FORCES:
+        raise InputError("unknown force model", column="--force", found=force, expected=", ".join(FORCES))
+    if force == "sgp4" and orbit.tle is None:
+        raise InputError("SGP4 needs a TLE", file=orbit.source, column="--force", found="sgp4",
+                         expected="a TLE input, or --force j2 / two-body for a state file")
+    return force
+
+
+def sgp4_states(tle, times, eop=None) -> np.ndarray:
+    """GCRF states ``[r m, v m/s]`` (N, 6) of a TLE by SGP4 at UTC ``datetime64`` times."""
+    from trackproc.dynamics import frames
+    from trackproc.dynamics.timescales import datetime64_to_jd_utc
+    from trackproc.io.tle import sgp4_teme
+
+    jd1, jd2 = datetime64_to_jd_utc(np.asarray(times, dtype="datetime64[ns]").reshape(-1))
+    r_teme, v_teme = sgp4_teme(tle, jd1, jd2)
+    r, v = frames.teme_to_gcrf(r_teme, v_teme, jd1, jd2, eop)
+    return np.concatenate([r, v], axis=1)
+
+
+class Satellite:
+    """GCRF position, velocity, acceleration and jerk at UTC times ``t0 + t_s`` for one orbit.
+
+    Built once for an interval ``[t0 + lo_s, t0 + hi_s]``; :meth:`rvaj` takes seconds from
+    ``t0`` (SI seconds, leap seconds counted). ``force`` is ``sgp4`` (a TLE), ``two-body`` or
+    ``j2`` (a state; a TLE is first turned into its SGP4 state at ``t0``).
+    """
+
+    def __init__(self, orbit: OrbitInput, force: str, t0, lo_s: float, hi_s: float, eop=None, tol: float = 1e-13):
+        from trackproc.dynamics import timescales as ts
+
+        self.force, self.eop = force, eop
+        self.t0 = np.datetime64(t0, "ns")
+        self.jd0 = tuple(float(x) for x in ts.datetime64_to_jd_utc(self.t0))
+        self.tle = orbit.tle if force == "sgp4" else None
+        self.traj = None
+        self.initial = orbit.state
+        if force != "sgp4":
+            from trackproc.dynamics import propagator
+
+            if orbit.state is None:
+                from trackproc.io.tle import tle_state
+
+                self.initial = tle_state(orbit.tle, at=self.t0, eop=eop)
+            shift = float(ts.seconds_since(self.jd0, self.initial.jd_utc))
+            margin = 4 * FD_STEP_S
+            span = np.array([lo_s - margin, hi_s + margin]) + shift
+            try:
+                traj = propagator.propagate_state(self.initial, span, force=force, eop=eop, tol=tol)
+            except (ValueError, ArithmeticError) as exc:
+                raise ProcessingError(f"propagation failed: {exc}") from None
+            self.traj = traj.raise_for_outcome()
+            self._shift = shift
+
+    def times(self, t_s) -> np.ndarray:
+        """UTC ``datetime64[ns]`` of seconds from ``t0``."""
+        from trackproc.dynamics import timescales as ts
+
+        return ts.jd_utc_to_datetime64(*ts.add_seconds_utc(self.jd0, np.atleast_1d(np.asarray(t_s, float))))
+
+    def _states(self, t_s) -> np.ndarray:
+        if self.traj is not None:
+            return self.traj.state(np.asarray(t_s, float) + self._shift)
+        return sgp4_states(self.tle, self.times(t_s), self.eop)
+
+    def rvaj(self, t_s):
+        """Position, velocity, acceleration, jerk (each (N, 3), GCRF SI) at seconds from ``t0``."""
+        t = np.atleast_1d(np.asarray(t_s, float))
+        h = FD_STEP_S
+        if self.traj is not None:
+            x = self.traj.state(t + self._shift)
+            acc = self.traj.state(np.concatenate([t - h, t, t + h]) + self._shift, derivative=1)[:, 3:]
+            a_m, a_0, a_p = np.split(acc, 3)
+            return x[:, :3], x[:, 3:], a_0, (a_p - a_m) / (2 * h)
+        x = self._states(np.concatenate([t - h, t, t + h]))
+        x_m, x_0, x_p = np.split(x, 3)
+        a = (x_p[:, 3:] - x_m[:, 3:]) / (2 * h)
+        j = (x_p[:, 3:] - 2 * x_0[:, 3:] + x_m[:, 3:]) / (h * h)
+        return x_0[:, :3], x_0[:, 3:], a, j
+
+
+def station_itrf(station, earth: str = "wgs84") -> np.ndarray:
+    from trackproc.dynamics import geodesy
+
+    return geodesy.geodetic_to_itrf(float(station.lat_deg) * DEG, float(station.lon_deg) * DEG,
+                                    float(station.height_m), earth)
+
+
+def observe(sat: Satellite, station, t_s, *, carrier_hz: float = 1.0, range_rate_model: str = "doppler",
+            earth: str = "wgs84", mode: str = "one-way"):
+    """:class:`~trackproc.models.measurements.Observables` of ``station`` at reception times
+    ``t0 + t_s`` (the foundation model, DESIGN.md light time; ``mode`` one-way or two-way)."""
+    from trackproc.dynamics import timescales as ts
+    from trackproc.models.measurements import observables, station_gcrf
+
+    t = np.atleast_1d(np.asarray(t_s, float))
+    r, v, a, j = sat.rvaj(t)
+    jd1, jd2 = ts.add_seconds_utc(sat.jd0, t)
+    st = station_gcrf(station_itrf(station, earth), jd1, jd2, sat.eop)
+    try:
+        return observables(r, v, a, j, st.r, st.v, st.a, st.gcrf_to_itrf, float(station.lat_deg) * DEG,
+                           float(station.lon_deg) * DEG, carrier_hz=carrier_hz, range_rate_model=range_rate_model,
+                           mode=mode)
+    except ArithmeticError as exc:
+        raise ProcessingError(f"measurement prediction failed: {exc}") from None
