@@ -62,8 +62,9 @@ def test_doppler_pass_rms_at_noise_and_offset_drift_recovered(run_cli, write, tm
 
 
 def test_multistation_range_biases_recovered_and_every_kind_at_noise(run_cli, tmp_path):
+    # the default Earth orientation: the one sample_data was simulated with (sample_data/README.md)
     res = _ok(run_cli(["compare", SAMPLE / "multistation.parquet", SAMPLE / "truth_at_start.json", "--remove",
-                       "offset", "--dut1", "0"]))
+                       "offset"]))
     doc = _summary(res.stderr)
     biases = {"CPH": 120.0, "ZHY": -80.0, "KIR": 45.0}
     kinds = set()

@@ -56,15 +56,16 @@ COMMANDS = {
 @pytest.mark.parametrize("command", list(COMMANDS))
 def test_wrong_file(run_cli, tmp_path, command, kind):
     bad = _make(tmp_path, kind)
-    out = tmp_path / "out.file"
+    out = tmp_path / "out.parquet"   # a table suffix: the input, not the output, is what is wrong
     result = run_cli([*COMMANDS[command](bad, out), "--dut1", "0", "-q"] if command not in ("ingest", "info", "smooth")
                      else [*COMMANDS[command](bad, out), "-q"])
     assert_rejected(result, 2, f"bad_{kind}", outputs=[out], folder=tmp_path)
 
 
-@pytest.mark.parametrize("text, needle", [(b'{"epoch": "2026-03-20T09:30:00Z"}', "JSON"),
+# info reads state files and TDMs too: a broken one is named by its missing field
+@pytest.mark.parametrize("text, needle", [(b'{"epoch": "2026-03-20T09:30:00Z"}', "'frame'"),
                                           (b"station,lat_deg\nCPH,55\n", "column"),
-                                          (b"CCSDS_TDM_VERS = 2.0\n", "TDM")])
+                                          (b"CCSDS_TDM_VERS = 2.0\n", "META_START")])
 def test_info_names_what_it_was_given(run_cli, write, text, needle):
     result = run_cli(["info", write("thing", text), "-q"])
     assert_rejected(result, 2, "thing", needle)

@@ -93,11 +93,26 @@ def main(argv: list[str] | None = None) -> int:
     finalizers must run).
     """
     if argv is None:
+        _one_blas_thread()
         code = _main(sys.argv[1:])
         if _command_name(_hoist_global_flags(sys.argv[1:])) != "batch" and not _has_children():
             _hard_exit(code)
         return code
     return _main(argv)
+
+
+#: BLAS thread variables: one thread unless the user says otherwise.
+_BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def _one_blas_thread() -> None:
+    """One BLAS thread per process unless the environment says otherwise, set before numpy loads:
+    trackproc's matrices are small (a pass: ~1000 x 10), and a multi-threaded BLAS on a loaded
+    2-core machine made the noise model's Choleskys ~25x and smoothing's QR ~200x slower (measured
+    while developing issue 13); batch sets the same per worker."""
+    if "numpy" not in sys.modules:
+        for name in _BLAS_THREADS:
+            os.environ.setdefault(name, "1")
 
 
 def _has_children() -> bool:

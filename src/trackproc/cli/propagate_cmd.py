@@ -186,7 +186,13 @@ def propagate_command(
 
             table = read_stations(stations)
         station = resolve_station(at_station, table, pass_table)
-    _check_extent(initial.epoch, start_t, span, step, at_times, carrier_hz, object_name, object_id)
+    if orbit.state is not None:
+        epoch0 = orbit.state.epoch
+    else:
+        from trackproc.io.tle import tle_epoch
+
+        epoch0 = tle_epoch(orbit.tle)
+    _check_extent(epoch0, start_t, span, step, at_times, carrier_hz, object_name, object_id)
     options = PropagateOptions(
         span_s=span, step_s=step, start=start_t, at_times=at_times, force=force_key, earth=earth.value, tol=tol,
         stm=stm, station=station, carrier_hz=carrier_hz, range_rate_model=range_rate_model.value,
@@ -210,7 +216,7 @@ def propagate_command(
 
             options.force_note = (f"TLE integrated with {force_key} from its SGP4 state at {format_epoch(first)} "
                                   f"(--force {force_key}), not evaluated by SGP4")
-            log.info("%s", options.force_note)
+            log.warning("%s", options.force_note)
         result = propagate(initial, options, orientation)
 
     oem_kwargs = {}
