@@ -89,6 +89,7 @@ def ingest_step(ctx: InputContext, opt: dict) -> None:
 
 def smooth_step(ctx: InputContext, opt: dict) -> None:
     """smooth: polynomial fit of every pass and kind (:func:`trackproc.pipeline.smooth.smooth`)."""
+    from trackproc.io.smoothing_record import fit_summary
     from trackproc.pipeline.smooth import SmoothOptions, smooth, summary_json
 
     result = smooth(ctx.table, SmoothOptions(
@@ -100,27 +101,18 @@ def smooth_step(ctx: InputContext, opt: dict) -> None:
     counts = result.summary["counts"]
     ctx.numbers.update(fits_ok=counts["ok"], fits_suspect=counts["suspect"], fits_failed=counts["failed"])
     records = result.summary["fits"]
-    ctx.details["fits"] = [_fit_numbers(rec) for rec in records]
+    ctx.details["fits"] = [fit_summary(rec) for rec in records]
     fitted = [rec for rec in records if rec["status"] != "failed"]
     fitted.sort(key=lambda r: (_PRIMARY_KINDS.index(r["kind"]) if r["kind"] in _PRIMARY_KINDS else 99,
                                r["tca"]["status"] != "ok" if "tca" in r else True, r["station"], r["pass_id"]))
     if fitted:
-        ctx.numbers.update({k: v for k, v in _fit_numbers(fitted[0]).items()
+        ctx.numbers.update({k: v for k, v in fit_summary(fitted[0]).items()
                             if k in ("kind", "rms", "rms_unit", "tca_utc", "tca_sigma_s", "fca_hz")})
     for f in result.fits:
         if f.status == "failed":
             ctx.warnings.append(f"{f.label}: failed: {f.error}")
         elif f.status == "suspect":
             ctx.warnings.append(f"{f.label}: suspect ({', '.join(f.warnings)})")
-
-
-def _fit_numbers(rec: dict) -> dict:
-    tca = rec.get("tca") or {}
-    return {"station": rec["station"], "pass_id": rec["pass_id"], "kind": rec["kind"], "status": rec["status"],
-            "n_samples": rec["n_samples"], "n_used": rec.get("n_used"), "degree": rec.get("degree"),
-            "rms": rec.get("rms"), "rms_unit": rec.get("unit"),
-            "tca_utc": tca.get("time_utc"), "tca_sigma_s": tca.get("sigma_s"), "fca_hz": rec.get("fca_hz"),
-            "error": rec.get("error") or tca.get("error")}
 
 
 def estimate_step(ctx: WindowContext, opt: dict) -> None:
@@ -132,7 +124,7 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
     from trackproc.io.passfile import PassTable, parse_pass_table
     from trackproc.io.residuals import residuals_bytes
     from trackproc.io.stations import parse_stations
-    from trackproc.io.statefile import format_epoch, parse_epoch, parse_state, state_json
+    from trackproc.io.statefile import format_epoch, parse_epoch, parse_state_or_tle, state_json
     from trackproc.pipeline.estimate import EstimateOptions, estimate
 
     orientation, warning = earth_orientation(opt["eop"], opt["dut1"])
@@ -149,19 +141,14 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
     if not tables:
         raise ProcessingError("no samples left in the window (all flagged by the smoother)")
     initial_bytes, initial_path = ctx.files["estimate.initial"], ctx.paths["estimate.initial"]
-    if initial_bytes.lstrip()[:1] == b"{":
-        state0 = parse_state(initial_bytes, initial_path, orientation)
-    else:
-        from trackproc.io.tle import parse_tle, tle_state
-
+    at = None
+    if initial_bytes.lstrip()[:1] != b"{":          # a TLE: by SGP4 at the solution epoch
         epoch = opt["epoch"]
-        at = None
         if epoch is not None and epoch.lower() == "first":
             at = min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
         elif epoch is not None and epoch.lower() != "initial":
             at = parse_epoch(epoch, column="estimate.epoch")
-        state0 = tle_state(parse_tle(initial_bytes.decode("utf-8", errors="replace"), initial_path), at=at,
-                           eop=orientation)
+    state0 = parse_state_or_tle(initial_bytes, initial_path, orientation, at=at)
     stations = (None if ctx.files.get("ingest.stations") is None
                 else parse_stations(ctx.files["ingest.stations"], ctx.paths["ingest.stations"]))
     options = EstimateOptions(
@@ -192,13 +179,9 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
 def initial_state(data: bytes, path: str, orientation):
     """The stale state of ``refine.initial``: a JSON state file, or a TLE (at its epoch here; refine
     evaluates it by SGP4 at the traverse epoch)."""
-    from trackproc.io.statefile import parse_state
+    from trackproc.io.statefile import parse_state_or_tle
 
-    if data.lstrip()[:1] == b"{":
-        return parse_state(data, path, orientation)
-    from trackproc.io.tle import parse_tle, tle_state
-
-    return tle_state(parse_tle(data.decode("utf-8", errors="replace"), path), eop=orientation)
+    return parse_state_or_tle(data, path, orientation)
 
 
 #: The rule that picks the pass refine uses when an input holds several (docs/batch.md).
