@@ -31,7 +31,7 @@ def test_outputs_match_the_recording(name, tmp_path):
 def test_every_recording_has_a_case_and_the_set_stays_small():
     files = sorted(p for p in record.HERE.glob("*.json"))
     assert {p.stem for p in files} == set(record.CASES)
-    assert sum(p.stat().st_size for p in files) < 200_000
+    assert sum(p.stat().st_size for p in files) < 256_000   # 211 kB with the quality, noise and elements fields
 
 
 def _first_number(node, path=()):

@@ -23,7 +23,7 @@ def _targets(tmp_path: Path):
         "directory": (str(folder), 2, "is a directory"),
         "under_a_file": (str(plain / "out.parquet"), 2, "not a directory"),
         "deep_under_a_file": (str(plain / "a" / "b" / "out.parquet"), 2, "not a directory"),
-        "in_proc": ("/proc/trackproc-hostile/out.parquet", 1, "cannot write output"),
+        "in_proc": ("/proc/trackproc-hostile/out.parquet", 2, "does not exist"),   # a missing directory: never created
         "dev_full": ("/dev/full", 1, "no space left"),
     }
 

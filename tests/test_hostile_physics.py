@@ -77,7 +77,7 @@ def test_state_in_km_s_rejected_by_simulate_and_estimate(run_cli, write, tmp_pat
     state = write("s.json", state_doc(velocity_m_s=[-4.8166, 3.9364, 4.0911]))
     for args in (["simulate", "--state", state, "--stations", STATIONS, "--duration", "600", "--step", "10"],
                  ["estimate", MULTI, "--initial", state]):
-        out = tmp_path / "o.out"
+        out = tmp_path / "o.parquet"
         result = run_cli([*args, "--dut1", "0", "-q", "-o", out])
         assert_rejected(result, 2, "s.json", "velocity_m_s", outputs=[out])
 
@@ -136,7 +136,7 @@ def _pass_with_meta(tmp_path, **meta_changes):
 @pytest.mark.parametrize("command", ["smooth", "refine", "info"])
 def test_hostile_pass_metadata(run_cli, tmp_path, changes, needle, command):
     path = _pass_with_meta(tmp_path, **changes)
-    out = tmp_path / "o.out"
+    out = tmp_path / "o.parquet"
     args = {"smooth": ["smooth", path, "-o", out], "info": ["info", path],
             "refine": ["refine", path, "--initial", TRUTH, "--dut1", "0", "-o", out]}[command]
     result = run_cli([*args, "-q"])

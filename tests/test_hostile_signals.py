@@ -64,12 +64,12 @@ def test_handlers_are_restored(tmp_path):
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
 def test_sigterm_of_a_running_command(tmp_path, signum):
     out = tmp_path / "long.parquet"
-    cmd = [sys.executable, "-m", "trackproc", "simulate", "--state", str(TRUTH), "--stations", str(STATIONS),
+    cmd = [sys.executable, "-m", "trackproc", "-v", "simulate", "--state", str(TRUTH), "--stations", str(STATIONS),
            "--duration", "2000000", "--step", "1", "-o", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        first = proc.stderr.readline()   # the no-EOP warning: the command is running, handlers are in place
-        assert "WARNING" in first, first
+        first = proc.stderr.readline()   # "started": the command is running, handlers are in place
+        assert "DEBUG" in first and "started" in first, first
         time.sleep(0.5)
         proc.send_signal(signum)
         _, err = proc.communicate(timeout=60)
@@ -77,7 +77,7 @@ def test_sigterm_of_a_running_command(tmp_path, signum):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 128 + signum, err
-    lines = [line for line in err.splitlines() if line.strip() and "WARNING" not in line]
+    lines = [line for line in err.splitlines() if line.strip() and "WARNING" not in line and "DEBUG" not in line]
     assert len(lines) == 1 and lines[0].startswith("trackproc: error: terminated by"), err
     assert "Traceback" not in err
     assert not out.exists()

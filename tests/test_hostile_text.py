@@ -52,8 +52,8 @@ def test_file_name_with_a_newline_cannot_forge_a_log_line(run_cli, tmp_path):
     raw = tmp_path / "pass\ntrackproc: INFO: all good.csv"
     raw.write_bytes(DOPPLER_CSV.read_bytes())
     out = tmp_path / "o.parquet"
-    result = run_cli(["ingest", raw, "--stations", STATIONS, "--carrier-hz", "2.2e9", "--mode", "one-way",
-                      "-o", out])
+    result = run_cli(["-v", "ingest", raw, "--stations", STATIONS, "--carrier-hz", "2.2e9", "--mode", "one-way",
+                      "-o", out])     # -v: the INFO line that names the file is logged
     assert result.exit_code == 0, result.stderr
     lines = result.stderr.splitlines()
     assert lines and all(line.startswith("trackproc: ") for line in lines)

@@ -65,6 +65,7 @@ def _root(
     logging.basicConfig(level=level, handlers=[handler], force=True)
     # warnings of the lower layers (e.g. dates beyond the EOP table) as one log line each
     warnings.showwarning = lambda message, category, *args, **kwargs: log.warning(str(message))
+    log.debug("%s: started (pid %d)", ctx.invoked_subcommand, os.getpid())
 
 
 class _OneLineFormatter(logging.Formatter):

@@ -66,10 +66,13 @@ def resolve_output(output: Optional[str], what: str = "output") -> str:
     if output is not None:
         if output != "-":
             parent = Path(output).parent
-            if str(parent) not in ("", ".") and not parent.is_dir():
-                # a mistyped directory is not created silently
-                raise typer.BadParameter(f"directory {str(parent)!r} of {output!r} does not exist; "
-                                         "expected an existing directory", param_hint="-o/--output")
+            if str(parent) not in ("", ".") and not parent.exists():
+                # a mistyped directory is not created silently (one under a file, or unwritable, is
+                # the output guard's: it names the OS error)
+                ancestor = next((a for a in parent.parents if a.exists()), None)
+                if ancestor is None or ancestor.is_dir():
+                    raise typer.BadParameter(f"directory {str(parent)!r} of {output!r} does not exist; "
+                                             "expected an existing directory", param_hint="-o/--output")
         return output
     if not sys.stdout.isatty():
         return "-"

@@ -49,15 +49,13 @@ def compare_command(
     pass and kind the RMS after removing the pass's own fitted offset (and drift), with those
     fitted values (JSON on stderr and --summary). A TLE is evaluated by SGP4 at the samples.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
         trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
             --carrier-hz 2.2e9 --mode one-way -o pass.parquet
         trackproc compare pass.parquet sample_data/truth.json --summary fit.json -o residuals.csv --plot fit.png
 
         trackproc compare sample_data/multistation.parquet sample_data/stale.json --remove none
-
-        trackproc ingest Delfi-C3_32789_202004011044.csv -o - | trackproc compare - metadata
 
     Exit status: 0 ok; 2 bad options or input; 1 propagation failure.
     """

@@ -33,10 +33,11 @@ def identify_command(
     the best and a verdict: decisive (every runner-up below 1/100) or ambiguous (with the
     runners-up).
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
-        trackproc ingest pass.csv --stations stations.csv --carrier-hz 145.87e6 --mode one-way -o pass.parquet
-        trackproc identify pass.parquet --tles launch-cluster.tle -o ranking.json
+        trackproc simulate --tle sample_data/iss.tle --stations sample_data/stations.csv --duration 21600 \\
+            --kinds doppler --carrier-hz 145.8e6 -o iss.parquet
+        trackproc identify iss.parquet --tles sample_data/catalogue.tle -o ranking.json
 
     Exit status: 0 (the verdict, decisive or ambiguous, is in the output); 2 bad options or input;
     1 when no candidate can be evaluated.

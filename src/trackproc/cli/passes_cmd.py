@@ -50,7 +50,7 @@ def passes_command(
     azimuth, elevation and range at AOS/TCA/LOS, and Doppler there with --carrier-hz. A TLE is
     evaluated by SGP4 (default), a state integrated with J2.
 
-    Example:
+    Examples (run from the repository root, on the shipped sample_data/):
 
         trackproc passes sample_data/truth.json --stations sample_data/stations.csv --span 1d \\
             --min-elevation 10 --carrier-hz 2.2e9 --format md -o -
