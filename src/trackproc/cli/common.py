@@ -136,3 +136,40 @@ def summary(text: str) -> None:
     if logging.getLogger("trackproc").isEnabledFor(logging.WARNING):
         sys.stderr.write(text if text.endswith("\n") else text + "\n")
         sys.stderr.flush()
+
+
+JsonSummaryOpt = typer.Option(False, "--json", help="The stderr summary as one JSON object (for scripts), not text.")
+
+
+def elements_line(state) -> str:
+    """The state's osculating elements in one line, for the text summaries."""
+    from trackproc.io.statefile import orbital_elements
+
+    e = orbital_elements(state)
+    angles = ", ".join(f"{name} {e[key]:.4f} deg" for name, key in (
+        ("i", "i_deg"), ("RAAN", "raan_deg"), ("omega", "argp_deg"), ("M", "mean_anomaly_deg"),
+        ("u", "arg_latitude_deg")) if e[key] is not None)
+    return f"  elements (osculating, GCRF): a {e['a_m']:.1f} m, e {e['e']:.6f}, {angles}\n"
+
+
+def summary_json(state, command: str, warnings=()) -> str:
+    """The stderr summary of a state-producing command (refine, estimate) as one JSON line: the
+    epoch, every parameter with its sigma, the osculating elements, the RTN sigmas, the quality
+    verdict and the warnings."""
+    import json
+
+    import numpy as np
+
+    from trackproc.io.jsonutil import json_ready
+    from trackproc.io.statefile import format_epoch, orbital_elements
+
+    sigma = state.sigma if state.sigma is not None else (
+        np.sqrt(np.clip(np.diag(state.covariance), 0, None)) if state.covariance is not None else None)
+    values = state.values if state.values is not None else state.rv
+    params = {n: {"value": float(v), "sigma": None if sigma is None else float(s)}
+              for n, v, s in zip(state.parameters, values, sigma if sigma is not None else [None] * len(values))}
+    diag = state.diagnostics or {}
+    doc = {"command": command, "epoch": format_epoch(state.epoch), "frame": "GCRF", "parameters": params,
+           "elements": orbital_elements(state), "sigma_rtn": diag.get("sigma_rtn"),
+           "converged": diag.get("converged"), "quality": state.extra.get("quality"), "warnings": list(warnings)}
+    return json.dumps(json_ready(doc), allow_nan=False) + "\n"

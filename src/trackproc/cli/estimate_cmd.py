@@ -10,7 +10,7 @@ import typer
 
 from trackproc.cli.app import app
 from trackproc import vocabulary
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModel, choices,
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, OutputOpt, RangeRateModel, choices,
                                   named_values, resolve_output)
 
 log = logging.getLogger("trackproc")
@@ -90,6 +90,7 @@ def estimate_command(
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
                                        help="Plot the residuals per kind in their units, RMS per pass (needs matplotlib: "
                                             "pip install 'trackproc[plot]')."),
+    as_json: bool = JsonSummaryOpt,
     strict: bool = typer.Option(
         False, "--strict",
         help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' solution always exits 1); the outputs "
@@ -183,7 +184,10 @@ def estimate_command(
     if png is not None:
         write_bytes(plot, png)
     if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
-        sys.stderr.write(summary_text(result))
+        from trackproc.cli.common import elements_line, summary_json
+
+        sys.stderr.write(summary_json(result.state, "estimate", result.warnings) if as_json
+                         else summary_text(result) + elements_line(result.state))
         sys.stderr.flush()
     verdict = result.quality.verdict
     if verdict == "rejected" or (strict and verdict == "suspect"):

@@ -10,7 +10,7 @@ import typer
 
 from trackproc.cli.app import app
 from trackproc import vocabulary
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModel, choices, named_values,
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, OutputOpt, RangeRateModel, choices, named_values,
                                   resolve_output)
 
 log = logging.getLogger("trackproc")
@@ -126,6 +126,7 @@ def refine_command(
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
                                        help="Plot the data with the refined model, the residuals and what the pass "
                                             "cannot see (needs matplotlib: pip install 'trackproc[plot]')."),
+    as_json: bool = JsonSummaryOpt,
     strict: bool = typer.Option(
         False, "--strict",
         help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' solution always exits 1); the output "
@@ -209,7 +210,10 @@ def refine_command(
 
         write_bytes(plot, refine_png(result.residuals, result.state.diagnostics))
     if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
-        sys.stderr.write(summary_text(result))
+        from trackproc.cli.common import elements_line, summary_json
+
+        sys.stderr.write(summary_json(result.state, "refine", result.warnings) if as_json
+                         else summary_text(result) + elements_line(result.state))
         sys.stderr.flush()
     verdict = result.quality.verdict
     if verdict == "rejected" or (strict and verdict == "suspect"):

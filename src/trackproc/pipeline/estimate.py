@@ -888,7 +888,16 @@ def _two_stage_dict(two, sol2) -> dict:
 
 # ----------------------------------------------------------------------------- text and plot
 
+def _for_people(value, unit) -> str:
+    """A value with its unit as a person reads it: angles in degrees (radians stay in the files)."""
+    if unit == "rad":
+        return f"{math.degrees(value):.4g} deg"
+    return f"{value:.4g} {unit}"
+
+
 def _fmt(value, sigma, unit):
+    if unit == "rad":     # angle biases: degrees for people
+        value, sigma, unit = math.degrees(value), math.degrees(sigma), "deg"
     return f"{value:>18.6f} ± {sigma:<12.4g} {unit}"
 
 
@@ -909,7 +918,7 @@ def summary_text(result: EstimateResult) -> str:
     lines.append(f"  samples {sol.n_measurements}, edited {sol.n_edited}, dof {sol.dof}, chi2 {sol.chi2:.6g}, "
                  f"variance factor {sol.variance_factor:.4g}, condition number {sol.condition_number:.3g}")
     for station, kinds in d["rms"].items():
-        parts = [f"{k} {v['rms']:.4g} {v['unit']} (n {v['n']}, edited {v['edited']}, wrms {v['wrms']:.3g})"
+        parts = [f"{k} {_for_people(v['rms'], v['unit'])} (n {v['n']}, edited {v['edited']}, wrms {v['wrms']:.3g})"
                  for k, v in kinds.items() if v["rms"] is not None]
         lines.append(f"  {station}: " + "; ".join(parts))
     if result.comparison and "doppler_only_sigma" in result.comparison:
