@@ -53,3 +53,15 @@ def test_help_examples_are_not_wrapped(command, capsys, monkeypatch):
 def test_version_short_flag(capsys):
     assert main(["-V"]) == 0
     assert capsys.readouterr().out.startswith("trackproc ")
+
+
+def test_manual_page_is_current():
+    """docs/trackproc.1 is generated from the same help (python -m trackproc.cli.manpage): a change
+    of an option or a docstring without regenerating it fails here."""
+    from pathlib import Path
+
+    from trackproc.cli.manpage import manpage
+
+    shipped = (Path(__file__).resolve().parents[1] / "docs" / "trackproc.1").read_text()
+    assert manpage() == shipped, "regenerate: python -m trackproc.cli.manpage > docs/trackproc.1"
+    assert '.SS "trackproc refine"' in shipped and ".SH EXIT STATUS" in shipped
