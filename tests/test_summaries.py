@@ -15,7 +15,7 @@ MU = 3.986004418e14
 
 @pytest.fixture(scope="module")
 def estimate_runs(tmp_path_factory):
-    from click.testing import CliRunner
+    from typer.testing import CliRunner
 
     from trackproc.cli.app import main
 

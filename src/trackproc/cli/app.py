@@ -195,15 +195,14 @@ def plain_help(command):
     ``[a|b]`` for choices, never a Python type), arguments shown by name alone, and the indented
     shell examples of a docstring kept verbatim (click's ``\\b`` paragraphs) instead of rewrapped
     mid-command. Plain click formatting (no boxes) is set on the app itself."""
-    import click
-
     for param in getattr(command, "params", []):
         kind = getattr(param, "param_type_name", "")
         if kind == "argument":
             param.display_type_rich = lambda ctx: None
         elif (kind == "option" and not getattr(param, "is_flag", False) and param.metavar is None
               and hasattr(param, "display_type")):
-            label = param.display_type(click.Context(command)).strip("<>")
+            # the command's own context class: typer vendors click (no click import here)
+            label = param.display_type(command.context_class(command)).strip("<>")
             param.metavar = _METAVARS.get(label) or (f"[{label}]" if "|" in label else label.upper() or None)
     if getattr(command, "help", None):
         command.help = _keep_examples(command.help)

@@ -45,7 +45,6 @@ def _options(command, ctx) -> list[str]:
 
 def manpage() -> str:
     """The page, from the same command tree (and the same plain help) as ``trackproc --help``."""
-    import click
     from typer.main import get_command
 
     from trackproc import __version__
@@ -53,14 +52,14 @@ def manpage() -> str:
 
     _register()
     root = plain_help(get_command(app))
-    ctx = click.Context(root, info_name="trackproc")
+    ctx = root.context_class(root, info_name="trackproc")   # typer vendors click: its own classes
     parts = [f'.TH TRACKPROC 1 "" "trackproc {__version__}" "User Commands"',
              ".SH NAME", "trackproc \\- satellite tracking passes in, orbits with honest error matrices out",
              ".SH SYNOPSIS", ".B trackproc", "[\\fIOPTIONS\\fR] \\fICOMMAND\\fR [\\fIARGS\\fR]...",
              ".SH DESCRIPTION", _paragraphs(root.help or ""), ".SH OPTIONS", *_options(root, ctx),
              ".SH COMMANDS"]
     for name, cmd in root.commands.items():
-        sub = click.Context(cmd, info_name=name, parent=ctx)
+        sub = cmd.context_class(cmd, info_name=name, parent=ctx)
         usage = " ".join(cmd.collect_usage_pieces(sub))
         parts += [f'.SS "trackproc {name}"', ".PP", f"\\fBtrackproc {name}\\fR {_roff(usage)}",
                   _paragraphs(cmd.help or ""), *_options(cmd, sub)]
