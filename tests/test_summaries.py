@@ -48,3 +48,26 @@ def test_json_summary_matches_the_state_file(estimate_runs):
         assert doc["parameters"][name]["value"] == pytest.approx(value, rel=1e-15)
         assert doc["parameters"][name]["sigma"] == pytest.approx(sigma, rel=1e-15)
     assert doc["elements"]["a_m"] == pytest.approx(state["elements"]["a_m"], rel=1e-15)
+
+
+def test_accuracy_and_detect_json_summaries(tmp_path):
+    from typer.testing import CliRunner
+
+    from trackproc.cli.app import main
+
+    with CliRunner().isolation() as (_, err, _):
+        assert main(["accuracy", str(SAMPLE / "stale.json"), "--span", "3600", "--step", "600", "--method", "all",
+                     "--json", "-o", str(tmp_path / "a.parquet")]) == 0
+        doc = json.loads(err.getvalue().decode().strip().splitlines()[-1])
+    assert doc["command"] == "accuracy" and "spectral_vs_stm_max_relative_sigma_difference" in doc["checks"]
+    passfile = tmp_path / "b.parquet"
+    with CliRunner().isolation() as (_, err, _):
+        assert main(["-q", "simulate", "--ballistic", str(SAMPLE / "nominal.json"), "--stations",
+                     str(SAMPLE / "stations.csv"), "--hypothesis", "h1", "--step", "2", "--elevation-mask-deg", "0",
+                     "--seed", "1", "-o", str(passfile)]) == 0
+    with CliRunner().isolation() as (_, err, _):
+        assert main(["detect", str(passfile), "--nominal", str(SAMPLE / "nominal.json"), "--json",
+                     "-o", str(tmp_path / "d.json")]) == 0
+        line = json.loads(err.getvalue().decode().strip().splitlines()[-1])
+    result = json.loads((tmp_path / "d.json").read_text())
+    assert line["decision"] == result["decision"] == "H1" and line["S"] == result["statistic"]["S"]

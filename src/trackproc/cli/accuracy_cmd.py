@@ -10,7 +10,8 @@ from typing import Optional
 import typer
 
 from trackproc.cli.app import app
-from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, resolve_output, table_format_for
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, OutputOpt, resolve_output,
+                                  table_format_for)
 
 log = logging.getLogger("trackproc")
 
@@ -100,6 +101,7 @@ def accuracy_command(
     fmt: Optional[OutFormat] = typer.Option(None, "--format",
                                             help="parquet, arrow, csv or json (default: from the suffix; "
                                                  "Arrow stream on a pipe)."),
+    as_json: bool = JsonSummaryOpt,
     output: Optional[str] = OutputOpt,
 ) -> None:
     """Predict the accuracy of an orbit from its initial covariance: sigma(t) of position and
@@ -169,9 +171,17 @@ def accuracy_command(
 
     from trackproc.cli.common import summary
 
-    summary(f"initial covariance: {result.meta['initial_covariance']['source']}")
     checks = result.meta["checks"]
-    if "spectral_vs_stm_max_relative_sigma_difference" in checks:
+    if as_json:
+        import json
+
+        from trackproc.io.jsonutil import json_ready
+
+        summary(json.dumps(json_ready({"command": "accuracy", "initial_covariance": result.meta["initial_covariance"],
+                                       "methods": result.meta["methods"], "checks": checks}), allow_nan=False))
+    else:
+        summary(f"initial covariance: {result.meta['initial_covariance']['source']}")
+    if "spectral_vs_stm_max_relative_sigma_difference" in checks and not as_json:
         summary(f"spectral vs stm: largest relative sigma difference "
                 f"{checks['spectral_vs_stm_max_relative_sigma_difference']:.2e}")
     if "monte_carlo_vs_linear_max_abs_z" in checks:
@@ -182,7 +192,7 @@ def accuracy_command(
         if z > 5:
             log.warning("%s: beyond the statistical bound, the first-order methods miss a nonlinearity "
                         "over this span", text)
-        else:
+        elif not as_json:
             summary(text)
     png = plot_bytes(result) if plot is not None else None
     write_bytes(out, table_bytes(result.frame, result.meta, out_format))

@@ -31,6 +31,7 @@ def detect_command(
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
                                        help="Plot measured and displaced angles against the nominal, and S against "
                                             "its laws under H0 and H1 (needs matplotlib: pip install 'trackproc[plot]')."),
+    as_json: bool = typer.Option(False, "--json", help="The stderr summary as one JSON object (for scripts), not text."),
     output: Optional[str] = typer.Option(None, "-o", "--output", help="RESULT.json, or - for stdout (default)."),
 ) -> None:
     """Decide between H0 (the nominal trajectory) and H1 (displaced by Delta*) from a measured
@@ -90,6 +91,13 @@ def detect_command(
         write_bytes(plot, detect_png(result.samples, doc))
     from trackproc.cli.common import summary
 
-    summary("%s %s: S = %.4g, threshold %.4g -> %s (gamma %.3g, alpha %.3g, beta %.3g)" % (
-        doc["station"], doc["pass_id"], doc["statistic"]["S"], doc["threshold"], doc["decision"], doc["gamma"],
-        doc["false_alarm_probability"], doc["miss_probability"]))
+    if as_json:
+        import json
+
+        summary(json.dumps({k: doc[k] for k in ("station", "pass_id", "decision", "threshold", "gamma",
+                                                 "false_alarm_probability", "miss_probability")}
+                           | {"S": doc["statistic"]["S"]}))
+    else:
+        summary("%s %s: S = %.4g, threshold %.4g -> %s (gamma %.3g, alpha %.3g, beta %.3g)" % (
+            doc["station"], doc["pass_id"], doc["statistic"]["S"], doc["threshold"], doc["decision"], doc["gamma"],
+            doc["false_alarm_probability"], doc["miss_probability"]))
