@@ -851,7 +851,8 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
             moved = prepare(table, initial, stations, replace(opt, traverse_epoch=epoch, doppler_bias=bias), eop,
                             source, curve=ref.curve)
             moved.warnings[:] = list(ref.warnings)
-            moved, *first = solve_noise(table, initial, moved, stations, eop, source)
+            moved = _with_noise_of(moved, ref)
+            first = solve_weighted(moved)
             factor = adaptation["factor"] if adaptation else 1.0
             moved_out = _solve_gated(moved, factor, first=tuple(first) if factor == 1.0 else None)
         except ProcessingError:
@@ -868,6 +869,21 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
         consistency = circular_consistency(free, sol, scale)
     return finish(ref, sol, kkt, scale, consistency=consistency, adaptation=adaptation, traverse_moves=moves,
                   improvement=improvement, refusal=refusal)
+
+
+def _with_noise_of(moved: Refinement, ref: Refinement) -> Refinement:
+    """``moved`` (the same pass at another solution epoch) with ``ref``'s noise model: the model
+    depends on the sample times' differences only, so it carries over (REML is not run again: a
+    traverse re-solve moves the epoch by seconds)."""
+    if ref.noise is None:
+        return replace(moved, noise=None, noise_edited=ref.noise_edited, noise_report=ref.noise_report)
+    from trackproc.methods.noise import PassCovariance
+
+    t = moved.problem.meas.t_s
+    shift = float(np.min(t) - np.min(ref.problem.meas.t_s))
+    blocks = [(idx, model, t0 + shift) for idx, model, t0 in ref.noise.blocks]
+    cov = PassCovariance(moved.problem.meas.sigma, t, blocks)
+    return replace(moved, noise=cov, noise_edited=ref.noise_edited, noise_report=ref.noise_report)
 
 
 def _may_refuse(ref: Refinement) -> bool:
@@ -1027,7 +1043,8 @@ def solve_noise(table, initial, ref: Refinement, stations=None, eop=None, source
     for _ in range(rounds):
         noisy, want_drift = noise_model(ref, sol, scale)
         if want_drift and observed is None:
-            ref = prepare(table, initial, stations, replace(ref.options, doppler_bias="offset+drift"), eop, source)
+            ref = prepare(table, initial, stations, replace(ref.options, doppler_bias="offset+drift"), eop, source,
+                          curve=ref.curve)   # the same smoothed curve and epoch: no second smoothing
             noisy = replace(ref, noise=noisy.noise, noise_edited=noisy.noise_edited, noise_report=noisy.noise_report)
         elif not noisy.correlated() and not ref.correlated():
             return noisy, sol, kkt, scale                 # white, no drift to add: the white fit stands
