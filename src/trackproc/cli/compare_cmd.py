@@ -53,7 +53,7 @@ def compare_command(
 
         trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
             --carrier-hz 2.2e9 --mode one-way -o pass.parquet
-        trackproc compare pass.parquet sample_data/truth.json --summary fit.json -o residuals.csv --plot fit.png
+        trackproc compare pass.parquet sample_data/truth.json --summary fit.json -o residuals.csv
 
         trackproc compare sample_data/multistation.parquet sample_data/stale.json --remove none
 

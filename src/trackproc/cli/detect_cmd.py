@@ -44,8 +44,7 @@ def detect_command(
 
         trackproc simulate --ballistic sample_data/nominal.json --stations sample_data/stations.csv \\
             --hypothesis h1 --step 1 --elevation-mask-deg 0 --seed 1 -o ballistic.parquet
-        trackproc detect ballistic.parquet --nominal sample_data/nominal.json --false-alarm 0.001 \\
-            --plot detect.png -o result.json
+        trackproc detect ballistic.parquet --nominal sample_data/nominal.json --false-alarm 0.001 -o result.json
     """
     if false_alarm is not None and equal_error:
         raise typer.BadParameter("give either --false-alarm or --equal-error", param_hint="--false-alarm")

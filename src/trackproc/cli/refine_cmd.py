@@ -150,7 +150,7 @@ def refine_command(
         trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
             --carrier-hz 2.2e9 --mode one-way -o pass.parquet
         trackproc smooth pass.parquet -o smoothed.parquet
-        trackproc refine smoothed.parquet --initial sample_data/stale.json --plot refine.png -o refined.json
+        trackproc refine smoothed.parquet --initial sample_data/stale.json -o refined.json
 
         trackproc refine pass.parquet --initial sample_data/stale.json --doppler-bias offset+drift \\
             --residuals res.csv -o -
