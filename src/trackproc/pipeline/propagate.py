@@ -198,13 +198,7 @@ def propagate_tle(tle, options: PropagateOptions, eop=None) -> PropagateResult:
         columns["light_time_s"] = prediction.light_time_s
     frame = pd.DataFrame(columns)
     if options.visible_only:
-        keep = prediction.elevation_rad >= options.elevation_mask_deg * DEG
-        if not keep.any():
-            raise ProcessingError(
-                f"no visible pass: the satellite never rises above the {options.elevation_mask_deg:g} deg mask of "
-                f"{options.station.name} between {iso_utc(times[0])} and {iso_utc(times[-1])} (maximum elevation "
-                f"{np.degrees(prediction.elevation_rad.max()):.1f} deg); try a longer --span or a lower "
-                "--elevation-mask-deg")
+        keep = visible_rows(prediction, options, times)
         frame = frame[keep].reset_index(drop=True)
     meta = _meta(None, options, None, eop, False, times, tle=tle)
     return PropagateResult(ephemeris=Ephemeris(frame, meta), trajectory=None, t_s=t_s, prediction=prediction)
@@ -295,13 +289,7 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
                 columns["sigma_doppler_hz"] = options.carrier_hz * columns["sigma_range_rate_m_s"] / C_LIGHT
     frame = pd.DataFrame(columns)
     if options.visible_only:
-        keep = prediction.elevation_rad >= options.elevation_mask_deg * DEG
-        if not keep.any():
-            raise ProcessingError(
-                f"no visible pass: the satellite never rises above the {options.elevation_mask_deg:g} deg mask of "
-                f"{options.station.name} between {iso_utc(times[0])} and {iso_utc(times[-1])} (maximum elevation "
-                f"{np.degrees(prediction.elevation_rad.max()):.1f} deg); try a longer --span or a lower "
-                "--elevation-mask-deg")
+        keep = visible_rows(prediction, options, times)
         frame = frame[keep].reset_index(drop=True)
         if cov is not None:
             cov = cov[keep]
@@ -400,3 +388,15 @@ def oem_identity(initial, object_name: Optional[str] = None, object_id: Optional
     name = object_name or (initial.extra.get("tle_name") if isinstance(initial.extra, dict) else None) or "UNKNOWN"
     ident = object_id or (international_designator(tle[0]) if tle else None) or "UNKNOWN"
     return name, ident
+
+
+def visible_rows(prediction, options, times) -> np.ndarray:
+    """``--visible-only``: the rows above the elevation mask; a ProcessingError when there are none."""
+    keep = prediction.elevation_rad >= options.elevation_mask_deg * DEG
+    if not keep.any():
+        raise ProcessingError(
+            f"no visible pass: the satellite never rises above the {options.elevation_mask_deg:g} deg mask of "
+            f"{options.station.name} between {iso_utc(times[0])} and {iso_utc(times[-1])} (maximum elevation "
+            f"{np.degrees(prediction.elevation_rad.max()):.1f} deg); try a longer --span or a lower "
+            "--elevation-mask-deg")
+    return keep
