@@ -26,6 +26,9 @@ LINK_MODES = ("one-way", "two-way")
 #: Range-rate models (``--range-rate-model``): ``doppler`` the derivative of the light-time
 #: range (default), ``instantaneous`` Orekit's one-way ``RangeRate`` (no light-time factor).
 RANGE_RATE_MODELS = ("doppler", "instantaneous")
+#: Noise models of a pass's samples (``--noise``; ``auto`` chooses among the others by REML;
+#: trackproc.methods.noise).
+NOISE_MODELS = ("auto", "white", "ar1", "walk", "ar1+walk")
 
 #: Force models (``--force``).
 FORCES = ("two-body", "j2")

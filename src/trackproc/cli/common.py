@@ -22,6 +22,7 @@ Force = choices("Force", vocabulary.FORCES)
 Earth = choices("Earth", vocabulary.EARTHS)
 RangeRateModel = choices("RangeRateModel", vocabulary.RANGE_RATE_MODELS)
 DopplerMode = choices("DopplerMode", vocabulary.LINK_MODES)
+Noise = choices("Noise", vocabulary.NOISE_MODELS)
 
 
 class TableFormat(str, Enum):
@@ -173,3 +174,8 @@ def summary_json(state, command: str, warnings=()) -> str:
            "elements": orbital_elements(state), "sigma_rtn": diag.get("sigma_rtn"),
            "converged": diag.get("converged"), "quality": state.extra.get("quality"), "warnings": list(warnings)}
     return json.dumps(json_ready(doc), allow_nan=False) + "\n"
+
+
+OscillatorNoiseOpt = typer.Option(
+    None, "--oscillator-noise", metavar="HZ_PER_SQRT_S",
+    help="Random-walk intensity of the transmitter frequency (Hz/sqrt(s)) instead of estimating it.")

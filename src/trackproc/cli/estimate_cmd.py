@@ -10,21 +10,14 @@ import typer
 
 from trackproc.cli.app import app
 from trackproc import vocabulary
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, OutputOpt, RangeRateModel, choices,
-                                  named_values, resolve_output)
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, Noise, OscillatorNoiseOpt,
+                                  OutputOpt, RangeRateModel, choices, named_values, resolve_output)
 
 log = logging.getLogger("trackproc")
 
 
 DopplerBias = choices("DopplerBias", vocabulary.DOPPLER_BIASES)
 
-
-class Noise(str, Enum):
-    auto = "auto"
-    white = "white"
-    ar1 = "ar1"
-    walk = "walk"
-    ar1_walk = "ar1+walk"
 
 
 class BiasPer(str, Enum):
@@ -54,9 +47,7 @@ def estimate_command(
         help="Noise model of each pass's Doppler/range-rate samples: auto = chosen per pass by REML among white, "
              "AR(1) and (one-way, with --doppler-bias) a random walk of the transmitter frequency, then GLS; white = "
              "independent samples; or that model. See docs/estimate.md."),
-    oscillator_noise: Optional[float] = typer.Option(
-        None, "--oscillator-noise", metavar="HZ_PER_SQRT_S",
-        help="Random-walk intensity of the transmitter frequency (Hz/sqrt(s)) instead of estimating it."),
+    oscillator_noise: Optional[float] = OscillatorNoiseOpt,
     apriori_sigma: List[str] = typer.Option(
         [], "--apriori-sigma", metavar="NAME=SIGMA",
         help="A-priori 1-sigma (SI units) of a parameter (x, vx, range_bias:KIR), a family (range_bias, "

@@ -10,8 +10,8 @@ import typer
 
 from trackproc.cli.app import app
 from trackproc import vocabulary
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, OutputOpt, RangeRateModel, choices, named_values,
-                                  resolve_output)
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, Noise, OscillatorNoiseOpt,
+                                  OutputOpt, RangeRateModel, choices, named_values, resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -38,13 +38,6 @@ class Covariance(str, Enum):
     profile = "profile"
     linear = "linear"
 
-
-class Noise(str, Enum):
-    auto = "auto"
-    white = "white"
-    ar1 = "ar1"
-    walk = "walk"
-    ar1_walk = "ar1+walk"
 
 
 @app.command("refine")
@@ -97,9 +90,7 @@ def refine_command(
         help="Noise model of the samples (pointwise): auto = chosen per pass by REML among white, AR(1) "
              "(exponentially correlated), random walk of the transmitter frequency (one-way) and both, then GLS; "
              "white = independent samples (the plain weighted fit); or that model. See docs/refine.md."),
-    oscillator_noise: Optional[float] = typer.Option(
-        None, "--oscillator-noise", metavar="HZ_PER_SQRT_S",
-        help="Random-walk intensity of the transmitter frequency (Hz/sqrt(s)) instead of estimating it."),
+    oscillator_noise: Optional[float] = OscillatorNoiseOpt,
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Pointwise: edit samples beyond K x max(1, WRMS) sigmas. 0: off."),

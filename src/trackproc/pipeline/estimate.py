@@ -51,7 +51,7 @@ from trackproc.isotime import iso_utc
 from trackproc.dynamics.rtn import rtn_covariance
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
-from trackproc.vocabulary import DOPPLER_BIASES, KIND_UNITS
+from trackproc.vocabulary import DOPPLER_BIASES, KIND_UNITS, NOISE_MODELS
 
 #: Unit of each kind's values (SI).
 UNITS = KIND_UNITS
@@ -671,7 +671,6 @@ def estimate_quality(problem: Problem, sol):
     return q
 
 
-NOISE_MODELS = ("auto", "white", "ar1", "walk", "ar1+walk")
 
 
 def pass_noise(problem: Problem, sol, opt: EstimateOptions):

@@ -951,8 +951,7 @@ def _solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
     return work, sol, kkt, scale, adaptation, improvement, None
 
 
-#: Noise models of ``--noise`` (``auto`` chooses among them by REML).
-NOISE_MODELS = ("auto", "white", "ar1", "walk", "ar1+walk")
+NOISE_MODELS = vocabulary.NOISE_MODELS
 #: A drift is added to a one-way pass's offset when its GLS estimate exceeds this many sigmas
 #: (and √(ln n), the BIC threshold): p = 0.001, so that a pass without drift keeps the offset alone.
 DRIFT_T = 3.29
