@@ -179,3 +179,24 @@ def summary_json(state, command: str, warnings=()) -> str:
 OscillatorNoiseOpt = typer.Option(
     None, "--oscillator-noise", metavar="HZ_PER_SQRT_S",
     help="Random-walk intensity of the transmitter frequency (Hz/sqrt(s)) instead of estimating it.")
+
+
+def report_solution(result, command: str, as_json: bool, strict: bool, summary_text) -> None:
+    """The end of ``refine`` and ``estimate``: the summary on stderr (``summary_text(result)``, or ``--json``; off
+    under ``-q``), then the verdict's exit: ``rejected`` (or ``suspect`` with ``--strict``) exits 1
+    with the outputs written, since they are complete and carry the verdict."""
+    import logging
+
+    log = logging.getLogger("trackproc")
+    if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
+        sys.stderr.write(summary_json(result.state, command, result.warnings) if as_json
+                         else summary_text(result) + elements_line(result.state))
+        sys.stderr.flush()
+    verdict = result.quality.verdict
+    if verdict == "rejected" or (strict and verdict == "suspect"):
+        log.error(f"{result.quality.text()}: the solution is written with its verdict; exit 1"
+                  + (" (--strict)" if verdict == "suspect" else ""))
+        from trackproc.io.atomic import commit_outputs
+
+        commit_outputs()
+        raise typer.Exit(1)

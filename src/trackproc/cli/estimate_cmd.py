@@ -122,8 +122,6 @@ def estimate_command(
     sigmas = named_values(apriori_sigma, "--apriori-sigma")
     kind_list = [k.strip() for k in kinds.split(",") if k.strip()] if kinds else None
 
-    import sys
-
     from trackproc.io.atomic import is_stdio, write_bytes
     from trackproc.io.eop import earth_orientation
     from trackproc.io.opm import write_opm
@@ -174,17 +172,6 @@ def estimate_command(
         write_residuals(result.residuals, residuals, meta)
     if png is not None:
         write_bytes(plot, png)
-    if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
-        from trackproc.cli.common import elements_line, summary_json
+    from trackproc.cli.common import report_solution
 
-        sys.stderr.write(summary_json(result.state, "estimate", result.warnings) if as_json
-                         else summary_text(result) + elements_line(result.state))
-        sys.stderr.flush()
-    verdict = result.quality.verdict
-    if verdict == "rejected" or (strict and verdict == "suspect"):
-        log.error(f"{result.quality.text()}: the solution is written with its verdict; exit 1"
-                  + (" (--strict)" if verdict == "suspect" else ""))
-        from trackproc.io.atomic import commit_outputs
-
-        commit_outputs()   # the outputs are complete and carry the verdict: written, then exit 1
-        raise typer.Exit(1)
+    report_solution(result, "estimate", as_json, strict, summary_text)

@@ -161,8 +161,6 @@ def refine_command(
 
         require_matplotlib()
 
-    import sys
-
     from trackproc.io.atomic import is_stdio
     from trackproc.io.eop import earth_orientation
     from trackproc.io.passfile import read_pass_table
@@ -200,17 +198,6 @@ def refine_command(
         from trackproc.report.plots import refine_png
 
         write_bytes(plot, refine_png(result.residuals, result.state.diagnostics))
-    if log.isEnabledFor(logging.WARNING):   # the summary is the result for people: off only under -q
-        from trackproc.cli.common import elements_line, summary_json
+    from trackproc.cli.common import report_solution
 
-        sys.stderr.write(summary_json(result.state, "refine", result.warnings) if as_json
-                         else summary_text(result) + elements_line(result.state))
-        sys.stderr.flush()
-    verdict = result.quality.verdict
-    if verdict == "rejected" or (strict and verdict == "suspect"):
-        log.error(f"{result.quality.text()}: the solution is written with its verdict; exit 1"
-                  + (" (--strict)" if verdict == "suspect" else ""))
-        from trackproc.io.atomic import commit_outputs
-
-        commit_outputs()   # the outputs are complete and carry the verdict: written, then exit 1
-        raise typer.Exit(1)
+    report_solution(result, "refine", as_json, strict, summary_text)

@@ -173,14 +173,7 @@ def propagate_tle(tle, options: PropagateOptions, eop=None) -> PropagateResult:
                          expected="--force j2 or two-body (integrate from the TLE's state) for --stm")
     times = requested_times(options, tle_epoch(tle))
     states = sgp4_states(tle, times, eop)
-    radius = np.linalg.norm(states[:, :3], axis=1)
-    if np.any(radius < MIN_RADIUS_M):
-        i = int(np.argmin(radius))
-        raise ProcessingError(f"the orbit enters the Earth: |r| = {radius[i] / 1e3:.1f} km at "
-                              f"{iso_utc(times[i])} (below {MIN_RADIUS_M / 1e3:.0f} km)")
-    columns = {"time": pd.DatetimeIndex(times).tz_localize("UTC")}
-    for k, name in enumerate(("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s")):
-        columns[name] = states[:, k]
+    columns = state_columns(states, times)
     from trackproc.dynamics import timescales as ts
 
     sat = Satellite(OrbitInput(tle=tle, source=tle.source), "sgp4", times[0], 0.0, 0.0, eop)
@@ -236,15 +229,8 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
         raise ProcessingError(f"propagation failed: {exc}") from None
     traj.raise_for_outcome()
     states = traj.state(t_s)
-    radius = np.linalg.norm(states[:, :3], axis=1)
-    if np.any(radius < MIN_RADIUS_M):
-        i = int(np.argmin(radius))
-        raise ProcessingError(f"the orbit enters the Earth: |r| = {radius[i] / 1e3:.1f} km at "
-                              f"{iso_utc(times[i])} (below {MIN_RADIUS_M / 1e3:.0f} km)")
 
-    columns = {"time": pd.DatetimeIndex(times).tz_localize("UTC")}
-    for k, name in enumerate(("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s")):
-        columns[name] = states[:, k]
+    columns = state_columns(states, times)
     phi = traj.stm(t_s) if want_stm else None
     if options.stm:
         flat = phi.reshape(-1, 36)
@@ -400,3 +386,17 @@ def visible_rows(prediction, options, times) -> np.ndarray:
             f"{np.degrees(prediction.elevation_rad.max()):.1f} deg); try a longer --span or a lower "
             "--elevation-mask-deg")
     return keep
+
+
+def state_columns(states, times) -> dict:
+    """The ephemeris columns ``time, x_m .. vz_m_s`` of GCRF ``states``; a ProcessingError when the
+    orbit enters the Earth."""
+    radius = np.linalg.norm(states[:, :3], axis=1)
+    if np.any(radius < MIN_RADIUS_M):
+        i = int(np.argmin(radius))
+        raise ProcessingError(f"the orbit enters the Earth: |r| = {radius[i] / 1e3:.1f} km at "
+                              f"{iso_utc(times[i])} (below {MIN_RADIUS_M / 1e3:.0f} km)")
+    columns = {"time": pd.DatetimeIndex(times).tz_localize("UTC")}
+    for k, name in enumerate(("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s")):
+        columns[name] = states[:, k]
+    return columns
