@@ -18,7 +18,8 @@ from trackproc.io.statefile import State
 from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Options
 from trackproc.dynamics.rtn import rtn_rotation as rtn_matrix
-from trackproc.pipeline.refine import RefineOptions, finish, prepare, refine, summary_text, traverse_station
+from trackproc.pipeline.refine import RefineOptions, finish, prepare, refine, traverse_station
+from trackproc.report.refine_text import summary_text
 from trackproc.pipeline.simulate import SimulateOptions, simulate
 
 #: seed 004 Table 1 (km, km/s there), at an epoch of our choosing: sample_data/truth.json, stale.json

@@ -167,7 +167,8 @@ def refine_command(
     from trackproc.io.residuals import write_residuals
     from trackproc.io.stations import read_stations
     from trackproc.io.statefile import format_epoch, read_state_or_tle, write_state
-    from trackproc.pipeline.refine import RefineOptions, refine, summary_text
+    from trackproc.pipeline.refine import RefineOptions, refine
+    from trackproc.report.refine_text import summary_text
 
     orientation, warning = earth_orientation(eop, dut1)
     if warning:

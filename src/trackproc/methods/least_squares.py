@@ -180,7 +180,7 @@ def combination_text(vector: np.ndarray, names: Sequence[str], threshold: float 
     return " ".join(terms)
 
 
-def _prior_rows(priors: Sequence[Prior], n: int, scales: np.ndarray):
+def prior_rows(priors: Sequence[Prior], n: int, scales: np.ndarray):
     """Whitening of the priors: rows ``W E S`` and the factor W (with W Wᵀ = covariance⁻¹)."""
     rows, factors = [], []
     for p in priors:
@@ -195,7 +195,7 @@ def _prior_rows(priors: Sequence[Prior], n: int, scales: np.ndarray):
     return a, factors
 
 
-def _prior_rhs(factors, x: np.ndarray) -> np.ndarray:
+def prior_rhs(factors, x: np.ndarray) -> np.ndarray:
     parts = [w @ (p.centre - x[p.index]) for w, p in factors]
     return np.concatenate(parts) if parts else np.zeros(0)
 
@@ -244,7 +244,7 @@ class _Problem:
         self.scales = np.ones(n) if scales is None else np.asarray(scales, float)
         self.periodic = np.zeros(self.nobs, bool) if periodic is None else np.asarray(periodic, bool)
         self.fixed_out = np.zeros(self.nobs, bool) if fixed_out is None else np.asarray(fixed_out, bool).copy()
-        self.prior_a, self.prior_factors = _prior_rows(priors, n, self.scales)
+        self.prior_a, self.prior_factors = prior_rows(priors, n, self.scales)
         self.n_prior = self.prior_a.shape[0]
         self.clip = clip if clip else None
 
@@ -281,7 +281,7 @@ class _Problem:
 
     def prior_rhs(self, x):
         """The whitened a-priori residuals at ``x``."""
-        return _prior_rhs(self.prior_factors, x)
+        return prior_rhs(self.prior_factors, x)
 
     def cost(self, r, x, mask):
         """χ²: squared normalized residuals of the kept samples plus the a-priori terms."""

@@ -75,7 +75,7 @@ from typing import Callable, Optional, Sequence
 import numpy as np
 
 from trackproc.errors import ProcessingError
-from trackproc.methods.least_squares import (Options, Solution, _iterate, _prior_rows, _Problem, combination_text,
+from trackproc.methods.least_squares import (Options, Solution, _iterate, prior_rows, _Problem, combination_text,
                                              whitened_svd)
 
 __all__ = ["nonsingular_elements", "state_from_elements", "element_covariance", "ELEMENT_NAMES", "gauss_legendre",
@@ -300,7 +300,7 @@ def geodesic_retraction(model, sigma, scales, priors=(), *, fraction: float = 0.
     """
     sig = np.asarray(sigma, float)
     sc = np.asarray(scales, float)
-    prior_a, _ = _prior_rows(priors, sc.size, sc)
+    prior_a, _ = prior_rows(priors, sc.size, sc)
 
     def retract(x, dx):
         x = np.asarray(x, float)
@@ -606,7 +606,7 @@ def sandwich_covariance(solution: Solution, sigma_nodes, design_nodes, coefficie
     b = jd.T @ (np.asarray(design_nodes, float) / sig[:, None])          # (n, m)
     middle = b @ np.asarray(coefficient_covariance, float) @ b.T
     if priors:
-        pa, _ = _prior_rows(priors, n, scales)
+        pa, _ = prior_rows(priors, n, scales)
         middle = middle + pa.T @ pa
     cov_scaled = k_scaled @ middle @ k_scaled
     cov = cov_scaled * np.outer(scales, scales)

@@ -1,0 +1,197 @@
+"""Assemble a :class:`~trackproc.pipeline.refine.problem.Refinement` from a pass and a stale state
+(:func:`prepare`): the options checked, the pass chosen and smoothed, the traverse epoch, the
+stale state (a TLE by SGP4 there), the a-priori, the estimator's problem
+(:func:`trackproc.pipeline.estimate.build_problem`), the station in the image domain, and for the
+integral cost the quadrature of seed 004 eq. 14 (:func:`integral_setup`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+import numpy as np
+import pandas as pd
+
+from trackproc.constants import C_LIGHT
+from trackproc.dynamics import geodesy, propagator
+from trackproc.dynamics import measurement_spectra as ms
+from trackproc.dynamics import timescales as ts
+from trackproc.errors import InputError, ProcessingError
+from trackproc.io import smoothing_record
+from trackproc.io.passfile import PassTable
+from trackproc.io.tle import parse_tle, tle_state
+from trackproc.methods import refinement as rf
+from trackproc.methods.least_squares import Prior
+from trackproc.pipeline.estimate import EstimateOptions, build_problem
+from trackproc.pipeline.refine.options import (COSTS, DEFAULT_APRIORI_ELEMENTS, DOPPLER_BIAS, NOISE_MODELS,
+                                               RefineOptions, SmoothedCurve)
+from trackproc.pipeline.refine.problem import Refinement, default_apriori_covariance, is_tle_state, link_mode
+from trackproc.pipeline.refine.selection import curve_traverse_epoch, select_pass, smoothed_curve
+
+
+def prepare(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
+            source: str = "<pass>", curve: Optional[SmoothedCurve] = None) -> Refinement:
+    """Assemble a :class:`Refinement` (see the module docstring); :class:`InputError` for bad input.
+    ``curve``: the pass's smoothed curve when already made (:func:`refine`'s re-solves)."""
+    opt = options or RefineOptions()
+    if opt.cost not in COSTS:
+        raise InputError("unknown cost", column="--cost", found=opt.cost, expected=" or ".join(COSTS))
+    if opt.noise not in NOISE_MODELS:
+        raise InputError("unknown noise model", column="--noise", found=opt.noise, expected=", ".join(NOISE_MODELS))
+    if opt.oscillator_noise is not None and not (math.isfinite(opt.oscillator_noise) and opt.oscillator_noise > 0):
+        raise InputError("the oscillator noise must be positive", column="--oscillator-noise",
+                         found=opt.oscillator_noise, expected="a random-walk intensity > 0 in Hz per sqrt(s)")
+    if opt.covariance not in ("linear", "profile"):
+        raise InputError("unknown covariance", column="--covariance", found=opt.covariance,
+                         expected="linear or profile")
+    if opt.doppler_bias not in (None,) + DOPPLER_BIAS:
+        raise InputError("unknown Doppler bias model", column="--doppler-bias", found=opt.doppler_bias,
+                         expected=" or ".join(DOPPLER_BIAS))
+    if opt.force not in propagator.FORCES:
+        raise InputError("unknown force model", column="--force", found=opt.force, expected="two-body or j2")
+    if not (opt.quadrature_order >= 2 and opt.quadrature_panel_s > 0 and opt.max_gap_s > 0):
+        raise InputError("bad quadrature settings", column="--quadrature-order",
+                         found=(opt.quadrature_order, opt.quadrature_panel_s, opt.max_gap_s),
+                         expected="order >= 2, panel > 0 s, gap > 0 s")
+    warnings: list = []
+    sub, kind, station, pass_id = select_pass(table, opt, source)
+    meta = sub.meta
+    if opt.cost == "pointwise" and smoothing_record.output_of(meta) == "grid":
+        raise InputError("a smoothed grid is a curve, not samples", file=source, column="smoothing",
+                         found="output = grid",
+                         expected="the samples (smooth without --grid), or --cost integral")
+    carrier = meta.get("carrier_hz")
+    carrier = float(carrier) if isinstance(carrier, (int, float)) and carrier > 0 else math.nan
+    if kind == "doppler" and not carrier > 0:
+        raise InputError("Doppler samples need the carrier frequency", file=source, column="carrier_hz",
+                         found=meta.get("carrier_hz"), expected="carrier_hz > 0 in the file metadata "
+                                                                "(trackproc ingest --carrier-hz)")
+    # a coherent two-way link returns the ground station's own frequency: no transmitter offset
+    one_way = (meta.get("doppler_mode") or "one-way") == "one-way"
+    bias = opt.doppler_bias if opt.doppler_bias is not None else ("offset" if kind == "doppler" and one_way else "none")
+    if bias != "none" and kind == "range_rate" and not carrier > 0:
+        raise InputError("a Doppler offset on range-rate samples needs the carrier frequency", file=source,
+                         column="carrier_hz", found=meta.get("carrier_hz"),
+                         expected="carrier_hz in the metadata, or --doppler-bias none")
+    frame = sub.frame
+    sig = frame["sigma"].to_numpy(float)
+    if not np.all(np.isfinite(sig) & (sig > 0)):
+        i = int(np.flatnonzero(~(np.isfinite(sig) & (sig > 0)))[0])
+        raise InputError(f"invalid sigma at {pd.Timestamp(frame['time'].iloc[i]).isoformat()} (sample {i + 1} of the "
+                         "pass)", file=source, column="sigma", found=sig[i], expected="a positive number")
+    if len(frame) < 8:
+        raise ProcessingError(f"too few samples in the pass: {len(frame)} (at least 8 are needed)")
+
+    curve = curve if curve is not None else smoothed_curve(sub, kind, station, pass_id, source)
+    t_traverse, how = curve_traverse_epoch(curve, warnings, opt.traverse_epoch)
+
+    # the stale state: a TLE is evaluated by SGP4 at the traverse epoch
+    if is_tle_state(initial):
+        lines = initial.extra["tle"]
+        tle = parse_tle("\n".join(([initial.extra["tle_name"]] if initial.extra.get("tle_name") else []) + list(lines)),
+                        initial.source or "<tle>")
+        initial = tle_state(tle, at=t_traverse, eop=eop)
+        warnings.append("the TLE is evaluated by SGP4 at the traverse epoch: the stale epoch is the traverse epoch")
+    stale_epoch = np.datetime64(initial.epoch, "ns")
+
+    use_apriori = opt.apriori if opt.apriori is not None else (opt.cost == "pointwise")
+    apriori_sigma, apriori_initial, note, default_prior = {}, False, "none (the pass alone)", False
+    if use_apriori:
+        if opt.apriori_sigma:
+            apriori_sigma, note = dict(opt.apriori_sigma), "--apriori-sigma"
+        elif initial.state_covariance is not None:
+            apriori_initial, note = True, "the stale state's covariance, moved to the traverse epoch by the STM"
+        else:
+            default_prior = True
+            note = ("default (the stale state has no covariance): orbital-element sigmas " +
+                    ", ".join(f"{k} {v:g}" for k, v in DEFAULT_APRIORI_ELEMENTS.items()))
+    elif opt.apriori_sigma:
+        raise InputError("--apriori-sigma with --no-apriori", column="--apriori-sigma",
+                         expected="one of the two")
+    est = EstimateOptions(doppler_bias=None if bias == "none" else bias, doppler_bias_per="pass",
+                          apriori_sigma=apriori_sigma, apriori_initial=apriori_initial, force=opt.force,
+                          earth=opt.earth, range_rate_model=opt.range_rate_model, max_iterations=opt.max_iterations,
+                          clip=opt.clip, epoch=t_traverse, kinds=[kind])
+    problem = build_problem([(source, PassTable(frame, meta))], initial, stations, est, eop)
+    mu = propagator.force_parameters(opt.force)[0]
+    if default_prior:
+        rv0 = problem.x0[:6]
+        problem.priors.append(Prior(np.arange(6), rv0.copy(), default_apriori_covariance(rv0, mu)))
+
+    names = list(problem.names)
+    x0 = problem.x0.copy()
+    scales = problem.params.scales()
+    if opt.circular:
+        names.append("r_ka")
+        x0 = np.r_[x0, np.linalg.norm(x0[:3])]
+        scales = np.r_[scales, scales[0]]
+
+    # the station in the image domain (seed 004 eqs. 7-10), for the integral and the model traverse time
+    known = dict(stations or {})
+    for n_, s_ in sub.stations().items():
+        known.setdefault(n_, s_)
+    st = known[station]
+    lat, lon, r_itrf = geodesy.station_itrf(st, opt.earth)
+    t_meas = problem.meas.t_s
+    epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))
+    station_model = ms.StationModel.build(r_itrf, lat, lon, epoch_jd, problem.frame.q, float(t_meas.min()) - 60.0,
+                                          float(t_meas.max()) + 60.0, eop=eop)
+
+    # the station's geocentric axis at the traverse epoch (GCRF): the single-pass rotation family
+    r_st0, _ = station_model.state(np.array([0.0]))
+    axis = problem.frame.q.T @ r_st0[0]
+    ref = Refinement(options=opt, problem=problem, curve=curve, kind=kind, station_name=station, pass_id=pass_id,
+                     initial=initial, stale_epoch=stale_epoch, traverse_how=how, names=names, x0=x0, scales=scales,
+                     priors=list(problem.priors), apriori_note=note, station_model=station_model, mu=mu,
+                     carrier_hz=carrier, station_axis=axis / np.linalg.norm(axis), warnings=warnings)
+    if opt.cost == "integral":
+        ref.integral = integral_setup(ref, frame)
+    return ref
+
+
+def integral_setup(ref: Refinement, frame) -> dict:
+    """Gauss-Legendre nodes on the covered parts of the pass, the curve there (range-rate), the
+    pseudo-sigmas, the bias coefficients and the basis (for the sandwich covariance)."""
+    opt = ref.options
+    curve = ref.curve
+    intervals = rf.covered_intervals(curve.used_t_s, opt.max_gap_s)
+    if not intervals:
+        raise ProcessingError("the smoothed pass has no interval without gaps to integrate over")
+    t_poly, w = rf.gauss_legendre(intervals, order=opt.quadrature_order, panel_s=opt.quadrature_panel_s)
+    # node times: polynomial time (s from the curve's epoch) -> s from the traverse epoch (SI)
+    jd_c = ts.datetime64_to_jd_utc(curve.epoch)
+    jd_e = tuple(float(a) for a in ts.datetime64_to_jd_utc(ref.problem.epoch))
+    offset = float(ts.seconds_since(jd_c, jd_e))
+    t_nodes = t_poly + offset
+    # Doppler -> range-rate: -c Δf/f one-way, -c Δf/(2f) two-way (seed 004: Vr = c/(2 f0) f_D)
+    mode = link_mode(ref)
+    k_link = 2.0 if mode == "two-way" else 1.0
+    to_rr = -C_LIGHT / (k_link * ref.carrier_hz) if ref.kind == "doppler" else 1.0
+    observed = to_rr * curve.fit(t_poly)
+    design = to_rr * curve.fit.design(t_poly)
+    sig = frame["sigma"].to_numpy(float) * abs(to_rr)
+    n_used = curve.used_t_s.size
+    covered = float(sum(b - a for a, b in intervals))
+    spacing = covered / max(n_used - len(intervals), 1)
+    sigma_ref = float(np.sqrt(np.mean(sig * sig)))
+    vf_curve = float(curve.fit.variance_factor)
+    if opt.reweight and math.isfinite(vf_curve) and vf_curve > 1.0:
+        sigma_ref *= math.sqrt(vf_curve)           # the samples' actual scatter about the curve
+    sigma_nodes = rf.pseudo_sigma(w, sigma_ref, spacing)
+    bias_cols = []
+    for d in ref.problem.params.selected[6:]:
+        # an offset in Hz on range-rate: -c/f one-way, -c/(2f) two-way (observation.bias_modifiers)
+        coef = -C_LIGHT / (k_link * ref.carrier_hz) * np.ones(t_nodes.size)
+        if d.family == "doppler_drift":
+            coef = coef * (t_nodes - d.epoch_s)
+        elif d.family != "doppler_offset":
+            raise ProcessingError(f"parameter {d.name} has no meaning for the integral cost")
+        bias_cols.append(coef)
+    model = rf.IntegralModel(ref.problem.epoch, ref.problem.frame, ref.station_model, t_nodes, bias_cols,
+                             force=opt.force, eop=ref.problem.eop, range_rate_model=ref.problem.range_rate_model,
+                             n_extra=1 if opt.circular else 0, mode=mode)
+    return {"model": model, "observed": observed, "sigma": sigma_nodes, "weights": w, "t_nodes": t_nodes,
+            "t_poly": t_poly, "design": design, "coefficient_covariance": curve.fit.cov_scaled,
+            "intervals": intervals, "sigma_ref": sigma_ref, "spacing": spacing, "to_range_rate": to_rr,
+            "mode": mode}

@@ -1,0 +1,114 @@
+"""The noise model of a refinement's pass (REML among white, AR(1), the oscillator's random walk
+and both: :mod:`trackproc.methods.noise`) and the transmitter drift a one-way pass wants, then the
+GLS solve with them (:func:`solve_noise`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from trackproc.methods import noise as nz
+from trackproc.methods.least_squares import prior_rhs, prior_rows
+from trackproc.pipeline.refine.assemble import prepare
+from trackproc.pipeline.refine.gates import solve_weighted
+from trackproc.pipeline.refine.problem import Refinement, link_mode
+
+
+#: A drift is added to a one-way pass's offset when its GLS estimate exceeds this many sigmas
+#: (and √(ln n), the BIC threshold): p = 0.001, so that a pass without drift keeps the offset alone.
+DRIFT_T = 3.29
+
+
+def oscillator_link(ref: Refinement) -> bool:
+    """A one-way link with a transmitter offset: the frequency can wander."""
+    return link_mode(ref) == "one-way" and any(n.startswith("doppler_offset") for n in ref.problem.names)
+
+
+def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinement, bool]:
+    """The noise model of the pass from the residuals of a fit ``sol`` (:func:`trackproc.methods.noise.fit_noise`:
+    REML, the fixed effects being the Jacobian columns of the state, the offset and a drift),
+    and whether the pass wants a drift it does not have (the GLS estimate of a drift, with the
+    a-priori, beyond :data:`DRIFT_T` sigmas; only under ``noise="auto"`` without ``doppler_bias``).
+    Returns ``(the Refinement with the model, drift wanted)``; the model is reported in
+    ``noise_report``."""
+    opt = ref.options
+    meas = ref.problem.meas
+    keep = ~np.asarray(sol.edited, bool)
+    t = meas.t_s
+    t0 = float(t.min())
+    osc = oscillator_link(ref)
+    r = np.asarray(sol.residual, float)
+    npb = ref.n_problem
+    _, jac = ref.pointwise_model(sol.values)
+    x = np.asarray(jac, float)[:, :npb]
+    has_drift = any(n.startswith("doppler_drift") for n in ref.problem.names)
+    if osc and not has_drift:        # the drift column (Hz/s; the offset's column times t - t0)
+        i_off = [i for i, n in enumerate(ref.problem.names) if n.startswith("doppler_offset")][0]
+        x = np.column_stack([x, x[:, i_off] * (t - t0)])
+    if opt.noise == "auto":
+        models = nz.MODELS if osc else ("white", "ar1")
+    elif opt.noise == "white":
+        models = ("white",)
+    else:
+        models = (opt.noise,)
+    walk = opt.oscillator_noise
+    nf = nz.fit_noise(t[keep], r[keep], x[keep], models=models, walk=walk, t0=t0)
+    cov = nz.PassCovariance(meas.sigma, t, [(np.arange(t.size), nf.model, t0)])
+    want_drift = False
+    drift_t = None
+    if osc and not has_drift:
+        w = cov.whitener(keep)
+        a = w(x)
+        b = w(r)
+        pa, factors = prior_rows(ref.priors, len(ref.names), np.ones(len(ref.names)))
+        if pa.shape[0]:
+            pa = np.column_stack([pa[:, :npb], np.zeros(pa.shape[0])])
+            a = np.vstack([a, pa])
+            b = np.concatenate([b, prior_rhs(factors, np.asarray(sol.values, float))])
+        u, sv, vt = np.linalg.svd(a, full_matrices=False)
+        ok = sv > 1e-10 * sv[0]
+        beta = vt[ok].T @ ((u[:, ok].T @ b) / sv[ok])
+        sd = float(np.sqrt(np.sum((vt[ok, -1] / sv[ok]) ** 2)))
+        drift_t = float(beta[-1] / sd) if sd > 0 else 0.0
+        want_drift = (opt.noise == "auto" and opt.doppler_bias is None
+                      and abs(drift_t) > max(DRIFT_T, math.sqrt(math.log(max(keep.sum(), 3)))))
+    report = nf.as_dict()
+    report.update({"option": opt.noise,
+                   "oscillator_noise_given": walk, "link": link_mode(ref)})
+    if drift_t is not None:
+        report["drift_t"] = drift_t
+    bias = [n.split(":")[0] for n in ref.problem.names if n.startswith("doppler_")]
+    report["transmitter"] = ("offset+drift" if (want_drift or has_drift) else "offset" if bias else "none") + \
+        ("+wander" if nf.model.walk > 0 else "")
+    model = None if nf.model.is_white else cov
+    return replace(ref, noise=model, noise_edited=np.asarray(sol.edited, bool).copy(), noise_report=report), want_drift
+
+
+def solve_noise(table, initial, ref: Refinement, stations=None, eop=None, source: str = "<pass>", rounds: int = 1,
+                observed=None, prior_centre=None, x0=None):
+    """:func:`solve_weighted` with the noise model of the pass (:func:`noise_model`): a first
+    (white) fit, the model by REML, a drift if the pass wants one (the problem prepared again
+    from ``table``/``initial`` with ``offset+drift``), then GLS; with ``rounds`` > 1 the model is
+    refitted on the GLS residuals and the fit repeated (REML does not depend on the fixed
+    effects' estimate to first order: a second round changed the DopTrack development ratios by
+    < 0.01 and costs 0.1 s of CPU, so one is the default). A pass whose noise is white and needs no drift keeps the
+    white fit unchanged. ``observed``, ``prior_centre``, ``x0`` as in :meth:`Refinement.solve`
+    (Monte Carlo: the problem must then already carry the drift it needs).
+    Returns ``(Refinement, Solution, KKTResult or None, sigma scale)``."""
+    sol, kkt, scale = solve_weighted(ref, observed, prior_centre, x0)
+    if ref.options.cost != "pointwise" or (ref.options.noise == "white" and ref.options.oscillator_noise is None):
+        return ref, sol, kkt, scale
+    for _ in range(rounds):
+        noisy, want_drift = noise_model(ref, sol, scale)
+        if want_drift and observed is None:
+            ref = prepare(table, initial, stations, replace(ref.options, doppler_bias="offset+drift"), eop, source,
+                          curve=ref.curve)   # the same smoothed curve and epoch: no second smoothing
+            noisy = replace(ref, noise=noisy.noise, noise_edited=noisy.noise_edited, noise_report=noisy.noise_report)
+        elif not noisy.correlated() and not ref.correlated():
+            return noisy, sol, kkt, scale                 # white, no drift to add: the white fit stands
+        ref = noisy
+        sol, kkt, scale = solve_weighted(ref, observed, prior_centre, x0)
+    return ref, sol, kkt, scale

@@ -1,0 +1,258 @@
+"""The assembled refinement (:class:`Refinement`): the estimator's problem with the a-priori,
+its models, the pointwise and the GLS solves (constrained under ``circular``, seed 004 eqs. 5 and
+15-17), the profile covariance and the reported covariance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Optional
+
+import numpy as np
+
+from trackproc.methods import refinement as rf
+from trackproc.methods.least_squares import Options, Prior, solve, solve_gls
+from trackproc.methods.refinement import (ELEMENT_NAMES, CachedModel, circular_constraints, constraint_scales,
+                                           element_covariance, geodesic_retraction, profile_mixture, solve_kkt)
+from trackproc.pipeline.refine.options import DEFAULT_APRIORI_ELEMENTS, RefineOptions, SmoothedCurve
+
+
+def is_tle_state(state) -> bool:
+    return state.force_model == "sgp4" and bool((state.extra or {}).get("tle"))
+
+
+def state_prior_covariance(priors) -> Optional[np.ndarray]:
+    """The 6 × 6 a-priori covariance of x..vz from the problem's priors (None unless all six)."""
+    cov = np.full((6, 6), np.nan)
+    for p in priors:
+        idx = np.asarray(p.index, int)
+        pc = np.asarray(p.covariance, float)
+        sel = np.flatnonzero(idx < 6)
+        if sel.size:
+            cov[np.ix_(idx[sel], idx[sel])] = pc[np.ix_(sel, sel)]
+    if np.isnan(np.diag(cov)).any():
+        return None
+    return np.nan_to_num(cov, nan=0.0)
+
+
+def default_apriori_covariance(rv, mu_m3_s2: float) -> np.ndarray:
+    """GCRF covariance (6, 6) of :data:`DEFAULT_APRIORI_ELEMENTS` at the state ``rv``."""
+    return element_covariance(rv, mu_m3_s2, [DEFAULT_APRIORI_ELEMENTS[k] for k in ELEMENT_NAMES])
+
+
+def link_mode(ref: Refinement) -> str:
+    """``"two-way"`` when the pass's samples are modelled as round trips, else ``"one-way"``."""
+    return "two-way" if bool(np.any(ref.problem.meas.two_way)) else "one-way"
+
+
+@dataclass
+class Refinement:
+    """An assembled refinement, reusable (e.g. Monte Carlo): :func:`prepare` builds it,
+    :meth:`solve` solves it (optionally with other observations and another a-priori centre),
+    :func:`refine` turns a solution into the outputs."""
+
+    options: RefineOptions
+    problem: object
+    curve: SmoothedCurve
+    kind: str
+    station_name: str
+    pass_id: str
+    initial: object
+    stale_epoch: np.datetime64
+    traverse_how: str
+    names: list
+    x0: np.ndarray
+    scales: np.ndarray
+    priors: list
+    apriori_note: str
+    station_model: object
+    mu: float
+    carrier_hz: float
+    station_axis: np.ndarray
+    integral: Optional[dict] = None
+    warnings: list = field(default_factory=list)
+    #: correlated-noise model of the samples (:class:`~trackproc.methods.noise.PassCovariance`), None = white
+    noise: Optional[object] = None
+    #: samples edited when the noise model was fitted (the GLS starts from them)
+    noise_edited: Optional[np.ndarray] = None
+    #: what :func:`noise_model` found (written to the diagnostics)
+    noise_report: Optional[dict] = None
+
+    @property
+    def n_problem(self) -> int:
+        return len(self.problem.names)
+
+    # -- models ------------------------------------------------------------------------------
+    def pointwise_model(self, x):
+        h, jac = self.problem.model(np.asarray(x, float)[: self.n_problem])
+        if len(self.names) > self.n_problem:
+            jac = np.hstack([jac, np.zeros((jac.shape[0], len(self.names) - self.n_problem))])
+        return h, jac
+
+    def constraints(self, x):
+        return circular_constraints(x, self.mu, rka_index=len(self.names) - 1)
+
+    def constraint_scale(self, x):
+        return constraint_scales(x, self.mu, rka_index=len(self.names) - 1)
+
+    def data(self):
+        """``(model, observed, sigma, periodic, clip)`` of the chosen cost."""
+        if self.options.cost == "integral":
+            d = self.integral
+            return d["model"], d["observed"], d["sigma"], None, None
+        meas = self.problem.meas
+        return self.pointwise_model, meas.observed, meas.sigma, meas.periodic, self.options.clip
+
+    def correlated(self) -> bool:
+        """True when the samples carry a correlated-noise model (the solve is then GLS)."""
+        return self.noise is not None and not self.noise.is_white and self.options.cost == "pointwise"
+
+    def whitened(self, keep, sigma_scale=1.0, observed=None):
+        """The GLS system of the kept samples: ``(model_w, y_w)`` with ``model_w(x) = (L⁻¹ h, L⁻¹ J)``
+        and ``y_w = L⁻¹ y`` (``C = L Lᵀ`` of :attr:`noise` over the kept samples, times
+        ``sigma_scale²``): independent samples of unit sigma."""
+        model, y, _, _, _ = self.data()
+        if observed is not None:
+            y = np.asarray(observed, float)
+        w = self.noise.whitener(np.asarray(keep, bool))
+        k = 1.0 / sigma_scale
+
+        def model_w(x):
+            h, jac = model(x)
+            return w(h) * k, w(jac) * k
+
+        return model_w, w(y) * k
+
+    def solve(self, observed=None, prior_centre=None, x0=None, sigma_scale=1.0):
+        """Solve (``observed`` replaces the data: the samples, or the curve at the nodes;
+        ``prior_centre`` (6,) the stale state at the traverse epoch; ``sigma_scale`` multiplies
+        the data sigmas). Returns ``(Solution, KKTResult or None)``. With a correlated-noise
+        model (:meth:`correlated`) the problem is solved by GLS (:meth:`solve_gls`)."""
+        if self.correlated():
+            return self.solve_gls(observed, prior_centre, x0, sigma_scale)
+        model, y, sigma, periodic, clip = self.data()
+        sigma = np.asarray(sigma, float) * sigma_scale
+        if observed is not None:
+            y = np.asarray(observed, float)
+        priors = self.priors_at(prior_centre)
+        start = self.x0 if x0 is None else np.asarray(x0, float)
+        opts = Options(max_iterations=self.options.max_iterations, clip=clip, rank_rtol=self.options.rank_rtol)
+        model = CachedModel(model)
+        retract = geodesic_retraction(model, sigma, self.scales, priors)
+        if self.options.circular:
+            kkt = solve_kkt(model, start, y, sigma, names=self.names, constraints=self.constraints,
+                            constraint_scale=self.constraint_scale, scales=self.scales, priors=priors,
+                            periodic=periodic, options=opts, retract=retract)
+            return kkt.solution, kkt
+        lo, hi = self.bounds()
+        return solve(model, start, y, sigma, names=self.names, scales=self.scales, priors=priors, periodic=periodic,
+                     bounds=(lo, hi), options=opts, retract=retract), None
+
+    def bounds(self):
+        lo, hi = self.problem.params.bounds()
+        return (np.r_[lo, [-np.inf] * (len(self.names) - lo.size)], np.r_[hi, [np.inf] * (len(self.names) - hi.size)])
+
+    def solve_gls(self, observed=None, prior_centre=None, x0=None, sigma_scale=1.0):
+        """Generalised least squares with the correlated-noise model (:attr:`noise`):
+        :func:`trackproc.methods.least_squares.solve_gls` (whitened kept samples, editing on the
+        innovations) with this refinement's solver (constrained under ``circular``)."""
+        model, y, _, _, clip = self.data()
+        if observed is not None:
+            y = np.asarray(observed, float)
+        priors = self.priors_at(prior_centre)
+        lo, hi = self.bounds()
+        opts = Options(max_iterations=self.options.max_iterations, clip=None, rank_rtol=self.options.rank_rtol)
+
+        def fit(model_w, y_w, start):
+            cached = CachedModel(model_w)
+            ones = np.ones(y_w.size)
+            retract = geodesic_retraction(cached, ones, self.scales, priors)
+            if self.options.circular:
+                kkt = solve_kkt(cached, start, y_w, ones, names=self.names, constraints=self.constraints,
+                                constraint_scale=self.constraint_scale, scales=self.scales, priors=priors,
+                                options=opts, retract=retract)
+                return kkt.solution, kkt
+            return solve(cached, start, y_w, ones, names=self.names, scales=self.scales, priors=priors,
+                         bounds=(lo, hi), options=opts, retract=retract), None
+
+        sol, kkt = solve_gls(model, self.x0 if x0 is None else np.asarray(x0, float), y, self.noise, fit, clip=clip,
+                             sigma_scale=sigma_scale, edited=self.noise_edited)
+        if kkt is not None:
+            kkt = replace(kkt, solution=sol)
+        return sol, kkt
+
+    def priors_at(self, prior_centre=None) -> list:
+        """The a-priori terms, centred on ``prior_centre`` (6,) instead of the stale state if given."""
+        if prior_centre is None:
+            return list(self.priors)
+        out = []
+        for p in self.priors:
+            centre = np.asarray(p.centre, float).copy()
+            sel = np.asarray(p.index) < 6
+            centre[sel] = np.asarray(prior_centre, float)[np.asarray(p.index)[sel]]
+            out.append(Prior(p.index, centre, p.covariance))
+        return out
+
+    def profile_covariance(self, sol, obs, sigma_scale: float = 1.0, prior_centre=None) -> np.ndarray:
+        """The covariance of a pointwise solution with the curvature along the directions the pass
+        cannot see (:func:`trackproc.methods.refinement.profile_mixture`): for each unseen
+        direction ``i`` (``obs.dual[i]``), the refinement is solved again with that coordinate
+        held at the Gauss-Hermite nodes of its posterior (linear equality constraint, KKT), and
+        the conditional solutions and covariances are mixed. The data are the solution's own
+        (``computed + residual``, the same editing); ``prior_centre`` as in :meth:`solve`.
+        Raises :class:`ProcessingError` if a profile point cannot be solved."""
+        model, _, sigma, periodic, _ = self.data()
+        keep = ~np.asarray(sol.edited, bool)
+        y = (np.asarray(sol.computed, float) + np.asarray(sol.residual, float))[keep]
+        sigma = (np.asarray(sigma, float) * sigma_scale)[keep]
+        periodic = None if periodic is None else np.asarray(periodic)[keep]
+
+        def kept(x):
+            h, jac = model(x)
+            return h[keep], jac[keep]
+
+        if self.correlated():        # GLS: the whitened kept samples, unit sigmas
+            y_all = np.asarray(sol.computed, float) + np.asarray(sol.residual, float)
+            kept, y = self.whitened(keep, sigma_scale, y_all)
+            sigma, periodic = np.ones(y.size), None
+
+        x_hat = np.asarray(sol.values, float)
+        cov = np.asarray(sol.covariance, float)
+        n = x_hat.size
+        priors = self.priors_at(prior_centre)
+        opts = Options(max_iterations=self.options.max_iterations, clip=None, rank_rtol=self.options.rank_rtol)
+        cached = CachedModel(kept)
+        out = cov.copy()
+        for i in obs.unobservable:
+            row = np.r_[obs.dual[i], np.zeros(n - 6)]
+            sigma_i = float(np.sqrt(row @ cov @ row))
+
+            def fixed(target, row=row, sigma_i=sigma_i):
+                def constraint(x):
+                    return np.array([row @ (x - x_hat) - target]), row[None, :]
+
+                k = solve_kkt(cached, x_hat, y, sigma, names=self.names, constraints=constraint,
+                              constraint_scale=lambda x: np.array([max(sigma_i, 1.0)]), scales=self.scales,
+                              priors=priors, periodic=periodic, options=opts)
+                return k.solution.values, k.solution.covariance
+
+            out += profile_mixture(fixed, x_hat, sigma_i) - cov
+        return out
+
+    def tolerance(self) -> float:
+        """The eccentricity tolerance of ``--circular`` (0 unless given)."""
+        return float(self.options.circular_tolerance or 0.0)
+
+    def covariance(self, sol, kkt=None, priors=None) -> np.ndarray:
+        """The reported covariance: the solver's (pointwise) or the sandwich (integral), plus,
+        under ``--circular``, what a constraint holding only to :meth:`tolerance` adds."""
+        if self.options.cost != "integral":
+            cov = sol.covariance
+        else:
+            d = self.integral
+            cov = rf.sandwich_covariance(sol, d["sigma"], d["design"], d["coefficient_covariance"],
+                                         self.priors if priors is None else priors)
+        if kkt is not None and self.tolerance() > 0:
+            sigma_eps = rf.circular_tolerance_covariance(sol.values, self.mu, self.tolerance())
+            cov = cov + rf.constraint_error_covariance(kkt.sensitivity, sigma_eps)
+        return cov

@@ -1,0 +1,289 @@
+"""The outputs of a solved refinement (:func:`finish`): the refined state at the traverse epoch and
+at the stale epoch with the covariance, the constraints of seed 004 eq. 5, the observability
+report, the residuals at the samples, the warnings and the diagnostics.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+from scipy.stats import chi2 as chi2_dist
+
+from trackproc.constants import C_LIGHT, force_model_constants
+from trackproc.dynamics import propagator
+from trackproc.dynamics import timescales as ts
+from trackproc.dynamics.rtn import rtn_covariance, rtn_jacobian
+from trackproc.errors import ProcessingError
+from trackproc.io.statefile import State, format_epoch
+from trackproc.methods import refinement as rf
+from trackproc.pipeline.estimate import UNITS, residual_frame
+from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, RefineResult
+from trackproc.pipeline.refine.problem import (Refinement, default_apriori_covariance, link_mode,
+                                               state_prior_covariance)
+from trackproc.pipeline.refine.quality import refine_quality
+from trackproc.pipeline.refine.traverse import eccentricity, max_elevation_deg, model_traverse
+
+
+def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None,
+           prior_centre=None, adaptation: dict | None = None, traverse_moves: list | None = None,
+           improvement: dict | None = None, refusal: dict | None = None) -> RefineResult:
+    """Outputs of a solved :class:`Refinement` (states, covariance, report, residuals);
+    ``consistency`` the :func:`circular_consistency` of a ``--circular`` solution;
+    ``prior_centre`` the a-priori centre the solution was solved with (:meth:`Refinement.solve`)."""
+    opt = ref.options
+    problem = ref.problem
+    warnings = list(ref.warnings)
+    x = sol.values
+    names = list(ref.names)
+    npb = ref.n_problem
+    cov = ref.covariance(sol, kkt)
+    if refusal is not None:
+        # the pass cannot improve the stale state: keep it with its a-priori covariance, the
+        # Doppler offset/drift fitted at it
+        x = np.asarray(sol.values, float).copy()
+        x[:6] = ref.x0[:6]
+        cov = np.zeros_like(np.asarray(cov, float))
+        cov[:6, :6] = refusal["state_covariance"]
+        nuisance = (improvement or {}).get("stale_nuisance") or {}
+        if len(nuisance.get("values", [])) == npb - 6 and npb > 6:
+            x[6:npb] = nuisance["values"]
+            cov[6:npb, 6:npb] = np.asarray(nuisance["covariance"], float)
+    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    units = problem.params.units() + (["m"] if opt.circular else [])
+
+    # residuals at the samples (both costs)
+    if refusal is not None:
+        h, _ = problem.model(x[:npb])
+        r = problem.meas.observed - h
+        samples = SimpleNamespace(computed=h, residual=r, normalized=r / (problem.meas.sigma * sigma_scale),
+                                  edited=np.asarray(sol.edited, bool))
+    elif opt.cost == "pointwise":
+        samples = sol
+    else:
+        h, _ = problem.model(x[:npb])
+        r = problem.meas.observed - h
+        samples = SimpleNamespace(computed=h, residual=r, normalized=r / problem.meas.sigma,
+                                  edited=np.zeros(r.size, bool))
+    residuals = residual_frame(problem, samples)
+    kept = ~samples.edited
+    # Doppler residual (Hz) -> m/s: c/f one-way, c/(2f) two-way
+    rr_factor = (C_LIGHT / ((2.0 if link_mode(ref) == "two-way" else 1.0) * ref.carrier_hz)
+                 if ref.kind == "doppler" else 1.0)
+    res_kept = samples.residual[kept]
+    rms = float(np.sqrt(np.mean(res_kept ** 2))) if res_kept.size else math.nan
+
+    # constraints (eq. 5) at the solution
+    rka = float(x[-1]) if opt.circular else float(np.linalg.norm(x[:3]))
+    x7 = np.r_[x[:6], rka]
+    f, _ = rf.circular_constraints(x7, ref.mu)
+    fscale = rf.constraint_scales(x7, ref.mu)
+    constraints = {"names": list(rf.CONSTRAINT_NAMES), "units": ["m^2", "m^2/s^2", "m^2/s"],
+                   "values": f.tolist(), "relative": (f / fscale).tolist(), "imposed": bool(opt.circular),
+                   "r_ka_m": rka, "eccentricity": eccentricity(x[:3], x[3:6], ref.mu)}
+    if kkt is not None:
+        constraints.update({"multipliers": kkt.multipliers.tolist(),
+                            "multipliers_note": "lambda of L = chi2 + lambda^T f (chi2: the whitened cost; "
+                                                "seed 004 eq. 16), per unit of each constraint",
+                            "stationarity": kkt.stationarity, "restoration_steps": kkt.restorations,
+                            "free_directions": kkt.null_space_dim, "eccentricity_tolerance": ref.tolerance(),
+                            "tolerance_note": "the covariance includes the constraints' own uncertainty for an orbit "
+                                              "circular only to this eccentricity (0: conditional on an exactly "
+                                              "circular orbit)"})
+        i_rka = names.index("r_ka")
+        constraints["r_ka_sigma_m"] = float(sigma[i_rka])
+        if consistency is not None:
+            constraints["consistency"] = consistency
+    else:
+        u = x[:3] / np.linalg.norm(x[:3])
+        constraints["r_ka_sigma_m"] = float(np.sqrt(u @ cov[:3, :3] @ u))
+
+    # observability of the state from this pass
+    reference = state_prior_covariance(ref.priors)
+    ref_name = "the a-priori covariance at the traverse epoch"
+    if reference is None:
+        reference = default_apriori_covariance(x[:6], ref.mu)
+        ref_name = "the default a-priori covariance (not used in the fit)"
+    _, _, sig_data, _, _ = ref.data()
+    keep = ~sol.edited
+    obs = rf.observability(sol.jacobian[keep][:, :npb], np.asarray(sig_data)[keep] * sigma_scale, problem.names,
+                           rtn_jacobian(x[:3], x[3:6], rotating=False), reference, cov[:6, :6],
+                           other_scales=problem.params.scales()[6:], reference=ref_name,
+                           station_axis=ref.station_axis, state=x[:6])
+    if opt.circular:
+        obs.notes.append("--circular: the three constraints of eq. 5 fix three combinations of the state; "
+                         "the covariance is zero across them (it is conditional on a circular orbit)")
+    if ref.priors and opt.cost == "pointwise" and obs.unobservable:
+        obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
+    big = rtn_jacobian(x[:3], x[3:6], rotating=False)             # GCRF -> RTN for (r, v)
+    covariance_note = "linear (the inverse of the whitened normal matrix at the solution)"
+    if (opt.covariance == "profile" and opt.cost == "pointwise" and not opt.circular and obs.unobservable and ref.priors
+            and refusal is None):
+        # the estimate slides along a curved valley where the pass sees nothing: the linear
+        # covariance misses that curvature along the best-determined combinations
+        try:
+            cov = ref.profile_covariance(sol, obs, sigma_scale, prior_centre)
+            sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+            obs.posterior_sigma_rtn = np.sqrt(np.clip(np.diag(big @ cov[:6, :6] @ big.T), 0.0, None))
+            covariance_note = (f"profile: linear, plus the curvature along the {len(obs.unobservable)} "
+                               f"direction(s) the pass cannot see ({rf.PROFILE_NODES} Gauss-Hermite points each)")
+        except ProcessingError as exc:
+            warnings.append(f"the profile covariance could not be computed ({exc}); the linear one is reported")
+    # how far the pass moved the stale state, along what it sees and along what it cannot
+    # (a large unseen part means the a-priori, not the data, put the state there)
+    obs.correction_rtn = {part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))
+                          for part, d in zip(("seen", "unseen"), obs.split(x[:6] - ref.x0[:6]))}
+    if refusal is not None:
+        refusal = dict(refusal)
+        refusal.pop("state_covariance", None)
+        refusal["refused_correction_rtn"] = {
+            part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))
+            for part, d in zip(("seen", "unseen"), obs.split(np.asarray(sol.values, float)[:6] - ref.x0[:6]))}
+
+    # the state at the stale epoch
+    dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(ref.stale_epoch),
+                                tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))))
+    if dt == 0.0:
+        rv_s, cov_s = x[:6].copy(), cov.copy()
+    else:
+        traj = propagator.propagate(x[:3], x[3:6], problem.epoch, [dt], force=opt.force, stm=True,
+                                    frame=problem.frame, eop=problem.eop).raise_for_outcome()
+        rv_s = traj.state(dt)
+        jac = np.eye(len(names))
+        jac[:6, :6] = traj.stm(dt)
+        cov_s = jac @ cov @ jac.T
+        cov_s = 0.5 * (cov_s + cov_s.T)
+
+    # traverse-point diagnostics
+    t_model = model_traverse(ref, x)
+    traverse = {"epoch": format_epoch(problem.epoch), "definition": ref.traverse_how,
+                "sigma_s": float(ref.curve.tca.sigma_s) if ref.curve.tca is not None else None,
+                "curve": ref.curve.source,
+                "refined_orbit_zero_range_rate_s": t_model,
+                "moved_s": list(traverse_moves or []),
+                "refined_orbit_zero_range_rate_utc": (format_epoch(problem.epoch + np.timedelta64(
+                    int(round(t_model * 1e9)), "ns")) if t_model is not None else None)}
+
+    # warnings
+    max_el = max_elevation_deg(ref, x)
+    if max_el is not None and max_el < LOW_PASS_DEG:
+        warnings.append(f"a low pass (highest elevation {max_el:.1f} deg < {LOW_PASS_DEG:g}): one low pass "
+                        "determines the orbit poorly and an onboard oscillator's wander is easily taken for orbit; "
+                        "see docs/refine.md")
+    if sigma_scale > 1.0:
+        warnings.append(f"the samples scatter more than their sigmas say: sigmas scaled by {sigma_scale:.3g} "
+                        "(sqrt of the variance factor, iterated) before weighing them against the a-priori")
+    if consistency is not None and consistency.get("p_value", 1.0) < CIRCULAR_TEST_P:
+        c = consistency
+        warnings.append(f"the pass contradicts the circular-orbit constraints (delta chi2 = {c['delta_chi2']:.4g}, 2 "
+                        f"degrees of freedom, p = {c['p_value']:.2g}; the unconstrained fit's eccentricity is "
+                        f"{c['free_fit_eccentricity']:.2g}): the constrained state is biased and its covariance too "
+                        "small; give --circular-tolerance (the eccentricity the orbit is circular to) or drop "
+                        "--circular")
+    if opt.circular and kkt is not None and ref.tolerance() == 0.0:
+        warnings.append("--circular: the covariance is conditional on an exactly circular orbit; with J2 the "
+                        "osculating eccentricity of a circular orbit swings by about 1e-3 (give --circular-tolerance)")
+    if sol.dof > 0 and sol.variance_factor > 4.0 and opt.cost == "pointwise":
+        warnings.append(f"a-posteriori variance factor {sol.variance_factor:.3g} (> 4): the sigmas of the data are too "
+                        "small or the model misses something; the covariance is optimistic")
+    if sol.n_prior:
+        limit = float(chi2_dist.ppf(0.999, sol.n_prior))
+        if sol.chi2_prior > limit:
+            warnings.append(f"the refined state departs from the stale state by chi2 = {sol.chi2_prior:.4g} over "
+                            f"{sol.n_prior} a-priori constraints (99.9 % limit {limit:.3g}): the pass and the stale "
+                            "state disagree; check the pass, or loosen the a-priori")
+    if opt.cost == "pointwise" and sol.n_edited > 0.1 * sol.n_measurements:
+        warnings.append(f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)")
+    if opt.cost == "integral" and not ref.priors and obs.unobservable:
+        warnings.append(f"{len(obs.unobservable)} state direction(s) are weakly determined by the pass alone "
+                        "(see the observability report); consider --apriori")
+
+    quality = refine_quality(ref, sol, sigma_scale=sigma_scale, adaptation=adaptation, improvement=improvement,
+                             refusal=refusal, t_model=t_model, max_el=max_el, consistency=consistency)
+    if refusal is not None:
+        warnings.append(f"the stale state is kept: {refusal['reason']}")
+    apriori_note = ref.apriori_note
+    if adaptation is not None and adaptation.get("factor", 1.0) > 1.0 and refusal is None:
+        a = adaptation
+        warnings.append(f"the pass contradicted the a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, 99.9 % limit "
+                        f"{a['limit']:.3g}): its covariance was scaled by {a['factor']:.3g} (sigmas x"
+                        f"{a['sigma_factor']:.3g}; maximum-likelihood variance component) and the pass refined again")
+        apriori_note += f"; scaled by {a['factor']:.3g} (the pass contradicted it)"
+    rtn = rtn_covariance(x[:3], x[3:6], cov[:6, :6])
+    diagnostics = {
+        "converged": bool(sol.converged), "message": sol.message, "iterations": int(sol.iterations),
+        "damped_steps": int(sol.damped_steps), "cost": float(sol.chi2), "cost_history": sol.cost_history,
+        "dof": int(sol.dof), "variance_factor": sol.variance_factor, "condition_number": sol.condition_number,
+        "apriori_rows": sol.n_prior, "chi2_apriori": sol.chi2_prior,
+        "samples": int(problem.meas.observed.size), "edited": int((~kept).sum()),
+        "sigma_scale": sigma_scale, "max_elevation_deg": max_el,
+        "residual_rms": {"value": rms, "unit": UNITS[ref.kind], "range_rate_m_s": rms * rr_factor},
+        "apriori_adaptation": adaptation, "improvement": without_nuisance(improvement), "refused": refusal,
+        "traverse": traverse, "constraints": constraints, "observability": obs.as_dict(),
+        "covariance_rtn": rtn,
+        "sigma_rtn": dict(zip(rf.RTN_NAMES, np.sqrt(np.clip(np.diag(rtn), 0.0, None)).tolist())),
+        "units": units, "warnings": warnings,
+    }
+    if ref.noise_report is not None:                  # the noise model of the pass (methods/noise.py)
+        diagnostics["noise"] = ref.noise_report
+    method = {"cost": opt.cost, "circular": bool(opt.circular),
+              "solver": ("Gauss-Newton with equality constraints, KKT by the null-space method (seed 004 eqs. 15-17)"
+                         if opt.circular else "Gauss-Newton by QR/SVD with Levenberg-Marquardt damping"),
+              "apriori": apriori_note, "covariance": covariance_note,
+              "kind": ref.kind, "station": ref.station_name, "pass_id": ref.pass_id,
+              "range_rate_model": problem.range_rate_model, "force_model": opt.force, "earth": opt.earth,
+              "doppler_bias": [n for n in problem.names if n.startswith("doppler_")],
+              "propagator": "Taylor (DT) with first-order sensitivity spectra, quasi-inertial frame of the traverse "
+                            "epoch"}
+    if opt.cost == "integral":
+        d = ref.integral
+        w = d["weights"]
+        res_nodes = d["observed"] - sol.computed
+        integral = float(np.sum(w * res_nodes ** 2))
+        method.update({
+            "integral": {"equation": "I = integral over the pass of (Vr_LSQ - Vr(X, t))^2 dt (seed 004 eq. 14)",
+                         "quadrature": f"composite Gauss-Legendre, {opt.quadrature_order} nodes per panel of at most "
+                                       f"{opt.quadrature_panel_s:g} s", "nodes": int(w.size),
+                         "intervals_s": d["intervals"], "I_m2_s": integral,
+                         "rms_curve_difference_m_s": math.sqrt(integral / float(np.sum(w))),
+                         "normalisation": "chi2 = I / (sigma_ref^2 * spacing)", "sigma_ref_m_s": d["sigma_ref"],
+                         "spacing_s": d["spacing"],
+                         "link": d["mode"],
+                         "gradient": ("first-order 2-D DT sensitivities (seed 004 eqs. 19-21) through the range and "
+                                      "range-rate spectra" if d["mode"] == "one-way" else
+                                      "round-trip (two-way) range-rate partials through both light times times the "
+                                      "Taylor engine's state transition matrix (first-order DT sensitivities)"),
+                         "covariance": "the smoothing polynomial's scaled coefficient covariance propagated through "
+                                       "the linearised estimator (sandwich)",
+                         "sigma_formal": sol.sigma.tolist()},
+            "curve": {"degree": int(ref.curve.fit.degree), "basis": ref.curve.fit.basis, "source": ref.curve.source}})
+    stale_doc = {"epoch": format_epoch(ref.stale_epoch), "frame": "GCRF", "position_m": rv_s[:3].tolist(),
+                 "velocity_m_s": rv_s[3:].tolist(), "parameters": names, "values": np.r_[rv_s, x[6:]].tolist(),
+                 "sigma": np.sqrt(np.clip(np.diag(cov_s), 0.0, None)).tolist(), "covariance": cov_s.tolist()}
+    values = x.copy()
+    extra = {"refinement": method, "at_stale_epoch": stale_doc,
+             "stale_state": {"epoch": format_epoch(ref.initial.epoch), "position_m": ref.initial.r_m.tolist(),
+                             "velocity_m_s": ref.initial.v_m_s.tolist(),
+                             "source": ref.initial.source or (ref.initial.extra or {}).get("source")}}
+    eop_source = getattr(problem.eop, "source", None) or "none (UT1-UTC = 0, no polar motion)"
+    extra["quality"] = quality.as_dict()
+    state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=names, values=values, sigma=sigma,
+                               covariance=cov, force_model=opt.force, constants=force_model_constants(opt.force),
+                               eop_source=eop_source, diagnostics=diagnostics, extra=extra)
+    stale_state = State.from_vectors(ref.stale_epoch, rv_s[:3], rv_s[3:], parameters=names,
+                                     values=np.r_[rv_s, x[6:]], sigma=np.sqrt(np.clip(np.diag(cov_s), 0.0, None)),
+                                     covariance=cov_s, force_model=opt.force,
+                                     constants=force_model_constants(opt.force), eop_source=eop_source,
+                                     diagnostics=diagnostics,
+                                     extra={"refinement": method, "at_traverse_epoch": format_epoch(problem.epoch),
+                                            "quality": quality.as_dict()})
+    return RefineResult(state=state, stale_epoch_state=stale_state, solution=sol, problem=problem, curve=ref.curve,
+                        residuals=residuals, observability=obs, constraints=constraints, covariance=cov, names=names,
+                        warnings=warnings, quality=quality)
+
+
+def without_nuisance(improvement):
+    if improvement is None:
+        return None
+    return {k: v for k, v in improvement.items() if k != "stale_nuisance"}

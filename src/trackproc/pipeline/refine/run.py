@@ -1,0 +1,70 @@
+""":func:`refine`: prepare, the noise model, the gates, the solution epoch moved to the refined
+orbit's own traverse point, the circular-constraint test, the outputs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from trackproc.errors import ProcessingError
+from trackproc.io.passfile import PassTable
+from trackproc.pipeline.refine.assemble import prepare
+from trackproc.pipeline.refine.gates import circular_consistency, solve_gated, solve_weighted, with_noise_of
+from trackproc.pipeline.refine.noise import solve_noise
+from trackproc.pipeline.refine.options import MAX_TRAVERSE_ITERATIONS, TRAVERSE_TOLERANCE_S, RefineOptions, RefineResult
+from trackproc.pipeline.refine.result import finish
+from trackproc.pipeline.refine.traverse import model_traverse
+
+
+def refine(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
+           source: str = "<pass>") -> RefineResult:
+    """Refine ``initial`` (a GCRF :class:`~trackproc.io.statefile.State`, or a TLE's) from one pass.
+
+    The consistency gates (docs/refine.md, "Quality"): the a-priori is scaled by its variance
+    component when the pass contradicts it (:func:`solve_adapted`); the solution epoch follows the
+    refined orbit's own zero range-rate; and when the pass cannot improve the stale state
+    (an a-priori conflict the pass cannot carry, or one on residuals correlated beyond the pass's noise model), the
+    stale state is kept with its covariance (``refused`` in the diagnostics and the quality).
+    The result's ``quality`` (:func:`refine_quality`) says what was found.
+
+    Returns :class:`RefineResult`; raises :class:`InputError` (exit 2) for invalid input and
+    :class:`ProcessingError` (exit 1) when the refinement fails (no convergence, rank deficiency).
+    """
+    opt = options or RefineOptions()
+    ref = prepare(table, initial, stations, opt, eop, source)
+    # the pass's noise model (REML) and transmitter drift first, then the gates on that solution
+    ref, sol, kkt, scale = solve_noise(table, initial, ref, stations, eop, source)
+    ref, sol, kkt, scale, adaptation, improvement, refusal = solve_gated(ref, first=(sol, kkt, scale))
+    # the solution epoch is the refined orbit's own traverse point: re-solve there until it stays
+    moves = []
+    for _ in range(MAX_TRAVERSE_ITERATIONS if refusal is None else 0):
+        t_model = model_traverse(ref, sol.values)
+        if t_model is None or abs(t_model) <= TRAVERSE_TOLERANCE_S:
+            break
+        epoch = ref.problem.epoch + np.timedelta64(int(round(t_model * 1e9)), "ns")
+        try:
+            # the same transmitter model (a drift the pass wanted) and a noise model refitted there
+            bias = "offset+drift" if any(n.startswith("doppler_drift") for n in ref.names) else opt.doppler_bias
+            moved = prepare(table, initial, stations, replace(opt, traverse_epoch=epoch, doppler_bias=bias), eop,
+                            source, curve=ref.curve)
+            moved.warnings[:] = list(ref.warnings)
+            moved = with_noise_of(moved, ref)
+            first = solve_weighted(moved)
+            factor = adaptation["factor"] if adaptation else 1.0
+            moved_out = solve_gated(moved, factor, first=tuple(first) if factor == 1.0 else None)
+        except ProcessingError:
+            break                                        # the quality reports the mismatch left
+        moves.append(float(t_model))
+        ref, sol, kkt, scale, adaptation, improvement, refusal = moved_out
+        if refusal is not None:
+            break
+    consistency = None
+    if ref.options.circular:
+        # the same assembled problem without the constraints and r_ka (always the last parameter)
+        free = replace(ref, options=replace(ref.options, circular=False), names=ref.names[:-1], x0=ref.x0[:-1],
+                       scales=ref.scales[:-1])
+        consistency = circular_consistency(free, sol, scale)
+    return finish(ref, sol, kkt, scale, consistency=consistency, adaptation=adaptation, traverse_moves=moves,
+                  improvement=improvement, refusal=refusal)

@@ -1,0 +1,131 @@
+"""The refined orbit at the pass: its highest elevation, its range-rate by the pass's link, the
+time where that range-rate vanishes (the orbit's own traverse point) and its eccentricity; and
+:func:`traverse_station`, which places a station so that a given state is the traverse point of
+a visible pass (the seed 004 Table 1 scenario).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+import numpy as np
+from scipy.optimize import brentq
+
+from trackproc.dynamics import frames, geodesy, propagator
+from trackproc.dynamics import measurement_spectra as ms
+from trackproc.dynamics import timescales as ts
+from trackproc.errors import ProcessingError
+from trackproc.io.stations import Station
+from trackproc.methods.refinement import range_rate_samples
+from trackproc.models import observation as ob
+from trackproc.pipeline.refine.problem import Refinement, link_mode
+
+
+def max_elevation_deg(ref: Refinement, x) -> Optional[float]:
+    """Highest elevation (deg) of the refined orbit at the pass's sample times."""
+    t = ref.problem.meas.t_s
+    try:
+        traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [float(t.min()) - 1.0, float(t.max())],
+                                    force=ref.options.force, frame=ref.problem.frame,
+                                    eop=ref.problem.eop).raise_for_outcome()
+        el = ms.predict(traj, ref.station_model, t, partials=False).elevation_rad
+        return float(np.degrees(el.max()))
+    except (ArithmeticError, ValueError, ProcessingError):
+        return None
+
+
+def link_range_rate(ref: Refinement, traj, t_s) -> np.ndarray:
+    """The orbit's range-rate (m/s) at reception times ``t_s`` (s from the traverse epoch) by the
+    pass's link: one-way from the DT spectra, two-way by the round trip (mean of both legs,
+    :mod:`trackproc.models.observation` eqs. 7-9, on the same samples as the integral cost's
+    :class:`~trackproc.methods.refinement.IntegralModel`), with the problem's range-rate model.
+    ``traj`` carries its STM (the round trip's :func:`~trackproc.models.observation.evaluate`)."""
+    t = np.atleast_1d(np.asarray(t_s, float))
+    model = ref.problem.range_rate_model
+    if link_mode(ref) == "one-way":
+        return ms.predict(traj, ref.station_model, t, range_rate_model=model, partials=False).range_rate_m_s
+    meas = range_rate_samples(ref.problem.epoch, ref.station_model.r_itrf_m, t, "two-way", ref.problem.eop)
+    return ob.evaluate(meas, traj, n_columns=6, range_rate_model=model)[0]
+
+
+def model_traverse(ref: Refinement, x) -> Optional[float]:
+    """Seconds from the traverse epoch where the refined orbit's range-rate (by the pass's link,
+    one- or two-way) vanishes (None if not within ±60 s)."""
+    try:
+        traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [-62.0, 62.0], force=ref.options.force,
+                                    stm=link_mode(ref) == "two-way", frame=ref.problem.frame,
+                                    eop=ref.problem.eop).raise_for_outcome()
+        t = np.linspace(-60.0, 60.0, 241)
+        rr = link_range_rate(ref, traj, t)
+        k = np.flatnonzero((rr[:-1] < 0) & (rr[1:] >= 0))
+        if k.size == 0:
+            return None
+        i = int(k[np.argmin(np.abs(t[k]))])
+        a, b = t[i], t[i + 1]
+        fa, fb = rr[i], rr[i + 1]
+        for _ in range(30):
+            m = a - fa * (b - a) / (fb - fa)
+            fm = float(link_range_rate(ref, traj, np.array([m]))[0])
+            if abs(fm) < 1e-9 or b - a < 1e-7:
+                return float(m)
+            if fm < 0:
+                a, fa = m, fm
+            else:
+                b, fb = m, fm
+        return float(m)
+    except (ArithmeticError, ValueError, ProcessingError):
+        return None
+
+
+def eccentricity(r, v, mu) -> float:
+    r = np.asarray(r, float)
+    v = np.asarray(v, float)
+    e = ((v @ v - mu / np.linalg.norm(r)) * r - (r @ v) * v) / mu
+    return float(np.linalg.norm(e))
+
+
+def traverse_station(state, *, cross_track_m: float = 600e3, side: str = "left", height_m: float = 0.0,
+                     name: str = "TRV", eop=None, earth: str = "wgs84", force: str = "j2",
+                     range_rate_model: str = "doppler"):
+    """A station for which ``state`` (GCRF, at its epoch) is the traverse point of a visible pass.
+
+    The station is placed ``cross_track_m`` from the sub-satellite point at the epoch, to the
+    ``side`` (``"left"``/``"right"``) of the ground track (perpendicular to the satellite's
+    Earth-fixed velocity), then moved along the track until the one-way range-rate received at
+    the epoch (light time, station motion, ``range_rate_model``) is zero to 1 µm/s. Returns
+    ``(Station, info)`` with the elevation and range at the epoch (the top of the pass).
+    """
+    jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(np.datetime64(state.epoch, "ns")))
+    r_itrf, v_itrf = frames.gcrf_to_itrf(state.r_m, state.v_m_s, *jd, eop)
+    r_itrf, v_itrf = r_itrf.reshape(3), v_itrf.reshape(3)
+    up = r_itrf / np.linalg.norm(r_itrf)
+    track = v_itrf - up * (up @ v_itrf)
+    track /= np.linalg.norm(track)
+    left = np.cross(up, track)
+    cross = left if side == "left" else -left
+    traj = propagator.propagate(state.r_m, state.v_m_s, state.epoch, [-2.0, 2.0], force=force, eop=eop)
+    radius = 6371e3
+
+    def site(s):
+        n = up + (cross_track_m / radius) * cross + (s / radius) * track
+        n /= np.linalg.norm(n)
+        lat, lon, _ = geodesy.itrf_to_geodetic(n * radius, earth)
+        return float(lat), float(lon)
+
+    def rate(s):
+        lat, lon = site(s)
+        r_st_itrf = geodesy.geodetic_to_itrf(lat, lon, height_m, earth)
+        trk = geodesy.station_gcrf(r_st_itrf, np.array([jd[0]]), np.array([jd[1]]), eop)
+        geo = ob.solve_light_time(traj, np.array([0.0]), trk.r)
+        return float(ob.range_rate_value(geo.state[:, :3], geo.state[:, 3:], trk.r, trk.v, range_rate_model)[0])
+
+    s = brentq(rate, -400e3, 400e3, xtol=1e-6, rtol=1e-15)
+    lat, lon = site(s)
+    r_st_itrf = geodesy.geodetic_to_itrf(lat, lon, height_m, earth)
+    enu = geodesy.itrf_to_enu(r_itrf, r_st_itrf, lat, lon)
+    az, el, rng = geodesy.enu_to_azel(enu)
+    station = Station(name, math.degrees(lat), math.degrees(lon) if lon >= -math.pi else math.degrees(lon) + 360.0,
+                      float(height_m))
+    return station, {"elevation_deg": float(np.degrees(el)), "range_m": float(rng),
+                     "azimuth_deg": float(np.degrees(az)), "along_track_shift_m": float(s), "range_rate_m_s": rate(s)}
