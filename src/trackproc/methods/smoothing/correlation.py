@@ -1,0 +1,69 @@
+"""The AR(1) noise of a pass's residuals (:func:`estimate_noise`): the method of moments corrected
+for the fit's own projection (see :mod:`trackproc.methods.smoothing`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import brentq
+
+from trackproc.methods.smoothing.fit import (MAX_RHO, NoiseModel, check_arrays, design_matrix, ou_apply, pass_domain,
+                                             replace_fit)
+
+
+#: An AR(1) estimate within this many standard errors (1 / sqrt(n - p)) of white noise is white.
+RHO_SIGNIFICANCE = 2.0
+
+
+def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", domain_s=None) -> NoiseModel:
+    """AR(1) correlation of the normalized noise from the residuals of a white-noise fit of ``degree``.
+
+    Method of moments corrected for the projection of the fit: with ``z = M u`` the normalized
+    residuals (``M = I - Q Q^T``, ``Q`` an orthonormal basis of the whitened design matrix) and
+    ``u`` unit-variance noise of correlation ``C(rho)`` (``rho^(|t_i - t_j| / step)``), the observed
+    ``c = sum z_i z_(i-1) / sum z_i^2`` is solved for ``rho`` from
+    ``E[sum z_i z_(i-1)] / E[sum z_i^2] = tr(L M C M) / tr(M C M)``; both traces cost O(n p) because
+    ``C`` is Markov (:func:`ou_apply`). ``step`` is the median sample spacing. An estimate within
+    ``RHO_SIGNIFICANCE`` standard errors (``1 / sqrt(n - p)``) of white gives ``rho = 0``.
+    """
+    t, y, s = check_arrays(t_s, y, sigma)
+    domain = pass_domain(t, domain_s)
+    order = np.argsort(t, kind="stable")
+    t, y, s = t[order], y[order], s[order]
+    n, p = t.size, int(degree) + 1
+    steps = np.diff(t)
+    positive = steps[steps > 0]
+    step = float(np.median(positive)) if positive.size else 1.0
+    if n - p < 4:
+        return NoiseModel(step_s=step, degree=int(degree), n_eff=float(n))
+    a = design_matrix(t, int(degree), domain, basis) / s[:, None]
+    q, _ = np.linalg.qr(a)
+    yw = y / s
+    z = yw - q @ (q.T @ yw)
+    den = float(z @ z)
+    if not den > 0:
+        return NoiseModel(step_s=step, degree=int(degree), n_eff=float(n))
+    c_obs = float(z[1:] @ z[:-1]) / den
+    lag1 = c_obs
+
+    def expected(rho: float) -> float:
+        model = NoiseModel(rho=rho, step_s=step)
+        acorr = model.neighbour_correlation(t)
+        w = ou_apply(acorr, q)
+        g = q.T @ w
+        tr_mcm = n - float(np.sum(q * w))
+        lag = (float(np.sum(acorr)) - float(np.sum(q[1:] * w[:-1])) - float(np.sum(w[1:] * q[:-1]))
+               + float(np.sum((q[1:] @ g) * q[:-1])))
+        return lag / tr_mcm
+
+    e0 = expected(0.0)
+    if c_obs <= e0:
+        rho_hat = 0.0
+    elif c_obs >= expected(MAX_RHO):
+        rho_hat = MAX_RHO
+    else:
+        rho_hat = float(brentq(lambda r: expected(r) - c_obs, 0.0, MAX_RHO, xtol=1e-6))
+    significant = (c_obs - e0) > RHO_SIGNIFICANCE / np.sqrt(n - p)
+    rho = rho_hat if significant else 0.0
+    model = NoiseModel(rho=rho, step_s=step, rho_estimate=rho_hat, lag1_observed=lag1, degree=int(degree))
+    return replace_fit(model, n_eff=model.effective_samples(t))
