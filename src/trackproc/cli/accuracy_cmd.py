@@ -147,10 +147,10 @@ def accuracy_command(
         AccuracyOptions,
         accuracy,
         correlation_bytes,
-        plot_bytes,
         require_matplotlib,
         table_bytes,
     )
+    from trackproc.report.accuracy_plots import plot_bytes
 
     if plot is not None:
         require_matplotlib()
@@ -219,9 +219,9 @@ def _seed_example(span, step, sigma_position_m, sigma_velocity_m_s, radius_m, di
         SeedExampleOptions,
         require_matplotlib,
         seed_example,
-        seed_example_plot_bytes,
         table_bytes,
     )
+    from trackproc.report.accuracy_plots import seed_example_plot_bytes
 
     if plot is not None:
         require_matplotlib()
