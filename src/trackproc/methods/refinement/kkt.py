@@ -1,0 +1,154 @@
+"""Gauss-Newton with equality constraints, the KKT system by the null-space method (seed 004 eqs. 15-17).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+
+from trackproc.errors import ProcessingError
+
+from trackproc.methods.least_squares import Options, Problem, Solution, combination_text, iterate, whitened_svd
+
+
+#: Feasibility reached by the restoration steps (relative to each constraint's scale).
+FEASIBILITY_RTOL = 1e-14
+MAX_RESTORE = 30
+
+
+@dataclass
+class KKTResult:
+    """A solution under equality constraints (:func:`solve_kkt`).
+
+    ``solution`` (a :class:`~trackproc.methods.least_squares.Solution`; its covariance is the
+    constrained one, singular across the constraint surface), ``multipliers`` λ of
+    ``L = χ² + λᵀ f`` (seed 004 eq. 16; units: cost per unit of each constraint),
+    ``constraints`` f at the solution, ``relative`` f divided by :func:`constraint_scales`,
+    ``stationarity`` the free Gauss-Newton step left at the solution, in formal sigmas (0 at a
+    KKT point: ``∇χ² + Aᵀλ = 0``),
+    ``restorations`` minimum-norm Newton steps taken to stay feasible, ``sensitivity`` (n, m)
+    ``dx̂/dε``: how the solution moves if the constraints were ``f = ε`` instead of 0 (for the
+    covariance of a constraint that holds only approximately, :func:`constraint_error_covariance`).
+    """
+
+    solution: Solution
+    multipliers: np.ndarray
+    constraints: np.ndarray
+    relative: np.ndarray
+    stationarity: float
+    restorations: int = 0
+    null_space_dim: int = 0
+    sensitivity: Optional[np.ndarray] = None
+
+
+def null_space(a_scaled):
+    """``Y`` (n, m), ``Z`` (n, n - m), ``R`` (m, m) with ``A_sᵀ = Y R`` (QR of the constraint Jacobian)."""
+    m = a_scaled.shape[0]
+    q, r = np.linalg.qr(a_scaled.T, mode="complete")
+    rr = r[:m, :m]
+    if np.any(np.abs(np.diag(rr)) <= 1e-13 * max(np.abs(np.diag(rr)).max(), 1e-300)):
+        raise ProcessingError("the constraints are degenerate at this point (their Jacobian is rank deficient)")
+    return q[:, :m], q[:, m:], rr
+
+
+def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: Sequence[str],
+              constraints: Callable[[np.ndarray], tuple], constraint_scale: Callable[[np.ndarray], np.ndarray],
+              scales=None, priors=(), periodic=None, options: Options | None = None, retract=None) -> KKTResult:
+    """Minimise ``Σ ((y - h(x))/σ)² + prior terms`` subject to ``f(x) = 0`` (seed 004 eqs. 15-17).
+
+    Gauss-Newton on the KKT system of each linearised step, solved by the null-space method
+    (module docstring); every iterate is restored onto ``f = 0`` by minimum-norm Newton steps;
+    Levenberg-Marquardt damping of the free step; the k-sigma editing, stopping rules and failure
+    reports are those of :func:`trackproc.methods.least_squares.solve` (the same problem and iterations).
+
+    ``constraints(x) -> (f (m,), A (m, n))``; ``constraint_scale(x) -> (m,)`` positive scales
+    making ``f`` relative (feasible when every ``|f| / scale < 1e-14``); ``retract`` as in
+    :func:`~trackproc.methods.least_squares.solve` (applied before the restoration).
+    Raises :class:`ProcessingError` on failure.
+    """
+    opt = options or Options()
+    x = np.asarray(x0, float).copy()
+    n = x.size
+    names = list(names)
+    prob = Problem(model, n, observed, sigma, scales=scales, priors=priors, periodic=periodic, clip=opt.clip)
+    scales = prob.scales
+    restorations = 0
+
+    def restore(xv):
+        nonlocal restorations
+        for _ in range(MAX_RESTORE):
+            f, a = constraints(xv)
+            if np.all(np.abs(f) <= FEASIBILITY_RTOL * constraint_scale(xv)):
+                return xv
+            step = np.linalg.lstsq(a * scales[None, :], -f, rcond=None)[0]
+            xv = xv + scales * step
+            restorations += 1
+        f, _ = constraints(xv)
+        rel = np.abs(f) / constraint_scale(xv)
+        if np.all(rel < 1e-10):
+            return xv
+        raise ArithmeticError(f"cannot satisfy the constraints (relative residual {rel.max():.3g})")
+
+    def reduced(jac, r, xv, mask, it):
+        f, ac = constraints(xv)
+        yb, zb, rr = null_space(ac * scales[None, :])
+        p = -np.linalg.solve(rr.T, f)
+        a, b = prob.system(jac, r, xv, mask, it)
+        ub, s, vt = whitened_svd(a @ zb, b - a @ (yb @ p))
+        if s.size < zb.shape[1] or s[-1] <= opt.rank_rtol * s[0]:
+            weak = combination_text(zb @ vt[-1], names) if s.size else ""
+            raise ProcessingError(
+                f"rank-deficient problem under the constraints (condition number "
+                f"{s[0] / s[-1] if s.size and s[-1] > 0 else math.inf:.3g}); unobservable combination of the "
+                f"scaled parameters: {weak}", {"iteration": it, "singular_values": s.tolist()})
+        return yb, zb, rr, p, ub, s, vt
+
+    def linearise(jac, r, xv, mask, it):
+        yb, zb, _, p, ub, s, vt = reduced(jac, r, xv, mask, it)
+        return ub, s, vt, lambda q: yb @ p + zb @ q                 # δ = Y p + Z q
+
+    def trial(xv, xi):
+        try:
+            return restore(prob.step(xv, xi, retract))
+        except (ArithmeticError, ProcessingError, ValueError):
+            return None
+
+    def check_counts(mask):
+        if int((~mask).sum()) + prob.n_prior < n - 3:
+            raise ProcessingError(f"too few measurements: {int((~mask).sum())} kept for {n} parameters")
+
+    x, h, jac = prob.start(x, prepare=restore)
+    if not np.all(np.isfinite(h)):
+        raise ProcessingError("the model gives non-finite values at the initial values")
+    r = prob.residuals(h)
+    mask = prob.edit(r, np.zeros(prob.nobs, bool))
+    run = iterate(prob, opt, x, h, jac, r, mask, stable=not mask.any(), linearise=linearise, trial=trial,
+                   check=check_counts, tag=" (constrained)")
+    if not run.converged:
+        history = run.history
+        raise ProcessingError(
+            f"did not converge in {opt.max_iterations} iterations under the constraints (cost {history[-2]:.6g} -> "
+            f"{history[-1]:.6g}); try --max-iterations, a better --initial state, or drop --circular",
+            {"iterations": run.iterations, "cost_history": history})
+
+    # covariance, multipliers and stationarity at the solution
+    x = run.x
+    yb, zb, rr, _, ub, s, vt = reduced(run.jac, run.r, x, run.mask, run.iterations)
+    inner = (vt.T / s ** 2) @ vt
+    f, ac = constraints(x)
+    sol = prob.solution(names, run, zb @ inner @ zb.T, s, free=n - f.size, constrained=True)
+    a, b = prob.system(run.jac, run.r, x, run.mask, run.iterations)
+    grad = -2.0 * a.T @ b                                    # ∇χ² in the scaled parameters
+    lam = np.linalg.lstsq((ac * scales[None, :]).T, -grad, rcond=None)[0]
+    # stationarity: the free Gauss-Newton step left at the solution, in formal sigmas
+    sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))
+    stationarity = float(np.max(np.abs(vt.T @ (ub / s)) / sig_q))
+    # dξ/dε: the constraint step Y R⁻ᵀ δε, minus the free directions' readjustment
+    a_y = yb @ np.linalg.inv(rr.T)
+    sens = a_y - zb @ (inner @ (zb.T @ (a.T @ (a @ a_y))))
+    return KKTResult(solution=sol, multipliers=lam, constraints=f, relative=f / constraint_scale(x),
+                     stationarity=stationarity, restorations=restorations, null_space_dim=int(zb.shape[1]),
+                     sensitivity=sens * scales[:, None])
