@@ -1,5 +1,5 @@
 """The layer contract of pyproject.toml ([tool.importlinter]), checked by import-linter on every
-``python -m pytest`` run: cli -> pipeline -> io -> methods -> models -> dynamics -> constants, errors;
+``python -m pytest`` run: cli -> report -> pipeline -> io -> types -> methods -> models -> dynamics -> constants, errors;
 a module may import only from the layers below its own."""
 
 from __future__ import annotations

@@ -32,7 +32,6 @@ from __future__ import annotations
 import csv
 import io
 import json
-from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -43,6 +42,7 @@ from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
 from trackproc.isotime import iso_utc_array
 from trackproc.io.raw import KIND_UNITS
+from trackproc.types.passes import PassTable  # noqa: F401  (re-exported)
 from trackproc.io.tabular import (META_KEY, csv_metadata_line, Problems, column_numbers, column_strings,
                                   column_times, source_table)
 
@@ -55,22 +55,6 @@ SIGN_CONVENTION = (
     "one-way: range_rate = -c*doppler/carrier_hz, two-way: range_rate = -c*doppler/(2*carrier_hz) "
     "(first order)"
 )
-
-
-@dataclass
-class PassTable:
-    """Canonical samples (``frame``, columns :data:`COLUMNS` first) and file metadata (``meta``)."""
-
-    frame: pd.DataFrame
-    meta: dict = field(default_factory=dict)
-
-    def stations(self) -> dict:
-        """Stations recorded at ingest, name -> :class:`trackproc.io.stations.Station`."""
-        from trackproc.io.stations import Station
-
-        source = str(self.meta.get("source") or "<pass file>")
-        return {name: Station.from_meta(name, values, source)
-                for name, values in (self.meta.get("stations") or {}).items()}
 
 
 def base_meta(**extra) -> dict:

@@ -28,7 +28,6 @@ Units: metres, m/s; the covariance in the units of the parameters (m², m²/s, m
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -37,10 +36,11 @@ from trackproc.io.jsonutil import json_ready
 from trackproc.errors import InputError
 from trackproc.isotime import iso_utc as format_epoch  # noqa: F401  (the state file's epoch text)
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
-from trackproc.io.validate import check_iso_year, check_orbit_state
+from trackproc.io.validate import check_orbit_state
+from trackproc.types.epoch import parse_epoch  # noqa: F401  (re-exported)
+from trackproc.types.state import STATE_PARAMETERS, State  # noqa: F401  (re-exported)
 
 SCHEMA_VERSION = 1
-STATE_PARAMETERS = ("x", "y", "z", "vx", "vy", "vz")
 #: Frames accepted on read (aliases map to these), converted to GCRF.
 FRAMES = ("GCRF", "EME2000", "J2000", "TEME", "ITRF")
 #: File label of each force model key (the CLI's ``--force`` values).
@@ -55,92 +55,7 @@ _SYMMETRY_RTOL = 1e-9
 _PSD_RTOL = 1e-10
 
 
-@dataclass
-class State:
-    """An orbit state at an epoch, in GCRF, with optional extended parameters and covariance.
-
-    ``epoch`` is UTC ``datetime64[ns]``; ``jd_utc`` the same instant as a two-part UTC Julian
-    date (ERFA convention). ``r_m`` (3,) and ``v_m_s`` (3,) are GCRF. ``parameters`` names
-    the estimated parameters in order (the six state components first, as
-    :data:`STATE_PARAMETERS`, when present); ``values``, ``sigma`` and ``covariance``
-    (n × n, rows/columns following ``parameters``) may be None. ``force_model`` is a
-    ``--force`` key (``"two-body"``, ``"j2"``) or, for a file from elsewhere, its own label;
-    ``constants`` the constants it used; ``eop_source`` the Earth-orientation input;
-    ``diagnostics`` the solution's diagnostics; ``extra`` any other top-level keys.
-    """
-
-    epoch: np.datetime64
-    jd_utc: tuple
-    r_m: np.ndarray
-    v_m_s: np.ndarray
-    parameters: list = field(default_factory=lambda: list(STATE_PARAMETERS))
-    values: Optional[np.ndarray] = None
-    sigma: Optional[np.ndarray] = None
-    covariance: Optional[np.ndarray] = None
-    force_model: Optional[str] = None
-    constants: dict = field(default_factory=dict)
-    eop_source: Optional[str] = None
-    diagnostics: dict = field(default_factory=dict)
-    extra: dict = field(default_factory=dict)
-    source: Optional[str] = None
-
-    @classmethod
-    def from_vectors(cls, epoch, r_m, v_m_s, **kwargs) -> "State":
-        """A GCRF state at a UTC epoch (``datetime64``, or ISO 8601 text)."""
-        from trackproc.dynamics.timescales import datetime64_to_jd_utc
-
-        t = parse_epoch(epoch) if isinstance(epoch, str) else np.datetime64(epoch, "ns")
-        jd1, jd2 = datetime64_to_jd_utc(t)
-        return cls(epoch=t, jd_utc=(float(jd1), float(jd2)), r_m=np.asarray(r_m, float).reshape(3).copy(),
-                   v_m_s=np.asarray(v_m_s, float).reshape(3).copy(), **kwargs)
-
-    @property
-    def rv(self) -> np.ndarray:
-        """Position and velocity as one (6,) vector (m, m/s)."""
-        return np.concatenate([self.r_m, self.v_m_s])
-
-    @property
-    def state_covariance(self) -> Optional[np.ndarray]:
-        """The 6 × 6 covariance of position and velocity, when the parameters include them."""
-        if self.covariance is None:
-            return None
-        index = [self.parameters.index(p) for p in STATE_PARAMETERS if p in self.parameters]
-        if len(index) != 6:
-            return None
-        return self.covariance[np.ix_(index, index)]
-
-
 # --------------------------------------------------------------------------- epochs
-
-def parse_epoch(text: str, *, file: str | None = None, column: str = "epoch") -> np.datetime64:
-    """ISO 8601 UTC text -> ``datetime64[ns]``. ``Z``, ``+00:00`` or any other offset (converted
-    to UTC) are accepted; no offset means UTC. Leap seconds (``23:59:60``) cannot be held."""
-    expected = "an ISO 8601 UTC time such as 2026-03-20T09:30:00.000Z"
-    if not isinstance(text, str) or not text.strip():
-        raise InputError("invalid epoch", file=file, column=column, found=text, expected=expected)
-    s = text.strip().replace(" ", "T", 1) if "T" not in text else text.strip()
-    offset_s = 0
-    if s.endswith(("Z", "z")):
-        s = s[:-1]
-    else:
-        tail = s[-6:]
-        if len(s) > 16 and tail[0] in "+-" and tail[3] == ":" and tail[1:3].isdigit() and tail[4:].isdigit():
-            sign = 1 if tail[0] == "+" else -1
-            offset_s = sign * (int(tail[1:3]) * 3600 + int(tail[4:]) * 60)
-            s = s[:-6]
-    if ":60" in s[13:19]:
-        raise InputError("leap-second epoch (23:59:60) cannot be represented", file=file, column=column,
-                         found=text, expected="an epoch outside the leap second")
-    if len(s) < 10 or not s[:4].isdigit() or s[4] != "-":
-        raise InputError("invalid epoch", file=file, column=column, found=text, expected=expected)
-    check_iso_year(s, file=file, column=column)
-    try:
-        t = np.datetime64(s, "ns")
-    except ValueError:
-        raise InputError("invalid epoch", file=file, column=column, found=text, expected=expected) from None
-    if np.isnat(t):
-        raise InputError("invalid epoch", file=file, column=column, found=text, expected=expected)
-    return t - np.timedelta64(offset_s, "s")
 
 
 # --------------------------------------------------------------------------- reading
