@@ -30,7 +30,17 @@ import pandas as pd
 from trackproc import vocabulary
 from trackproc.constants import C_LIGHT, force_model_constants
 from trackproc.errors import InputError, ProcessingError
+from trackproc import __version__
+from trackproc.dynamics import geodesy, propagator
+from trackproc.dynamics import measurement_spectra as ms
+from trackproc.dynamics import timescales as ts
+from trackproc.io.ephemeris import (COV_COLUMNS, SCHEMA_VERSION, SIGMA_COLUMNS, STM_COLUMNS, Ephemeris,
+                                    international_designator)
+from trackproc.io.passfile import SIGN_CONVENTION
+from trackproc.io.statefile import FORCE_LABELS
+from trackproc.io.tle import tle_epoch
 from trackproc.isotime import iso_utc
+from trackproc.pipeline.orbit_source import SGP4_LABEL, OrbitInput, Satellite, observe, sgp4_states
 
 DEG = np.pi / 180.0
 #: Below this geocentric distance (m) the orbit is taken to have entered the Earth.
@@ -163,10 +173,6 @@ def propagate_tle(tle, options: PropagateOptions, eop=None) -> PropagateResult:
     (:func:`trackproc.pipeline.orbit_source.observe`). No STM or covariance: SGP4 is not
     integrated here. ``trajectory`` of the result is None.
     """
-    from trackproc.io.ephemeris import Ephemeris
-    from trackproc.io.tle import tle_epoch
-    from trackproc.pipeline.orbit_source import OrbitInput, Satellite, observe, sgp4_states
-
     _check_options(options)
     if options.stm:
         raise InputError("SGP4 has no state transition matrix here", column="--stm",
@@ -174,8 +180,6 @@ def propagate_tle(tle, options: PropagateOptions, eop=None) -> PropagateResult:
     times = requested_times(options, tle_epoch(tle))
     states = sgp4_states(tle, times, eop)
     columns = state_columns(states, times)
-    from trackproc.dynamics import timescales as ts
-
     sat = Satellite(OrbitInput(tle=tle, source=tle.source), "sgp4", times[0], 0.0, 0.0, eop)
     t_s = np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(times), sat.jd0), float)
     prediction = None
@@ -204,16 +208,6 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
     :class:`~trackproc.errors.ProcessingError` when the propagation stops early, the orbit
     enters the Earth, or (``visible_only``) no sample is above the mask.
     """
-    from trackproc.dynamics import measurement_spectra as ms
-    from trackproc.dynamics import propagator
-    from trackproc.dynamics import timescales as ts
-    from trackproc.io.ephemeris import (
-        COV_COLUMNS,
-        SIGMA_COLUMNS,
-        STM_COLUMNS,
-        Ephemeris,
-    )
-
     _check_options(options)
     if options.force == "sgp4":
         raise InputError("SGP4 needs a TLE", column="--force", found="sgp4",
@@ -249,8 +243,6 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
 
     prediction = None
     if options.station is not None:
-        from trackproc.dynamics import geodesy
-
         st = options.station
         lat, lon, r_itrf = geodesy.station_itrf(st, options.earth)
         model = ms.StationModel.build(r_itrf, lat, lon, traj.epoch_jd_utc, traj.frame.q, t_s.min(), t_s.max(),
@@ -285,11 +277,6 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
 
 
 def _meta(initial, options, traj, eop, has_cov, times, tle=None) -> dict:
-    from trackproc import __version__
-    from trackproc.io.ephemeris import SCHEMA_VERSION
-    from trackproc.io.passfile import SIGN_CONVENTION
-    from trackproc.io.statefile import FORCE_LABELS
-
     units = {"x_m": "m", "y_m": "m", "z_m": "m", "vx_m_s": "m/s", "vy_m_s": "m/s", "vz_m_s": "m/s"}
     meta = {
         "schema_version": SCHEMA_VERSION,
@@ -319,8 +306,6 @@ def _meta(initial, options, traj, eop, has_cov, times, tle=None) -> dict:
                                  f"({iso_utc(traj.epoch)}); J2 about that rotation axis",
         }
     if tle is not None:
-        from trackproc.pipeline.orbit_source import SGP4_LABEL
-
         meta["initial_state"] = {"tle": [tle.line1, tle.line2], "name": tle.name, "source": tle.source}
         meta["force_model"] = "SGP4"
         meta["constants"] = {"model": "WGS-72 (SGP4's own)"}
@@ -368,8 +353,6 @@ def _meta(initial, options, traj, eop, has_cov, times, tle=None) -> dict:
 def oem_identity(initial, object_name: Optional[str] = None, object_id: Optional[str] = None) -> tuple[str, str]:
     """OBJECT_NAME and OBJECT_ID for an OEM: the options, else the TLE's name and international
     designator, else UNKNOWN."""
-    from trackproc.io.ephemeris import international_designator
-
     tle = initial.extra.get("tle") if isinstance(initial.extra, dict) else None
     name = object_name or (initial.extra.get("tle_name") if isinstance(initial.extra, dict) else None) or "UNKNOWN"
     ident = object_id or (international_designator(tle[0]) if tle else None) or "UNKNOWN"
