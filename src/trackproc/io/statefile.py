@@ -33,6 +33,10 @@ from typing import Optional
 import numpy as np
 
 from trackproc.io.jsonutil import json_ready
+from trackproc.constants import MU_EARTH, force_model_constants
+from trackproc.dynamics import frames
+from trackproc.dynamics.kepler import classical_elements
+from trackproc.dynamics.timescales import datetime64_to_jd_utc
 from trackproc.errors import InputError
 from trackproc.isotime import iso_utc as format_epoch  # noqa: F401  (the state file's epoch text)
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
@@ -104,8 +108,6 @@ def force_key(label) -> Optional[str]:
 
 def parse_state(data: bytes | str, source: str = "<state>", eop=None) -> State:
     """The :class:`State` in the JSON text ``data``; see the module docstring."""
-    from trackproc.dynamics.timescales import datetime64_to_jd_utc
-
     file = source
     try:
         doc = json.loads(data)
@@ -272,8 +274,6 @@ def check_covariance(cov: np.ndarray, *, file: str | None = None, column: str = 
 
 def _frame_jacobian(frame: str, jd1: float, jd2: float, eop) -> np.ndarray:
     """6 × 6 matrix of the (linear) transform of (r, v) from ``frame`` to GCRF at a UTC date."""
-    from trackproc.dynamics import frames
-
     basis = np.eye(6)
     r_g, v_g = frames.to_gcrf(frame, basis[:, :3], basis[:, 3:], jd1, jd2, eop)
     return np.concatenate([r_g, v_g], axis=1).T
@@ -296,7 +296,7 @@ def parse_state_or_tle(data: bytes, source: str, eop=None, at=None) -> State:
     by SGP4 at its epoch or at ``at``: the one place that tells the two apart."""
     if data.lstrip()[:1] == b"{":
         return parse_state(data, source, eop)
-    from trackproc.io.tle import parse_tle, tle_state
+    from trackproc.io.tle import parse_tle, tle_state   # here: io.tle builds a State from this module
 
     return tle_state(parse_tle(data.decode("utf-8", errors="replace"), source), at=at, eop=eop)
 
@@ -305,9 +305,6 @@ def parse_state_or_tle(data: bytes, source: str, eop=None, at=None) -> State:
 
 def orbital_elements(state: State) -> dict:
     """Osculating classical elements of the state, for people (degrees); derived, never read back."""
-    from trackproc.constants import MU_EARTH
-    from trackproc.dynamics.kepler import classical_elements
-
     mu = (state.constants or {}).get("mu_m3_s2", MU_EARTH)
     return classical_elements(state.r_m, state.v_m_s, mu)
 
@@ -318,8 +315,6 @@ def state_document(state: State, force: str | None = None, eop_source: str | Non
     ``force`` (a ``--force`` key) and ``eop_source`` override the state's own; the force
     model's constants come from :func:`trackproc.constants.force_model_constants`.
     """
-    from trackproc.constants import force_model_constants
-
     force = force if force is not None else state.force_model
     key = force_key(FORCE_LABELS.get(force, force)) if force is not None else None
     doc = {"schema_version": SCHEMA_VERSION, "epoch": format_epoch(state.epoch), "frame": "GCRF",

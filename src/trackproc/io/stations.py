@@ -12,6 +12,7 @@ import math
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
+from trackproc.io.tabular import parse_text_table
 from trackproc.io.validate import check_name, check_station
 from trackproc.types.station import Station  # noqa: F401  (re-exported)
 
@@ -28,8 +29,6 @@ _LIMITS = {
 
 def parse_stations(data: bytes, source: str) -> dict[str, Station]:
     """Stations by name from the bytes of a stations CSV (``source`` names it in errors)."""
-    from trackproc.io.tabular import parse_text_table
-
     table = parse_text_table(data, source)
     by_key = {name.lower(): name for name in table.columns}
     for column in REQUIRED:

@@ -12,7 +12,11 @@ mistakes (km for m, km/s for m/s, Hz for GHz) and corrupt values, never a real p
 from __future__ import annotations
 
 import math
+import os
 import re
+
+import numpy as np
+import pandas as pd
 
 from trackproc.constants import C_LIGHT, MU_EARTH
 from trackproc.errors import InputError
@@ -99,8 +103,6 @@ def check_los_speed(values, kind: str, *, carrier_hz: float | None = None, mode:
     """Range-rate or Doppler samples: the line-of-sight speed they imply must be one an Earth
     orbit allows (|range-rate| <= 12 km/s; issue 13 item 5). Range-rate: every sample; Doppler:
     the median sample of the file (see below)."""
-    import numpy as np
-
     values = np.asarray(values, dtype=float)
     if values.size == 0:
         return
@@ -156,8 +158,6 @@ def check_orbit_state(position_m, velocity_m_s, *, file: str | None = None, fiel
     """A geocentric state of something in Earth orbit (or on a ballistic arc above the surface):
     |r| between the polar radius and the Hill sphere, |v| below the escape speed at |r| and
     above a twentieth of the circular speed (a state in km or km/s fails here)."""
-    import numpy as np
-
     r = np.asarray(position_m, dtype=float).reshape(-1)
     v = np.asarray(velocity_m_s, dtype=float).reshape(-1)
     prefix = f"{field}." if field else ""
@@ -204,8 +204,6 @@ def check_rows(count, what: str, *, column: str) -> None:
 def check_distinct_files(paths, what: str) -> None:
     """The same input named twice (``estimate f f``, or a link to it) would count every sample
     twice and make every sigma sqrt(2) too small: an input error."""
-    import os
-
     seen: dict = {}
     for path in paths:
         if str(path) == "-":
@@ -225,8 +223,6 @@ def check_distinct_files(paths, what: str) -> None:
 def check_no_repeated_samples(frames) -> None:
     """The same sample (station, kind, time) in two inputs (a copy of a pass file): an input
     error naming both files. ``frames`` is a list of (source, DataFrame with station, kind, time)."""
-    import pandas as pd
-
     if len(frames) < 2:
         return
     parts = [pd.DataFrame({"station": f["station"].astype(str).to_numpy(), "kind": f["kind"].astype(str).to_numpy(),
@@ -262,8 +258,6 @@ DEFAULT_MAX_INPUT_ROWS = 2_000_000
 
 
 def max_input_rows() -> int:
-    import os
-
     text = os.environ.get("TRACKPROC_MAX_INPUT_ROWS", "")
     if not text:
         return DEFAULT_MAX_INPUT_ROWS
