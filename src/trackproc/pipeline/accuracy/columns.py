@@ -11,10 +11,12 @@ from trackproc import __version__
 from trackproc.constants import force_model_constants
 from trackproc.io.jsonutil import dumps
 from trackproc.io.passfile import iso_times
-from trackproc.io.statefile import FORCE_LABELS, STATE_PARAMETERS, format_epoch
+from trackproc.io.statefile import FORCE_LABELS
 from trackproc.io.time_table import table_bytes
+from trackproc.isotime import iso_utc
 from trackproc.methods import accuracy as ac
 from trackproc.pipeline.accuracy.options import COMPONENTS, PREFIX, RTN_COMPONENTS, RTN_CONVENTION, AccuracyResult
+from trackproc.types import STATE_PARAMETERS
 
 
 def _columns(prefix, cov, rtn, obs) -> dict:
@@ -99,7 +101,7 @@ def result_meta(state, options, traj, cov0, cov_label, checks, eop, track, mc) -
         "product": "trackproc accuracy",
         "time_scale": "UTC",
         "frame": "GCRF",
-        "epoch": format_epoch(state.epoch),
+        "epoch": iso_utc(state.epoch),
         "state_source": state.source,
         "span_s": float(options.span_s),
         "step_s": float(options.step_s),

@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 
 from trackproc.errors import InputError
-from trackproc.io.statefile import STATE_PARAMETERS
 from trackproc.methods import accuracy as ac
+from trackproc.types import STATE_PARAMETERS
 from trackproc.vocabulary import FORCES
 
 

@@ -12,9 +12,10 @@ import numpy as np
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
-from trackproc.io.statefile import format_epoch, parse_epoch
-from trackproc.io.validate import check_name
+from trackproc.isotime import iso_utc
 from trackproc.methods.ballistic import R_PLANAR
+from trackproc.types import parse_epoch
+from trackproc.types.checks import check_name
 from trackproc.vocabulary import EARTHS, FORCES
 
 
@@ -52,7 +53,7 @@ class Nominal:
 
     def describe(self) -> dict:
         """JSON-ready echo (angles in degrees, time ISO)."""
-        out = {"impact_time": format_epoch(self.impact_time), "model": self.model,
+        out = {"impact_time": iso_utc(self.impact_time), "model": self.model,
                "displacement_m": self.displacement_m, "direction": self.direction, "tau_s": self.tau_s}
         if self.velocity_m_s is not None:
             out.update(velocity_m_s=self.velocity_m_s, angle_deg=self.angle_rad / DEG)

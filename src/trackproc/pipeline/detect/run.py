@@ -11,7 +11,7 @@ from typing import Optional
 import numpy as np
 
 from trackproc.errors import InputError, ProcessingError
-from trackproc.io.statefile import format_epoch
+from trackproc.isotime import iso_utc
 from trackproc.methods import detection as dt
 
 from trackproc.pipeline.detect.geometry import (StationGeometry, flight_time_s, model_3d, planar_encounter,
@@ -90,15 +90,15 @@ def detect(table, nominal: Nominal, options: DetectOptions | None = None, *, sou
     dropped = int((~keep).sum())
     if not keep.any():
         raise InputError("no samples before impact_time - tau_s", file=source, column="time",
-                         found=f"{format_epoch(times.min())} .. {format_epoch(times.max())}",
-                         expected=f"samples before {format_epoch(nominal.impact_time)} minus {nominal.tau_s:g} s")
+                         found=f"{iso_utc(times.min())} .. {iso_utc(times.max())}",
+                         expected=f"samples before {iso_utc(nominal.impact_time)} minus {nominal.tau_s:g} s")
     flight = flight_time_s(nominal)
     early = keep & (s_all < -flight)
     if early.any():
         i = int(np.flatnonzero(early)[0])
         raise InputError(f"{int(early.sum())} samples before the launch of the nominal trajectory "
-                         f"(a flight of {flight:.1f} s ending at {format_epoch(nominal.impact_time)})",
-                         file=source, column="time", found=format_epoch(times[i]),
+                         f"(a flight of {flight:.1f} s ending at {iso_utc(nominal.impact_time)})",
+                         file=source, column="time", found=iso_utc(times[i]),
                          expected="samples of the flight (check impact_time in the nominal file and the pass)")
     rows = rows[keep]
     s = s_all[keep]
@@ -173,7 +173,7 @@ def detect(table, nominal: Nominal, options: DetectOptions | None = None, *, sou
         "uniform_sigma": stat.uniform_sigma,
         "samples": {
             "used": stat.n, "by_kind": by_kind, "not_used_after_T_minus_tau": dropped,
-            "first": format_epoch(times[keep].min()), "last": format_epoch(times[keep].max()),
+            "first": iso_utc(times[keep].min()), "last": iso_utc(times[keep].max()),
             "first_s_from_impact": float(s.min()), "last_s_from_impact": float(s.max()),
             "median_spacing_s": spacing,
         },

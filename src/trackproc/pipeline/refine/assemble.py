@@ -19,11 +19,11 @@ from trackproc.dynamics import measurement_spectra as ms
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io import smoothing_record
-from trackproc.io.passfile import PassTable
 from trackproc.io.tle import parse_tle, tle_state
 from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Prior
 from trackproc.pipeline.estimate import EstimateOptions, build_problem
+from trackproc.types import PassTable
 from trackproc.pipeline.refine.options import (COSTS, DEFAULT_APRIORI_ELEMENTS, DOPPLER_BIAS, NOISE_MODELS,
                                                RefineOptions, SmoothedCurve)
 from trackproc.pipeline.refine.problem import Refinement, default_apriori_covariance, is_tle_state, link_mode

@@ -16,10 +16,11 @@ from trackproc.dynamics import propagator
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.rtn import rtn_covariance, rtn_jacobian
 from trackproc.errors import ProcessingError
-from trackproc.io.statefile import State, format_epoch
+from trackproc.isotime import iso_utc
 from trackproc.methods import refinement as rf
 from trackproc.pipeline.estimate import UNITS, residual_frame
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, RefineResult
+from trackproc.types import State
 from trackproc.pipeline.refine.problem import (Refinement, default_apriori_covariance, link_mode,
                                                state_prior_covariance)
 from trackproc.pipeline.refine.quality import refine_quality
@@ -157,12 +158,12 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
 
     # traverse-point diagnostics
     t_model = model_traverse(ref, x)
-    traverse = {"epoch": format_epoch(problem.epoch), "definition": ref.traverse_how,
+    traverse = {"epoch": iso_utc(problem.epoch), "definition": ref.traverse_how,
                 "sigma_s": float(ref.curve.tca.sigma_s) if ref.curve.tca is not None else None,
                 "curve": ref.curve.source,
                 "refined_orbit_zero_range_rate_s": t_model,
                 "moved_s": list(traverse_moves or []),
-                "refined_orbit_zero_range_rate_utc": (format_epoch(problem.epoch + np.timedelta64(
+                "refined_orbit_zero_range_rate_utc": (iso_utc(problem.epoch + np.timedelta64(
                     int(round(t_model * 1e9)), "ns")) if t_model is not None else None)}
 
     # warnings
@@ -258,12 +259,12 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                                        "the linearised estimator (sandwich)",
                          "sigma_formal": sol.sigma.tolist()},
             "curve": {"degree": int(ref.curve.fit.degree), "basis": ref.curve.fit.basis, "source": ref.curve.source}})
-    stale_doc = {"epoch": format_epoch(ref.stale_epoch), "frame": "GCRF", "position_m": rv_s[:3].tolist(),
+    stale_doc = {"epoch": iso_utc(ref.stale_epoch), "frame": "GCRF", "position_m": rv_s[:3].tolist(),
                  "velocity_m_s": rv_s[3:].tolist(), "parameters": names, "values": np.r_[rv_s, x[6:]].tolist(),
                  "sigma": np.sqrt(np.clip(np.diag(cov_s), 0.0, None)).tolist(), "covariance": cov_s.tolist()}
     values = x.copy()
     extra = {"refinement": method, "at_stale_epoch": stale_doc,
-             "stale_state": {"epoch": format_epoch(ref.initial.epoch), "position_m": ref.initial.r_m.tolist(),
+             "stale_state": {"epoch": iso_utc(ref.initial.epoch), "position_m": ref.initial.r_m.tolist(),
                              "velocity_m_s": ref.initial.v_m_s.tolist(),
                              "source": ref.initial.source or (ref.initial.extra or {}).get("source")}}
     eop_source = getattr(problem.eop, "source", None) or "none (UT1-UTC = 0, no polar motion)"
@@ -276,7 +277,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                                      covariance=cov_s, force_model=opt.force,
                                      constants=force_model_constants(opt.force), eop_source=eop_source,
                                      diagnostics=diagnostics,
-                                     extra={"refinement": method, "at_traverse_epoch": format_epoch(problem.epoch),
+                                     extra={"refinement": method, "at_traverse_epoch": iso_utc(problem.epoch),
                                             "quality": quality.as_dict()})
     return RefineResult(state=state, stale_epoch_state=stale_state, solution=sol, problem=problem, curve=ref.curve,
                         residuals=residuals, observability=obs, constraints=constraints, covariance=cov, names=names,

@@ -9,13 +9,13 @@ from dataclasses import replace
 import numpy as np
 
 from trackproc.errors import ProcessingError
-from trackproc.io.passfile import PassTable
 from trackproc.pipeline.refine.assemble import prepare
 from trackproc.pipeline.refine.gates import circular_consistency, solve_gated, solve_weighted, with_noise_of
 from trackproc.pipeline.refine.noise import solve_noise
 from trackproc.pipeline.refine.options import MAX_TRAVERSE_ITERATIONS, TRAVERSE_TOLERANCE_S, RefineOptions, RefineResult
 from trackproc.pipeline.refine.result import finish
 from trackproc.pipeline.refine.traverse import model_traverse
+from trackproc.types import PassTable
 
 
 def refine(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,

@@ -10,10 +10,10 @@ import pandas as pd
 
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io import smoothing_record
-from trackproc.io.passfile import PassTable
 from trackproc.methods.smoothing import SmoothingError, closest_approach
 from trackproc.pipeline.refine.options import LINK_MODES, RANGE_RATE_KINDS, RefineOptions, SmoothedCurve
 from trackproc.pipeline.smooth import SmoothOptions, smooth
+from trackproc.types import PassTable
 
 
 def select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple[PassTable, str, str, str]:

@@ -16,10 +16,10 @@ from trackproc.dynamics import frames, geodesy, propagator
 from trackproc.dynamics import measurement_spectra as ms
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import ProcessingError
-from trackproc.io.stations import Station
 from trackproc.methods.refinement import range_rate_samples
 from trackproc.models import observation as ob
 from trackproc.pipeline.refine.problem import Refinement, link_mode
+from trackproc.types import Station
 
 
 def max_elevation_deg(ref: Refinement, x) -> Optional[float]:
