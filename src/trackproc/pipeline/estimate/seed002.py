@@ -21,7 +21,9 @@ def motion_columns(names):
 
 
 def compare(problem: Problem, sol) -> dict:
-    """Seed 002 eqs. 9, 15: solve without the ranges (and range biases), compare motion blocks."""
+    """Solve without the ranges (and range biases) and compare the motion blocks.
+
+    Implements seed 002 eqs. 9 and 15 (the theorem on the motion block of the extended error matrix)."""
 
     names = sol.names
     mcol = motion_columns(names)
@@ -80,7 +82,7 @@ def subproblem(problem: Problem, rows, keep_range_bias: bool) -> Problem:
 
 
 def two_stage(problem: Problem, sol, opt: EstimateOptions):
-    """Seed 002 eqs. 17-22: stage 1 per-pass offsets from the orbit without ranges, accumulated
+    """Implements seed 002 eqs. 17-22: stage 1 per-pass offsets from the orbit without ranges, accumulated
     per station (Π); stage 2 with the bias-corrected ranges (error matrix D + E Π Eᵀ)."""
     meas = problem.meas
     is_range = meas.kind == "range"
