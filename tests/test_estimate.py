@@ -288,13 +288,43 @@ def test_doppler_without_carrier_is_an_input_error():
     (EstimateOptions(apriori_sigma={"x": -1.0}), "--apriori-sigma"),
     (EstimateOptions(kinds=["phase"]), "--kinds"),
     (EstimateOptions(doppler_bias="offset", kinds=["range"]), "--doppler-bias"),
-    (EstimateOptions(apriori_initial=True), "covariance"),
 ])
 def test_invalid_options(options, column):
     sim = simulated()
     with pytest.raises(InputError) as caught:
         estimate(tables(sim), TRUTH, None, options, EOP)
     assert caught.value.column == column
+
+
+def test_apriori_initial_without_a_covariance_takes_refines_element_apriori():
+    """--apriori-initial on a state without covariance (a TLE): refine's documented element
+    a-priori (along-track loose, period tight), said in the estimation record; the prior is the
+    element covariance mapped to GCRF (its along-track sigma ~ a × 4e-4 rad, its semi-major-axis
+    sigma 50 m)."""
+    from trackproc.constants import MU_EARTH
+    from trackproc.dynamics.rtn import rtn_covariance
+    from trackproc.methods.refinement import element_covariance, nonsingular_elements
+
+    sim = simulated()
+    problem = build_problem(tables(sim), TRUTH, None, EstimateOptions(apriori_initial=True), EOP)
+    (prior,) = problem.priors
+    assert prior.index.tolist() == list(range(6))
+    rv = TRUTH.rv
+    a = nonsingular_elements(rv, MU_EARTH)[0]
+    along = np.sqrt(rtn_covariance(rv[:3], rv[3:], prior.covariance)[1, 1])
+    assert along == pytest.approx(a * 4e-4, rel=0.05)
+    # back to elements: the semi-major axis' sigma by a first-order map, independently of the forward one
+    jac = np.empty((6, 6))
+    for k in range(6):
+        d = np.zeros(6)
+        d[k] = 1e-3 if k < 3 else 1e-6
+        jac[:, k] = (nonsingular_elements(rv + d, MU_EARTH) - nonsingular_elements(rv - d, MU_EARTH)) / (2 * d[k])
+    sa = np.sqrt((jac @ prior.covariance @ jac.T)[0, 0])
+    assert sa == pytest.approx(50.0, rel=0.02)
+    np.testing.assert_allclose(prior.covariance, element_covariance(rv, MU_EARTH, [50, 5e-5, 5e-5, 1e-4, 1e-4, 4e-4]),
+                               rtol=1e-12)
+    res = estimate(tables(sim), TRUTH, None, EstimateOptions(apriori_initial=True), EOP)
+    assert "no covariance" in res.state.extra["estimation"]["apriori_default"]
 
 
 def test_stations_table_overrides_and_supplies_a_known_bias():
