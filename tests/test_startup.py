@@ -28,4 +28,4 @@ def test_values_still_validated_by_typer(capsys):
     err = capsys.readouterr().err
     assert "--circular-tolerance" in err and "greater than or equal to 0" in err
     assert main(["refine", "p.csv", "--initial", "s.json", "--max-iterations", "abc"]) == 2
-    assert "abc" in capsys.readouterr().err
+    assert "valid integer" in capsys.readouterr().err
