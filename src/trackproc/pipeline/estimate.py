@@ -557,9 +557,9 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         warnings.append(f"a-posteriori variance factor {sol.variance_factor:.3g} (> 4): the sigmas of the data "
                         "are too small or the model misses something; the covariance is optimistic")
     if sol.n_prior:
-        from scipy.stats import chi2 as chi2_dist
+        from scipy.special import gammaincinv  # chi-square quantile without scipy.stats (issue 19)
 
-        limit = float(chi2_dist.ppf(0.999, sol.n_prior))
+        limit = 2.0 * float(gammaincinv(sol.n_prior / 2.0, 0.999))
         if sol.chi2_prior > limit:
             warnings.append(f"the solution departs from the a-priori values by chi2 = {sol.chi2_prior:.4g} over "
                             f"{sol.n_prior} constraints (99.9 % limit {limit:.3g}): the data and the a-priori "

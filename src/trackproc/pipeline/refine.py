@@ -1059,7 +1059,7 @@ def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0
     (checked by Monte Carlo in the tests; with a fixed a-priori centre it is smaller on average,
     so the test errs towards silence). ``free`` is the same refinement without the constraints,
     solved here from the constrained solution with the same data sigmas."""
-    from scipy.stats import chi2 as chi2_dist
+    from scipy.special import chdtrc  # chi-square survival without scipy.stats (issue 19)
 
     try:
         sol, _ = free.solve(sigma_scale=sigma_scale, x0=np.asarray(constrained.values, float)[:len(free.names)])
@@ -1067,7 +1067,7 @@ def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0
         return {"test": "likelihood ratio", "status": f"the unconstrained fit failed: {exc}"}
     delta = float(constrained.chi2 - sol.chi2)
     out = {"test": "likelihood ratio", "delta_chi2": delta, "dof": 2,
-           "p_value": float(chi2_dist.sf(max(delta, 0.0), 2)),
+           "p_value": float(chdtrc(2, max(delta, 0.0))),
            "free_fit_eccentricity": _eccentricity(sol.values[:3], sol.values[3:6], free.mu),
            "edited_constrained_free": [int(constrained.n_edited), int(sol.n_edited)]}
     if constrained.n_edited != sol.n_edited:
@@ -1400,9 +1400,9 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         warnings.append(f"a-posteriori variance factor {sol.variance_factor:.3g} (> 4): the sigmas of the data are too "
                         "small or the model misses something; the covariance is optimistic")
     if sol.n_prior:
-        from scipy.stats import chi2 as chi2_dist
+        from scipy.special import gammaincinv  # chi-square quantile without scipy.stats (issue 19)
 
-        limit = float(chi2_dist.ppf(0.999, sol.n_prior))
+        limit = 2.0 * float(gammaincinv(sol.n_prior / 2.0, 0.999))
         if sol.chi2_prior > limit:
             warnings.append(f"the refined state departs from the stale state by chi2 = {sol.chi2_prior:.4g} over "
                             f"{sol.n_prior} a-priori constraints (99.9 % limit {limit:.3g}): the pass and the stale "
