@@ -1,6 +1,7 @@
 """Precession-nutation on a grid (issue 19): Q = GCRS -> CIRS interpolated from a 30-minute grid
 against the direct ``erfa.c2i06a`` at every date, and its rate against a central difference of
-the direct evaluation; the interpolated value does not depend on the other dates asked for."""
+the direct evaluation; the interpolated value does not depend on the other dates asked for; an EOP file is parsed once
+per process and file version."""
 
 import erfa
 import numpy as np
@@ -51,3 +52,22 @@ def test_earth_rotation_position_within_a_millimetre_of_direct_c2t06a():
     expected = np.asarray(erfa.c2t06a(tt1, tt2, u1, u2, np.zeros(300), np.zeros(300)))
     r = np.array([3774841.0, -1538034.0, 5924146.0]) * 1.1        # an orbit-radius point
     assert np.abs((rot.matrix - expected) @ r).max() < 1e-3 * 1e-3   # < 1 um
+
+
+def test_eop_file_parsed_once_per_version(tmp_path):
+    """A batch worker reads its EOP file once (issue 19); a changed file is read again."""
+    import os
+
+    from test_eop import row
+    from trackproc.io.eop import read_finals2000a
+
+    path = tmp_path / "finals2000A.data"
+    path.write_text("\n".join([row(58849, 0.1, 0.2, -0.17), row(58850, 0.1, 0.2, -0.171)]) + "\n")
+    first = read_finals2000a(path)
+    assert read_finals2000a(str(path)) is first
+    assert not first.mjd.flags.writeable
+    path.write_text("\n".join([row(58849, 0.1, 0.2, -0.17), row(58850, 0.1, 0.2, -0.171),
+                               row(58851, 0.1, 0.2, -0.172)]) + "\n")
+    os.utime(path, ns=(1, 1))                       # a different version even on a coarse clock
+    second = read_finals2000a(path)
+    assert second is not first and second.mjd.tolist() == [58849.0, 58850.0, 58851.0]
