@@ -277,13 +277,15 @@ def _series_var_single(r0, v0, dr0, dv0, p, mu, kj2, mu_slot):
     f = np.zeros((21, n))
     f[0:3, 0] = r0[0]
     f[0:3, 1] = v0[0]
-    gs = np.zeros((n, 3, 3))
-    phi = np.zeros((n, 3, npar))
-    phi[0] = dr0[0]
-    phi[1] = dv0[0]
+    # G(l) as gs[:, l, :] and Phi(K) at row n-1-K (reversed): the convolution over l of order K
+    # is then one matrix product of two contiguous views, (3, 3(K+1)) @ (3(K+1), P).
+    gs = np.zeros((3, n, 3))
+    phr = np.zeros((n, 3, npar))
+    phr[n - 1] = dr0[0]
+    phr[n - 2] = dv0[0]
     mu_col = None if mu_slot is None else mu_slot - 1
     k = kj2
-    matmul, einsum, take = np.matmul, np.einsum, _G_VAR_IDX
+    matmul, take = np.matmul, _G_VAR_IDX
     for kk in range(p):
         g = matmul(f[:, :kk + 1], f[:, kk::-1].T).take(take).tolist()
         (pxx, pxy, pxz, pyy, pyz, pzz, gw3, gw5, gw7, gw9, glw3, glw5, glw7, glw9,
@@ -323,20 +325,21 @@ def _series_var_single(r0, v0, dr0, dv0, p, mu, kj2, mu_slot):
         c10 = 10.0 * k
         gxz = qp[2] - c10 * ux
         gyz = qp[4] - c10 * uy
-        gs[kk] = ((hxy + qp[0], qp[1], gxz), (qp[1], hxy + qp[3], gyz),
-                  (gxz, gyz, hz + qp[5] - 2.0 * c10 * uz))
+        gs[:, kk] = ((hxy + qp[0], qp[1], gxz), (qp[1], hxy + qp[3], gyz),
+                     (gxz, gyz, hz + qp[5] - 2.0 * c10 * uz))
         fac = 1.0 / ((kk + 1.0) * (kk + 2.0))
         f[3:21, kk] = (sk, w3, w5, w7, w9, kk * w3, kk * w5, kk * w7, kk * w9,
                        pxx, pxy, pxz, pyy, pyz, pzz, hxy, hz, q)
         f[0:3, kk + 2] = (ax * fac, ay * fac, az * fac)
-        acc = einsum("lij,ljc->ic", gs[:kk + 1], phi[kk::-1])
+        m = 3 * (kk + 1)
+        acc = matmul(gs[:, :kk + 1].reshape(3, m), phr[n - 1 - kk:].reshape(m, npar))
         if mu_col is not None:
             acc[:, mu_col] += (ax / mu, ay / mu, az / mu)
         acc *= fac
-        phi[kk + 2] = acc
+        phr[n - 3 - kk] = acc
     out = np.empty((1, 3, npar + 1, n))
     out[0, :, 0] = f[0:3]
-    out[0, :, 1:] = phi.transpose(1, 2, 0)
+    out[0, :, 1:] = phr[::-1].transpose(1, 2, 0)
     return out
 
 
@@ -436,11 +439,20 @@ _INV_K = _PerOrder(lambda p: np.array([1.0 / (p - 1), 1.0 / p, 1.0 / (p - 1), 1.
 
 def _step_size(x, p, tol):
     """Jorba-Zou step (>= 0, may be inf) common to the batch, from value spectra (B, 3, p+2)."""
-    lo = np.log(np.maximum(1.0, np.abs(x[:, :, :2]).max(axis=1)))       # (B, 2): r, v scale
-    with np.errstate(divide="ignore"):
-        # |c_k| for position k = p-1, p and velocity k = p-1, p (V(k) = (k+1) X(k+1)).
-        hi = np.log(np.abs(x[:, :, p - 1:]).max(axis=1)[:, [0, 1, 1, 2]] * _ORDER_FACTORS[p])
+    a = np.abs(x[:, :, [0, 1, p - 1, p, p + 1]]).max(axis=1)          # (B, 5) max over x, y, z
     lt = math.log(tol)
+    if a.shape[0] == 1:                     # one trajectory: the same formula in scalar arithmetic
+        r, v, c1, c2, c3 = a[0].tolist()
+        lr, lv = math.log(max(1.0, r)), math.log(max(1.0, v))
+        cand = math.inf
+        # |c_k| for position k = p-1, p and velocity k = p-1, p (V(k) = (k+1) X(k+1))
+        for c, lo, k in ((c1, lr, p - 1), (c2, lr, p), (c2 * p, lv, p - 1), (c3 * (p + 1.0), lv, p)):
+            if c > 0.0:
+                cand = min(cand, (lt + lo - math.log(c)) / k)
+        return math.exp(cand - 0.7 / (p - 1)) if cand < math.inf else math.inf
+    lo = np.log(np.maximum(1.0, a[:, :2]))                             # (B, 2): r, v scale
+    with np.errstate(divide="ignore"):
+        hi = np.log(a[:, [2, 3, 3, 4]] * _ORDER_FACTORS[p])
     cand = ((lt + lo[:, [0, 0, 1, 1]] - hi) * _INV_K[p]).min()    # log (tol scale/|c_k|)^(1/k)
     return math.exp(float(cand) - 0.7 / (p - 1))
 
@@ -604,11 +616,13 @@ class Propagation:
             if m + 1 < n:
                 cd[:, 1, :, :n - m - 1] = cs[..., m + 1:] * fac[1, :n - m - 1]
             dt = (tf if sel is None else tf[sel]) - tb[s]
-            res = np.matmul(_powers(dt, nm).T, cd.reshape(nb, 2 * nf, nm).transpose(0, 2, 1))
+            # one 2-D product of contiguous operands (BLAS), (B*2F, nm) @ (nm, M)
+            res = (cd.reshape(nb * 2 * nf, nm) @ _powers(dt, nm)).reshape(nb, 2, nf, -1)
+            res = res.transpose(0, 3, 1, 2)
             if out is None:
-                out = res.reshape(nb, tf.size, 2, nf)
+                out = res
             else:
-                out[:, sel] = res.reshape(nb, -1, 2, nf)
+                out[:, sel] = res
         return out, t.shape
 
     def _finish(self, arr, tshape, tail):
@@ -734,51 +748,52 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
     coefs, senss = [], []
     outcome = Outcome.SUCCESS
     t = t0
-    while t != t1:
-        if len(coefs) >= max_steps:
-            outcome = Outcome.STEP_LIMIT
-            break
-        try:
-            with np.errstate(all="ignore"):
+    if stm:
+        kern = _series_var_single if nb == 1 else _series_dual
+    else:
+        kern = _series_state_single if nb == 1 else _series_state
+    with np.errstate(all="ignore"):                          # overflow is detected below
+        while t != t1:
+            if len(coefs) >= max_steps:
+                outcome = Outcome.STEP_LIMIT
+                break
+            try:
                 if stm:
-                    kern = _series_var_single if nb == 1 else _series_dual
                     xd = kern(r, v, dr, dv, p, mu_m3_s2, kj2, mu_slot)
                     x = xd[:, :, 0]
-                elif nb == 1:
-                    x = _series_state_single(r, v, p, mu_m3_s2, kj2)
                 else:
-                    x = _series_state(r, v, p, mu_m3_s2, kj2)
-        except (ZeroDivisionError, OverflowError):         # scalar kernel, e.g. r = 0
-            outcome = Outcome.NON_FINITE
-            break
-        if not (np.isfinite(x).all() and (not stm or np.isfinite(xd).all())):
-            outcome = Outcome.NON_FINITE
-            break
-        h = _step_size(x, p, tol)
-        remaining = abs(t1 - t)
-        last = not (h < remaining)
-        hs = (t1 - t) if last else direction * h
-        hp = hs ** kpow
-        hd = kder * hp[:-1]
-        if stm:
-            rv = xd @ hp                               # (B, 3, J)
-            vv = xd[..., 1:] @ hd
-            r, v = rv[:, :, 0], vv[:, :, 0]
-            dr, dv = rv[:, :, 1:], vv[:, :, 1:]
-            senss.append(xd[:, :, 1:])
-            coefs.append(x)
-        else:
-            r = x @ hp
-            v = x[..., 1:] @ hd
-            coefs.append(x)
-        if not (np.isfinite(r).all() and np.isfinite(v).all()):
-            coefs.pop()
+                    x = kern(r, v, p, mu_m3_s2, kj2)
+            except (ZeroDivisionError, OverflowError):         # scalar kernel, e.g. r = 0
+                outcome = Outcome.NON_FINITE
+                break
+            if not (np.isfinite(x).all() and (not stm or np.isfinite(xd).all())):
+                outcome = Outcome.NON_FINITE
+                break
+            h = _step_size(x, p, tol)
+            remaining = abs(t1 - t)
+            last = not (h < remaining)
+            hs = (t1 - t) if last else direction * h
+            hp = hs ** kpow
+            hd = kder * hp[:-1]
             if stm:
-                senss.pop()
-            outcome = Outcome.NON_FINITE
-            break
-        t = t1 if last else t + hs
-        times.append(t)
+                rv = xd @ hp                               # (B, 3, J)
+                vv = xd[..., 1:] @ hd
+                r, v = rv[:, :, 0], vv[:, :, 0]
+                dr, dv = rv[:, :, 1:], vv[:, :, 1:]
+                senss.append(xd[:, :, 1:])
+                coefs.append(x)
+            else:
+                r = x @ hp
+                v = x[..., 1:] @ hd
+                coefs.append(x)
+            if not (np.isfinite(r).all() and np.isfinite(v).all()):
+                coefs.pop()
+                if stm:
+                    senss.pop()
+                outcome = Outcome.NON_FINITE
+                break
+            t = t1 if last else t + hs
+            times.append(t)
     if coefs:
         coef_arr = np.stack(coefs)
         sens_arr = np.stack(senss) if stm else None

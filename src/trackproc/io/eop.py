@@ -13,15 +13,40 @@ NO_EOP_WARNING = ("no --eop file or --dut1 given and no EOP package (astropy-ier
                   "(ignoring UT1-UTC, up to 0.9 s, costs up to ~400 m at the equator)")
 
 
+#: Parsed tables of this process, by (resolved path, mtime, size) or package version: a batch worker
+#: reads its EOP file once, not once per pass (issue 19; parsing 20,000 rows takes ~0.1 s).
+_PARSED: dict = {}
+_PARSED_MAX = 8
+
+
+def _remember(key, table):
+    if len(_PARSED) >= _PARSED_MAX:
+        _PARSED.clear()
+    for name in ("mjd", "ut1_minus_tai_s", "xp_rad", "yp_rad"):
+        getattr(table, name).setflags(write=False)      # shared between callers: read-only
+    _PARSED[key] = table
+    return table
+
+
 def read_finals2000a(path: str | Path):
     """Parse an IERS finals2000A file: MJD (cols 8-15) and, per row, the final Bulletin B values
     (PM-x cols 135-144, PM-y 145-154 arcsec, UT1-UTC 155-165 s) where the row has them, else the
     Bulletin A values (PM-x 19-27, PM-y 38-46, UT1-UTC 59-68) — the same choice as Orekit's
     reader; rows without UT1-UTC (beyond the predictions) are skipped. The celestial pole
     offsets dX, dY are not used (sub-centimetre at the station). Returns :class:`~trackproc.dynamics.timescales.EarthOrientation`.
+
+    Parsed once per process and file version (kept by resolved path, modification time and size;
+    its arrays read-only), so that a batch worker does not re-read the file for every pass.
     """
     from trackproc.dynamics.timescales import eop_from_table
 
+    try:
+        stat = Path(path).stat()
+        key = ("finals2000A", str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size)
+    except OSError:
+        key = None
+    if key in _PARSED:
+        return _PARSED[key]
     try:
         lines = Path(path).read_text(encoding="ascii", errors="replace").splitlines()
     except FileNotFoundError:
@@ -50,7 +75,8 @@ def read_finals2000a(path: str | Path):
                              "PM-y 38-46, UT1-UTC 59-68") from None
     if len(mjd) < 2:
         raise InputError("no usable rows", file=str(path), expected="an IERS finals2000A file with UT1-UTC")
-    return eop_from_table(mjd, dut1, xp, yp, source=f"IERS finals2000A {Path(path).name}")
+    table = eop_from_table(mjd, dut1, xp, yp, source=f"IERS finals2000A {Path(path).name}")
+    return table if key is None else _remember(key, table)
 
 
 def bundled_earth_orientation():
@@ -75,10 +101,14 @@ def bundled_earth_orientation():
     source = f"IERS finals2000A from astropy-iers-data {version}"
     cache_dir = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "trackproc"
     cache = cache_dir / f"eop-astropy-iers-data-{version}.npz"
+    key = ("astropy-iers-data", str(cache))
+    if key in _PARSED:
+        return _PARSED[key]
     try:
         with np.load(cache) as z:
-            return EarthOrientation(mjd=z["mjd"], ut1_minus_tai_s=z["ut1_minus_tai_s"], xp_rad=z["xp_rad"],
-                                    yp_rad=z["yp_rad"], source=source)
+            return _remember(key,
+                             EarthOrientation(mjd=z["mjd"], ut1_minus_tai_s=z["ut1_minus_tai_s"],
+                                              xp_rad=z["xp_rad"], yp_rad=z["yp_rad"], source=source))
     except (OSError, KeyError, ValueError):
         pass
     table = read_finals2000a(astropy_iers_data.IERS_A_FILE)
@@ -92,7 +122,7 @@ def bundled_earth_orientation():
         os.replace(tmp.name, cache)
     except OSError:
         pass
-    return table
+    return _remember(key, table)
 
 
 def earth_orientation(eop_path=None, dut1_s=None):

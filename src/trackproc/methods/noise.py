@@ -261,7 +261,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     (``--oscillator-noise``: then the walk is not estimated and every candidate carries it),
     ``white_floor`` a lower bound of ``σ_w`` (quantisation), ``t0`` the start of the walk.
     """
-    from scipy.stats import chi2 as chi2_dist
+    from scipy.special import gammaincinv  # chi-square quantile without scipy.stats (issue 19)
 
     t = np.asarray(t_s, float)
     r = np.asarray(residual, float)
@@ -340,7 +340,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     for name in models:
         _, ll, k = fitted[name]
         d = k - k_base
-        if d > 0 and 2.0 * (ll - ll_base) > max(d * math.log(m), float(chi2_dist.ppf(p_select, d))):
+        if d > 0 and 2.0 * (ll - ll_base) > max(d * math.log(m), 2.0 * float(gammaincinv(d / 2.0, p_select))):
             passing.append(name)
     chosen = base if len(passing) == 1 else max(passing[1:], key=lambda name: (fitted[name][2], fitted[name][1]))
     model = fitted[chosen][0]

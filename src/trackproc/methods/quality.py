@@ -72,9 +72,9 @@ def _plain(v):
 
 def chi2_limit(dof: int, probability: float = GATE_PROBABILITY) -> float:
     """The ``probability`` quantile of χ²(dof)."""
-    from scipy.stats import chi2
+    from scipy.special import gammaincinv  # chi-square quantile without scipy.stats (issue 19)
 
-    return float(chi2.ppf(probability, max(int(dof), 1)))
+    return 2.0 * float(gammaincinv(max(int(dof), 1) / 2.0, probability))
 
 
 def variance_factor_limit(dof: int, probability: float = GATE_PROBABILITY) -> float:

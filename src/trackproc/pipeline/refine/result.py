@@ -9,7 +9,6 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
 
 from trackproc.constants import C_LIGHT, force_model_constants
 from trackproc.dynamics import propagator
@@ -18,6 +17,7 @@ from trackproc.dynamics.rtn import rtn_covariance, rtn_jacobian
 from trackproc.errors import ProcessingError
 from trackproc.isotime import iso_utc
 from trackproc.methods import refinement as rf
+from trackproc.methods.quality import chi2_limit
 from trackproc.pipeline.estimate import UNITS, residual_frame
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, RefineResult
 from trackproc.types import State
@@ -189,7 +189,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         warnings.append(f"a-posteriori variance factor {sol.variance_factor:.3g} (> 4): the sigmas of the data are too "
                         "small or the model misses something; the covariance is optimistic")
     if sol.n_prior:
-        limit = float(chi2_dist.ppf(0.999, sol.n_prior))
+        limit = chi2_limit(sol.n_prior, 0.999)
         if sol.chi2_prior > limit:
             warnings.append(f"the refined state departs from the stale state by chi2 = {sol.chi2_prior:.4g} over "
                             f"{sol.n_prior} a-priori constraints (99.9 % limit {limit:.3g}): the pass and the stale "
