@@ -106,12 +106,17 @@ class GravityField:
                 if n - m >= 2:
                     b[n, m] = np.sqrt((n + m - 1) * (n - m - 1) * (2 * n + 1) / ((n + m) * (n - m) * (2 * n - 3)))
         f = np.array([0.0, np.sqrt(3.0)] + [np.sqrt((2 * m + 1) / (2 * m)) for m in range(2, size)])
-        self._tables.update(n=n_, m=m_, k0=k0 * (nf - mf + 1), kp=kp, km=km * (nf - mf + 2) * (nf - mf + 1),
+        f[0] = 1.0
+        self._tables.update(fprod=np.cumprod(f), n=n_, m=m_, k0=k0 * (nf - mf + 1), kp=kp, km=km * (nf - mf + 2) * (nf - mf + 1),
                             a=a, b=b, f=f, c=self.cbar[n_, m_], s=self.sbar[n_, m_])
         return self._tables
 
-    def solid_harmonics(self, r_itrf) -> tuple[np.ndarray, np.ndarray]:
-        """Normalised ``V̄_nm``, ``W̄_nm`` to degree N+1, order M+1: arrays (P, N+2, N+2)."""
+    def solid_harmonics(self, r_itrf) -> np.ndarray:
+        """Normalised ``Z̄_nm = V̄_nm + i W̄_nm`` to degree N+1, order M+1: complex (P, N+2, N+2).
+
+        V̄ and W̄ obey the same recursion, so they are carried as one complex number; the
+        sectorals are a product, ``Z̄_mm = (Π f_k) (x₀ + i y₀)^m R/r``.
+        """
         t = self._coefficient_tables()
         r = np.atleast_2d(np.asarray(r_itrf, float))
         R = self.radius_m
@@ -119,22 +124,19 @@ class GravityField:
         x0, y0, z0 = (r * (R / r2)[:, None]).T
         rho = R * R / r2
         nmax, mmax = self.degree + 1, min(self.order + 1, self.degree + 1)
-        V = np.zeros((r.shape[0], nmax + 1, nmax + 1))
-        W = np.zeros_like(V)
-        V[:, 0, 0] = R / np.sqrt(r2)
-        f, a, b = t["f"], t["a"], t["b"]
-        for m in range(1, mmax + 1):
-            V[:, m, m] = f[m] * (x0 * V[:, m - 1, m - 1] - y0 * W[:, m - 1, m - 1])
-            W[:, m, m] = f[m] * (x0 * W[:, m - 1, m - 1] + y0 * V[:, m - 1, m - 1])
+        Z = np.zeros((r.shape[0], nmax + 1, nmax + 1), complex)
+        ms = np.arange(mmax + 1)
+        diag = t["fprod"][:mmax + 1] * (x0 + 1j * y0)[:, None] ** ms * (R / np.sqrt(r2))[:, None]
+        Z[:, ms, ms] = diag
+        a, b = t["a"], t["b"]
         z0c, rhoc = z0[:, None], rho[:, None]
         for n in range(1, nmax + 1):
-            ms = slice(0, min(n, mmax + 1))
-            an, bn = a[n, ms], b[n, ms]
-            prev2 = V[:, n - 2, ms] if n >= 2 else 0.0
-            V[:, n, ms] = an * z0c * V[:, n - 1, ms] - bn * rhoc * prev2
-            prev2 = W[:, n - 2, ms] if n >= 2 else 0.0
-            W[:, n, ms] = an * z0c * W[:, n - 1, ms] - bn * rhoc * prev2
-        return V, W
+            k = min(n, mmax + 1)
+            if n >= 2:
+                Z[:, n, :k] = a[n, :k] * z0c * Z[:, n - 1, :k] - b[n, :k] * rhoc * Z[:, n - 2, :k]
+            else:
+                Z[:, n, :k] = a[n, :k] * z0c * Z[:, n - 1, :k]
+        return Z
 
     def acceleration(self, r_itrf, *, central: bool = True) -> np.ndarray:
         """Acceleration (m/s²) at ITRF positions ``r_itrf`` (m, (P, 3) or (3,)), in ITRF.
@@ -144,16 +146,13 @@ class GravityField:
         """
         t = self._coefficient_tables()
         one = np.ndim(r_itrf) == 1
-        V, W = self.solid_harmonics(r_itrf)
+        Z = self.solid_harmonics(r_itrf)
         n, m = t["n"], t["m"]
         c, s = t["c"], t["s"]
         if not central:
             c = np.where((n == 0), 0.0, c)
-        mp = m + 1
-        mm = np.maximum(m - 1, 0)
-        vp, wp = V[:, n + 1, mp], W[:, n + 1, mp]
-        vm, wm = V[:, n + 1, mm], W[:, n + 1, mm]
-        v0, w0 = V[:, n + 1, m], W[:, n + 1, m]
+        zp, zm, z0 = Z[:, n + 1, m + 1], Z[:, n + 1, np.maximum(m - 1, 0)], Z[:, n + 1, m]
+        vp, wp, vm, wm, v0, w0 = zp.real, zp.imag, zm.real, zm.imag, z0.real, z0.imag
         zonal = m == 0
         kp, km, k0 = t["kp"], t["km"], t["k0"]
         ax = np.where(zonal, -c * kp * vp * 2.0,
@@ -168,6 +167,5 @@ class GravityField:
     def potential(self, r_itrf) -> np.ndarray:
         """Potential ``U`` (m²/s², positive) at ITRF positions: ``GM/R Σ C̄ V̄ + S̄ W̄``."""
         t = self._coefficient_tables()
-        V, W = self.solid_harmonics(r_itrf)
-        n, m = t["n"], t["m"]
-        return self.gm_m3_s2 / self.radius_m * (t["c"] * V[:, n, m] + t["s"] * W[:, n, m]).sum(-1)
+        z = self.solid_harmonics(r_itrf)[:, t["n"], t["m"]]
+        return self.gm_m3_s2 / self.radius_m * (t["c"] * z.real + t["s"] * z.imag).sum(-1)

@@ -29,7 +29,7 @@ from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.forces import drag as drag_mod
 from trackproc.dynamics.forces import relativity, srp, third_body
 from trackproc.dynamics.forces.gravity_field import GravityField
-from trackproc.dynamics.frames import _r3, earth_rotation
+from trackproc.dynamics.frames import earth_rotation
 from trackproc.dynamics.geodesy import itrf_to_geodetic
 
 __all__ = ["Spacecraft", "ForceModel", "Environment", "PARAMETERS", "GRID_S"]
@@ -246,7 +246,8 @@ class Environment:
         qq = ((1 - x) * self._qq[k] + x * self._qq[k + 1]).reshape(3, 3)
         w = ((1 - x) * self._w[k] + x * self._w[k + 1]).reshape(3, 3)
         era = (1 - x) * self._era[k] + x * self._era[k + 1]
-        m = w @ _r3(era) @ qq
+        c, sn = np.cos(era), np.sin(era)
+        m = w @ np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]]) @ qq     # W R3(ERA) Q q^T
         sun = self._hermite(self._sun, k, x)
         moon = self._hermite(self._moon, k, x)
         axis = qq[2]                                          # CIP z axis in the integration frame
