@@ -105,8 +105,10 @@ def result_meta(state, options, traj, cov0, cov_label, checks, eop, track, mc) -
         "state_source": state.source,
         "span_s": float(options.span_s),
         "step_s": float(options.step_s),
-        "force_model": FORCE_LABELS.get(options.force, options.force),
-        "constants": force_model_constants(options.force),
+        "force_model": (options.force_model.label() if options.force_model is not None
+                        else FORCE_LABELS.get(options.force, options.force)),
+        "constants": (options.force_model.describe() if options.force_model is not None
+                      else force_model_constants(options.force)),
         "earth_orientation": getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
         "methods": list(options.methods),
         "unprefixed_method": options.methods[0],

@@ -49,6 +49,8 @@ class AccuracyOptions:
     step_s: float
     force: str = "j2"
     method: str = "spectral"
+    #: The ForceModel of ``force="full"`` (trackproc.dynamics.forces; cli.force_options builds it).
+    force_model: Optional[object] = None
     monte_carlo: Optional[int] = None
     seed: Optional[int] = None
     sigma_position_m: Optional[Sequence[float]] = None
@@ -112,6 +114,11 @@ def check_options(options: AccuracyOptions) -> None:
         raise InputError("unknown method", column="--method", found=options.method, expected=" | ".join(METHODS))
     if options.force not in FORCES:
         raise InputError("unknown force model", column="--force", found=options.force, expected=" or ".join(FORCES))
+    if options.force == "full" and options.n_samples:
+        # each draw would be a full DOP853 integration (about a second per day of LEO): not offered
+        raise InputError("Monte Carlo draws use the Taylor engine's batch mode (two-body, j2)", column="--method",
+                         found=f"{options.method} with --force full",
+                         expected="--method spectral or stm (no --monte-carlo) with --force full")
     if options.monte_carlo is not None and not (2 <= int(options.monte_carlo) <= MAX_MONTE_CARLO):
         raise InputError("invalid sample count", column="--monte-carlo", found=options.monte_carlo,
                          expected=f"an integer in [2, {MAX_MONTE_CARLO}]")

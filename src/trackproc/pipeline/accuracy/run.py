@@ -39,7 +39,8 @@ def accuracy(state, options: AccuracyOptions, stations: Optional[dict] = None, e
     cov0, cov_label = initial_covariance(state, options)
     times = time_grid(state.epoch, options.span_s, options.step_s)
     t = np.maximum(ts.seconds_since(ts.datetime64_to_jd_utc(times), state.jd_utc), 0.0)   # SI s (leap s)
-    traj = propagate_state(state, float(t.max(initial=0.0)), force=options.force, eop=eop, stm=True)
+    traj = propagate_state(state, float(t.max(initial=0.0)), force=options.force, eop=eop, stm=True,
+                           force_model=options.force_model)
     traj.raise_for_outcome()
     nominal = traj.state(t)                        # (M, 6) GCRF
     big_q = traj.rotation                          # GCRF -> quasi-inertial
