@@ -103,6 +103,9 @@ class EstimateOptions:
     rank_rtol: float = 1e-9
     noise: str = "auto"
     oscillator_noise: Optional[float] = None
+    troposphere: str = "auto"             # range corrections: pipeline.range_corrections
+    com_offset_m: float = 0.0
+    wavelength_nm: Optional[float] = None
 
 
 # ----------------------------------------------------------------------------- the problem
@@ -129,6 +132,7 @@ class Problem:
     sources: np.ndarray
     eop: object = None
     evaluations: int = 0
+    corrections: object = None            # range corrections (pipeline.range_corrections), or None
 
     @property
     def names(self) -> list:
@@ -162,8 +166,10 @@ class Problem:
         values.update({n: x[i] for n, i in cols.items()})
         try:
             traj = self.trajectory(x)
-            h, jac, _ = ob.evaluate(self.meas, traj, modifiers=self.modifiers, bias_values=values, bias_columns=cols,
-                                    n_columns=x.size, range_rate_model=self.range_rate_model)
+            h, jac, geo = ob.evaluate(self.meas, traj, modifiers=self.modifiers, bias_values=values,
+                                      bias_columns=cols, n_columns=x.size, range_rate_model=self.range_rate_model)
+            if self.corrections is not None:
+                self.corrections.add_to(h, self.meas, geo)
         except ValueError as exc:
             raise ArithmeticError(str(exc)) from None
         self.evaluations += 1
@@ -461,9 +467,13 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
             raise InputError("give --apriori-initial or state a-priori sigmas, not both", column="--apriori-sigma")
         priors.append(Prior(np.arange(6), np.asarray(rv0, float), np.asarray(cov0, float)))
     frame_q = propagator.reference_frame(*epoch_jd, eop)
+    from trackproc.pipeline import range_corrections
+
+    corrections = range_corrections.build(frame, tables, known, troposphere=opt.troposphere,
+                                          com_offset_m=opt.com_offset_m, wavelength_nm=opt.wavelength_nm)
     return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force, range_rate_model=model,
                    modifiers=modifiers, priors=priors, times=t64, sources=frame["_source"].to_numpy(dtype=object),
-                   eop=eop)
+                   eop=eop, corrections=corrections)
 
 
 # ----------------------------------------------------------------------------- result
@@ -790,7 +800,8 @@ def _subproblem(problem: Problem, rows, keep_range_bias: bool) -> Problem:
             priors.append(p)
     return Problem(meas=meas, params=params, epoch=problem.epoch, frame=problem.frame, force=problem.force,
                    range_rate_model=problem.range_rate_model, modifiers=modifiers, priors=priors,
-                   times=problem.times[rows], sources=problem.sources[rows], eop=problem.eop)
+                   times=problem.times[rows], sources=problem.sources[rows], eop=problem.eop,
+                   corrections=None if problem.corrections is None else problem.corrections.subset(rows))
 
 
 def _two_stage(problem: Problem, sol, opt: EstimateOptions):
