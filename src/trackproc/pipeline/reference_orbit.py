@@ -41,3 +41,54 @@ def compare_with_cpf(state, cpf, *, force: str = "j2", eop=None, propagate_kwarg
             "rms_radial_m": rms(np.einsum("ij,ij->i", d, r_hat)), "rms_along_m": rms(np.einsum("ij,ij->i", d, a_hat)),
             "rms_cross_m": rms(np.einsum("ij,ij->i", d, c_hat)), "start": iso_utc(times[0], 3),
             "end": iso_utc(times[-1], 3), "distance_m": dist}
+
+
+class CpfTrajectory:
+    """The CPF positions (GCRF) as a trajectory: Lagrange interpolation of degree 9 over the 10
+    nearest epochs (its error scales as h^10: 0.14 m at most with LAGEOS epochs 600 s apart,
+    measured by dropping every other node, hence ~0.1 mm at the CPF's 300 s), velocity and acceleration by central differences of the
+    interpolant (h = 0.5 s). ``t`` in seconds from ``epoch``. ``stm`` is zero: a reference
+    orbit has no parameters (for modelling measurements through
+    :func:`trackproc.models.observation.evaluate`)."""
+
+    ORDER = 10
+
+    def __init__(self, cpf, epoch, eop=None):
+        from trackproc.dynamics import timescales as ts
+        from trackproc.io.cpf import cpf_gcrf
+
+        ref = ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns"))
+        self.t_nodes = np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(cpf.times), ref), float)
+        self.r_nodes = cpf_gcrf(cpf, eop)
+        if len(self.t_nodes) < self.ORDER:
+            raise ValueError("a CPF trajectory needs at least 10 epochs")
+
+    def covers(self, t) -> np.ndarray:
+        """True where ``t`` lies inside the CPF's span."""
+        t = np.asarray(t, float)
+        return (t >= self.t_nodes[0]) & (t <= self.t_nodes[-1])
+
+    def position(self, t) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(t, float))
+        k = np.clip(np.searchsorted(self.t_nodes, t) - self.ORDER // 2, 0, len(self.t_nodes) - self.ORDER)
+        idx = k[:, None] + np.arange(self.ORDER)[None, :]
+        x = self.t_nodes[idx]                                    # (N, m)
+        diff = t[:, None] - x                                    # (N, m)
+        den = x[:, :, None] - x[:, None, :]                      # (N, m, m)
+        eye = np.eye(self.ORDER, dtype=bool)
+        num = np.where(eye[None], 1.0, diff[:, None, :])
+        den = np.where(eye[None], 1.0, den)
+        w = np.prod(num / den, axis=2)                           # Lagrange basis at t
+        return np.einsum("nm,nmk->nk", w, self.r_nodes[idx])
+
+    def state(self, t, derivative: int = 0) -> np.ndarray:
+        h = 0.5
+        t = np.atleast_1d(np.asarray(t, float))
+        p0, pp, pm = self.position(t), self.position(t + h), self.position(t - h)
+        vel = (pp - pm) / (2 * h)
+        if derivative == 0:
+            return np.hstack([p0, vel])
+        return np.hstack([vel, (pp - 2 * p0 + pm) / (h * h)])
+
+    def stm(self, t) -> np.ndarray:
+        return np.zeros((np.atleast_1d(t).size, 6, 6))
