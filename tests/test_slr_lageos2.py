@@ -55,9 +55,8 @@ def _cpf_residuals(troposphere: str, com: float):
     traj = CpfTrajectory(read_cpf(str(CPF)), state.epoch, eop)
     inside = traj.covers(prob.meas.t_s - 1.0)
     meas = prob.meas.subset(np.flatnonzero(inside))
-    computed, _, geo = ob.evaluate(meas, traj)
-    if prob.corrections is not None:
-        prob.corrections.subset(inside).add_to(computed, meas, geo)
+    corrections = [b.modifier.bind(meas) for b in prob.modifiers if not b.names]   # driver-free: the corrections
+    computed, _, _ = ob.evaluate(meas, traj, modifiers=corrections)
     return meas.station, meas.observed - computed
 
 

@@ -35,15 +35,38 @@ def test_mapping_is_one_at_zenith_and_delay_falls_with_elevation():
     assert np.all(np.diff(d) < 0) and 2.0 < d[-1] < 2.5 and 10.0 < d[0] < 15.0
 
 
-def test_range_corrections_subtract_the_centre_of_mass_offset_and_fill_missing_meteo():
-    n = 3
-    corr = tp.RangeCorrections(rows=np.arange(n), lat_rad=np.full(n, LAT), height_m=np.full(n, 2010.344),
-                               pressure_hpa=np.array([798.4188, np.nan, 798.4188]),
-                               temperature_k=np.full(n, 300.15), humidity_percent=np.full(n, 40.0),
-                               wavelength_um=np.full(n, 0.532), troposphere=True, com_offset_m=0.251)
-    v = corr.values(np.full(n, np.pi / 2))
-    assert v[0] == pytest.approx(1.935226 - 0.251, abs=2e-5)
+class _Geometry:
+    """Straight up from each station (elevation 90 deg) or along the horizon tilted by ``el``."""
+
+    def __init__(self, el):
+        self.u = np.stack([np.zeros_like(el), np.cos(el), np.sin(el)], -1)
+
+
+def _meas(t_s, station):
+    from trackproc.models.observation import MeasurementSet
+
+    n = len(t_s)
+    return MeasurementSet(t_s=np.asarray(t_s, float), kind=["range"] * n, station=station, pass_id=["p"] * n,
+                          observed=np.zeros(n), sigma=np.ones(n), r_st=np.zeros((n, 3)), v_st=np.zeros((n, 3)),
+                          gcrf_to_enu=np.broadcast_to(np.eye(3), (n, 3, 3)).copy())
+
+
+def test_modifiers_interpolate_meteo_and_subtract_the_centre_of_mass_offset():
+    from trackproc.models.modifiers import bind_all
+
+    meas = _meas([0.0, 50.0, 100.0, 10.0], ["A", "A", "A", "B"])
+    tropo = tp.TroposphereDelay("A", LAT, 2010.344, 0.532, meteo_t_s=[0.0, 100.0], pressure_hpa=[798.4188, 798.4188],
+                                temperature_k=[300.15, 300.15], humidity_percent=[40.0, 40.0], spans_s=[(0.0, 60.0)])
+    com = tp.CentreOfMassOffset(0.251)
+    value = np.zeros(4)
+    for b in bind_all([tropo, com], meas):
+        b.apply(value, np.zeros((4, 6)), {}, {}, _Geometry(np.full(4, np.pi / 2)))
+    # station A inside its span: zenith delay of the IERS case (water vapour from 40 %) minus the offset
+    assert value[0] == pytest.approx(1.935226 - 0.251, abs=2e-5) and value[1] == pytest.approx(value[0])
+    assert value[2] == pytest.approx(-0.251) and value[3] == pytest.approx(-0.251)   # outside the span; station B
+    # no meteo: the standard atmosphere at the height, so a delay of the right size
+    std = tp.TroposphereDelay("B", LAT, 2010.344)
+    v = std.correction(meas, np.array([3]), _Geometry(np.full(4, np.radians(20.0))))
     p_std = tp.standard_meteo(2010.344)[0]
-    assert v[1] == pytest.approx(v[0] * p_std / 798.4188, rel=0.01)   # standard atmosphere, mostly hydrostatic
-    off = tp.RangeCorrections(**{**corr.__dict__, "troposphere": False})
-    assert np.allclose(off.values(np.zeros(n)), -0.251)
+    assert v[0] == pytest.approx(tp.fcula_mapping(np.radians(20.0), LAT, 2010.344, 291.15 - 6.5e-3 * 2010.344)
+                                 * 1.93 * p_std / 798.4188, rel=0.02)

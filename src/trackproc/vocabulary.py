@@ -40,6 +40,9 @@ STATE_NAMES = ("x", "y", "z", "vx", "vy", "vz")
 #: Bias parameter families (``family:KEY``) and their SI units.
 BIAS_UNITS = {"range_bias": "m", "doppler_offset": "Hz", "doppler_drift": "Hz/s", "az_bias": "rad",
               "el_bias": "rad"}
+#: Parameters of constraints rather than of a measurement, and their SI units: refine's
+#: circular-orbit radius (seed 004 eq. 5).
+CONSTRAINT_PARAMETERS = {"r_ka": "m"}
 #: Doppler-bias choices (``--doppler-bias``): a transmitter frequency offset, or offset and drift.
 DOPPLER_BIASES = ("offset", "offset+drift")
 #: ``refine``'s Doppler-bias choices: also ``none`` (a coherent two-way link has no offset).

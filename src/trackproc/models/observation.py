@@ -82,7 +82,7 @@ sum to ``(c/2) dT/dp``. Up-leg rate (:func:`up_rate_partials`), with ``e = û_u�
 ~1e-7 typically in LEO) but above the finite-difference check's resolution (~4e-9), so they
 are kept: the partials are exact to first order.
 
-Biases are *modifiers* that bring their own drivers (:class:`BiasModifier`): each adds
+Biases are *modifiers* that own their drivers (:mod:`trackproc.models.modifiers`): each adds
 ``coefficient × value`` to some rows, so its partial is the coefficient — 1 for a range,
 Doppler offset, azimuth or elevation bias, ``t_r - t0`` for a Doppler drift, and
 ``-c/f`` (``-c (t_r - t0)/f``) when a Doppler offset (drift) acts on range-rate samples that
@@ -96,13 +96,14 @@ Every partial here is checked against central finite differences in
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional, Sequence
 
 import numpy as np
 
 from trackproc.constants import C_LIGHT
 from trackproc.models import light_time as lt
+from trackproc.models import modifiers as md
 from trackproc.models.light_time import LIGHT_TIME_TOL_S, UpLeg, solve_up_leg  # noqa: F401  (re-exported)
 from trackproc.models.observables import (azel_partials, azel_value, range_partials,  # noqa: F401  (re-exported)
                                           range_rate_partials, range_rate_value, two_way_range_partials,
@@ -110,6 +111,7 @@ from trackproc.models.observables import (azel_partials, azel_value, range_parti
 from trackproc.models.observables import check_range_rate_model as _check_model
 from trackproc.vocabulary import ESTIMATE_KIND_ORDER, LINK_KINDS, RANGE_RATE_MODELS  # noqa: F401
 from trackproc.vocabulary import LINK_MODES as MODES
+from trackproc.vocabulary import STATE_NAMES
 
 __all__ = ["KINDS", "RANGE_RATE_MODELS", "MODES", "MeasurementSet", "BiasModifier", "EmissionGeometry", "UpLeg",
            "range_partials", "range_rate_value", "range_rate_partials", "azel_value", "azel_partials",
@@ -244,21 +246,14 @@ class MeasurementSet:
                               carrier_hz=self.carrier_hz[rows], a_st=pick(self.a_st), mode=self.mode[rows])
 
 
-@dataclass(frozen=True)
-class BiasModifier:
-    """A linear bias: adds ``coefficient[k] * value`` of driver ``name`` to row ``rows[k]``."""
-
-    name: str
-    rows: np.ndarray
-    coefficient: np.ndarray = field(default=None)
-
-    def coefficients(self) -> np.ndarray:
-        return np.ones(len(self.rows)) if self.coefficient is None else np.asarray(self.coefficient, float)
+#: A modifier bound to a measurement set (the name the estimator used before modifiers owned drivers).
+BiasModifier = md.BoundModifier
 
 
 def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | None = None,
-                   c: float = C_LIGHT) -> list[BiasModifier]:
-    """The modifiers of the bias drivers ``names`` on ``meas`` (state names are skipped).
+                   c: float = C_LIGHT) -> list[md.BoundModifier]:
+    """The bound modifiers owning the bias drivers ``names`` on ``meas`` (state names are skipped),
+    for callers that hold names rather than modifiers (:func:`trackproc.models.modifiers.from_name`).
 
     ``range_bias:S`` -> ranges of station S; ``az_bias:S``/``el_bias:S`` -> its angles;
     ``doppler_offset:K`` and ``doppler_drift:K`` -> Doppler and range-rate samples whose pass id
@@ -269,42 +264,12 @@ def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | No
 
     Implements seed 002 eq. 10 (the E block of the offsets D0 of the extended state; Doppler offsets alike).
     """
-    from trackproc.models.parameters import split_name
-
     epochs = epochs or {}
     out = []
     for name in names:
-        family, key = split_name(name)
-        if family == "state":
+        if name in STATE_NAMES:
             continue
-        if family == "range_bias":
-            rows = np.flatnonzero((meas.kind == "range") & (meas.station == key))
-            coef = None
-        elif family in ("az_bias", "el_bias"):
-            kind = "azimuth" if family == "az_bias" else "elevation"
-            rows = np.flatnonzero((meas.kind == kind) & (meas.station == key))
-            coef = None
-        else:
-            owner = (meas.pass_id == key) | (meas.station == key)
-            rows = np.flatnonzero(owner & ((meas.kind == "doppler") | (meas.kind == "range_rate")))
-            coef = np.ones(rows.size)
-            if family == "doppler_drift":
-                if name not in epochs:
-                    raise ValueError(f"{name}: no reference epoch for the drift")
-                coef = meas.t_s[rows] - epochs[name]
-            rr = meas.kind[rows] == "range_rate"
-            if rr.any():
-                f = meas.carrier_hz[rows][rr]
-                if not np.all(np.isfinite(f) & (f > 0)):
-                    raise ValueError(f"{name}: range-rate samples without a carrier frequency cannot take a "
-                                     "Doppler offset/drift")
-                coef = coef.copy()
-                coef[rr] *= -c / f
-                # two-way range-rate came from two-way Doppler: ρ̇ = -c Δf / (2 f)
-                coef[rr] = np.where(meas.two_way[rows][rr], 0.5 * coef[rr], coef[rr])
-        if rows.size == 0:
-            raise ValueError(f"parameter {name!r} acts on no measurement")
-        out.append(BiasModifier(name, rows, coef))
+        out.append(md.from_name(name, epochs.get(name)).bind(meas))
     return out
 
 
@@ -316,7 +281,8 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
     ``trajectory`` gives GCRF ``state(t, derivative=0|1)`` (N, 6) and ``stm(t)`` (N, 6, P) —
     d state(t) / d (state at the epoch), P = ``n_state_params`` columns placed first (a
     :class:`trackproc.dynamics.propagator.Trajectory` propagated with ``stm=True``).
-    ``modifiers`` (from :func:`bias_modifiers`), with ``bias_values`` name -> value and
+    ``modifiers`` (:class:`~trackproc.models.modifiers.BoundModifier`, e.g. from
+    :func:`trackproc.models.modifiers.bind_all`), with ``bias_values`` driver name -> value and
     ``bias_columns`` name -> column of the Jacobian (omit a name to hold it fixed: value added,
     no column). Two-way samples (``meas.two_way``) take the round trip, eqs. (7)-(13), and need
     ``meas.a_st``. Returns ``(computed (N,), jacobian (N, n_columns), geometry)``, the geometry
@@ -390,11 +356,7 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         d_big_t = round_trip_jacobian(geo.u[two], up.u, up.v_st, dstate[two, :3, :n_state_params], c)
         jac[two, :n_state_params] += g_t[two, None] * d_big_t
     for mod in modifiers:
-        coef = mod.coefficients()
-        value[mod.rows] += coef * bias_values.get(mod.name, 0.0)
-        col = bias_columns.get(mod.name)
-        if col is not None:
-            jac[mod.rows, col] += coef
+        mod.apply(value, jac, bias_values, bias_columns, geo)
     return value, jac, geo
 
 

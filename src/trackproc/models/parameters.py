@@ -14,10 +14,12 @@ Names (the part after ``:`` is a station or pass id)::
     doppler_offset:KEY             added to one-way Doppler (Hz) of a pass or station
     doppler_drift:KEY              Hz/s, times (t - epoch of the driver)
     az_bias:STATION  el_bias:STATION   added to azimuth / elevation (rad)
+    r_ka                           radius of refine's circular-orbit constraints (m, seed 004 eq. 5)
 
 This is seed 002's extended state vector (m motion parameters + N offsets, eq. 10) done
-generally: the measurement models (:mod:`trackproc.models.observation`) declare which drivers
-they depend on and the estimator concatenates the selected ones.
+generally: the measurement modifiers (:mod:`trackproc.models.modifiers`) own the bias drivers
+and the estimator collects them from the modifiers (the factory functions below remain for
+callers that only need a driver).
 
 Pure Python and numpy; nothing here reads files or prints.
 """
@@ -34,12 +36,14 @@ from trackproc import vocabulary
 
 __all__ = ["ParameterDriver", "ParameterSet", "DuplicateParameterError", "STATE_NAMES", "KINDS",
            "state_drivers", "range_bias", "doppler_offset", "doppler_drift", "az_bias", "el_bias",
-           "split_name"]
+           "split_name", "family_driver", "orbit_radius", "CONSTRAINT_NAMES"]
 
 #: Names of the six state components, in order.
 STATE_NAMES = vocabulary.STATE_NAMES
 #: Parameter families with a key after ``:``, and their units.
 KINDS = vocabulary.BIAS_UNITS
+#: Parameters of constraints (not of a measurement): refine's circular-orbit radius, and units.
+CONSTRAINT_NAMES = vocabulary.CONSTRAINT_PARAMETERS
 #: Default scales (about one expected sigma): state m and m/s, then by family.
 DEFAULT_SCALES = {"position": 100.0, "velocity": 0.1, "range_bias": 10.0, "doppler_offset": 1.0,
                   "doppler_drift": 1e-3, "az_bias": 1e-4, "el_bias": 1e-4}
@@ -115,7 +119,7 @@ class ParameterDriver:
 
     @property
     def family(self) -> str:
-        """``"state"`` for x..vz, else the part before ``:``."""
+        """``"state"`` for x..vz, the name for a constraint parameter (``r_ka``), else the part before ``:``."""
         return "state" if self.name in STATE_NAMES else split_name(self.name)[0]
 
     @property
@@ -133,12 +137,15 @@ class ParameterDriver:
 
 
 def split_name(name: str) -> tuple[str, Optional[str]]:
-    """``"range_bias:KIR"`` -> ``("range_bias", "KIR")``; ``"vx"`` -> ``("state", None)``.
+    """``"range_bias:KIR"`` -> ``("range_bias", "KIR")``; ``"vx"`` -> ``("state", None)``;
+    ``"r_ka"`` -> ``("r_ka", None)``.
 
     Raises ValueError for an unknown family or an empty key.
     """
     if name in STATE_NAMES:
         return "state", None
+    if name in CONSTRAINT_NAMES:
+        return name, None
     family, sep, key = name.partition(":")
     if not sep or not key or family not in KINDS:
         raise ValueError(f"unknown parameter name {name!r}; expected one of {', '.join(STATE_NAMES)} or "
@@ -269,7 +276,8 @@ def state_drivers(rv, *, scale_m: float = DEFAULT_SCALES["position"],
     return out
 
 
-def _family_driver(family: str, key: str, reference: float, scale: float | None, apriori_sigma, **kw):
+def family_driver(family: str, key: str, reference: float, scale: float | None, apriori_sigma, **kw):
+    """The driver ``FAMILY:KEY`` (unit from the vocabulary, default scale by family)."""
     if not isinstance(key, str) or not key or any(c.isspace() for c in key):
         raise ValueError(f"{family} key must be a non-empty string without spaces; found {key!r}")
     return ParameterDriver(f"{family}:{key}", KINDS[family], reference,
@@ -279,31 +287,39 @@ def _family_driver(family: str, key: str, reference: float, scale: float | None,
 def range_bias(station: str, reference: float = 0.0, *, scale: float | None = None,
                apriori_sigma: float | None = None) -> ParameterDriver:
     """``range_bias:STATION`` (m): ``D_meas = D + D0`` (seed 002, one-way phase ranging)."""
-    return _family_driver("range_bias", station, reference, scale, apriori_sigma,
+    return family_driver("range_bias", station, reference, scale, apriori_sigma,
                           description="range bias added to every range of the station (seed 002 D0)")
 
 
 def doppler_offset(key: str, reference: float = 0.0, *, scale: float | None = None,
                    apriori_sigma: float | None = None) -> ParameterDriver:
     """``doppler_offset:KEY`` (Hz): frequency offset of one-way Doppler (pass or station)."""
-    return _family_driver("doppler_offset", key, reference, scale, apriori_sigma,
+    return family_driver("doppler_offset", key, reference, scale, apriori_sigma,
                           description="one-way Doppler frequency offset (received - nominal)")
 
 
 def doppler_drift(key: str, epoch_s: float, reference: float = 0.0, *, scale: float | None = None,
                   apriori_sigma: float | None = None) -> ParameterDriver:
     """``doppler_drift:KEY`` (Hz/s): Doppler offset grows as ``drift * (t - epoch_s)``."""
-    return _family_driver("doppler_drift", key, reference, scale, apriori_sigma, epoch_s=float(epoch_s),
+    return family_driver("doppler_drift", key, reference, scale, apriori_sigma, epoch_s=float(epoch_s),
                           description="one-way Doppler frequency drift")
 
 
 def az_bias(station: str, reference: float = 0.0, *, scale: float | None = None,
             apriori_sigma: float | None = None) -> ParameterDriver:
     """``az_bias:STATION`` (rad), added to the modelled azimuth."""
-    return _family_driver("az_bias", station, reference, scale, apriori_sigma, description="azimuth bias")
+    return family_driver("az_bias", station, reference, scale, apriori_sigma, description="azimuth bias")
 
 
 def el_bias(station: str, reference: float = 0.0, *, scale: float | None = None,
             apriori_sigma: float | None = None) -> ParameterDriver:
     """``el_bias:STATION`` (rad), added to the modelled elevation."""
-    return _family_driver("el_bias", station, reference, scale, apriori_sigma, description="elevation bias")
+    return family_driver("el_bias", station, reference, scale, apriori_sigma, description="elevation bias")
+
+
+def orbit_radius(reference: float, *, scale: float = DEFAULT_SCALES["position"],
+                 apriori_sigma: float | None = None) -> ParameterDriver:
+    """``r_ka`` (m): the radius of the circular-orbit constraints ``|r|² = r_ka²``,
+    ``|v|² = μ/r_ka`` of refine (seed 004 eq. 5), a parameter of the constraints, not of a measurement."""
+    return ParameterDriver("r_ka", CONSTRAINT_NAMES["r_ka"], reference, scale, apriori_sigma=apriori_sigma,
+                           bounds=(0.0, math.inf), description="circular-orbit radius (seed 004 eq. 5)")

@@ -37,9 +37,9 @@ m(15°) = 3.80024367) in ``tests/test_troposphere.py``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
+
+from trackproc.models import modifiers as md
 
 #: Default laser wavelength (frequency-doubled Nd:YAG), µm.
 DEFAULT_WAVELENGTH_UM = 0.532
@@ -121,38 +121,75 @@ def standard_meteo(height_m):
     return 1013.25 * (1.0 - 2.26e-5 * h) ** 5.225, 291.15 - 6.5e-3 * h, np.full_like(h, 50.0)
 
 
-@dataclass(frozen=True)
-class RangeCorrections:
-    """Corrections added to the modelled range samples (a fixed modifier: no driver, no partial).
+def _in_spans(t, spans) -> np.ndarray:
+    t = np.asarray(t, float)
+    out = np.zeros(t.shape, dtype=bool)
+    for lo, hi in spans:
+        out |= (t >= lo) & (t <= hi)
+    return out
 
-    ``rows`` the range samples it applies to; ``lat_rad``, ``height_m`` their station; meteo per
-    sample (``pressure_hpa``, ``temperature_k``, ``humidity_percent``; NaN rows take
-    :func:`standard_meteo`), ``wavelength_um`` per sample, ``troposphere`` on/off, and
-    ``com_offset_m``: the target's centre-of-mass offset (the reflector is nearer than the
-    centre of mass, so it is *subtracted* from the modelled range to the centre of mass).
 
-    The delay's partial with respect to the orbit (through the elevation) is below 1e-4 of the
-    range partial above 10° and is left out; the value is recomputed from the current orbit at
-    every evaluation.
+class TroposphereDelay(md.RangeCorrection):
+    """The Mendes–Pavlis delay, eq. (1), of one station's range samples (a driver-free modifier).
+
+    ``lat_rad``, ``height_m``: the station; ``wavelength_um``; the surface meteo as records at
+    ``meteo_t_s`` (s on the measurement set's time axis) of ``pressure_hpa``, ``temperature_k``,
+    ``humidity_percent``, linearly interpolated to each sample (held at the ends); without
+    records the standard atmosphere (:func:`standard_meteo`). ``spans_s``: only samples inside
+    these ``(start, end)`` intervals (None: all); ``exclude_s``: not those inside these.
+    The delay is evaluated at the elevation of each model evaluation's geometry; its partial
+    with respect to the orbit (through the elevation, about 1e-4 of the range partial at 10°)
+    is left out of the Jacobian.
     """
 
-    rows: np.ndarray
-    lat_rad: np.ndarray
-    height_m: np.ndarray
-    pressure_hpa: np.ndarray
-    temperature_k: np.ndarray
-    humidity_percent: np.ndarray
-    wavelength_um: np.ndarray
-    troposphere: bool = True
-    com_offset_m: float = 0.0
+    def __init__(self, station: str, lat_rad: float, height_m: float, wavelength_um: float = DEFAULT_WAVELENGTH_UM,
+                 meteo_t_s=None, pressure_hpa=None, temperature_k=None, humidity_percent=None,
+                 spans_s=None, exclude_s=None) -> None:
+        super().__init__(station)
+        self.lat_rad, self.height_m, self.wavelength_um = float(lat_rad), float(height_m), float(wavelength_um)
+        self.meteo = None
+        if meteo_t_s is not None and len(meteo_t_s):
+            order = np.argsort(np.asarray(meteo_t_s, float))
+            self.meteo = tuple(np.asarray(a, float)[order] for a in
+                               (meteo_t_s, pressure_hpa, temperature_k, humidity_percent))
+        self.spans_s = spans_s
+        self.exclude_s = exclude_s or []
 
-    def values(self, elevation_rad) -> np.ndarray:
-        """The correction (m) to add to each of ``rows``, given their elevations (rad)."""
-        out = np.full(len(self.rows), -float(self.com_offset_m))
-        if self.troposphere:
-            p, t, rh = self.pressure_hpa.copy(), self.temperature_k.copy(), self.humidity_percent.copy()
-            missing = ~(np.isfinite(p) & np.isfinite(t) & np.isfinite(rh))
-            if missing.any():
-                p[missing], t[missing], rh[missing] = standard_meteo(self.height_m[missing])
-            out += slant_delay_m(elevation_rad, self.lat_rad, self.height_m, p, t, rh, self.wavelength_um)
-        return out
+    def rows(self, meas) -> np.ndarray:
+        rows = super().rows(meas)
+        t = meas.t_s[rows]
+        keep = np.ones(rows.size, dtype=bool) if self.spans_s is None else _in_spans(t, self.spans_s)
+        keep &= ~_in_spans(t, self.exclude_s)
+        return rows[keep]
+
+    def meteo_at(self, t_s):
+        """(P hPa, T K, RH %) at the times ``t_s`` (NaN records give way to the standard atmosphere)."""
+        t_s = np.asarray(t_s, float)
+        std = standard_meteo(np.full(t_s.shape, self.height_m))
+        if self.meteo is None:
+            return std
+        t, *values = self.meteo
+        out = []
+        for v, fallback in zip(values, std):
+            ok = np.isfinite(v)
+            out.append(np.interp(t_s, t[ok], v[ok]) if ok.any() else fallback)
+        return tuple(out)
+
+    def delay(self, meas, rows, geometry) -> np.ndarray:
+        if geometry is None:
+            raise ValueError("the troposphere delay needs the evaluation's geometry")
+        p, t, rh = self.meteo_at(meas.t_s[rows])
+        return slant_delay_m(md.elevation(meas, rows, geometry), self.lat_rad, self.height_m, p, t, rh,
+                             self.wavelength_um)
+
+
+class CentreOfMassOffset(md.RangeCorrection):
+    """The target's centre-of-mass offset: the reflectors are ``offset_m`` nearer than the centre
+    of mass the orbit describes, so the modelled range is shortened by it (LAGEOS: 0.251 m)."""
+
+    def __init__(self, offset_m: float, station: str | None = None) -> None:
+        super().__init__(station)
+        self.offset_m = float(offset_m)
+
+    def delay(self, meas, rows, geometry) -> np.ndarray:
+        return np.full(rows.shape, -self.offset_m)

@@ -1,0 +1,113 @@
+"""Options of ``trackproc estimate`` and their checks (:class:`EstimateOptions`, :func:`check_options`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Optional, Sequence
+
+from trackproc.dynamics import propagator
+from trackproc.errors import InputError
+from trackproc.models import observation as ob
+from trackproc.models import parameters as pm
+from trackproc.vocabulary import DOPPLER_BIASES, KIND_UNITS, NOISE_MODELS
+
+
+#: Unit of each kind's values (SI).
+UNITS = KIND_UNITS
+DOPPLER_BIAS = DOPPLER_BIASES
+DOPPLER_BIAS_PER = ("pass", "station")
+#: Margin (s) added before the first sample so that emission times are covered.
+LIGHT_TIME_MARGIN_S = 1.0
+#: Names that stand for several parameters in ``apriori_sigma``.
+GROUPS = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"), "state": pm.STATE_NAMES}
+RESIDUAL_COLUMNS = ("time", "station", "pass_id", "kind", "unit", "observed", "computed", "residual",
+                    "normalized_residual", "sigma", "edited")
+
+
+@dataclass
+class EstimateOptions:
+    """Options of :func:`estimate` (defaults = the CLI's).
+
+    ``range_bias``: estimate a range bias for every station with ranges (True), for the listed
+    stations, or none (False); ``doppler_bias``: None, ``"offset"`` or ``"offset+drift"``,
+    ``doppler_bias_per``: ``"pass"`` or ``"station"``; ``angle_bias``: azimuth and elevation
+    biases per station with angles; ``apriori_sigma``: name -> 1-sigma (a parameter name, a
+    family such as ``range_bias``, or ``position``/``velocity``/``state``); ``apriori_initial``:
+    use the initial state's 6 × 6 covariance as an a-priori constraint; ``epoch``: the solution
+    epoch (None = the initial state's; ``"first"`` = the first sample; or a UTC datetime64);
+    ``kinds``: kinds to use (None = all); ``range_rate_model``: None = from the pass files
+    (default doppler); ``compare_doppler_only``, ``two_stage``: the seed 002 reports.
+    ``noise``: the noise model of each pass's Doppler/range-rate samples (:func:`pass_noise`):
+    ``"auto"`` (chosen per pass by REML among white, AR(1), and for one-way passes with a
+    frequency offset a random walk of the transmitter frequency and both; then GLS), ``"white"``
+    (independent samples), or one of ``"ar1"``, ``"walk"``, ``"ar1+walk"``;
+    ``oscillator_noise``: the random-walk intensity (Hz/√s) instead of estimating it.
+    ``troposphere`` (auto | mendes-pavlis | none), ``com_offset_m``, ``wavelength_nm``: the
+    known corrections of range samples (:mod:`trackproc.pipeline.range_corrections`).
+    """
+
+    range_bias: bool | Sequence[str] = False
+    doppler_bias: Optional[str] = None
+    doppler_bias_per: str = "pass"
+    angle_bias: bool = False
+    apriori_sigma: Mapping[str, float] = field(default_factory=dict)
+    apriori_initial: bool = False
+    force: str = "j2"
+    earth: str = "wgs84"
+    range_rate_model: Optional[str] = None
+    max_iterations: int = 20
+    clip: Optional[float] = 4.0
+    epoch: object = None
+    kinds: Optional[Sequence[str]] = None
+    compare_doppler_only: bool = False
+    two_stage: bool = False
+    rank_rtol: float = 1e-9
+    noise: str = "auto"
+    oscillator_noise: Optional[float] = None
+    troposphere: str = "auto"             # range corrections (pipeline.range_corrections)
+    com_offset_m: float = 0.0
+    wavelength_nm: Optional[float] = None
+
+
+def check_options(opt: EstimateOptions) -> None:
+    """:class:`InputError` naming the option for any choice outside the vocabulary."""
+    if opt.noise not in NOISE_MODELS:
+        raise InputError("unknown noise model", column="--noise", found=opt.noise,
+                         expected="auto, white, ar1, walk or ar1+walk")
+    if opt.oscillator_noise is not None and not (math.isfinite(opt.oscillator_noise) and opt.oscillator_noise > 0):
+        raise InputError("the oscillator noise must be positive", column="--oscillator-noise",
+                         found=opt.oscillator_noise, expected="a random-walk intensity > 0 in Hz per sqrt(s)")
+    if opt.doppler_bias not in (None,) + DOPPLER_BIAS:
+        raise InputError("unknown Doppler bias model", column="--doppler-bias", found=opt.doppler_bias,
+                         expected=" or ".join(DOPPLER_BIAS))
+    if opt.doppler_bias_per not in DOPPLER_BIAS_PER:
+        raise InputError("unknown Doppler bias grouping", column="--doppler-bias-per", found=opt.doppler_bias_per,
+                         expected=" or ".join(DOPPLER_BIAS_PER))
+    if opt.kinds is not None:
+        bad = [k for k in opt.kinds if k not in ob.KINDS]
+        if bad or not opt.kinds:
+            raise InputError("unknown measurement kind", column="--kinds", found=",".join(bad) or "(none)",
+                             expected="a comma list of " + ",".join(ob.KINDS))
+    if opt.force not in propagator.FORCES:
+        raise InputError("unknown force model", column="--force", found=opt.force, expected="two-body or j2")
+
+
+def check_apriori(apriori: Mapping[str, float]) -> None:
+    """:class:`InputError` for an a-priori sigma that is not a positive number."""
+    for key, sigma in apriori.items():
+        if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma > 0):
+            raise InputError("a-priori sigma must be positive", column="--apriori-sigma", found=f"{key}={sigma}",
+                             expected="NAME=SIGMA with SIGMA > 0")
+
+
+def apriori_for(name, family, apriori):
+    """The a-priori sigma of a parameter from the option's keys (exact name wins)."""
+    if name in apriori:
+        return apriori[name]
+    for group, members in GROUPS.items():
+        if name in members and group in apriori:
+            return apriori[group]
+    if family in apriori:
+        return apriori[family]
+    return None

@@ -1,0 +1,264 @@
+"""The estimation problem of ``trackproc estimate``: :class:`Problem` and :func:`build_problem`.
+
+The parameters are the six state drivers ``x..vz`` plus the drivers that the measurement
+modifiers own (:mod:`trackproc.models.modifiers`): the options choose the modifiers
+(:func:`bias_modifiers`), the estimator collects their drivers, and the model applies the
+modifiers bound to the samples (steps 3-5 of :mod:`trackproc.pipeline.estimate`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+import pandas as pd
+
+from trackproc.dynamics import propagator
+from trackproc.dynamics import timescales as ts
+from trackproc.errors import InputError
+from trackproc.methods.least_squares import Options, Prior, solve, solve_gls
+from trackproc.methods.refinement import CachedModel, geodesic_retraction
+from trackproc.models import modifiers as md
+from trackproc.models import observation as ob
+from trackproc.models import parameters as pm
+from trackproc.pipeline.estimate import samples as sm
+from trackproc.pipeline.estimate.options import (GROUPS, LIGHT_TIME_MARGIN_S, EstimateOptions, apriori_for,
+                                                 check_apriori, check_options)
+
+
+@dataclass
+class Problem:
+    """An assembled estimation problem: samples, parameters, model (reusable, e.g. Monte Carlo).
+
+    ``meas`` (:class:`~trackproc.models.observation.MeasurementSet`), ``params`` (the drivers;
+    the selected ones are the estimated vector), ``epoch`` (UTC datetime64) and ``frame`` of the
+    propagation, ``force``, ``range_rate_model``, ``modifiers`` (bound to ``meas``; they own the bias drivers), ``priors``,
+    ``times`` (UTC datetime64 of the samples), ``sources`` (file of each sample).
+    """
+
+    meas: ob.MeasurementSet
+    params: pm.ParameterSet
+    epoch: np.datetime64
+    frame: object
+    force: str
+    range_rate_model: str
+    modifiers: list
+    priors: list
+    times: np.ndarray
+    sources: np.ndarray
+    eop: object = None
+    evaluations: int = 0
+
+    @property
+    def names(self) -> list:
+        return self.params.selected_names
+
+    @property
+    def x0(self) -> np.ndarray:
+        return self.params.values()
+
+    def _columns(self):
+        names = self.names
+        cols = {n: i for i, n in enumerate(names) if n not in pm.STATE_NAMES}
+        fixed = {d.name: d.value for d in self.params if not d.selected and d.family != "state"}
+        return cols, fixed
+
+    def trajectory(self, x):
+        """The propagated trajectory (with STM) of the state in ``x``."""
+        t = self.meas.t_s
+        span = [float(t.min()) - LIGHT_TIME_MARGIN_S, float(t.max())]
+        traj = propagator.propagate(x[:3], x[3:6], self.epoch, span, force=self.force, stm=True, frame=self.frame,
+                                    eop=self.eop)
+        return traj.raise_for_outcome()
+
+    def model(self, x):
+        """``(computed (N,), jacobian (N, n))`` at the selected parameter values ``x``."""
+        x = np.asarray(x, float)
+        cols, fixed = self._columns()
+        values = dict(fixed)
+        values.update({n: x[i] for n, i in cols.items()})
+        try:
+            traj = self.trajectory(x)
+            h, jac, _ = ob.evaluate(self.meas, traj, modifiers=self.modifiers, bias_values=values, bias_columns=cols,
+                                    n_columns=x.size, range_rate_model=self.range_rate_model)
+        except ValueError as exc:
+            raise ArithmeticError(str(exc)) from None
+        self.evaluations += 1
+        return h, jac
+
+    def solve(self, observed=None, *, max_iterations: int = 20, clip: Optional[float] = 4.0,
+              rank_rtol: float = 1e-9, x0=None, priors=None, noise=None, edited=None):
+        """:func:`~trackproc.methods.least_squares.solve` on this problem (``observed``
+        replaces the samples' values, e.g. for Monte Carlo); with ``noise`` (a correlated
+        :class:`~trackproc.methods.noise.PassCovariance`), generalised least squares
+        (:func:`~trackproc.methods.least_squares.solve_gls`, starting from the ``edited`` samples)."""
+        y = self.meas.observed if observed is None else np.asarray(observed, float)
+        lo, hi = self.params.bounds()
+        if noise is not None and not noise.is_white:
+            opts = Options(max_iterations=max_iterations, clip=None, rank_rtol=rank_rtol)
+            pri = self.priors if priors is None else priors
+
+            def fit(model_w, y_w, start):
+                # the step follows the curved valleys the correlated weighting leaves (as refine's)
+                cached = CachedModel(model_w)
+                ones = np.ones(y_w.size)
+                return solve(cached, start, y_w, ones, names=self.names, scales=self.params.scales(), priors=pri,
+                             bounds=(lo, hi), options=opts,
+                             retract=geodesic_retraction(cached, ones, self.params.scales(), pri)), None
+
+            return solve_gls(self.model, self.x0 if x0 is None else x0, y, noise, fit, clip=clip, edited=edited)[0]
+        return solve(self.model, self.x0 if x0 is None else x0, y, self.meas.sigma, names=self.names,
+                     scales=self.params.scales(), priors=self.priors if priors is None else priors,
+                     periodic=self.meas.periodic, bounds=(lo, hi),
+                     options=Options(max_iterations=max_iterations, clip=clip, rank_rtol=rank_rtol))
+
+
+def initial_at_epoch(initial, epoch, force, eop):
+    """Initial GCRF state (and 6 × 6 covariance if any) moved to ``epoch`` (Taylor + STM)."""
+    cov = initial.state_covariance
+    if np.datetime64(initial.epoch, "ns") == epoch:
+        return initial.rv, cov
+    dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(epoch), initial.jd_utc))
+    traj = propagator.propagate(initial.r_m, initial.v_m_s, initial.epoch, [dt], force=force, stm=cov is not None,
+                                eop=eop).raise_for_outcome()
+    rv = traj.state(dt)
+    if cov is not None:
+        cov = traj.covariance(dt, cov)
+    return rv, cov
+
+
+def range_bias_modifiers(opt: EstimateOptions, kinds_by_station: dict, known: dict, apriori) -> list:
+    """A :class:`~trackproc.models.modifiers.RangeBias` per station with ranges: estimated for the
+    stations ``--range-bias`` asks for, held at the stations table's known bias for the others."""
+    range_stations = sorted(s for s, k in kinds_by_station.items() if "range" in k)
+    if opt.range_bias is True:
+        wanted = range_stations
+    elif opt.range_bias:
+        wanted = list(opt.range_bias)
+        dup = sorted({s for s in wanted if wanted.count(s) > 1})
+        if dup:
+            raise InputError("duplicate parameter", column="--range-bias", found=f"range_bias:{dup[0]}",
+                             expected="each station once")
+        for s in wanted:
+            if s not in range_stations:
+                raise InputError("range bias for a station without ranges", column="--range-bias", found=s,
+                                 expected="one of " + (", ".join(range_stations) or "(no station has ranges)"))
+    else:
+        wanted = []
+    out = []
+    for s in range_stations:
+        prior_value = getattr(known[s], "range_bias_m", None)
+        if s in wanted:
+            out.append(md.RangeBias(s, prior_value or 0.0,
+                                    apriori_sigma=apriori_for(f"range_bias:{s}", "range_bias", apriori)))
+        elif prior_value:
+            out.append(md.RangeBias(s, prior_value, selected=False))     # a known bias from the stations table
+    return out
+
+
+def frequency_modifiers(opt: EstimateOptions, frame, t_s, apriori) -> list:
+    """``--doppler-bias``: a :class:`~trackproc.models.modifiers.DopplerOffset` (and
+    :class:`~trackproc.models.modifiers.DopplerDrift` from the first sample) per pass or station
+    with Doppler or range-rate samples, each with the :class:`~trackproc.models.modifiers.OscillatorWander`
+    of that transmitter (given by ``--oscillator-noise`` or estimated)."""
+    if not opt.doppler_bias:
+        return []
+    rr_rows = frame["kind"].isin(["doppler", "range_rate"]).to_numpy()
+    keys_col = "pass_id" if opt.doppler_bias_per == "pass" else "station"
+    keys = frame.loc[rr_rows, keys_col].astype(str)
+    first = pd.Series(t_s[rr_rows], index=keys.index).groupby(keys.to_numpy()).min()
+    if not len(first):
+        raise InputError("no Doppler or range-rate samples for --doppler-bias", column="--doppler-bias",
+                         found=opt.doppler_bias, expected="pass files with doppler or range_rate samples")
+    out = []
+    for key in sorted(first.index):
+        out.append(md.DopplerOffset(key, apriori_sigma=apriori_for(f"doppler_offset:{key}", "doppler_offset",
+                                                                   apriori)))
+        if opt.doppler_bias == "offset+drift":
+            out.append(md.DopplerDrift(key, float(first[key]),
+                                       apriori_sigma=apriori_for(f"doppler_drift:{key}", "doppler_drift", apriori)))
+        out.append(md.OscillatorWander(key, opt.oscillator_noise))
+    return out
+
+
+def angle_modifiers(opt: EstimateOptions, kinds_by_station: dict, apriori) -> list:
+    """``--angle-bias``: azimuth and elevation biases per station with angles."""
+    out = []
+    if opt.angle_bias:
+        for s, k in sorted(kinds_by_station.items()):
+            if "azimuth" in k:
+                out.append(md.AzimuthBias(s, apriori_sigma=apriori_for(f"az_bias:{s}", "az_bias", apriori)))
+            if "elevation" in k:
+                out.append(md.ElevationBias(s, apriori_sigma=apriori_for(f"el_bias:{s}", "el_bias", apriori)))
+    return out
+
+
+def bias_modifiers(opt: EstimateOptions, frame, t_s, known, apriori) -> list:
+    """Every modifier the options ask for, in the order of their drivers in the extended state."""
+    kinds_by_station = frame.groupby("station")["kind"].agg(lambda k: set(k.astype(str))).to_dict()
+    return (range_bias_modifiers(opt, kinds_by_station, known, apriori) + frequency_modifiers(opt, frame, t_s, apriori)
+            + angle_modifiers(opt, kinds_by_station, apriori))
+
+
+def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial) -> list:
+    """The a-priori constraints: the drivers' own sigmas, and ``--apriori-initial`` (the initial
+    state's 6 × 6 covariance)."""
+    priors = []
+    mask, centre, sigma = params.apriori()
+    if mask.any():
+        priors.append(Prior.diagonal(np.flatnonzero(mask), centre[mask], sigma[mask]))
+    if opt.apriori_initial:
+        if cov0 is None:
+            raise InputError("the initial state has no covariance", file=initial.source, column="covariance",
+                             expected="a state file with a 6 x 6 covariance for --apriori-initial")
+        if mask[:6].any():
+            raise InputError("give --apriori-initial or state a-priori sigmas, not both", column="--apriori-sigma")
+        priors.append(Prior(np.arange(6), np.asarray(rv0, float), np.asarray(cov0, float)))
+    return priors
+
+
+def build_problem(tables, initial, stations=None, options: EstimateOptions | None = None, eop=None) -> Problem:
+    """Assemble the :class:`Problem` from pass tables, an initial state and stations.
+
+    ``tables``: sequence of ``(source name, PassTable)``; ``initial``: a GCRF
+    :class:`~trackproc.io.statefile.State`; ``stations``: name -> Station (optional when the pass
+    files' metadata carry them). Raises :class:`InputError` for invalid input.
+    """
+    opt = options or EstimateOptions()
+    check_options(opt)
+    if not tables:
+        raise InputError("no pass files given", column="PASS", expected="one or more pass files, or -")
+    frame, file_models = sm.merge_tables(tables, opt.kinds)
+    sm.check_samples(frame)
+    model = sm.range_rate_model(opt.range_rate_model, file_models)
+    known = sm.resolve_stations(frame, tables, stations)
+    t64 = sm.utc_times(frame)
+    epoch = sm.solution_epoch(opt.epoch, initial, t64)
+    meas = sm.measurement_set(frame, t64, epoch, known, opt.earth, eop)
+
+    rv0, cov0 = initial_at_epoch(initial, epoch, opt.force, eop)
+    apriori = dict(opt.apriori_sigma)
+    check_apriori(apriori)
+    params = pm.ParameterSet(pm.state_drivers(rv0, sigma=[apriori_for(s, "state", apriori) for s in pm.STATE_NAMES]))
+    modifiers = bias_modifiers(opt, frame, meas.t_s, known, apriori)
+    from trackproc.pipeline.range_corrections import range_correction_modifiers
+
+    modifiers += range_correction_modifiers(frame, tables, known, epoch, troposphere=opt.troposphere,
+                                            com_offset_m=opt.com_offset_m, wavelength_nm=opt.wavelength_nm)
+    for d in md.collect_drivers(modifiers):
+        params.add(d)
+    unknown = [k for k in apriori if k not in params and k not in GROUPS and k not in pm.KINDS
+               and k not in pm.STATE_NAMES]
+    if unknown:
+        raise InputError("a-priori sigma for an unknown parameter", column="--apriori-sigma", found=unknown[0],
+                         expected="one of " + ", ".join(params.names + list(GROUPS) + list(pm.KINDS)))
+    try:
+        bound = md.bind_all(modifiers, meas)
+    except ValueError as exc:
+        raise InputError(str(exc), column="--doppler-bias") from None
+    priors = priors_of(params, opt, rv0, cov0, initial)
+    frame_q = propagator.reference_frame(*(float(a) for a in ts.datetime64_to_jd_utc(epoch)), eop)
+    return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force, range_rate_model=model,
+                   modifiers=bound, priors=priors, times=t64, sources=frame["_source"].to_numpy(dtype=object),
+                   eop=eop)

@@ -1,0 +1,147 @@
+"""The result of ``trackproc estimate``: :func:`estimate` (problem, fit, gates, reports) and
+what it returns (:class:`EstimateResult`, with the residual table and the state file's records)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+import pandas as pd
+
+from trackproc.constants import force_model_constants
+from trackproc.dynamics.rtn import rtn_covariance
+from trackproc.io.statefile import State
+from trackproc.models import observation as ob
+from trackproc.pipeline.estimate import gates
+from trackproc.pipeline.estimate import seed002 as s2
+from trackproc.pipeline.estimate.options import UNITS, EstimateOptions
+from trackproc.pipeline.estimate.problem import Problem, build_problem
+
+
+@dataclass
+class EstimateResult:
+    """Everything :func:`estimate` produces (the CLI writes it).
+
+    ``state`` (:class:`~trackproc.io.statefile.State`, GCRF, every estimated parameter, its
+    sigma, the full covariance and the diagnostics), ``solution`` (the solver's
+    :class:`~trackproc.methods.least_squares.Solution`), ``problem``, ``residuals`` (one row per
+    sample: :data:`RESIDUAL_COLUMNS`), ``rtn_covariance`` (6 × 6, m and m/s), ``comparison``
+    (Doppler-only vs extended, or None), ``two_stage`` (:class:`~trackproc.methods.two_stage.TwoStage`
+    or None) and ``two_stage_solution`` (its stage-2 solution), ``warnings``.
+    """
+
+    state: object
+    solution: object
+    problem: Problem
+    residuals: pd.DataFrame
+    rtn_covariance: np.ndarray
+    comparison: Optional[dict] = None
+    two_stage: Optional[object] = None
+    two_stage_solution: Optional[object] = None
+    warnings: list = field(default_factory=list)
+    quality: Optional[object] = None
+
+
+def rms_table(problem: Problem, sol) -> dict:
+    """Per station and kind: counts, edited, RMS (unit) and WRMS (normalized) of kept samples."""
+    out = {}
+    meas = problem.meas
+    for st in sorted(set(meas.station)):
+        for kind in ob.KINDS:
+            rows = (meas.station == st) & (meas.kind == kind)
+            if not rows.any():
+                continue
+            kept = rows & ~sol.edited
+            r = sol.residual[kept]
+            z = sol.normalized[kept]
+            out.setdefault(st, {})[kind] = {
+                "n": int(rows.sum()), "edited": int((rows & sol.edited).sum()), "unit": UNITS[kind],
+                "rms": float(np.sqrt(np.mean(r * r))) if r.size else None,
+                "mean": float(np.mean(r)) if r.size else None,
+                "wrms": float(np.sqrt(np.mean(z * z))) if z.size else None}
+    return out
+
+
+def residual_frame(problem: Problem, sol) -> pd.DataFrame:
+    """The residual table (:data:`RESIDUAL_COLUMNS`), samples in time order per station."""
+    meas = problem.meas
+    frame = pd.DataFrame({
+        "time": pd.DatetimeIndex(problem.times).tz_localize("UTC"), "station": meas.station.astype(str),
+        "pass_id": meas.pass_id.astype(str), "kind": meas.kind.astype(str),
+        "unit": [UNITS[k] for k in meas.kind], "observed": meas.observed, "computed": sol.computed,
+        "residual": sol.residual, "normalized_residual": sol.normalized, "sigma": meas.sigma,
+        "edited": sol.edited.astype(bool)})
+    order = np.lexsort((frame["kind"].to_numpy(dtype=str), problem.times, frame["station"].to_numpy(dtype=str)))
+    return frame.iloc[order].reset_index(drop=True)
+
+
+def estimate(tables, initial, stations=None, options: EstimateOptions | None = None, eop=None) -> EstimateResult:
+    """Estimate the orbit state and the selected biases from pass tables (see the module docstring).
+
+    Returns :class:`EstimateResult`; raises :class:`InputError` (exit 2) for invalid input and
+    :class:`ProcessingError` (exit 1) when the estimation fails (too few data, rank deficiency,
+    non-convergence), with diagnostics.
+    """
+    opt = options or EstimateOptions()
+    problem = build_problem(tables, initial, stations, opt, eop)
+    sol, noise_report = gates.solve(problem, opt)
+    problem.params.set_values(sol.values)
+    x = sol.values
+    names = sol.names
+    rtn = rtn_covariance(x[:3], x[3:6], sol.covariance[:6, :6])
+    warnings = gates.warnings_of(sol)
+    fixed = {d.name: d.value for d in problem.params if not d.selected}
+    drifts = {d.name: d.epoch_s for d in problem.params if d.epoch_s is not None}
+    diagnostics = {
+        "converged": bool(sol.converged), "message": sol.message, "iterations": int(sol.iterations),
+        "damped_steps": int(sol.damped_steps), "cost": float(sol.chi2), "cost_history": sol.cost_history,
+        "dof": int(sol.dof), "variance_factor": sol.variance_factor, "wrms": sol.wrms,
+        "apriori_rows": sol.n_prior, "chi2_apriori": sol.chi2_prior,
+        "condition_number": sol.condition_number,
+        "measurements": sol.n_measurements, "edited": sol.n_edited, "clip_sigma": opt.clip,
+        "rms": rms_table(problem, sol),
+        "correlation": sol.correlation,
+        "covariance_rtn": rtn, "sigma_rtn": {"radial_m": math.sqrt(rtn[0, 0]), "along_m": math.sqrt(rtn[1, 1]),
+                                             "cross_m": math.sqrt(rtn[2, 2]), "radial_m_s": math.sqrt(rtn[3, 3]),
+                                             "along_m_s": math.sqrt(rtn[4, 4]), "cross_m_s": math.sqrt(rtn[5, 5])},
+        "units": problem.params.units(),
+    }
+    if noise_report is not None:
+        diagnostics["noise"] = noise_report
+    quality = gates.estimate_quality(problem, sol)
+    comparison = s2.compare(problem, sol) if opt.compare_doppler_only else None
+    two, sol2 = s2.two_stage(problem, sol, opt) if opt.two_stage else (None, None)
+    if comparison is not None:
+        diagnostics["compare_doppler_only"] = comparison
+    if two is not None:
+        diagnostics["two_stage"] = s2.two_stage_dict(two, sol2)
+    extra = {"estimation": {
+        "method": "batch weighted least squares (Gauss-Newton by SVD, Levenberg-Marquardt damping)",
+        "range_rate_model": problem.range_rate_model,
+        "light_time": light_time_note(problem.meas),
+        "propagator": "Taylor (DT) with state transition matrix, quasi-inertial frame of the solution epoch",
+        "earth": opt.earth, "doppler_bias": opt.doppler_bias, "doppler_bias_per": opt.doppler_bias_per,
+        "fixed_parameters": fixed, "drift_epochs_s": drifts,
+        "apriori": {n: s for n, s, m in zip(names, problem.params.apriori()[2], problem.params.apriori()[0]) if m},
+        "apriori_initial": bool(opt.apriori_initial),
+        "sources": sorted({str(s) for s in problem.sources}),
+    }, "quality": quality.as_dict()}
+    state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=list(names), values=x, sigma=sol.sigma,
+                               covariance=sol.covariance, force_model=opt.force,
+                               constants=force_model_constants(opt.force),
+                               eop_source=getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
+                               diagnostics=diagnostics, extra=extra)
+    return EstimateResult(state=state, solution=sol, problem=problem, residuals=residual_frame(problem, sol),
+                          rtn_covariance=rtn, comparison=comparison, two_stage=two, two_stage_solution=sol2,
+                          warnings=warnings, quality=quality)
+
+
+def light_time_note(meas) -> str:
+    """How the samples' light time was modelled (the state file's ``estimation`` record)."""
+    if not meas.two_way.any():
+        return "one-way, time tag at reception, range-rate > 0 receding"
+    both = "one-way and " if (~meas.two_way & np.isin(meas.kind, ob.LINK_KINDS)).any() else ""
+    return (f"{both}two-way (round trip to the same station, turnaround ratio 1: range = round trip / 2, "
+            "range-rate = mean of both legs), time tag at reception, range-rate > 0 receding")

@@ -1,0 +1,141 @@
+"""The samples of ``trackproc estimate``: pass tables merged and checked, stations resolved,
+reception times in SI seconds from the solution epoch, stations in GCRF (steps 1-2 of
+:mod:`trackproc.pipeline.estimate`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from trackproc.dynamics import geodesy
+from trackproc.dynamics import timescales as ts
+from trackproc.errors import InputError
+from trackproc.io.statefile import parse_epoch
+from trackproc.models import observation as ob
+
+
+def merge_tables(tables, kinds):
+    """One frame of all samples with their file, carrier and metadata checks."""
+    frames, carriers, models, sources = [], [], [], []
+    for source, table in tables:
+        frame = table.frame
+        meta = table.meta or {}
+        if len(frame) == 0:
+            raise InputError("no samples", file=source, expected="a pass file with at least one sample")
+        mode = meta.get("doppler_mode") or "one-way"
+        kinds_here = set(frame["kind"].astype(str))
+        if mode not in ob.MODES and kinds_here & set(ob.LINK_KINDS):
+            raise InputError("unknown link mode", file=source, column="doppler_mode", found=mode,
+                             expected="one-way or two-way (a round trip through a transponder of ratio 1)")
+        carrier = meta.get("carrier_hz")
+        if "doppler" in kinds_here and (kinds is None or "doppler" in kinds):
+            if not isinstance(carrier, (int, float)) or not (carrier > 0):
+                raise InputError("Doppler samples need the carrier frequency", file=source, column="carrier_hz",
+                                 found=carrier, expected="carrier_hz > 0 in the file metadata (trackproc ingest "
+                                                         "--carrier-hz)")
+        carriers.append(float(carrier) if isinstance(carrier, (int, float)) and carrier > 0 else math.nan)
+        models.append(meta.get("range_rate_model"))
+        sub = frame[["time", "station", "pass_id", "kind", "value", "sigma"]].copy()
+        sub["_source"] = source
+        sub["_carrier"] = carriers[-1]
+        sub["_mode"] = mode if mode in ob.MODES else "one-way"     # angles only: the link does not matter
+        sub["_row"] = np.arange(len(sub))
+        frames.append(sub)
+        sources.append(source)
+    frame = pd.concat(frames, ignore_index=True)
+    if kinds is not None:
+        frame = frame[frame["kind"].isin(list(kinds))].reset_index(drop=True)
+        if len(frame) == 0:
+            raise InputError("no samples of the requested kinds", column="--kinds", found=",".join(kinds),
+                             expected="kinds present in the pass files")
+    return frame, models
+
+
+def check_samples(frame):
+    bad = ~(np.isfinite(frame["value"].to_numpy(float)))
+    bad_sigma = ~(np.isfinite(frame["sigma"].to_numpy(float)) & (frame["sigma"].to_numpy(float) > 0))
+    for mask, column, expected in ((bad, "value", "a finite number"), (bad_sigma, "sigma", "a positive number")):
+        if mask.any():
+            i = int(np.flatnonzero(mask)[0])
+            r = frame.iloc[i]
+            raise InputError(f"invalid {column} at {pd.Timestamp(r['time']).isoformat()} ({r['station']}, "
+                             f"{r['kind']}; sample {int(r['_row']) + 1} of the file)", file=r["_source"],
+                             column=column, found=r[column], expected=expected)
+
+
+def resolve_stations(frame, tables, stations):
+    """Station objects for every station in the samples: --stations first, then metadata."""
+    known = dict(stations or {})
+    for source, table in tables:
+        for name, st in table.stations().items():
+            known.setdefault(name, st)
+    missing = sorted(set(frame["station"].astype(str)) - set(known))
+    if missing:
+        name = missing[0]
+        src = frame.loc[frame["station"] == name, "_source"].iloc[0]
+        raise InputError("unknown station", file=src, column="station", found=name,
+                         expected="a station of --stations or of the pass file's metadata"
+                         + (f" ({', '.join(sorted(known))})" if known else " (give --stations STATIONS.csv)"))
+    return known
+
+
+def solution_epoch(option, initial, times):
+    if option is None or (isinstance(option, str) and option.lower() == "initial"):
+        return np.datetime64(initial.epoch, "ns")
+    if isinstance(option, str) and option.lower() == "first":
+        return np.datetime64(times.min(), "ns")
+    if isinstance(option, str):
+        return parse_epoch(option, column="--epoch")
+    return np.datetime64(option, "ns")
+
+
+def range_rate_model(option, file_models) -> str:
+    """The range-rate model: the option, else the pass files' one (they must agree), else doppler."""
+    model = option
+    if model is None:
+        found = sorted({m for m in file_models if m})
+        if len(found) > 1:
+            raise InputError("pass files disagree on the range-rate model", column="range_rate_model",
+                             found=", ".join(found), expected="one model; choose with --range-rate-model")
+        model = found[0] if found else "doppler"
+    if model not in ob.RANGE_RATE_MODELS:
+        raise InputError("unknown range-rate model", column="--range-rate-model", found=model,
+                         expected=" or ".join(ob.RANGE_RATE_MODELS))
+    return model
+
+
+def utc_times(frame) -> np.ndarray:
+    """The samples' UTC time tags as naive datetime64[ns]."""
+    times = frame["time"]
+    if getattr(times.dt, "tz", None) is not None:
+        times = times.dt.tz_convert("UTC").dt.tz_localize(None)
+    return times.to_numpy(dtype="datetime64[ns]")
+
+
+def measurement_set(frame, t64, epoch, known, earth: str, eop) -> ob.MeasurementSet:
+    """The :class:`~trackproc.models.observation.MeasurementSet` of ``frame``: reception times
+    in SI seconds from ``epoch`` (through TAI), every station in GCRF at its reception times
+    (IAU 2006/2000A) with its velocity, acceleration and GCRF -> ENU rotation."""
+    epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(epoch))
+    jd1, jd2 = ts.datetime64_to_jd_utc(t64)
+    t_s = np.asarray(ts.seconds_since((jd1, jd2), epoch_jd), float)
+    n = len(frame)
+    r_st = np.empty((n, 3))
+    v_st = np.empty((n, 3))
+    a_st = np.empty((n, 3))
+    enu = np.empty((n, 3, 3))
+    station_col = frame["station"].astype(str).to_numpy(dtype=object)
+    for name in sorted(set(station_col)):
+        rows = np.flatnonzero(station_col == name)
+        st = known[name]
+        lat, lon, r_itrf = geodesy.station_itrf(st, earth)
+        track = geodesy.station_gcrf(r_itrf, jd1[rows], jd2[rows], eop)
+        r_st[rows], v_st[rows], a_st[rows] = track.r, track.v, track.a
+        enu[rows] = geodesy.enu_matrix(lat, lon) @ track.gcrf_to_itrf
+    return ob.MeasurementSet(t_s=t_s, kind=frame["kind"].astype(str).to_numpy(dtype=object), station=station_col,
+                             pass_id=frame["pass_id"].astype(str).to_numpy(dtype=object),
+                             observed=frame["value"].to_numpy(float), sigma=frame["sigma"].to_numpy(float),
+                             r_st=r_st, v_st=v_st, gcrf_to_enu=enu, carrier_hz=frame["_carrier"].to_numpy(float),
+                             a_st=a_st, mode=frame["_mode"].to_numpy(dtype=object))
