@@ -30,8 +30,13 @@ RANGE_RATE_MODELS = ("doppler", "instantaneous")
 #: trackproc.methods.noise).
 NOISE_MODELS = ("auto", "white", "ar1", "walk", "ar1+walk")
 
-#: Force models (``--force``).
-FORCES = ("two-body", "j2")
+#: Force models (``--force``): the Taylor engine's two-body and J2, and ``full`` (gravity field,
+#: Sun, Moon, radiation pressure, drag, relativity; trackproc.dynamics.forces, DOP853).
+FORCES = ("two-body", "j2", "full")
+#: Third bodies of the full force model (``--third-body``).
+THIRD_BODIES = ("sun", "moon")
+#: Atmosphere models of the full force model's drag (``--atmosphere``).
+ATMOSPHERES = ("harris-priester", "nrlmsis")
 #: Earth figures for stations (``--earth``): WGS-84 ellipsoid or the papers' 6371 km sphere.
 EARTHS = ("wgs84", "sphere")
 

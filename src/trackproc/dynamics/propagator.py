@@ -43,12 +43,13 @@ import numpy as np
 from trackproc.dynamics import taylor
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.frames import QuasiInertialFrame, earth_rotation
+from trackproc import vocabulary
 from trackproc.errors import ProcessingError
 from trackproc.isotime import iso_utc
 
 __all__ = ["FORCES", "Trajectory", "Steps", "propagate", "propagate_state", "force_parameters", "reference_frame"]
 
-FORCES = taylor.FORCES
+FORCES = vocabulary.FORCES
 #: Length of the run made when every requested time is the epoch itself (s).
 _MIN_SPAN_S = 1.0
 
@@ -115,6 +116,7 @@ class Trajectory:
     t_min_s: float
     t_max_s: float
     initial_gcrf: np.ndarray | None = None
+    force_model: object = None          # the ForceModel of force "full" (its describe() for metadata)
 
     # -- summary -----------------------------------------------------------------------------
     @property
@@ -230,6 +232,22 @@ class Trajectory:
             out = big.T @ out @ big
         return out
 
+    @property
+    def force_parameter_names(self) -> tuple:
+        """Force-model parameters whose partials the runs carry (``cr``, ``cd``, ``empirical_*``)."""
+        return tuple(self.runs[0].parameters[6:]) if self.has_stm and self.runs else ()
+
+    def parameter_partials(self, t_s, *, frame: str = "gcrf") -> np.ndarray:
+        """``d state(t) / d p`` for :attr:`force_parameter_names`, ``(..., 6, P)`` (GCRF by default)."""
+        names = self.force_parameter_names
+        if not names:
+            raise ValueError("this trajectory carries no force-parameter partials; propagate a ForceModel "
+                             "with estimated parameters and stm=True")
+        out = self._evaluate(t_s, lambda run, t: run.jacobian(t)[..., 6:], (6, len(names)))
+        if _frame_key(frame) == "gcrf":
+            out = self.rotation.T @ out
+        return out
+
     def covariance(self, t_s, covariance0) -> np.ndarray:
         """Propagated GCRF covariance ``Phi P0 Phi^T`` (m^2, m^2/s, m^2/s^2), ``(..., 6, 6)``.
 
@@ -287,7 +305,7 @@ def reference_frame(jd1: float, jd2: float, eop=None) -> QuasiInertialFrame:
 
 def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float = 1e-15,
               stm: bool = False, frame: QuasiInertialFrame | None = None,
-              max_steps: int = 100_000) -> Trajectory:
+              max_steps: int = 100_000, force_model=None) -> Trajectory:
     """Propagate a GCRF state to cover times ``t_s`` (s from ``epoch``, either sign).
 
     Parameters
@@ -300,13 +318,18 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
         Times to cover, SI seconds from the epoch (negative = before it), or UTC
         ``datetime64`` labels. The runs cover ``[min(t_s, 0), max(t_s, 0)]``; evaluate at any
         time inside (:meth:`Trajectory.state` etc. take seconds or ``datetime64`` too).
-    force : ``"two-body"`` or ``"j2"``
-        Force model (constants from :mod:`trackproc.constants`).
+    force : ``"two-body"``, ``"j2"`` or ``"full"``
+        Force model (constants from :mod:`trackproc.constants`); ``"full"`` integrates
+        ``force_model`` (a :class:`trackproc.dynamics.forces.ForceModel`, which may also be
+        passed as ``force`` itself) with DOP853 and the variational equations
+        (:mod:`trackproc.dynamics.forces.integrator`); its STM and the partials of its
+        estimated parameters (:meth:`Trajectory.parameter_partials`) come with ``stm``.
     eop : :class:`~trackproc.dynamics.timescales.EarthOrientation` or None
         Earth orientation for the integration frame (only the precession-nutation matrix of
         the reference epoch matters to the dynamics).
     tol : float
-        Taylor tolerance per step (combined absolute/relative; down to about 1e-16).
+        Taylor tolerance per step (combined absolute/relative; down to about 1e-16). For
+        ``"full"``: the DOP853 relative tolerance, at least ``integrator.RTOL`` (1e-13).
     stm : bool
         Also propagate the state transition matrix (first-order sensitivity spectra).
     frame : QuasiInertialFrame, optional
@@ -327,8 +350,18 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
     epoch = np.datetime64(epoch, "ns")
     jd1, jd2 = ts.datetime64_to_jd_utc(epoch)
     jd = (float(jd1), float(jd2))
-    mu, j2, re = force_parameters(force)
-    key = "two-body" if j2 == 0.0 else "j2"
+    model = None
+    if not isinstance(force, str) and hasattr(force, "environment"):
+        model, force = force, "full"
+    elif force == "full":
+        model = force_model
+        if model is None:
+            raise ValueError("force 'full' needs a force_model (trackproc.dynamics.forces.ForceModel)")
+    if model is not None:
+        mu, j2, re, key = model.field.gm_m3_s2, model.field.j2(), model.field.radius_m, "full"
+    else:
+        mu, j2, re = force_parameters(force)
+        key = "two-body" if j2 == 0.0 else "j2"
     r = np.asarray(r_m, float).reshape(3)
     v = np.asarray(v_m_s, float).reshape(3)
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
@@ -344,16 +377,22 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
     s0 = np.concatenate([q @ r, q @ v])
     t_min, t_max = float(min(t.min(), 0.0)), float(max(t.max(), 0.0))
     runs = []
-    if t_min < 0.0:
-        runs.append(taylor.propagate(s0, 0.0, t_min, force=key, mu_m3_s2=mu, j2=j2, re_m=re, tol=tol,
-                                     stm=stm, max_steps=max_steps))
-    if t_max > 0.0 or t_min == 0.0:
-        end = t_max if t_max > 0.0 else _MIN_SPAN_S
-        runs.append(taylor.propagate(s0, 0.0, end, force=key, mu_m3_s2=mu, j2=j2, re_m=re, tol=tol,
-                                     stm=stm, max_steps=max_steps))
+    ends = ([t_min] if t_min < 0.0 else []) + ([t_max if t_max > 0.0 else _MIN_SPAN_S]
+                                             if (t_max > 0.0 or t_min == 0.0) else [])
+    if model is not None:
+        from trackproc.dynamics.forces import integrator
+
+        env = model.environment(jd, q, t_min, max(t_max, _MIN_SPAN_S))
+        for end in ends:
+            runs.append(integrator.propagate(env, s0, end, stm=stm, rtol=max(tol, integrator.RTOL),
+                                             max_steps=max_steps))
+    else:
+        for end in ends:
+            runs.append(taylor.propagate(s0, 0.0, end, force=key, mu_m3_s2=mu, j2=j2, re_m=re, tol=tol,
+                                         stm=stm, max_steps=max_steps))
     return Trajectory(epoch=epoch, epoch_jd_utc=jd, frame=fr, runs=tuple(runs), force=key,
                       mu_m3_s2=mu, j2=j2, re_m=re, tol=float(tol), t_min_s=t_min, t_max_s=t_max,
-                      initial_gcrf=np.concatenate([r, v]))
+                      initial_gcrf=np.concatenate([r, v]), force_model=model)
 
 
 def propagate_state(state, t_s, **kwargs) -> Trajectory:

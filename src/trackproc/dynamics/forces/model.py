@@ -1,0 +1,339 @@
+"""One force model: the sum of the Earth's field, Sun and Moon, radiation pressure, drag,
+relativity and an empirical acceleration, with its partial derivatives.
+
+:class:`ForceModel` holds the settings and constants (and names them for every output's
+metadata, :meth:`ForceModel.describe`); :meth:`ForceModel.environment` binds it to a time
+span, precomputing what depends on time only (Earth orientation, Sun and Moon) on a grid;
+:meth:`Environment.acceleration` then gives the acceleration of states in the propagator's
+quasi-inertial frame (a fixed rotation of GCRF), and :meth:`Environment.partials` its
+Jacobians ``∂a/∂r``, ``∂a/∂v`` and ``∂a/∂p`` for the estimated parameters.
+
+Time-dependent inputs are tabulated every ``GRID_S`` seconds and interpolated: the
+precession-nutation matrix and polar motion linearly (their curvature over 10 min is
+< 1e-12 rad), the Earth Rotation Angle linearly (it is linear in UT1, itself linear between
+EOP nodes), the Sun and Moon by cubic Hermite from ERFA's positions and velocities (< 1 cm of
+lunar position at a 10-minute grid). The field acts in ITRF through the full IAU 2006/2000A
+rotation (:func:`trackproc.dynamics.frames.earth_rotation`), not the frozen frame the
+Taylor engine uses for J2 (frozen precession-nutation drifts 0.15"/day, i.e. tens of metres
+over a day through the tesseral terms).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from trackproc.constants import OMEGA_EARTH, WGS84_A
+from trackproc.dynamics import timescales as ts
+from trackproc.dynamics.forces import drag as drag_mod
+from trackproc.dynamics.forces import relativity, srp, third_body
+from trackproc.dynamics.forces.gravity_field import GravityField
+from trackproc.dynamics.frames import earth_rotation
+from trackproc.dynamics.geodesy import itrf_to_geodetic
+
+__all__ = ["Spacecraft", "ForceModel", "Environment", "PARAMETERS", "GRID_S"]
+
+#: Force-model parameters that can carry partials (``estimate`` drivers): radiation pressure
+#: and drag coefficients, and a constant empirical acceleration in R, T, N (m/s²).
+PARAMETERS = ("cr", "cd", "empirical_r", "empirical_t", "empirical_n")
+#: Spacing of the tabulated Earth orientation, Sun and Moon (s).
+GRID_S = 600.0
+#: Central-difference steps of the numerical Jacobian of the non-central accelerations.
+_H_R_M = 1.0
+_H_V_M_S = 1e-3
+
+
+@dataclass(frozen=True)
+class Spacecraft:
+    """Cannon-ball properties (state file ``spacecraft:`` or ``--mass-kg`` etc.).
+
+    ``cr`` (radiation-pressure coefficient, 1 = absorbing, 2 = mirror) defaults to 1.5 and
+    ``cd`` to 2.2 (a usual value for a compact satellite in free molecular flow) when the
+    areas and mass are given without them.
+    """
+
+    mass_kg: float | None = None
+    srp_area_m2: float | None = None
+    cr: float = 1.5
+    drag_area_m2: float | None = None
+    cd: float = 2.2
+
+    @property
+    def srp_known(self) -> bool:
+        return bool(self.mass_kg and self.srp_area_m2)
+
+    @property
+    def drag_known(self) -> bool:
+        return bool(self.mass_kg and self.drag_area_m2)
+
+    def as_dict(self) -> dict:
+        return {"mass_kg": self.mass_kg, "srp_area_m2": self.srp_area_m2, "cr": self.cr,
+                "drag_area_m2": self.drag_area_m2, "cd": self.cd}
+
+
+@dataclass(frozen=True, eq=False)
+class ForceModel:
+    """The full force model (``--force full``).
+
+    ``field`` the Earth's gravity field (with its own GM and radius; degree 0 = point mass),
+    ``third_bodies`` a subset of ``("sun", "moon")``, ``srp``/``drag``/``relativity``
+    switches, ``atmosphere`` ``"harris-priester"`` (cosine exponent ``hp_exponent``) or
+    ``"nrlmsis"`` (with ``f107``, ``f107a``, ``ap``), ``empirical_rtn`` a constant
+    acceleration in the radial/along-track/cross-track frame (m/s²), ``estimated`` the
+    parameters (of :data:`PARAMETERS`) whose partials the propagation carries, ``eop`` the
+    Earth orientation.
+    """
+
+    field: GravityField
+    third_bodies: tuple = ("sun", "moon")
+    srp: bool = False
+    drag: bool = False
+    relativity: bool = True
+    spacecraft: Spacecraft = field(default_factory=Spacecraft)
+    atmosphere: str = "harris-priester"
+    hp_exponent: float = 4.0
+    f107: float = 150.0
+    f107a: float = 150.0
+    ap: float = 4.0
+    empirical_rtn: tuple = (0.0, 0.0, 0.0)
+    estimated: tuple = ()
+    eop: object = None
+    earth_radius_m: float = WGS84_A          # shadow cone and geodetic heights (WGS-84)
+
+    def __post_init__(self):
+        bad = [b for b in self.third_bodies if b not in ("sun", "moon")]
+        if bad:
+            raise ValueError(f"unknown third bodies {bad}; expected sun and/or moon")
+        bad = [p for p in self.estimated if p not in PARAMETERS]
+        if bad:
+            raise ValueError(f"unknown force parameters {bad}; expected some of {PARAMETERS}")
+        if self.atmosphere not in ("harris-priester", "nrlmsis"):
+            raise ValueError(f"unknown atmosphere {self.atmosphere!r}; expected harris-priester or nrlmsis")
+        if self.srp and not self.spacecraft.srp_known:
+            raise ValueError("solar radiation pressure needs the spacecraft mass and SRP area")
+        if self.drag and not self.spacecraft.drag_known:
+            raise ValueError("drag needs the spacecraft mass and drag area")
+        if "cr" in self.estimated and not self.srp:
+            raise ValueError("cr is estimated but radiation pressure is off")
+        if "cd" in self.estimated and not self.drag:
+            raise ValueError("cd is estimated but drag is off")
+
+    @property
+    def gm_m3_s2(self) -> float:
+        return self.field.gm_m3_s2
+
+    def with_parameters(self, **values) -> "ForceModel":
+        """A copy with ``cr``, ``cd``, ``empirical_r/t/n`` set (estimation updates)."""
+        sc = self.spacecraft
+        emp = list(self.empirical_rtn)
+        for key, val in values.items():
+            if key == "cr":
+                sc = replace(sc, cr=float(val))
+            elif key == "cd":
+                sc = replace(sc, cd=float(val))
+            elif key.startswith("empirical_"):
+                emp["rtn".index(key[-1])] = float(val)
+            else:
+                raise ValueError(f"unknown force parameter {key!r}; expected one of {PARAMETERS}")
+        return replace(self, spacecraft=sc, empirical_rtn=tuple(emp))
+
+    def parameter_values(self) -> dict:
+        sc = self.spacecraft
+        full = {"cr": sc.cr, "cd": sc.cd, "empirical_r": self.empirical_rtn[0],
+                "empirical_t": self.empirical_rtn[1], "empirical_n": self.empirical_rtn[2]}
+        return {k: full[k] for k in self.estimated}
+
+    def describe(self) -> dict:
+        """The model, its constants and data sources, for every output's metadata."""
+        f = self.field
+        out = {
+            "name": self.label(),
+            "gravity_field": {"model": f.name, "source": f.source, "degree": f.degree, "order": f.order,
+                              "gm_m3_s2": f.gm_m3_s2, "radius_m": f.radius_m, "tide_system": f.tide_system,
+                              "coefficients_at": f.epoch or None},
+            "earth_orientation": getattr(self.eop, "source", "none (UT1-UTC = 0, no polar motion)"),
+            "third_bodies": {b: {"gm_m3_s2": third_body.GM_SUN if b == "sun" else third_body.GM_MOON,
+                                 "ephemeris": "ERFA epv00" if b == "sun" else "ERFA moon98"}
+                             for b in self.third_bodies},
+            "relativity": "Schwarzschild (IERS 2010 eq. 10.12)" if self.relativity else None,
+        }
+        if self.srp:
+            out["srp"] = {"model": "cannon-ball, conical Earth shadow", "p_sun_n_m2": srp.P_SUN,
+                          "earth_radius_m": self.earth_radius_m}
+        if self.drag:
+            out["drag"] = {"atmosphere": self.atmosphere}
+            if self.atmosphere == "harris-priester":
+                out["drag"]["cosine_exponent"] = self.hp_exponent
+            else:
+                out["drag"].update(f107=self.f107, f107a=self.f107a, ap=self.ap)
+        if self.srp or self.drag:
+            out["spacecraft"] = self.spacecraft.as_dict()
+        if any(self.empirical_rtn) or any(p.startswith("empirical") for p in self.estimated):
+            out["empirical_rtn_m_s2"] = list(self.empirical_rtn)
+        if self.estimated:
+            out["estimated"] = list(self.estimated)
+        return out
+
+    def label(self) -> str:
+        """Short text: ``full (EIGEN-6S 20x20, sun+moon, srp, drag, relativity)``."""
+        f = self.field
+        parts = [f"{f.name} {f.degree}x{f.order}"]
+        if self.third_bodies:
+            parts.append("+".join(self.third_bodies))
+        if self.srp:
+            parts.append("srp")
+        if self.drag:
+            parts.append(f"drag ({self.atmosphere})")
+        if self.relativity:
+            parts.append("relativity")
+        if any(self.empirical_rtn):
+            parts.append("empirical")
+        return "full (" + ", ".join(parts) + ")"
+
+    def environment(self, epoch_jd_utc: tuple, q: np.ndarray, t_min_s: float, t_max_s: float) -> "Environment":
+        """Bind the model to ``[t_min_s, t_max_s]`` seconds from a UTC epoch, in the frame
+        ``q`` (GCRF -> integration frame)."""
+        return Environment(self, epoch_jd_utc, np.asarray(q, float), t_min_s, t_max_s)
+
+
+class Environment:
+    """A :class:`ForceModel` over a time span: the time-dependent inputs tabulated, the
+    accelerations and their partials evaluated at (t, r, v) in the integration frame."""
+
+    def __init__(self, model: ForceModel, epoch_jd_utc, q, t_min_s, t_max_s):
+        self.model = model
+        self.q = q
+        self.epoch_jd_utc = epoch_jd_utc
+        lo = np.floor(min(t_min_s, 0.0) / GRID_S) - 2
+        hi = np.ceil(max(t_max_s, 0.0) / GRID_S) + 2
+        self.t0_grid = lo * GRID_S
+        nodes = self.t0_grid + GRID_S * np.arange(int(hi - lo) + 1)
+        jd1, jd2 = ts.add_seconds_utc(epoch_jd_utc, nodes)
+        rot = earth_rotation(jd1, jd2, model.eop, rates=False)
+        # GCRF->CIRS composed with the integration frame: (Q q^T) maps integration -> CIRS
+        self._qq = (rot.q @ q.T).reshape(-1, 9)
+        self._w = rot.w.reshape(-1, 9)
+        self._era = np.unwrap(np.asarray(rot.era, float))
+        tt1, tt2 = ts.utc_to_tt(jd1, jd2)
+        sun, moon = third_body.sun_moon_gcrf(tt1, tt2)
+        # rotate into the integration frame
+        self._sun = np.einsum("ij,nkj->nki", q, sun)
+        self._moon = np.einsum("ij,nkj->nki", q, moon)
+        self._cache_t = None
+        self.n_nodes = nodes.size
+
+    # -- time-dependent inputs ---------------------------------------------------------------
+    def _locate(self, t):
+        u = (t - self.t0_grid) / GRID_S
+        k = int(min(max(np.floor(u), 0), self.n_nodes - 2))
+        return k, u - k
+
+    def _hermite(self, table, k, x):
+        p0, v0 = table[k]
+        p1, v1 = table[k + 1]
+        h = GRID_S
+        x2, x3 = x * x, x * x * x
+        return ((2 * x3 - 3 * x2 + 1) * p0 + (x3 - 2 * x2 + x) * h * v0
+                + (-2 * x3 + 3 * x2) * p1 + (x3 - x2) * h * v1)
+
+    def at(self, t: float):
+        """``(M, sun, moon, axis)`` at ``t``: M integration -> ITRF (3, 3); Sun and Moon
+        positions in the integration frame (m); the Earth's rotation axis in it."""
+        if self._cache_t == t:
+            return self._cache
+        k, x = self._locate(t)
+        qq = ((1 - x) * self._qq[k] + x * self._qq[k + 1]).reshape(3, 3)
+        w = ((1 - x) * self._w[k] + x * self._w[k + 1]).reshape(3, 3)
+        era = (1 - x) * self._era[k] + x * self._era[k + 1]
+        c, sn = np.cos(era), np.sin(era)
+        m = w @ np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]]) @ qq     # W R3(ERA) Q q^T
+        sun = self._hermite(self._sun, k, x)
+        moon = self._hermite(self._moon, k, x)
+        axis = qq[2]                                          # CIP z axis in the integration frame
+        self._cache_t, self._cache = t, (m, sun, moon, axis)
+        return self._cache
+
+    # -- accelerations -----------------------------------------------------------------------
+    def central(self, r) -> np.ndarray:
+        gm = self.model.field.gm_m3_s2
+        rn = np.linalg.norm(r, axis=-1, keepdims=True)
+        return -gm * r / rn ** 3
+
+    def perturbation(self, t: float, r, v, *, parts: bool = False):
+        """Every acceleration but the central ``-GM r/r³`` (m/s², integration frame), (P, 3).
+
+        With ``parts`` also the unit-coefficient parts ``{cr, cd, empirical_*}`` (for the
+        parameter partials)."""
+        mdl = self.model
+        m, sun, moon, axis = self.at(t)
+        r = np.atleast_2d(r)
+        v = np.atleast_2d(v)
+        r_itrf = r @ m.T
+        acc = mdl.field.acceleration(r_itrf, central=False) @ m
+        if "sun" in mdl.third_bodies:
+            acc = acc + third_body.point_mass(r, sun, third_body.GM_SUN)
+        if "moon" in mdl.third_bodies:
+            acc = acc + third_body.point_mass(r, moon, third_body.GM_MOON)
+        if mdl.relativity:
+            acc = acc + relativity.acceleration(r, v, mdl.field.gm_m3_s2)
+        sc = mdl.spacecraft
+        unit = {}
+        if mdl.srp:
+            a1 = srp.acceleration(r, sun, sc.srp_area_m2 / sc.mass_kg, 1.0, mdl.earth_radius_m)
+            acc = acc + sc.cr * a1
+            unit["cr"] = a1
+        if mdl.drag:
+            v_rel = v - OMEGA_EARTH * np.cross(axis, r)           # co-rotating atmosphere
+            h = itrf_to_geodetic(r_itrf)[2]
+            if mdl.atmosphere == "harris-priester":
+                rho = drag_mod.harris_priester(h, r_itrf, m @ sun, mdl.hp_exponent)
+            else:
+                when = ts.jd_utc_to_datetime64(*ts.add_seconds_utc(self.epoch_jd_utc, t))
+                rho = drag_mod.nrlmsis_density(when, r_itrf, h, mdl.f107, mdl.f107a, mdl.ap)
+            a1 = drag_mod.acceleration(v_rel, rho, 1.0, sc.drag_area_m2 / sc.mass_kg)
+            acc = acc + sc.cd * a1
+            unit["cd"] = a1
+        emp = np.asarray(mdl.empirical_rtn, float)
+        if any(emp) or parts:
+            rt = _rtn_axes(r, v)                                # (P, 3, 3): rows R, T, N
+            if any(emp):
+                acc = acc + np.einsum("k,pki->pi", emp, rt)
+            for i, key in enumerate(("empirical_r", "empirical_t", "empirical_n")):
+                unit[key] = rt[:, i, :]
+        return (acc, unit) if parts else acc
+
+    def acceleration(self, t: float, r, v) -> np.ndarray:
+        """Total acceleration (m/s²) in the integration frame."""
+        return self.central(np.atleast_2d(r)) + self.perturbation(t, r, v)
+
+    def partials(self, t: float, r, v):
+        """``(a, ∂a/∂r, ∂a/∂v, ∂a/∂p)`` at one state: (3,), (3, 3), (3, 3), (3, P).
+
+        The central term's gradient is analytic; the rest by central differences (steps 1 m and
+        1 mm/s) evaluated in one vectorised call (13 points cost about 1.5 single ones).
+        """
+        r = np.asarray(r, float).reshape(3)
+        v = np.asarray(v, float).reshape(3)
+        e = np.eye(3)
+        rp = np.concatenate([r[None], r + _H_R_M * e, r - _H_R_M * e, np.tile(r, (6, 1))])
+        vp = np.concatenate([v[None], np.tile(v, (6, 1)), v + _H_V_M_S * e, v - _H_V_M_S * e])
+        pert, unit = self.perturbation(t, rp, vp, parts=True)
+        g = (pert[1:4] - pert[4:7]).T / (2 * _H_R_M)
+        hv = (pert[7:10] - pert[10:13]).T / (2 * _H_V_M_S)
+        gm = self.model.field.gm_m3_s2
+        rn = np.linalg.norm(r)
+        g = g + gm * (3.0 * np.outer(r, r) / rn ** 5 - np.eye(3) / rn ** 3)
+        a = pert[0] - gm * r / rn ** 3
+        est = self.model.estimated
+        dp = np.stack([unit[p][0] for p in est], -1) if est else np.zeros((3, 0))
+        return a, g, hv, dp
+
+
+def _rtn_axes(r, v) -> np.ndarray:
+    """Unit radial, along-track (transverse) and cross-track vectors, rows of (P, 3, 3)."""
+    rn = r / np.linalg.norm(r, axis=-1, keepdims=True)
+    h = np.cross(r, v)
+    nn = h / np.linalg.norm(h, axis=-1, keepdims=True)
+    tn = np.cross(nn, rn)
+    return np.stack([rn, tn, nn], -2)

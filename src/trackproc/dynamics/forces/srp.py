@@ -1,0 +1,57 @@
+"""Solar radiation pressure on a cannon-ball spacecraft, with the Earth's conical shadow.
+
+``a = ν Cr P☉ (AU/d)² (A/m) (r - r☉)/|r - r☉|``, ``P☉ = 4.56e-6 N/m²`` at 1 AU (Montenbruck &
+Gill 2000 eq. 3.75 with the cannon-ball ``Cr``; Orekit's ``IsotropicRadiationSingleCoefficient``
+uses the same ``P☉`` and reference distance), ``ν`` the visible fraction of the solar disc
+(M&G section 3.4.2, conical shadow of a spherical Earth of radius ``R⊕``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from trackproc.dynamics.forces.third_body import AU_M
+
+__all__ = ["P_SUN", "R_SUN", "shadow_fraction", "acceleration"]
+
+#: Solar radiation pressure at 1 AU, N/m² (M&G 2000 eq. 3.73; Orekit's reference value).
+P_SUN = 4.56e-6
+#: Solar radius, m (IAU 2015 nominal).
+R_SUN = 6.957e8
+
+
+def shadow_fraction(r, sun, r_earth: float) -> np.ndarray:
+    """Fraction ``ν`` (0..1) of the solar disc seen from ``r`` (P, 3) past the Earth (conical model).
+
+    Implements Montenbruck & Gill (2000) eqs. 3.79-3.86 (apparent radii a, b and separation c
+    of the Sun and the occulting Earth; partial occultation by the overlap of two discs).
+    """
+    r = np.asarray(r, float)
+    d_sun = sun - r
+    rn = np.linalg.norm(r, axis=-1)
+    dn = np.linalg.norm(d_sun, axis=-1)
+    a = np.arcsin(np.clip(R_SUN / dn, -1, 1))               # apparent solar radius
+    b = np.arcsin(np.clip(r_earth / rn, -1, 1))             # apparent Earth radius
+    c = np.arccos(np.clip(np.einsum("ij,ij->i", -r, d_sun) / (rn * dn), -1, 1))   # separation
+    nu = np.ones(r.shape[0])
+    total = c <= b - a
+    nu[total] = 0.0
+    part = (np.abs(a - b) < c) & (c < a + b)
+    if part.any():
+        ap, bp, cp = a[part], b[part], c[part]
+        x = (cp ** 2 + ap ** 2 - bp ** 2) / (2 * cp)
+        y = np.sqrt(np.maximum(ap ** 2 - x ** 2, 0.0))
+        area = (ap ** 2 * np.arccos(np.clip(x / ap, -1, 1)) + bp ** 2 * np.arccos(np.clip((cp - x) / bp, -1, 1))
+                - cp * y)
+        nu[part] = 1.0 - area / (np.pi * ap ** 2)
+    annular = (c < a - b) & ~total
+    nu[annular] = 1.0 - (b[annular] / a[annular]) ** 2
+    return nu
+
+
+def acceleration(r, sun, area_over_mass: float, cr: float, r_earth: float) -> np.ndarray:
+    """SRP acceleration (m/s²) at ``r`` (P, 3) with the Sun at ``sun`` (3,), GCRS axes."""
+    d = np.asarray(r, float) - sun
+    dn = np.linalg.norm(d, axis=-1, keepdims=True)
+    nu = shadow_fraction(r, sun, r_earth)[:, None]
+    return nu * cr * P_SUN * (AU_M / dn) ** 2 * area_over_mass * d / dn

@@ -1,0 +1,238 @@
+"""Reader of gravity-field models in the ICGEM ``.gfc`` format (ICGEM 1.0 and 2.0).
+
+The International Centre for Global Earth Models exchange format (Barthelmes & Förste,
+"The ICGEM-format", GFZ Potsdam, 2011; ICGEM-Format-2023): a free-text preamble, a header
+between ``begin_of_head`` and ``end_of_head`` (``earth_gravity_constant``, ``radius``,
+``max_degree``, ``tide_system``, ``norm``, ``errors``, ``modelname``), then one line per
+coefficient::
+
+    gfc   L M  C  S  [sigma_C sigma_S]                     static coefficient
+    gfct  L M  C  S  [sigma_C sigma_S]  t0 [t1]            value at the reference epoch t0
+    trnd  L M  C  S  [sigma_C sigma_S]  [t0 t1]            drift per year  (``dot`` in old files)
+    acos  L M  C  S  [sigma_C sigma_S]  [t0 t1] period_y   cosine amplitude
+    asin  L M  C  S  [sigma_C sigma_S]  [t0 t1] period_y   sine amplitude
+
+(dates ``yyyymmdd`` or ``yyyymmdd.hhmm``; ICGEM 2.0 adds the validity interval ``t0 t1`` to
+each time-variable line). A coefficient at a date t is (the EIGEN-6S header's own rule,
+evaluated as Orekit's ``ICGEMFormatReader`` does)::
+
+    G(t) = gfct + trnd (t - t0) + Σ_p [acos_p cos(2π (t - t0)/p) + asin_p sin(2π (t - t0)/p)]
+
+with ``t - t0`` in Julian years (365.25 d). Coefficients above the requested degree/order are
+skipped while reading. A malformed file raises :class:`~trackproc.errors.InputError` naming
+the file, the line and what was expected. ``.gz`` files are read transparently.
+"""
+
+from __future__ import annotations
+
+import gzip
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from trackproc.dynamics.forces.gravity_field import GravityField
+from trackproc.errors import InputError
+
+__all__ = ["read_icgem", "default_field_path", "load_field", "DEFAULT_FIELD_NAME"]
+
+#: The field shipped in the package (trackproc/data): EIGEN-6S to degree/order 70 with its
+#: time-variable terms (degree <= 50), unchanged lines of GFZ's file (see README "Forces").
+DEFAULT_FIELD_NAME = "eigen-6s-70.gfc.gz"
+_JULIAN_YEAR_D = 365.25
+_HEADER_KEYS = ("earth_gravity_constant", "radius", "max_degree", "tide_system", "norm", "errors", "modelname",
+                "product_type", "format")
+
+
+def default_field_path() -> Path:
+    """Path of the gravity field shipped with the package."""
+    return Path(str(resources.files("trackproc") / "data" / DEFAULT_FIELD_NAME))
+
+
+def _open(path: Path):
+    if path.suffix == ".gz":
+        return gzip.open(path, "rt", encoding="latin-1")
+    return open(path, encoding="latin-1")
+
+
+def _date_days(text: str, where) -> float:
+    """``yyyymmdd`` or ``yyyymmdd.hhmm`` -> days since 1970-01-01 (UTC, as float)."""
+    try:
+        whole, _, frac = text.partition(".")
+        day = np.datetime64(f"{whole[:4]}-{whole[4:6]}-{whole[6:8]}", "D")
+        hours = int(frac[:2]) if frac[:2] else 0
+        minutes = int(frac[2:4]) if frac[2:4] else 0
+    except (ValueError, IndexError):
+        raise InputError("bad date", **where, found=text, expected="yyyymmdd or yyyymmdd.hhmm") from None
+    return float(day.astype("int64")) + (hours * 60 + minutes) / 1440.0
+
+
+def read_icgem(path, degree: int | None = None, order: int | None = None, date=None) -> GravityField:
+    """Read an ICGEM ``.gfc`` file into a :class:`GravityField` at ``date``.
+
+    Parameters
+    ----------
+    path : file path (``.gfc`` or ``.gfc.gz``).
+    degree, order : truncation on read (default: the file's ``max_degree``; order = degree).
+    date : UTC ``datetime64`` (or ISO text) at which the time-variable terms are evaluated;
+        default the reference epoch of the file's ``gfct`` lines (the static part).
+    """
+    path = Path(path)
+    fname = str(path)
+    if not path.is_file():
+        raise InputError("gravity field file not found", file=fname, expected="an ICGEM .gfc file")
+    when = None
+    if date is not None:
+        d = np.datetime64(str(date).rstrip("Zz") if isinstance(date, str) else date, "s")
+        when = float(d.astype("int64")) / 86400.0
+    header: dict[str, str] = {}
+    in_header = False
+    seen_head = False
+    static: dict = {}
+    terms: list = []                     # (kind, n, m, c, s, t0, t1, period)
+    lmax = None
+    with _open(path) as fh:
+        for lineno, line in enumerate(fh, 1):
+            words = line.split()
+            if not words:
+                continue
+            key = words[0].lower()
+            where = {"file": fname, "row": lineno}
+            if key == "begin_of_head":
+                in_header = seen_head = True
+                continue
+            if key == "end_of_head":
+                if not seen_head:
+                    in_header = False
+                seen_head = True
+                in_header = False
+                lmax = _check_header(header, fname, lineno)
+                if degree is not None and degree > lmax:
+                    raise InputError(f"degree {degree} requested", file=fname, found=f"max_degree {lmax}",
+                                     expected=f"a degree <= {lmax}")
+                continue
+            if in_header or lmax is None:
+                if key in _HEADER_KEYS and len(words) >= 2:
+                    header[key] = words[1]
+                continue
+            if key not in ("gfc", "gfct", "trnd", "dot", "acos", "asin"):
+                raise InputError("unknown line key", **where, found=words[0],
+                                 expected="gfc, gfct, trnd, dot, acos or asin")
+            try:
+                n, m = int(words[1]), int(words[2])
+                c, s = float(words[3].replace("D", "E").replace("d", "e")), float(words[4].replace("D", "E").replace("d", "e"))
+            except (ValueError, IndexError):
+                raise InputError("bad coefficient line", **where, found=line.strip()[:80],
+                                 expected="key L M C S [sigma_C sigma_S] ...") from None
+            if not (0 <= m <= n) or n > lmax:
+                raise InputError("bad degree/order", **where, found=f"L={n} M={m}",
+                                 expected=f"0 <= M <= L <= max_degree {lmax}")
+            if (degree is not None and n > degree) or (order is not None and m > order):
+                continue
+            rest = words[5 + header["_nsig"]:]
+            if key == "gfc":
+                static[(n, m)] = static.get((n, m), (0.0, 0.0))
+                static[(n, m)] = (static[(n, m)][0] + c, static[(n, m)][1] + s)
+                continue
+            if key == "gfct":
+                if not rest:
+                    raise InputError("gfct line without its reference epoch", **where, expected="t0 (yyyymmdd)")
+                t0 = _date_days(rest[0], where)
+                t1 = _date_days(rest[1], where) if len(rest) > 1 else None
+                terms.append(("gfct", n, m, c, s, t0, t1, None))
+            elif key in ("trnd", "dot"):
+                t0 = _date_days(rest[0], where) if len(rest) >= 2 else None
+                t1 = _date_days(rest[1], where) if len(rest) >= 2 else None
+                terms.append(("trnd", n, m, c, s, t0, t1, None))
+            else:
+                if not rest:
+                    raise InputError(f"{key} line without its period", **where, expected="period in years")
+                try:
+                    period = float(rest[-1])
+                except ValueError:
+                    raise InputError(f"bad {key} period", **where, found=rest[-1], expected="period in years") from None
+                if not period > 0:
+                    raise InputError(f"bad {key} period", **where, found=rest[-1], expected="a positive period in years")
+                t0 = _date_days(rest[0], where) if len(rest) >= 3 else None
+                t1 = _date_days(rest[1], where) if len(rest) >= 3 else None
+                terms.append((key, n, m, c, s, t0, t1, period))
+    if lmax is None:
+        raise InputError("no ICGEM header", file=fname, expected="a header ending in end_of_head")
+    nmax = lmax if degree is None else degree
+    cbar = np.zeros((nmax + 1, nmax + 1))
+    sbar = np.zeros((nmax + 1, nmax + 1))
+    for (n, m), (c, s) in static.items():
+        cbar[n, m] += c
+        sbar[n, m] += s
+    epoch_text = _add_time_variable(terms, cbar, sbar, when, fname)
+    if order is not None:
+        cbar[:, order + 1:] = 0.0
+        sbar[:, order + 1:] = 0.0
+    if nmax >= 0 and cbar[0, 0] == 0.0:
+        cbar[0, 0] = 1.0                 # C00 = 1 by definition (some files omit the line)
+    name = header.get("modelname", path.name)
+    return GravityField(gm_m3_s2=float(header["earth_gravity_constant"]), radius_m=float(header["radius"]),
+                        cbar=cbar, sbar=sbar, name=name, tide_system=header.get("tide_system", "unknown"),
+                        source=path.name, epoch=epoch_text)
+
+
+def _check_header(header: dict, fname: str, lineno: int) -> int:
+    for key in ("earth_gravity_constant", "radius", "max_degree"):
+        if key not in header:
+            raise InputError(f"header keyword {key} missing", file=fname, row=lineno,
+                             expected="earth_gravity_constant, radius and max_degree in the header")
+    try:
+        gm, radius, lmax = float(header["earth_gravity_constant"]), float(header["radius"]), int(header["max_degree"])
+    except ValueError:
+        raise InputError("bad header value", file=fname, row=lineno,
+                         found={k: header[k] for k in ("earth_gravity_constant", "radius", "max_degree")},
+                         expected="numbers") from None
+    if not (gm > 0 and radius > 0 and lmax >= 0):
+        raise InputError("bad header value", file=fname, row=lineno, found=f"GM {gm}, radius {radius}, max_degree {lmax}",
+                         expected="positive GM and radius, max_degree >= 0")
+    norm = header.get("norm", "fully_normalized").lower()
+    if norm not in ("fully_normalized", "fully_normalised"):
+        raise InputError("unsupported normalisation", file=fname, row=lineno, found=norm, expected="fully_normalized")
+    header["_nsig"] = 0 if header.get("errors", "formal").lower() == "no" else 2
+    return lmax
+
+
+def _add_time_variable(terms, cbar, sbar, when, fname) -> str:
+    """Add gfct + trnd + periodic terms evaluated at ``when`` (days since 1970) into the arrays.
+
+    ICGEM 1.0: a trnd/acos/asin line refers to the gfct of its (L, M) (its t0). ICGEM 2.0:
+    each line has its validity interval [t0, t1); the lines whose interval holds the date count.
+    Without a date, the epoch of the gfct lines is used (their static value).
+    """
+    if not terms:
+        return ""
+    ref = {}
+    for kind, n, m, c, s, t0, t1, _ in terms:
+        if kind == "gfct" and (n, m) not in ref:
+            ref[(n, m)] = t0
+    if when is None:
+        when = min(ref.values()) if ref else 0.0
+    for kind, n, m, c, s, t0, t1, period in terms:
+        if t0 is not None and t1 is not None and not (t0 <= when < t1):
+            continue
+        base = t0 if t0 is not None else ref.get((n, m))
+        if base is None:
+            raise InputError(f"{kind} term of L={n} M={m} has no reference epoch (no gfct line)", file=fname,
+                             expected="a gfct line for every time-variable coefficient")
+        dt_y = (when - base) / _JULIAN_YEAR_D
+        if kind == "gfct":
+            k = 1.0
+        elif kind == "trnd":
+            k = dt_y
+        elif kind == "acos":
+            k = np.cos(2 * np.pi * dt_y / period)
+        else:
+            k = np.sin(2 * np.pi * dt_y / period)
+        cbar[n, m] += k * c
+        sbar[n, m] += k * s
+    return str(np.datetime64(int(round(when * 86400)), "s")) + "Z"
+
+
+def load_field(path=None, degree: int = 20, order: int | None = None, date=None) -> GravityField:
+    """The field of ``path`` (default: the shipped EIGEN-6S) to ``degree`` x ``order`` at ``date``."""
+    return read_icgem(default_field_path() if path is None else path, degree, order, date)
