@@ -65,6 +65,7 @@ class EstimateOptions:
     rank_rtol: float = 1e-9
     noise: str = "auto"
     oscillator_noise: Optional[float] = None
+    force_model: object = None            # force "full": a dynamics.forces.ForceModel (None: default_force_model)
     troposphere: str = "auto"             # range corrections (pipeline.range_corrections)
     com_offset_m: float = 0.0
     wavelength_nm: Optional[float] = None
@@ -90,7 +91,7 @@ def check_options(opt: EstimateOptions) -> None:
             raise InputError("unknown measurement kind", column="--kinds", found=",".join(bad) or "(none)",
                              expected="a comma list of " + ",".join(ob.KINDS))
     if opt.force not in propagator.FORCES:
-        raise InputError("unknown force model", column="--force", found=opt.force, expected="two-body or j2")
+        raise InputError("unknown force model", column="--force", found=opt.force, expected=" or ".join(propagator.FORCES))
 
 
 def check_apriori(apriori: Mapping[str, float]) -> None:
