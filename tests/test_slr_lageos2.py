@@ -89,23 +89,31 @@ def test_interpolated_cpf_reproduces_its_own_nodes():
 
 @pytest.mark.slow
 def test_cli_fit_of_the_normal_points_against_the_cpf(run_cli, tmp_path):
+    """The 3-day arc through the CLI with the full force model (EIGEN-6S 20x20, Sun, Moon,
+    relativity): centimetre-to-decimetre residuals and the solution within a few metres of the
+    JAXA CPF over its day (measured 0.97 m RMS, 2.3 m at most). ~30 s of CPU."""
+    import pandas as pd
+
     from trackproc.io.cpf import read_cpf
     from trackproc.io.eop import earth_orientation
     from trackproc.io.statefile import read_state
+    from trackproc.pipeline.estimate.problem import default_force_model
     from trackproc.pipeline.reference_orbit import compare_with_cpf
 
     passes = tmp_path / "l2.parquet"
-    r = run_cli(["ingest", NPT, "--stations", SNX, "--eccentricities", ECC, "-o", passes])
+    r = run_cli(["ingest", NPT, "--stations", SNX, "--eccentricities", ECC, "--sigma-range-m", "0.3", "-o", passes])
     assert r.exit_code == 0, r.stderr
     init = tmp_path / "init.json"
     init.write_text(json.dumps(INITIAL))
-    sol = tmp_path / "sol.json"
-    r = run_cli(["estimate", passes, "--initial", init, "--range-bias", "--com-offset", "0.251", "--force", "j2",
-                 "--json", "-o", sol])
-    assert r.exit_code in (0,), r.stderr
-    summary = json.loads(r.stderr.strip().splitlines()[-1])
+    sol, res = tmp_path / "sol.json", tmp_path / "res.csv"
+    r = run_cli(["estimate", passes, "--initial", init, "--range-bias", "--com-offset", "0.251", "--force", "full",
+                 "--residuals", res, "-o", sol])
+    assert r.exit_code == 0, r.stderr
+    residuals = pd.read_csv(res, comment="#")
+    rms = residuals.groupby("station")["residual"].apply(lambda x: float(np.sqrt(np.mean(x * x))))
+    assert rms.max() < 1.0 and rms.median() < 0.3, rms        # measured 0.09 / 0.15 / 0.19 / 0.50 m
     eop, _ = earth_orientation(None, None)
-    cmp = compare_with_cpf(read_state(str(sol), eop), read_cpf(str(CPF)), force="j2", eop=eop)
-    # two-body + J2 over a 3-day arc: the missing forces (tesserals, Sun, Moon) limit it to ~150 m
-    assert cmp["rms_m"] < 300.0, cmp
-    assert summary is not None
+    state = read_state(str(sol), eop)
+    cmp = compare_with_cpf(state, read_cpf(str(CPF)), force="full", eop=eop,
+                           propagate_kwargs={"force_model": default_force_model(state.epoch, eop)})
+    assert cmp["rms_m"] < 3.0 and cmp["max_m"] < 6.0, cmp      # measured 0.97 m RMS, 2.28 m max

@@ -178,6 +178,13 @@ def estimate_command(
         two_stage=two_stage, noise=noise.value, oscillator_noise=oscillator_noise,
         troposphere=troposphere, com_offset_m=com_offset, wavelength_nm=wavelength_nm)
     result = estimate(tables, state0, station_table, options, orientation)
+    corrections = {}
+    for b in result.problem.modifiers:
+        if not b.names and b.rows.size:         # driver-free: the known range corrections
+            label = repr(b.modifier)
+            corrections[label] = corrections.get(label, 0) + int(b.rows.size)
+    if corrections:
+        log.info("range corrections: %s", "; ".join(f"{k} on {n} samples" for k, n in corrections.items()))
 
     png = residuals_png(result.residuals) if plot is not None else None
     write_state(result.state, out, force=force.value, eop_source=orientation.source)

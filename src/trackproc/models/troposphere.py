@@ -155,6 +155,10 @@ class TroposphereDelay(md.RangeCorrection):
         self.spans_s = spans_s
         self.exclude_s = exclude_s or []
 
+    def __repr__(self) -> str:
+        meteo = "CRD meteo" if self.meteo is not None else "standard atmosphere"
+        return f"Mendes-Pavlis/FCULa {self.station} ({self.wavelength_um * 1e3:g} nm, {meteo})"
+
     def rows(self, meas) -> np.ndarray:
         rows = super().rows(meas)
         t = meas.t_s[rows]
@@ -190,6 +194,9 @@ class CentreOfMassOffset(md.RangeCorrection):
     def __init__(self, offset_m: float, station: str | None = None) -> None:
         super().__init__(station)
         self.offset_m = float(offset_m)
+
+    def __repr__(self) -> str:
+        return f"centre-of-mass offset {self.offset_m:g} m"
 
     def delay(self, meas, rows, geometry) -> np.ndarray:
         return np.full(rows.shape, -self.offset_m)
