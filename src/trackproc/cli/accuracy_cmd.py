@@ -10,6 +10,7 @@ from typing import Optional
 import typer
 
 from trackproc.cli.app import app
+from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, OutputOpt, resolve_output,
                                   table_format_for)
 
@@ -57,6 +58,7 @@ def _format_for(path: str, requested: Optional[OutFormat]) -> str:
 
 
 @app.command("accuracy")
+@force_options
 def accuracy_command(
     state: Optional[str] = typer.Argument(None, metavar="STATE.json",
                                           help="State file with covariance (e.g. from estimate), a TLE, or - "
@@ -103,6 +105,7 @@ def accuracy_command(
                                                  "Arrow stream on a pipe)."),
     as_json: bool = JsonSummaryOpt,
     output: Optional[str] = OutputOpt,
+    force_settings: ForceSettings = None,
 ) -> None:
     """Predict the accuracy of an orbit from its initial covariance: sigma(t) of position and
     velocity (GCRF and radial / along-track / cross-track), of range and range-rate at a station,
@@ -166,7 +169,8 @@ def accuracy_command(
     options = AccuracyOptions(span_s=span, step_s=step, force=force.value, method=method.value,
                               monte_carlo=monte_carlo, seed=seed, sigma_position_m=pos, sigma_velocity_m_s=vel,
                               sigma_frame=sigma_frame.value, at_station=at_station, earth=earth.value,
-                              correlation=correlation is not None)
+                              correlation=correlation is not None,
+                              force_model=force_settings.model(force.value, initial.epoch, orientation, initial))
     result = accuracy(initial, options, table, orientation, stations_source=stations)
 
     from trackproc.cli.common import summary

@@ -31,7 +31,7 @@ class TableFormat(str, Enum):
     csv = "csv"
 
 
-ForceOpt = typer.Option(Force.j2, "--force", help="Force model: two-body or j2.")
+ForceOpt = typer.Option(Force.j2, "--force", help="Force model: two-body, j2 or full (gravity field, Sun, Moon, SRP, drag, relativity; see the force-model options).")
 EarthOpt = typer.Option(Earth.wgs84, "--earth",
                         help="wgs84 ellipsoid, or sphere (R = 6371 km, linear sidereal time, as seed 004).")
 EopOpt = typer.Option(None, "--eop", help="IERS EOP file (finals2000A / finals.all): UT1-UTC and polar motion.",

@@ -10,6 +10,7 @@ from typing import Optional
 import typer
 
 from trackproc.cli.app import app
+from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc.cli.common import (
     Dut1Opt,
     EarthOpt,
@@ -28,12 +29,14 @@ class OrbitForce(str, Enum):
     sgp4 = "sgp4"
     two_body = "two-body"
     j2 = "j2"
+    full = "full"
 
 
 #: ``--force`` of commands taking a STATE|TLE (default: sgp4 for a TLE, j2 for a state).
 OrbitForceOpt = typer.Option(None, "--force",
-                             help="sgp4 (default for a TLE: SGP4 at every time), j2 (default for a state) or "
-                                  "two-body; j2/two-body on a TLE integrate from its SGP4 state at the first "
+                             help="sgp4 (default for a TLE: SGP4 at every time), j2 (default for a state), "
+                                  "two-body or full (gravity field, Sun, Moon, SRP, drag: see the force-model "
+                                  "options); j2/two-body/full on a TLE integrate from its SGP4 state at the first "
                                   "requested time.")
 
 
@@ -60,6 +63,7 @@ def _format(output: str, requested: Optional[EphemerisFormat]) -> EphemerisForma
 
 
 @app.command("propagate")
+@force_options
 def propagate_command(
     state: str = typer.Argument(..., metavar="STATE.json|TLE|metadata",
                                 help="Initial state (JSON state file, any supported frame) or a TLE; - for stdin; "
@@ -103,6 +107,7 @@ def propagate_command(
         None, "--format", help="parquet, arrow, csv or oem (CCSDS OEM KVN; default from the suffix; "
                                "Arrow stream on stdout)."),
     output: Optional[str] = OutputOpt,
+    force_settings: ForceSettings = None,
 ) -> None:
     """Propagate an orbit state (two-body or J2, adaptive Taylor series) or a TLE (SGP4 at every
     output time, unless --force j2/two-body) and write its ephemeris:
@@ -202,6 +207,7 @@ def propagate_command(
         stm=stm, station=station, carrier_hz=carrier_hz, range_rate_model=range_rate_model.value,
         visible_only=visible_only, elevation_mask_deg=elevation_mask_deg)
     if force_key == "sgp4":
+        force_settings.model(force_key, None)              # full-only flags: a usage error
         result = propagate_tle(orbit.tle, options, orientation)
         initial = None
     else:
@@ -221,6 +227,7 @@ def propagate_command(
             options.force_note = (f"TLE integrated with {force_key} from its SGP4 state at {format_epoch(first)} "
                                   f"(--force {force_key}), not evaluated by SGP4")
             log.warning("%s", options.force_note)
+        options.force_model = force_settings.model(force_key, initial.epoch, orientation, orbit.state)
         result = propagate(initial, options, orientation)
 
     oem_kwargs = {}
@@ -233,19 +240,21 @@ def propagate_command(
             comment = "trackproc propagate: SGP4 at every epoch (TEME -> GCRF)"
         else:
             name, ident = oem_identity(initial, object_name, object_id)
-            comment = f"trackproc propagate: Taylor (DT) integration, tol {tol:g}"
+            comment = (f"trackproc propagate: Taylor (DT) integration, tol {tol:g}" if force_key != "full" else
+                       "trackproc propagate: DOP853 integration of the full force model")
         oem_kwargs = {"object_name": name, "object_id": ident, "comments": [comment]}
     write_ephemeris(result.ephemeris, out, out_format.value, **oem_kwargs)
     if compare is not None:
-        _compare_with_cpf(compare, initial, force_key, orientation)
+        _compare_with_cpf(compare, initial, force_key, orientation, options.force_model)
     eph = result.ephemeris
-    steps = f"{result.trajectory.n_steps} Taylor steps" if result.trajectory is not None else "SGP4"
+    steps = (f"{result.trajectory.n_steps} {'DOP853' if force_key == 'full' else 'Taylor'} steps"
+             if result.trajectory is not None else "SGP4")
     log.info("%d rows, %s .. %s, %s (%s) -> %s (%s)", len(eph.frame), eph.meta["start"],
              eph.meta["end"], steps, eph.meta["force_model"],
              "stdout" if out == "-" else out, out_format.value)
 
 
-def _compare_with_cpf(path, initial, force_key, orientation) -> None:
+def _compare_with_cpf(path, initial, force_key, orientation, force_model=None) -> None:
     """``--compare CPF``: the summary of :func:`trackproc.pipeline.reference_orbit.compare_with_cpf`."""
     import json
     import sys
@@ -257,11 +266,7 @@ def _compare_with_cpf(path, initial, force_key, orientation) -> None:
     if initial is None:
         raise InputError("--compare needs an integrated orbit", column="--compare", found="a TLE evaluated by SGP4",
                          expected="a state file, or --force j2/two-body")
-    kwargs = {}
-    if force_key == "full":
-        from trackproc.pipeline.estimate.problem import default_force_model
-
-        kwargs["force_model"] = default_force_model(initial.epoch, orientation)
+    kwargs = {"force_model": force_model} if force_key == "full" else {}
     summary = compare_with_cpf(initial, read_cpf(path), force=force_key, eop=orientation, propagate_kwargs=kwargs)
     summary.pop("distance_m")
     summary = {"reference": path, "force": force_key, **summary}

@@ -8,6 +8,7 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
+from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc.cli.common import (DopplerMode, Dut1Opt, EarthOpt, EopOpt, ForceOpt, OutputOpt, RangeRateModelOpt,
                                   TableFormat, resolve_output, table_format_for)
 
@@ -17,6 +18,7 @@ KIND_NAMES = "range,range_rate,doppler,elevation,azimuth"
 
 
 @app.command("simulate")
+@force_options
 def simulate_command(
     state: Optional[str] = typer.Option(None, "--state", metavar="STATE.json",
                                         help="Initial state file (JSON; GCRF, EME2000, TEME or ITRF)."),
@@ -72,6 +74,7 @@ def simulate_command(
                                                    help="With --ballistic --hypothesis h1: displacement, m "
                                                         "(default: the nominal file's).",
                                                    rich_help_panel="Ballistic (seed 003)"),
+    force_settings: ForceSettings = None,
 ) -> None:
     """Simulate tracking passes of a known orbit: range, range-rate (one-way light time), Doppler,
     azimuth and elevation, with noise, range biases and a frequency offset/drift.
@@ -138,7 +141,8 @@ def simulate_command(
         sigma_range_rate_m_s=sigma_range_rate_m_s, sigma_doppler_hz=sigma_doppler_hz,
         sigma_angle_deg=sigma_angle_deg, range_bias_m=biases, freq_offset_hz=freq_offset_hz,
         freq_drift_hz_s=freq_drift_hz_s, seed=seed, force=force.value, earth=earth.value,
-        range_rate_model=range_rate_model.value)
+        range_rate_model=range_rate_model.value,
+        force_model=force_settings.model(force.value, initial.epoch, orientation, initial if state else None))
     result = simulate(initial, table, options, orientation)
 
     if truth is not None:

@@ -75,6 +75,8 @@ class AccuracyOptions:
     step_s: float
     force: str = "j2"
     method: str = "spectral"
+    #: The ForceModel of ``force="full"`` (trackproc.dynamics.forces; cli.force_options builds it).
+    force_model: Optional[object] = None
     monte_carlo: Optional[int] = None
     seed: Optional[int] = None
     sigma_position_m: Optional[Sequence[float]] = None
@@ -140,6 +142,11 @@ def _check_options(options: AccuracyOptions) -> None:
         raise InputError("unknown method", column="--method", found=options.method, expected=" | ".join(METHODS))
     if options.force not in FORCES:
         raise InputError("unknown force model", column="--force", found=options.force, expected=" or ".join(FORCES))
+    if options.force == "full" and options.n_samples:
+        # each draw would be a full DOP853 integration (about a second per day of LEO): not offered
+        raise InputError("Monte Carlo draws use the Taylor engine's batch mode (two-body, j2)", column="--method",
+                         found=f"{options.method} with --force full",
+                         expected="--method spectral or stm (no --monte-carlo) with --force full")
     if options.monte_carlo is not None and not (2 <= int(options.monte_carlo) <= MAX_MONTE_CARLO):
         raise InputError("invalid sample count", column="--monte-carlo", found=options.monte_carlo,
                          expected=f"an integer in [2, {MAX_MONTE_CARLO}]")
@@ -230,7 +237,8 @@ def accuracy(state, options: AccuracyOptions, stations: Optional[dict] = None, e
     cov0, cov_label = initial_covariance(state, options)
     times = time_grid(state.epoch, options.span_s, options.step_s)
     t = np.maximum(ts.seconds_since(ts.datetime64_to_jd_utc(times), state.jd_utc), 0.0)   # SI s (leap s)
-    traj = propagate_state(state, float(t.max(initial=0.0)), force=options.force, eop=eop, stm=True)
+    traj = propagate_state(state, float(t.max(initial=0.0)), force=options.force, eop=eop, stm=True,
+                           force_model=options.force_model)
     traj.raise_for_outcome()
     nominal = traj.state(t)                        # (M, 6) GCRF
     big_q = traj.rotation                          # GCRF -> quasi-inertial
@@ -444,8 +452,10 @@ def _meta(state, options, traj, cov0, cov_label, checks, eop, track, mc) -> dict
         "state_source": state.source,
         "span_s": float(options.span_s),
         "step_s": float(options.step_s),
-        "force_model": FORCE_LABELS.get(options.force, options.force),
-        "constants": force_model_constants(options.force),
+        "force_model": (options.force_model.label() if options.force_model is not None
+                        else FORCE_LABELS.get(options.force, options.force)),
+        "constants": (options.force_model.describe() if options.force_model is not None
+                      else force_model_constants(options.force)),
         "earth_orientation": getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
         "methods": list(options.methods),
         "unprefixed_method": options.methods[0],

@@ -30,7 +30,7 @@ DEG = np.pi / 180.0
 #: Step of the central differences giving SGP4's acceleration and jerk, s.
 FD_STEP_S = 1.0
 #: Force models of a ``STATE|TLE`` argument (``--force``).
-FORCES = ("sgp4", "two-body", "j2")
+FORCES = ("sgp4", "two-body", "j2", "full")
 SGP4_LABEL = "SGP4 (TLE mean elements, WGS-72; Vallado's sgp4 package), TEME -> GCRF via ITRF"
 
 

@@ -59,6 +59,8 @@ class PropagateOptions:
     light_time: bool = True
     #: Said in the metadata when a TLE is integrated instead of evaluated by SGP4.
     force_note: Optional[str] = None
+    #: The ForceModel of ``force="full"`` (trackproc.dynamics.forces; cli.force_options builds it).
+    force_model: Optional[object] = None
 
 
 @dataclass
@@ -224,7 +226,7 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
     want_stm = options.stm or cov0 is not None
     try:
         traj = propagator.propagate_state(initial, t_s, force=options.force, eop=eop, tol=options.tol,
-                                          stm=want_stm)
+                                          stm=want_stm, force_model=options.force_model)
     except (ValueError, ArithmeticError) as exc:
         raise ProcessingError(f"propagation failed: {exc}") from None
     traj.raise_for_outcome()
@@ -318,6 +320,16 @@ def _meta(initial, options, traj, eop, has_cov, times, tle=None) -> dict:
             "integration_frame": "GCRF rotated by the bias-precession-nutation matrix of the state's epoch "
                                  f"({iso_utc(traj.epoch)}); J2 about that rotation axis",
         }
+        if traj.force_model is not None:
+            from trackproc.dynamics.forces import integrator
+
+            meta["force_model"] = traj.force_model.label()
+            meta["constants"] = traj.force_model.describe()
+            meta["propagator"] = {
+                "method": "DOP853 (scipy) with the variational equations, dense output (trackproc.dynamics.forces)",
+                "rtol": max(float(options.tol), integrator.RTOL), "steps": int(traj.n_steps),
+                "integration_frame": "GCRF (rotated by a constant matrix); the field acts in ITRF through IAU "
+                                     "2006/2000A at every time"}
     if tle is not None:
         from trackproc.pipeline.orbit_source import SGP4_LABEL
 

@@ -75,6 +75,8 @@ class SimulateOptions:
     force: str = "j2"
     earth: str = "wgs84"
     range_rate_model: str = "doppler"
+    #: The ForceModel of ``force="full"`` (trackproc.dynamics.forces; cli.force_options builds it).
+    force_model: Optional[object] = None
 
     def noise_sigmas(self) -> dict:
         """Noise 1-sigma per kind, SI (angles in rad)."""
@@ -187,15 +189,21 @@ def simulate(initial, stations: Mapping, options: SimulateOptions, eop=None) -> 
 
     # the orbit, in the quasi-inertial frame of the initial epoch (J2 about its z axis)
     qframe = frames.QuasiInertialFrame.at(*initial.jd_utc, eop)
-    try:
-        r_all, v_all = reference.propagate_gcrf(initial.r_m, initial.v_m_s, np.r_[start_rel, t_rel], qframe.q,
-                                                options.force)
-    except ArithmeticError as exc:
-        raise ProcessingError(f"propagation failed: {exc}") from None
+    if options.force_model is not None:
+        r_all, v_all, a_all, j_all = _full_force_orbit(initial, np.r_[start_rel, t_rel], options.force_model, eop)
+    else:
+        try:
+            r_all, v_all = reference.propagate_gcrf(initial.r_m, initial.v_m_s, np.r_[start_rel, t_rel], qframe.q,
+                                                    options.force)
+        except ArithmeticError as exc:
+            raise ProcessingError(f"propagation failed: {exc}") from None
     r_sat, v_sat = r_all[1:], v_all[1:]
     if np.any(np.linalg.norm(r_sat, axis=1) < 6_300_000.0):
         raise ProcessingError("the orbit enters the Earth within the simulated span (|r| < 6300 km)")
-    a_sat, j_sat = reference.acceleration_gcrf(r_sat, v_sat, qframe.q, options.force)
+    if options.force_model is not None:
+        a_sat, j_sat = a_all[1:], j_all[1:]
+    else:
+        a_sat, j_sat = reference.acceleration_gcrf(r_sat, v_sat, qframe.q, options.force)
 
     # the stations
     names = sorted(stations)
@@ -266,6 +274,19 @@ def simulate(initial, stations: Mapping, options: SimulateOptions, eop=None) -> 
     return Simulation(frame=frame, meta=meta, truth=truth, truth_values=truth_values, grid=grid)
 
 
+def _full_force_orbit(initial, t_s, force_model, eop):
+    """GCRF position, velocity, acceleration and jerk at ``t_s`` (s from the state's epoch) under
+    the full force model (DOP853 + dense polynomials, trackproc.dynamics.forces)."""
+    from trackproc.dynamics import propagator
+
+    try:
+        traj = propagator.propagate_state(initial, t_s, force=force_model, eop=eop).raise_for_outcome()
+    except (ValueError, ArithmeticError) as exc:
+        raise ProcessingError(f"propagation failed: {exc}") from None
+    x, d1, d2 = traj.state(t_s), traj.state(t_s, derivative=1), traj.state(t_s, derivative=2)
+    return x[:, :3], x[:, 3:], d1[:, 3:], d2[:, 3:]
+
+
 def _meta(options, stations, names, visible, pass_ids_all, start, times, truth, initial, eop, sigmas) -> dict:
     from trackproc.io.passfile import base_meta
     from trackproc.io.statefile import FORCE_LABELS
@@ -298,7 +319,9 @@ def _meta(options, stations, names, visible, pass_ids_all, start, times, truth, 
         "earth": options.earth if options.earth != "sphere" else
         "sphere (R = 6371 km station coordinates and vertical; Earth orientation still IAU 2006/2000A)",
         "passes": len(passes),
-        "propagator": "DOP853 rtol 1e-13 (scipy solve_ivp method), J2 about the rotation axis of the initial epoch",
+        "propagator": ("DOP853 rtol 1e-13 (scipy solve_ivp method), J2 about the rotation axis of the initial epoch"
+                       if options.force_model is None else
+                       "DOP853 rtol 1e-12 with dense output, full force model (trackproc.dynamics.forces)"),
         "aberration": "neglected (<= 0.32 arcsec)",
     }
     return base_meta(
@@ -306,8 +329,10 @@ def _meta(options, stations, names, visible, pass_ids_all, start, times, truth, 
         doppler_mode=options.mode,
         sources=["trackproc simulate"],
         stations=station_meta,
-        force_model=FORCE_LABELS.get(options.force, options.force),
-        constants=force_model_constants(options.force),
+        force_model=(options.force_model.label() if options.force_model is not None
+                     else FORCE_LABELS.get(options.force, options.force)),
+        constants=(options.force_model.describe() if options.force_model is not None
+                   else force_model_constants(options.force)),
         earth_orientation=eop_source,
         range_rate_model=options.range_rate_model,
         simulation=simulation,

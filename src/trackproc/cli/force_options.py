@@ -1,0 +1,221 @@
+"""The options of the full force model (``--force full``), defined once for every command
+that propagates: ``--gravity DEG[xORD]``, ``--gravity-field FILE.gfc``, ``--third-body``,
+``--srp/--no-srp``, ``--drag/--no-drag``, ``--atmosphere``, ``--relativity/--no-relativity``,
+and the spacecraft (``--mass-kg``, ``--srp-area-m2``, ``--cr``, ``--drag-area-m2``, ``--cd``,
+else the state file's ``spacecraft: {...}``).
+
+A command takes them all by one decorator, :func:`force_options`, placed under
+``@app.command``: the options join the command's signature (typer reads it) and reach the
+function as one :class:`ForceSettings` (keyword ``force_settings``). Nothing heavy is
+imported here (``--help`` stays fast); :meth:`ForceSettings.model` builds the
+:class:`~trackproc.dynamics.forces.ForceModel`.
+"""
+
+from __future__ import annotations
+
+import functools
+import inspect
+import typing
+from dataclasses import dataclass, fields
+from typing import Optional
+
+import typer
+
+from trackproc import vocabulary
+from trackproc.cli.common import choices
+
+Atmosphere = choices("Atmosphere", vocabulary.ATMOSPHERES)
+PANEL = "Force model (--force full)"
+
+#: The options, by parameter name: (default typer.Option, annotation).
+OPTIONS = {
+    "gravity": (typer.Option("20", "--gravity", metavar="DEG[xORD]", rich_help_panel=PANEL,
+                             help="--force full: degree and order of the gravity field (default 20; 20x0: zonals)."),
+                str),
+    "gravity_field": (typer.Option(None, "--gravity-field", metavar="FILE.gfc", rich_help_panel=PANEL,
+                                   help="--force full: ICGEM gravity-field file (default: the shipped EIGEN-6S, "
+                                        "to degree 70)."),
+                      Optional[str]),
+    "third_body": (typer.Option("sun,moon", "--third-body", metavar="sun,moon|none", rich_help_panel=PANEL,
+                                help="--force full: third bodies (ERFA's Sun and Moon)."),
+                   str),
+    "srp": (typer.Option(None, "--srp/--no-srp", rich_help_panel=PANEL, show_default=False,
+                         help="--force full: solar radiation pressure (default: on when mass and SRP area are "
+                              "known)."),
+            Optional[bool]),
+    "drag": (typer.Option(None, "--drag/--no-drag", rich_help_panel=PANEL, show_default=False,
+                          help="--force full: atmospheric drag (default: on when mass and drag area are known)."),
+             Optional[bool]),
+    "atmosphere": (typer.Option(Atmosphere.harris_priester, "--atmosphere", rich_help_panel=PANEL,
+                                help="--force full: density model of the drag (nrlmsis needs pymsis)."),
+                   Atmosphere),
+    "relativity": (typer.Option(True, "--relativity/--no-relativity", rich_help_panel=PANEL,
+                                help="--force full: Schwarzschild correction."),
+                   bool),
+    "mass_kg": (typer.Option(None, "--mass-kg", metavar="KG", rich_help_panel=PANEL,
+                             help="Spacecraft mass, kg (else the state file's spacecraft.mass_kg)."),
+                Optional[float]),
+    "srp_area_m2": (typer.Option(None, "--srp-area-m2", metavar="M2", rich_help_panel=PANEL,
+                                 help="Cross-section for radiation pressure, m²."),
+                    Optional[float]),
+    "cr": (typer.Option(None, "--cr", metavar="CR", rich_help_panel=PANEL,
+                        help="Radiation-pressure coefficient (default 1.5)."),
+           Optional[float]),
+    "drag_area_m2": (typer.Option(None, "--drag-area-m2", metavar="M2", rich_help_panel=PANEL,
+                                  help="Cross-section for drag, m²."),
+                     Optional[float]),
+    "cd": (typer.Option(None, "--cd", metavar="CD", rich_help_panel=PANEL, help="Drag coefficient (default 2.2)."),
+           Optional[float]),
+}
+_SPACECRAFT_KEYS = ("mass_kg", "srp_area_m2", "cr", "drag_area_m2", "cd")
+
+
+@dataclass
+class ForceSettings:
+    """The full-force options as given on the command line (None = not given)."""
+
+    gravity: str = "20"
+    gravity_field: Optional[str] = None
+    third_body: str = "sun,moon"
+    srp: Optional[bool] = None
+    drag: Optional[bool] = None
+    atmosphere: object = "harris-priester"
+    relativity: bool = True
+    mass_kg: Optional[float] = None
+    srp_area_m2: Optional[float] = None
+    cr: Optional[float] = None
+    drag_area_m2: Optional[float] = None
+    cd: Optional[float] = None
+
+    def given(self) -> list[str]:
+        """Flags given that only ``--force full`` uses."""
+        default = ForceSettings()
+        out = []
+        for f in fields(self):
+            value = getattr(self, f.name)
+            value = getattr(value, "value", value)
+            if value != getattr(default, f.name):
+                out.append("--" + f.name.replace("_", "-"))
+        return out
+
+    def degree_order(self) -> tuple[int, int]:
+        text = str(self.gravity).lower().strip()
+        deg, _, order = text.partition("x")
+        try:
+            d = int(deg)
+            o = int(order) if order else d
+        except ValueError:
+            raise typer.BadParameter(f"expected DEG or DEGxORD (e.g. 20 or 70x70), got {self.gravity!r}",
+                                     param_hint="--gravity") from None
+        if not (0 <= o <= d):
+            raise typer.BadParameter(f"expected 0 <= order <= degree, got {self.gravity!r}", param_hint="--gravity")
+        return d, o
+
+    def bodies(self) -> tuple:
+        text = self.third_body.strip().lower()
+        if text == "none":
+            return ()
+        names = tuple(x.strip() for x in text.split(",") if x.strip())
+        bad = [n for n in names if n not in vocabulary.THIRD_BODIES]
+        if bad or not names or len(set(names)) != len(names):
+            raise typer.BadParameter(f"expected sun, moon, sun,moon or none, got {self.third_body!r}",
+                                     param_hint="--third-body")
+        return names
+
+    def model(self, force: str, epoch, eop=None, state=None, estimated: tuple = ()):
+        """The :class:`~trackproc.dynamics.forces.ForceModel` for ``--force full`` (None for
+        another force; full-only flags with another force are a usage error).
+
+        ``epoch`` dates the field's time-variable terms; ``state`` (a read state file) may
+        carry ``spacecraft: {mass_kg, srp_area_m2, cr, drag_area_m2, cd}``.
+        """
+        if force != "full":
+            extra = self.given()
+            if extra:
+                raise typer.BadParameter(f"{', '.join(extra)}: only with --force full (--force is {force})",
+                                         param_hint=extra[0])
+            return None
+        from trackproc.dynamics.forces import ForceModel, Spacecraft
+        from trackproc.errors import InputError
+        from trackproc.io.icgem import load_field
+
+        deg, order = self.degree_order()
+        bodies = self.bodies()
+        sc = spacecraft_from_state(state)
+        for key in _SPACECRAFT_KEYS:
+            value = getattr(self, key)
+            if value is not None:
+                if not (value > 0 and value == value and value != float("inf")):
+                    raise typer.BadParameter(f"expected a positive number, got {value}",
+                                             param_hint="--" + key.replace("_", "-"))
+                sc[key] = float(value)
+        spacecraft = Spacecraft(**sc)
+        srp = spacecraft.srp_known if self.srp is None else self.srp
+        drag = spacecraft.drag_known if self.drag is None else self.drag
+        if srp and not spacecraft.srp_known:
+            raise typer.BadParameter("radiation pressure needs the spacecraft mass and SRP area (--mass-kg, "
+                                     "--srp-area-m2, or spacecraft: in the state file)", param_hint="--srp")
+        if drag and not spacecraft.drag_known:
+            raise typer.BadParameter("drag needs the spacecraft mass and drag area (--mass-kg, --drag-area-m2, or "
+                                     "spacecraft: in the state file)", param_hint="--drag")
+        atmosphere = getattr(self.atmosphere, "value", self.atmosphere)
+        if drag and atmosphere == "nrlmsis":
+            import importlib.util
+
+            if importlib.util.find_spec("pymsis") is None:
+                raise typer.BadParameter("nrlmsis needs the pymsis package (pip install pymsis)",
+                                         param_hint="--atmosphere")
+        field = load_field(self.gravity_field, deg, order, date=epoch)
+        try:
+            return ForceModel(field=field, third_bodies=bodies, srp=srp, drag=drag, relativity=self.relativity,
+                              spacecraft=spacecraft, atmosphere=atmosphere, estimated=tuple(estimated), eop=eop)
+        except ValueError as exc:
+            raise InputError(str(exc), column="--force") from None
+
+
+def spacecraft_from_state(state) -> dict:
+    """The ``spacecraft`` block of a state file (``State.extra``) as keyword arguments; an
+    :class:`~trackproc.errors.InputError` naming the file and field when malformed."""
+    from trackproc.errors import InputError
+
+    block = (getattr(state, "extra", None) or {}).get("spacecraft") if state is not None else None
+    if block is None:
+        return {}
+    source = getattr(state, "source", None) or "<state>"
+    if not isinstance(block, dict):
+        raise InputError("not an object", file=source, column="spacecraft", found=block,
+                         expected="{mass_kg, srp_area_m2, cr, drag_area_m2, cd}")
+    out = {}
+    for key, value in block.items():
+        if key not in _SPACECRAFT_KEYS:
+            raise InputError("unknown key", file=source, column=f"spacecraft.{key}", found=key,
+                             expected=", ".join(_SPACECRAFT_KEYS))
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 < value < float("inf")):
+            raise InputError("bad value", file=source, column=f"spacecraft.{key}", found=value,
+                             expected="a positive number")
+        out[key] = float(value)
+    return out
+
+
+def force_options(fn):
+    """Add the full-force options to a command; the function gets ``force_settings``."""
+    sig = inspect.signature(fn)
+    params = [p for p in sig.parameters.values() if p.name != "force_settings"]
+    extra = [inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=opt, annotation=ann)
+             for name, (opt, ann) in OPTIONS.items()]
+    # keyword-only parameters must follow positional-or-keyword ones in a signature
+    params = [p.replace(kind=inspect.Parameter.KEYWORD_ONLY) for p in params]
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        settings = ForceSettings(**{name: kwargs.pop(name) for name in OPTIONS if name in kwargs})
+        return fn(*args, force_settings=settings, **kwargs)
+
+    wrapper.__signature__ = sig.replace(parameters=params + extra)
+    hints = typing.get_type_hints(fn)            # resolved in the command's module
+    hints.pop("force_settings", None)
+    hints.update({name: ann for name, (_, ann) in OPTIONS.items()})
+    wrapper.__annotations__ = hints
+    return wrapper

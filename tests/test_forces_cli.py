@@ -1,0 +1,98 @@
+"""``--force full`` at the command line (issue 17): the options defined once in
+cli/force_options.py reach propagate, simulate and accuracy; full-only flags with another
+force, a malformed spacecraft block, a bad field file are one-line usage errors (exit 2)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackproc.dynamics.forces import ForceModel, Spacecraft
+from trackproc.dynamics.propagator import propagate
+from trackproc.io.ephemeris import read_ephemeris
+from trackproc.io.icgem import load_field
+from trackproc.io.statefile import read_state
+
+V0 = [0.0, -927.7425636, 7555.8568340]
+STATE = {"epoch": "2020-04-05T00:00:00Z", "frame": "GCRF", "position_m": [6878137.0, 0.0, 0.0], "velocity_m_s": V0,
+         "spacecraft": {"mass_kg": 2.2, "srp_area_m2": 0.01, "drag_area_m2": 0.01, "cr": 1.3}}
+
+
+@pytest.fixture
+def state_file(write):
+    return write("sat.json", json.dumps(STATE))
+
+
+def test_propagate_full_matches_the_python_api_and_names_its_model(run_cli, state_file, tmp_path):
+    out = tmp_path / "eph.csv"
+    res = run_cli(["propagate", str(state_file), "--span", "1800", "--step", "600", "--force", "full",
+                   "--gravity", "8x8", "--dut1", "0", "-o", str(out)])
+    assert res.exit_code == 0, res.stderr
+    eph = read_ephemeris(str(out))
+    meta = eph.meta
+    assert meta["force_model"] == "full (EIGEN-6S 8x8, sun+moon, srp, drag (harris-priester), relativity)"
+    assert meta["constants"]["spacecraft"]["cr"] == 1.3 and meta["constants"]["gravity_field"]["degree"] == 8
+    initial = read_state(str(state_file))
+    from trackproc.dynamics.timescales import EarthOrientation
+
+    eop = EarthOrientation.constant(0.0)
+    fm = ForceModel(load_field(degree=8, date="2020-04-05T00:00:00"), srp=True, drag=True, eop=eop,
+                    spacecraft=Spacecraft(2.2, 0.01, 1.3, 0.01))
+    t = np.array([0.0, 600.0, 1200.0, 1800.0])
+    ref = propagate(initial.r_m, initial.v_m_s, initial.epoch, t, force=fm, eop=eop).state(t)
+    got = eph.frame[["x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy()
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-6)
+    # --no-drag/--no-srp change the orbit (drag of a 2.2 kg cubesat at 500 km: metres in 30 min)
+    out2 = tmp_path / "eph2.csv"
+    assert run_cli(["propagate", str(state_file), "--span", "1800", "--step", "600", "--force", "full", "--gravity",
+                    "8x8", "--no-drag", "--no-srp", "--dut1", "0", "-o", str(out2)]).exit_code == 0
+    got2 = read_ephemeris(str(out2)).frame[["x_m", "y_m", "z_m"]].to_numpy()
+    assert 1e-3 < np.abs(got2 - got[:, :3]).max() < 100.0
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--force", "j2", "--gravity", "30"], "--gravity: only with --force full"),
+    (["--force", "full", "--gravity", "abc"], "DEG or DEGxORD"),
+    (["--force", "full", "--gravity", "10x20"], "order <= degree"),
+    (["--force", "full", "--third-body", "sun,mars"], "sun, moon"),
+    (["--force", "full", "--cd", "-1"], "positive"),
+])
+def test_bad_force_options_are_usage_errors(run_cli, state_file, tmp_path, args, words):
+    res = run_cli(["propagate", str(state_file), "--span", "60", "--step", "60", "--dut1", "0", "-o",
+                   str(tmp_path / "x.csv")] + args)
+    assert res.exit_code == 2 and words in res.stderr and "Traceback" not in res.stderr
+
+
+def test_drag_without_spacecraft_and_bad_spacecraft_block(run_cli, write, tmp_path):
+    bare = write("bare.json", json.dumps({k: v for k, v in STATE.items() if k != "spacecraft"}))
+    res = run_cli(["propagate", str(bare), "--span", "60", "--step", "60", "--force", "full", "--drag", "--dut1", "0",
+                   "-o", str(tmp_path / "x.csv")])
+    assert res.exit_code == 2 and "drag needs the spacecraft mass" in res.stderr
+    bad = write("bad.json", json.dumps({**STATE, "spacecraft": {"mass_kg": "heavy"}}))
+    res = run_cli(["propagate", str(bad), "--span", "60", "--step", "60", "--force", "full", "--dut1", "0",
+                   "-o", str(tmp_path / "x.csv")])
+    assert res.exit_code == 2 and "spacecraft.mass_kg" in res.stderr and "bad.json" in res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
+
+
+def test_bad_gravity_field_file_names_file_and_line(run_cli, state_file, write, tmp_path):
+    gfc = write("f.gfc", "begin_of_head\nearth_gravity_constant 3.986e14\nradius 6378136.3\nmax_degree 2\n"
+                         "end_of_head\ngfc 2 0 oops 0 0 0\n")
+    res = run_cli(["propagate", str(state_file), "--span", "60", "--step", "60", "--force", "full", "--gravity", "2",
+                   "--gravity-field", str(gfc), "--dut1", "0", "-o", str(tmp_path / "x.csv")])
+    assert res.exit_code == 2 and "f.gfc, row 6" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_simulate_and_accuracy_take_full(run_cli, state_file, stations_csv, tmp_path):
+    sim = tmp_path / "sim.csv"
+    res = run_cli(["simulate", "--state", str(state_file), "--stations", str(stations_csv), "--duration", "7200",
+                   "--step", "30", "--force", "full", "--gravity", "4", "--seed", "1", "--dut1", "0", "-o", str(sim)])
+    assert res.exit_code == 0, res.stderr
+    assert "full (EIGEN-6S 4x4" in sim.read_text()[:4000]
+    stale = Path(__file__).resolve().parents[1] / "sample_data" / "stale.json"
+    res = run_cli(["accuracy", str(stale), "--span", "600", "--step", "300", "--force", "full",
+                   "--method", "monte-carlo", "-o", str(tmp_path / "a.csv")])
+    assert res.exit_code == 2 and "--force full" in res.stderr
