@@ -10,7 +10,7 @@ import pytest
 
 from trackproc.constants import C_LIGHT
 from trackproc.errors import InputError
-from trackproc.io.crd import looks_like_crd, meteo_at, read_crd
+from trackproc.io.crd import looks_like_crd, read_crd
 from trackproc.io.tabular import detect_layout
 
 from realdata import REALDATA
@@ -71,13 +71,10 @@ def test_sniffed_by_content_and_suffix():
     assert detect_layout(b"h1 crd 1 2016 2 13 23\n", "x") == "crd"
 
 
-def test_meteo_interpolated_to_the_samples():
-    raw = read_crd(V1.encode(), "v1.npt")
-    meteo = raw.meta["crd"]["meteo"]
-    t = np.array(["2016-02-13T23:58:20.001", "2016-02-15T00:00:00"], dtype="datetime64[ns]")
-    p, temp, rh = meteo_at(meteo, "7090", t)
-    assert p[0] == pytest.approx((983.7 + 983.9) / 2, abs=1e-9) and temp[1] == 301.0 and rh[1] == 28.0
-    assert np.isnan(meteo_at(meteo, "7941", t)[0]).all()
+def test_meteo_records_in_the_metadata():
+    meteo = read_crd(V1.encode(), "v1.npt").meta["crd"]["meteo"]["7090"]
+    assert meteo["pressure_hpa"] == [983.7, 983.9] and meteo["temperature_k"] == [301.4, 301.0]
+    assert meteo["humidity_percent"] == [24.0, 28.0] and meteo["time"][0].startswith("2016-02-13T23:51:40.001")
 
 
 @pytest.mark.parametrize("edit, field", [

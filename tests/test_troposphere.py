@@ -70,3 +70,13 @@ def test_modifiers_interpolate_meteo_and_subtract_the_centre_of_mass_offset():
     p_std = tp.standard_meteo(2010.344)[0]
     assert v[0] == pytest.approx(tp.fcula_mapping(np.radians(20.0), LAT, 2010.344, 291.15 - 6.5e-3 * 2010.344)
                                  * 1.93 * p_std / 798.4188, rel=0.02)
+
+
+def test_meteo_interpolated_between_records_and_held_at_the_ends():
+    d = tp.TroposphereDelay("A", LAT, 100.0, meteo_t_s=[100.0, 0.0], pressure_hpa=[990.0, 1000.0],
+                            temperature_k=[290.0, 280.0], humidity_percent=[np.nan, 40.0])
+    p, t, rh = d.meteo_at([50.0, -10.0, 500.0])
+    assert np.allclose(p, [995.0, 1000.0, 990.0]) and np.allclose(t, [285.0, 280.0, 290.0])
+    assert np.allclose(rh, 40.0)                          # a missing value: the valid records only
+    p0, t0, rh0 = tp.TroposphereDelay("A", LAT, 100.0).meteo_at([0.0])
+    assert np.allclose([p0[0], t0[0], rh0[0]], [t_[0] for t_ in tp.standard_meteo(np.array([100.0]))])

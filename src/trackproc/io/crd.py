@@ -25,7 +25,10 @@ Samples: one ``range`` per normal point, time-tagged at **ground reception**
 (event 1; exact to the legs' asymmetry ρ̇·tof/c ≲ 1 µs, a few mm), value the one-way
 equivalent ``c·tof/2`` (m), the file's link mode ``two-way``. The sessions (station, span,
 wavelength, corrections already applied) and the meteorological records go to the metadata
-(``crd.sessions``, ``crd.meteo``) for the range corrections (:func:`meteo_at`).
+(``crd.sessions``, ``crd.meteo``) for the range corrections
+(:mod:`trackproc.pipeline.range_corrections`). A malformed record is an input error whatever
+``drop_invalid`` says (the structure of the file is in doubt); invalid values that parse are
+left to ingest's checks.
 Seconds of day that restart after midnight are moved to the next day (a sample more than an
 hour before its session's start).
 """
@@ -87,8 +90,7 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
     text = decode_text(data, source)
     session = None
     sessions, meteo = [], {}
-    times, stations, values, rows, pass_ids = [], [], [], [], []
-    full_rate = []
+    times, full_rate = [], []             # (reception ns, station, value m, line, pass id) of 11 / 10 records
     wavelengths = {}
     version = None
     for row, line in enumerate(text.splitlines(), start=1):
@@ -213,17 +215,3 @@ def _meteo_meta(records) -> dict:
     records = sorted(records)
     return {"time": [_iso(r[0]) for r in records], "pressure_hpa": [r[1] for r in records],
             "temperature_k": [r[2] for r in records], "humidity_percent": [r[3] for r in records]}
-
-
-def meteo_at(meteo: dict, station: str, times) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Surface pressure (hPa), temperature (K), humidity (%) of ``station`` at UTC ``times``
-    (datetime64), linearly interpolated between its meteorological records (held constant
-    before the first and after the last); NaN where the station has none."""
-    t = np.asarray(times, dtype="datetime64[ns]").astype(np.int64)
-    rec = meteo.get(station)
-    if not rec or not rec.get("time"):
-        nan = np.full(t.shape, np.nan)
-        return nan, nan.copy(), nan.copy()
-    tr = pd.to_datetime(pd.Series(rec["time"]), utc=True).dt.tz_localize(None).to_numpy("datetime64[ns]").astype(np.int64)
-    return tuple(np.interp(t.astype(float), tr.astype(float), np.asarray(rec[k], float))
-                 for k in ("pressure_hpa", "temperature_k", "humidity_percent"))
