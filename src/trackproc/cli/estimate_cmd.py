@@ -9,6 +9,7 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
+from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc import vocabulary
 from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, Noise, OscillatorNoiseOpt,
                                   OutputOpt, RangeRateModel, choices, named_values, resolve_output)
@@ -26,6 +27,7 @@ class BiasPer(str, Enum):
 
 
 @app.command("estimate")
+@force_options
 def estimate_command(
     passes: List[str] = typer.Argument(..., metavar="PASS...",
                                        help="Pass files (Parquet, Arrow, CSV from ingest/simulate), or - for stdin."),
@@ -33,7 +35,8 @@ def estimate_command(
                                 help="Initial state: a state file (GCRF, EME2000, TEME, ITRF) or a TLE."),
     stations: Optional[str] = typer.Option(
         None, "--stations", metavar="STATIONS.csv",
-        help="Stations table (station, lat_deg, lon_deg, height_m[, range_bias_m]); default: the pass files' metadata."),
+        help="Stations table (station, lat_deg, lon_deg, height_m[, range_bias_m]) or SINEX file (positions + "
+             "velocities at the data's mid epoch); default: the pass files' metadata."),
     range_bias: bool = typer.Option(False, "--range-bias", help="Estimate a range bias for every station with ranges."),
     range_bias_station: List[str] = typer.Option(
         [], "--range-bias-station", metavar="STATION", help="Estimate a range bias for this station only (repeatable)."),
@@ -64,6 +67,18 @@ def estimate_command(
     max_iterations: int = typer.Option(20, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Edit samples beyond K x max(1, WRMS) sigmas (iterated, flagged). 0: off."),
+    troposphere: str = typer.Option(
+        "auto", "--troposphere", metavar="auto|mendes-pavlis|none",
+        help="Tropospheric delay of range samples: Mendes-Pavlis + FCULa from the CRD meteo records (auto: laser "
+             "sessions not already corrected; mendes-pavlis: every range, needs a wavelength; none)."),
+    com_offset: float = typer.Option(0.0, "--com-offset", metavar="M",
+                                     help="Target centre-of-mass offset subtracted from modelled ranges, m "
+                                          "(LAGEOS 0.251)."),
+    wavelength_nm: Optional[float] = typer.Option(
+        None, "--wavelength-nm", metavar="NM", help="Laser wavelength for --troposphere mendes-pavlis on ranges "
+                                                    "without a CRD configuration record."),
+    eccentricities: Optional[str] = typer.Option(
+        None, "--eccentricities", metavar="ECC.snx", help="SINEX eccentricities applied to --stations FILE.snx."),
     force=ForceOpt,
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
@@ -90,6 +105,7 @@ def estimate_command(
         help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' solution always exits 1); the outputs "
              "are written either way."),
     output: Optional[str] = OutputOpt,
+    force_settings: ForceSettings = None,
 ) -> None:
     """Estimate the orbit state at an epoch and the selected biases from one or more passes
     (batch weighted least squares with per-station range biases, seed 002), and write a state
@@ -155,15 +171,29 @@ def estimate_command(
 
         at = parse_epoch(epoch, column="--epoch")
     state0 = read_state_or_tle(initial, orientation, at=at)
-    station_table = read_stations(stations) if stations is not None else None
+    station_table = None
+    if stations is not None:
+        lo = min(t.frame["time"].min() for _, t in tables)
+        hi = max(t.frame["time"].max() for _, t in tables)
+        mid = (lo + (hi - lo) / 2).tz_convert("UTC").tz_localize(None).to_datetime64()
+        station_table = read_stations(stations, epoch=mid, eccentricities=eccentricities)
     options = EstimateOptions(
         range_bias=True if range_bias else list(range_bias_station), doppler_bias=doppler_bias.value if doppler_bias else None,
         doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,
         apriori_initial=apriori_initial, force=force.value, earth=earth.value,
         range_rate_model=range_rate_model.value if range_rate_model else None, max_iterations=max_iterations,
         clip=clip if clip > 0 else None, epoch=epoch, kinds=kind_list, compare_doppler_only=compare_doppler_only,
-        two_stage=two_stage, noise=noise.value, oscillator_noise=oscillator_noise)
+        two_stage=two_stage, noise=noise.value, oscillator_noise=oscillator_noise,
+        troposphere=troposphere, com_offset_m=com_offset, wavelength_nm=wavelength_nm,
+        force_model=force_settings.model(force.value, state0.epoch, orientation, state0))
     result = estimate(tables, state0, station_table, options, orientation)
+    corrections = {}
+    for b in result.problem.modifiers:
+        if not b.names and b.rows.size:         # driver-free: the known range corrections
+            label = repr(b.modifier)
+            corrections[label] = corrections.get(label, 0) + int(b.rows.size)
+    if corrections:
+        log.info("range corrections: %s", "; ".join(f"{k} on {n} samples" for k, n in corrections.items()))
 
     png = residuals_png(result.residuals) if plot is not None else None
     write_state(result.state, out, force=force.value, eop_source=orientation.source)

@@ -26,16 +26,21 @@ class Layout(str, Enum):
     doptrack = "doptrack"
     aer = "aer"
     tdm = "tdm"
+    crd = "crd"
 
 
 @app.command("ingest")
 def ingest_command(
     inputs: List[str] = typer.Argument(..., metavar="INPUT",
-                                       help="CSV, Parquet, Arrow IPC, DopTrack CSV, Orekit .aer or CCSDS TDM; - for stdin."),
+                                       help="CSV, Parquet, Arrow IPC, DopTrack CSV, Orekit .aer, CCSDS TDM or ILRS CRD (.npt/.crd); - for stdin."),
     stations: Optional[str] = typer.Option(
         None, "--stations", metavar="STATIONS.csv",
-        help="Stations table: station, lat_deg, lon_deg, height_m [, range_bias_m]. "
+        help="Stations table: station, lat_deg, lon_deg, height_m [, range_bias_m]; or a SINEX file "
+             "(positions + velocities, taken at the data's mid epoch). "
              "Optional when every input defines its stations (DopTrack sidecar, pass files)."),
+    eccentricities: Optional[str] = typer.Option(
+        None, "--eccentricities", metavar="ECC.snx",
+        help="SINEX SITE/ECCENTRICITY file (e.g. ILRS ecc_une.snx) applied to the --stations SINEX positions."),
     carrier_hz: Optional[float] = typer.Option(
         None, "--carrier-hz", metavar="F",
         help="Nominal carrier frequency, Hz (required with Doppler samples unless the input gives it)."),
@@ -85,10 +90,11 @@ def ingest_command(
     from trackproc.io.tabular import read_raw
     from trackproc.pipeline.ingest import IngestOptions, ingest
 
-    table = read_stations(stations) if stations is not None else {}
     raws = [read_raw(path, layout.value, sidecar=sidecar, carrier_hz=carrier_hz, drop_invalid=drop_invalid,
                      tdm_two_way_range=tdm_two_way_range.value)
             for path in inputs]
+    table = (read_stations(stations, epoch=_mid_epoch(raws), eccentricities=eccentricities)
+             if stations is not None else {})
     options = IngestOptions(
         carrier_hz=carrier_hz, doppler_mode=mode.value if mode is not None else None, max_gap_s=max_gap,
         drop_invalid=drop_invalid, sigma_range_m=sigma_range_m, sigma_range_rate_m_s=sigma_range_rate_m_s,
@@ -104,3 +110,15 @@ def ingest_command(
     log.info("ingested %d samples, %d pass(es), %d station(s) -> %s (%s)", len(frame),
              frame["pass_id"].nunique(), frame["station"].nunique(), "stdout" if out == "-" else out,
              out_format.value)
+
+
+def _mid_epoch(raws):
+    """The middle of the inputs' time span (UTC datetime64), to date SINEX station positions."""
+    import numpy as np
+
+    times = [raw.frame["time"].dropna() for raw in raws if len(raw.frame)]
+    if not times:
+        return None
+    lo = min(t.min() for t in times)
+    hi = max(t.max() for t in times)
+    return np.datetime64((lo + (hi - lo) / 2).tz_convert("UTC").tz_localize(None), "ns")

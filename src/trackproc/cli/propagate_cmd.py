@@ -99,6 +99,10 @@ def propagate_command(
                                                                           "name, else UNKNOWN)."),
     object_id: Optional[str] = typer.Option(None, "--object-id", help="OEM OBJECT_ID (default: the TLE's "
                                                                       "international designator, else UNKNOWN)."),
+    compare: Optional[str] = typer.Option(
+        None, "--compare", metavar="CPF",
+        help="Also compare the orbit with a reference ephemeris (ILRS CPF): distance RMS, max and its radial/"
+             "along/cross parts over the CPF's epochs, one JSON line on stderr (a state, not a TLE)."),
     fmt: Optional[EphemerisFormat] = typer.Option(
         None, "--format", help="parquet, arrow, csv or oem (CCSDS OEM KVN; default from the suffix; "
                                "Arrow stream on stdout)."),
@@ -240,12 +244,33 @@ def propagate_command(
                        "trackproc propagate: DOP853 integration of the full force model")
         oem_kwargs = {"object_name": name, "object_id": ident, "comments": [comment]}
     write_ephemeris(result.ephemeris, out, out_format.value, **oem_kwargs)
+    if compare is not None:
+        _compare_with_cpf(compare, initial, force_key, orientation, options.force_model)
     eph = result.ephemeris
     steps = (f"{result.trajectory.n_steps} {'DOP853' if force_key == 'full' else 'Taylor'} steps"
              if result.trajectory is not None else "SGP4")
     log.info("%d rows, %s .. %s, %s (%s) -> %s (%s)", len(eph.frame), eph.meta["start"],
              eph.meta["end"], steps, eph.meta["force_model"],
              "stdout" if out == "-" else out, out_format.value)
+
+
+def _compare_with_cpf(path, initial, force_key, orientation, force_model=None) -> None:
+    """``--compare CPF``: the summary of :func:`trackproc.pipeline.reference_orbit.compare_with_cpf`."""
+    import json
+    import sys
+
+    from trackproc.errors import InputError
+    from trackproc.io.cpf import read_cpf
+    from trackproc.pipeline.reference_orbit import compare_with_cpf
+
+    if initial is None:
+        raise InputError("--compare needs an integrated orbit", column="--compare", found="a TLE evaluated by SGP4",
+                         expected="a state file, or --force j2/two-body")
+    kwargs = {"force_model": force_model} if force_key == "full" else {}
+    summary = compare_with_cpf(initial, read_cpf(path), force=force_key, eop=orientation, propagate_kwargs=kwargs)
+    summary.pop("distance_m")
+    summary = {"reference": path, "force": force_key, **summary}
+    sys.stderr.write(json.dumps(summary, sort_keys=True) + "\n")
 
 
 def _check_extent(epoch, start_t, span, step, at_times, carrier_hz, object_name, object_id) -> None:

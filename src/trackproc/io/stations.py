@@ -70,11 +70,26 @@ def parse_stations(data: bytes, source: str) -> dict[str, Station]:
     return stations
 
 
-def read_stations(path: str) -> dict[str, Station]:
-    """Stations by name from a stations CSV file (or ``-`` for stdin)."""
+def read_stations(path: str, epoch=None, eccentricities: str | None = None) -> dict[str, Station]:
+    """Stations by name from a stations CSV file (or ``-`` for stdin), or from a SINEX file
+    (positions and velocities at ``epoch``, datetime64 UTC, with ``eccentricities``: see
+    :mod:`trackproc.io.sinex`)."""
     source = "<stdin>" if is_stdio(path) else str(path)
     data = read_input_bytes(path)
     if not data.strip():
         raise InputError("empty stations table", file=source, row=1, found="no data",
                          expected="a header station, lat_deg, lon_deg, height_m and one row per station")
+    from trackproc.io import sinex
+
+    if sinex.looks_like_sinex(data):
+        if epoch is None:
+            raise InputError("SINEX stations need the epoch of the data", file=source,
+                             expected="a stations CSV here, or tracking data to date the SINEX positions")
+        ecc = None
+        if eccentricities is not None:
+            ecc = (read_input_bytes(eccentricities), "<stdin>" if is_stdio(eccentricities) else str(eccentricities))
+        return sinex.sinex_stations(data, source, epoch, ecc)
+    if eccentricities is not None:
+        raise InputError("eccentricities apply to SINEX station files", file=source, column="--eccentricities",
+                         expected="--stations FILE.snx")
     return parse_stations(data, source)

@@ -629,7 +629,7 @@ def _raw(frame: pd.DataFrame, table: SourceTable, column_map: dict, dropped: dic
 
 # --------------------------------------------------------------------------- dispatch
 
-LAYOUTS = ("auto", "wide", "long", "doptrack", "aer", "tdm")
+LAYOUTS = ("auto", "wide", "long", "doptrack", "aer", "tdm", "crd")
 
 
 def detect_layout(data: bytes, name: str) -> str:
@@ -639,8 +639,10 @@ def detect_layout(data: bytes, name: str) -> str:
     head = data[:4096].decode("utf-8-sig", errors="replace").lstrip()
     if head.startswith("CCSDS_TDM_VERS"):
         return "tdm"
-    from trackproc.io import doptrack, orekit_aer
+    from trackproc.io import crd, doptrack, orekit_aer
 
+    if crd.looks_like_crd(head) or name.lower().endswith((".npt", ".crd", ".frd")):
+        return "crd"
     if doptrack.looks_like_doptrack(head):
         return "doptrack"
     if name.lower().endswith(".aer") or orekit_aer.looks_like_aer(head):
@@ -673,6 +675,10 @@ def read_raw(path: str, layout: str = "auto", *, sidecar: str | None = None,
         data_path = None if is_stdio(path) else Path(path)
         return read_doptrack(data, source, data_path=data_path, sidecar=sidecar,
                              carrier_hz=carrier_hz, drop_invalid=drop_invalid)
+    if layout == "crd":
+        from trackproc.io.crd import read_crd
+
+        return read_crd(data, source, drop_invalid=drop_invalid)
     if layout == "aer":
         from trackproc.io.orekit_aer import read_aer
 

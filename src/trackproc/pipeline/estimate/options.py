@@ -44,6 +44,8 @@ class EstimateOptions:
     frequency offset a random walk of the transmitter frequency and both; then GLS), ``"white"``
     (independent samples), or one of ``"ar1"``, ``"walk"``, ``"ar1+walk"``;
     ``oscillator_noise``: the random-walk intensity (Hz/√s) instead of estimating it.
+    ``troposphere`` (auto | mendes-pavlis | none), ``com_offset_m``, ``wavelength_nm``: the
+    known corrections of range samples (:mod:`trackproc.pipeline.range_corrections`).
     """
 
     range_bias: bool | Sequence[str] = False
@@ -64,6 +66,10 @@ class EstimateOptions:
     rank_rtol: float = 1e-9
     noise: str = "auto"
     oscillator_noise: Optional[float] = None
+    force_model: object = None            # force "full": a dynamics.forces.ForceModel (None: default_force_model)
+    troposphere: str = "auto"             # range corrections (pipeline.range_corrections)
+    com_offset_m: float = 0.0
+    wavelength_nm: Optional[float] = None
 
 
 def check_options(opt: EstimateOptions) -> None:
@@ -86,7 +92,7 @@ def check_options(opt: EstimateOptions) -> None:
             raise InputError("unknown measurement kind", column="--kinds", found=",".join(bad) or "(none)",
                              expected="a comma list of " + ",".join(ob.KINDS))
     if opt.force not in propagator.FORCES:
-        raise InputError("unknown force model", column="--force", found=opt.force, expected="two-body or j2")
+        raise InputError("unknown force model", column="--force", found=opt.force, expected=" or ".join(propagator.FORCES))
 
 
 def check_apriori(apriori: Mapping[str, float]) -> None:

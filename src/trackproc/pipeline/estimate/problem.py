@@ -49,6 +49,7 @@ class Problem:
     times: np.ndarray
     sources: np.ndarray
     eop: object = None
+    force_model: object = None            # the ForceModel of force "full"
     evaluations: int = 0
     #: where the state's a-priori came from (the state file's ``estimation`` record)
     apriori_note: str = ""
@@ -72,7 +73,7 @@ class Problem:
         t = self.meas.t_s
         span = [float(t.min()) - LIGHT_TIME_MARGIN_S, float(t.max())]
         traj = propagator.propagate(x[:3], x[3:6], self.epoch, span, force=self.force, stm=True, frame=self.frame,
-                                    eop=self.eop)
+                                    eop=self.eop, force_model=self.force_model)
         return traj.raise_for_outcome()
 
     def model(self, x):
@@ -117,14 +118,24 @@ class Problem:
                      options=Options(max_iterations=max_iterations, clip=clip, rank_rtol=rank_rtol))
 
 
-def initial_at_epoch(initial, epoch, force, eop):
+def default_force_model(epoch, eop, degree: int = 20):
+    """Force ``full`` without a given model: the shipped field to ``degree`` x ``degree`` at ``epoch``,
+    Sun and Moon, relativity (no SRP or drag: they need the spacecraft's properties)."""
+    from trackproc.dynamics.forces import ForceModel
+    from trackproc.io.icgem import load_field
+
+    return ForceModel(field=load_field(degree=degree, date=np.datetime64(epoch, "s")), third_bodies=("sun", "moon"),
+                      relativity=True, eop=eop)
+
+
+def initial_at_epoch(initial, epoch, force, eop, force_model=None):
     """Initial GCRF state (and 6 × 6 covariance if any) moved to ``epoch`` (Taylor + STM)."""
     cov = initial.state_covariance
     if np.datetime64(initial.epoch, "ns") == epoch:
         return initial.rv, cov
     dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(epoch), initial.jd_utc))
     traj = propagator.propagate(initial.r_m, initial.v_m_s, initial.epoch, [dt], force=force, stm=cov is not None,
-                                eop=eop).raise_for_outcome()
+                                eop=eop, force_model=force_model).raise_for_outcome()
     rv = traj.state(dt)
     if cov is not None:
         cov = traj.covariance(dt, cov)
@@ -257,11 +268,18 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     epoch = sm.solution_epoch(opt.epoch, initial, t64)
     meas = sm.measurement_set(frame, t64, epoch, known, opt.earth, eop)
 
-    rv0, cov0 = initial_at_epoch(initial, epoch, opt.force, eop)
+    force_model = opt.force_model
+    if opt.force == "full" and force_model is None:
+        force_model = default_force_model(epoch, eop)
+    rv0, cov0 = initial_at_epoch(initial, epoch, opt.force, eop, force_model)
     apriori = dict(opt.apriori_sigma)
     check_apriori(apriori)
     params = pm.ParameterSet(pm.state_drivers(rv0, sigma=[apriori_for(s, "state", apriori) for s in pm.STATE_NAMES]))
     modifiers = bias_modifiers(opt, frame, meas.t_s, known, apriori)
+    from trackproc.pipeline.range_corrections import range_correction_modifiers
+
+    modifiers += range_correction_modifiers(frame, tables, known, epoch, troposphere=opt.troposphere,
+                                            com_offset_m=opt.com_offset_m, wavelength_nm=opt.wavelength_nm)
     for d in md.collect_drivers(modifiers):
         params.add(d)
     unknown = [k for k in apriori if k not in params and k not in GROUPS and k not in pm.KINDS
@@ -277,4 +295,4 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     frame_q = propagator.reference_frame(*(float(a) for a in ts.datetime64_to_jd_utc(epoch)), eop)
     return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force, range_rate_model=model,
                    modifiers=bound, priors=priors, times=t64, sources=frame["_source"].to_numpy(dtype=object),
-                   eop=eop, apriori_note=note)
+                   eop=eop, apriori_note=note, force_model=force_model)

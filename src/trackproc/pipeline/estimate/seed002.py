@@ -78,7 +78,8 @@ def subproblem(problem: Problem, rows, keep_range_bias: bool) -> Problem:
             priors.append(p)
     return Problem(meas=meas, params=params, epoch=problem.epoch, frame=problem.frame, force=problem.force,
                    range_rate_model=problem.range_rate_model, modifiers=modifiers, priors=priors,
-                   times=problem.times[rows], sources=problem.sources[rows], eop=problem.eop)
+                   times=problem.times[rows], sources=problem.sources[rows], eop=problem.eop,
+                   force_model=problem.force_model)
 
 
 def two_stage(problem: Problem, sol, opt: EstimateOptions):
