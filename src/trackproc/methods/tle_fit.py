@@ -151,7 +151,7 @@ def jacobian(model: Callable, x, free, steps) -> np.ndarray:
 
 
 def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, prior_cov=None, design=None,
-          steps=None, keep=None, max_iterations: int = 30, tolerance: float = 1e-4) -> Solution:
+          steps=None, keep=None, max_iterations: int = 30, tolerance: float = 1e-2) -> Solution:
     """Weighted least squares of the elements (``free`` mask) and linear nuisance terms
     (``design`` columns) with an optional Gaussian a-priori on the elements (``prior_cov`` (7, 7)
     of all elements; the rows of free ones are used). ``keep`` (bool, N) excludes edited samples.
@@ -233,8 +233,10 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
         if ratio < tolerance:
             converged, message = True, f"converged: last update {ratio:.2g} of its 1-sigma"
             break
-    # the covariance at the solution
-    jx = jacobian(model, x, free, steps)
+    # the covariance at the solution (the last Jacobian when the last step was below the
+    # tolerance: the Jacobian does not change over a hundredth of a sigma)
+    if not (converged and history and history[-1]["max_step_over_sigma"] < tolerance):
+        jx = jacobian(model, x, free, steps)
     a = np.concatenate([jx, b], axis=1) * w[:, None]
     normal = a.T @ a + info
     cov = np.linalg.inv(normal)
