@@ -28,7 +28,9 @@ Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project
 6. **Verdict** (as refine/estimate, :mod:`trackproc.methods.quality`): ``rejected`` when the
    solver does not converge or the data contradict the a-priori (its χ² beyond the 99.9 % point),
    ``suspect`` when more than 10 % of the samples are edited or the written TLE (rounded to its
-   fields) fits measurably worse than the fitted elements.
+   fields) fits measurably worse than the fitted elements (χ² up by more than 1); ``ok``
+   reasons say how the sigmas were scaled and whether the data improve significantly on the
+   initial orbit (the likelihood-ratio test :func:`trackproc.methods.quality.improvement_test`).
 """
 
 from __future__ import annotations
@@ -397,6 +399,13 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
     if n_edited > EDITED_LIMIT * len(obs):
         q.add("edited", "suspect", f"{n_edited} of {len(obs)} samples edited (> 10 %)", value=n_edited,
               limit=EDITED_LIMIT * len(obs))
+    gain = qm.improvement_test(chi2_initial, chi2_fitted, int(free.sum()))
+    q.add("improvement", "ok",
+          (f"the data move the elements significantly from the initial orbit (chi2 {chi2_initial:.4g} -> "
+           f"{chi2_fitted:.4g}, limit of the drop {gain['limit']:.3g})") if gain["significant"] else
+          (f"the data cannot tell the fitted TLE from the initial orbit (chi2 {chi2_initial:.4g} -> {chi2_fitted:.4g}, "
+           f"a drop below the 99.9 % point {gain['limit']:.3g}): it is not demonstrably better"),
+          value=gain["delta_chi2"], limit=gain["limit"])
     rounding = chi2_written - chi2_fitted
     q.add("rounding", "ok" if rounding <= 1.0 else "suspect",
           f"the written TLE (fields rounded) changes chi2 by {rounding:.3g}", value=rounding, limit=1.0)
