@@ -28,7 +28,8 @@ Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project
 6. **Verdict** (as refine/estimate, :mod:`trackproc.methods.quality`): ``rejected`` when the
    solver does not converge or the data contradict the a-priori (its χ² beyond the 99.9 % point),
    ``suspect`` when more than 10 % of the samples are edited or the written TLE (rounded to its
-   fields) fits measurably worse than the fitted elements (χ² up by more than 1); ``ok``
+   fields) lies outside the fitted elements' 99.9 % confidence region (χ² up by more than
+   the 99.9 % point of χ²(free elements)); ``ok``
    reasons say how the sigmas were scaled and whether the data improve significantly on the
    initial orbit (the likelihood-ratio test :func:`trackproc.methods.quality.improvement_test`).
 """
@@ -407,8 +408,12 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
            f"a drop below the 99.9 % point {gain['limit']:.3g}): it is not demonstrably better"),
           value=gain["delta_chi2"], limit=gain["limit"])
     rounding = chi2_written - chi2_fitted
-    q.add("rounding", "ok" if rounding <= 1.0 else "suspect",
-          f"the written TLE (fields rounded) changes chi2 by {rounding:.3g}", value=rounding, limit=1.0)
+    # the written (rounded) elements inside the fitted elements' 99.9 % confidence region?
+    rounding_limit = qm.chi2_limit(int(free.sum()))
+    q.add("rounding", "ok" if rounding <= rounding_limit else "suspect",
+          f"the written TLE (fields rounded) changes chi2 by {rounding:.3g} (99.9 % limit {rounding_limit:.3g})"
+          + ("" if rounding <= rounding_limit else ": the TLE format cannot hold elements as precise as the data "
+             "determine them"), value=rounding, limit=rounding_limit)
 
     # per group summaries (the RMS the users quote: after the nuisance terms)
     resid = sol.residual
