@@ -83,6 +83,7 @@ def test_readme_tour_and_examples_run(tmp_path):
 
 
 @pytest.mark.parametrize("command", ["ingest", "info", "simulate", "propagate", "smooth", "estimate", "refine",
-                                     "accuracy", "requirements", "detect", "batch", "passes", "compare", "identify"])
+                                     "accuracy", "requirements", "detect", "batch", "passes", "compare", "identify",
+                                     "fit-tle"])
 def test_help_examples_run(command, tmp_path):
     run(help_blocks()[command], tmp_path)

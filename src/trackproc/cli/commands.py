@@ -20,6 +20,7 @@ from trackproc.cli import batch_cmd  # noqa: F401
 from trackproc.cli import passes_cmd  # noqa: F401
 from trackproc.cli import compare_cmd  # noqa: F401
 from trackproc.cli import identify_cmd  # noqa: F401
+from trackproc.cli import fit_tle_cmd  # noqa: F401
 # isort: on
 
 from trackproc.cli.app import app
@@ -38,6 +39,7 @@ SUMMARIES = {
     "batch": "Many passes, every night: parallel, resumable, cron-grade.",
     "compare": "Residuals of a pass against a state or TLE: RMS after the pass's own offset and drift.",
     "identify": "Which catalogue TLE is this pass? Ranked fits, likelihood ratios, a verdict.",
+    "fit-tle": "Fit a TLE (SGP4 mean elements, B*) to passes or an ephemeris, with covariance and a verdict.",
     "passes": "Pass schedule of a state or TLE: AOS/TCA/LOS, max elevation, azimuths, Doppler per station.",
 }
 

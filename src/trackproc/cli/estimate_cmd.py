@@ -31,8 +31,9 @@ class BiasPer(str, Enum):
 def estimate_command(
     passes: List[str] = typer.Argument(..., metavar="PASS...",
                                        help="Pass files (Parquet, Arrow, CSV from ingest/simulate), or - for stdin."),
-    initial: str = typer.Option(..., "--initial", metavar="STATE.json|TLE",
-                                help="Initial state: a state file (GCRF, EME2000, TEME, ITRF) or a TLE."),
+    initial: str = typer.Option(..., "--initial", metavar="STATE.json|TLE|metadata",
+                                help="Initial state: a state file (GCRF, EME2000, TEME, ITRF) or a TLE; metadata = "
+                                     "the TLE stored in the pass files (DopTrack; the newest)."),
     stations: Optional[str] = typer.Option(
         None, "--stations", metavar="STATIONS.csv",
         help="Stations table (station, lat_deg, lon_deg, height_m[, range_bias_m]) or SINEX file (positions + "
@@ -149,7 +150,8 @@ def estimate_command(
     from trackproc.io.passfile import read_pass_table
     from trackproc.io.residuals import write_residuals
     from trackproc.io.stations import read_stations
-    from trackproc.io.statefile import format_epoch, read_state_or_tle, write_state
+    from trackproc.io.statefile import format_epoch, write_state
+    from trackproc.pipeline.orbit_source import initial_state
     from trackproc.pipeline.estimate import EstimateOptions, estimate, require_matplotlib, summary_text
     from trackproc.report.plots import residuals_png
 
@@ -170,7 +172,7 @@ def estimate_command(
         from trackproc.io.statefile import parse_epoch
 
         at = parse_epoch(epoch, column="--epoch")
-    state0 = read_state_or_tle(initial, orientation, at=at)
+    state0 = initial_state(initial, tables, orientation, at=at)
     station_table = None
     if stations is not None:
         lo = min(t.frame["time"].min() for _, t in tables)

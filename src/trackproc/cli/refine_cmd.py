@@ -44,9 +44,9 @@ class Covariance(str, Enum):
 def refine_command(
     input: str = typer.Argument(..., metavar="PASS",
                                 help="One pass of one station (raw or smoothed; Parquet, Arrow, CSV), or - for stdin."),
-    initial: str = typer.Option(..., "--initial", metavar="STATE.json|TLE",
+    initial: str = typer.Option(..., "--initial", metavar="STATE.json|TLE|metadata",
                                 help="The stale state: a state file (optional covariance) or a TLE (SGP4 at the "
-                                     "traverse epoch)."),
+                                     "traverse epoch); metadata = the TLE stored in the pass file (DopTrack)."),
     stations: Optional[str] = typer.Option(
         None, "--stations", metavar="STATIONS.csv",
         help="Stations table (station, lat_deg, lon_deg, height_m); default: the pass file's metadata."),
@@ -166,7 +166,8 @@ def refine_command(
     from trackproc.io.passfile import read_pass_table
     from trackproc.io.residuals import write_residuals
     from trackproc.io.stations import read_stations
-    from trackproc.io.statefile import format_epoch, read_state_or_tle, write_state
+    from trackproc.io.statefile import format_epoch, write_state
+    from trackproc.pipeline.orbit_source import initial_state
     from trackproc.pipeline.refine import RefineOptions, refine
     from trackproc.report.refine_text import summary_text
 
@@ -175,7 +176,7 @@ def refine_command(
         log.warning(warning)
     source = "<stdin>" if is_stdio(input) else input
     table = read_pass_table(input)
-    state0 = read_state_or_tle(initial, orientation)
+    state0 = initial_state(initial, [(source, table)], orientation)
     station_table = read_stations(stations) if stations is not None else None
     options = RefineOptions(
         cost=cost.value, circular=circular, circular_tolerance=circular_tolerance,

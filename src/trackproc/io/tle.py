@@ -104,14 +104,15 @@ def tle_epoch(tle: Tle) -> np.datetime64:
     return np.datetime64(t, "ns").astype("datetime64[us]").astype("datetime64[ns]")
 
 
-def sgp4_teme(tle: Tle, jd1, jd2):
-    """SGP4 position (m) and velocity (m/s) in TEME at UTC two-part Julian dates, shape (N, 3)."""
-    sat = satrec(tle)
+def sgp4_teme(tle, jd1, jd2):
+    """SGP4 position (m) and velocity (m/s) in TEME at UTC two-part Julian dates, shape (N, 3).
+    ``tle`` is a :class:`Tle` or an ``sgp4.api.Satrec`` (elements being fitted)."""
+    sat = tle if hasattr(tle, "sgp4_array") else satrec(tle)
     jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
     err, r, v = sat.sgp4_array(jd1, jd2)
     if np.any(err):
         code = int(np.asarray(err)[np.flatnonzero(err)[0]])
-        raise ProcessingError(f"SGP4 failed for {tle.source} (error {code}: decayed or invalid elements "
+        raise ProcessingError(f"SGP4 failed for {getattr(tle, 'source', 'the elements')} (error {code}: decayed or invalid elements "
                               "at the requested time)")
     return np.asarray(r) * 1e3, np.asarray(v) * 1e3
 
@@ -137,3 +138,107 @@ def tle_state(tle: Tle, at=None, eop=None):
         extra["tle_name"] = tle.name
     return State.from_vectors(t, r[0], v[0], force_model="sgp4",
                               eop_source=getattr(eop, "source", None), extra=extra, source=tle.source)
+
+
+# --------------------------------------------------------------------------- writing
+
+#: Resolution of the epoch field (YYDDD.DDDDDDDD): 1e-8 day.
+EPOCH_RESOLUTION_DAY = 1e-8
+
+
+@dataclass(frozen=True)
+class MeanElements:
+    """SGP4 mean elements as a TLE states them: UTC ``epoch`` (``datetime64``), angles in
+    degrees, Kozai mean motion in revolutions per day, ``bstar`` in 1/earth radii."""
+
+    epoch: np.datetime64
+    inclination_deg: float
+    raan_deg: float
+    eccentricity: float
+    arg_perigee_deg: float
+    mean_anomaly_deg: float
+    mean_motion_rev_day: float
+    bstar: float
+
+
+def round_epoch(t) -> np.datetime64:
+    """``t`` (UTC) rounded to what the epoch field can hold (1e-8 day = 0.864 ms), so the
+    elements fitted at it are the ones written."""
+    t = np.datetime64(t, "ns")
+    year = t.astype("datetime64[Y]")
+    frac = (t - year.astype("datetime64[ns]")) / np.timedelta64(86400, "s")
+    ns = int(round(round(float(frac) / EPOCH_RESOLUTION_DAY) * EPOCH_RESOLUTION_DAY * 86400e9))
+    return year.astype("datetime64[ns]") + np.timedelta64(ns, "ns")
+
+
+def _epoch_field(t) -> str:
+    t = np.datetime64(t, "ns")
+    year = t.astype("datetime64[Y]")
+    days = (t - year.astype("datetime64[ns]")) / np.timedelta64(86400, "s") + 1.0
+    text = f"{days:012.8f}"
+    if text.startswith("367") or float(text) >= 367.0:
+        raise ValueError(f"epoch {t} rounds into the next year")
+    return f"{int(str(year)) % 100:02d}{text}"
+
+
+def _exp_field(value: float) -> str:
+    """The ``±MMMMM±E`` field (an assumed leading decimal point): B* and the second derivative."""
+    if value == 0.0:
+        return " 00000+0"
+    exponent = int(np.floor(np.log10(abs(value)))) + 1
+    mantissa = int(round(abs(value) / 10.0 ** exponent * 1e5))
+    if mantissa >= 100000:
+        mantissa //= 10
+        exponent += 1
+    if exponent < -9:
+        return " 00000+0"
+    if exponent > 9:
+        raise ValueError(f"{value:g} does not fit a TLE exponent field")
+    return f"{'-' if value < 0 else ' '}{mantissa:05d}{'-' if exponent < 0 else '+'}{abs(exponent)}"
+
+
+def _angle(deg: float) -> str:
+    text = f"{float(deg) % 360.0:8.4f}"
+    return "  0.0000" if text == "360.0000" else text
+
+
+def format_tle(elements: MeanElements, template: Tle | None = None, *, satnum: str | None = None,
+               revolution: int | None = None, element_number: int | None = None, name: str | None = None) -> Tle:
+    """A checked :class:`Tle` of ``elements`` (CelesTrak "NORAD Two-Line Element Set Format";
+    checksums by :func:`checksum`). From ``template`` (the initial TLE) are kept: the catalogue
+    number, classification, international designator, the mean-motion derivative fields (not
+    used by SGP4), the ephemeris type, the element set number and the name, unless given."""
+    t1 = template.line1 if template is not None else None
+    sat = (satnum or (template.satnum if template is not None else "99999")).strip()
+    if len(sat) > 5:
+        raise ValueError(f"catalogue number {sat!r} has more than 5 characters")
+    sat = sat.rjust(5, "0") if sat.isdigit() else sat.rjust(5)
+    classification = t1[7] if t1 else "U"
+    designator = t1[9:17] if t1 else " " * 8
+    ndot = t1[33:43] if t1 else " .00000000"
+    nddot = t1[44:52] if t1 else " 00000-0"
+    ephtype = t1[62] if t1 else "0"
+    elnum = element_number if element_number is not None else (int(t1[64:68]) if t1 and t1[64:68].strip() else 999)
+    e = float(elements.eccentricity)
+    if not 0.0 <= e < 1.0:
+        raise ValueError(f"eccentricity {e} outside [0, 1)")
+    inc = float(elements.inclination_deg)
+    if not 0.0 <= inc <= 180.0:
+        raise ValueError(f"inclination {inc} deg outside [0, 180]")
+    rev = revolution if revolution is not None else (int(template.line2[63:68]) if template is not None
+                                                     and template.line2[63:68].strip() else 0)
+    line1 = (f"1 {sat}{classification} {designator} {_epoch_field(elements.epoch)} {ndot} {nddot} "
+             f"{_exp_field(float(elements.bstar))} {ephtype} {elnum % 10000:4d}")
+    line2 = (f"2 {sat} {inc:8.4f} {_angle(elements.raan_deg)} {int(round(e * 1e7)):07d} "
+             f"{_angle(elements.arg_perigee_deg)} {_angle(elements.mean_anomaly_deg)} "
+             f"{float(elements.mean_motion_rev_day):11.8f}{rev % 100000:5d}")
+    line1 += str(checksum(line1))
+    line2 += str(checksum(line2))
+    if name is None and template is not None:
+        name = template.name
+    return parse_tle("\n".join(([name] if name else []) + [line1, line2]), "<fitted TLE>")
+
+
+def tle_text(tle: Tle) -> str:
+    """The TLE as a file holds it: the name line (when known), then the two element lines."""
+    return "\n".join(([tle.name] if tle.name else []) + [tle.line1, tle.line2]) + "\n"

@@ -1,5 +1,5 @@
 """What a ``STATE|TLE`` argument names, as GCRF states at any UTC times, and a station's
-observables of it (shared by ``propagate``, ``passes`` and ``compare``).
+observables of it (shared by ``propagate``, ``passes``, ``compare`` and ``fit-tle``).
 
 * A TLE is evaluated by SGP4 at every requested time (:func:`trackproc.io.tle.sgp4_teme`, then
   TEME -> GCRF by :func:`trackproc.dynamics.frames.teme_to_gcrf`): mean elements are only
@@ -76,6 +76,45 @@ def tle_from_pass_metadata(table, source: str = "<pass>"):
         raise InputError("the pass file's sources carry different TLEs", file=source, column="tle",
                          found=f"{len(unique)} TLEs", expected="one TLE (compare the passes one at a time)")
     return parse_tle("\n".join(unique[0]), f"{source} (metadata TLE)")
+
+
+def metadata_tle(tables: list):
+    """``--initial metadata``: the TLE stored in the pass files' metadata (DopTrack), the newest
+    by epoch when several files carry different ones (the best-informed prediction);
+    ``tables`` are ``(source, PassTable)``. InputError when none carries a TLE."""
+    from trackproc.io.tle import tle_epoch
+
+    found, errors = [], []
+    for source, table in tables:
+        try:
+            found.append(tle_from_pass_metadata(table, source))
+        except InputError as exc:
+            errors.append(exc)
+    if not found:
+        if len(errors) == 1:
+            raise errors[0]
+        raise InputError("no TLE in the pass files' metadata", column="--initial", found="metadata",
+                         expected="pass files ingested from DopTrack (their TLE kept), or a TLE/state file")
+    return max(found, key=lambda t: (tle_epoch(t), t.line1))
+
+
+def initial_orbit(initial: str, tables: list, eop=None) -> OrbitInput:
+    """``--initial STATE.json|TLE|metadata`` of ``fit-tle``: an :class:`OrbitInput`."""
+    if initial == "metadata":
+        tle = metadata_tle(tables)
+        return OrbitInput(tle=tle, source=tle.source)
+    return read_orbit(initial, eop)
+
+
+def initial_state(initial: str, tables: list, eop=None, at=None):
+    """``--initial STATE.json|TLE|metadata`` of ``refine`` and ``estimate``: a GCRF state (a TLE,
+    given or from the pass files' metadata, by SGP4 at its epoch or at ``at``)."""
+    from trackproc.io.statefile import read_state_or_tle
+    from trackproc.io.tle import tle_state
+
+    if initial == "metadata":
+        return tle_state(metadata_tle(tables), at=at, eop=eop)
+    return read_state_or_tle(initial, eop, at=at)
 
 
 def resolve_force(orbit: OrbitInput, force: Optional[str]) -> str:
@@ -156,11 +195,61 @@ class Satellite:
             acc = self.traj.state(np.concatenate([t - h, t, t + h]) + self._shift, derivative=1)[:, 3:]
             a_m, a_0, a_p = np.split(acc, 3)
             return x[:, :3], x[:, 3:], a_0, (a_p - a_m) / (2 * h)
-        x = self._states(np.concatenate([t - h, t, t + h]))
-        x_m, x_0, x_p = np.split(x, 3)
-        a = (x_p[:, 3:] - x_m[:, 3:]) / (2 * h)
-        j = (x_p[:, 3:] - 2 * x_0[:, 3:] + x_m[:, 3:]) / (h * h)
-        return x_0[:, :3], x_0[:, 3:], a, j
+        return _rvaj_from_states(self._states(np.concatenate([t - h, t, t + h])), h)
+
+
+def _rvaj_from_states(x, h):
+    """Position, velocity, and by central differences of the velocity over ``h`` the
+    acceleration and jerk, from states stacked ``[t - h; t; t + h]`` (3N, 6)."""
+    x_m, x_0, x_p = np.split(x, 3)
+    a = (x_p[:, 3:] - x_m[:, 3:]) / (2 * h)
+    j = (x_p[:, 3:] - 2 * x_0[:, 3:] + x_m[:, 3:]) / (h * h)
+    return x_0[:, :3], x_0[:, 3:], a, j
+
+
+def teme_to_gcrf_maps(jd1, jd2, eop=None) -> np.ndarray:
+    """The 6 x 6 matrices (N, 6, 6) taking a TEME state ``[r, v]`` to GCRF at each UTC date:
+    :func:`trackproc.dynamics.frames.teme_to_gcrf` is linear in the state, so it is evaluated
+    once on the six unit states and reused for any number of element sets."""
+    from trackproc.dynamics import frames
+
+    jd1, jd2 = (np.atleast_1d(np.asarray(a, float)) for a in (jd1, jd2))
+    basis = np.broadcast_to(np.eye(6)[:, None, :], (6, jd1.size, 6))
+    r, v = frames.teme_to_gcrf(basis[..., :3], basis[..., 3:], jd1, jd2, eop)
+    return np.transpose(np.concatenate([r, v], -1), (1, 2, 0))
+
+
+class Sgp4Track:
+    """GCRF states of SGP4 element sets at fixed UTC ``times`` (and, with ``derivatives``, the
+    acceleration and jerk :func:`observe` needs, as :class:`Satellite` gives them), the frame
+    transformations evaluated once: ``fit-tle`` evaluates many element sets at the same samples."""
+
+    def __init__(self, times, eop=None, derivatives: bool = True):
+        from trackproc.dynamics.timescales import datetime64_to_jd_utc
+
+        t = np.asarray(times, dtype="datetime64[ns]").reshape(-1)
+        self.times, self.derivatives = t, derivatives
+        step = np.timedelta64(int(FD_STEP_S * 1e9), "ns")
+        every = np.concatenate([t - step, t, t + step]) if derivatives else t
+        self.jd1, self.jd2 = datetime64_to_jd_utc(every)
+        self.maps = teme_to_gcrf_maps(self.jd1, self.jd2, eop)
+
+    def states(self, sat) -> np.ndarray:
+        """GCRF ``[r, v]`` (N, 6) of ``sat`` (a :class:`~trackproc.io.tle.Tle` or ``Satrec``) at the times."""
+        x = self._all(sat)
+        return np.split(x, 3)[1] if self.derivatives else x
+
+    def _all(self, sat) -> np.ndarray:
+        from trackproc.io.tle import sgp4_teme
+
+        r, v = sgp4_teme(sat, self.jd1, self.jd2)
+        return np.einsum("nij,nj->ni", self.maps, np.concatenate([r, v], -1))
+
+    def rvaj(self, sat):
+        """Position, velocity, acceleration, jerk (each (N, 3), GCRF SI) at the times."""
+        if not self.derivatives:
+            raise ValueError("this track was built without derivatives")
+        return _rvaj_from_states(self._all(sat), FD_STEP_S)
 
 
 def station_itrf(station, earth: str = "wgs84") -> np.ndarray:
@@ -175,12 +264,22 @@ def observe(sat: Satellite, station, t_s, *, carrier_hz: float = 1.0, range_rate
     """:class:`~trackproc.models.measurements.Observables` of ``station`` at reception times
     ``t0 + t_s`` (the foundation model, DESIGN.md light time; ``mode`` one-way or two-way)."""
     from trackproc.dynamics import timescales as ts
-    from trackproc.models.measurements import observables, station_gcrf
+    from trackproc.models.measurements import station_gcrf
 
     t = np.atleast_1d(np.asarray(t_s, float))
     r, v, a, j = sat.rvaj(t)
     jd1, jd2 = ts.add_seconds_utc(sat.jd0, t)
     st = station_gcrf(station_itrf(station, earth), jd1, jd2, sat.eop)
+    return station_observables(r, v, a, j, st, station, carrier_hz=carrier_hz, range_rate_model=range_rate_model,
+                               mode=mode)
+
+
+def station_observables(r, v, a, j, st, station, *, carrier_hz: float = 1.0, range_rate_model: str = "doppler",
+                        mode: str = "one-way"):
+    """The foundation model's observables of a satellite state (with acceleration and jerk) seen
+    from ``station`` whose GCRF track ``st`` (``station_gcrf``) is at the same reception times."""
+    from trackproc.models.measurements import observables
+
     try:
         return observables(r, v, a, j, st.r, st.v, st.a, st.gcrf_to_itrf, float(station.lat_deg) * DEG,
                            float(station.lon_deg) * DEG, carrier_hz=carrier_hz, range_rate_model=range_rate_model,

@@ -1,0 +1,485 @@
+"""``trackproc fit-tle``: SGP4 mean elements fitted to passes and/or an ephemeris (issue 18 item 3).
+
+Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project's honesty rules.
+
+1. **Epoch.** The new TLE's epoch (default: the middle of the last pass) is rounded to what the
+   epoch field holds (1e-8 day), so the elements fitted are those written.
+2. **Initial elements at that epoch.** The initial orbit (a TLE by SGP4, a state by the J2
+   integrator) is sampled every minute over one revolution either side of the epoch and a TLE at
+   the epoch is fitted to those GCRF positions (:func:`trackproc.methods.tle_fit.solve`, B* kept):
+   it reproduces the initial TLE's own prediction there (metres: same theory).
+3. **A-priori.** refine's default element sigmas (:data:`trackproc.pipeline.refine.DEFAULT_APRIORI_ELEMENTS`:
+   a 50 m, e 5e-5, i and Ω 1e-4 rad, argument of latitude 4e-4 rad) at the initial TLE's epoch,
+   B* ``max(|B*|, 1e-4)``, carried to the new epoch by the along-track drift a mean-motion
+   error causes (:func:`trackproc.methods.tle_fit.age_covariance`).
+4. **Model.** Each sample predicted by SGP4 -> GCRF and the foundation measurement model
+   (:func:`trackproc.pipeline.orbit_source.station_observables`: light time, one- or two-way,
+   the model ``compare`` and ``simulate`` use); an ephemeris row gives three position samples.
+   Per pass and kind of one-way Doppler or range-rate, the transmitter's offset and drift
+   (``--doppler-bias``, default ``offset+drift``: DopTrack's oscillator drifts 0.3-0.7 Hz/s)
+   are nuisance parameters, as ``compare`` fits them.
+5. **Fit, editing, noise.** Levenberg-Marquardt on the elements and nuisance terms with the
+   a-priori; samples beyond ``clip`` times their group's RMS are edited (three rounds). The
+   file's sigmas are then scaled per pass and kind by the RMS of the normalised residuals (when
+   above 1) and by the square root of their integrated autocorrelation time ``τ`` (a TLE's
+   misfit is smooth in time: ``n`` samples hold ``n/τ`` independent ones;
+   :func:`trackproc.pipeline.identify.integrated_autocorrelation_time`) and the fit is repeated:
+   its covariance is the one reported.
+6. **Verdict** (as refine/estimate, :mod:`trackproc.methods.quality`): ``rejected`` when the
+   solver does not converge or the data contradict the a-priori (its χ² beyond the 99.9 % point),
+   ``suspect`` when more than 10 % of the samples are edited or the written TLE (rounded to its
+   fields) lies outside the fitted elements' 99.9 % confidence region (χ² up by more than
+   the 99.9 % point of χ²(free elements)); ``ok``
+   reasons say how the sigmas were scaled and whether the data improve significantly on the
+   initial orbit (the likelihood-ratio test :func:`trackproc.methods.quality.improvement_test`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+import pandas as pd
+
+from trackproc.errors import InputError, ProcessingError
+
+KINDS = ("doppler", "range_rate", "range", "azimuth", "elevation")
+DOPPLER_BIAS = ("none", "offset", "offset+drift")
+#: B* a-priori 1-sigma floor (1/earth radii): B* of LEO objects varies by this much between TLEs.
+BSTAR_SIGMA_FLOOR = 1e-4
+#: Sampling of the initial orbit when the elements are moved to the new epoch (s), and its half-span (revolutions).
+REEPOCH_STEP_S = 60.0
+REEPOCH_HALF_SPAN_REV = 1.0
+#: Share of edited samples above which the fit is suspect.
+EDITED_LIMIT = 0.10
+MU_WGS72 = 398600.8e9
+
+
+@dataclass
+class FitTleOptions:
+    """Options of :func:`fit_tle` (defaults = the CLI's)."""
+
+    epoch: Optional[np.datetime64] = None
+    fit_bstar: bool = True
+    doppler_bias: str = "offset+drift"
+    kinds: Optional[list] = None
+    earth: str = "wgs84"
+    range_rate_model: str = "doppler"
+    ephemeris_sigma_m: float = 100.0
+    clip: float = 4.0
+    max_iterations: int = 30
+    satnum: Optional[str] = None
+    apriori: bool = True
+
+
+@dataclass
+class FitTleResult:
+    tle: object
+    summary: dict
+    quality: object
+    residuals: pd.DataFrame
+    warnings: list = field(default_factory=list)
+
+
+@dataclass
+class _Block:
+    """Samples of one station (or one ephemeris) and how to predict them."""
+
+    rows: np.ndarray            # indices into the stacked observation vector
+    kind: np.ndarray
+    predict: object             # satrec -> predicted values at these rows
+
+
+def _utc(series) -> np.ndarray:
+    return pd.DatetimeIndex(series).tz_convert("UTC").tz_localize(None).as_unit("ns").to_numpy()
+
+
+def _observations(tables, ephemerides, options, eop, stations):
+    """The stacked samples (a DataFrame: time, group, kind, value, sigma, source) and the blocks
+    predicting them."""
+    from trackproc.models.measurements import station_gcrf
+    from trackproc.dynamics.timescales import datetime64_to_jd_utc
+    from trackproc.pipeline.orbit_source import Sgp4Track, station_itrf, station_observables
+
+    parts, blocks, offset = [], [], 0
+    for source, table in tables:
+        frame = table.frame
+        if options.kinds:
+            frame = frame[frame["kind"].isin(options.kinds)]
+        frame = frame[frame["kind"].isin(KINDS)].reset_index(drop=True)
+        if len(frame) == 0:
+            raise InputError("no samples of a kind fit-tle uses", file=source, column="kind",
+                             expected=", ".join(options.kinds or KINDS))
+        known = dict(table.stations())
+        known.update(stations or {})
+        missing = sorted(set(frame["station"]) - set(known))
+        if missing:
+            raise InputError("station coordinates unknown", file=source, column="station", found=", ".join(missing),
+                             expected="stations in the pass file's metadata or --stations STATIONS.csv")
+        carrier = table.meta.get("carrier_hz")
+        mode = table.meta.get("doppler_mode") or "one-way"
+        if (frame["kind"] == "doppler").any() and not carrier:
+            raise InputError("Doppler samples without a carrier frequency", file=source, column="carrier_hz",
+                             expected="a pass file ingested with --carrier-hz")
+        times = _utc(frame["time"])
+        for name in sorted(set(frame["station"])):
+            sel = np.flatnonzero(frame["station"].to_numpy() == name)
+            st = known[name]
+            track = Sgp4Track(times[sel], eop)
+            view = station_gcrf(station_itrf(st, options.earth), *datetime64_to_jd_utc(times[sel]), eop)
+            kinds = frame["kind"].to_numpy()[sel]
+
+            def predict(sat, track=track, view=view, st=st, kinds=kinds, carrier=carrier, mode=mode):
+                r, v, a, j = track.rvaj(sat)
+                obs = station_observables(r, v, a, j, view, st, carrier_hz=carrier or 1.0, mode=mode,
+                                          range_rate_model=options.range_rate_model)
+                out = np.empty(kinds.size)
+                for kind, values in (("range", obs.range_m), ("range_rate", obs.range_rate_m_s),
+                                     ("doppler", obs.doppler_hz), ("elevation", obs.elevation_rad),
+                                     ("azimuth", obs.azimuth_rad)):
+                    m = kinds == kind
+                    out[m] = values[m]
+                return out
+
+            blocks.append(_Block(rows=offset + np.arange(sel.size), kind=kinds, predict=predict))
+            part = pd.DataFrame({"time": times[sel], "station": name, "pass_id": frame["pass_id"].to_numpy()[sel],
+                                 "kind": kinds, "value": frame["value"].to_numpy(float)[sel],
+                                 "sigma": frame["sigma"].to_numpy(float)[sel], "source": source,
+                                 "one_way": mode == "one-way"})
+            parts.append(part)
+            offset += sel.size
+    for source, eph in ephemerides:
+        times = _utc(eph.frame["time"])
+        xyz = eph.frame[["x_m", "y_m", "z_m"]].to_numpy(float)
+        cols = [c for c in ("sigma_x_m", "sigma_y_m", "sigma_z_m") if c in eph.frame.columns]
+        sig = (eph.frame[cols].to_numpy(float) if len(cols) == 3
+               else np.full(xyz.shape, float(options.ephemeris_sigma_m)))
+        if not np.all(np.isfinite(sig) & (sig > 0)):
+            raise InputError("ephemeris sigmas must be positive", file=source, column="sigma_x_m",
+                             expected="positive numbers, or no sigma columns (--ephemeris-sigma is used)")
+        track = Sgp4Track(times, eop, derivatives=False)
+
+        def predict(sat, track=track):
+            return track.states(sat)[:, :3].reshape(-1)
+
+        n = xyz.size
+        blocks.append(_Block(rows=offset + np.arange(n), kind=np.repeat(np.array(["position"]), n), predict=predict))
+        parts.append(pd.DataFrame({"time": np.repeat(times, 3), "station": "", "pass_id": source,
+                                   "kind": np.tile(["x", "y", "z"], len(times)), "value": xyz.reshape(-1),
+                                   "sigma": sig.reshape(-1), "source": source, "one_way": False}))
+        offset += n
+    if not parts:
+        raise InputError("nothing to fit", expected="one or more pass files or --ephemeris files")
+    obs = pd.concat(parts, ignore_index=True)
+    obs["group"] = obs["source"].astype(str) + "|" + obs["pass_id"].astype(str) + "|" + obs["kind"].where(
+        ~obs["kind"].isin(["x", "y", "z"]), "position")
+    return obs, blocks
+
+
+def _design(obs: pd.DataFrame, bias: str):
+    """Offset (and drift, per s from the group's first sample) columns per pass and kind of
+    one-way Doppler and range-rate; their names."""
+    columns, names = [], []
+    if bias == "none":
+        return np.zeros((len(obs), 0)), names
+    t_all = (obs["time"] - obs["time"].min()).dt.total_seconds().to_numpy() if len(obs) else np.zeros(0)
+    rate = obs["kind"].isin(["doppler", "range_rate"]).to_numpy() & obs["one_way"].to_numpy(bool)
+    for group in sorted(set(obs.loc[rate, "group"])):
+        m = (obs["group"] == group).to_numpy()
+        t = np.where(m, t_all - t_all[m].min(), 0.0)
+        columns.append(m.astype(float))
+        names.append(f"{group} offset")
+        if bias == "offset+drift":
+            columns.append(t)
+            names.append(f"{group} drift")
+    return (np.stack(columns, axis=1) if columns else np.zeros((len(obs), 0))), names
+
+
+def default_epoch(tables, ephemerides) -> np.datetime64:
+    """The middle of the last pass (the last pass id by its first sample), else of the ephemeris."""
+    best = None
+    for _, table in tables:
+        f = table.frame
+        for _, g in f.groupby("pass_id", sort=False):
+            t = _utc(g["time"])
+            if best is None or t.min() > best[0]:
+                best = (t.min(), t.max())
+    if best is None:
+        t = np.concatenate([_utc(e.frame["time"]) for _, e in ephemerides])
+        best = (t.min(), t.max())
+    return best[0] + (best[1] - best[0]) // 2
+
+
+def _reepoch(orbit, epoch, template_bstar, eop):
+    """Elements at ``epoch`` reproducing the initial orbit there: fitted to its GCRF positions
+    every :data:`REEPOCH_STEP_S` over :data:`REEPOCH_HALF_SPAN_REV` revolutions either side."""
+    from trackproc.dynamics import kepler
+    from trackproc.io.tle import satrec
+    from trackproc.methods import tle_fit as tf
+    from trackproc.pipeline.orbit_source import Satellite, Sgp4Track, teme_to_gcrf_maps
+
+    force = "sgp4" if orbit.tle is not None else "j2"
+    # the initial guess: the osculating elements (TEME) of the initial orbit at the epoch
+    probe = Satellite(orbit, force, epoch, -1.0, 1.0, eop)
+    x_gcrf = np.concatenate(probe.rvaj([0.0])[:2], axis=1)[0]
+    from trackproc.dynamics.timescales import datetime64_to_jd_utc
+
+    jd1, jd2 = datetime64_to_jd_utc(np.asarray([epoch], dtype="datetime64[ns]"))
+    m = teme_to_gcrf_maps(jd1, jd2, eop)[0]
+    x_teme = np.linalg.solve(m, x_gcrf)
+    el = kepler.classical_elements(x_teme[:3], x_teme[3:], MU_WGS72)
+    a = float(el["a_m"])
+    if not 0.0 < a < 1e9:
+        raise InputError("the initial orbit is not a bound Earth orbit", file=orbit.source, found=f"a = {a:.6g} m",
+                         expected="a TLE or a state of an Earth satellite")
+    period = 2 * math.pi * math.sqrt(a ** 3 / MU_WGS72)
+    e, argp = float(el["e"]), el["argp_deg"]
+    w = math.radians(argp) if argp is not None else 0.0
+    lam = (argp + el["mean_anomaly_deg"]) if argp is not None and el["mean_anomaly_deg"] is not None \
+        else float(el["arg_latitude_deg"])
+    x0 = np.array([86400.0 / period, e * math.cos(w), e * math.sin(w), float(el["i_deg"]),
+                   float(el["raan_deg"] or 0.0), lam, template_bstar])
+    if orbit.tle is not None:        # SGP4's own mean elements at the epoch: a closer start
+        sat = satrec(orbit.tle)
+        sat.sgp4(float(jd1[0]), float(jd2[0]))
+        x0[:6] = [sat.nm * tf.REV_DAY_PER_RAD_MIN, sat.em * math.cos(sat.om), sat.em * math.sin(sat.om),
+                  sat.im / tf.DEG, sat.Om / tf.DEG, (sat.mm + sat.om) / tf.DEG]
+    half = REEPOCH_HALF_SPAN_REV * period
+    grid = np.arange(-half, half + REEPOCH_STEP_S / 2, REEPOCH_STEP_S)
+    sampler = Satellite(orbit, force, epoch, float(grid[0]), float(grid[-1]), eop)
+    truth = sampler._states(grid)[:, :3]
+    track = Sgp4Track(sampler.times(grid), eop, derivatives=False)
+    ep = tf.Epoch(0, float(jd1[0]), float(jd2[0]))
+    sol = tf.solve(lambda x: track.states(tf.satrec_of(x, ep))[:, :3].reshape(-1), x0, truth.reshape(-1),
+                   np.ones(truth.size), free=np.r_[np.ones(6, bool), False],
+                   steps=np.array([1e-8, 1e-8, 1e-8, 1e-6, 1e-6, 1e-6, 1e-7]), max_iterations=40, tolerance=1e-6)
+    if not sol.converged:
+        raise ProcessingError(f"the initial orbit could not be expressed as a TLE at the epoch ({sol.message})")
+    rms = float(np.sqrt(np.mean(np.sum(sol.residual.reshape(-1, 3) ** 2, axis=1))))
+    return sol.x, rms, force
+
+
+def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=None,
+            stations: Optional[dict] = None) -> FitTleResult:
+    """Fit a TLE to ``tables`` (``(source, PassTable)``) and ``ephemerides`` (``(source,
+    Ephemeris)``) from ``orbit`` (:class:`~trackproc.pipeline.orbit_source.OrbitInput`)."""
+    from trackproc.dynamics.timescales import datetime64_to_jd_utc
+    from trackproc.io.statefile import format_epoch
+    from trackproc.io.tle import MeanElements, format_tle, round_epoch, satrec, tle_epoch
+    from trackproc.methods import quality as qm
+    from trackproc.methods import tle_fit as tf
+    from trackproc.models.observation import wrap_pi
+    from trackproc.pipeline.identify import integrated_autocorrelation_time
+    from trackproc.pipeline.refine import DEFAULT_APRIORI_ELEMENTS
+
+    if options.doppler_bias not in DOPPLER_BIAS:
+        raise InputError("unknown Doppler bias model", column="--doppler-bias", found=options.doppler_bias,
+                         expected=", ".join(DOPPLER_BIAS))
+    template = orbit.tle
+    epoch = round_epoch(options.epoch if options.epoch is not None else default_epoch(tables, ephemerides))
+    obs, blocks = _observations(tables, ephemerides, options, eop, stations)
+    design, nuisance_names = _design(obs, options.doppler_bias)
+    bstar0 = float(satrec(template).bstar) if template is not None else 0.0
+    x_init, reepoch_rms, initial_force = _reepoch(orbit, epoch, bstar0, eop)
+    jd1, jd2 = datetime64_to_jd_utc(np.asarray([epoch], dtype="datetime64[ns]"))
+    satnum_text = (options.satnum or (template.satnum if template is not None else "99999")).strip()
+    ep = tf.Epoch(int(satnum_text) if satnum_text.isdigit() else 0, float(jd1[0]), float(jd2[0]))
+
+    # a-priori: refine's default element sigmas at the initial epoch, carried to the new epoch
+    n0 = float(x_init[0])
+    a0 = (MU_WGS72 / (2 * math.pi * n0 / 86400.0) ** 2) ** (1 / 3)
+    d = DEFAULT_APRIORI_ELEMENTS
+    sig = tf.element_sigmas(d["a_m"], d["ex"], d["ey"], d["i_rad"], d["raan_rad"], d["u_rad"],
+                            max(abs(bstar0), BSTAR_SIGMA_FLOOR), n0, a0)
+    initial_epoch = tle_epoch(template) if template is not None else orbit.state.epoch
+    age_days = float((epoch - np.datetime64(initial_epoch, "ns")) / np.timedelta64(1, "s")) / 86400.0
+    prior_cov = tf.age_covariance(sig, age_days)
+    free = np.r_[np.ones(6, bool), bool(options.fit_bstar)]
+    steps = tf.STEP_FRACTION * sig
+    observed = obs["value"].to_numpy(float)
+    sigma_file = obs["sigma"].to_numpy(float)
+    is_az = (obs["kind"] == "azimuth").to_numpy()
+    groups = obs["group"].to_numpy()
+
+    def model(x):
+        sat = tf.satrec_of(x, ep)
+        out = np.empty(len(obs))
+        for block in blocks:
+            out[block.rows] = block.predict(sat)
+        # azimuth: the prediction on the observation's side of the ±π cut
+        out[is_az] = observed[is_az] - wrap_pi(observed[is_az] - out[is_az])
+        return out
+
+    def run(x0, sigma, keep):
+        try:
+            return tf.solve(model, x0, observed, sigma, free=free, prior_mean=x_init if options.apriori else None,
+                            prior_cov=prior_cov if options.apriori else None, design=design, steps=steps, keep=keep,
+                            max_iterations=options.max_iterations)
+        except ValueError as exc:
+            raise ProcessingError(f"fit-tle: {exc}") from None
+
+    keep = np.ones(len(obs), bool)
+    sol = run(x_init, sigma_file, keep)
+    for _ in range(3):                       # editing: beyond clip x the group's RMS (normalised)
+        z = sol.residual / sigma_file
+        new_keep = np.ones(len(obs), bool)
+        for g in set(groups):
+            m = groups == g
+            rms = math.sqrt(float(np.mean(z[m & keep] ** 2))) if (m & keep).any() else 0.0
+            new_keep[m] = np.abs(z[m]) <= options.clip * max(rms, 1.0)
+        if np.array_equal(new_keep, keep):
+            break
+        keep = new_keep
+        sol = run(sol.x, sigma_file, keep)
+    # noise: the file's sigmas scaled per group by the normalised RMS (when > 1) and sqrt(tau)
+    z = sol.residual / sigma_file
+    scale = np.ones(len(obs))
+    noise = {}
+    order = np.argsort(obs["time"].to_numpy(), kind="stable")
+    for g in sorted(set(groups)):
+        m = (groups == g) & keep
+        idx = order[m[order]]
+        if idx.size == 0:
+            continue
+        rms = math.sqrt(float(np.mean(z[idx] ** 2)))
+        tau = integrated_autocorrelation_time([z[idx]])
+        s = math.sqrt(max(rms, 1.0) ** 2 * tau)
+        scale[groups == g] = s
+        noise[g] = {"samples": int(idx.size), "rms_over_file_sigma": rms, "autocorrelation_time_samples": tau,
+                    "sigma_scale": s}
+    sigma_eff = sigma_file * scale
+    sol = run(sol.x, sigma_eff, keep)
+
+    # the TLE as written (fields rounded) and how it fits
+    c = tf.classical(sol.x)
+    rev0 = int(template.line2[63:68]) if template is not None and template.line2[63:68].strip() else 0
+    revolution = rev0 + int(math.floor(n0 * age_days)) if template is not None else 0
+    elements = MeanElements(epoch=epoch, inclination_deg=c["inclination_deg"], raan_deg=c["raan_deg"],
+                            eccentricity=c["eccentricity"], arg_perigee_deg=c["arg_perigee_deg"],
+                            mean_anomaly_deg=c["mean_anomaly_deg"], mean_motion_rev_day=c["mean_motion_rev_day"],
+                            bstar=c["bstar"])
+    try:
+        tle = format_tle(elements, template, satnum=options.satnum, revolution=max(revolution, 0))
+    except ValueError as exc:
+        raise ProcessingError(f"the fitted elements cannot be written as a TLE: {exc}") from None
+    written = tf.elements_of(satrec(tle))
+
+    def chi2_with_nuisance(x):
+        """χ² (final weights, kept samples) of elements ``x`` with the nuisance terms refitted."""
+        r = observed - model(x)
+        w = np.where(keep, 1.0 / sigma_eff, 0.0)
+        if design.shape[1]:
+            cc = np.linalg.lstsq(design * w[:, None], r * w, rcond=None)[0]
+            r = r - design @ cc
+        rw = r * w
+        return float(rw @ rw), r
+
+    chi2_written, _ = chi2_with_nuisance(written)
+    chi2_fitted, _ = chi2_with_nuisance(sol.x)
+    chi2_initial, r_initial = chi2_with_nuisance(x_init)
+
+    # the verdict
+    q = qm.Quality()
+    if not sol.converged:
+        q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
+    if sol.n_prior:
+        limit = qm.chi2_limit(sol.n_prior)
+        q.add("apriori_conflict", "ok" if sol.chi2_prior <= limit else "rejected",
+              f"a-priori chi2 {sol.chi2_prior:.4g} over {sol.n_prior} elements (99.9 % limit {limit:.3g})"
+              + ("" if sol.chi2_prior <= limit else ": the data contradict the initial orbit's a-priori, the "
+                 "covariance that leans on it does not hold"), value=sol.chi2_prior, limit=limit)
+    worst = max(noise.values(), key=lambda v: v["sigma_scale"]) if noise else None
+    if worst is not None:
+        q.add("noise", "ok", f"file sigmas scaled per pass and kind by up to {worst['sigma_scale']:.3g} (residual "
+              f"RMS {worst['rms_over_file_sigma']:.3g} sigma, autocorrelation time "
+              f"{worst['autocorrelation_time_samples']:.3g} samples) before the covariance is taken",
+              value=worst["sigma_scale"])
+    n_edited = int((~keep).sum())
+    if n_edited > EDITED_LIMIT * len(obs):
+        q.add("edited", "suspect", f"{n_edited} of {len(obs)} samples edited (> 10 %)", value=n_edited,
+              limit=EDITED_LIMIT * len(obs))
+    gain = qm.improvement_test(chi2_initial, chi2_fitted, int(free.sum()))
+    q.add("improvement", "ok",
+          (f"the data move the elements significantly from the initial orbit (chi2 {chi2_initial:.4g} -> "
+           f"{chi2_fitted:.4g}, limit of the drop {gain['limit']:.3g})") if gain["significant"] else
+          (f"the data cannot tell the fitted TLE from the initial orbit (chi2 {chi2_initial:.4g} -> {chi2_fitted:.4g}, "
+           f"a drop below the 99.9 % point {gain['limit']:.3g}): it is not demonstrably better"),
+          value=gain["delta_chi2"], limit=gain["limit"])
+    rounding = chi2_written - chi2_fitted
+    # the written (rounded) elements inside the fitted elements' 99.9 % confidence region?
+    rounding_limit = qm.chi2_limit(int(free.sum()))
+    q.add("rounding", "ok" if rounding <= rounding_limit else "suspect",
+          f"the written TLE (fields rounded) changes chi2 by {rounding:.3g} (99.9 % limit {rounding_limit:.3g})"
+          + ("" if rounding <= rounding_limit else ": the TLE format cannot hold elements as precise as the data "
+             "determine them"), value=rounding, limit=rounding_limit)
+
+    # per group summaries (the RMS the users quote: after the nuisance terms)
+    resid = sol.residual
+    per_group = []
+    for g in sorted(set(groups)):
+        m = groups == g
+        mk = m & keep
+        entry = {"group": g, "kind": str(obs["kind"][m].iloc[0]), "samples": int(m.sum()),
+                 "edited": int((m & ~keep).sum()),
+                 "rms_initial": float(np.sqrt(np.mean(r_initial[mk] ** 2))) if mk.any() else None,
+                 "rms": float(np.sqrt(np.mean(resid[mk] ** 2))) if mk.any() else None}
+        for k, name in enumerate(nuisance_names):
+            if name.startswith(g + " "):
+                entry[name.rsplit(" ", 1)[1]] = float(sol.nuisance[k])
+                entry[name.rsplit(" ", 1)[1] + "_sigma"] = float(math.sqrt(sol.covariance[int(free.sum()) + k,
+                                                                                          int(free.sum()) + k]))
+        entry.update(noise.get(g, {}))
+        per_group.append(entry)
+    cov = sol.element_covariance
+    sigma = sol.sigma
+    summary = {
+        "generator": "trackproc fit-tle",
+        "initial": orbit.source,
+        "initial_force_model": initial_force,
+        "epoch": format_epoch(epoch),
+        "initial_age_days": age_days,
+        "reepoch_rms_m": reepoch_rms,
+        "tle": [tle.line1, tle.line2],
+        "name": tle.name,
+        "elements": dict(zip(tf.ELEMENT_NAMES, sol.x.tolist())),
+        "sigma": dict(zip(tf.ELEMENT_NAMES, sigma.tolist())),
+        "covariance": {"parameters": list(tf.ELEMENT_NAMES), "matrix": cov.tolist(),
+                       "note": "n rev/day, ex, ey, angles deg, B* 1/earth radii; the file sigmas scaled per pass "
+                               "and kind (noise) before it is taken"},
+        "classical": c,
+        "initial_elements": dict(zip(tf.ELEMENT_NAMES, x_init.tolist())),
+        "fixed": [] if options.fit_bstar else ["bstar"],
+        "apriori": {"used": bool(options.apriori), "sigma_at_initial_epoch": dict(zip(tf.ELEMENT_NAMES, sig.tolist())),
+                    "chi2": sol.chi2_prior, "elements": sol.n_prior},
+        "chi2": {"initial": chi2_initial, "fitted": chi2_fitted, "written": chi2_written},
+        "samples": int(len(obs)), "edited": n_edited, "iterations": sol.iterations, "converged": sol.converged,
+        "solver": sol.message,
+        "doppler_bias": options.doppler_bias,
+        "groups": per_group,
+        "quality": q.as_dict(),
+    }
+    residuals = obs[["time", "station", "pass_id", "kind", "value", "sigma"]].copy()
+    residuals["residual"] = resid
+    residuals["edited"] = ~keep
+    return FitTleResult(tle=tle, summary=summary, quality=q, residuals=residuals)
+
+
+def summary_text(result: FitTleResult) -> str:
+    """The people's summary on stderr."""
+    s = result.summary
+    c = s["classical"]
+    sig = s["sigma"]
+    lines = [f"fit-tle: epoch {s['epoch']} ({s['initial_age_days']:+.2f} d from the initial), {s['samples']} samples, "
+             f"{s['edited']} edited, {s['iterations']} iterations",
+             f"  n {c['mean_motion_rev_day']:.8f} ± {sig['n_rev_per_day']:.2g} rev/day, e {c['eccentricity']:.7f}, "
+             f"i {c['inclination_deg']:.4f} ± {sig['i_deg']:.2g} deg, RAAN {c['raan_deg']:.4f} ± "
+             f"{sig['raan_deg']:.2g} deg, lambda ± {sig['lambda_deg']:.2g} deg, B* {c['bstar']:.4g} ± {sig['bstar']:.2g}"]
+    for g in s["groups"]:
+        unit = {"doppler": "Hz", "range_rate": "m/s", "range": "m", "azimuth": "rad", "elevation": "rad"}.get(
+            g["kind"], "m")
+        lines.append(f"  {g['group']}: RMS {g['rms']:.4g} {unit} (initial {g['rms_initial']:.4g}), "
+                     f"{g['samples']} samples")
+    lines.append("  " + result.quality.text())
+    return "\n".join(lines) + "\n"
