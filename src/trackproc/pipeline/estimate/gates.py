@@ -135,8 +135,9 @@ def refuse(problem: Problem, opt: EstimateOptions, sol, noise, chi2: float, rows
     out.update({"factor": factor, "sigma_factor": math.sqrt(factor), "resolved": False,
                 "refused": {"code": "apriori_conflict_doubtful_noise" if doubt else "apriori_conflict",
                             "covariance_factor": factor,
-                            "reason": (f"the data contradict the initial state's a-priori (chi2 {chi2:.4g} over {rows}, "
-                                       f"limit {qm.chi2_limit(rows):.3g}) but their noise model is in doubt: {why}; "
+                            "reason": (f"the data contradict the initial state's a-priori (chi2 {chi2:.4g} over "
+                                       f"{rows}, limit {qm.chi2_limit(rows):.3g}) but their noise model is in doubt: "
+                                       f"{why}; "
                                        "neither the estimated state nor a loosened a-priori can be trusted"
                                        if doubt else
                                        f"the data contradict the initial state's a-priori (chi2 {chi2:.4g} over "
@@ -221,8 +222,9 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None):
         if a["resolved"]:
             q.add("apriori_conflict", "ok",
                   f"the data contradicted the state a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
-                  f"{a['limit']:.3g}); its covariance was scaled by {a['factor']:.3g} (sigmas x{a['sigma_factor']:.3g}, "
-                  "maximum-likelihood variance component)", value=a["chi2_before"], limit=a["limit"])
+                  f"{a['limit']:.3g}); its covariance was scaled by {a['factor']:.3g} "
+                  f"(sigmas x{a['sigma_factor']:.3g}, maximum-likelihood variance component)",
+                  value=a["chi2_before"], limit=a["limit"])
         else:
             q.add("apriori_conflict", "rejected",
                   f"the data contradict the state a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
@@ -283,7 +285,8 @@ def pass_noise(problem: Problem, sol, opt: EstimateOptions):
     """The noise model of every pass's Doppler and range-rate samples from the residuals of
     ``sol`` (:func:`trackproc.methods.noise.fit_noise`: REML with the pass's Jacobian columns as
     fixed effects; the random walk of the transmitter frequency only for one-way passes with a
-    frequency offset, i.e. an :class:`~trackproc.models.modifiers.OscillatorWander` on its samples). Returns ``(PassCovariance or None when every pass is white, report)``;
+    frequency offset, i.e. an :class:`~trackproc.models.modifiers.OscillatorWander` on its
+    samples). Returns ``(PassCovariance or None when every pass is white, report)``;
     the report lists each pass's model and effective number of samples."""
     meas = problem.meas
     keep_all = ~np.asarray(sol.edited, bool)
