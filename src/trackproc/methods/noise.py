@@ -18,7 +18,8 @@ and lets the orbit absorb the wander. The covariance of the samples of one pass 
 This dense per-pass form is the batch form of "frequency nodes with a random-walk prior between
 them" with the nodes marginalised out (a Kalman smoother would give the same estimate and
 covariance): generalised least squares with ``C`` (Aitken 1935) by whitening with the Cholesky
-factor, ``C = L Lᵀ``: residuals and Jacobian rows become ``L⁻¹ r``, ``L⁻¹ J``.
+factor, ``C = L Lᵀ``: residuals and Jacobian rows become ``L⁻¹ r``, ``L⁻¹ J``
+(:class:`~trackproc.methods.whitening.PassCovariance`, re-exported here).
 
 The hyper-parameters are estimated by restricted maximum likelihood (REML; Patterson &
 Thompson 1971, Harville 1977) on the residuals of a first fit, the fixed effects being the
@@ -53,6 +54,8 @@ from typing import Optional, Sequence
 
 import numpy as np
 from scipy.linalg import cho_factor, solve_triangular
+
+from trackproc.methods.whitening import PassCovariance, effective_samples  # noqa: F401  (re-exported)
 
 __all__ = ["NoiseModel", "NoiseFit", "PassCovariance", "fit_noise", "restricted_loglik", "MODELS",
            "effective_samples", "effective_samples_beyond", "lag1_correlation"]
@@ -103,14 +106,6 @@ class NoiseModel:
         return {"model": self.name, "white": self.white, "ar1_sigma": self.ar_sigma, "ar1_tau_s": self.ar_tau_s,
                 "ar1_rho_1s": math.exp(-1.0 / self.ar_tau_s) if self.ar_sigma > 0 and self.ar_tau_s > 0 else 0.0,
                 "walk_per_sqrt_s": self.walk}
-
-
-def effective_samples(cov: np.ndarray) -> float:
-    """Effective number of independent samples of a covariance: ``(tr C)² / tr(C²)``
-    (= n for independent samples of equal variance, 1 for fully correlated ones; Bayley &
-    Hammersley 1946)."""
-    c = np.asarray(cov, float)
-    return float(np.trace(c) ** 2 / np.sum(c * c))
 
 
 def effective_samples_beyond(model: "NoiseModel", t_s, t0: Optional[float] = None) -> float:
@@ -347,76 +342,3 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     return NoiseFit(model=model, candidates=cands, n=n, n_reml=int(ts.size), lag1=lag1_correlation(t, r),
                     n_effective=effective_samples_beyond(model, t, t0),
                     how="REML" if walk is None else "REML, walk given")
-
-
-# ----------------------------------------------------------------------------- whitening
-
-class PassCovariance:
-    """The covariance of all samples: blocks (index arrays with a :class:`NoiseModel` and the
-    walk's start) and independent samples (``sigma``) elsewhere; whitening of kept samples.
-
-    ``whitener(keep)`` returns ``w(M)``: the rows of ``M`` at the kept samples (in their original
-    order) multiplied by ``L⁻¹`` of their covariance block by block (``C = L Lᵀ``). Factors are
-    cached per set of kept samples.
-    """
-
-    def __init__(self, sigma, t_s, blocks: Sequence[tuple] = ()):
-        self.sigma = np.asarray(sigma, float)
-        self.t = np.asarray(t_s, float)
-        self.blocks = [(np.asarray(i, int), m, t0) for i, m, t0 in blocks]
-        self._cache: dict = {}
-
-    @property
-    def is_white(self) -> bool:
-        return all(m.is_white for _, m, _ in self.blocks)
-
-    def _factors(self, keep: np.ndarray):
-        key = keep.tobytes()
-        hit = self._cache.get(key)
-        if hit is None:
-            pos = np.cumsum(keep) - 1               # position of a kept sample among the kept ones
-            in_block = np.zeros(keep.size, bool)
-            fac = []
-            for idx, model, t0 in self.blocks:
-                in_block[idx] = True
-                k = idx[keep[idx]]
-                if k.size == 0:
-                    continue
-                c = model.covariance(self.t[k], t0)
-                fac.append((pos[k], np.linalg.cholesky(c)))
-            diag = np.flatnonzero(keep & ~in_block)
-            hit = (fac, pos[diag], self.sigma[diag])
-            if len(self._cache) > 16:
-                self._cache.clear()
-            self._cache[key] = hit
-        return hit
-
-    def whitener(self, keep):
-        keep = np.asarray(keep, bool)
-        fac, dpos, dsig = self._factors(keep)
-
-        def apply(m):
-            m = np.asarray(m, float)[keep]
-            out = np.empty_like(m)
-            for pos, chol in fac:
-                out[pos] = solve_triangular(chol, m[pos], lower=True, check_finite=False)
-            out[dpos] = m[dpos] / (dsig if m.ndim == 1 else dsig[:, None])
-            return out
-
-        return apply
-
-    def innovations(self, r) -> np.ndarray:
-        """Normalized residuals of every sample: ``L⁻¹ r`` over all samples (the standardised
-        one-step prediction errors, in time order within a block; white: ``r/σ``)."""
-        return self.whitener(np.ones(self.sigma.size, bool))(r)
-
-    def effective_samples(self, keep=None) -> float:
-        keep = np.ones(self.sigma.size, bool) if keep is None else np.asarray(keep, bool)
-        total = 0.0
-        in_block = np.zeros(keep.size, bool)
-        for idx, model, t0 in self.blocks:
-            in_block[idx] = True
-            k = idx[keep[idx]]
-            if k.size:
-                total += effective_samples(model.covariance(self.t[k], t0))
-        return total + float((keep & ~in_block).sum())

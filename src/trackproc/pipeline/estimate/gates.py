@@ -9,6 +9,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from scipy.stats import norm
+
 from trackproc.errors import ProcessingError
 from trackproc.methods import noise as nz
 from trackproc.methods.least_squares import Prior
@@ -49,8 +51,7 @@ def solve(problem: Problem, opt: EstimateOptions):
     # held-back pass). Then the initial state is kept (refine's gate, pipeline/refine.py).
     original = problem.priors
     sol_a, adaptation = adapt_apriori(problem, opt, sol, used)
-    doubt = [r for r in estimate_quality(problem, sol_a, adaptation).reasons
-             if r["code"] in ("whiteness", "variance_factor") and r["severity"] != "ok"]
+    doubt = doubtful_noise(problem, sol_a)
     if doubt or not adaptation["resolved"]:
         problem.priors = original
         return refuse(problem, opt, sol, used, chi2, rows, doubt, adaptation) + (noise_report,)
@@ -127,16 +128,16 @@ def refuse(problem: Problem, opt: EstimateOptions, sol, noise, chi2: float, rows
     sigma = np.sqrt(np.diag(cov))
     kept = replace(held, values=values, covariance=cov, sigma=sigma, correlation=cov / np.outer(sigma, sigma))
     problem.priors = scaled_priors(problem.priors, factor)
-    why = (", ".join(f"{r['code']} ({r['message'].split(':')[0]})" for r in doubt) + " with the a-priori "
-           "scaled by the data" if doubt else
+    why = ("; ".join(doubt) + ", with the a-priori scaled by the data" if doubt else
            f"the data cannot carry a looser a-priori ({(adaptation or {}).get('failure') or 'not resolved'})")
     out = dict(adaptation or {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner)",
                               "chi2_before": chi2, "rows": rows, "limit": qm.chi2_limit(rows)})
     out.update({"factor": factor, "sigma_factor": math.sqrt(factor), "resolved": False,
                 "refused": {"code": "apriori_conflict_doubtful_noise" if doubt else "apriori_conflict",
                             "covariance_factor": factor,
-                            "reason": (f"the data contradict the initial state's a-priori (chi2 {chi2:.4g} over {rows}, "
-                                       f"limit {qm.chi2_limit(rows):.3g}) but their noise model is in doubt: {why}; "
+                            "reason": (f"the data contradict the initial state's a-priori (chi2 {chi2:.4g} over "
+                                       f"{rows}, limit {qm.chi2_limit(rows):.3g}) but their noise model is in doubt: "
+                                       f"{why}; "
                                        "neither the estimated state nor a loosened a-priori can be trusted"
                                        if doubt else
                                        f"the data contradict the initial state's a-priori (chi2 {chi2:.4g} over "
@@ -203,6 +204,54 @@ def warnings_of(sol) -> list:
     return warnings
 
 
+def pass_residuals(problem: Problem, sol) -> list:
+    """Per pass and kind (station/pass kind), the kept normalised residuals in time order:
+    ``{"pass", "n", "chi2", "whiteness"}`` (:func:`~trackproc.methods.quality.whiteness`)."""
+    meas = problem.meas
+    kept = ~np.asarray(sol.edited, bool)
+    z = np.asarray(sol.normalized, float)
+    passes = []
+    station, pass_id, kind = meas.station.astype(str), meas.pass_id.astype(str), meas.kind.astype(str)
+    for key in sorted(set(zip(station, pass_id, kind))):
+        rows = kept & (station == key[0]) & (pass_id == key[1]) & (kind == key[2])
+        if not rows.any():
+            continue
+        idx = np.flatnonzero(rows)
+        idx = idx[np.argsort(problem.times[idx], kind="stable")]
+        passes.append({"pass": f"{key[0]}/{key[1]} {key[2]}", "n": int(idx.size), "chi2": float(z[idx] @ z[idx]),
+                       "whiteness": qm.whiteness(z[idx])})
+    return passes
+
+
+def doubtful_noise(problem: Problem, sol) -> list:
+    """Why the data's noise model is in doubt on ``sol`` (empty when it holds): the variance
+    factor beyond its 99.9 % point, or residuals correlated in time beyond the 99.9 % point for
+    the worst of the m passes (Bonferroni: the lag-1 autocorrelation's ``ρ √n`` or the runs
+    test's ``|z|`` above ``Φ⁻¹(1 - 0.001/(2m))``, so that white passes are not doubted by chance:
+    on short white passes ρ > 0.3 happens one time in ten)."""
+    out = []
+    if sol.dof > 0 and math.isfinite(sol.variance_factor):
+        limit = qm.variance_factor_limit(sol.dof)
+        if sol.variance_factor > limit:
+            out.append(f"a-posteriori variance factor {sol.variance_factor:.4g} (99.9 % limit {limit:.3g})")
+    passes = [p for p in pass_residuals(problem, sol) if math.isfinite(p["whiteness"]["lag1_autocorrelation"])]
+    if passes:
+        crit = float(norm.ppf(1.0 - (1.0 - qm.GATE_PROBABILITY) / (2 * len(passes))))
+
+        def score(p):
+            w = p["whiteness"]
+            runs = abs(w["runs_z"]) if math.isfinite(w["runs_z"]) else 0.0
+            return max(w["lag1_autocorrelation"] * math.sqrt(w["n"]), runs)
+
+        worst = max(passes, key=score)
+        if score(worst) > crit:
+            w = worst["whiteness"]
+            out.append(f"pass {worst['pass']}: residuals correlated in time (lag-1 autocorrelation "
+                       f"{w['lag1_autocorrelation']:.2f} over {w['n']} samples, runs-test z {w['runs_z']:.1f}; "
+                       f"limit {crit:.2f} for the worst of {len(passes)} passes)")
+    return out
+
+
 def estimate_quality(problem: Problem, sol, adaptation: dict | None = None):
     """The :class:`~trackproc.methods.quality.Quality` of a batch solution: convergence, a-priori
     conflict (``rejected``: the covariance leans on an a-priori the data contradict), variance
@@ -221,15 +270,13 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None):
         if a["resolved"]:
             q.add("apriori_conflict", "ok",
                   f"the data contradicted the state a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
-                  f"{a['limit']:.3g}); its covariance was scaled by {a['factor']:.3g} (sigmas x{a['sigma_factor']:.3g}, "
-                  "maximum-likelihood variance component)", value=a["chi2_before"], limit=a["limit"])
-        else:
+                  f"{a['limit']:.3g}); its covariance was scaled by {a['factor']:.3g} "
+                  f"(sigmas x{a['sigma_factor']:.3g}, maximum-likelihood variance component)",
+                  value=a["chi2_before"], limit=a["limit"])
+        else:           # (solve refuses such a solution: kept for a caller of adapt_apriori alone)
             q.add("apriori_conflict", "rejected",
                   f"the data contradict the state a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
-                  f"{a['limit']:.3g}) and cannot carry a looser one"
-                  + (f" ({a['failure']})" if a.get("failure") else f" (chi2 {a['chi2_after']:.4g} after scaling by "
-                                                                    f"{a['factor']:.3g})"),
-                  value=a["chi2_before"], limit=a["limit"])
+                  f"{a['limit']:.3g}) and cannot carry a looser one", value=a["chi2_before"], limit=a["limit"])
     elif sol.n_prior:
         limit = qm.chi2_limit(sol.n_prior)
         q.add("apriori_conflict", "ok" if sol.chi2_prior <= limit else "rejected",
@@ -242,20 +289,7 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None):
               f"a-posteriori variance factor {sol.variance_factor:.4g} (99.9 % limit {vf_limit:.3g})",
               value=sol.variance_factor, limit=vf_limit)
     # per pass: its share of the misfit and the whiteness of its residuals (time order)
-    meas = problem.meas
-    kept = ~np.asarray(sol.edited, bool)
-    z = np.asarray(sol.normalized, float)
-    passes = []
-    station, pass_id, kind = meas.station.astype(str), meas.pass_id.astype(str), meas.kind.astype(str)
-    for key in sorted(set(zip(station, pass_id, kind))):
-        rows = kept & (station == key[0]) & (pass_id == key[1]) & (kind == key[2])
-        if not rows.any():
-            continue
-        idx = np.flatnonzero(rows)
-        idx = idx[np.argsort(problem.times[idx], kind="stable")]
-        w = qm.whiteness(z[idx])
-        passes.append({"pass": f"{key[0]}/{key[1]} {key[2]}", "n": int(idx.size), "chi2": float(z[idx] @ z[idx]),
-                       "whiteness": w})
+    passes = pass_residuals(problem, sol)
     total = sum(p["chi2"] for p in passes)
     if len(passes) > 1 and total > 0 and sol.dof > 0 and sol.variance_factor > vf_limit:
         worst = max(passes, key=lambda p: p["chi2"] / p["n"])
@@ -283,7 +317,8 @@ def pass_noise(problem: Problem, sol, opt: EstimateOptions):
     """The noise model of every pass's Doppler and range-rate samples from the residuals of
     ``sol`` (:func:`trackproc.methods.noise.fit_noise`: REML with the pass's Jacobian columns as
     fixed effects; the random walk of the transmitter frequency only for one-way passes with a
-    frequency offset, i.e. an :class:`~trackproc.models.modifiers.OscillatorWander` on its samples). Returns ``(PassCovariance or None when every pass is white, report)``;
+    frequency offset, i.e. an :class:`~trackproc.models.modifiers.OscillatorWander` on its
+    samples). Returns ``(PassCovariance or None when every pass is white, report)``;
     the report lists each pass's model and effective number of samples."""
     meas = problem.meas
     keep_all = ~np.asarray(sol.edited, bool)

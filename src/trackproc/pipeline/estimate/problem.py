@@ -34,7 +34,8 @@ class Problem:
 
     ``meas`` (:class:`~trackproc.models.observation.MeasurementSet`), ``params`` (the drivers;
     the selected ones are the estimated vector), ``epoch`` (UTC datetime64) and ``frame`` of the
-    propagation, ``force``, ``range_rate_model``, ``modifiers`` (bound to ``meas``; they own the bias drivers), ``priors``,
+    propagation, ``force``, ``range_rate_model``, ``modifiers`` (bound to ``meas``; they own
+    the bias drivers), ``priors``,
     ``times`` (UTC datetime64 of the samples), ``sources`` (file of each sample).
     """
 
