@@ -14,6 +14,8 @@ import tempfile
 from pathlib import Path
 from typing import BinaryIO, Iterator
 
+from trackproc.errors import InputError, OutputError
+
 STDIO = "-"
 
 
@@ -97,8 +99,6 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
     side (a directory, a path under a file, a full or read-only disk) is an
     :class:`~trackproc.errors.OutputError` naming the path.
     """
-    from trackproc.errors import OutputError
-
     if is_stdio(path):
         out = _WholeWrites(sys.stdout.buffer)
         yield out
@@ -201,8 +201,6 @@ def max_input_bytes() -> int:
     """The largest input file or stdin stream read, in bytes: ``TRACKPROC_MAX_INPUT_MB`` (MiB),
     default :data:`DEFAULT_MAX_INPUT_MB`. A bound, so that ``/dev/zero`` or a runaway pipe is an
     input error instead of exhausting the machine."""
-    from trackproc.errors import InputError
-
     text = os.environ.get("TRACKPROC_MAX_INPUT_MB", "")
     if not text:
         return DEFAULT_MAX_INPUT_MB << 20
@@ -217,8 +215,6 @@ def max_input_bytes() -> int:
 
 
 def _read_bounded(handle, limit: int, name: str) -> bytes:
-    from trackproc.errors import InputError
-
     chunks, total = [], 0
     while True:
         chunk = handle.read(min(1 << 20, limit + 1 - total))
@@ -234,8 +230,6 @@ def _read_bounded(handle, limit: int, name: str) -> bytes:
 def read_input_bytes(path: str | os.PathLike, limit: int | None = None) -> bytes:
     """All bytes of a file, or of stdin for ``-`` (Parquet needs the whole buffer), at most
     ``limit`` bytes (default :func:`max_input_bytes`): beyond it an input error."""
-    from trackproc.errors import InputError
-
     limit = max_input_bytes() if limit is None else limit
     if is_stdio(path):
         return _read_bounded(sys.stdin.buffer, limit, "<stdin>")

@@ -5,12 +5,12 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
+
 
 def json_ready(value):
     """A JSON-ready copy: numpy scalars/arrays to Python, NaN/Inf to None (JSON has neither),
     tuples to lists, datetime64 to ISO 8601 UTC with Z."""
-    import numpy as np
-
     if isinstance(value, dict):
         return {str(k): json_ready(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

@@ -20,13 +20,19 @@
 
 from __future__ import annotations
 
+import io
 from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 import pandas as pd
 
+from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError
+from trackproc.io.statefile import format_epoch
+from trackproc.models.observation import wrap_pi
+from trackproc.pipeline.orbit_source import SGP4_LABEL, Satellite, observe, resolve_force
+from trackproc.pipeline.plotting import require_matplotlib
 
 REMOVE = ("none", "offset", "offset+drift")
 UNITS = {"range": "m", "range_rate": "m/s", "doppler": "Hz", "elevation": "rad", "azimuth": "rad"}
@@ -70,11 +76,6 @@ def compare(table, orbit, options: CompareOptions, eop=None, stations: Optional[
     """Residuals of ``table`` (a :class:`~trackproc.io.passfile.PassTable`) against ``orbit``
     (:class:`~trackproc.pipeline.orbit_source.OrbitInput`): the residual frame (the columns of
     :mod:`trackproc.io.residuals`) and the summary dict."""
-    from trackproc.dynamics import timescales as ts
-    from trackproc.io.statefile import format_epoch
-    from trackproc.models.observation import wrap_pi
-    from trackproc.pipeline.orbit_source import SGP4_LABEL, Satellite, observe, resolve_force
-
     if options.remove not in REMOVE:
         raise InputError("unknown trend removal", column="--remove", found=options.remove, expected=", ".join(REMOVE))
     force = resolve_force(orbit, options.force)
@@ -156,10 +157,6 @@ def plot_bytes(residuals: pd.DataFrame, summary: dict, max_panels: int = 24) -> 
     predicted) in grey on the right axis, after removing the fitted offset/drift in colour on the
     left axis, in the kind's unit
     (angles in degrees), with the RMS after removal in the title."""
-    import io
-
-    from trackproc.pipeline.plotting import require_matplotlib
-
     require_matplotlib()
     import matplotlib
 

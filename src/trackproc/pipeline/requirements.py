@@ -23,8 +23,11 @@ from typing import Optional
 
 import numpy as np
 
-from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
+from trackproc.constants import MU_EARTH, OMEGA_EARTH
 from trackproc.errors import InputError
+from trackproc.methods import ballistic as bl, detection as dt
+from trackproc.methods.ballistic import R_PLANAR
+from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 
 DEG = math.pi / 180.0
 DEFAULT_VELOCITIES_KMS = (1.0, 2.0, 3.0, 4.0, 5.0)
@@ -145,8 +148,6 @@ def _check(options: RequirementsOptions) -> None:
 
 def resolve_gamma(options: RequirementsOptions) -> tuple[float, float, float]:
     """(γ, α, β): from ``gamma`` (α = β = 1 - Φ(γ/2)), or from α and β (one given: equal)."""
-    from trackproc.methods import detection as dt
-
     if options.alpha is not None or options.beta is not None:
         alpha = options.alpha if options.alpha is not None else options.beta
         beta = options.beta if options.beta is not None else options.alpha
@@ -184,9 +185,6 @@ def _paper_value(table: Optional[str], options, v_kms, angle, tau) -> Optional[f
 def cell(velocity_m_s: float, angle_rad: float, tau_s: float, displacement_m: float, gamma: float, *,
          latitude_rad: float | None = None, direction: str = "none", radius_m: float | None = None):
     """g (rad·s^½), ‖Δε‖ and the encounter of one cell (seed 003 eqs. 5-8 on eqs. 9-11)."""
-    from trackproc.methods import ballistic as bl
-    from trackproc.methods import detection as dt
-
     enc = bl.PlanarEncounter.from_impact(velocity_m_s, angle_rad, latitude_rad=latitude_rad, direction=direction,
                                          radius_m=radius_m or bl.R_PLANAR)
     rise = enc.rise_time()
@@ -241,9 +239,6 @@ def to_csv(result: RequirementsResult) -> str:
 
 
 def parameters(result: RequirementsResult) -> dict:
-    from trackproc.constants import MU_EARTH, OMEGA_EARTH
-    from trackproc.methods.ballistic import R_PLANAR
-
     o = result.options
     return {
         "displacement_m": o.displacement_m, "gamma": result.gamma, "alpha": result.alpha, "beta": result.beta,
