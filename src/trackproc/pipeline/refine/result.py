@@ -9,7 +9,7 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
+from scipy.special import gammaincinv  # chi-square quantile without scipy.stats (issue 19)
 
 from trackproc.constants import C_LIGHT, force_model_constants
 from trackproc.dynamics import propagator
@@ -189,7 +189,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         warnings.append(f"a-posteriori variance factor {sol.variance_factor:.3g} (> 4): the sigmas of the data are too "
                         "small or the model misses something; the covariance is optimistic")
     if sol.n_prior:
-        limit = float(chi2_dist.ppf(0.999, sol.n_prior))
+        limit = 2.0 * float(gammaincinv(sol.n_prior / 2.0, 0.999))
         if sol.chi2_prior > limit:
             warnings.append(f"the refined state departs from the stale state by chi2 = {sol.chi2_prior:.4g} over "
                             f"{sol.n_prior} a-priori constraints (99.9 % limit {limit:.3g}): the pass and the stale "
