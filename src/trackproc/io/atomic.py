@@ -8,6 +8,7 @@ target only when complete, so a failure never leaves a half-written file behind.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import sys
 import tempfile
@@ -52,7 +53,6 @@ class _Transaction:
                 self.rollback()
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
-                from trackproc.errors import OutputError
 
                 raise OutputError(str(target), exc) from None
 
@@ -119,7 +119,6 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
             raise OutputError(str(path), exc) from None
         return
     if target.is_dir():
-        import errno
 
         raise OutputError(str(path), IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR)))
     directory = target.parent if str(target.parent) else Path(".")
@@ -127,7 +126,6 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
         directory.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
     except FileExistsError as exc:  # a parent is a file
-        import errno
 
         raise OutputError(str(path), NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR))) from exc
     except OSError as exc:

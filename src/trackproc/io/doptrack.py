@@ -38,6 +38,7 @@ from trackproc.io.raw import RawMeasurements
 from trackproc.io.tabular import (NONFINITE_VALUE, UNPARSEABLE_TIME, WRONG_TYPE, Column, Problems, SourceTable,
                                   column_numbers, parse_text_table)
 from trackproc.io.validate import check_iso_year, check_name, check_station, check_year
+from trackproc.isotime import iso_utc
 
 #: Nominal downlink carrier of Delfi-C3 (NORAD 32789), Hz: 145.870 MHz (TU Delft, DopTrack).
 DELFI_C3_CARRIER_HZ = 145.870e6
@@ -150,8 +151,6 @@ def _number(value, source: str, key: str, expected: str) -> float:
 
 def _iso(value) -> object:
     if isinstance(value, (dt.datetime, dt.date, pd.Timestamp)):
-        from trackproc.isotime import iso_utc
-
         return iso_utc(value, 6)
     if isinstance(value, dict):
         return {str(k): _iso(v) for k, v in value.items()}

@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 
+from trackproc.isotime import iso_utc
+
 
 def json_ready(value):
     """A JSON-ready copy: numpy scalars/arrays to Python, NaN/Inf to None (JSON has neither),
@@ -18,8 +20,6 @@ def json_ready(value):
     if isinstance(value, np.ndarray):
         return json_ready(value.tolist())
     if isinstance(value, np.datetime64):
-        from trackproc.isotime import iso_utc
-
         return iso_utc(value, 9)
     if isinstance(value, np.generic):
         return json_ready(value.item())

@@ -27,6 +27,7 @@ import numpy as np
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
+from trackproc.io.statefile import FORCE_LABELS
 from trackproc.io.validate import check_name
 from trackproc.isotime import iso_utc
 
@@ -66,8 +67,6 @@ def opm_text(state, *, object_name: str = "UNKNOWN", object_id: str = "UNKNOWN",
               f"OBJECT_NAME = {object_name}", f"OBJECT_ID = {object_id}", "CENTER_NAME = EARTH",
               "REF_FRAME = GCRF", "TIME_SYSTEM = UTC", ""]
     if state.force_model:
-        from trackproc.io.statefile import FORCE_LABELS
-
         label = FORCE_LABELS.get(state.force_model, state.force_model)
         lines.append(f"COMMENT force model {label}")
     quality = (state.extra or {}).get("quality") if hasattr(state, "extra") else None

@@ -20,6 +20,7 @@ import pandas as pd
 import pyarrow as pa
 
 from trackproc.io.atomic import open_atomic
+from trackproc.io.passfile import iso_times
 from trackproc.io.tables import arrow_table_bytes
 
 __all__ = ["COLUMNS", "residuals_bytes", "write_residuals", "format_for"]
@@ -61,8 +62,6 @@ def residuals_bytes(frame: pd.DataFrame, meta: dict | None = None, fmt: str = "p
     """The encoded residual table: ``parquet``, ``arrow`` (IPC stream) or ``csv``."""
     meta = meta or {}
     if fmt == "csv":
-        from trackproc.io.passfile import iso_times
-
         out = io.StringIO()
         out.write(f"# {META_KEY}: {json.dumps(meta, sort_keys=True, default=str)}\n")
         writer = csv.writer(out, lineterminator="\n")
