@@ -30,7 +30,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import DOP853
 
-from trackproc.constants import J2 as J2_EARTH, MU_EARTH, RE_EARTH
+from trackproc.constants import J2 as J2_EARTH
+from trackproc.constants import MU_EARTH, RE_EARTH
 from trackproc.dynamics.gravity import acceleration, jerk  # noqa: F401  (re-exported)
 
 #: Default relative tolerance of the reference integration.
