@@ -12,6 +12,9 @@ code   meaning
 
 from __future__ import annotations
 
+import errno
+import signal
+
 EXIT_OK = 0
 EXIT_PROCESSING = 1
 EXIT_INPUT = 2
@@ -81,8 +84,6 @@ class OutputError(TrackprocError):
     exit_code = EXIT_PROCESSING
 
     def __init__(self, path: str, exc: OSError):
-        import errno
-
         self.path, self.errno = str(path), exc.errno
         usage = {errno.EISDIR, errno.ENOTDIR, errno.ENAMETOOLONG, errno.EEXIST, errno.EINVAL}
         self.exit_code = EXIT_INPUT if exc.errno in usage else EXIT_PROCESSING
@@ -96,8 +97,6 @@ class Terminated(BaseException):
     removes its temporary file, then the CLI exits 128 + signal number."""
 
     def __init__(self, signum: int):
-        import signal
-
         self.signum = signum
         try:
             self.name = signal.Signals(signum).name

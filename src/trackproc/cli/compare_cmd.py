@@ -98,7 +98,7 @@ def compare_command(
     text = json.dumps(json_ready(summary), indent=2) + "\n"
     if plot is not None:
         from trackproc.io.atomic import write_bytes
-        from trackproc.pipeline.compare import plot_bytes
+        from trackproc.report.compare_plots import plot_bytes
 
         write_bytes(plot, plot_bytes(residuals, summary))
     if output is not None:

@@ -107,7 +107,11 @@ def requirements_command(
         text = rq.to_json(result, compare_paper)
     else:
         text = rq.to_markdown(result, compare_paper)
-    png = rq.plot_bytes(result) if plot is not None else None
+    png = None
+    if plot is not None:
+        from trackproc.report.requirements_plots import plot_bytes
+
+        png = plot_bytes(result)
     write_text(output or "-", text)
     if png is not None:
         write_bytes(plot, png)

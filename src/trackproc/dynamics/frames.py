@@ -36,6 +36,9 @@ def _r3(angle) -> np.ndarray:
     return np.stack([np.stack([c, s, z], -1), np.stack([-s, c, z], -1), np.stack([z, z, o], -1)], -2)
 
 
+rotation_z = _r3   # the public name (dynamics.measurement_spectra rotates the station with it)
+
+
 def _omega_cross(r, omega=OMEGA_ERA) -> np.ndarray:
     """``ω ẑ × r`` for the Earth Rotation Angle rate ``omega`` (rad/s, scalar or per date)."""
     r = np.asarray(r, float)

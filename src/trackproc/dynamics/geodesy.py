@@ -13,6 +13,7 @@ import erfa
 import numpy as np
 
 from trackproc.constants import R_SPHERE
+from trackproc.dynamics import frames
 
 WGS84 = 1  # ERFA ellipsoid identifier
 DEG = np.pi / 180.0
@@ -125,8 +126,6 @@ def station_gcrf(r_itrf, jd1, jd2, eop=None) -> StationTrack:
     and a range-rate sample share their reception time) are evaluated once: the Earth
     orientation (``erfa.c2i06a`` per date) is the cost here.
     """
-    from trackproc.dynamics import frames
-
     r_itrf = np.asarray(r_itrf, float)
     jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
     jd1, jd2 = jd1.reshape(-1), jd2.reshape(-1)

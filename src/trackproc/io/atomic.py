@@ -8,11 +8,14 @@ target only when complete, so a failure never leaves a half-written file behind.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import sys
 import tempfile
 from pathlib import Path
 from typing import BinaryIO, Iterator
+
+from trackproc.errors import InputError, OutputError
 
 STDIO = "-"
 
@@ -50,7 +53,6 @@ class _Transaction:
                 self.rollback()
                 with contextlib.suppress(OSError):
                     os.unlink(tmp)
-                from trackproc.errors import OutputError
 
                 raise OutputError(str(target), exc) from None
 
@@ -97,8 +99,6 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
     side (a directory, a path under a file, a full or read-only disk) is an
     :class:`~trackproc.errors.OutputError` naming the path.
     """
-    from trackproc.errors import OutputError
-
     if is_stdio(path):
         out = _WholeWrites(sys.stdout.buffer)
         yield out
@@ -119,7 +119,6 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
             raise OutputError(str(path), exc) from None
         return
     if target.is_dir():
-        import errno
 
         raise OutputError(str(path), IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR)))
     directory = target.parent if str(target.parent) else Path(".")
@@ -127,7 +126,6 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
         directory.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
     except FileExistsError as exc:  # a parent is a file
-        import errno
 
         raise OutputError(str(path), NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR))) from exc
     except OSError as exc:
@@ -201,8 +199,6 @@ def max_input_bytes() -> int:
     """The largest input file or stdin stream read, in bytes: ``TRACKPROC_MAX_INPUT_MB`` (MiB),
     default :data:`DEFAULT_MAX_INPUT_MB`. A bound, so that ``/dev/zero`` or a runaway pipe is an
     input error instead of exhausting the machine."""
-    from trackproc.errors import InputError
-
     text = os.environ.get("TRACKPROC_MAX_INPUT_MB", "")
     if not text:
         return DEFAULT_MAX_INPUT_MB << 20
@@ -217,8 +213,6 @@ def max_input_bytes() -> int:
 
 
 def _read_bounded(handle, limit: int, name: str) -> bytes:
-    from trackproc.errors import InputError
-
     chunks, total = [], 0
     while True:
         chunk = handle.read(min(1 << 20, limit + 1 - total))
@@ -234,8 +228,6 @@ def _read_bounded(handle, limit: int, name: str) -> bytes:
 def read_input_bytes(path: str | os.PathLike, limit: int | None = None) -> bytes:
     """All bytes of a file, or of stdin for ``-`` (Parquet needs the whole buffer), at most
     ``limit`` bytes (default :func:`max_input_bytes`): beyond it an input error."""
-    from trackproc.errors import InputError
-
     limit = max_input_bytes() if limit is None else limit
     if is_stdio(path):
         return _read_bounded(sys.stdin.buffer, limit, "<stdin>")

@@ -30,12 +30,15 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import yaml
 
 from trackproc.errors import InputError
+from trackproc.io.atomic import read_input_bytes
 from trackproc.io.raw import RawMeasurements
+from trackproc.io.tabular import (NONFINITE_VALUE, UNPARSEABLE_TIME, WRONG_TYPE, Column, Problems, SourceTable,
+                                  column_numbers, parse_text_table)
 from trackproc.io.validate import check_iso_year, check_name, check_station, check_year
-from trackproc.io.tabular import (NONFINITE_VALUE, UNPARSEABLE_TIME, WRONG_TYPE, Column, Problems,
-                                  SourceTable, column_numbers, parse_text_table)
+from trackproc.isotime import iso_utc
 
 #: Nominal downlink carrier of Delfi-C3 (NORAD 32789), Hz: 145.870 MHz (TU Delft, DopTrack).
 DELFI_C3_CARRIER_HZ = 145.870e6
@@ -71,8 +74,6 @@ MAX_SIDECAR_BYTES = 1 << 20
 def _safe_loader():
     """PyYAML's SafeLoader without aliases: ``*name`` repeats a node without copying it, so a chain
     of aliases in an 800-byte file expands to gigabytes once the value is used as text."""
-    import yaml
-
     class NoAliasLoader(yaml.SafeLoader):
         def compose_node(self, parent, index):
             if self.check_event(yaml.AliasEvent):
@@ -87,10 +88,6 @@ def _safe_loader():
 def load_sidecar(path: Path) -> dict:
     """The YAML sidecar as a dict (InputError with the line on a syntax error), loaded safely:
     bounded size, no aliases, no tags beyond plain YAML."""
-    import yaml
-
-    from trackproc.io.atomic import read_input_bytes
-
     data = read_input_bytes(path, limit=MAX_SIDECAR_BYTES)
     try:
         text = data.decode("utf-8")
@@ -154,8 +151,6 @@ def _number(value, source: str, key: str, expected: str) -> float:
 
 def _iso(value) -> object:
     if isinstance(value, (dt.datetime, dt.date, pd.Timestamp)):
-        from trackproc.isotime import iso_utc
-
         return iso_utc(value, 6)
     if isinstance(value, dict):
         return {str(k): _iso(v) for k, v in value.items()}

@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import math
-
+import os
+import tempfile
 from pathlib import Path
 
+import numpy as np
+
+from trackproc.dynamics.timescales import EarthOrientation, eop_from_table
 from trackproc.errors import InputError
 
 NO_EOP_WARNING = ("no --eop file or --dut1 given and no EOP package (astropy-iers-data) installed: "
@@ -38,8 +42,6 @@ def read_finals2000a(path: str | Path):
     Parsed once per process and file version (kept by resolved path, modification time and size;
     its arrays read-only), so that a batch worker does not re-read the file for every pass.
     """
-    from trackproc.dynamics.timescales import eop_from_table
-
     try:
         stat = Path(path).stat()
         key = ("finals2000A", str(Path(path).resolve()), stat.st_mtime_ns, stat.st_size)
@@ -90,13 +92,6 @@ def bundled_earth_orientation():
         import astropy_iers_data
     except ImportError:
         return None
-    import os
-    import tempfile
-
-    import numpy as np
-
-    from trackproc.dynamics.timescales import EarthOrientation
-
     version = astropy_iers_data.__version__
     source = f"IERS finals2000A from astropy-iers-data {version}"
     cache_dir = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "trackproc"
@@ -129,8 +124,6 @@ def earth_orientation(eop_path=None, dut1_s=None):
     """The Earth orientation for the --eop / --dut1 options; with neither, the IERS table of the
     ``astropy-iers-data`` package (no warning: dates outside it are warned about where they are
     used), else zero UT1-UTC with a warning text."""
-    from trackproc.dynamics.timescales import EarthOrientation
-
     if eop_path is not None and dut1_s is not None:
         raise InputError("give either --eop or --dut1, not both")
     if eop_path is not None:

@@ -47,10 +47,13 @@ import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from trackproc.io.tables import arrow_table_bytes
 from trackproc.errors import InputError
-from trackproc.isotime import iso_utc
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
+from trackproc.io.passfile import iso_times, meta_json
+from trackproc.io.tables import arrow_table_bytes
+from trackproc.io.tabular import META_KEY, Problems, column_numbers, column_times, csv_metadata_line, source_table
+from trackproc.io.validate import check_name
+from trackproc.isotime import iso_utc
 
 __all__ = ["COLUMNS", "STATE_NAMES", "STM_COLUMNS", "SIGMA_COLUMNS", "COV_COLUMNS", "MEASUREMENT_COLUMNS",
            "FORMATS", "Ephemeris", "ephemeris_bytes", "write_ephemeris", "read_ephemeris", "oem_text",
@@ -92,9 +95,6 @@ class Ephemeris:
 
 def to_arrow(eph: Ephemeris) -> pa.Table:
     """Arrow table: time as timestamp[ns, UTC], numbers float64, metadata under ``trackproc``."""
-    from trackproc.io.passfile import meta_json
-    from trackproc.io.tabular import META_KEY
-
     frame = eph.frame
     missing = [c for c in COLUMNS if c not in frame.columns]
     if missing:
@@ -122,9 +122,6 @@ def to_arrow(eph: Ephemeris) -> pa.Table:
 
 
 def _csv_bytes(eph: Ephemeris) -> bytes:
-    from trackproc.io.passfile import iso_times, meta_json
-    from trackproc.io.tabular import csv_metadata_line
-
     frame = eph.frame
     out = io.StringIO()
     out.write(csv_metadata_line(meta_json(eph.meta)))
@@ -176,13 +173,6 @@ def read_ephemeris(path: str) -> Ephemeris:
 
 def parse_ephemeris(data: bytes, source: str) -> Ephemeris:
     """An ephemeris from the bytes of a Parquet, Arrow or CSV file named ``source`` (for messages)."""
-    from trackproc.io.tabular import (
-        Problems,
-        column_numbers,
-        column_times,
-        source_table,
-    )
-
     if not data.strip():
         raise InputError("empty input", file=source, row=1, found="no data", expected="an ephemeris table")
     table = source_table(data, source)
@@ -254,8 +244,6 @@ def oem_text(eph: Ephemeris, *, object_name: str = "UNKNOWN", object_id: str = "
     Positions and velocities are converted to km and km/s, covariances to km^2, km^2/s, km^2/s^2
     (CCSDS 502.0 section 5.2.4-5.2.5); see the module docstring for the layout.
     """
-    from trackproc.io.validate import check_name
-
     for key, text in (("OBJECT_NAME", object_name), ("OBJECT_ID", object_id), ("ORIGINATOR", originator)):
         check_name(str(text), "OEM " + key, column=key)   # a newline would forge a KVN line
     frame = eph.frame

@@ -5,12 +5,14 @@ from __future__ import annotations
 import json
 import math
 
+import numpy as np
+
+from trackproc.isotime import iso_utc
+
 
 def json_ready(value):
     """A JSON-ready copy: numpy scalars/arrays to Python, NaN/Inf to None (JSON has neither),
     tuples to lists, datetime64 to ISO 8601 UTC with Z."""
-    import numpy as np
-
     if isinstance(value, dict):
         return {str(k): json_ready(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -18,8 +20,6 @@ def json_ready(value):
     if isinstance(value, np.ndarray):
         return json_ready(value.tolist())
     if isinstance(value, np.datetime64):
-        from trackproc.isotime import iso_utc
-
         return iso_utc(value, 9)
     if isinstance(value, np.generic):
         return json_ready(value.item())

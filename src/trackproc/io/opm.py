@@ -26,8 +26,10 @@ from datetime import datetime, timezone
 import numpy as np
 
 from trackproc.errors import InputError
-from trackproc.isotime import iso_utc
 from trackproc.io.atomic import is_stdio, read_input_bytes, write_text
+from trackproc.io.statefile import FORCE_LABELS
+from trackproc.io.validate import check_name
+from trackproc.isotime import iso_utc
 
 __all__ = ["COVARIANCE_KEYS", "opm_text", "write_opm", "parse_opm", "read_opm"]
 
@@ -53,8 +55,6 @@ def opm_text(state, *, object_name: str = "UNKNOWN", object_id: str = "UNKNOWN",
     ``state.state_covariance`` (m, m/s) is converted to km and km/s; the other estimated
     parameters (if any) are listed in COMMENT lines with their sigmas.
     """
-    from trackproc.io.validate import check_name
-
     for key, text in (("OBJECT_NAME", object_name), ("OBJECT_ID", object_id), ("ORIGINATOR", originator)):
         check_name(str(text), "OPM " + key, column=key)   # a newline would forge a KVN line
     created = creation_date or datetime.now(timezone.utc).replace(tzinfo=None)
@@ -67,8 +67,6 @@ def opm_text(state, *, object_name: str = "UNKNOWN", object_id: str = "UNKNOWN",
               f"OBJECT_NAME = {object_name}", f"OBJECT_ID = {object_id}", "CENTER_NAME = EARTH",
               "REF_FRAME = GCRF", "TIME_SYSTEM = UTC", ""]
     if state.force_model:
-        from trackproc.io.statefile import FORCE_LABELS
-
         label = FORCE_LABELS.get(state.force_model, state.force_model)
         lines.append(f"COMMENT force model {label}")
     quality = (state.extra or {}).get("quality") if hasattr(state, "extra") else None

@@ -12,14 +12,16 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pyarrow as pa
 
-from trackproc.io.tables import arrow_table_bytes
 from trackproc.io.atomic import open_atomic
+from trackproc.io.passfile import iso_times
+from trackproc.io.tables import arrow_table_bytes
 
 __all__ = ["COLUMNS", "residuals_bytes", "write_residuals", "format_for"]
 
@@ -36,8 +38,6 @@ def format_for(path: str) -> str:
 
 
 def _arrow(frame: pd.DataFrame, meta: dict) -> pa.Table:
-    import json
-
     times = frame["time"]
     if getattr(times.dt, "tz", None) is None:
         times = times.dt.tz_localize("UTC")
@@ -60,12 +60,8 @@ def _arrow(frame: pd.DataFrame, meta: dict) -> pa.Table:
 
 def residuals_bytes(frame: pd.DataFrame, meta: dict | None = None, fmt: str = "parquet") -> bytes:
     """The encoded residual table: ``parquet``, ``arrow`` (IPC stream) or ``csv``."""
-    import json
-
     meta = meta or {}
     if fmt == "csv":
-        from trackproc.io.passfile import iso_times
-
         out = io.StringIO()
         out.write(f"# {META_KEY}: {json.dumps(meta, sort_keys=True, default=str)}\n")
         writer = csv.writer(out, lineterminator="\n")

@@ -28,6 +28,9 @@ import numpy as np
 import pandas as pd
 
 from trackproc.errors import InputError, ProcessingError
+from trackproc.io.passfile import base_meta
+from trackproc.io.statefile import format_epoch
+from trackproc.pipeline import detect as dp
 
 DEG = math.pi / 180.0
 HYPOTHESES = ("h0", "h1")
@@ -84,10 +87,6 @@ def simulate_ballistic(nominal, stations: Mapping, options: BallisticOptions, eo
     :class:`~trackproc.errors.InputError` for bad options or an unknown station and
     :class:`~trackproc.errors.ProcessingError` when nothing is visible.
     """
-    from trackproc.io.passfile import base_meta
-    from trackproc.io.statefile import format_epoch
-    from trackproc.pipeline import detect as dp
-
     _check(options)
     name = nominal.station
     if name is None:
@@ -205,8 +204,6 @@ def planar_vs_3d(nominal, station, *, step_s: float = 1.0, displacement_m: float
     values are ``sqrt(Σ Δ²)``) plus the information distances ``‖Δε‖ ≈ sqrt(step Σ Δ²)``
     (rad·s^½) of the planar elevations, the 3-D elevations, and the 3-D azimuths and elevations.
     """
-    from trackproc.pipeline import detect as dp
-
     geometry = dp.StationGeometry.of(station, nominal.earth)
     enc = dp.planar_for_3d(nominal, geometry)
     disp = displacement_m if displacement_m is not None else nominal.displacement_m

@@ -7,12 +7,20 @@ durations in seconds, elevations in degrees.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from trackproc.constants import MU_EARTH, WGS84_A
+from trackproc.dynamics.kepler import classical_elements
+from trackproc.io.opm import parse_opm
 from trackproc.io.passfile import COLUMNS, KINDS, PassTable, iso_times
+from trackproc.io.statefile import format_epoch, parse_state
+from trackproc.io.tdm import read_tdm
+from trackproc.io.tle import parse_tle, tle_epoch
+from trackproc.isotime import iso_utc
 
 
 @dataclass
@@ -156,17 +164,11 @@ def format_info(info: PassFileInfo) -> str:
 def ephemeris_info(frame, meta: dict, source: str) -> dict:
     """Summary of an ephemeris table: span, samples, step, geocentric radius, height above the
     equatorial radius (a quick check, not a geodetic height) and speed ranges."""
-    import numpy as np
-
-    from trackproc.constants import WGS84_A
-
     times = frame["time"]
     r = np.linalg.norm(frame[["x_m", "y_m", "z_m"]].to_numpy(float), axis=1)
     v = np.linalg.norm(frame[["vx_m_s", "vy_m_s", "vz_m_s"]].to_numpy(float), axis=1)
     steps = np.diff(times.dt.tz_convert("UTC").dt.tz_localize(None).to_numpy().astype(np.int64)) / 1e9
     extra = [c for c in frame.columns if c not in ("time", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s")]
-    from trackproc.isotime import iso_utc
-
     fmt = lambda t: iso_utc(t, 3)  # noqa: E731
     return {
         "file": source,
@@ -188,9 +190,6 @@ def ephemeris_info(frame, meta: dict, source: str) -> dict:
 
 
 def _state_summary(r_m, v_m_s, mu: float | None = None) -> dict:
-    from trackproc.constants import MU_EARTH, WGS84_A
-    from trackproc.dynamics.kepler import classical_elements
-
     r = float(np.linalg.norm(r_m))
     el = classical_elements(np.asarray(r_m, float), np.asarray(v_m_s, float), mu or MU_EARTH)
     rounded = {k: (round(v, 6) if isinstance(v, float) else v) for k, v in el.items()}
@@ -201,10 +200,6 @@ def _state_summary(r_m, v_m_s, mu: float | None = None) -> dict:
 def state_info(data: bytes, source: str) -> dict:
     """A state file (JSON): epoch, frame, the state, its osculating elements, the estimated
     parameters with their sigmas, the force model and the solution's quality when recorded."""
-    import json
-
-    from trackproc.io.statefile import parse_state
-
     state = parse_state(data, source)
     doc = json.loads(data)
     out = {"file": source, "kind": "state (JSON)", "epoch": doc.get("epoch"), "frame": doc.get("frame"),
@@ -228,9 +223,6 @@ def state_info(data: bytes, source: str) -> dict:
 
 def tle_info(data: bytes, source: str) -> dict:
     """A TLE: name, catalogue number, epoch, the mean elements as written (TEME, SGP4 theory)."""
-    from trackproc.io.statefile import format_epoch
-    from trackproc.io.tle import parse_tle, tle_epoch
-
     tle = parse_tle(data.decode("ascii", errors="replace"), source)
     l2 = tle.line2
     return {"file": source, "kind": "TLE (SGP4 mean elements, TEME)", "name": tle.name, "catalogue_number": tle.satnum,
@@ -242,8 +234,6 @@ def tle_info(data: bytes, source: str) -> dict:
 
 def opm_info(data: bytes, source: str) -> dict:
     """A CCSDS OPM (KVN): object, epoch, frame, the state, its elements and sigmas."""
-    from trackproc.io.opm import parse_opm
-
     opm = parse_opm(data.decode("utf-8", errors="replace"), source)
     out = {"file": source, "kind": f"CCSDS OPM {opm['version']}", **opm["meta"],
            "epoch": str(opm["epoch"]) + "Z", "frame": opm["ref_frame"], "time_system": opm["time_system"],
@@ -288,8 +278,6 @@ def oem_info(data: bytes, source: str) -> dict:
 
 def tdm_info(data: bytes, source: str) -> dict:
     """A CCSDS TDM (KVN): participants, path, the samples per kind and station, the span."""
-    from trackproc.io.tdm import read_tdm
-
     raw = read_tdm(data, source)
     frame = raw.frame
     values, _ = _kvn_values(data.decode("utf-8", errors="replace"))

@@ -21,6 +21,7 @@ All refinements are vectorised over the passes of a station (one observables cal
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from typing import Optional
@@ -28,7 +29,12 @@ from typing import Optional
 import numpy as np
 import pandas as pd
 
+from trackproc import __version__
 from trackproc.errors import InputError
+from trackproc.io.jsonutil import json_ready
+from trackproc.io.statefile import format_epoch
+from trackproc.io.tle import tle_epoch
+from trackproc.pipeline.orbit_source import SGP4_LABEL, Satellite, observe, resolve_force
 
 DEG = np.pi / 180.0
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
@@ -113,8 +119,6 @@ def _bisect(f, lo, hi):
 
 def station_passes(sat, station, options: PassesOptions) -> list[dict]:
     """The passes of one station (dicts of :func:`find_passes`'s columns), in time order."""
-    from trackproc.pipeline.orbit_source import observe
-
     mask = options.min_elevation_deg * DEG
 
     def obs(t):
@@ -207,10 +211,6 @@ def find_passes(orbit, stations: dict, options: PassesOptions, eop=None):
     """The passes of ``orbit`` (:class:`~trackproc.pipeline.orbit_source.OrbitInput`) over
     ``stations`` (name -> Station): a DataFrame (columns :data:`COLUMN_ORDER`, the Doppler ones
     only with a carrier; times UTC ``datetime64``) sorted by AOS then station, and metadata."""
-    from trackproc.io.statefile import format_epoch
-    from trackproc.io.tle import tle_epoch
-    from trackproc.pipeline.orbit_source import SGP4_LABEL, Satellite, resolve_force
-
     _check(options)
     force = resolve_force(orbit, options.force)
     start = options.start
@@ -224,8 +224,6 @@ def find_passes(orbit, stations: dict, options: PassesOptions, eop=None):
     frame = pd.DataFrame(rows, columns=columns)
     if len(frame):
         frame = frame.sort_values(["aos_time", "station"], kind="stable").reset_index(drop=True)
-    from trackproc import __version__
-
     meta = {
         "generator": "trackproc passes",
         "orbit": orbit.source,
@@ -252,8 +250,6 @@ FORMATS = ("csv", "json", "md")
 
 
 def _cell(value, digits: int = 3) -> str:
-    from trackproc.io.statefile import format_epoch
-
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return ""
     if isinstance(value, (bool, np.bool_)):
@@ -269,10 +265,6 @@ def render(frame: pd.DataFrame, meta: dict, fmt: str) -> str:
     """The schedule as CSV (a header, one row per pass, ISO 8601 UTC times), JSON
     (``{"meta": ..., "passes": [...]}``) or a Markdown table (one line per pass, the times to the
     second)."""
-    import json
-
-    from trackproc.io.jsonutil import json_ready
-
     records = frame.to_dict("records")
     if fmt == "json":
         def value(v):

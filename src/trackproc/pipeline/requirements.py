@@ -21,10 +21,12 @@ import math
 from dataclasses import dataclass, field
 from typing import Optional
 
-import numpy as np
-
-from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
+from trackproc.constants import MU_EARTH, OMEGA_EARTH
 from trackproc.errors import InputError
+from trackproc.methods import ballistic as bl
+from trackproc.methods import detection as dt
+from trackproc.methods.ballistic import R_PLANAR
+from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 
 DEG = math.pi / 180.0
 DEFAULT_VELOCITIES_KMS = (1.0, 2.0, 3.0, 4.0, 5.0)
@@ -145,8 +147,6 @@ def _check(options: RequirementsOptions) -> None:
 
 def resolve_gamma(options: RequirementsOptions) -> tuple[float, float, float]:
     """(γ, α, β): from ``gamma`` (α = β = 1 - Φ(γ/2)), or from α and β (one given: equal)."""
-    from trackproc.methods import detection as dt
-
     if options.alpha is not None or options.beta is not None:
         alpha = options.alpha if options.alpha is not None else options.beta
         beta = options.beta if options.beta is not None else options.alpha
@@ -184,9 +184,6 @@ def _paper_value(table: Optional[str], options, v_kms, angle, tau) -> Optional[f
 def cell(velocity_m_s: float, angle_rad: float, tau_s: float, displacement_m: float, gamma: float, *,
          latitude_rad: float | None = None, direction: str = "none", radius_m: float | None = None):
     """g (rad·s^½), ‖Δε‖ and the encounter of one cell (seed 003 eqs. 5-8 on eqs. 9-11)."""
-    from trackproc.methods import ballistic as bl
-    from trackproc.methods import detection as dt
-
     enc = bl.PlanarEncounter.from_impact(velocity_m_s, angle_rad, latitude_rad=latitude_rad, direction=direction,
                                          radius_m=radius_m or bl.R_PLANAR)
     rise = enc.rise_time()
@@ -241,9 +238,6 @@ def to_csv(result: RequirementsResult) -> str:
 
 
 def parameters(result: RequirementsResult) -> dict:
-    from trackproc.constants import MU_EARTH, OMEGA_EARTH
-    from trackproc.methods.ballistic import R_PLANAR
-
     o = result.options
     return {
         "displacement_m": o.displacement_m, "gamma": result.gamma, "alpha": result.alpha, "beta": result.beta,
@@ -310,34 +304,3 @@ def to_markdown(result: RequirementsResult, compare_paper: bool = False) -> str:
 
 
 # --------------------------------------------------------------------------- Fig. 3
-
-
-def plot_bytes(result: RequirementsResult | None = None, sigma_max_rad: float = 0.01) -> bytes:
-    """PNG of Fig. 3: Δt = (g/σ)² against σ for the paper's g values, and the grid's g range."""
-    require_matplotlib()
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    sigma = np.linspace(sigma_max_rad / 200, sigma_max_rad, 400)
-    fig, ax = plt.subplots(figsize=(8, 5.5))
-    for k, g in enumerate(FIG3_G, 1):
-        ax.plot(sigma, (g / sigma) ** 2, color=f"C{k - 1}", label=f"{k}: g = {g * 1e3:g}e-3")
-    if result is not None:
-        gs = sorted(c.g for c in result.cells if c.g > 0)
-        picks = gs if len(gs) <= 6 else [gs[0], gs[len(gs) // 2], gs[-1]]
-        for k, g in enumerate(picks):
-            ax.plot(sigma, (g / sigma) ** 2, "--", color="0.2", lw=0.9, dashes=(2 + 2 * k, 2),
-                    label=f"this grid: g = {g * 1e3:.2f}e-3")
-    ax.set_ylim(0, 20)
-    ax.set_xlim(0, sigma_max_rad)
-    ax.set_xlabel("sigma, rad (0.01 rad = 34.4')")
-    ax.set_ylabel("sample spacing dt, s")
-    ax.set_title("dt = (g / sigma)^2 (seed 003 Fig. 3); dashed: this grid's g (min, median, max)", fontsize=10)
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return buf.getvalue()

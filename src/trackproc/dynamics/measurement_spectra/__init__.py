@@ -79,9 +79,10 @@ satellite (``D2(0) > 0``).
 
 from trackproc.vocabulary import RANGE_RATE_MODELS, check_range_rate_model  # noqa: F401  (re-exported)
 from trackproc.dynamics.measurement_spectra.series import (  # noqa: F401
-    cauchy_sum, derivative_matrix, evaluate_segments, evaluate_series, product_matrix, series_reciprocal, series_sqrt,
-    shift_matrix)
-from trackproc.dynamics.measurement_spectra.station import (SLOW_NODE_SPACING_S, StationModel, rotation_spectra)  # noqa: F401
+    cauchy_sum, derivative_matrix, evaluate_segments, evaluate_series, product_matrix, series_reciprocal,
+    series_sqrt, shift_matrix)
+from trackproc.dynamics.measurement_spectra.station import (  # noqa: F401
+    SLOW_NODE_SPACING_S, StationModel, rotation_spectra)
 from trackproc.dynamics.measurement_spectra.segments import (  # noqa: F401
     LIGHT_TIME_TERMS, MAX_LIGHT_TIME_ITER, SEGMENT_SAFETY, SegmentSpectra, initial_segments, segment_spectra)
 from trackproc.dynamics.measurement_spectra.predict import Prediction, predict  # noqa: F401

@@ -10,7 +10,7 @@ import numpy as np
 
 from trackproc.constants import C_LIGHT
 from trackproc.dynamics import spectra as sp
-from trackproc.dynamics.frames import _r3
+from trackproc.dynamics.frames import rotation_z
 
 from trackproc.dynamics.measurement_spectra.series import (cauchy_sum, derivative_matrix, evaluate_series,
                                                            product_matrix, series_reciprocal, series_sqrt)
@@ -167,6 +167,6 @@ def initial_segments(t, step_idx, steps, station, tol, n):
 def _approx_station(station, t):
     """Station position and velocity from the frozen rotation (for segment sizing only)."""
     theta = station.era0_rad + station.omega_rad_s * t
-    r = np.einsum("nji,j->ni", _r3(theta), station.p_nodes[0]) @ station.pn_nodes[0].T
+    r = np.einsum("nji,j->ni", rotation_z(theta), station.p_nodes[0]) @ station.pn_nodes[0].T
     v = station.omega_rad_s * np.stack([-r[:, 1], r[:, 0], np.zeros_like(t)], -1)
     return r, v

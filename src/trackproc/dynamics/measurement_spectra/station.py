@@ -11,7 +11,7 @@ import numpy as np
 
 from trackproc.dynamics import geodesy
 from trackproc.dynamics import timescales as ts
-from trackproc.dynamics.frames import OMEGA_ERA, _r3, earth_rotation
+from trackproc.dynamics.frames import OMEGA_ERA, earth_rotation, rotation_z
 
 
 #: Spacing of the nodes of the slow rotation (precession-nutation, polar motion), s.
@@ -224,7 +224,7 @@ class StationModel:
             pn = np.einsum("sjab,sj->sab", self._slow(cu)[0][inv], powers)
             wq = np.einsum("sjab,sj->sab", self._w_quadratic(cu)[inv], powers)
         d_cirs = np.einsum("nji,nj->ni", pn, d_qi)                      # P^T d
-        d_itrf = np.einsum("nij,nj->ni", wq, np.einsum("nij,nj->ni", _r3(theta), d_cirs))
+        d_itrf = np.einsum("nij,nj->ni", wq, np.einsum("nij,nj->ni", rotation_z(theta), d_cirs))
         return np.einsum("ij,nj->ni", geodesy.enu_matrix(self.lat_rad, self.lon_rad), d_itrf)
 
     def _w_quadratic(self, c):

@@ -56,10 +56,11 @@ from trackproc.methods.accuracy.moments import (  # noqa: F401
 from trackproc.methods.accuracy.seed000 import (  # noqa: F401
     seed000_enough_discretes, seed000_spectra, seed000_statistics, seed000_variance_exact,
     seed000_velocity_variance_exact, seed000_velocity_weight)
-from trackproc.methods.accuracy.engine import (spectral_covariance, spectral_cross_covariance, spectral_factors,  # noqa: F401
-                                               state_spectra)
+from trackproc.methods.accuracy.engine import (  # noqa: F401
+    spectral_covariance, spectral_cross_covariance, spectral_factors, state_spectra)
 from trackproc.methods.accuracy.sampling import (  # noqa: F401
-    covariance_sd, monte_carlo_bounds, sample_covariance, sample_initial_states, stm_covariance, stm_cross_covariance)
+    covariance_sd, monte_carlo_bounds, sample_covariance, sample_initial_states, stm_covariance,
+    stm_cross_covariance)
 from trackproc.methods.accuracy.observables import (  # noqa: F401
     correlation_coefficients, observable_covariance, range_range_rate_jacobian, sigmas)
 

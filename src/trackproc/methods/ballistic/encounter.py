@@ -1,4 +1,5 @@
-"""The planar encounter: the elevation seen by the observer (seed 003 eq. 11, App. B), :class:`PlanarEncounter`, and the observer-motion error (App. C).
+"""The planar encounter: the elevation seen by the observer (seed 003 eq. 11, App. B), :class:`PlanarEncounter`,
+and the observer-motion error (App. C).
 """
 
 from __future__ import annotations

@@ -36,8 +36,8 @@ Pure numpy; the model is a callable ``model(x) -> (computed (N,), jacobian (N, n
 """
 
 from trackproc.methods.least_squares.types import Options, Prior, Solution  # noqa: F401
-from trackproc.methods.least_squares.iteration import (Problem, Run, combination_text, iterate, prior_rhs, prior_rows,  # noqa: F401
-                                                       whitened_svd)
+from trackproc.methods.least_squares.iteration import (  # noqa: F401
+    Problem, Run, combination_text, iterate, prior_rhs, prior_rows, whitened_svd)
 from trackproc.methods.least_squares.solver import solve, solve_gls  # noqa: F401
 
 __all__ = ["Options", "Prior", "Solution", "solve", "solve_gls", "whitened_svd", "combination_text"]

@@ -1,4 +1,5 @@
-"""The weighted least-squares solver (:func:`solve`) and its generalised form for correlated samples (:func:`solve_gls`).
+"""The weighted least-squares solver (:func:`solve`) and its generalised form for correlated samples
+(:func:`solve_gls`).
 """
 
 from __future__ import annotations

@@ -65,18 +65,18 @@ Here:
 
 Pure numpy on SI units (m, m/s, s); nothing here reads files or prints.
 """
-from trackproc.methods.refinement.quadrature import (covered_intervals, gauss_legendre, pseudo_sigma,  # noqa: F401
-                                                     range_rate_samples)
+from trackproc.methods.refinement.quadrature import (  # noqa: F401
+    covered_intervals, gauss_legendre, pseudo_sigma, range_rate_samples)
 from trackproc.methods.refinement.constraints import (  # noqa: F401
     CONSTRAINT_NAMES, circular_constraints, circular_tolerance_covariance, constraint_error_covariance,
     constraint_scales)
-from trackproc.methods.refinement.elements import (ELEMENT_NAMES, element_covariance, nonsingular_elements,  # noqa: F401
-                                                   state_from_elements)
+from trackproc.methods.refinement.elements import (  # noqa: F401
+    ELEMENT_NAMES, element_covariance, nonsingular_elements, state_from_elements)
 from trackproc.methods.refinement.geodesic import CachedModel, geodesic_retraction  # noqa: F401
 from trackproc.methods.refinement.integral import IntegralModel, sandwich_covariance  # noqa: F401
 from trackproc.methods.refinement.kkt import FEASIBILITY_RTOL, KKTResult, solve_kkt  # noqa: F401
-from trackproc.methods.refinement.observability import (PROFILE_NODES, RTN_NAMES, Observability, observability,  # noqa: F401
-                                                        profile_mixture)
+from trackproc.methods.refinement.observability import (  # noqa: F401
+    PROFILE_NODES, RTN_NAMES, Observability, observability, profile_mixture)
 
 __all__ = ["nonsingular_elements", "state_from_elements", "element_covariance", "ELEMENT_NAMES", "gauss_legendre",
            "covered_intervals", "pseudo_sigma", "circular_constraints", "constraint_scales", "IntegralModel",

@@ -1,4 +1,5 @@
-"""A cached model and the geodesic-acceleration retraction of Transtrum & Sethna for Gauss-Newton steps along curved valleys.
+"""A cached model and the geodesic-acceleration retraction of Transtrum & Sethna for Gauss-Newton steps along
+curved valleys.
 """
 
 from __future__ import annotations

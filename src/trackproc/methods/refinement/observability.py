@@ -1,4 +1,5 @@
-"""What one pass determines of the state (:func:`observability`) and the profile covariance along what it cannot see (:func:`profile_mixture`).
+"""What one pass determines of the state (:func:`observability`) and the profile covariance along what it cannot
+see (:func:`profile_mixture`).
 """
 
 from __future__ import annotations

@@ -33,5 +33,5 @@ from trackproc.pipeline.accuracy.options import (  # noqa: F401
 from trackproc.pipeline.accuracy.columns import (  # noqa: F401
     consistency_checks, correlation_bytes, correlation_frame, correlation_matrices, result_meta, sigma_frame)
 from trackproc.pipeline.accuracy.run import accuracy, monte_carlo, station_track  # noqa: F401
-from trackproc.pipeline.accuracy.seed_example import (SeedExampleOptions, SeedExampleResult, seed_example,  # noqa: F401
-                                                      truncation_table)
+from trackproc.pipeline.accuracy.seed_example import (  # noqa: F401
+    SeedExampleOptions, SeedExampleResult, seed_example, truncation_table)

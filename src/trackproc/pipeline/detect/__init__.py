@@ -38,8 +38,8 @@ from trackproc.vocabulary import EARTHS, FORCES  # noqa: F401  (re-exported)
 from trackproc.pipeline.detect.nominal import DEG, FIELDS, MODELS, Nominal, parse_nominal, read_nominal  # noqa: F401
 from trackproc.pipeline.detect.geometry import (  # noqa: F401
     StationGeometry, flight_time_s, model_3d, planar_encounter, planar_for_3d, seconds_from_impact, wrap_pi)
-from trackproc.pipeline.detect.run import (DetectOptions, DetectResult, compare_planar, detect, result_json,  # noqa: F401
-                                           select_samples)
+from trackproc.pipeline.detect.run import (  # noqa: F401
+    DetectOptions, DetectResult, compare_planar, detect, result_json, select_samples)
 
 __all__ = ["DetectOptions", "DetectResult", "Nominal", "StationGeometry", "compare_planar", "detect", "model_3d",
            "parse_nominal", "planar_encounter", "read_nominal", "result_json", "seconds_from_impact"]

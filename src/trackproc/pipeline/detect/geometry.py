@@ -1,4 +1,5 @@
-"""The model values of ``detect``: the planar encounter (seed 003 eqs. 9-11) and the 3-D trajectory seen from a real station.
+"""The model values of ``detect``: the planar encounter (seed 003 eqs. 9-11) and the 3-D trajectory seen from a
+real station.
 """
 
 from __future__ import annotations

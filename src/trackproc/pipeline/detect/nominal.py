@@ -1,4 +1,5 @@
-"""The nominal trajectory of ``trackproc detect`` (NOMINAL.json, see :mod:`trackproc.pipeline.detect`): :class:`Nominal` and its reader.
+"""The nominal trajectory of ``trackproc detect`` (NOMINAL.json, see :mod:`trackproc.pipeline.detect`):
+:class:`Nominal` and its reader.
 """
 
 from __future__ import annotations

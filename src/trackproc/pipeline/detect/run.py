@@ -1,4 +1,5 @@
-""":func:`detect`: the samples chosen, the predictions under H0 and H1, the statistic and the decision (seed 003); its JSON.
+""":func:`detect`: the samples chosen, the predictions under H0 and H1, the statistic and the decision (seed
+003); its JSON.
 """
 
 from __future__ import annotations

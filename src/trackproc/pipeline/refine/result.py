@@ -76,29 +76,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     rms = float(np.sqrt(np.mean(res_kept ** 2))) if res_kept.size else math.nan
 
     # constraints (eq. 5) at the solution
-    rka = float(x[-1]) if opt.circular else float(np.linalg.norm(x[:3]))
-    x7 = np.r_[x[:6], rka]
-    f, _ = rf.circular_constraints(x7, ref.mu)
-    fscale = rf.constraint_scales(x7, ref.mu)
-    constraints = {"names": list(rf.CONSTRAINT_NAMES), "units": ["m^2", "m^2/s^2", "m^2/s"],
-                   "values": f.tolist(), "relative": (f / fscale).tolist(), "imposed": bool(opt.circular),
-                   "r_ka_m": rka, "eccentricity": eccentricity(x[:3], x[3:6], ref.mu)}
-    if kkt is not None:
-        constraints.update({"multipliers": kkt.multipliers.tolist(),
-                            "multipliers_note": "lambda of L = chi2 + lambda^T f (chi2: the whitened cost; "
-                                                "seed 004 eq. 16), per unit of each constraint",
-                            "stationarity": kkt.stationarity, "restoration_steps": kkt.restorations,
-                            "free_directions": kkt.null_space_dim, "eccentricity_tolerance": ref.tolerance(),
-                            "tolerance_note": "the covariance includes the constraints' own uncertainty for an orbit "
-                                              "circular only to this eccentricity (0: conditional on an exactly "
-                                              "circular orbit)"})
-        i_rka = names.index("r_ka")
-        constraints["r_ka_sigma_m"] = float(sigma[i_rka])
-        if consistency is not None:
-            constraints["consistency"] = consistency
-    else:
-        u = x[:3] / np.linalg.norm(x[:3])
-        constraints["r_ka_sigma_m"] = float(np.sqrt(u @ cov[:3, :3] @ u))
+    constraints = constraint_report(ref, x, cov, sigma, kkt, consistency)
 
     # observability of the state from this pass
     reference = state_prior_covariance(ref.priors)
@@ -143,18 +121,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
             for part, d in zip(("seen", "unseen"), obs.split(np.asarray(sol.values, float)[:6] - ref.x0[:6]))}
 
     # the state at the stale epoch
-    dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(ref.stale_epoch),
-                                tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))))
-    if dt == 0.0:
-        rv_s, cov_s = x[:6].copy(), cov.copy()
-    else:
-        traj = propagator.propagate(x[:3], x[3:6], problem.epoch, [dt], force=opt.force, stm=True,
-                                    frame=problem.frame, eop=problem.eop).raise_for_outcome()
-        rv_s = traj.state(dt)
-        jac = np.eye(len(names))
-        jac[:6, :6] = traj.stm(dt)
-        cov_s = jac @ cov @ jac.T
-        cov_s = 0.5 * (cov_s + cov_s.T)
+    rv_s, cov_s = at_stale_epoch(ref, x, cov)
 
     # traverse-point diagnostics
     t_model = model_traverse(ref, x)
@@ -168,37 +135,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
 
     # warnings
     max_el = max_elevation_deg(ref, x)
-    if max_el is not None and max_el < LOW_PASS_DEG:
-        warnings.append(f"a low pass (highest elevation {max_el:.1f} deg < {LOW_PASS_DEG:g}): one low pass "
-                        "determines the orbit poorly and an onboard oscillator's wander is easily taken for orbit; "
-                        "see docs/refine.md")
-    if sigma_scale > 1.0:
-        warnings.append(f"the samples scatter more than their sigmas say: sigmas scaled by {sigma_scale:.3g} "
-                        "(sqrt of the variance factor, iterated) before weighing them against the a-priori")
-    if consistency is not None and consistency.get("p_value", 1.0) < CIRCULAR_TEST_P:
-        c = consistency
-        warnings.append(f"the pass contradicts the circular-orbit constraints (delta chi2 = {c['delta_chi2']:.4g}, 2 "
-                        f"degrees of freedom, p = {c['p_value']:.2g}; the unconstrained fit's eccentricity is "
-                        f"{c['free_fit_eccentricity']:.2g}): the constrained state is biased and its covariance too "
-                        "small; give --circular-tolerance (the eccentricity the orbit is circular to) or drop "
-                        "--circular")
-    if opt.circular and kkt is not None and ref.tolerance() == 0.0:
-        warnings.append("--circular: the covariance is conditional on an exactly circular orbit; with J2 the "
-                        "osculating eccentricity of a circular orbit swings by about 1e-3 (give --circular-tolerance)")
-    if sol.dof > 0 and sol.variance_factor > 4.0 and opt.cost == "pointwise":
-        warnings.append(f"a-posteriori variance factor {sol.variance_factor:.3g} (> 4): the sigmas of the data are too "
-                        "small or the model misses something; the covariance is optimistic")
-    if sol.n_prior:
-        limit = chi2_limit(sol.n_prior, 0.999)
-        if sol.chi2_prior > limit:
-            warnings.append(f"the refined state departs from the stale state by chi2 = {sol.chi2_prior:.4g} over "
-                            f"{sol.n_prior} a-priori constraints (99.9 % limit {limit:.3g}): the pass and the stale "
-                            "state disagree; check the pass, or loosen the a-priori")
-    if opt.cost == "pointwise" and sol.n_edited > 0.1 * sol.n_measurements:
-        warnings.append(f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)")
-    if opt.cost == "integral" and not ref.priors and obs.unobservable:
-        warnings.append(f"{len(obs.unobservable)} state direction(s) are weakly determined by the pass alone "
-                        "(see the observability report); consider --apriori")
+    warnings += refine_warnings(ref, sol, obs, kkt, sigma_scale, consistency, max_el)
 
     quality = refine_quality(ref, sol, sigma_scale=sigma_scale, adaptation=adaptation, improvement=improvement,
                              refusal=refusal, t_model=t_model, max_el=max_el, consistency=consistency)
@@ -238,27 +175,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
               "propagator": "Taylor (DT) with first-order sensitivity spectra, quasi-inertial frame of the traverse "
                             "epoch"}
     if opt.cost == "integral":
-        d = ref.integral
-        w = d["weights"]
-        res_nodes = d["observed"] - sol.computed
-        integral = float(np.sum(w * res_nodes ** 2))
-        method.update({
-            "integral": {"equation": "I = integral over the pass of (Vr_LSQ - Vr(X, t))^2 dt (seed 004 eq. 14)",
-                         "quadrature": f"composite Gauss-Legendre, {opt.quadrature_order} nodes per panel of at most "
-                                       f"{opt.quadrature_panel_s:g} s", "nodes": int(w.size),
-                         "intervals_s": d["intervals"], "I_m2_s": integral,
-                         "rms_curve_difference_m_s": math.sqrt(integral / float(np.sum(w))),
-                         "normalisation": "chi2 = I / (sigma_ref^2 * spacing)", "sigma_ref_m_s": d["sigma_ref"],
-                         "spacing_s": d["spacing"],
-                         "link": d["mode"],
-                         "gradient": ("first-order 2-D DT sensitivities (seed 004 eqs. 19-21) through the range and "
-                                      "range-rate spectra" if d["mode"] == "one-way" else
-                                      "round-trip (two-way) range-rate partials through both light times times the "
-                                      "Taylor engine's state transition matrix (first-order DT sensitivities)"),
-                         "covariance": "the smoothing polynomial's scaled coefficient covariance propagated through "
-                                       "the linearised estimator (sandwich)",
-                         "sigma_formal": sol.sigma.tolist()},
-            "curve": {"degree": int(ref.curve.fit.degree), "basis": ref.curve.fit.basis, "source": ref.curve.source}})
+        method.update(integral_method(ref, sol))
     stale_doc = {"epoch": iso_utc(ref.stale_epoch), "frame": "GCRF", "position_m": rv_s[:3].tolist(),
                  "velocity_m_s": rv_s[3:].tolist(), "parameters": names, "values": np.r_[rv_s, x[6:]].tolist(),
                  "sigma": np.sqrt(np.clip(np.diag(cov_s), 0.0, None)).tolist(), "covariance": cov_s.tolist()}
@@ -282,6 +199,124 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     return RefineResult(state=state, stale_epoch_state=stale_state, solution=sol, problem=problem, curve=ref.curve,
                         residuals=residuals, observability=obs, constraints=constraints, covariance=cov, names=names,
                         warnings=warnings, quality=quality)
+
+
+def constraint_report(ref: Refinement, x, cov, sigma, kkt=None, consistency: dict | None = None) -> dict:
+    """The circular-orbit constraints of seed 004 eq. 5 at the solution ``x`` (values, scales, ``r_ka``
+    and its sigma; with ``kkt`` the multipliers and, under ``--circular``, ``consistency``)."""
+    opt = ref.options
+    names = list(ref.names)
+    rka = float(x[-1]) if opt.circular else float(np.linalg.norm(x[:3]))
+    x7 = np.r_[x[:6], rka]
+    f, _ = rf.circular_constraints(x7, ref.mu)
+    fscale = rf.constraint_scales(x7, ref.mu)
+    constraints = {"names": list(rf.CONSTRAINT_NAMES), "units": ["m^2", "m^2/s^2", "m^2/s"],
+                   "values": f.tolist(), "relative": (f / fscale).tolist(), "imposed": bool(opt.circular),
+                   "r_ka_m": rka, "eccentricity": eccentricity(x[:3], x[3:6], ref.mu)}
+    if kkt is not None:
+        constraints.update({"multipliers": kkt.multipliers.tolist(),
+                            "multipliers_note": "lambda of L = chi2 + lambda^T f (chi2: the whitened cost; "
+                                                "seed 004 eq. 16), per unit of each constraint",
+                            "stationarity": kkt.stationarity, "restoration_steps": kkt.restorations,
+                            "free_directions": kkt.null_space_dim, "eccentricity_tolerance": ref.tolerance(),
+                            "tolerance_note": "the covariance includes the constraints' own uncertainty for an orbit "
+                                              "circular only to this eccentricity (0: conditional on an exactly "
+                                              "circular orbit)"})
+        i_rka = names.index("r_ka")
+        constraints["r_ka_sigma_m"] = float(sigma[i_rka])
+        if consistency is not None:
+            constraints["consistency"] = consistency
+    else:
+        u = x[:3] / np.linalg.norm(x[:3])
+        constraints["r_ka_sigma_m"] = float(np.sqrt(u @ cov[:3, :3] @ u))
+    return constraints
+
+
+def at_stale_epoch(ref: Refinement, x, cov) -> tuple[np.ndarray, np.ndarray]:
+    """The refined state ``x`` and its covariance moved to the stale state's epoch by the STM."""
+    opt = ref.options
+    problem = ref.problem
+    names = list(ref.names)
+    dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(ref.stale_epoch),
+                                tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))))
+    if dt == 0.0:
+        rv_s, cov_s = x[:6].copy(), cov.copy()
+    else:
+        traj = propagator.propagate(x[:3], x[3:6], problem.epoch, [dt], force=opt.force, stm=True,
+                                    frame=problem.frame, eop=problem.eop).raise_for_outcome()
+        rv_s = traj.state(dt)
+        jac = np.eye(len(names))
+        jac[:6, :6] = traj.stm(dt)
+        cov_s = jac @ cov @ jac.T
+        cov_s = 0.5 * (cov_s + cov_s.T)
+    return rv_s, cov_s
+
+
+def refine_warnings(ref: Refinement, sol, obs, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None,
+                    max_el: float | None = None) -> list:
+    """The warnings a solution earns (low pass, reweighting, circular-constraint conflict, variance
+    factor, a-priori conflict, edited samples, unseen directions), in the order the report gives them."""
+    opt = ref.options
+    warnings = []
+    if max_el is not None and max_el < LOW_PASS_DEG:
+        warnings.append(f"a low pass (highest elevation {max_el:.1f} deg < {LOW_PASS_DEG:g}): one low pass "
+                        "determines the orbit poorly and an onboard oscillator's wander is easily taken for orbit; "
+                        "see docs/refine.md")
+    if sigma_scale > 1.0:
+        warnings.append(f"the samples scatter more than their sigmas say: sigmas scaled by {sigma_scale:.3g} "
+                        "(sqrt of the variance factor, iterated) before weighing them against the a-priori")
+    if consistency is not None and consistency.get("p_value", 1.0) < CIRCULAR_TEST_P:
+        c = consistency
+        warnings.append(f"the pass contradicts the circular-orbit constraints (delta chi2 = {c['delta_chi2']:.4g}, 2 "
+                        f"degrees of freedom, p = {c['p_value']:.2g}; the unconstrained fit's eccentricity is "
+                        f"{c['free_fit_eccentricity']:.2g}): the constrained state is biased and its covariance too "
+                        "small; give --circular-tolerance (the eccentricity the orbit is circular to) or drop "
+                        "--circular")
+    if opt.circular and kkt is not None and ref.tolerance() == 0.0:
+        warnings.append("--circular: the covariance is conditional on an exactly circular orbit; with J2 the "
+                        "osculating eccentricity of a circular orbit swings by about 1e-3 (give --circular-tolerance)")
+    if sol.dof > 0 and sol.variance_factor > 4.0 and opt.cost == "pointwise":
+        warnings.append(f"a-posteriori variance factor {sol.variance_factor:.3g} (> 4): the sigmas of the data are too "
+                        "small or the model misses something; the covariance is optimistic")
+    if sol.n_prior:
+        limit = chi2_limit(sol.n_prior, 0.999)
+        if sol.chi2_prior > limit:
+            warnings.append(f"the refined state departs from the stale state by chi2 = {sol.chi2_prior:.4g} over "
+                            f"{sol.n_prior} a-priori constraints (99.9 % limit {limit:.3g}): the pass and the stale "
+                            "state disagree; check the pass, or loosen the a-priori")
+    if opt.cost == "pointwise" and sol.n_edited > 0.1 * sol.n_measurements:
+        warnings.append(f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)")
+    if opt.cost == "integral" and not ref.priors and obs.unobservable:
+        warnings.append(f"{len(obs.unobservable)} state direction(s) are weakly determined by the pass alone "
+                        "(see the observability report); consider --apriori")
+    return warnings
+
+
+def integral_method(ref: Refinement, sol) -> dict:
+    """The integral cost's part of the method report (seed 004 eq. 14: quadrature, normalisation,
+    gradient, covariance) and the smoothed curve it integrates."""
+    opt = ref.options
+    d = ref.integral
+    w = d["weights"]
+    res_nodes = d["observed"] - sol.computed
+    integral = float(np.sum(w * res_nodes ** 2))
+    return {
+        "integral": {"equation": "I = integral over the pass of (Vr_LSQ - Vr(X, t))^2 dt (seed 004 eq. 14)",
+                     "quadrature": f"composite Gauss-Legendre, {opt.quadrature_order} nodes per panel of at most "
+                                   f"{opt.quadrature_panel_s:g} s", "nodes": int(w.size),
+                     "intervals_s": d["intervals"], "I_m2_s": integral,
+                     "rms_curve_difference_m_s": math.sqrt(integral / float(np.sum(w))),
+                     "normalisation": "chi2 = I / (sigma_ref^2 * spacing)", "sigma_ref_m_s": d["sigma_ref"],
+                     "spacing_s": d["spacing"],
+                     "link": d["mode"],
+                     "gradient": ("first-order 2-D DT sensitivities (seed 004 eqs. 19-21) through the range and "
+                                  "range-rate spectra" if d["mode"] == "one-way" else
+                                  "round-trip (two-way) range-rate partials through both light times times the "
+                                  "Taylor engine's state transition matrix (first-order DT sensitivities)"),
+                     "covariance": "the smoothing polynomial's scaled coefficient covariance propagated through "
+                                   "the linearised estimator (sandwich)",
+                     "sigma_formal": sol.sigma.tolist()},
+        "curve": {"degree": int(ref.curve.fit.degree), "basis": ref.curve.fit.basis, "source": ref.curve.source}}
 
 
 def without_nuisance(improvement):
