@@ -80,27 +80,28 @@ def ingest_command(
     out = resolve_output(output, "output pass file")
     out_format = table_format_for(out, fmt)
 
-    from trackproc.io.passfile import write_pass_table
+    from trackproc.io.passfile import canonical_schema, write_pass_batches
     from trackproc.io.stations import read_stations
-    from trackproc.io.tabular import read_raw
-    from trackproc.pipeline.ingest import IngestOptions, ingest
+    from trackproc.io.tabular import iter_raw
+    from trackproc.pipeline.ingest import Ingest, IngestOptions
 
     table = read_stations(stations) if stations is not None else {}
-    raws = [read_raw(path, layout.value, sidecar=sidecar, carrier_hz=carrier_hz, drop_invalid=drop_invalid,
-                     tdm_two_way_range=tdm_two_way_range.value)
-            for path in inputs]
     options = IngestOptions(
         carrier_hz=carrier_hz, doppler_mode=mode.value if mode is not None else None, max_gap_s=max_gap,
         drop_invalid=drop_invalid, sigma_range_m=sigma_range_m, sigma_range_rate_m_s=sigma_range_rate_m_s,
         sigma_doppler_hz=sigma_doppler_hz, sigma_angle_deg=sigma_angle_deg)
-    result = ingest(raws, table, options)
+    run = Ingest(table, options)
+    for path in inputs:   # streamed: a chunk of rows at a time (docs/ingest.md)
+        run.add_input(iter_raw(path, layout.value, sidecar=sidecar, carrier_hz=carrier_hz, drop_invalid=drop_invalid,
+                               tdm_two_way_range=tdm_two_way_range.value))
+    result = run.finish()
     for warning in result.warnings:
         log.warning("%s", warning)
     if result.dropped:
         log.warning("dropped %d invalid samples: %s", sum(result.dropped.values()),
                     ", ".join(f"{reason} {n}" for reason, n in result.dropped.items()))
-    write_pass_table(result.table, out, out_format.value)
-    frame = result.table.frame
-    log.info("ingested %d samples, %d pass(es), %d station(s) -> %s (%s)", len(frame),
-             frame["pass_id"].nunique(), frame["station"].nunique(), "stdout" if out == "-" else out,
-             out_format.value)
+    schema = canonical_schema(result.meta)
+    write_pass_batches(result.samples.arrow_batches(schema), schema, out, out_format.value)
+    samples, passes, station_count = result.samples.counts()
+    log.info("ingested %d samples, %d pass(es), %d station(s) -> %s (%s)", samples, passes, station_count,
+             "stdout" if out == "-" else out, out_format.value)

@@ -33,6 +33,7 @@ import csv
 import io
 import json
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -167,30 +168,143 @@ def angles_in_degrees(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def pass_table_bytes(table: PassTable, fmt: str = "parquet") -> bytes:
-    """The encoded file: ``parquet``, ``arrow`` (IPC stream) or ``csv``."""
+    """The encoded file: ``parquet``, ``arrow`` (IPC stream) or ``csv``. Smoothing records (see
+    :mod:`trackproc.io.smoothing_record`) follow an Arrow table as a second stream, and stay inline
+    in the metadata of a Parquet or CSV that has no file of its own (:func:`write_pass_table` puts
+    them in a sidecar)."""
+    from trackproc.io import smoothing_record
+
     fmt = getattr(fmt, "value", fmt)
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown pass-table format {fmt!r}; expected one of {FORMATS}")
+    meta, records = smoothing_record.split_records(table.meta, "stream" if fmt == "arrow" else "inline")
+    if records is None and smoothing_record.smoothing_of(meta).get("fits"):
+        text = meta_json(meta)
+        smoothing_record.check_inline_size(text, f"a {fmt} stream")
+    table = PassTable(table.frame, meta)
     if fmt == "csv":
-        frame = angles_in_degrees(table.frame)
         out = io.StringIO()
         out.write(csv_metadata_line(meta_json(table.meta)))
-        writer = csv.writer(out, lineterminator="\n")
-        columns = list(COLUMNS) + [c for c in frame.columns if c not in COLUMNS]
-        writer.writerow(columns)
-        cells = [iso_times(frame["time"])] + [frame[c].to_numpy(dtype=object) for c in columns[1:]]
-        for row in zip(*cells):
-            writer.writerow([row[0]] + [_csv_cell(v) for v in row[1:]])
+        _write_csv_rows(out, table.frame, header=True)
         return out.getvalue().encode("utf-8")
-    arrow = to_arrow(table)
-    if fmt not in ("parquet", "arrow"):
-        raise ValueError(f"unknown pass-table format {fmt!r}; expected one of {FORMATS}")
-    return arrow_table_bytes(arrow, fmt)
+    data = arrow_table_bytes(to_arrow(table), fmt)
+    return data if records is None else data + arrow_table_bytes(records, "arrow")
+
+
+def _write_csv_rows(out, frame: pd.DataFrame, *, header: bool) -> None:
+    frame = angles_in_degrees(frame)
+    writer = csv.writer(out, lineterminator="\n")
+    columns = list(COLUMNS) + [c for c in frame.columns if c not in COLUMNS]
+    if header:
+        writer.writerow(columns)
+    cells = [iso_times(frame["time"])] + [frame[c].to_numpy(dtype=object) for c in columns[1:]]
+    for row in zip(*cells):
+        writer.writerow([row[0]] + [_csv_cell(v) for v in row[1:]])
 
 
 def write_pass_table(table: PassTable, path: str, fmt: str = "parquet") -> None:
-    """Write ``table`` atomically to ``path`` (``-`` = stdout) as parquet, arrow or csv."""
+    """Write ``table`` atomically to ``path`` (``-`` = stdout) as parquet, arrow or csv; the
+    smoothing records of a Parquet or CSV file go to its sidecar (``x.passes.parquet``, written
+    first) with their checksum in the pointer."""
+    from trackproc.io import smoothing_record
+
+    fmt = getattr(fmt, "value", fmt)
+    target = None if is_stdio(path) else Path(path)
+    if fmt != "arrow" and target is not None and not (target.exists() and not target.is_file()):
+        meta, records = smoothing_record.split_records(table.meta, "sidecar")
+        if records is not None:
+            import hashlib
+
+            side = smoothing_record.sidecar_path(target)
+            side_bytes = arrow_table_bytes(records, "parquet")
+            meta[smoothing_record.META_KEY]["records"].update(
+                file=side.name, sha256=hashlib.sha256(side_bytes).hexdigest())
+            with open_atomic(side) as handle:
+                handle.write(side_bytes)
+            table = PassTable(table.frame, meta)
     data = pass_table_bytes(table, fmt)
     with open_atomic(path) as handle:
         handle.write(data)
+
+
+def canonical_schema(meta: dict) -> pa.Schema:
+    """The schema of a canonical pass table (:data:`COLUMNS`) with ``meta`` under ``trackproc``."""
+    return pa.schema([pa.field("time", pa.timestamp("ns", tz="UTC"), nullable=False),
+                      pa.field("station", pa.string(), nullable=False),
+                      pa.field("pass_id", pa.string(), nullable=False),
+                      pa.field("kind", pa.string(), nullable=False),
+                      pa.field("value", pa.float64(), nullable=False),
+                      pa.field("sigma", pa.float64(), nullable=False)],
+                     metadata={META_KEY: meta_json(meta).encode()})
+
+
+def write_pass_batches(batches, schema: pa.Schema, path: str, fmt: str = "parquet") -> None:
+    """Write a canonical table given as record batches (``schema``: :func:`canonical_schema`)
+    atomically to ``path`` (``-`` = stdout), one batch at a time: the same bytes as
+    :func:`write_pass_table` of the whole table when each batch is a Parquet row group
+    (:data:`~trackproc.pipeline.ingest_samples.SLICE_ROWS` rows)."""
+    fmt = getattr(fmt, "value", fmt)
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown pass-table format {fmt!r}; expected one of {FORMATS}")
+    with open_atomic(path) as handle:
+        if fmt == "csv":
+            meta = json.loads(schema.metadata[META_KEY])
+            handle.write(csv_metadata_line(meta_json(meta)).encode("utf-8"))
+            header = True
+            for batch in batches:
+                out = io.StringIO()
+                _write_csv_rows(out, batch.to_pandas(), header=header)
+                handle.write(out.getvalue().encode("utf-8"))
+                header = False
+            if header:
+                out = io.StringIO()
+                _write_csv_rows(out, schema.empty_table().to_pandas(), header=True)
+                handle.write(out.getvalue().encode("utf-8"))
+            return
+        sink = _Sink(handle)
+        if fmt == "parquet":
+            import pyarrow.parquet as pq
+
+            writer = pq.ParquetWriter(sink, schema, compression="zstd")
+            empty = True
+            for batch in batches:
+                writer.write_table(pa.Table.from_batches([batch], schema=schema))
+                empty = False
+            if empty:
+                writer.write_table(schema.empty_table())
+            writer.close()
+        else:
+            with pa.ipc.new_stream(sink, schema) as writer:
+                for batch in batches:
+                    writer.write_batch(batch)
+
+
+class _Sink:
+    """A write-only file for Arrow's writers over an atomic output or stdout (which cannot tell)."""
+
+    def __init__(self, handle):
+        self.handle, self.position, self.closed = handle, 0, False
+
+    def write(self, data) -> int:
+        n = len(memoryview(data).cast("B"))
+        self.handle.write(data)
+        self.position += n
+        return n
+
+    def tell(self) -> int:
+        return self.position
+
+    def flush(self) -> None:
+        self.handle.flush()
+
+    def close(self) -> None:
+        self.closed = True
+
+    def writable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return False
 
 
 # --------------------------------------------------------------------------- reading
@@ -248,7 +362,24 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
         if degrees.any() and name in frame.columns and frame[name].dtype.kind == "f":
             frame.loc[degrees, name] = np.radians(frame.loc[degrees, name].to_numpy(dtype=np.float64))
     _check_meta(meta, frame, table.rows, source)
+    _attach_records(meta, data, source)
     return PassTable(frame, meta)
+
+
+def _attach_records(meta: dict, data: bytes, source: str) -> None:
+    """Layout-2 smoothing records, loaded when first used: in a sidecar, or after an Arrow stream."""
+    from trackproc.io import smoothing_record
+
+    pointer = smoothing_record.smoothing_of(meta).get("records")
+    rest = None
+    if isinstance(pointer, dict) and pointer.get("in") == "stream" and data[:4] == b"\xff\xff\xff\xff":
+        reader = pa.BufferReader(data)
+        try:
+            pa.ipc.open_stream(reader).read_all()
+            rest = data[reader.tell():]
+        except (pa.ArrowException, OSError, ValueError):
+            rest = None
+    smoothing_record.attach_records(meta, source, rest)
 
 
 def _check_samples(problems, columns: dict, table, source: str) -> None:
