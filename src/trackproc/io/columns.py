@@ -198,8 +198,10 @@ def _arrow_column(name: str, array: pa.Array) -> Column:
         array = array.cast(array.type.value_type)
     if pa.types.is_string(array.type) or pa.types.is_large_string(array.type) or \
             pa.types.is_string_view(array.type):
-        values = pc.fill_null(array.cast(pa.string()), "").to_numpy(zero_copy_only=False)
-        return Column(name, text=np.array([v.strip() for v in values], dtype=object))
+        # one Python string per distinct value (station, pass and kind repeat): ~8 bytes a row
+        encoded = pc.dictionary_encode(pc.fill_null(array.cast(pa.string()), ""))
+        values = np.array([v.strip() for v in encoded.dictionary.to_pylist()] or [""], dtype=object)
+        return Column(name, text=values[encoded.indices.to_numpy(zero_copy_only=False)])
     return Column(name, array=array)
 
 

@@ -114,8 +114,6 @@ def records_table(fits):
 
     import pyarrow as pa
 
-    from trackproc.io.jsonutil import json_ready
-
     columns = {name: [] for name in ("station", "pass_id", "kind", "status", *_ARRAYS, "scaled_derived", "record")}
     for rec in fits:
         rest = dict(rec)
@@ -125,9 +123,8 @@ def records_table(fits):
         columns["coefficients"].append(None if coef is None else [_float(v) for v in coef])
         flat = None if cov is None else [_float(v) for row in cov for v in row]
         columns["covariance_unscaled"].append(flat)
-        derived = (cov is not None and "covariance_scaled" in rest
-                   and rest["covariance_scaled"] == json_ready((np.asarray(flat, float).reshape(len(cov), -1)
-                                                                * _float(rest.get("variance_factor"))).tolist()))
+        derived = cov is not None and "covariance_scaled" in rest and _is_scaled(
+            rest["covariance_scaled"], np.asarray(flat, float).reshape(len(cov), -1), rest.get("variance_factor"))
         if derived:
             del rest["covariance_scaled"]
         columns["scaled_derived"].append(bool(derived))
@@ -141,25 +138,46 @@ def _float(value) -> float:
     return math.nan if value is None else float(value)
 
 
+def _is_scaled(scaled, unscaled: np.ndarray, factor) -> bool:
+    """``scaled`` (JSON: null for non-finite) is exactly ``unscaled * factor`` (as smooth makes it)."""
+    try:
+        given = np.array(scaled, dtype=float)     # None -> nan
+    except (TypeError, ValueError):
+        return False
+    made = unscaled * _float(factor)
+    made[~np.isfinite(made)] = np.nan
+    return given.shape == made.shape and bool(np.array_equal(given, made, equal_nan=True))
+
+
+def _plain(values: list) -> list:
+    """Floats as JSON holds them: NaN and infinities as None."""
+    return [v if v is not None and math.isfinite(v) else None for v in values]
+
+
 def record_of(table, i: int) -> dict:
     """Row ``i`` of :func:`records_table` as the record it was made from."""
+    return next(_records(table.slice(i, 1)))
+
+
+def _records(table):
+    """Every row of :func:`records_table` as its record (columns converted once, not cell by cell)."""
     import json
 
-    from trackproc.io.jsonutil import json_ready
-
-    rec = {key: table.column(key)[i].as_py() for key in ("station", "pass_id", "kind", "status")}
-    rec.update(json.loads(table.column("record")[i].as_py()))
-    coef = table.column("coefficients")[i].as_py()
-    if coef is not None:
-        rec["coefficients"] = json_ready(coef)
-    flat = table.column("covariance_unscaled")[i].as_py()
-    if flat is not None:
-        n = math.isqrt(len(flat))
-        cov = np.asarray(flat, float).reshape(n, n) if n * n == len(flat) else np.asarray(flat, float)[None, :]
-        rec["covariance_unscaled"] = json_ready(cov.tolist())
-        if table.column("scaled_derived")[i].as_py():
-            rec["covariance_scaled"] = json_ready((cov * _float(rec.get("variance_factor"))).tolist())
-    return rec
+    columns = {name: table.column(name).to_pylist() for name in table.column_names}
+    for i in range(table.num_rows):
+        rec = {key: columns[key][i] for key in ("station", "pass_id", "kind", "status")}
+        rec.update(json.loads(columns["record"][i]))
+        coef = columns["coefficients"][i]
+        if coef is not None:
+            rec["coefficients"] = _plain(coef)
+        flat = columns["covariance_unscaled"][i]
+        if flat is not None:
+            n = math.isqrt(len(flat))
+            cov = np.asarray(flat, float).reshape(n, n) if n * n == len(flat) else np.asarray(flat, float)[None, :]
+            rec["covariance_unscaled"] = [_plain(row) for row in cov.tolist()]
+            if columns["scaled_derived"][i]:
+                rec["covariance_scaled"] = [_plain(row) for row in (cov * _float(rec.get("variance_factor"))).tolist()]
+        yield rec
 
 
 class FitRecords:
@@ -186,8 +204,7 @@ class FitRecords:
         return record_of(self.table(), i % n)
 
     def __iter__(self):
-        table = self.table()
-        return (record_of(table, i) for i in range(table.num_rows))
+        return _records(self.table())
 
     def __bool__(self) -> bool:
         return len(self) > 0
