@@ -160,3 +160,15 @@ def test_peak_memory_of_a_large_ingest(tmp_path):
     import pyarrow.parquet as pq
 
     assert pq.ParquetFile(out).metadata.num_rows == 500_000
+
+
+def test_samples_of_all_inputs_are_bounded(run_cli, monkeypatch, tmp_path):
+    """The samples kept for the whole-set checks are bounded too (a wide row gives several)."""
+    raw, stations = tmp_path / "in.csv", tmp_path / "st.csv"
+    raw.write_text(_wide(8))                       # 8 rows, 16 samples
+    stations.write_text(ST)
+    monkeypatch.setenv("TRACKPROC_MAX_INPUT_ROWS", "10")
+    monkeypatch.setenv("TRACKPROC_CHUNK_ROWS", "3")
+    result = run_cli(["ingest", raw, "--stations", stations, "-o", tmp_path / "o.parquet"])
+    assert result.exit_code == 2 and "more than 10 samples" in result.stderr
+    assert result.stderr.count("\n") == 1 and not (tmp_path / "o.parquet").exists()

@@ -38,7 +38,7 @@ from trackproc.io.passfile import COLUMNS, KINDS, PassTable, base_meta
 from trackproc.io.raw import RawMeasurements
 from trackproc.pipeline.ingest_samples import Names, Samples, pass_codes
 from trackproc.io.stations import Station
-from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_carrier, check_los_speed
+from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_carrier, check_los_speed, max_input_rows
 from trackproc.io.layouts import DEG, UNIT_SPELLINGS
 from trackproc.io.problems import NONFINITE_SIGMA, NONFINITE_VALUE, UNKNOWN_KIND, Problems, add_counts
 
@@ -131,6 +131,7 @@ class Ingest:
         self.reader_dropped: dict[str, int] = {}
         self.checked_dropped: dict[str, int] = {}
         self.pending: tuple[tuple[int, int], InputError] | None = None   # earliest invalid sample
+        self.max_samples = max_input_rows()
 
     def add_input(self, chunks: Iterable[RawMeasurements]) -> None:
         """Read one input's chunks (all of them: a later chunk may hold a reader error)."""
@@ -158,6 +159,9 @@ class Ingest:
             add_counts(self.checked_dropped, counts)
             frame = frame[keep]
         self.samples.append(frame, index)
+        if len(self.samples) > self.max_samples:   # ~45 bytes each are kept until the end
+            raise InputError(f"more than {self.max_samples} samples in all inputs", file=raw.source,
+                             expected="fewer samples (split the inputs), or a larger TRACKPROC_MAX_INPUT_ROWS")
 
     def finish(self) -> IngestResult:
         """The checks that need every sample, then order and passes (see the module docstring)."""

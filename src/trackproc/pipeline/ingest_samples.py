@@ -54,12 +54,14 @@ class Samples:
         self.stations, self.passes, self.units = Names(), Names([""]), Names()
         self._pieces: dict[str, list] = {name: [] for name in DTYPES}
         self.columns: dict[str, np.ndarray] = {}
+        self._appended = 0
 
     def append(self, frame: pd.DataFrame, input_index: int) -> None:
         """Samples of one chunk (the merged frame of :mod:`trackproc.pipeline.ingest`)."""
         n = len(frame)
         if not n:
             return
+        self._appended += n
         kind_codes = {k: i for i, k in enumerate(KINDS)}
         pieces = self._pieces
         pieces["time"].append(frame["time"].dt.tz_convert("UTC").dt.tz_localize(None).dt.as_unit("ns")
@@ -82,7 +84,7 @@ class Samples:
             del parts
 
     def __len__(self) -> int:
-        return len(self.columns["time"]) if self.columns else sum(len(p) for p in self._pieces["time"])
+        return len(self.columns["time"]) if self.columns else self._appended
 
     def keep(self, mask: np.ndarray) -> None:
         for name in list(self.columns):
