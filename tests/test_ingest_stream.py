@@ -48,6 +48,9 @@ CASES = {
         "# a comment line\ntime,station,kind,value,sigma,pass_id\n"
         + "".join(f"2026-03-20T09:30:{i:02d}Z,ZHY,{'range_km' if i % 2 else 'elevation_deg'},{10 + i},,"
                   f"{'mine' if i > 30 else ''}\n\n" for i in range(45)), []),
+    "spaces, tabs, no final newline": (_wide(30).replace(",ZHY,", " ,  ZHY\t, ").rstrip("\n"), []),
+    "comma-only and blank lines late": (_wide(30, bad={25: {2: "-1"}}).replace("\n2026-03-20T09:04:00Z", "\n,,,\n \n2026-03-20T09:04:00Z"),
+                                        []),
     "quoted newlines and comments": (
         'time,station,"range_m",elevation_deg\n'
         + "".join(f'2026-03-20T09:30:{i:02d}Z,ZHY,"{1e6 + i}\n",{10 + i * 0.1}\n# note {i}\n' for i in range(20))
@@ -96,6 +99,8 @@ def test_cases_fail_where_they_should(run_cli, monkeypatch, tmp_path):
     assert "row 35" in codes["duplicate and unknown station"][1]
     assert "wrong number of fields" in codes["wrong field count late"][1]
     assert codes["long layout with sigma and pass ids"][0] == 0
+    assert codes["spaces, tabs, no final newline"][0] == 0
+    assert "row 29" in codes["comma-only and blank lines late"][1]   # data row 27 after two skipped lines
     assert "row 62" in codes["quoted newlines and comments"][1]   # 20 x 3 lines after the header
     assert ("dropped 9 invalid samples: unparseable time 2, non-finite value 1, elevation out of range 1, "
             "negative range 1, unknown station 2, duplicated timestamp 2") in codes["drop invalid"][1]

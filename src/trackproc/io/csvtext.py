@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 import io
 import os
+import re
 from dataclasses import dataclass, field
 from typing import Iterable, Iterator
 
@@ -94,6 +95,13 @@ def iter_text_tables(blocks: Iterable[bytes], source: str) -> Iterator[TextTable
         text = decode_text(piece, source, line0=newlines, encoding="utf-8-sig" if first else "utf-8")
         newlines += piece.count(b"\n")
         check_input_rows(newlines - 1, file=source)
+        table = _plain_chunk(piece, header, lines) if header is not None else None
+        if table is not None:   # the common case, parsed by Arrow's CSV reader
+            lines += len(table.rows)
+            table.header_row, table.comments = header_row, comments
+            yield table
+            comments = []
+            continue
         records, starts, found, count = _records(text, source, lines)
         lines += count
         comments.extend(found)
@@ -106,6 +114,38 @@ def iter_text_tables(blocks: Iterable[bytes], source: str) -> Iterator[TextTable
         comments = []
     if header is None:
         raise _no_header(source)
+
+
+#: What only the line-by-line reader handles exactly: quotes, comments, blank or comma-only lines,
+#: line breaks other than \n (str.splitlines counts them), NUL, a last line without its newline.
+_NOT_PLAIN = re.compile(rb'["#\r\x00\x0b\x0c\x1c-\x1e]|\xc2\x85|\xe2\x80[\xa8\xa9]|(?:^|\n)[ \t,]*\n')
+
+
+def _plain_chunk(piece: bytes, header: list[str], line0: int) -> TextTable | None:
+    """A chunk of plain lines (one record each) parsed by Arrow's CSV reader, ~5 times faster than
+    the csv module; None when the chunk needs the exact line-by-line reader (or has a wrong number
+    of fields, which that reader reports with its row)."""
+    if not piece.endswith(b"\n") or _NOT_PLAIN.search(piece):
+        return None
+    import pyarrow as pa
+    import pyarrow.compute as pc
+    import pyarrow.csv as pacsv
+
+    try:
+        table = pacsv.read_csv(
+            pa.BufferReader(piece),
+            read_options=pacsv.ReadOptions(column_names=header, block_size=len(piece) + 1, use_threads=False),
+            parse_options=pacsv.ParseOptions(quote_char=False),
+            convert_options=pacsv.ConvertOptions(column_types={name: pa.string() for name in header},
+                                                 strings_can_be_null=False))
+    except (pa.ArrowException, ValueError):
+        return None
+    n = table.num_rows
+    if n != piece.count(b"\n"):
+        return None
+    cells = {name: pc.utf8_trim_whitespace(table.column(name)).to_numpy(zero_copy_only=False).astype(object)
+             for name in header}
+    return TextTable(list(header), cells, np.arange(line0 + 1, line0 + n + 1, dtype=np.int64), 0)
 
 
 def _no_header(source: str) -> InputError:

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import Iterator
 
 from trackproc.errors import InputError
-from trackproc.io.atomic import is_stdio, iter_input_blocks, read_input_bytes
+from trackproc.io.atomic import is_stdio, iter_input_blocks, max_input_bytes, read_input_bytes
 from trackproc.io.columns import (META_KEY, Column, SourceTable, column_numbers, column_strings,  # noqa: F401
                                   column_times, iter_source_tables, load_arrow, sniff_container, source_table,
                                   table_meta)
@@ -133,6 +133,12 @@ def iter_raw(path: str, layout: str = "auto", *, sidecar: str | None = None,
                        tdm_two_way_range=tdm_two_way_range, data=head + b"".join(blocks))
         return
     regular = not is_stdio(path) and sniff_container(head) != "text" and os.path.isfile(path)
+    if regular:   # Parquet and Arrow read the file directly, one row group at a time
+        blocks.close()
+        limit = max_input_bytes()
+        if os.path.getsize(path) > limit:
+            raise InputError(f"input larger than the limit of {limit / (1 << 20):g} MiB", file=source,
+                             expected="a smaller input, or a larger TRACKPROC_MAX_INPUT_MB")
     tables = iter_source_tables(_chain(head, blocks), source, path=str(path) if regular else None)
     first = next(tables)
     reader = layout_reader(first, layout, drop_invalid)
