@@ -337,11 +337,14 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
     data_columns = {"time": pd.DatetimeIndex(times).tz_localize("UTC")}
     for name in ("station", "pass_id", "kind"):
         data_columns[name] = pd.Series(column_strings(table, table.columns[name]), dtype=object).astype(str)
-    kinds = data_columns["kind"].to_numpy(dtype=object)
-    degrees = np.isin(kinds, [k + "_deg" for k in ANGLE_KINDS])   # a trackproc CSV's angle rows
-    kinds = np.where(degrees, [str(k)[:-4] for k in kinds], kinds)
-    problems.add("unknown kind", ~np.isin(kinds, KINDS), column="kind", found=kinds,
-                 expected="one of " + ", ".join(KINDS))
+    # text columns compared through their few distinct values (codes), never row by row
+    codes, written = pd.factorize(data_columns["kind"])
+    written = [str(k) for k in written]
+    in_degrees = [k in [a + "_deg" for a in ANGLE_KINDS] for k in written]   # a trackproc CSV's angle rows
+    names = np.array([k[:-4] if deg else k for k, deg in zip(written, in_degrees)] or [""], dtype=object)
+    degrees = np.array(in_degrees or [False])[codes]
+    problems.add("unknown kind", ~np.array([k in KINDS for k in names])[codes], column="kind",
+                 found=lambda i: names[codes[i]], expected="one of " + ", ".join(KINDS))
     for name in ("value", "sigma"):
         values, missing_mask, wrong = column_numbers(table, table.columns[name])
         problems.add("wrong column type", wrong | missing_mask, column=name,
@@ -349,7 +352,7 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
                      expected="a number (SI units)")
         data_columns[name] = values
     if degrees.any():   # a trackproc CSV's angle rows are in degrees (the CSV edge): radians inside
-        data_columns["kind"] = pd.Series(kinds, dtype=object).astype(str)
+        data_columns["kind"] = pd.Series(names[codes], dtype=object).astype(str)
         for name in ("value", "sigma"):
             data_columns[name] = np.where(degrees, np.radians(data_columns[name]), data_columns[name])
     _check_samples(problems, data_columns, table, source)
@@ -387,24 +390,30 @@ def _check_samples(problems, columns: dict, table, source: str) -> None:
     |range-rate| <= 12 km/s; station names printable."""
     from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_name
 
-    kinds = columns["kind"].to_numpy(dtype=object)
+    codes, names = pd.factorize(columns["kind"])
+    names = [str(k) for k in names]
+
+    def of_kind(kind: str) -> np.ndarray:
+        return codes == names.index(kind) if kind in names else np.zeros(len(codes), bool)
+
     value, sigma = np.asarray(columns["value"], float), np.asarray(columns["sigma"], float)
     given = np.isfinite(value)
     problems.add("non-finite value", ~given, column="value", found=value, expected="a finite number")
     problems.add("invalid sigma", ~(np.isfinite(sigma) & (sigma > 0)), column="sigma",
                  found=sigma, expected="a finite sigma > 0")
-    problems.add("negative range", given & (kinds == "range") & (value < 0), column="value", found=value,
+    problems.add("negative range", given & of_kind("range") & (value < 0), column="value", found=value,
                  expected="a range >= 0 m")
-    problems.add("elevation out of range", given & (kinds == "elevation") & (np.abs(value) > np.pi / 2 + 1e-12),
+    problems.add("elevation out of range", given & of_kind("elevation") & (np.abs(value) > np.pi / 2 + 1e-12),
                  column="value", found=value, expected="an elevation in [-pi/2, pi/2] rad")
-    problems.add("azimuth out of range", given & (kinds == "azimuth") & ((value < -np.pi) | (value > 2 * np.pi)),
+    problems.add("azimuth out of range", given & of_kind("azimuth") & ((value < -np.pi) | (value > 2 * np.pi)),
                  column="value", found=value, expected="an azimuth in [-pi, 2 pi] rad")
-    problems.add("implausible range-rate", given & (kinds == "range_rate") & (np.abs(value) > MAX_LOS_SPEED_M_S),
+    problems.add("implausible range-rate", given & of_kind("range_rate") & (np.abs(value) > MAX_LOS_SPEED_M_S),
                  column="value", found=value,
                  expected=f"|range-rate| <= {MAX_LOS_SPEED_M_S:g} m/s (an Earth orbit)")
-    names = columns["station"].to_numpy(dtype=object)
-    for name in pd.unique(names):
-        check_name(name, "station name", file=source, row=int(table.rows[int(np.flatnonzero(names == name)[0])]), column="station")
+    codes, stations = pd.factorize(columns["station"])
+    _, first = np.unique(codes, return_index=True)
+    for code, at in zip(range(len(stations)), first):
+        check_name(str(stations[code]), "station name", file=source, row=int(table.rows[int(at)]), column="station")
 
 
 def _check_meta(meta: dict, frame: pd.DataFrame, rows, source: str) -> None:
