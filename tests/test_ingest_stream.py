@@ -177,3 +177,21 @@ def test_samples_of_all_inputs_are_bounded(run_cli, monkeypatch, tmp_path):
     result = run_cli(["ingest", raw, "--stations", stations, "-o", tmp_path / "o.parquet"])
     assert result.exit_code == 2 and "more than 10 samples" in result.stderr
     assert result.stderr.count("\n") == 1 and not (tmp_path / "o.parquet").exists()
+
+
+@pytest.mark.parametrize("fmt", ["parquet", "arrow", "csv"])
+def test_streamed_writer_gives_the_whole_table_writers_bytes(run_cli, tmp_path, fmt):
+    """``ingest`` writes slice by slice; the in-memory path (read_raw, ingest, write_pass_table) is the reference."""
+    from trackproc.io.passfile import write_pass_table
+    from trackproc.io.stations import read_stations
+    from trackproc.io.tabular import read_raw
+    from trackproc.pipeline.ingest import IngestOptions, ingest
+
+    out, ref = tmp_path / f"o.{fmt}", tmp_path / f"r.{fmt}"
+    result = run_cli(["ingest", MULTI, "--stations", STATIONS, "--carrier-hz", "2.2e9", "--mode", "one-way",
+                      "--format", fmt, "-o", out])
+    assert result.exit_code == 0, result.stderr
+    table = ingest([read_raw(str(MULTI))], read_stations(str(STATIONS)),
+                   IngestOptions(carrier_hz=2.2e9, doppler_mode="one-way")).table
+    write_pass_table(table, str(ref), fmt)
+    assert out.read_bytes() == ref.read_bytes()

@@ -80,7 +80,7 @@ def ingest_command(
     out = resolve_output(output, "output pass file")
     out_format = table_format_for(out, fmt)
 
-    from trackproc.io.passfile import canonical_schema, write_pass_batches
+    from trackproc.io.pass_stream import canonical_schema, write_pass_batches
     from trackproc.io.stations import read_stations
     from trackproc.io.tabular import iter_raw
     from trackproc.pipeline.ingest import Ingest, IngestOptions

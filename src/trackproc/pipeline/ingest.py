@@ -34,7 +34,7 @@ import pandas as pd
 from trackproc.errors import InputError
 from trackproc.vocabulary import LINK_MODES
 from trackproc.isotime import iso_utc
-from trackproc.io.passfile import COLUMNS, KINDS, PassTable, base_meta
+from trackproc.io.passfile import KINDS, PassTable, base_meta
 from trackproc.io.raw import RawMeasurements
 from trackproc.pipeline.ingest_samples import Names, Samples, pass_codes
 from trackproc.io.stations import Station

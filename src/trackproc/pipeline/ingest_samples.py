@@ -136,9 +136,9 @@ class Samples:
         c = self.columns
         return pd.DataFrame({
             "time": pd.DatetimeIndex(c["time"].astype("datetime64[ns]")).tz_localize("UTC"),
-            "station": self.stations.array()[c["station"]] if len(c["time"]) else np.zeros(0, object),
-            "pass_id": self.passes.array()[c["pass_id"]] if len(c["time"]) else np.zeros(0, object),
-            "kind": np.array(KINDS, dtype=object)[c["kind"]],
+            "station": pd.Series(self.stations.array()[c["station"]] if len(c["time"]) else [], dtype=object).astype(str),
+            "pass_id": pd.Series(self.passes.array()[c["pass_id"]], dtype=object).astype(str),
+            "kind": pd.Series(np.array(KINDS, dtype=object)[c["kind"]], dtype=object).astype(str),
             "value": c["value"], "sigma": c["sigma"],
         })[list(COLUMNS)]
 
