@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 
 from test_smoothing import _doppler_pass, _flyby_range_rate
+from trackproc.io.smoothing_record import output_of, smoothing_of
 from trackproc.io.passfile import COLUMNS, PassTable, base_meta, read_pass_table, write_pass_table
 from trackproc.pipeline.smooth import SmoothOptions, smooth
 
@@ -77,7 +78,7 @@ def test_round_trip_columns_summary_and_metadata_rebuild_the_polynomial(run_cli,
     assert len(flagged) <= 6
 
     summary = json.loads(summ.read_text())
-    meta = table.meta["smoothing"]
+    meta = smoothing_of(table.meta)
     assert meta["output"] == "samples"
     assert {k: v for k, v in meta.items() if k != "output"} == summary
     assert summary["counts"] == {"fits": 3, "ok": 3, "suspect": 0, "failed": 0}
@@ -113,7 +114,7 @@ def test_grid_output_is_the_curve_on_a_regular_grid(run_cli, pass_file, tmp_path
                       "-o", out])
     assert result.exit_code == 0, result.stderr
     grid = read_pass_table(str(out))
-    assert grid.meta["smoothing"]["output"] == "grid" and grid.meta["smoothing"]["grid_step_s"] == 5.0
+    assert output_of(grid.meta) == "grid" and smoothing_of(grid.meta)["grid_step_s"] == 5.0
     assert list(grid.frame.columns) == list(COLUMNS)
     summary = json.loads(summ.read_text())
     for rec in summary["fits"]:

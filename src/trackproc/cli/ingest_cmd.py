@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import logging
 from enum import Enum
 from typing import List, Optional
@@ -85,40 +86,47 @@ def ingest_command(
     out = resolve_output(output, "output pass file")
     out_format = table_format_for(out, fmt)
 
-    from trackproc.io.passfile import write_pass_table
+    from trackproc.io.pass_stream import canonical_schema, write_pass_batches
     from trackproc.io.stations import read_stations
-    from trackproc.io.tabular import read_raw
-    from trackproc.pipeline.ingest import IngestOptions, ingest
+    from trackproc.io.tabular import iter_raw
+    from trackproc.pipeline.ingest import Ingest, IngestOptions
 
-    raws = [read_raw(path, layout.value, sidecar=sidecar, carrier_hz=carrier_hz, drop_invalid=drop_invalid,
-                     tdm_two_way_range=tdm_two_way_range.value)
-            for path in inputs]
-    table = (read_stations(stations, epoch=_mid_epoch(raws), eccentricities=eccentricities)
-             if stations is not None else {})
+    runs = [iter_raw(path, layout.value, sidecar=sidecar, carrier_hz=carrier_hz, drop_invalid=drop_invalid,
+                     tdm_two_way_range=tdm_two_way_range.value) for path in inputs]   # lazy: opened when read
+    table = {}
+    if stations is not None:
+        # SINEX positions are dated by the data: the first chunk of the first input (velocities of
+        # cm/yr make the days of one ingest negligible), put back in front of its input
+        head = next(runs[0], None)
+        if head is not None:
+            runs[0] = itertools.chain([head], runs[0])
+        table = read_stations(stations, epoch=_epoch_of(head), eccentricities=eccentricities)
     options = IngestOptions(
         carrier_hz=carrier_hz, doppler_mode=mode.value if mode is not None else None, max_gap_s=max_gap,
         drop_invalid=drop_invalid, sigma_range_m=sigma_range_m, sigma_range_rate_m_s=sigma_range_rate_m_s,
         sigma_doppler_hz=sigma_doppler_hz, sigma_angle_deg=sigma_angle_deg)
-    result = ingest(raws, table, options)
+    run = Ingest(table, options)
+    for chunks in runs:   # streamed: a chunk of rows at a time (docs/ingest.md)
+        run.add_input(chunks)
+    result = run.finish()
     for warning in result.warnings:
         log.warning("%s", warning)
     if result.dropped:
         log.warning("dropped %d invalid samples: %s", sum(result.dropped.values()),
                     ", ".join(f"{reason} {n}" for reason, n in result.dropped.items()))
-    write_pass_table(result.table, out, out_format.value)
-    frame = result.table.frame
-    log.info("ingested %d samples, %d pass(es), %d station(s) -> %s (%s)", len(frame),
-             frame["pass_id"].nunique(), frame["station"].nunique(), "stdout" if out == "-" else out,
-             out_format.value)
+    schema = canonical_schema(result.meta)
+    write_pass_batches(result.samples.arrow_batches(schema), schema, out, out_format.value)
+    samples, passes, station_count = result.samples.counts()
+    log.info("ingested %d samples, %d pass(es), %d station(s) -> %s (%s)", samples, passes, station_count,
+             "stdout" if out == "-" else out, out_format.value)
 
 
-def _mid_epoch(raws):
-    """The middle of the inputs' time span (UTC datetime64), to date SINEX station positions."""
+def _epoch_of(raw):
+    """The middle of a chunk's time span (UTC datetime64), to date SINEX station positions."""
     import numpy as np
 
-    times = [raw.frame["time"].dropna() for raw in raws if len(raw.frame)]
-    if not times:
+    times = raw.frame["time"].dropna() if raw is not None and len(raw.frame) else None
+    if times is None or not len(times):
         return None
-    lo = min(t.min() for t in times)
-    hi = max(t.max() for t in times)
+    lo, hi = times.min(), times.max()
     return np.datetime64((lo + (hi - lo) / 2).tz_convert("UTC").tz_localize(None), "ns")

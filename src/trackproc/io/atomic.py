@@ -212,33 +212,54 @@ def max_input_bytes() -> int:
     return int(mb * (1 << 20))
 
 
-def _read_bounded(handle, limit: int, name: str) -> bytes:
-    chunks, total = [], 0
-    while True:
-        chunk = handle.read(min(1 << 20, limit + 1 - total))
-        if not chunk:
-            return b"".join(chunks)
-        chunks.append(chunk)
-        total += len(chunk)
-        if total > limit:
-            raise InputError(f"input larger than the limit of {limit / (1 << 20):g} MiB", file=name,
-                             expected="a smaller input, or a larger TRACKPROC_MAX_INPUT_MB")
+#: Bytes read at a time from an input.
+INPUT_BLOCK = 1 << 20
+
+
+def iter_input_blocks(path: str | os.PathLike, limit: int | None = None) -> Iterator[bytes]:
+    """The bytes of a file, or of stdin for ``-``, in blocks of at most :data:`INPUT_BLOCK`, at most
+    ``limit`` bytes in all (default :func:`max_input_bytes`): beyond it an input error. The readers
+    that stream (CSV, Parquet) hold one block at a time; the file is opened at the first block."""
+
+    limit = max_input_bytes() if limit is None else limit
+    name = "<stdin>" if is_stdio(path) else str(path)
+    if is_stdio(path):
+        handle = sys.stdin.buffer
+    else:
+        try:
+            handle = open(path, "rb")
+        except FileNotFoundError:
+            raise InputError("file not found", file=name) from None
+        except IsADirectoryError:
+            raise InputError("is a directory, expected a file", file=name) from None
+        except PermissionError:
+            raise InputError("permission denied", file=name) from None
+        except OSError as exc:
+            raise InputError(f"cannot read: {(exc.strerror or str(exc)).lower()}", file=name) from None
+    total = 0
+    try:
+        while True:
+            try:
+                chunk = handle.read(min(INPUT_BLOCK, limit + 1 - total))
+            except IsADirectoryError:
+                raise InputError("is a directory, expected a file", file=name) from None
+            except OSError as exc:
+                if is_stdio(path):
+                    raise
+                raise InputError(f"cannot read: {(exc.strerror or str(exc)).lower()}", file=name) from None
+            if not chunk:
+                return
+            total += len(chunk)
+            if total > limit:
+                raise InputError(f"input larger than the limit of {limit / (1 << 20):g} MiB", file=name,
+                                 expected="a smaller input, or a larger TRACKPROC_MAX_INPUT_MB")
+            yield chunk
+    finally:
+        if not is_stdio(path):
+            handle.close()
 
 
 def read_input_bytes(path: str | os.PathLike, limit: int | None = None) -> bytes:
     """All bytes of a file, or of stdin for ``-`` (Parquet needs the whole buffer), at most
     ``limit`` bytes (default :func:`max_input_bytes`): beyond it an input error."""
-    limit = max_input_bytes() if limit is None else limit
-    if is_stdio(path):
-        return _read_bounded(sys.stdin.buffer, limit, "<stdin>")
-    try:
-        with open(path, "rb") as handle:
-            return _read_bounded(handle, limit, str(path))
-    except FileNotFoundError:
-        raise InputError("file not found", file=str(path)) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a file", file=str(path)) from None
-    except PermissionError:
-        raise InputError("permission denied", file=str(path)) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {(exc.strerror or str(exc)).lower()}", file=str(path)) from None
+    return b"".join(iter_input_blocks(path, limit))

@@ -32,6 +32,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -151,27 +152,60 @@ def angles_in_degrees(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def pass_table_bytes(table: PassTable, fmt: str = "parquet") -> bytes:
-    """The encoded file: ``parquet``, ``arrow`` (IPC stream) or ``csv``."""
+    """The encoded file: ``parquet``, ``arrow`` (IPC stream) or ``csv``. Smoothing records (see
+    :mod:`trackproc.io.smoothing_record`) follow an Arrow table as a second stream, and stay inline
+    in the metadata of a Parquet or CSV that has no file of its own (:func:`write_pass_table` puts
+    them in a sidecar)."""
+    from trackproc.io import smoothing_record
+
     fmt = getattr(fmt, "value", fmt)
+    if fmt not in FORMATS:
+        raise ValueError(f"unknown pass-table format {fmt!r}; expected one of {FORMATS}")
+    meta, records = smoothing_record.split_records(table.meta, "stream" if fmt == "arrow" else "inline")
+    if records is None and smoothing_record.smoothing_of(meta).get("fits"):
+        text = meta_json(meta)
+        smoothing_record.check_inline_size(text, f"a {fmt} stream")
+    table = PassTable(table.frame, meta)
     if fmt == "csv":
-        frame = angles_in_degrees(table.frame)
         out = io.StringIO()
         out.write(csv_metadata_line(meta_json(table.meta)))
-        writer = csv.writer(out, lineterminator="\n")
-        columns = list(COLUMNS) + [c for c in frame.columns if c not in COLUMNS]
-        writer.writerow(columns)
-        cells = [iso_times(frame["time"])] + [frame[c].to_numpy(dtype=object) for c in columns[1:]]
-        for row in zip(*cells):
-            writer.writerow([row[0]] + [_csv_cell(v) for v in row[1:]])
+        _write_csv_rows(out, table.frame, header=True)
         return out.getvalue().encode("utf-8")
-    arrow = to_arrow(table)
-    if fmt not in ("parquet", "arrow"):
-        raise ValueError(f"unknown pass-table format {fmt!r}; expected one of {FORMATS}")
-    return arrow_table_bytes(arrow, fmt)
+    data = arrow_table_bytes(to_arrow(table), fmt)
+    return data if records is None else data + arrow_table_bytes(records, "arrow")
+
+
+def _write_csv_rows(out, frame: pd.DataFrame, *, header: bool) -> None:
+    frame = angles_in_degrees(frame)
+    writer = csv.writer(out, lineterminator="\n")
+    columns = list(COLUMNS) + [c for c in frame.columns if c not in COLUMNS]
+    if header:
+        writer.writerow(columns)
+    cells = [iso_times(frame["time"])] + [frame[c].to_numpy(dtype=object) for c in columns[1:]]
+    for row in zip(*cells):
+        writer.writerow([row[0]] + [_csv_cell(v) for v in row[1:]])
 
 
 def write_pass_table(table: PassTable, path: str, fmt: str = "parquet") -> None:
-    """Write ``table`` atomically to ``path`` (``-`` = stdout) as parquet, arrow or csv."""
+    """Write ``table`` atomically to ``path`` (``-`` = stdout) as parquet, arrow or csv; the
+    smoothing records of a Parquet or CSV file go to its sidecar (``x.passes.parquet``, written
+    first) with their checksum in the pointer."""
+    from trackproc.io import smoothing_record
+
+    fmt = getattr(fmt, "value", fmt)
+    target = None if is_stdio(path) else Path(path)
+    if fmt != "arrow" and target is not None and not (target.exists() and not target.is_file()):
+        meta, records = smoothing_record.split_records(table.meta, "sidecar")
+        if records is not None:
+            import hashlib
+
+            side = smoothing_record.sidecar_path(target)
+            side_bytes = arrow_table_bytes(records, "parquet")
+            meta[smoothing_record.META_KEY]["records"].update(
+                file=side.name, sha256=hashlib.sha256(side_bytes).hexdigest())
+            with open_atomic(side) as handle:
+                handle.write(side_bytes)
+            table = PassTable(table.frame, meta)
     data = pass_table_bytes(table, fmt)
     with open_atomic(path) as handle:
         handle.write(data)
@@ -207,11 +241,14 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
     data_columns = {"time": pd.DatetimeIndex(times).tz_localize("UTC")}
     for name in ("station", "pass_id", "kind"):
         data_columns[name] = pd.Series(column_strings(table, table.columns[name]), dtype=object).astype(str)
-    kinds = data_columns["kind"].to_numpy(dtype=object)
-    degrees = np.isin(kinds, [k + "_deg" for k in ANGLE_KINDS])   # a trackproc CSV's angle rows
-    kinds = np.where(degrees, [str(k)[:-4] for k in kinds], kinds)
-    problems.add("unknown kind", ~np.isin(kinds, KINDS), column="kind", found=kinds,
-                 expected="one of " + ", ".join(KINDS))
+    # text columns compared through their few distinct values (codes), never row by row
+    codes, written = pd.factorize(data_columns["kind"])
+    written = [str(k) for k in written]
+    in_degrees = [k in [a + "_deg" for a in ANGLE_KINDS] for k in written]   # a trackproc CSV's angle rows
+    names = np.array([k[:-4] if deg else k for k, deg in zip(written, in_degrees)] or [""], dtype=object)
+    degrees = np.array(in_degrees or [False])[codes]
+    problems.add("unknown kind", ~np.array([k in KINDS for k in names])[codes], column="kind",
+                 found=lambda i: names[codes[i]], expected="one of " + ", ".join(KINDS))
     for name in ("value", "sigma"):
         values, missing_mask, wrong = column_numbers(table, table.columns[name])
         problems.add("wrong column type", wrong | missing_mask, column=name,
@@ -219,7 +256,7 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
                      expected="a number (SI units)")
         data_columns[name] = values
     if degrees.any():   # a trackproc CSV's angle rows are in degrees (the CSV edge): radians inside
-        data_columns["kind"] = pd.Series(kinds, dtype=object).astype(str)
+        data_columns["kind"] = pd.Series(names[codes], dtype=object).astype(str)
         for name in ("value", "sigma"):
             data_columns[name] = np.where(degrees, np.radians(data_columns[name]), data_columns[name])
     _check_samples(problems, data_columns, table, source)
@@ -232,7 +269,24 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
         if degrees.any() and name in frame.columns and frame[name].dtype.kind == "f":
             frame.loc[degrees, name] = np.radians(frame.loc[degrees, name].to_numpy(dtype=np.float64))
     _check_meta(meta, frame, table.rows, source)
+    _attach_records(meta, data, source)
     return PassTable(frame, meta)
+
+
+def _attach_records(meta: dict, data: bytes, source: str) -> None:
+    """Layout-2 smoothing records, loaded when first used: in a sidecar, or after an Arrow stream."""
+    from trackproc.io import smoothing_record
+
+    pointer = smoothing_record.smoothing_of(meta).get("records")
+    rest = None
+    if isinstance(pointer, dict) and pointer.get("in") == "stream" and data[:4] == b"\xff\xff\xff\xff":
+        reader = pa.BufferReader(data)
+        try:
+            pa.ipc.open_stream(reader).read_all()
+            rest = data[reader.tell():]
+        except (pa.ArrowException, OSError, ValueError):
+            rest = None
+    smoothing_record.attach_records(meta, source, rest)
 
 
 def _check_samples(problems, columns: dict, table, source: str) -> None:
@@ -240,24 +294,30 @@ def _check_samples(problems, columns: dict, table, source: str) -> None:
     |range-rate| <= 12 km/s; station names printable."""
     from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_name
 
-    kinds = columns["kind"].to_numpy(dtype=object)
+    codes, names = pd.factorize(columns["kind"])
+    names = [str(k) for k in names]
+
+    def of_kind(kind: str) -> np.ndarray:
+        return codes == names.index(kind) if kind in names else np.zeros(len(codes), bool)
+
     value, sigma = np.asarray(columns["value"], float), np.asarray(columns["sigma"], float)
     given = np.isfinite(value)
     problems.add("non-finite value", ~given, column="value", found=value, expected="a finite number")
     problems.add("invalid sigma", ~(np.isfinite(sigma) & (sigma > 0)), column="sigma",
                  found=sigma, expected="a finite sigma > 0")
-    problems.add("negative range", given & (kinds == "range") & (value < 0), column="value", found=value,
+    problems.add("negative range", given & of_kind("range") & (value < 0), column="value", found=value,
                  expected="a range >= 0 m")
-    problems.add("elevation out of range", given & (kinds == "elevation") & (np.abs(value) > np.pi / 2 + 1e-12),
+    problems.add("elevation out of range", given & of_kind("elevation") & (np.abs(value) > np.pi / 2 + 1e-12),
                  column="value", found=value, expected="an elevation in [-pi/2, pi/2] rad")
-    problems.add("azimuth out of range", given & (kinds == "azimuth") & ((value < -np.pi) | (value > 2 * np.pi)),
+    problems.add("azimuth out of range", given & of_kind("azimuth") & ((value < -np.pi) | (value > 2 * np.pi)),
                  column="value", found=value, expected="an azimuth in [-pi, 2 pi] rad")
-    problems.add("implausible range-rate", given & (kinds == "range_rate") & (np.abs(value) > MAX_LOS_SPEED_M_S),
+    problems.add("implausible range-rate", given & of_kind("range_rate") & (np.abs(value) > MAX_LOS_SPEED_M_S),
                  column="value", found=value,
                  expected=f"|range-rate| <= {MAX_LOS_SPEED_M_S:g} m/s (an Earth orbit)")
-    names = columns["station"].to_numpy(dtype=object)
-    for name in pd.unique(names):
-        check_name(name, "station name", file=source, row=int(table.rows[int(np.flatnonzero(names == name)[0])]), column="station")
+    codes, stations = pd.factorize(columns["station"])
+    _, first = np.unique(codes, return_index=True)
+    for code, at in zip(range(len(stations)), first):
+        check_name(str(stations[code]), "station name", file=source, row=int(table.rows[int(at)]), column="station")
 
 
 def _check_meta(meta: dict, frame: pd.DataFrame, rows, source: str) -> None:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
+from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -34,12 +34,13 @@ import pandas as pd
 from trackproc.errors import InputError
 from trackproc.vocabulary import LINK_MODES
 from trackproc.isotime import iso_utc
-from trackproc.io.passfile import COLUMNS, KINDS, PassTable, base_meta
+from trackproc.io.passfile import KINDS, PassTable, base_meta
 from trackproc.io.raw import RawMeasurements
+from trackproc.pipeline.ingest_samples import Names, Samples, pass_codes
 from trackproc.io.stations import Station
-from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_carrier, check_los_speed
-from trackproc.io.tabular import (DEG, NONFINITE_SIGMA, NONFINITE_VALUE, UNIT_SPELLINGS, UNKNOWN_KIND,
-                                  Problems, add_counts)
+from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_carrier, check_los_speed, max_input_rows
+from trackproc.io.layouts import DEG, UNIT_SPELLINGS
+from trackproc.io.problems import NONFINITE_SIGMA, NONFINITE_VALUE, UNKNOWN_KIND, Problems, add_counts
 
 NONPOSITIVE_SIGMA = "non-positive sigma"
 ELEVATION_RANGE = "elevation out of range"
@@ -77,11 +78,21 @@ class IngestOptions:
 @dataclass
 class IngestResult:
     """The canonical table, how many samples were dropped per reason (``drop_invalid``), and
-    warnings for the user (readers' assumptions, station coordinates overridden)."""
+    warnings for the user (readers' assumptions, station coordinates overridden). ``samples``:
+    the same table in compact columns (:mod:`trackproc.pipeline.ingest_samples`), which the
+    streaming writer uses; ``table`` is made from it when first asked for."""
 
-    table: PassTable
+    samples: Samples
+    meta: dict
     dropped: dict[str, int] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    _table: PassTable | None = None
+
+    @property
+    def table(self) -> PassTable:
+        if self._table is None:
+            self._table = PassTable(self.samples.frame(), self.meta)
+        return self._table
 
 
 #: Reader metadata keys that ingest interprets; any other key is kept under ``meta["inputs"]``.
@@ -92,46 +103,177 @@ _INTERPRETED = {"source", "dropped", "carrier_hz", "doppler_mode", "stations", "
 def ingest(raws: Sequence[RawMeasurements], stations: Mapping[str, Station] | None = None,
            options: IngestOptions | None = None) -> IngestResult:
     """Validate and merge raw samples into one canonical pass table (see the module docstring)."""
-    options = options or IngestOptions()
-    _check_options(options)
-    if not raws:
-        raise InputError("no input files", expected="at least one INPUT")
-    warnings = [f"{raw.source}: {text}" for raw in raws for text in raw.meta.get("warnings") or []]
-    known = _known_stations(raws, stations or {}, warnings)
-    frame = _merge(raws, options)
-    dropped: dict[str, int] = {}
+    run = Ingest(stations, options)
     for raw in raws:
-        add_counts(dropped, raw.meta.get("dropped") or {})
-
-    keep, counts = _validate(frame, known, options.drop_invalid)
-    add_counts(dropped, counts)
-    frame = frame[keep].reset_index(drop=True)
-    if frame.empty:
-        raise InputError("no valid samples left after dropping invalid rows",
-                         file=", ".join(r.source for r in raws),
-                         found=", ".join(f"{n} {reason}" for reason, n in dropped.items()) or "none",
-                         expected="at least one valid sample")
-    carrier_hz, mode = _doppler_settings(raws, frame, options)
-
-    frame = frame.sort_values(["station", "time", "kind"], kind="mergesort").reset_index(drop=True)
-    frame["pass_id"] = assign_pass_ids(frame, options.max_gap_s)
-    meta = _meta(raws, frame, known, options, carrier_hz, mode, dropped)
-    out = pd.DataFrame({
-        "time": frame["time"],
-        **{c: frame[c].astype(str) for c in ("station", "pass_id", "kind")},
-        "value": frame["value"].astype(np.float64),
-        "sigma": frame["sigma"].astype(np.float64),
-    })[list(COLUMNS)]
-    return IngestResult(PassTable(out, meta), dropped, warnings)
+        run.add_input([raw])
+    return run.finish()
 
 
-def _meta(raws, frame, known, options: IngestOptions, carrier_hz, mode, dropped) -> dict:
+class Ingest:
+    """One ingest, input by input and chunk by chunk (:func:`trackproc.io.tabular.iter_raw`), in
+    bounded memory: each chunk's samples are checked on their own and kept in compact columns;
+    what needs every sample (stations of all inputs, duplicates, Doppler settings, order, passes)
+    is done by :meth:`finish`. The first error is the one a whole read reports: a reader's error
+    at once (readers run before validation), the earliest invalid sample of all inputs at the end.
+    """
+
+    def __init__(self, stations: Mapping[str, Station] | None = None, options: IngestOptions | None = None):
+        self.options = options or IngestOptions()
+        self.option_error: InputError | None = None
+        try:
+            _check_options(self.options)
+        except InputError as exc:   # reported after the inputs are read, as before streaming
+            self.option_error = exc
+        self.table = stations or {}
+        self.inputs: list[RawMeasurements] = []       # per input: source, column map, metadata
+        self.samples = Samples()
+        self.merged = 0                                # samples the readers gave
+        self.reader_dropped: dict[str, int] = {}
+        self.checked_dropped: dict[str, int] = {}
+        self.pending: tuple[tuple[int, int], InputError] | None = None   # earliest invalid sample
+        self.max_samples = max_input_rows()
+
+    def add_input(self, chunks: Iterable[RawMeasurements]) -> None:
+        """Read one input's chunks (all of them: a later chunk may hold a reader error)."""
+        index = len(self.inputs)
+        for raw in chunks:
+            if len(self.inputs) == index:
+                self.inputs.append(RawMeasurements(frame=None, source=raw.source, column=dict(raw.column),
+                                                   meta={**raw.meta, "dropped": {}}))
+            add_counts(self.inputs[index].meta["dropped"], raw.meta.get("dropped") or {})
+            add_counts(self.reader_dropped, raw.meta.get("dropped") or {})
+            self._add_chunk(raw, index)
+
+    def _add_chunk(self, raw: RawMeasurements, index: int) -> None:
+        frame = _chunk_frame(raw, index, self.options)
+        self.merged += len(frame)
+        if self.option_error is not None or self.pending is not None or frame.empty:
+            return   # nothing after the first invalid sample can be reported before it
+        problems = _local_problems(frame)
+        if problems and not self.options.drop_invalid:
+            error = problems.first_error()
+            self.pending = ((index, int(error.row)), error)
+            frame = frame[~problems.invalid()]
+        elif problems:
+            keep, counts = problems.resolve(True)
+            add_counts(self.checked_dropped, counts)
+            frame = frame[keep]
+        self.samples.append(frame, index)
+        if len(self.samples) > self.max_samples:   # ~45 bytes each are kept until the end
+            raise InputError(f"more than {self.max_samples} samples in all inputs", file=raw.source,
+                             expected="fewer samples (split the inputs), or a larger TRACKPROC_MAX_INPUT_ROWS")
+
+    def finish(self) -> IngestResult:
+        """The checks that need every sample, then order and passes (see the module docstring)."""
+        if self.option_error is not None:
+            raise self.option_error
+        if not self.inputs:
+            raise InputError("no input files", expected="at least one INPUT")
+        raws, options = self.inputs, self.options
+        warnings = [f"{raw.source}: {text}" for raw in raws for text in raw.meta.get("warnings") or []]
+        known = _known_stations(raws, self.table, warnings)
+        if self.merged == 0:
+            raise InputError("empty input", file=", ".join(r.source for r in raws), found="no samples",
+                             expected="at least one measurement")
+        samples = self.samples
+        samples.concatenate()
+        keep, counts = self._whole_set_checks(known)
+        dropped = add_counts(dict(self.reader_dropped), self.checked_dropped)
+        add_counts(dropped, counts)
+        samples.keep(keep)
+        if not len(samples):
+            raise InputError("no valid samples left after dropping invalid rows",
+                             file=", ".join(r.source for r in raws),
+                             found=", ".join(f"{n} {reason}" for reason, n in dropped.items()) or "none",
+                             expected="at least one valid sample")
+        carrier_hz, mode = _doppler_settings(raws, samples, options)
+        samples.sort()
+        samples.number_passes(options.max_gap_s)
+        stations = [samples.stations.names[code] for code in np.unique(samples.columns["station"])]
+        meta = _meta(raws, stations, known, options, carrier_hz, mode, dropped)
+        return IngestResult(samples, meta, dropped, warnings)
+
+    def _whole_set_checks(self, known: Mapping[str, Station]) -> tuple[np.ndarray, dict[str, int]]:
+        """Unknown stations and duplicated timestamps -> (samples to keep, dropped per reason);
+        without ``drop_invalid`` the earliest problem, this or a pending one, is raised."""
+        c = self.samples.columns
+        names = sorted(known)
+        is_known = np.array([name in known for name in self.samples.stations.names] or [True], dtype=bool)
+        unknown = ~is_known[c["station"]]
+        duplicated, first = self.samples.duplicates(~unknown)
+        if not self.options.drop_invalid:
+            candidates = [self.pending] if self.pending else []
+            for mask, make in ((unknown, self._unknown_station_error), (duplicated, self._duplicate_error)):
+                if mask.any():
+                    at = np.flatnonzero(mask)
+                    i = int(at[np.lexsort((at, c["row"][at], c["input"][at]))[0]])
+                    candidates.append(((int(c["input"][i]), int(c["row"][i])), make(i, names, first)))
+            if candidates:
+                raise min(candidates, key=lambda item: item[0])[1]   # min is stable: earlier checks win ties
+            return np.ones(len(c["time"]), bool), {}
+        counts = {}
+        if unknown.any():
+            counts[UNKNOWN_STATION] = int(unknown.sum())
+        if duplicated.any():
+            counts[DUPLICATE_TIME] = int(duplicated.sum())
+        return ~(unknown | duplicated), counts
+
+    def _unknown_station_error(self, i: int, names: list, first) -> InputError:
+        c = self.samples.columns
+        listed = ", ".join(names[:20]) + (" ..." if len(names) > 20 else "")
+        return InputError(UNKNOWN_STATION, file=self.inputs[c["input"][i]].source, row=int(c["row"][i]),
+                          column="station", found=self.samples.stations.names[c["station"][i]],
+                          expected=(f"a station of the stations table or of the input ({listed})" if names
+                                    else "a station defined in --stations FILE (none given)"))
+
+    def _duplicate_error(self, i: int, names: list, first) -> InputError:
+        c, raws = self.samples.columns, self.inputs
+        j = int(first[i])
+        kind = KINDS[c["kind"][i]]
+        return InputError(f"duplicated timestamp for station {self.samples.stations.names[c['station'][i]]} and "
+                          f"kind {kind} (first at {raws[c['input'][j]].source} row {int(c['row'][j])})",
+                          file=raws[c["input"][i]].source, row=int(c["row"][i]),
+                          column=raws[c["input"][i]].column.get(kind, "value"),
+                          found=iso_utc(np.datetime64(int(c["time"][i]), "ns"), 6),
+                          expected="one sample per station, kind and time")
+
+
+def _chunk_frame(raw: RawMeasurements, index: int, options: IngestOptions) -> pd.DataFrame:
+    """One chunk of one input as the merged frame the checks read (sigma defaults filled in)."""
+    frame = raw.frame
+    missing = [c for c in ("time", "station", "kind", "value", "sigma", "row") if c not in frame.columns]
+    if missing:
+        raise InputError("reader returned incomplete samples", file=raw.source, column=missing[0])
+    defaults = options.default_sigmas()
+    kind = frame["kind"].astype(str).to_numpy(dtype=object)
+    sigma = frame["sigma"].to_numpy(dtype=np.float64).copy()
+    default = np.array([defaults.get(k, math.nan) for k in kind], dtype=np.float64)
+    sigma = np.where(np.isnan(sigma), default, sigma)
+    return pd.DataFrame({
+        "time": pd.to_datetime(frame["time"], utc=True).dt.as_unit("ns"),
+        "station": frame["station"].astype(str).to_numpy(dtype=object),
+        "pass_id": (frame["pass_id"].fillna("").astype(str).to_numpy(dtype=object)
+                    if "pass_id" in frame.columns else np.full(len(frame), "", dtype=object)),
+        "kind": kind,
+        "value": frame["value"].to_numpy(dtype=np.float64),
+        "sigma": sigma,
+        "row": frame["row"].to_numpy(dtype=np.int64),
+        "unit": (frame["unit"].astype(str).to_numpy(dtype=object) if "unit" in frame.columns
+                 else np.full(len(frame), "", dtype=object)),
+        "source": raw.source,
+        "input": index,
+        "value_column": [raw.column.get(k, "value") for k in kind],
+        "sigma_column": [raw.column.get(f"sigma:{k}", "sigma") for k in kind],
+    })
+
+
+def _meta(raws, station_names, known, options: IngestOptions, carrier_hz, mode, dropped) -> dict:
     """File metadata: provenance, settings, stations used, reader extras (see io.passfile)."""
     meta = base_meta(
         carrier_hz=carrier_hz,
         doppler_mode=mode,
         sources=[raw.source for raw in raws],
-        stations={name: known[name].as_dict() for name in sorted(frame["station"].unique())},
+        stations={name: known[name].as_dict() for name in sorted(station_names)},
         max_gap_s=float(options.max_gap_s),
         sigma_defaults={"range_m": options.sigma_range_m, "range_rate_m_s": options.sigma_range_rate_m_s,
                         "doppler_hz": options.sigma_doppler_hz, "angle_deg": options.sigma_angle_deg},
@@ -190,52 +332,14 @@ def _known_stations(raws: Sequence[RawMeasurements], table: Mapping[str, Station
     return known
 
 
-def _merge(raws: Sequence[RawMeasurements], options: IngestOptions) -> pd.DataFrame:
-    """All inputs in one frame (input order), with source, unit and source columns per sample."""
-    defaults = options.default_sigmas()
-    pieces = []
-    for index, raw in enumerate(raws):
-        frame = raw.frame
-        missing = [c for c in ("time", "station", "kind", "value", "sigma", "row") if c not in frame.columns]
-        if missing:
-            raise InputError("reader returned incomplete samples", file=raw.source, column=missing[0])
-        kind = frame["kind"].astype(str).to_numpy(dtype=object)
-        sigma = frame["sigma"].to_numpy(dtype=np.float64).copy()
-        default = np.array([defaults.get(k, math.nan) for k in kind])
-        sigma = np.where(np.isnan(sigma), default, sigma)
-        pieces.append(pd.DataFrame({
-            "time": pd.to_datetime(frame["time"], utc=True).dt.as_unit("ns"),
-            "station": frame["station"].astype(str).to_numpy(dtype=object),
-            "pass_id": (frame["pass_id"].fillna("").astype(str).to_numpy(dtype=object)
-                        if "pass_id" in frame.columns else np.full(len(frame), "", dtype=object)),
-            "kind": kind,
-            "value": frame["value"].to_numpy(dtype=np.float64),
-            "sigma": sigma,
-            "row": frame["row"].to_numpy(dtype=np.int64),
-            "unit": (frame["unit"].astype(str).to_numpy(dtype=object) if "unit" in frame.columns
-                     else np.full(len(frame), "", dtype=object)),
-            "source": raw.source,
-            "input": index,
-            "value_column": [raw.column.get(k, "value") for k in kind],
-            "sigma_column": [raw.column.get(f"sigma:{k}", "sigma") for k in kind],
-        }))
-    frame = pd.concat(pieces, ignore_index=True) if pieces else pd.DataFrame()
-    if frame.empty:
-        raise InputError("empty input", file=", ".join(r.source for r in raws), found="no samples",
-                         expected="at least one measurement")
-    return frame
-
-
 def _unit_factors(units: np.ndarray) -> np.ndarray:
     """Per sample, the factor from the unit the file used to SI (1 where unknown)."""
     return pd.Series(units, dtype=object).map(UNIT_FACTORS).fillna(1.0).to_numpy(dtype=np.float64)
 
 
-def _validate(frame: pd.DataFrame, known: Mapping[str, Station], drop_invalid: bool):
-    """Row checks over the merged frame -> (rows to keep, dropped count per reason)."""
-    rows = frame["row"].to_numpy()
-    order = frame["input"].to_numpy() * (int(rows.max()) + 1) + rows
-    problems = Problems(rows, frame["source"].to_numpy(dtype=object), order=order)
+def _local_problems(frame: pd.DataFrame) -> Problems:
+    """The checks of each sample on its own (value, sigma, domains) over one chunk of one input."""
+    problems = Problems(frame["row"].to_numpy(), frame["source"].to_numpy(dtype=object))
     kind = frame["kind"].to_numpy(dtype=object)
     value = frame["value"].to_numpy()
     sigma = frame["sigma"].to_numpy()
@@ -269,45 +373,10 @@ def _validate(frame: pd.DataFrame, known: Mapping[str, Station], drop_invalid: b
     problems.add(RANGE_RATE_SPEED, finite & (kind == "range_rate") & (np.abs(value) > MAX_LOS_SPEED_M_S),
                  column=value_col, found=value_written,
                  expected=f"|range-rate| <= {MAX_LOS_SPEED_M_S / 1000:g} km/s (an Earth orbit); is the unit right?")
-    station = frame["station"].to_numpy(dtype=object)
-    names = sorted(known)
-    listed = ", ".join(names[:20]) + (" ..." if len(names) > 20 else "")
-    problems.add(UNKNOWN_STATION, ~np.isin(station, names), column="station", found=station,
-                 expected=(f"a station of the stations table or of the input ({listed})" if names
-                           else "a station defined in --stations FILE (none given)"))
-    _add_duplicates(problems, frame)
-    return problems.resolve(drop_invalid)
+    return problems
 
 
-def _add_duplicates(problems: Problems, frame: pd.DataFrame) -> None:
-    """Same station, kind and time twice: the later rows (input order) are the duplicates.
-
-    Rows already invalid for another reason do not count, so ``drop_invalid`` keeps the valid one.
-    """
-    valid = np.flatnonzero(~problems.invalid())
-    sub = frame.iloc[valid]
-    duplicated = sub.duplicated(["station", "kind", "time"], keep="first").to_numpy()
-    if not duplicated.any():
-        return
-    group = sub.groupby(["station", "kind", "time"], sort=False).ngroup().to_numpy()
-    first_of_group = pd.Series(valid).groupby(group).transform("min").to_numpy()
-    mask = np.zeros(len(frame), dtype=bool)
-    mask[valid[duplicated]] = True
-    first = np.full(len(frame), -1)
-    first[valid] = first_of_group
-    source, rows, times = frame["source"].to_numpy(), frame["row"].to_numpy(), frame["time"]
-
-    def detail(i: int) -> str:
-        j = first[i]
-        return (f"duplicated timestamp for station {frame['station'].iat[i]} and kind "
-                f"{frame['kind'].iat[i]} (first at {source[j]} row {rows[j]})")
-
-    problems.add(DUPLICATE_TIME, mask, column=frame["value_column"].to_numpy(dtype=object),
-                 found=lambda i: iso_utc(times.iat[i], 6),
-                 expected="one sample per station, kind and time", detail=detail)
-
-
-def _doppler_settings(raws: Sequence[RawMeasurements], frame: pd.DataFrame, options: IngestOptions):
+def _doppler_settings(raws: Sequence[RawMeasurements], samples: Samples, options: IngestOptions):
     """Carrier (Hz) and mode from the options or the inputs; required with Doppler samples."""
     settings = {}
     for key, option, flag in (("carrier_hz", options.carrier_hz, "--carrier-hz"),
@@ -323,10 +392,11 @@ def _doppler_settings(raws: Sequence[RawMeasurements], frame: pd.DataFrame, opti
                 raise InputError(f"conflicting {key}", file=raw.source, column=flag, found=given,
                                  expected=f"{value} as {'given by ' + flag if option is not None else 'in the other inputs'}")
         settings[key] = value
-    doppler = frame["kind"].to_numpy(dtype=object) == "doppler"
-    if doppler.any():
-        first = int(np.flatnonzero(doppler)[0])
-        where = {"file": frame["source"].iat[first], "row": int(frame["row"].iat[first])}
+    c = samples.columns
+    doppler = np.flatnonzero(c["kind"] == KINDS.index("doppler"))   # in arrival order
+    if doppler.size:
+        first = int(doppler[0])
+        where = {"file": raws[c["input"][first]].source, "row": int(c["row"][first])}
         if settings["carrier_hz"] is None:
             raise InputError("Doppler samples need the nominal carrier frequency", column="--carrier-hz",
                              expected="--carrier-hz F (Hz)", **where)
@@ -336,11 +406,12 @@ def _doppler_settings(raws: Sequence[RawMeasurements], frame: pd.DataFrame, opti
     carrier = settings["carrier_hz"]
     if carrier is not None:
         carrier = check_carrier(carrier, column="--carrier-hz" if options.carrier_hz is not None else "carrier_hz")
-        for source in pd.unique(frame["source"][doppler]):
-            mine = doppler & (frame["source"] == source).to_numpy()
-            check_los_speed(frame["value"].to_numpy()[mine], "doppler", carrier_hz=carrier,
-                            mode=settings["doppler_mode"], file=source, rows=frame["row"].to_numpy()[mine],
-                            column=str(frame["value_column"].to_numpy()[mine][0]))
+        sources = np.array([raw.source for raw in raws], dtype=object)[c["input"][doppler]]
+        for source in pd.unique(sources):
+            mine = doppler[sources == source]
+            check_los_speed(c["value"][mine], "doppler", carrier_hz=carrier, mode=settings["doppler_mode"],
+                            file=source, rows=c["row"][mine],
+                            column=str(raws[c["input"][mine[0]]].column.get("doppler", "value")))
     return carrier, settings["doppler_mode"]
 
 
@@ -356,23 +427,11 @@ def assign_pass_ids(frame: pd.DataFrame, max_gap_s: float) -> np.ndarray:
     ``frame`` must be sorted by station then time; numbering is per station by start time and
     skips ids the input already uses.
     """
-    ids = frame["pass_id"].to_numpy(dtype=object).copy()
-    need = ids == ""
-    if not need.any():
-        return ids
-    gap_ns = int(round(max_gap_s * 1e9))
-    times = frame["time"].dt.tz_convert("UTC").dt.tz_localize(None).dt.as_unit("ns").to_numpy().astype(np.int64)
-    stations = frame["station"].to_numpy(dtype=object)
-    for station in pd.unique(stations[need]):
-        idx = np.flatnonzero(need & (stations == station))
-        taken = set(ids[(stations == station) & ~need])
-        new_pass = np.r_[True, np.diff(times[idx]) > gap_ns]
-        number = 0
-        labels = []
-        for _ in range(int(new_pass.sum())):
-            number += 1
-            while f"{station}-{number:03d}" in taken:
-                number += 1
-            labels.append(f"{station}-{number:03d}")
-        ids[idx] = np.array(labels, dtype=object)[np.cumsum(new_pass) - 1]
-    return ids
+    stations = Names()
+    passes = Names([""])
+    codes = pass_codes(stations.encode(frame["station"].astype(str).to_numpy(dtype=object)),
+                       frame["time"].dt.tz_convert("UTC").dt.tz_localize(None).dt.as_unit("ns").to_numpy()
+                       .astype(np.int64),
+                       passes.encode(frame["pass_id"].astype(str).to_numpy(dtype=object)), stations.names, passes,
+                       max_gap_s)
+    return passes.array()[codes]

@@ -252,9 +252,9 @@ def check_no_repeated_samples(frames) -> None:
 
 
 #: Default largest number of rows (samples) read from one input; ``TRACKPROC_MAX_INPUT_ROWS``
-#: overrides it. Reading is not streamed yet: ~0.7 kB of memory a row (benchmarks/ingest_memory.py),
-#: so 2e6 rows stay near 1.5 GB.
-DEFAULT_MAX_INPUT_ROWS = 2_000_000
+#: overrides it. ``ingest`` streams (~50 bytes a sample kept, benchmarks/ingest_memory.py: 5e6 rows
+#: in ~0.5 GB), so 1e7 rows stay near 1 GB; commands that load a pass table whole need more a row.
+DEFAULT_MAX_INPUT_ROWS = 10_000_000
 
 
 def max_input_rows() -> int:

@@ -1,0 +1,301 @@
+"""Columns of an input table, CSV text or typed Arrow (Parquet, Arrow IPC), whole or streamed:
+lookup by lower-case name, and conversion of a column to times, numbers or strings with the
+invalid cells reported to :class:`~trackproc.io.problems.Problems`."""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Iterable, Iterator
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.compute as pc
+
+from trackproc.errors import InputError
+from trackproc.io.csvtext import CSV_META_PREFIX, TextTable, chunk_rows, iter_text_tables, parse_text_table
+from trackproc.io.problems import TIME_EXPECTED, UNPARSEABLE_TIME, WRONG_TYPE, Problems
+from trackproc.io.validate import FIRST_YEAR, LAST_YEAR, check_input_rows
+
+#: Key of the trackproc metadata (JSON) in the Arrow / Parquet schema metadata.
+META_KEY = b"trackproc"
+
+# --------------------------------------------------------------------------- source tables
+
+
+@dataclass
+class SourceTable:
+    """Columns of a CSV (text) or of a Parquet/Arrow table (typed), by lower-case name."""
+
+    source: str
+    columns: dict[str, "Column"]
+    rows: np.ndarray
+    header_row: int | None                  # CSV header line; None for Parquet/Arrow
+    meta: dict                              # trackproc metadata carried by the file, or {}
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def require(self, *names: str) -> None:
+        missing = [n for n in names if n not in self.columns]
+        if missing:
+            raise InputError("missing required column", file=self.source, row=self.header_row,
+                             column=missing[0], found=", ".join(c.name for c in self.columns.values()),
+                             expected="columns " + ", ".join(names))
+
+
+@dataclass
+class Column:
+    """One column: ``text`` (object array of str, '' = empty) or typed Arrow ``array``."""
+
+    name: str
+    text: np.ndarray | None = None
+    array: pa.Array | None = None
+
+    @property
+    def type_name(self) -> str:
+        return "text" if self.text is not None else str(self.array.type)
+
+
+def sniff_container(data: bytes) -> str:
+    """``parquet``, ``arrow-file``, ``arrow-stream`` or ``text`` from the first bytes."""
+    if data[:4] == b"PAR1":
+        return "parquet"
+    if data[:6] == b"ARROW1":
+        return "arrow-file"
+    if data[:4] == b"\xff\xff\xff\xff":
+        return "arrow-stream"
+    return "text"
+
+
+def load_arrow(data: bytes, source: str, container: str) -> pa.Table:
+    """A Parquet or Arrow IPC (file or stream) buffer as an Arrow table."""
+    try:
+        if container == "parquet":
+            import pyarrow.parquet as pq
+            check_input_rows(pq.ParquetFile(pa.BufferReader(data)).metadata.num_rows, file=source)
+            return pq.read_table(pa.BufferReader(data))
+        if container == "arrow-file":
+            return pa.ipc.open_file(pa.BufferReader(data)).read_all()
+        return pa.ipc.open_stream(pa.BufferReader(data)).read_all()
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise InputError(f"unreadable {container} data ({exc})", file=source,
+                         expected=f"a complete {container} file") from None
+
+
+def table_meta(schema: pa.Schema) -> dict:
+    raw = (schema.metadata or {}).get(META_KEY)
+    if raw is None:
+        return {}
+    try:
+        meta = json.loads(raw)
+    except (ValueError, RecursionError):
+        return {}
+    return meta if isinstance(meta, dict) else {}
+
+
+def source_table(data: bytes, source: str) -> SourceTable:
+    """Any supported table container (CSV text, Parquet, Arrow file/stream) as columns."""
+    container = sniff_container(data)
+    if container == "text":
+        return _text_source(parse_text_table(data, source), source)
+    table = load_arrow(data, source, container)
+    check_input_rows(table.num_rows, file=source)
+    return _arrow_source(table, source, 0, table_meta(table.schema))
+
+
+def iter_source_tables(blocks: Iterable[bytes], source: str, *, path: str | None = None) -> Iterator[SourceTable]:
+    """The same, streamed: one :class:`SourceTable` per chunk of :func:`~trackproc.io.csvtext.chunk_rows`
+    rows, the file's row numbers in each (at least one, perhaps empty, table). ``blocks``: the input's
+    bytes (:func:`~trackproc.io.atomic.iter_input_blocks`); ``path``: a regular file, read by Parquet
+    and Arrow directly (one row group at a time) instead of from ``blocks``."""
+    blocks = iter(blocks)
+    head = next(blocks, b"")
+    container = sniff_container(head)
+    if container == "text":
+        meta = None
+        for text in iter_text_tables(_chain(head, blocks), source):
+            if meta is None:
+                meta = _csv_meta(text.comments)
+            table = _text_source(text, source)
+            table.meta = meta
+            yield table
+        return
+    stream = path if path is not None else pa.BufferReader(head + b"".join(blocks))
+    yield from _arrow_chunks(stream, source, container)
+
+
+def _chain(head: bytes, blocks: Iterator[bytes]) -> Iterator[bytes]:
+    yield head
+    yield from blocks
+
+
+def _csv_meta(comments: list[str]) -> dict:
+    meta = {}
+    for comment in comments:
+        if comment.startswith(CSV_META_PREFIX):
+            try:
+                meta = json.loads(comment[len(CSV_META_PREFIX):])
+            except (ValueError, RecursionError):
+                meta = {}
+    return meta
+
+
+def _text_source(text: TextTable, source: str) -> SourceTable:
+    columns = {name.lower(): Column(name, text=text.cells[name]) for name in text.columns}
+    return SourceTable(source, columns, text.rows, text.header_row, _csv_meta(text.comments))
+
+
+def _arrow_source(table, source: str, offset: int, meta: dict) -> SourceTable:
+    columns = {}
+    for name in table.schema.names:
+        if name.strip().lower() in columns:
+            raise InputError("duplicate column", file=source, column=name, expected="each column name once")
+        column = table.column(name)
+        columns[name.strip().lower()] = _arrow_column(
+            name, column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column)
+    rows = np.arange(offset + 1, offset + table.num_rows + 1, dtype=np.int64)
+    return SourceTable(source, columns, rows, None, meta)
+
+
+def _arrow_chunks(stream, source: str, container: str) -> Iterator[SourceTable]:
+    """Record batches of a Parquet file (row group by row group) or an Arrow IPC file or stream."""
+    size = chunk_rows()
+    try:
+        if container == "parquet":
+            import pyarrow.parquet as pq
+
+            handle = pq.ParquetFile(stream)
+            check_input_rows(handle.metadata.num_rows, file=source)
+            schema, batches = handle.schema_arrow, handle.iter_batches(batch_size=size)
+        elif container == "arrow-file":
+            handle = pa.ipc.open_file(stream)
+            schema = handle.schema
+            batches = (handle.get_batch(i) for i in range(handle.num_record_batches))
+        else:
+            handle = pa.ipc.open_stream(stream)
+            schema, batches = handle.schema, iter(handle)
+        meta, offset = table_meta(schema), 0
+        empty = True
+        for batch in batches:
+            for start in range(0, batch.num_rows, size):
+                piece = batch.slice(start, size)
+                check_input_rows(offset + piece.num_rows, file=source)
+                empty = False
+                yield _arrow_source(piece, source, offset, meta)
+                offset += piece.num_rows
+        if empty:
+            yield _arrow_source(schema.empty_table(), source, 0, meta)
+    except (pa.ArrowException, OSError, ValueError) as exc:
+        raise InputError(f"unreadable {container} data ({exc})", file=source,
+                         expected=f"a complete {container} file") from None
+
+
+def _arrow_column(name: str, array: pa.Array) -> Column:
+    if pa.types.is_dictionary(array.type):
+        array = array.cast(array.type.value_type)
+    if pa.types.is_string(array.type) or pa.types.is_large_string(array.type) or \
+            pa.types.is_string_view(array.type):
+        # one Python string per distinct value (station, pass and kind repeat): ~8 bytes a row
+        encoded = pc.dictionary_encode(pc.fill_null(array.cast(pa.string()), ""))
+        values = np.array([v.strip() for v in encoded.dictionary.to_pylist()] or [""], dtype=object)
+        return Column(name, text=values[encoded.indices.to_numpy(zero_copy_only=False)])
+    return Column(name, array=array)
+
+
+def _wrong_type(table: SourceTable, column: Column, expected: str) -> InputError:
+    return InputError(WRONG_TYPE, file=table.source, row=int(table.rows[0]) if len(table) else None,
+                      column=column.name, found=column.type_name, expected=expected)
+
+
+def column_times(table: SourceTable, column: Column, problems: Problems, index=None) -> np.ndarray:
+    """UTC times as ``datetime64[ns]`` (NaT where unparseable, reported to ``problems``).
+
+    ``index`` maps the problems' positions to the table's rows (default: one to one).
+    """
+    if column.text is not None:
+        text = pd.Series(column.text, dtype=object)
+        # beyond 1678-2261 a nanosecond timestamp wraps or raises: such rows are unparseable times
+        year = pd.to_numeric(text.astype(str).str.extract(r"^\s*([+-]?\d{4,})-", expand=False), errors="coerce")
+        text = text.where(~((year < FIRST_YEAR) | (year > LAST_YEAR)), "")
+        try:
+            parsed = pd.to_datetime(text, utc=True, format="ISO8601", errors="coerce")
+        except (ValueError, OverflowError):   # OutOfBoundsDatetime despite errors="coerce"
+            parsed = pd.Series([_one_time(t) for t in text], dtype="datetime64[ns, UTC]")
+        values = parsed.dt.tz_localize(None).dt.as_unit("ns").to_numpy()
+    elif pa.types.is_timestamp(column.array.type):
+        # Out-of-range stamps (year 3000 in ms or us) become NaT and are reported by row; a failing
+        # cast is not used for this (its exception left Arrow aborting at exit in ~7 % of runs).
+        unit = column.array.type.unit
+        ticks = pc.cast(column.array, pa.int64()).to_numpy(zero_copy_only=False)
+        ticks = np.where(np.isnan(ticks.astype(float)), 0, ticks).astype(np.int64) if ticks.dtype != np.int64 \
+            else ticks
+        lo = np.datetime64(f"{FIRST_YEAR}-01-01", unit).astype(np.int64)
+        hi = np.datetime64(f"{LAST_YEAR + 1}-01-01", unit).astype(np.int64)
+        outside = (ticks < lo) | (ticks >= hi)
+        values = np.where(outside, np.int64(0), ticks).astype(f"datetime64[{unit}]").astype("datetime64[ns]")
+        values[outside | column.array.is_null().to_numpy(zero_copy_only=False)] = np.datetime64("NaT")
+    else:
+        raise _wrong_type(table, column, "a timestamp column or ISO 8601 strings")
+    bad = np.isnat(values)
+    if index is not None:
+        bad = bad[index]
+    found = column.text if column.text is not None else None
+    if found is not None:
+        found = _indexed(found, index)
+    elif index is None:
+        found = lambda i: "null" if not column.array[i].is_valid else str(column.array[i])  # noqa: E731
+    else:
+        found = "null or out of range"
+    problems.add(UNPARSEABLE_TIME, bad, column=column.name, found=found, expected=TIME_EXPECTED)
+    return values
+
+
+def _one_time(text) -> pd.Timestamp:
+    try:
+        return pd.to_datetime(text, utc=True, format="ISO8601")
+    except (ValueError, OverflowError, TypeError):
+        return pd.NaT
+
+
+def _indexed(array, index):
+    return array if index is None else array[index]
+
+
+def column_numbers(table: SourceTable, column: Column) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(values, missing, wrong)`` as float64 / bool arrays (NaN where missing or wrong).
+
+    Text: '' is missing; ``nan``/``inf`` parse to NaN/inf; anything else not a number is wrong.
+    Typed: null is missing; integers, floats and decimals convert; other types raise.
+    """
+    if column.text is not None:
+        n = len(column.text)
+        values = np.full(n, np.nan)
+        missing = np.zeros(n, dtype=bool)
+        wrong = np.zeros(n, dtype=bool)
+        for i, cell in enumerate(column.text):
+            if not cell:
+                missing[i] = True
+                continue
+            try:
+                values[i] = float(cell)
+            except ValueError:
+                wrong[i] = True
+        return values, missing, wrong
+    arr = column.array
+    if not (pa.types.is_integer(arr.type) or pa.types.is_floating(arr.type) or pa.types.is_decimal(arr.type)):
+        raise _wrong_type(table, column, "a numeric column")
+    missing = arr.is_null().to_numpy(zero_copy_only=False)
+    values = pc.fill_null(arr.cast(pa.float64()), math.nan).to_numpy(zero_copy_only=False)
+    return values.astype(np.float64), missing, np.zeros(len(values), dtype=bool)
+
+
+def column_strings(table: SourceTable, column: Column) -> np.ndarray:
+    """Text cells ('' where empty); integer columns (station numbers) become their digits."""
+    if column.text is not None:
+        return column.text
+    if pa.types.is_integer(column.array.type):
+        return np.array(["" if v is None else str(v) for v in column.array.to_pylist()], dtype=object)
+    raise _wrong_type(table, column, "a text column")
