@@ -29,3 +29,55 @@ def test_values_still_validated_by_typer(capsys):
     assert "--circular-tolerance" in err and "greater than or equal to 0" in err
     assert main(["refine", "p.csv", "--initial", "s.json", "--max-iterations", "abc"]) == 2
     assert "valid integer" in capsys.readouterr().err
+
+
+@pytest.mark.subprocess
+def test_plain_command_runs_without_pydantic(tmp_path):
+    # strings, an enum given by value, a plain float: no pydantic import, same output as typer's
+    args = ["-q", "ingest", "sample_data/doppler_pass.csv", "--stations", "sample_data/stations.csv",
+            "--carrier-hz", "2.2e9", "--mode", "one-way", "-o"]
+    probe = ("import sys; from trackproc.cli import app as a; {patch}"
+             "code = a._main({args!r} + [sys.argv[1]]); print(code, 'pydantic' in sys.modules)")
+    root = __import__("pathlib").Path(__file__).resolve().parents[1]
+    fast = subprocess.run([sys.executable, "-c", probe.format(patch="", args=args), str(tmp_path / "a.parquet")],
+                          capture_output=True, text=True, check=True, cwd=root)
+    slow = subprocess.run([sys.executable, "-c", probe.format(
+        patch="a._plain_value = lambda d, v: a._NOT_PLAIN; a._plain_default = lambda p, v, c: False; ", args=args),
+        str(tmp_path / "b.parquet")], capture_output=True, text=True, check=True, cwd=root)
+    assert fast.stdout.split() == ["0", "False"], fast.stdout + fast.stderr
+    assert slow.stdout.split() == ["0", "True"], slow.stdout + slow.stderr
+    assert (tmp_path / "a.parquet").read_bytes() == (tmp_path / "b.parquet").read_bytes()
+
+
+def test_plain_values_equal_typers_own_coercion():
+    """Every value the light path converts is what typer's pydantic coercion gives for it."""
+    import enum
+    from typing import List, Optional
+
+    from typer import _coercion
+    from typer.models import OptionInfo
+
+    from trackproc.cli import app as a
+
+    class Colour(enum.Enum):
+        red = "red"
+        dark_red = "dark-red"
+
+    cases = [(str, {}, ["x.csv", "-", ""]), (float, {}, ["0", "2.2e9", "-1.5", ".5", "3.", "1e-3", "7"]),
+             (int, {}, ["0", "-3", "42"]), (Colour, {}, ["red", "dark-red", Colour.red]),
+             (Optional[float], {}, ["0.25"]), (List[str], {}, [("a", "b"), ()]),
+             (float, {}, [2.5]), (int, {}, [3])]
+    for ann, kwargs, values in cases:
+        desc = _coercion.resolve_type_descriptor(ann, OptionInfo(**kwargs))
+        typer_param = _coercion.build_runtime_param(desc)
+        for value in values:
+            mine = a._plain_value(desc, value)
+            assert mine is not a._NOT_PLAIN, (ann, value)
+            theirs = typer_param._coerce_value(value, param=None, ctx=None)
+            assert type(mine) is type(theirs) and mine == theirs, (ann, value, mine, theirs)
+    # left to typer: bad values, constrained numbers, non-decimal spellings
+    for ann, kwargs, value in [(float, {}, "abc"), (float, {}, "nan"), (float, {}, "1_000"), (float, {}, "1e999"),
+                               (int, {}, "1.0"), (float, {"min": 0.0}, "1"), (int, {"max": 3}, 2),
+                               (Colour, {}, "RED"), (Colour, {}, "blue")]:
+        desc = _coercion.resolve_type_descriptor(ann, OptionInfo(**kwargs))
+        assert a._plain_value(desc, value) is a._NOT_PLAIN, (ann, kwargs, value)

@@ -85,13 +85,16 @@ def _register() -> None:
 
 
 class _LightCoercion:
-    """Typer's runtime coercion of one parameter, without pydantic where nothing is to convert.
+    """Typer's runtime coercion of one parameter, without pydantic where the conversion is plain.
 
     Typer (0.2x) builds a pydantic TypeAdapter for every parameter it processes, including an
-    option left unset (value None) and a flag already holding a bool; importing pydantic for
-    that is ~60 % of ``trackproc COMMAND --help`` (issue 19: 0.12 s -> under 0.1 s). Those two
-    cases pass through unchanged (exactly what the adapter returns for them); any other value
-    goes to typer's own coercion, built on first use, so validation and messages are typer's.
+    option left at its default; importing pydantic for that is ~60 % of ``trackproc COMMAND
+    --help`` and ~50 ms of every command (issue 19). Values whose conversion is unambiguous pass
+    here with exactly the result typer's adapter gives (:func:`_plain_value`): None, a value
+    already of the annotated type, a string for a ``str`` option, an enum member's exact value,
+    a plain decimal number for an unconstrained number option. Anything else (a bad value, a
+    number option with min/max, a custom parser, ...) goes to typer's own coercion, built on
+    first use, so validation and messages stay typer's.
     """
 
     __slots__ = ("_param", "_build", "_full")
@@ -102,11 +105,89 @@ class _LightCoercion:
     def coerce(self, value, param, ctx):
         if value is None:
             return () if (param.multiple or param.nargs == -1) else None
-        if isinstance(value, bool) and self._param.type_descriptor.annotation is bool:
+        if _plain_default(self._param, value, ctx):
             return value
+        plain = _plain_value(self._param.type_descriptor, value)
+        if plain is not _NOT_PLAIN:
+            return plain
         if self._full is None:
             self._full = self._build(self._param)
         return self._full.coerce(value, param=param, ctx=ctx)
+
+
+def _plain_default(param, value, ctx) -> bool:
+    """True for the command's own default (not a config file's) already of the annotated type:
+    valid by construction, nothing to convert or check."""
+    source = getattr(ctx, "get_parameter_source", lambda name: None)(param.name)
+    return (getattr(source, "name", None) == "DEFAULT"
+            and type(value) is param.type_descriptor.annotation)
+
+
+_NOT_PLAIN = object()
+_DECIMAL = None   # compiled on first use (re is imported by typer anyway)
+_INTEGER = None
+
+
+def _plain_value(descriptor, value):
+    """``value`` converted as typer's adapter would, or ``_NOT_PLAIN`` when that needs typer."""
+    import typing
+
+    info = descriptor.parameter_info
+    if getattr(info, "parser", None) is not None or getattr(info, "click_type", None) is not None:
+        return _NOT_PLAIN
+    ann = descriptor.annotation
+    if typing.get_origin(ann) in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+        args = [a for a in typing.get_args(ann) if a is not type(None)]
+        if len(args) != 1:
+            return _NOT_PLAIN
+        ann = args[0]
+    if typing.get_origin(ann) is list and isinstance(value, (list, tuple)):
+        args = typing.get_args(ann)
+        if len(args) != 1:
+            return _NOT_PLAIN
+        items = [_plain_leaf(args[0], info, item) for item in value]
+        return _NOT_PLAIN if any(item is _NOT_PLAIN for item in items) else items
+    return _plain_leaf(ann, info, value)
+
+
+def _plain_leaf(ann, info, value):
+    global _DECIMAL, _INTEGER
+    import enum
+
+    if ann is bool:
+        return value if isinstance(value, bool) else _NOT_PLAIN
+    if ann is str:
+        return value if isinstance(value, str) else _NOT_PLAIN
+    if isinstance(ann, type) and issubclass(ann, enum.Enum):
+        if isinstance(value, ann):
+            return value
+        if isinstance(value, str):
+            try:
+                return ann(value)            # an exact member value: the member typer would give
+            except ValueError:
+                return _NOT_PLAIN
+        return _NOT_PLAIN
+    if ann in (int, float):
+        if (getattr(info, "min", None) is not None or getattr(info, "max", None) is not None
+                or getattr(info, "clamp", False)):
+            return _NOT_PLAIN                # constraints: typer's adapter checks them
+        if type(value) is ann:
+            return value
+        if not isinstance(value, str):
+            return _NOT_PLAIN
+        if _DECIMAL is None:
+            import re
+
+            _DECIMAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d{1,3})?")
+            _INTEGER = re.compile(r"[+-]?\d{1,18}")
+        if ann is int:
+            return int(value) if _INTEGER.fullmatch(value) else _NOT_PLAIN
+        if _DECIMAL.fullmatch(value):
+            number = float(value)
+            if number - number == 0.0:       # finite
+                return number
+        return _NOT_PLAIN
+    return _NOT_PLAIN
 
 
 def _light_coercion() -> None:
