@@ -9,6 +9,7 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
+from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc import vocabulary
 from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, Noise, OscillatorNoiseOpt,
                                   OutputOpt, RangeRateModel, choices, named_values, resolve_output)
@@ -26,6 +27,7 @@ class BiasPer(str, Enum):
 
 
 @app.command("estimate")
+@force_options
 def estimate_command(
     passes: List[str] = typer.Argument(..., metavar="PASS...",
                                        help="Pass files (Parquet, Arrow, CSV from ingest/simulate), or - for stdin."),
@@ -87,6 +89,7 @@ def estimate_command(
         help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' solution always exits 1); the outputs "
              "are written either way."),
     output: Optional[str] = OutputOpt,
+    force_settings: ForceSettings = None,
 ) -> None:
     """Estimate the orbit state at an epoch and the selected biases from one or more passes
     (batch weighted least squares with per-station range biases, seed 002), and write a state
@@ -157,7 +160,8 @@ def estimate_command(
         apriori_initial=apriori_initial, force=force.value, earth=earth.value,
         range_rate_model=range_rate_model.value if range_rate_model else None, max_iterations=max_iterations,
         clip=clip if clip > 0 else None, epoch=epoch, kinds=kind_list, compare_doppler_only=compare_doppler_only,
-        two_stage=two_stage, noise=noise.value, oscillator_noise=oscillator_noise)
+        two_stage=two_stage, noise=noise.value, oscillator_noise=oscillator_noise,
+        force_model=force_settings.model(force.value, state0.epoch, orientation, state0))
     result = estimate(tables, state0, station_table, options, orientation)
 
     png = residuals_png(result.residuals) if plot is not None else None

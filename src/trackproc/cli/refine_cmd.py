@@ -169,6 +169,9 @@ def refine_command(
     from trackproc.io.statefile import format_epoch, read_state_or_tle, write_state
     from trackproc.pipeline.refine import RefineOptions, refine, summary_text
 
+    if force.value == "full":
+        raise typer.BadParameter("refine fits one pass with the Taylor engine: two-body or j2 (--force full: "
+                                 "propagate, simulate, accuracy, estimate)", param_hint="--force")
     orientation, warning = earth_orientation(eop, dut1)
     if warning:
         log.warning(warning)

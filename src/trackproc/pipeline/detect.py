@@ -45,7 +45,7 @@ from typing import Optional
 import numpy as np
 
 from trackproc.errors import InputError, ProcessingError
-from trackproc.vocabulary import EARTHS, FORCES  # noqa: F401  (re-exported)
+from trackproc.vocabulary import EARTHS, FORCES, TAYLOR_FORCES  # noqa: F401  (re-exported)
 
 DEG = math.pi / 180.0
 MODELS = ("planar", "3d")
@@ -239,7 +239,7 @@ def parse_nominal(data: bytes | str, source: str = "<nominal>") -> Nominal:
         heading_deg=heading, radius_m=radius,
         sigma_rad=number("sigma_rad", lo=0, hi=0.5, lo_open=True, expected="a sigma in rad in (0, 0.5]"),
         tau_s=number("tau_s", lo=0, expected="a reaction time in s, >= 0") or 0.0,
-        force=choice("force", FORCES, "two-body"), earth=choice("earth", EARTHS, "wgs84"),
+        force=choice("force", TAYLOR_FORCES, "two-body"), earth=choice("earth", EARTHS, "wgs84"),
         kinds=kinds, source=source)
 
 

@@ -94,6 +94,8 @@ class EstimateOptions:
     force: str = "j2"
     earth: str = "wgs84"
     range_rate_model: Optional[str] = None
+    #: The ForceModel of ``force="full"`` (trackproc.dynamics.forces; cli.force_options builds it).
+    force_model: Optional[object] = None
     max_iterations: int = 20
     clip: Optional[float] = 4.0
     epoch: object = None
@@ -382,7 +384,7 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
                              a_st=a_st, mode=frame["_mode"].to_numpy(dtype=object))
 
     # parameters
-    rv0, cov0 = _initial_at_epoch(initial, epoch, opt.force, eop)
+    rv0, cov0 = _initial_at_epoch(initial, epoch, opt.force_model or opt.force, eop)
     apriori = dict(opt.apriori_sigma)
     for key, sigma in apriori.items():
         if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma > 0):
@@ -461,7 +463,8 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
             raise InputError("give --apriori-initial or state a-priori sigmas, not both", column="--apriori-sigma")
         priors.append(Prior(np.arange(6), np.asarray(rv0, float), np.asarray(cov0, float)))
     frame_q = propagator.reference_frame(*epoch_jd, eop)
-    return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force, range_rate_model=model,
+    return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force_model or opt.force,
+                   range_rate_model=model,
                    modifiers=modifiers, priors=priors, times=t64, sources=frame["_source"].to_numpy(dtype=object),
                    eop=eop)
 
@@ -603,8 +606,10 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         "sources": sorted({str(s) for s in problem.sources}),
     }, "quality": quality.as_dict()}
     state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=list(names), values=x, sigma=sol.sigma,
-                               covariance=sol.covariance, force_model=opt.force,
-                               constants=force_model_constants(opt.force),
+                               covariance=sol.covariance,
+                               force_model=opt.force_model.label() if opt.force_model else opt.force,
+                               constants=(opt.force_model.describe() if opt.force_model
+                                          else force_model_constants(opt.force)),
                                eop_source=getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
                                diagnostics=diagnostics, extra=extra)
     return EstimateResult(state=state, solution=sol, problem=problem, residuals=residual_frame(problem, sol),
