@@ -33,6 +33,8 @@ NOISE_MODELS = ("auto", "white", "ar1", "walk", "ar1+walk")
 #: Force models (``--force``): the Taylor engine's two-body and J2, and ``full`` (gravity field,
 #: Sun, Moon, radiation pressure, drag, relativity; trackproc.dynamics.forces, DOP853).
 FORCES = ("two-body", "j2", "full")
+#: The force models of the Taylor (DT) engine and the DOP853 reference (detect, refine).
+TAYLOR_FORCES = ("two-body", "j2")
 #: Third bodies of the full force model (``--third-body``).
 THIRD_BODIES = ("sun", "moon")
 #: Atmosphere models of the full force model's drag (``--atmosphere``).

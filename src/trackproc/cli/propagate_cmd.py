@@ -186,7 +186,7 @@ def propagate_command(
         orbit = OrbitInput(tle=tle, source=tle.source)
     else:
         orbit = read_orbit(state, orientation)
-    force_key = resolve_force(orbit, force.value if force is not None else None)
+    force_key = resolve_force(orbit, force.value if force is not None else None, allow_full=True)
     station = None
     if at_station is not None:
         table = None

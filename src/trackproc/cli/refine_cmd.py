@@ -171,6 +171,9 @@ def refine_command(
     from trackproc.pipeline.refine import RefineOptions, refine
     from trackproc.report.refine_text import summary_text
 
+    if force.value == "full":
+        raise typer.BadParameter("refine fits one pass with the Taylor engine: two-body or j2 (--force full: "
+                                 "propagate, simulate, accuracy, estimate)", param_hint="--force")
     orientation, warning = earth_orientation(eop, dut1)
     if warning:
         log.warning(warning)

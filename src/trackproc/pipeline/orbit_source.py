@@ -117,12 +117,16 @@ def initial_state(initial: str, tables: list, eop=None, at=None):
     return read_state_or_tle(initial, eop, at=at)
 
 
-def resolve_force(orbit: OrbitInput, force: Optional[str]) -> str:
-    """``--force``: default ``sgp4`` for a TLE, ``j2`` for a state; ``sgp4`` needs a TLE."""
+def resolve_force(orbit: OrbitInput, force: Optional[str], allow_full: bool = False) -> str:
+    """``--force``: default ``sgp4`` for a TLE, ``j2`` for a state; ``sgp4`` needs a TLE;
+    ``full`` only where the command builds the full force model (``allow_full``: propagate)."""
     if force is None:
         return "sgp4" if orbit.tle is not None else "j2"
     if force not in FORCES:
         raise InputError("unknown force model", column="--force", found=force, expected=", ".join(FORCES))
+    if force == "full" and not allow_full:
+        raise InputError("not offered by this command", column="--force", found="full",
+                         expected="sgp4, j2 or two-body (--force full: propagate, simulate, accuracy, estimate)")
     if force == "sgp4" and orbit.tle is None:
         raise InputError("SGP4 needs a TLE", file=orbit.source, column="--force", found="sgp4",
                          expected="a TLE input, or --force j2 / two-body for a state file")

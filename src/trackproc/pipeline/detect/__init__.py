@@ -34,7 +34,7 @@ NOMINAL.json (one JSON object; units in the names; unknown keys are an error)::
 
 Azimuth residuals ``x - a`` and differences ``b - a`` are wrapped to (-π, π].
 """
-from trackproc.vocabulary import EARTHS, FORCES  # noqa: F401  (re-exported)
+from trackproc.vocabulary import EARTHS, FORCES, TAYLOR_FORCES  # noqa: F401  (re-exported)
 from trackproc.pipeline.detect.nominal import DEG, FIELDS, MODELS, Nominal, parse_nominal, read_nominal  # noqa: F401
 from trackproc.pipeline.detect.geometry import (  # noqa: F401
     StationGeometry, flight_time_s, model_3d, planar_encounter, planar_for_3d, seconds_from_impact, wrap_pi)

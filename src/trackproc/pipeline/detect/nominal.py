@@ -17,7 +17,7 @@ from trackproc.isotime import iso_utc
 from trackproc.methods.ballistic import R_PLANAR
 from trackproc.types import parse_epoch
 from trackproc.types.checks import check_name
-from trackproc.vocabulary import EARTHS, FORCES
+from trackproc.vocabulary import EARTHS, TAYLOR_FORCES
 
 
 DEG = math.pi / 180.0
@@ -200,5 +200,5 @@ def parse_nominal(data: bytes | str, source: str = "<nominal>") -> Nominal:
         heading_deg=heading, radius_m=radius,
         sigma_rad=number("sigma_rad", lo=0, hi=0.5, lo_open=True, expected="a sigma in rad in (0, 0.5]"),
         tau_s=number("tau_s", lo=0, expected="a reaction time in s, >= 0") or 0.0,
-        force=choice("force", FORCES, "two-body"), earth=choice("earth", EARTHS, "wgs84"),
+        force=choice("force", TAYLOR_FORCES, "two-body"), earth=choice("earth", EARTHS, "wgs84"),
         kinds=kinds, source=source)

@@ -123,7 +123,8 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         "method": "batch weighted least squares (Gauss-Newton by SVD, Levenberg-Marquardt damping)",
         "range_rate_model": problem.range_rate_model,
         "light_time": light_time_note(problem.meas),
-        "propagator": "Taylor (DT) with state transition matrix, quasi-inertial frame of the solution epoch",
+        "propagator": ("DOP853 with variational equations" if problem.force_model is not None
+                       else "Taylor (DT) with state transition matrix") + ", quasi-inertial frame of the solution epoch",
         "earth": opt.earth, "doppler_bias": opt.doppler_bias, "doppler_bias_per": opt.doppler_bias_per,
         "fixed_parameters": fixed, "drift_epochs_s": drifts,
         "apriori": {n: s for n, s, m in zip(names, problem.params.apriori()[2], problem.params.apriori()[0]) if m},
@@ -133,8 +134,11 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         "sources": sorted({str(s) for s in problem.sources}),
     }, "quality": quality.as_dict()}
     state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=list(names), values=x, sigma=sol.sigma,
-                               covariance=sol.covariance, force_model=opt.force,
-                               constants=force_model_constants(opt.force),
+                               covariance=sol.covariance,
+                               force_model=(problem.force_model.label() if problem.force_model is not None
+                                            else opt.force),
+                               constants=(problem.force_model.describe() if problem.force_model is not None
+                                          else force_model_constants(opt.force)),
                                eop_source=getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
                                diagnostics=diagnostics, extra=extra)
     return EstimateResult(state=state, solution=sol, problem=problem, residuals=residual_frame(problem, sol),
