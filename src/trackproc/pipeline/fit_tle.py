@@ -447,7 +447,10 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         "sigma": dict(zip(tf.ELEMENT_NAMES, sigma.tolist())),
         "covariance": {"parameters": list(tf.ELEMENT_NAMES), "matrix": cov.tolist(),
                        "note": "n rev/day, ex, ey, angles deg, B* 1/earth radii; the file sigmas scaled per pass "
-                               "and kind (noise) before it is taken"},
+                               "and kind (noise) before it is taken",
+                       "scope": "the estimation error of the mean elements under SGP4; it leaves out SGP4's own "
+                                "theory error, which dominates predictions (DopTrack: 2-40x larger at the next "
+                                "pass, docs/fit-tle.md)"},
         "classical": c,
         "initial_elements": dict(zip(tf.ELEMENT_NAMES, x_init.tolist())),
         "fixed": [] if options.fit_bstar else ["bstar"],
