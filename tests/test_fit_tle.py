@@ -302,6 +302,7 @@ def test_doptrack_fitted_tle_predicts_the_held_back_pass():
 
 @pytest.mark.realdata
 @pytest.mark.subprocess
+@pytest.mark.slow
 def test_initial_metadata_is_the_pass_files_tle(run_cli, tmp_path):
     """``--initial metadata`` (issue 18 item 1): the TLE stored in DopTrack pass files (the newest
     of them) gives the same initial state as that TLE given as a file (refine, estimate), the

@@ -249,7 +249,7 @@ def _reepoch(orbit, epoch, template_bstar, eop):
     half = REEPOCH_HALF_SPAN_REV * period
     grid = np.arange(-half, half + REEPOCH_STEP_S / 2, REEPOCH_STEP_S)
     sampler = Satellite(orbit, force, epoch, float(grid[0]), float(grid[-1]), eop)
-    truth = sampler._states(grid)[:, :3]
+    truth = sampler.states(grid)[:, :3]
     track = Sgp4Track(sampler.times(grid), eop, derivatives=False)
     ep = tf.Epoch(0, float(jd1[0]), float(jd2[0]))
     sol = tf.solve(lambda x: track.states(tf.satrec_of(x, ep))[:, :3].reshape(-1), x0, truth.reshape(-1),
@@ -479,10 +479,13 @@ def summary_text(result: FitTleResult) -> str:
              f"  n {c['mean_motion_rev_day']:.8f} ± {sig['n_rev_per_day']:.2g} rev/day, e {c['eccentricity']:.7f}, "
              f"i {c['inclination_deg']:.4f} ± {sig['i_deg']:.2g} deg, RAAN {c['raan_deg']:.4f} ± "
              f"{sig['raan_deg']:.2g} deg, lambda ± {sig['lambda_deg']:.2g} deg, B* {c['bstar']:.4g} ± {sig['bstar']:.2g}"]
-    for g in s["groups"]:
+    shown = s["groups"] if len(s["groups"]) <= 12 else s["groups"][:10]
+    for g in shown:
         unit = {"doppler": "Hz", "range_rate": "m/s", "range": "m", "azimuth": "rad", "elevation": "rad"}.get(
             g["kind"], "m")
         lines.append(f"  {g['group']}: RMS {g['rms']:.4g} {unit} (initial {g['rms_initial']:.4g}), "
                      f"{g['samples']} samples")
+    if len(shown) < len(s["groups"]):
+        lines.append(f"  ... {len(s['groups']) - len(shown)} more passes and kinds (--json or --summary FILE)")
     lines.append("  " + result.quality.text())
     return "\n".join(lines) + "\n"
