@@ -8,7 +8,7 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
-from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, JsonSummaryOpt, RangeRateModelOpt
+from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, JsonSummaryOpt, RangeRateModelOpt, resolve_output
 
 log = logging.getLogger("trackproc")
 
@@ -89,6 +89,7 @@ def fit_tle_command(
     from trackproc.pipeline.orbit_source import initial_orbit
 
     passes = list(passes or [])
+    output = resolve_output(output, "TLE output")
     if doppler_bias not in DOPPLER_BIAS:
         raise typer.BadParameter(f"{doppler_bias!r} is not one of {', '.join(DOPPLER_BIAS)}",
                                  param_hint="--doppler-bias")
