@@ -45,6 +45,10 @@ def fit_tle_command(
                                  help="Constrain the elements by the initial orbit (refine's default element sigmas, "
                                       "grown with the age of the initial TLE)."),
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Iterations at most."),
+    cross_validate: bool = typer.Option(False, "--cross-validate",
+                                        help="Also leave each pass file out in turn, fit the others and predict it: "
+                                             "the fitted TLE's prediction skill against the initial orbit's (one "
+                                             "extra fit per file; 'suspect' when worse in the median)."),
     earth=EarthOpt,
     range_rate_model=RangeRateModelOpt,
     eop: Optional[str] = EopOpt,
@@ -118,7 +122,8 @@ def fit_tle_command(
         epoch=np.datetime64(at, "ns") if at is not None else None, fit_bstar=not fix_bstar, doppler_bias=doppler_bias,
         kinds=[k.strip() for k in kinds.split(",") if k.strip()] if kinds else None, earth=earth.value,
         range_rate_model=range_rate_model.value, ephemeris_sigma_m=ephemeris_sigma if ephemeris_sigma > 0 else 100.0,
-        clip=clip if clip > 0 else float("inf"), max_iterations=max_iterations, satnum=satnum, apriori=apriori)
+        clip=clip if clip > 0 else float("inf"), max_iterations=max_iterations, satnum=satnum, apriori=apriori,
+        cross_validate=cross_validate)
     result = fit_tle(tables, ephemerides, orbit, options, orientation, extra)
     text = json.dumps(json_ready(result.summary), indent=2) + "\n"
     write_text(output, tle_text(result.tle))

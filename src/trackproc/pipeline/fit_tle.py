@@ -72,6 +72,7 @@ class FitTleOptions:
     max_iterations: int = 30
     satnum: Optional[str] = None
     apriori: bool = True
+    cross_validate: bool = False
 
 
 @dataclass
@@ -434,6 +435,18 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         per_group.append(entry)
     cov = sol.element_covariance
     sigma = sol.sigma
+    cross = cross_validation(tables, ephemerides, orbit, options, eop, stations, epoch) \
+        if options.cross_validate else None
+    if cross is not None:
+        if cross["ratios"]:
+            median = float(np.median(cross["ratios"]))
+            q.add("cross_validation", "ok" if median <= 1.0 else "suspect",
+                  f"each pass file left out in turn and predicted by a TLE fitted to the others: RMS ratio to the "
+                  f"initial orbit's prediction, median {median:.3g} over {len(cross['ratios'])}"
+                  + ("" if median <= 1.0 else ": the fitted TLE predicts left-out passes worse than the initial "
+                     "orbit"), value=median, limit=1.0)
+        else:
+            q.add("cross_validation", "ok", cross["note"])
     summary = {
         "generator": "trackproc fit-tle",
         "initial": orbit.source,
@@ -463,10 +476,42 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         "groups": per_group,
         "quality": q.as_dict(),
     }
+    if cross is not None:
+        summary["cross_validation"] = cross
     residuals = obs[["time", "station", "pass_id", "kind", "value", "sigma"]].copy()
     residuals["residual"] = resid
     residuals["edited"] = ~keep
     return FitTleResult(tle=tle, summary=summary, quality=q, residuals=residuals)
+
+
+def cross_validation(tables, ephemerides, orbit, options: FitTleOptions, eop, stations, epoch) -> dict:
+    """Prediction skill from the user's own data (``--cross-validate``): each pass file left out
+    in turn, the TLE fitted to the others (same epoch and options) predicts it; per pass and kind
+    of the left-out file, the RMS after its own offset and drift (``compare``) of that prediction
+    and of the initial orbit's, and their ratio. Needs two or more pass files."""
+    from dataclasses import replace
+
+    from trackproc.pipeline.compare import CompareOptions, compare
+    from trackproc.pipeline.orbit_source import OrbitInput
+
+    if len(tables) < 2:
+        return {"passes": [], "ratios": [], "note": "cross-validation needs two or more pass files: the fitted "
+                                                    "TLE's prediction skill is unchecked"}
+    sub = replace(options, cross_validate=False, epoch=epoch)
+    cmp = CompareOptions(remove=options.doppler_bias, earth=options.earth, range_rate_model=options.range_rate_model)
+    rows, ratios = [], []
+    for k, (source, table) in enumerate(tables):
+        others = tables[:k] + tables[k + 1:]
+        fitted = fit_tle(others, ephemerides, orbit, sub, eop, stations)
+        _, ours = compare(table, OrbitInput(tle=fitted.tle, source="fitted"), cmp, eop, stations)
+        _, theirs = compare(table, orbit, cmp, eop, stations)
+        for a, b in zip(ours["passes"], theirs["passes"]):
+            ratio = a["rms"] / b["rms"] if b["rms"] > 0 else float("nan")
+            rows.append({"left_out": source, "pass_id": a["pass_id"], "kind": a["kind"], "unit": a["unit"],
+                         "rms_fitted_without_it": a["rms"], "rms_initial": b["rms"], "ratio": ratio})
+            if math.isfinite(ratio):
+                ratios.append(ratio)
+    return {"passes": rows, "ratios": ratios}
 
 
 def summary_text(result: FitTleResult) -> str:
