@@ -349,3 +349,25 @@ def test_initial_metadata_is_the_pass_files_tle(run_cli, tmp_path):
     for command in ("refine", "estimate", "fit-tle"):
         res = run_cli([command, sample, "--initial", "metadata", "-o", tmp_path / "x.out"])
         assert res.exit_code == 2 and "TLE" in res.stderr and len(res.stderr.strip().splitlines()) == 1, res.stderr
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_one_pass_without_the_apriori_is_rejected_as_undetermined(run_cli, tmp_path):
+    """One DopTrack pass (development day) cannot determine seven elements: with --no-apriori the
+    fit's sigmas exceed what an initial TLE already knows (inclination ~ tens of degrees) and
+    the verdict is rejected (exit 1, the TLE written with the reason), not ok."""
+    from realdata import DOPTRACK
+
+    raw = DOPTRACK / "data" / "Delfi-C3_32789_202004092043.csv"
+    if not raw.exists():
+        pytest.skip(f"real data not available: {raw}")
+    pass_file = tmp_path / "p.parquet"
+    assert run_cli(["ingest", raw, "-o", pass_file]).exit_code == 0
+    res = run_cli(["fit-tle", pass_file, "--initial", "metadata", "--no-apriori", "--max-iterations", "6", "--json",
+                   "-o", tmp_path / "x.tle"])
+    assert res.exit_code == 1, res.stderr
+    doc = json.loads(res.stderr[res.stderr.index("{"):res.stderr.rindex("}") + 1])
+    reasons = {r["code"]: r for r in doc["quality"]["reasons"]}
+    assert doc["quality"]["verdict"] == "rejected" and reasons["undetermined"]["severity"] == "rejected"
+    assert (tmp_path / "x.tle").exists()

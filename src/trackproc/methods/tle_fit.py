@@ -29,6 +29,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from trackproc.errors import ProcessingError
+
 DEG = math.pi / 180.0
 #: rev/day per rad/min.
 REV_DAY_PER_RAD_MIN = 1440.0 / (2.0 * math.pi)
@@ -156,7 +158,8 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
     (``design`` columns) with an optional Gaussian a-priori on the elements (``prior_cov`` (7, 7)
     of all elements; the rows of free ones are used). ``keep`` (bool, N) excludes edited samples.
     Converged when every update is below ``tolerance`` of its formal 1-σ. ``model(x)`` may raise
-    ValueError or ArithmeticError for elements SGP4 cannot use: such a trial step is refused."""
+    ValueError, ArithmeticError or ProcessingError for elements SGP4 cannot use: such a trial
+    step is refused."""
     x = np.asarray(x0, float).copy()
     observed, sigma = np.asarray(observed, float), np.asarray(sigma, float)
     nobs = observed.size
@@ -180,7 +183,7 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
     def evaluate(xx):
         try:
             h = np.asarray(model(xx), float)
-        except (ValueError, ArithmeticError):
+        except (ValueError, ArithmeticError, ProcessingError):     # SGP4 refuses these elements
             return None
         return h if np.all(np.isfinite(h[keep])) else None
 
@@ -239,7 +242,11 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
         jx = jacobian(model, x, free, steps)
     a = np.concatenate([jx, b], axis=1) * w[:, None]
     normal = a.T @ a + info
-    cov = np.linalg.inv(normal)
+    try:
+        cov = np.linalg.inv(normal)
+    except np.linalg.LinAlgError:
+        raise ValueError("the normal matrix is singular: the data do not determine the elements "
+                         "(an a-priori is needed)") from None
     resid = observed - h - b @ c
     g = prior_gap(x)
     rw = resid * w

@@ -26,7 +26,9 @@ Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project
    :func:`trackproc.pipeline.identify.integrated_autocorrelation_time`) and the fit is repeated:
    its covariance is the one reported.
 6. **Verdict** (as refine/estimate, :mod:`trackproc.methods.quality`): ``rejected`` when the
-   solver does not converge or the data contradict the a-priori (its χ² beyond the 99.9 % point),
+   solver does not converge, the data contradict the a-priori (its χ² beyond the 99.9 % point)
+   or, without the a-priori, leave an element over 10x less determined than the default
+   a-priori (``undetermined``; ``suspect`` beyond 1x),
    ``suspect`` when more than 10 % of the samples are edited or the written TLE (rounded to its
    fields) lies outside the fitted elements' 99.9 % confidence region (χ² up by more than
    the 99.9 % point of χ²(free elements)); ``ok``
@@ -318,8 +320,9 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
             return tf.solve(model, x0, observed, sigma, free=free, prior_mean=x_init if options.apriori else None,
                             prior_cov=prior_cov if options.apriori else None, design=design, steps=steps, keep=keep,
                             max_iterations=options.max_iterations)
-        except ValueError as exc:
-            raise ProcessingError(f"fit-tle: {exc}") from None
+        except (ValueError, ProcessingError, np.linalg.LinAlgError) as exc:
+            hint = "" if options.apriori else " (without --no-apriori the initial orbit constrains what the data do not)"
+            raise ProcessingError(f"the fit failed: {exc}{hint}") from None
 
     keep = np.ones(len(obs), bool)
     sol = run(x_init, sigma_file, keep)
@@ -391,6 +394,16 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
               f"a-priori chi2 {sol.chi2_prior:.4g} over {sol.n_prior} elements (99.9 % limit {limit:.3g})"
               + ("" if sol.chi2_prior <= limit else ": the data contradict the initial orbit's a-priori, the "
                  "covariance that leans on it does not hold"), value=sol.chi2_prior, limit=limit)
+    # what the data leave undetermined (only possible without the a-priori): sigmas beyond the
+    # default a-priori's, i.e. less than an initial TLE already knows
+    loose = {name: float(sol.sigma[k] / math.sqrt(prior_cov[k, k]))
+             for k, name in enumerate(tf.ELEMENT_NAMES) if free[k] and sol.sigma[k] > 1.01 * math.sqrt(prior_cov[k, k])}
+    if loose:
+        worst_ratio = max(loose.values())
+        q.add("undetermined", "rejected" if worst_ratio > 10.0 else "suspect",
+              "the data leave " + ", ".join(f"{k} ({v:.3g}x)" for k, v in sorted(loose.items())) + " less well "
+              "determined than the default a-priori of an initial TLE: give more passes, or keep the a-priori",
+              value=worst_ratio, limit=1.0)
     worst = max(noise.values(), key=lambda v: v["sigma_scale"]) if noise else None
     if worst is not None:
         q.add("noise", "ok", f"file sigmas scaled per pass and kind by up to {worst['sigma_scale']:.3g} (residual "
