@@ -106,8 +106,13 @@ def test_round_trip_ephemeris_gives_the_elements_back(run_cli, write, tmp_path):
     epoch = str(tle_epoch(truth))
     out = tmp_path / "fit.tle"
     res = run_cli(["fit-tle", "--ephemeris", eph, "--initial", start, "--epoch", epoch, "--fix-bstar",
-                   "--ephemeris-sigma", "1", "--no-apriori", "--dut1", "0", "-o", out, "--json"])
+                   "--ephemeris-sigma", "1", "--no-apriori", "--dut1", "0", "-o", out, "--json",
+                   "--residuals", tmp_path / "r.csv"])
     assert res.exit_code == 0, res.stderr
+    import pandas as pd
+
+    table = pd.read_csv(tmp_path / "r.csv", comment="#")
+    assert len(table) == 3 * 361 and set(table["kind"]) == {"x", "y", "z"} and table["residual"].abs().max() < 5.0
     summary = json.loads(res.stderr[res.stderr.index("{"):])
     fitted = parse_tle(out.read_text())
     assert fitted.satnum == "25544" and fitted.name == truth.name and fitted.line1[9:17] == truth.line1[9:17]

@@ -55,6 +55,9 @@ def fit_tle_command(
     dut1: Optional[float] = Dut1Opt,
     summary_path: Optional[str] = typer.Option(None, "--summary", metavar="FILE",
                                                help="Also write the JSON summary (elements, covariance, verdict) here."),
+    residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
+                                            help="Write the residuals of the fit (Parquet, or CSV by the .csv "
+                                                 "suffix; estimate's columns)."),
     as_json: bool = JsonSummaryOpt,
     strict: bool = typer.Option(False, "--strict",
                                 help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' fit always "
@@ -100,6 +103,8 @@ def fit_tle_command(
     if not passes and not ephemeris:
         raise typer.BadParameter("give pass files and/or --ephemeris files to fit", param_hint="PASS")
     stdin_users = [p for p in passes + list(ephemeris) if is_stdio(p)] + ([initial] if is_stdio(initial) else [])
+    if residuals == "-" and output == "-":
+        raise typer.BadParameter("stdout already carries the TLE; give --residuals a file", param_hint="--residuals")
     if len(stdin_users) > 1:
         raise typer.BadParameter("only one input can come from stdin", param_hint="PASS")
     if len(set(passes)) != len(passes):
@@ -129,6 +134,13 @@ def fit_tle_command(
     write_text(output, tle_text(result.tle))
     if summary_path is not None:
         write_text(summary_path, text)
+    if residuals is not None:
+        from trackproc.io.residuals import write_residuals
+
+        write_residuals(result.residuals, residuals, {"command": "fit-tle", "epoch": result.summary["epoch"],
+                                                      "tle": result.summary["tle"], "parameters": list(
+                                                          result.summary["elements"]),
+                                                      "sources": sorted({str(s) for s, _ in tables + ephemerides})})
     if log.isEnabledFor(logging.WARNING):
         sys.stderr.write(text if as_json else summary_text(result))
         sys.stderr.flush()

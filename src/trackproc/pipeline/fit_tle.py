@@ -491,9 +491,14 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
     }
     if cross is not None:
         summary["cross_validation"] = cross
-    residuals = obs[["time", "station", "pass_id", "kind", "value", "sigma"]].copy()
-    residuals["residual"] = resid
-    residuals["edited"] = ~keep
+    units = {"range": "m", "range_rate": "m/s", "doppler": "Hz", "elevation": "rad", "azimuth": "rad"}
+    # the residual table of estimate/refine (io.residuals): computed = SGP4 + the nuisance terms,
+    # sigma = the file's scaled as in the fit
+    residuals = pd.DataFrame({"time": pd.to_datetime(obs["time"]).dt.tz_localize("UTC"), "station": obs["station"],
+                              "pass_id": obs["pass_id"],
+                              "kind": obs["kind"], "unit": obs["kind"].map(units).fillna("m"), "observed": observed,
+                              "computed": observed - resid, "residual": resid,
+                              "normalized_residual": resid / sigma_eff, "sigma": sigma_eff, "edited": ~keep})
     return FitTleResult(tle=tle, summary=summary, quality=q, residuals=residuals)
 
 
