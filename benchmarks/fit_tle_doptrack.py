@@ -13,7 +13,8 @@ never used while developing):
 Both against the initial TLE's SGP4 prediction; "pred" is also compared with the TLE stored in
 the predicted pass's own metadata (newer, when the station had updated it). RMS in Hz of the
 predicted pass's Doppler after that pass's own offset and drift (``compare``). Usage:
-``PYTHONPATH=src python benchmarks/fit_tle_doptrack.py [dev|holdout|both]`` (about a minute).
+``PYTHONPATH=src python benchmarks/fit_tle_doptrack.py [dev|holdout|both|covariance]`` (about a
+minute; ``covariance``: :func:`covariance_check`, development evenings only).
 """
 
 from __future__ import annotations
@@ -76,9 +77,49 @@ def table(dev: bool):
     return out
 
 
+
+
+def covariance_check():
+    """Development evenings only: does the fitted elements' covariance cover the prediction error
+    of the held-back pass? Its Doppler spread there (20 draws from the covariance, each pass's
+    offset and drift removed) against the orbit's share of the prediction RMS,
+    ``sqrt(rms_fitted^2 - noise^2)``, the noise being the RMS of a fit to that pass itself."""
+    from trackproc.io.tle import satrec
+    from trackproc.methods import tle_fit as tf
+    from trackproc.pipeline.compare import fit_trend
+
+    for g in [g for g in evenings() if is_dev(g[0])]:
+        tables = [(s, _load(s)[0]) for s in g[:-1]]
+        res = fit_tle(tables, [], OrbitInput(tle=metadata_tle(tables), source="metadata"), FitTleOptions(), EOP)
+        held = _load(g[-1])[0]
+        own = fit_tle([(g[-1], held)], [], OrbitInput(tle=metadata_tle([(g[-1], held)]), source="metadata"),
+                      FitTleOptions(), EOP)
+        noise = own.summary["groups"][0]["rms"]
+        x = np.array(list(res.summary["elements"].values()))
+        chol = np.linalg.cholesky(np.array(res.summary["covariance"]["matrix"]) + 1e-30 * np.eye(7))
+        sat = satrec(res.tle)
+        ep = tf.Epoch(0, sat.jdsatepoch, sat.jdsatepochF)
+        base, _ = compare(held, OrbitInput(tle=tf.satrec_of(x, ep)), CompareOptions(remove="none"), EOP)
+        t = (base["time"] - base["time"].min()).dt.total_seconds().to_numpy()
+        rng = np.random.default_rng(0)
+        spread = []
+        for _ in range(20):
+            r, _ = compare(held, OrbitInput(tle=tf.satrec_of(x + chol @ rng.normal(size=7), ep)),
+                           CompareOptions(remove="none"), EOP)
+            _, after = fit_trend(t, r["computed"].to_numpy() - base["computed"].to_numpy(),
+                                 base["sigma"].to_numpy(), "offset+drift")
+            spread.append(float(np.mean(after ** 2)))
+        fitted = _rms(held, res.tle)
+        print(json.dumps({"predicted": g[-1], "noise_hz": round(noise, 2), "fitted_hz": round(fitted, 2),
+                          "orbit_share_hz": round(float(np.sqrt(max(fitted ** 2 - noise ** 2, 0.0))), 2),
+                          "covariance_hz": round(float(np.sqrt(np.mean(spread))), 2)}))
+
+
 if __name__ == "__main__":
     which = sys.argv[1] if len(sys.argv) > 1 else "dev"
     if which in ("dev", "both"):
         table(True)
     if which in ("holdout", "both"):
         table(False)
+    if which == "covariance":
+        covariance_check()

@@ -8,7 +8,7 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
-from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, JsonSummaryOpt, RangeRateModelOpt
+from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, JsonSummaryOpt, RangeRateModelOpt, resolve_output
 
 log = logging.getLogger("trackproc")
 
@@ -45,12 +45,19 @@ def fit_tle_command(
                                  help="Constrain the elements by the initial orbit (refine's default element sigmas, "
                                       "grown with the age of the initial TLE)."),
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Iterations at most."),
+    cross_validate: bool = typer.Option(False, "--cross-validate",
+                                        help="Also leave each pass file out in turn, fit the others and predict it: "
+                                             "the fitted TLE's prediction skill against the initial orbit's (one "
+                                             "extra fit per file; 'suspect' when worse in the median)."),
     earth=EarthOpt,
     range_rate_model=RangeRateModelOpt,
     eop: Optional[str] = EopOpt,
     dut1: Optional[float] = Dut1Opt,
     summary_path: Optional[str] = typer.Option(None, "--summary", metavar="FILE",
                                                help="Also write the JSON summary (elements, covariance, verdict) here."),
+    residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
+                                            help="Write the residuals of the fit (Parquet, or CSV by the .csv "
+                                                 "suffix; estimate's columns)."),
     as_json: bool = JsonSummaryOpt,
     strict: bool = typer.Option(False, "--strict",
                                 help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' fit always "
@@ -89,12 +96,15 @@ def fit_tle_command(
     from trackproc.pipeline.orbit_source import initial_orbit
 
     passes = list(passes or [])
+    output = resolve_output(output, "TLE output")
     if doppler_bias not in DOPPLER_BIAS:
         raise typer.BadParameter(f"{doppler_bias!r} is not one of {', '.join(DOPPLER_BIAS)}",
                                  param_hint="--doppler-bias")
     if not passes and not ephemeris:
         raise typer.BadParameter("give pass files and/or --ephemeris files to fit", param_hint="PASS")
     stdin_users = [p for p in passes + list(ephemeris) if is_stdio(p)] + ([initial] if is_stdio(initial) else [])
+    if residuals == "-" and output == "-":
+        raise typer.BadParameter("stdout already carries the TLE; give --residuals a file", param_hint="--residuals")
     if len(stdin_users) > 1:
         raise typer.BadParameter("only one input can come from stdin", param_hint="PASS")
     if len(set(passes)) != len(passes):
@@ -117,12 +127,20 @@ def fit_tle_command(
         epoch=np.datetime64(at, "ns") if at is not None else None, fit_bstar=not fix_bstar, doppler_bias=doppler_bias,
         kinds=[k.strip() for k in kinds.split(",") if k.strip()] if kinds else None, earth=earth.value,
         range_rate_model=range_rate_model.value, ephemeris_sigma_m=ephemeris_sigma if ephemeris_sigma > 0 else 100.0,
-        clip=clip if clip > 0 else float("inf"), max_iterations=max_iterations, satnum=satnum, apriori=apriori)
+        clip=clip if clip > 0 else float("inf"), max_iterations=max_iterations, satnum=satnum, apriori=apriori,
+        cross_validate=cross_validate)
     result = fit_tle(tables, ephemerides, orbit, options, orientation, extra)
     text = json.dumps(json_ready(result.summary), indent=2) + "\n"
     write_text(output, tle_text(result.tle))
     if summary_path is not None:
         write_text(summary_path, text)
+    if residuals is not None:
+        from trackproc.io.residuals import write_residuals
+
+        write_residuals(result.residuals, residuals, {"command": "fit-tle", "epoch": result.summary["epoch"],
+                                                      "tle": result.summary["tle"], "parameters": list(
+                                                          result.summary["elements"]),
+                                                      "sources": sorted({str(s) for s, _ in tables + ephemerides})})
     if log.isEnabledFor(logging.WARNING):
         sys.stderr.write(text if as_json else summary_text(result))
         sys.stderr.flush()

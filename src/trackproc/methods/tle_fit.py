@@ -14,11 +14,12 @@ exactly what a TLE reader will propagate.
 
     cost = Σ ((z_k − h_k(x) − B_k c) / σ_k)² + (x − x_p)ᵀ P⁻¹ (x − x_p)
 
-with ``h`` the SGP4 prediction (partials by central differences, as STRF's rffit does with its
-simplex; here steps of 1 % of the a-priori sigma), ``B c`` the linear nuisance terms (a
+with ``h`` the SGP4 prediction (partials by central differences, steps of 1 % of the a-priori
+sigma; STRF's rffit minimises a cost like it with a downhill simplex), ``B c`` the linear nuisance terms (a
 transmitter's frequency offset and drift per pass) and the a-priori ``x_p, P`` (the initial
 TLE). The covariance of ``[x_free, c]`` is the inverse normal matrix at the solution (Tapley,
-Schutz & Born, Statistical Orbit Determination, 2004, eq. 4.4.29 with an a-priori).
+Schutz & Born, Statistical Orbit Determination, 2004, section 4.4: least squares with a-priori
+information).
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ from dataclasses import dataclass, field
 from typing import Callable, Optional
 
 import numpy as np
+
+from trackproc.errors import ProcessingError
 
 DEG = math.pi / 180.0
 #: rev/day per rad/min.
@@ -152,11 +155,13 @@ def jacobian(model: Callable, x, free, steps) -> np.ndarray:
 
 def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, prior_cov=None, design=None,
           steps=None, keep=None, max_iterations: int = 30, tolerance: float = 1e-2) -> Solution:
-    """Weighted least squares of the elements (``free`` mask) and linear nuisance terms
+    """Weighted least squares with a-priori information (Tapley, Schutz & Born 2004, section 4.4)
+    of the elements (``free`` mask) and linear nuisance terms
     (``design`` columns) with an optional Gaussian a-priori on the elements (``prior_cov`` (7, 7)
     of all elements; the rows of free ones are used). ``keep`` (bool, N) excludes edited samples.
     Converged when every update is below ``tolerance`` of its formal 1-σ. ``model(x)`` may raise
-    ValueError or ArithmeticError for elements SGP4 cannot use: such a trial step is refused."""
+    ValueError, ArithmeticError or ProcessingError for elements SGP4 cannot use: such a trial
+    step is refused."""
     x = np.asarray(x0, float).copy()
     observed, sigma = np.asarray(observed, float), np.asarray(sigma, float)
     nobs = observed.size
@@ -180,7 +185,7 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
     def evaluate(xx):
         try:
             h = np.asarray(model(xx), float)
-        except (ValueError, ArithmeticError):
+        except (ValueError, ArithmeticError, ProcessingError):     # SGP4 refuses these elements
             return None
         return h if np.all(np.isfinite(h[keep])) else None
 
@@ -239,7 +244,11 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
         jx = jacobian(model, x, free, steps)
     a = np.concatenate([jx, b], axis=1) * w[:, None]
     normal = a.T @ a + info
-    cov = np.linalg.inv(normal)
+    try:
+        cov = np.linalg.inv(normal)
+    except np.linalg.LinAlgError:
+        raise ValueError("the normal matrix is singular: the data do not determine the elements "
+                         "(an a-priori is needed)") from None
     resid = observed - h - b @ c
     g = prior_gap(x)
     rw = resid * w

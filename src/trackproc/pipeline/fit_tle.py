@@ -26,7 +26,9 @@ Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project
    :func:`trackproc.pipeline.identify.integrated_autocorrelation_time`) and the fit is repeated:
    its covariance is the one reported.
 6. **Verdict** (as refine/estimate, :mod:`trackproc.methods.quality`): ``rejected`` when the
-   solver does not converge or the data contradict the a-priori (its χ² beyond the 99.9 % point),
+   solver does not converge, the data contradict the a-priori (its χ² beyond the 99.9 % point)
+   or, without the a-priori, leave an element over 10x less determined than the default
+   a-priori (``undetermined``; ``suspect`` beyond 1x),
    ``suspect`` when more than 10 % of the samples are edited or the written TLE (rounded to its
    fields) lies outside the fitted elements' 99.9 % confidence region (χ² up by more than
    the 99.9 % point of χ²(free elements)); ``ok``
@@ -72,6 +74,7 @@ class FitTleOptions:
     max_iterations: int = 30
     satnum: Optional[str] = None
     apriori: bool = True
+    cross_validate: bool = False
 
 
 @dataclass
@@ -249,7 +252,7 @@ def _reepoch(orbit, epoch, template_bstar, eop):
     half = REEPOCH_HALF_SPAN_REV * period
     grid = np.arange(-half, half + REEPOCH_STEP_S / 2, REEPOCH_STEP_S)
     sampler = Satellite(orbit, force, epoch, float(grid[0]), float(grid[-1]), eop)
-    truth = sampler._states(grid)[:, :3]
+    truth = sampler.states(grid)[:, :3]
     track = Sgp4Track(sampler.times(grid), eop, derivatives=False)
     ep = tf.Epoch(0, float(jd1[0]), float(jd2[0]))
     sol = tf.solve(lambda x: track.states(tf.satrec_of(x, ep))[:, :3].reshape(-1), x0, truth.reshape(-1),
@@ -317,8 +320,9 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
             return tf.solve(model, x0, observed, sigma, free=free, prior_mean=x_init if options.apriori else None,
                             prior_cov=prior_cov if options.apriori else None, design=design, steps=steps, keep=keep,
                             max_iterations=options.max_iterations)
-        except ValueError as exc:
-            raise ProcessingError(f"fit-tle: {exc}") from None
+        except (ValueError, ProcessingError, np.linalg.LinAlgError) as exc:
+            hint = "" if options.apriori else " (without --no-apriori the initial orbit constrains what the data do not)"
+            raise ProcessingError(f"the fit failed: {exc}{hint}") from None
 
     keep = np.ones(len(obs), bool)
     sol = run(x_init, sigma_file, keep)
@@ -390,6 +394,16 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
               f"a-priori chi2 {sol.chi2_prior:.4g} over {sol.n_prior} elements (99.9 % limit {limit:.3g})"
               + ("" if sol.chi2_prior <= limit else ": the data contradict the initial orbit's a-priori, the "
                  "covariance that leans on it does not hold"), value=sol.chi2_prior, limit=limit)
+    # what the data leave undetermined (only possible without the a-priori): sigmas beyond the
+    # default a-priori's, i.e. less than an initial TLE already knows
+    loose = {name: float(sol.sigma[k] / math.sqrt(prior_cov[k, k]))
+             for k, name in enumerate(tf.ELEMENT_NAMES) if free[k] and sol.sigma[k] > 1.01 * math.sqrt(prior_cov[k, k])}
+    if loose:
+        worst_ratio = max(loose.values())
+        q.add("undetermined", "rejected" if worst_ratio > 10.0 else "suspect",
+              "the data leave " + ", ".join(f"{k} ({v:.3g}x)" for k, v in sorted(loose.items())) + " less well "
+              "determined than the default a-priori of an initial TLE: give more passes, or keep the a-priori",
+              value=worst_ratio, limit=1.0)
     worst = max(noise.values(), key=lambda v: v["sigma_scale"]) if noise else None
     if worst is not None:
         q.add("noise", "ok", f"file sigmas scaled per pass and kind by up to {worst['sigma_scale']:.3g} (residual "
@@ -434,6 +448,18 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         per_group.append(entry)
     cov = sol.element_covariance
     sigma = sol.sigma
+    cross = cross_validation(tables, ephemerides, orbit, options, eop, stations, epoch) \
+        if options.cross_validate else None
+    if cross is not None:
+        if cross["ratios"]:
+            median = float(np.median(cross["ratios"]))
+            q.add("cross_validation", "ok" if median <= 1.0 else "suspect",
+                  f"each pass file left out in turn and predicted by a TLE fitted to the others: RMS ratio to the "
+                  f"initial orbit's prediction, median {median:.3g} over {len(cross['ratios'])}"
+                  + ("" if median <= 1.0 else ": the fitted TLE predicts left-out passes worse than the initial "
+                     "orbit"), value=median, limit=1.0)
+        else:
+            q.add("cross_validation", "ok", cross["note"])
     summary = {
         "generator": "trackproc fit-tle",
         "initial": orbit.source,
@@ -447,7 +473,10 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         "sigma": dict(zip(tf.ELEMENT_NAMES, sigma.tolist())),
         "covariance": {"parameters": list(tf.ELEMENT_NAMES), "matrix": cov.tolist(),
                        "note": "n rev/day, ex, ey, angles deg, B* 1/earth radii; the file sigmas scaled per pass "
-                               "and kind (noise) before it is taken"},
+                               "and kind (noise) before it is taken",
+                       "scope": "the estimation error of the mean elements under SGP4; it leaves out SGP4's own "
+                                "theory error, which dominates predictions (DopTrack: 2-40x larger at the next "
+                                "pass, docs/fit-tle.md)"},
         "classical": c,
         "initial_elements": dict(zip(tf.ELEMENT_NAMES, x_init.tolist())),
         "fixed": [] if options.fit_bstar else ["bstar"],
@@ -460,10 +489,47 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         "groups": per_group,
         "quality": q.as_dict(),
     }
-    residuals = obs[["time", "station", "pass_id", "kind", "value", "sigma"]].copy()
-    residuals["residual"] = resid
-    residuals["edited"] = ~keep
+    if cross is not None:
+        summary["cross_validation"] = cross
+    units = {"range": "m", "range_rate": "m/s", "doppler": "Hz", "elevation": "rad", "azimuth": "rad"}
+    # the residual table of estimate/refine (io.residuals): computed = SGP4 + the nuisance terms,
+    # sigma = the file's scaled as in the fit
+    residuals = pd.DataFrame({"time": pd.to_datetime(obs["time"]).dt.tz_localize("UTC"), "station": obs["station"],
+                              "pass_id": obs["pass_id"],
+                              "kind": obs["kind"], "unit": obs["kind"].map(units).fillna("m"), "observed": observed,
+                              "computed": observed - resid, "residual": resid,
+                              "normalized_residual": resid / sigma_eff, "sigma": sigma_eff, "edited": ~keep})
     return FitTleResult(tle=tle, summary=summary, quality=q, residuals=residuals)
+
+
+def cross_validation(tables, ephemerides, orbit, options: FitTleOptions, eop, stations, epoch) -> dict:
+    """Prediction skill from the user's own data (``--cross-validate``): each pass file left out
+    in turn, the TLE fitted to the others (same epoch and options) predicts it; per pass and kind
+    of the left-out file, the RMS after its own offset and drift (``compare``) of that prediction
+    and of the initial orbit's, and their ratio. Needs two or more pass files."""
+    from dataclasses import replace
+
+    from trackproc.pipeline.compare import CompareOptions, compare
+    from trackproc.pipeline.orbit_source import OrbitInput
+
+    if len(tables) < 2:
+        return {"passes": [], "ratios": [], "note": "cross-validation needs two or more pass files: the fitted "
+                                                    "TLE's prediction skill is unchecked"}
+    sub = replace(options, cross_validate=False, epoch=epoch)
+    cmp = CompareOptions(remove=options.doppler_bias, earth=options.earth, range_rate_model=options.range_rate_model)
+    rows, ratios = [], []
+    for k, (source, table) in enumerate(tables):
+        others = tables[:k] + tables[k + 1:]
+        fitted = fit_tle(others, ephemerides, orbit, sub, eop, stations)
+        _, ours = compare(table, OrbitInput(tle=fitted.tle, source="fitted"), cmp, eop, stations)
+        _, theirs = compare(table, orbit, cmp, eop, stations)
+        for a, b in zip(ours["passes"], theirs["passes"]):
+            ratio = a["rms"] / b["rms"] if b["rms"] > 0 else float("nan")
+            rows.append({"left_out": source, "pass_id": a["pass_id"], "kind": a["kind"], "unit": a["unit"],
+                         "rms_fitted_without_it": a["rms"], "rms_initial": b["rms"], "ratio": ratio})
+            if math.isfinite(ratio):
+                ratios.append(ratio)
+    return {"passes": rows, "ratios": ratios}
 
 
 def summary_text(result: FitTleResult) -> str:
@@ -476,10 +542,13 @@ def summary_text(result: FitTleResult) -> str:
              f"  n {c['mean_motion_rev_day']:.8f} ± {sig['n_rev_per_day']:.2g} rev/day, e {c['eccentricity']:.7f}, "
              f"i {c['inclination_deg']:.4f} ± {sig['i_deg']:.2g} deg, RAAN {c['raan_deg']:.4f} ± "
              f"{sig['raan_deg']:.2g} deg, lambda ± {sig['lambda_deg']:.2g} deg, B* {c['bstar']:.4g} ± {sig['bstar']:.2g}"]
-    for g in s["groups"]:
+    shown = s["groups"] if len(s["groups"]) <= 12 else s["groups"][:10]
+    for g in shown:
         unit = {"doppler": "Hz", "range_rate": "m/s", "range": "m", "azimuth": "rad", "elevation": "rad"}.get(
             g["kind"], "m")
         lines.append(f"  {g['group']}: RMS {g['rms']:.4g} {unit} (initial {g['rms_initial']:.4g}), "
                      f"{g['samples']} samples")
+    if len(shown) < len(s["groups"]):
+        lines.append(f"  ... {len(s['groups']) - len(shown)} more passes and kinds (--json or --summary FILE)")
     lines.append("  " + result.quality.text())
     return "\n".join(lines) + "\n"

@@ -185,6 +185,10 @@ class Satellite:
 
         return ts.jd_utc_to_datetime64(*ts.add_seconds_utc(self.jd0, np.atleast_1d(np.asarray(t_s, float))))
 
+    def states(self, t_s) -> np.ndarray:
+        """GCRF states ``[r m, v m/s]`` (N, 6) at seconds from ``t0``."""
+        return self._states(t_s)
+
     def _states(self, t_s) -> np.ndarray:
         if self.traj is not None:
             return self.traj.state(np.asarray(t_s, float) + self._shift)
