@@ -58,7 +58,7 @@ from trackproc.pipeline.refine.options import (  # noqa: F401
 from trackproc.pipeline.refine.selection import curve_traverse_epoch, select_pass, smoothed_curve  # noqa: F401
 from trackproc.pipeline.refine.problem import (  # noqa: F401
     Refinement, default_apriori_covariance, is_tle_state, link_mode, state_prior_covariance)
-from trackproc.pipeline.refine.assemble import integral_setup, prepare  # noqa: F401
+from trackproc.pipeline.refine.assemble import apriori_choice, check_options, integral_setup, prepare  # noqa: F401
 from trackproc.pipeline.refine.traverse import (  # noqa: F401
     eccentricity, link_range_rate, max_elevation_deg, model_traverse, traverse_station)
 from trackproc.pipeline.refine.gates import (  # noqa: F401
@@ -66,5 +66,6 @@ from trackproc.pipeline.refine.gates import (  # noqa: F401
     state_prior_chi2, state_prior_indices, with_noise_of)
 from trackproc.pipeline.refine.noise import DRIFT_T, noise_model, oscillator_link, solve_noise  # noqa: F401
 from trackproc.pipeline.refine.quality import refine_quality  # noqa: F401
-from trackproc.pipeline.refine.result import finish, without_nuisance  # noqa: F401
+from trackproc.pipeline.refine.result import (  # noqa: F401
+    at_stale_epoch, constraint_report, finish, integral_method, refine_warnings, without_nuisance)
 from trackproc.pipeline.refine.run import refine  # noqa: F401

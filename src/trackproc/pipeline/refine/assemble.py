@@ -30,11 +30,9 @@ from trackproc.pipeline.refine.problem import Refinement, default_apriori_covari
 from trackproc.pipeline.refine.selection import curve_traverse_epoch, select_pass, smoothed_curve
 
 
-def prepare(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
-            source: str = "<pass>", curve: Optional[SmoothedCurve] = None) -> Refinement:
-    """Assemble a :class:`Refinement` (see the module docstring); :class:`InputError` for bad input.
-    ``curve``: the pass's smoothed curve when already made (:func:`refine`'s re-solves)."""
-    opt = options or RefineOptions()
+def check_options(opt: RefineOptions) -> None:
+    """:class:`InputError` (exit 2) for an option :func:`prepare` cannot take (cost, noise model,
+    oscillator noise, covariance, Doppler bias, force model, quadrature settings)."""
     if opt.cost not in COSTS:
         raise InputError("unknown cost", column="--cost", found=opt.cost, expected=" or ".join(COSTS))
     if opt.noise not in NOISE_MODELS:
@@ -54,6 +52,35 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
         raise InputError("bad quadrature settings", column="--quadrature-order",
                          found=(opt.quadrature_order, opt.quadrature_panel_s, opt.max_gap_s),
                          expected="order >= 2, panel > 0 s, gap > 0 s")
+
+
+def apriori_choice(opt: RefineOptions, initial) -> tuple[dict, bool, str, bool]:
+    """Which a-priori the refinement takes: ``(apriori_sigma, apriori_initial, note, default_prior)``:
+    ``--apriori-sigma``, else the stale state's covariance, else the default element sigmas
+    (:data:`DEFAULT_APRIORI_ELEMENTS`); none for ``--no-apriori`` (the integral cost's default)."""
+    use_apriori = opt.apriori if opt.apriori is not None else (opt.cost == "pointwise")
+    apriori_sigma, apriori_initial, note, default_prior = {}, False, "none (the pass alone)", False
+    if use_apriori:
+        if opt.apriori_sigma:
+            apriori_sigma, note = dict(opt.apriori_sigma), "--apriori-sigma"
+        elif initial.state_covariance is not None:
+            apriori_initial, note = True, "the stale state's covariance, moved to the traverse epoch by the STM"
+        else:
+            default_prior = True
+            note = ("default (the stale state has no covariance): orbital-element sigmas " +
+                    ", ".join(f"{k} {v:g}" for k, v in DEFAULT_APRIORI_ELEMENTS.items()))
+    elif opt.apriori_sigma:
+        raise InputError("--apriori-sigma with --no-apriori", column="--apriori-sigma",
+                         expected="one of the two")
+    return apriori_sigma, apriori_initial, note, default_prior
+
+
+def prepare(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
+            source: str = "<pass>", curve: Optional[SmoothedCurve] = None) -> Refinement:
+    """Assemble a :class:`Refinement` (see the module docstring); :class:`InputError` for bad input.
+    ``curve``: the pass's smoothed curve when already made (:func:`refine`'s re-solves)."""
+    opt = options or RefineOptions()
+    check_options(opt)
     warnings: list = []
     sub, kind, station, pass_id = select_pass(table, opt, source)
     meta = sub.meta
@@ -95,20 +122,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
         warnings.append("the TLE is evaluated by SGP4 at the traverse epoch: the stale epoch is the traverse epoch")
     stale_epoch = np.datetime64(initial.epoch, "ns")
 
-    use_apriori = opt.apriori if opt.apriori is not None else (opt.cost == "pointwise")
-    apriori_sigma, apriori_initial, note, default_prior = {}, False, "none (the pass alone)", False
-    if use_apriori:
-        if opt.apriori_sigma:
-            apriori_sigma, note = dict(opt.apriori_sigma), "--apriori-sigma"
-        elif initial.state_covariance is not None:
-            apriori_initial, note = True, "the stale state's covariance, moved to the traverse epoch by the STM"
-        else:
-            default_prior = True
-            note = ("default (the stale state has no covariance): orbital-element sigmas " +
-                    ", ".join(f"{k} {v:g}" for k, v in DEFAULT_APRIORI_ELEMENTS.items()))
-    elif opt.apriori_sigma:
-        raise InputError("--apriori-sigma with --no-apriori", column="--apriori-sigma",
-                         expected="one of the two")
+    apriori_sigma, apriori_initial, note, default_prior = apriori_choice(opt, initial)
     est = EstimateOptions(doppler_bias=None if bias == "none" else bias, doppler_bias_per="pass",
                           apriori_sigma=apriori_sigma, apriori_initial=apriori_initial, force=opt.force,
                           earth=opt.earth, range_rate_model=opt.range_rate_model, max_iterations=opt.max_iterations,
