@@ -192,7 +192,7 @@ def _whole_records(blocks: Iterable[bytes], size: int) -> Iterator[tuple[bool, b
     """Byte pieces of about ``size`` that end after a newline outside double quotes (a quoted
     cell may hold a newline); ``(is_first, piece)``. The last piece is the rest of the input."""
     buffer = bytearray()
-    first, retry_at = True, size
+    first, retry_at = True, min(size, 1 << 16)   # a small first piece: the header and comments
     for block in blocks:
         buffer += block
         while len(buffer) >= retry_at:
