@@ -192,7 +192,7 @@ def _whole_records(blocks: Iterable[bytes], size: int) -> Iterator[tuple[bool, b
     """Byte pieces of about ``size`` that end after a newline outside double quotes (a quoted
     cell may hold a newline); ``(is_first, piece)``. The last piece is the rest of the input."""
     buffer = bytearray()
-    first, retry_at = True, size
+    first, retry_at = True, min(size, 1 << 16)   # a small first piece: the header and comments
     for block in blocks:
         buffer += block
         while len(buffer) >= retry_at:
@@ -209,7 +209,9 @@ def _whole_records(blocks: Iterable[bytes], size: int) -> Iterator[tuple[bool, b
 
 def _balanced_cut(buffer: bytearray) -> int:
     """Length of the longest prefix ending with a newline and holding an even number of quotes
-    (0: none)."""
+    outside comment lines (0: none); comment lines are blanked before the CSV is parsed."""
+    if b"#" in buffer:
+        return _balanced_cut_by_line(buffer)
     total = buffer.count(b'"')
     end, after = len(buffer), 0
     pos = buffer.rfind(b"\n", 0, end)
@@ -220,6 +222,18 @@ def _balanced_cut(buffer: bytearray) -> int:
         end = pos + 1
         pos = buffer.rfind(b"\n", 0, pos)
     return 0
+
+
+def _balanced_cut_by_line(buffer: bytearray) -> int:
+    best, parity, position = 0, 0, 0
+    lines = bytes(buffer).split(b"\n")
+    for line in lines[:-1]:          # the last piece has no newline yet
+        if not line.lstrip(b" \t\r\x0b\x0c").startswith(b"#"):
+            parity ^= line.count(b'"') & 1
+        position += len(line) + 1
+        if not parity:
+            best = position
+    return best
 
 
 def _check_header(header: list[str], source: str, row: int) -> None:

@@ -246,8 +246,14 @@ def _chunk_frame(raw: RawMeasurements, index: int, options: IngestOptions) -> pd
         raise InputError("reader returned incomplete samples", file=raw.source, column=missing[0])
     defaults = options.default_sigmas()
     kind = frame["kind"].astype(str).to_numpy(dtype=object)
+    codes, kinds = pd.factorize(pd.Series(kind, dtype=object))   # per distinct kind, not per row
+    kinds = [str(k) for k in kinds]
+
+    def per_kind(values) -> np.ndarray:
+        return np.array(values + [None], dtype=object)[codes] if len(codes) else np.zeros(0, object)
+
     sigma = frame["sigma"].to_numpy(dtype=np.float64).copy()
-    default = np.array([defaults.get(k, math.nan) for k in kind], dtype=np.float64)
+    default = per_kind([defaults.get(k, math.nan) for k in kinds]).astype(np.float64)
     sigma = np.where(np.isnan(sigma), default, sigma)
     return pd.DataFrame({
         "time": pd.to_datetime(frame["time"], utc=True).dt.as_unit("ns"),
@@ -262,8 +268,8 @@ def _chunk_frame(raw: RawMeasurements, index: int, options: IngestOptions) -> pd
                  else np.full(len(frame), "", dtype=object)),
         "source": raw.source,
         "input": index,
-        "value_column": [raw.column.get(k, "value") for k in kind],
-        "sigma_column": [raw.column.get(f"sigma:{k}", "sigma") for k in kind],
+        "value_column": per_kind([raw.column.get(k, "value") for k in kinds]),
+        "sigma_column": per_kind([raw.column.get(f"sigma:{k}", "sigma") for k in kinds]),
     })
 
 
