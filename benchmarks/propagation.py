@@ -25,7 +25,14 @@ measured values.
 
 from __future__ import annotations
 
-import argparse
+import os
+
+# One BLAS thread, as trackproc runs: a multi-threaded BLAS on this shared 2-core machine made the
+# dense output's matrix products (and so "state + STM") ~25x slower (issue 19).
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+import argparse  # noqa: E402
 import math
 import statistics
 import subprocess

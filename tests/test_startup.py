@@ -63,8 +63,9 @@ def test_plain_values_equal_typers_own_coercion():
         red = "red"
         dark_red = "dark-red"
 
-    cases = [(str, {}, ["x.csv", "-", ""]), (float, {}, ["0", "2.2e9", "-1.5", ".5", "3.", "1e-3", "7"]),
-             (int, {}, ["0", "-3", "42"]), (Colour, {}, ["red", "dark-red", Colour.red]),
+    cases = [(str, {}, ["x.csv", "-", ""]),
+             (float, {}, ["0", "2.2e9", "-1.5", ".5", "3.", "1e-3", "7", "+.5", "-0", "007.5", "1E5", "-.0e-3"]),
+             (int, {}, ["0", "-3", "42", "007", "+3", "-0"]), (Colour, {}, ["red", "dark-red", Colour.red]),
              (Optional[float], {}, ["0.25"]), (List[str], {}, [("a", "b"), ()]),
              (float, {}, [2.5]), (int, {}, [3])]
     for ann, kwargs, values in cases:

@@ -7,9 +7,13 @@ time; numpy, pandas, scipy and pyarrow are imported inside the commands, so that
 
 from __future__ import annotations
 
+import enum
 import logging
 import os
+import re
 import sys
+import types
+import typing
 import warnings
 
 import typer
@@ -124,19 +128,18 @@ def _plain_default(param, value, ctx) -> bool:
 
 
 _NOT_PLAIN = object()
-_DECIMAL = None   # compiled on first use (re is imported by typer anyway)
-_INTEGER = None
+#: Spellings whose value every parser agrees on (no "nan", "1_000", hex, surrounding blanks).
+_DECIMAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d{1,3})?")
+_INTEGER = re.compile(r"[+-]?\d{1,18}")
 
 
 def _plain_value(descriptor, value):
     """``value`` converted as typer's adapter would, or ``_NOT_PLAIN`` when that needs typer."""
-    import typing
-
     info = descriptor.parameter_info
     if getattr(info, "parser", None) is not None or getattr(info, "click_type", None) is not None:
         return _NOT_PLAIN
     ann = descriptor.annotation
-    if typing.get_origin(ann) in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+    if typing.get_origin(ann) in (typing.Union, types.UnionType):      # Optional[X]
         args = [a for a in typing.get_args(ann) if a is not type(None)]
         if len(args) != 1:
             return _NOT_PLAIN
@@ -151,9 +154,6 @@ def _plain_value(descriptor, value):
 
 
 def _plain_leaf(ann, info, value):
-    global _DECIMAL, _INTEGER
-    import enum
-
     if ann is bool:
         return value if isinstance(value, bool) else _NOT_PLAIN
     if ann is str:
@@ -175,11 +175,6 @@ def _plain_leaf(ann, info, value):
             return value
         if not isinstance(value, str):
             return _NOT_PLAIN
-        if _DECIMAL is None:
-            import re
-
-            _DECIMAL = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d{1,3})?")
-            _INTEGER = re.compile(r"[+-]?\d{1,18}")
         if ann is int:
             return int(value) if _INTEGER.fullmatch(value) else _NOT_PLAIN
         if _DECIMAL.fullmatch(value):
