@@ -96,3 +96,27 @@ def test_simulate_and_accuracy_take_full(run_cli, state_file, stations_csv, tmp_
     res = run_cli(["accuracy", str(stale), "--span", "600", "--step", "300", "--force", "full",
                    "--method", "monte-carlo", "-o", str(tmp_path / "a.csv")])
     assert res.exit_code == 2 and "--force full" in res.stderr
+
+
+@pytest.mark.slow
+def test_estimate_full_recovers_the_simulated_truth(run_cli, write, stations_csv, tmp_path):
+    """Passes simulated with the full model (4x4 field, Sun, Moon), a perturbed initial state,
+    estimate --force full with the same model: the truth within 4 sigma in every component."""
+    truth = {k: v for k, v in STATE.items() if k != "spacecraft"}
+    state = write("truth.json", json.dumps(truth))
+    sim = tmp_path / "sim.parquet"
+    args = ["--force", "full", "--gravity", "4", "--dut1", "0"]
+    res = run_cli(["simulate", "--state", str(state), "--stations", str(stations_csv), "--duration", "21600",
+                   "--step", "20", "--kinds", "range,range_rate", "--sigma-range-m", "2", "--sigma-range-rate-m-s",
+                   "0.002", "--seed", "7", "-o", str(sim)] + args)
+    assert res.exit_code == 0, res.stderr
+    guess = dict(truth, position_m=[truth["position_m"][0] + 500.0, 300.0, -200.0],
+                 velocity_m_s=[0.3, V0[1] - 0.2, V0[2] + 0.1])
+    out = tmp_path / "fit.json"
+    res = run_cli(["estimate", str(sim), "--initial", str(write("guess.json", json.dumps(guess))), "--stations",
+                   str(stations_csv), "-o", str(out)] + args)
+    assert res.exit_code == 0, res.stderr
+    fit = json.loads(out.read_text())
+    err = np.r_[np.subtract(fit["position_m"], truth["position_m"]), np.subtract(fit["velocity_m_s"], V0)]
+    assert np.all(np.abs(err) < 4 * np.asarray(fit["sigma"][:6])), (err, fit["sigma"][:6])
+    assert fit["constants"]["gravity_field"]["degree"] == 4

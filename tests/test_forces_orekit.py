@@ -8,10 +8,11 @@ their steps at T/(2N) for the 70x70 field (DOP853's error estimate is fooled oth
 at its usual 300 s maximum step is 6.7 cm off after a LEO day, trackproc's own cap keeps it at
 10 µm of its converged solution).
 
-Measured (2026-11, 1-day LEO 500 km SSO, 3-day LAGEOS-like): see docs/propagate.md "Full force
-model"; asserted here with margins: gravity + Sun + Moon (+ relativity) < 5 cm per day in LEO
-and < 10 cm over 3 days for LAGEOS (the issue's target: < 1 m); radiation pressure (shadow of
-an ellipsoid here stretched to a sphere, Orekit's own ellipsoid occultation) < 0.5 m; drag with
+Measured (2026-11, 1-day LEO 500 km SSO, 3-day LAGEOS-like, 1-day GTO): see docs/propagate.md
+"Full force model"; asserted here with margins: gravity + Sun + Moon (+ relativity) < 5 cm per
+day in LEO and < 10 cm over 3 days for LAGEOS (the issue's target: < 1 m); GTO < 2 cm with the
+Sun, < 0.5 m with the Moon too (ERFA's moon98 against DE-440); radiation pressure (shadow of an
+ellipsoid here stretched to a sphere, Orekit's own ellipsoid occultation) < 0.5 m; drag with
 Harris-Priester < 0.5 m.
 """
 
@@ -56,6 +57,7 @@ def _state(a, e, i, raan, argp, nu):
 
 LEO = _state(6878137.0, 0.001, 97.4, 30.0, 40.0, 10.0)
 LAGEOS = _state(12162000.0, 0.0138, 109.84, 160.0, 60.0, 20.0)
+GTO = _state(24396137.0, 0.7306, 7.0, 50.0, 178.0, 5.0)        # perigee 194 km, apogee 35 870 km
 CUBE = {"mass_kg": 100.0, "area_m2": 1.0, "cr": 1.5, "cd": 2.2}
 LAGEOS_SC = {"mass_kg": 405.38, "area_m2": 0.2827, "cr": 1.13}
 #: name: (orbit, hours, degree, third bodies, relativity, srp, drag, max step s, tolerance m)
@@ -67,6 +69,9 @@ CASES = {
     "leo_drag_harris_priester": (LEO, 24, 20, ["sun", "moon"], True, None, CUBE, 300.0, 0.5),
     "lageos_20x20_sun_moon_relativity": (LAGEOS, 72, 20, ["sun", "moon"], True, None, None, 300.0, 0.1),
     "lageos_srp": (LAGEOS, 72, 20, ["sun", "moon"], True, LAGEOS_SC, None, 300.0, 0.1),
+    "gto_20x20_sun_relativity": (GTO, 24, 20, ["sun"], True, None, None, 300.0, 0.02),
+    # the Moon from ERFA's moon98 (~10 arcsec) against DE-440: 0.2 m at GTO apogee after a day
+    "gto_20x20_sun_moon_relativity": (GTO, 24, 20, ["sun", "moon"], True, None, None, 300.0, 0.5),
 }
 
 

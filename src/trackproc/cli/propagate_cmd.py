@@ -81,7 +81,8 @@ def propagate_command(
     eop: Optional[str] = EopOpt,
     dut1: Optional[float] = Dut1Opt,
     tol: float = typer.Option(1e-15, "--tol", metavar="TOL",
-                              help="Taylor tolerance per step (relative/absolute; 1e-15 ~ micrometres per pass)."),
+                              help="Taylor tolerance per step (relative/absolute; 1e-15 ~ micrometres per pass); "
+                                   "--force full: the DOP853 rtol when >= 2.2e-14, else 1e-12."),
     stm: bool = typer.Option(False, "--stm", help="Add the state transition matrix columns stm_1_1 .. stm_6_6."),
     at_station: Optional[str] = typer.Option(None, "--at-station", metavar="ID",
                                              help="Add predicted range, range-rate, azimuth, elevation at this "
