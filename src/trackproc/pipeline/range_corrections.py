@@ -110,6 +110,10 @@ def range_correction_modifiers(frame: pd.DataFrame, tables, stations: dict, epoc
                                      expected="--troposphere auto or none for such sessions")
                 continue
             wl = wl or (wavelength_nm if troposphere == "mendes-pavlis" else None)
+            if not wl and troposphere == "mendes-pavlis":
+                raise InputError("the Mendes-Pavlis troposphere needs the laser wavelength", column="--wavelength-nm",
+                                 found=f"a CRD session of {st} without a C0 wavelength",
+                                 expected="--wavelength-nm NM")
             if wl:
                 out.append(tp.TroposphereDelay(st, lat, height, wl * 1e-3, spans_s=[(start, end)], **kw))
         if troposphere == "mendes-pavlis":
