@@ -55,8 +55,11 @@ def estimate_command(
         [], "--apriori-sigma", metavar="NAME=SIGMA",
         help="A-priori 1-sigma (SI units) of a parameter (x, vx, range_bias:KIR), a family (range_bias, "
              "doppler_offset) or position/velocity/state; repeatable."),
-    apriori_initial: bool = typer.Option(False, "--apriori-initial",
-                                         help="Use the initial state file's covariance as an a-priori constraint."),
+    apriori_initial: bool = typer.Option(
+        False, "--apriori-initial",
+        help="Use the initial state's covariance as an a-priori constraint (a state without one, such as a TLE: "
+             "refine's default element a-priori, along-track loose). A contradicted a-priori is scaled by the data, "
+             "or the initial state is kept when the data's noise model is in doubt (quality: refused)."),
     epoch: Optional[str] = typer.Option(None, "--epoch", metavar="ISO|initial|first",
                                         help="Solution epoch (default: the initial state's; first = first sample)."),
     kinds: Optional[str] = typer.Option(None, "--kinds", metavar="KIND[,KIND]",
@@ -109,7 +112,9 @@ def estimate_command(
     file with every parameter, its sigma, the full covariance and the diagnostics.
 
     A one-screen summary goes to stderr. The state file (and the OPM, as a COMMENT) carries a
-    ``quality`` verdict (ok, suspect, rejected) with its reasons. Exit status 1 when the
+    ``quality`` verdict (ok, suspect, rejected) with its reasons (a-priori conflict and its
+    adaptation, refusal that keeps the initial state, variance factor, residual whiteness, the
+    pass that dominates the misfit, edited samples). Exit status 1 when the
     estimation fails (too few data, rank deficiency with the unobservable combinations named,
     no convergence) or its verdict is 'rejected' (or 'suspect' with --strict; the outputs are
     written).

@@ -5,22 +5,32 @@ GLS), :func:`solve` (the weighted fit, then the correlated one), :func:`estimate
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
+from scipy.stats import norm
+
+from trackproc.errors import ProcessingError
 from trackproc.methods import noise as nz
+from trackproc.methods.least_squares import Prior
 from trackproc.methods import quality as qm
 from trackproc.models import modifiers as md
 from trackproc.pipeline.estimate.options import EstimateOptions
 from trackproc.pipeline.estimate.problem import Problem
 
 
+#: Iterations of the a-priori variance-component adaptation at most (as refine's).
+MAX_APRIORI_ADAPT = 6
+
+
 def solve(problem: Problem, opt: EstimateOptions):
     """The weighted least-squares fit, then (unless ``--noise white``) REML of each pass's noise
-    on its residuals, GLS, REML again on the GLS residuals and GLS. Returns ``(solution, noise
-    report or None)``."""
+    on its residuals, GLS, REML again on the GLS residuals and GLS; then the a-priori gate
+    (:func:`adapt_apriori`, or :func:`refuse`). Returns ``(solution, adaptation or None, noise report or None)``."""
     sol = problem.solve(max_iterations=opt.max_iterations, clip=opt.clip, rank_rtol=opt.rank_rtol)
     noise_report = None
+    used = None
     if opt.noise != "white" or opt.oscillator_noise is not None:
         previous = None
         for _ in range(2):            # REML on the residuals, GLS, REML again on its residuals
@@ -29,8 +39,152 @@ def solve(problem: Problem, opt: EstimateOptions):
                 break                 # white: the weighted fit stands
             sol = problem.solve(max_iterations=opt.max_iterations, clip=opt.clip, rank_rtol=opt.rank_rtol,
                                 noise=cov, edited=sol.edited, x0=sol.values)
-            previous = cov
-    return sol, noise_report
+            previous = used = cov
+    chi2, rows = state_prior_chi2(problem.priors, sol.values)
+    if not rows or chi2 <= qm.chi2_limit(rows) or state_prior_covariance(problem.priors) is None:
+        return sol, None, noise_report
+    # The a-priori is scaled by the data; but a conflict is evidence against the a-priori only if
+    # the data's own noise model holds on the adapted solution: residuals still correlated in
+    # time, or a variance factor beyond its limit, overstate the data's information just as much,
+    # and a loosened a-priori would then let the passes move the state by their own systematic
+    # errors (measured on the DopTrack development evenings: 3.2-3.4x worse than the TLE on the
+    # held-back pass). Then the initial state is kept (refine's gate, pipeline/refine.py).
+    original = problem.priors
+    sol_a, adaptation = adapt_apriori(problem, opt, sol, used)
+    doubt = doubtful_noise(problem, sol_a)
+    if doubt or not adaptation["resolved"]:
+        problem.priors = original
+        return refuse(problem, opt, sol, used, chi2, rows, doubt, adaptation) + (noise_report,)
+    return sol_a, adaptation, noise_report
+
+
+def _state_rows(p) -> np.ndarray:
+    return np.flatnonzero(np.asarray(p.index, int) < 6)
+
+
+def state_prior_chi2(priors, x) -> tuple[float, int]:
+    """The state a-priori's share of χ² at ``x`` and its number of rows (x..vz rows of every prior)."""
+    chi2, rows = 0.0, 0
+    for p in priors:
+        sel = _state_rows(p)
+        if sel.size:
+            r = np.asarray(x, float)[np.asarray(p.index, int)[sel]] - np.asarray(p.centre, float)[sel]
+            chi2 += float(r @ np.linalg.solve(np.asarray(p.covariance, float)[np.ix_(sel, sel)], r))
+            rows += sel.size
+    return chi2, rows
+
+
+def state_prior_covariance(priors):
+    """The 6 × 6 a-priori covariance of x..vz (None unless all six have one)."""
+    cov = np.full((6, 6), np.nan)
+    for p in priors:
+        sel = _state_rows(p)
+        idx = np.asarray(p.index, int)[sel]
+        cov[np.ix_(idx, idx)] = np.asarray(p.covariance, float)[np.ix_(sel, sel)]
+    return None if np.isnan(np.diag(cov)).any() else np.nan_to_num(cov, nan=0.0)
+
+
+def scaled_priors(priors, factor: float) -> list:
+    """``priors`` with the state rows' covariance times ``factor`` (a prior on state and biases,
+    always diagonal here, is split in two)."""
+    out = []
+    for p in priors:
+        idx, cov = np.asarray(p.index, int), np.asarray(p.covariance, float)
+        sel = _state_rows(p)
+        rest = np.setdiff1d(np.arange(idx.size), sel)
+        if sel.size:
+            out.append(Prior(idx[sel], np.asarray(p.centre, float)[sel], cov[np.ix_(sel, sel)] * factor))
+        if rest.size:
+            out.append(Prior(idx[rest], np.asarray(p.centre, float)[rest], cov[np.ix_(rest, rest)]))
+    return out
+
+
+def refuse(problem: Problem, opt: EstimateOptions, sol, noise, chi2: float, rows: int, doubt: list,
+           adaptation: dict | None = None):
+    """Keep the initial state: the state at the a-priori centre with the a-priori covariance
+    scaled by its variance component (the larger of the adapted one and one step on ``sol``,
+    never below 1, so that it covers the conflict),
+    the other parameters (biases) fitted with the state held there (their covariance is
+    conditional on it: no cross-covariance with the state is written). Returns ``(solution,
+    adaptation)`` with ``adaptation["refused"]`` saying why."""
+    pcov = state_prior_covariance(problem.priors)
+    red = qm.prior_redundancy(np.asarray(sol.covariance, float)[:6, :6], pcov)
+    factor = max(1.0, (adaptation or {}).get("factor", 1.0), qm.prior_variance_component(chi2, red) or 1.0)
+    centre = np.empty(6)
+    for p in problem.priors:
+        sel = _state_rows(p)
+        centre[np.asarray(p.index, int)[sel]] = np.asarray(p.centre, float)[sel]
+    x0 = np.asarray(sol.values, float).copy()
+    x0[:6] = centre
+    pinned = scaled_priors(problem.priors, 1e-10)      # the state held at the a-priori centre (sigmas x 1e-5)
+    held = problem.solve(max_iterations=opt.max_iterations, clip=opt.clip, rank_rtol=opt.rank_rtol, priors=pinned,
+                         noise=noise, edited=sol.edited, x0=x0)
+    values = np.asarray(held.values, float).copy()
+    values[:6] = centre
+    cov = np.asarray(held.covariance, float).copy()
+    cov[:6, :] = 0.0
+    cov[:, :6] = 0.0
+    cov[:6, :6] = pcov * factor
+    sigma = np.sqrt(np.diag(cov))
+    kept = replace(held, values=values, covariance=cov, sigma=sigma, correlation=cov / np.outer(sigma, sigma))
+    problem.priors = scaled_priors(problem.priors, factor)
+    why = ("; ".join(doubt) + ", with the a-priori scaled by the data" if doubt else
+           f"the data cannot carry a looser a-priori ({(adaptation or {}).get('failure') or 'not resolved'})")
+    out = dict(adaptation or {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner)",
+                              "chi2_before": chi2, "rows": rows, "limit": qm.chi2_limit(rows)})
+    out.update({"factor": factor, "sigma_factor": math.sqrt(factor), "resolved": False,
+                "refused": {"code": "apriori_conflict_doubtful_noise" if doubt else "apriori_conflict",
+                            "covariance_factor": factor,
+                            "reason": (f"the data contradict the initial state's a-priori (chi2 {chi2:.4g} over "
+                                       f"{rows}, limit {qm.chi2_limit(rows):.3g}) but their noise model is in doubt: "
+                                       f"{why}; "
+                                       "neither the estimated state nor a loosened a-priori can be trusted"
+                                       if doubt else
+                                       f"the data contradict the initial state's a-priori (chi2 {chi2:.4g} over "
+                                       f"{rows}) and {why}") + f"; the initial state is kept, its a-priori covariance "
+                                                               f"scaled by {factor:.3g}"}})
+    return kept, out
+
+
+def adapt_apriori(problem: Problem, opt: EstimateOptions, sol, noise=None):
+    """The a-priori gate: when the state a-priori's share of χ² exceeds the 99.9 % point of
+    χ²(rows), its covariance is scaled by its maximum-likelihood variance component
+    (Helmert/Förstner, :func:`~trackproc.methods.quality.prior_variance_component`, iterated to
+    a fixed point, never below 1) and the problem solved again (with the same noise model): an
+    initial state further off than its a-priori says is weighed by how far off the data show it
+    to be, and the covariance covers that (refine's gate, :func:`trackproc.pipeline.refine.solve_adapted`).
+    ``problem.priors`` become the scaled ones. Returns ``(solution, adaptation dict or None)``;
+    the adaptation is ``resolved`` False when the data cannot carry a looser a-priori."""
+    chi2, rows = state_prior_chi2(problem.priors, sol.values)
+    if not rows or chi2 <= qm.chi2_limit(rows) or state_prior_covariance(problem.priors) is None:
+        return sol, None
+    limit = qm.chi2_limit(rows)
+    start, factor, history, failure = chi2, 1.0, [], None
+    priors = problem.priors
+    for _ in range(MAX_APRIORI_ADAPT):
+        red = qm.prior_redundancy(np.asarray(sol.covariance, float)[:6, :6], state_prior_covariance(priors))
+        k_hat = qm.prior_variance_component(chi2, red)
+        history.append({"factor": factor, "chi2": chi2, "redundancy": red, "component": k_hat})
+        if k_hat is None or abs(k_hat - 1.0) < 0.1 or (k_hat < 1.0 and factor <= 1.0):
+            break
+        trial_factor = max(1.0, factor * k_hat)
+        trial = scaled_priors(problem.priors, trial_factor)
+        try:
+            sol = problem.solve(max_iterations=opt.max_iterations, clip=opt.clip, rank_rtol=opt.rank_rtol,
+                                priors=trial, noise=noise, edited=sol.edited, x0=sol.values)
+        except ProcessingError as exc:
+            failure = (f"with the a-priori scaled by {trial_factor:.3g} the estimation failed: "
+                       f"{str(exc).split(' (')[0]}")
+            break
+        factor, priors = trial_factor, trial
+        chi2, rows = state_prior_chi2(priors, sol.values)
+    problem.priors = priors
+    last = history[-1].get("component")
+    resolved = failure is None and (chi2 <= limit or (last is not None and abs(last - 1.0) < 0.1))
+    return sol, {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
+                 "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start, "chi2_after": chi2,
+                 "rows": rows, "limit": limit, "iterations": history, "resolved": bool(resolved),
+                 **({"failure": failure} if failure else {})}
 
 
 def warnings_of(sol) -> list:
@@ -50,26 +204,9 @@ def warnings_of(sol) -> list:
     return warnings
 
 
-def estimate_quality(problem: Problem, sol):
-    """The :class:`~trackproc.methods.quality.Quality` of a batch solution: convergence, a-priori
-    conflict (``rejected``: the covariance leans on an a-priori the data contradict), variance
-    factor against its 99.9 % point, the pass that dominates the misfit (named), residual
-    whiteness per pass (the worst named), edited samples."""
-    q = qm.Quality()
-    if not sol.converged:
-        q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
-    if sol.n_prior:
-        limit = qm.chi2_limit(sol.n_prior)
-        q.add("apriori_conflict", "ok" if sol.chi2_prior <= limit else "rejected",
-              f"a-priori chi2 {sol.chi2_prior:.4g} over {sol.n_prior} constraints (99.9 % limit {limit:.3g})"
-              + ("" if sol.chi2_prior <= limit else ": the data and the a-priori disagree, the covariance that leans "
-                 "on the a-priori does not hold"), value=sol.chi2_prior, limit=limit)
-    vf_limit = qm.variance_factor_limit(sol.dof) if sol.dof > 0 else None
-    if sol.dof > 0 and math.isfinite(sol.variance_factor):
-        q.add("variance_factor", "ok" if sol.variance_factor <= vf_limit else "suspect",
-              f"a-posteriori variance factor {sol.variance_factor:.4g} (99.9 % limit {vf_limit:.3g})",
-              value=sol.variance_factor, limit=vf_limit)
-    # per pass: its share of the misfit and the whiteness of its residuals (time order)
+def pass_residuals(problem: Problem, sol) -> list:
+    """Per pass and kind (station/pass kind), the kept normalised residuals in time order:
+    ``{"pass", "n", "chi2", "whiteness"}`` (:func:`~trackproc.methods.quality.whiteness`)."""
     meas = problem.meas
     kept = ~np.asarray(sol.edited, bool)
     z = np.asarray(sol.normalized, float)
@@ -81,9 +218,78 @@ def estimate_quality(problem: Problem, sol):
             continue
         idx = np.flatnonzero(rows)
         idx = idx[np.argsort(problem.times[idx], kind="stable")]
-        w = qm.whiteness(z[idx])
         passes.append({"pass": f"{key[0]}/{key[1]} {key[2]}", "n": int(idx.size), "chi2": float(z[idx] @ z[idx]),
-                       "whiteness": w})
+                       "whiteness": qm.whiteness(z[idx])})
+    return passes
+
+
+def doubtful_noise(problem: Problem, sol) -> list:
+    """Why the data's noise model is in doubt on ``sol`` (empty when it holds): the variance
+    factor beyond its 99.9 % point, or residuals correlated in time beyond the 99.9 % point for
+    the worst of the m passes (Bonferroni: the lag-1 autocorrelation's ``ρ √n`` or the runs
+    test's ``|z|`` above ``Φ⁻¹(1 - 0.001/(2m))``, so that white passes are not doubted by chance:
+    on short white passes ρ > 0.3 happens one time in ten)."""
+    out = []
+    if sol.dof > 0 and math.isfinite(sol.variance_factor):
+        limit = qm.variance_factor_limit(sol.dof)
+        if sol.variance_factor > limit:
+            out.append(f"a-posteriori variance factor {sol.variance_factor:.4g} (99.9 % limit {limit:.3g})")
+    passes = [p for p in pass_residuals(problem, sol) if math.isfinite(p["whiteness"]["lag1_autocorrelation"])]
+    if passes:
+        crit = float(norm.ppf(1.0 - (1.0 - qm.GATE_PROBABILITY) / (2 * len(passes))))
+
+        def score(p):
+            w = p["whiteness"]
+            runs = abs(w["runs_z"]) if math.isfinite(w["runs_z"]) else 0.0
+            return max(w["lag1_autocorrelation"] * math.sqrt(w["n"]), runs)
+
+        worst = max(passes, key=score)
+        if score(worst) > crit:
+            w = worst["whiteness"]
+            out.append(f"pass {worst['pass']}: residuals correlated in time (lag-1 autocorrelation "
+                       f"{w['lag1_autocorrelation']:.2f} over {w['n']} samples, runs-test z {w['runs_z']:.1f}; "
+                       f"limit {crit:.2f} for the worst of {len(passes)} passes)")
+    return out
+
+
+def estimate_quality(problem: Problem, sol, adaptation: dict | None = None):
+    """The :class:`~trackproc.methods.quality.Quality` of a batch solution: convergence, a-priori
+    conflict (``rejected``: the covariance leans on an a-priori the data contradict), variance
+    factor against its 99.9 % point, the pass that dominates the misfit (named), residual
+    whiteness per pass (the worst named), edited samples."""
+    q = qm.Quality()
+    if not sol.converged:
+        q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
+    if adaptation is not None and adaptation.get("refused"):
+        a = adaptation
+        q.add("refused", "suspect", f"the initial state is kept: {a['refused']['reason']}", value=a["refused"]["code"])
+        q.add("apriori_conflict", "suspect", f"a-priori chi2 {a['chi2_before']:.4g} over {a['rows']} (limit "
+              f"{a['limit']:.3g}) of the refused solution", value=a["chi2_before"], limit=a["limit"])
+    elif adaptation is not None:
+        a = adaptation
+        if a["resolved"]:
+            q.add("apriori_conflict", "ok",
+                  f"the data contradicted the state a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
+                  f"{a['limit']:.3g}); its covariance was scaled by {a['factor']:.3g} "
+                  f"(sigmas x{a['sigma_factor']:.3g}, maximum-likelihood variance component)",
+                  value=a["chi2_before"], limit=a["limit"])
+        else:           # (solve refuses such a solution: kept for a caller of adapt_apriori alone)
+            q.add("apriori_conflict", "rejected",
+                  f"the data contradict the state a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
+                  f"{a['limit']:.3g}) and cannot carry a looser one", value=a["chi2_before"], limit=a["limit"])
+    elif sol.n_prior:
+        limit = qm.chi2_limit(sol.n_prior)
+        q.add("apriori_conflict", "ok" if sol.chi2_prior <= limit else "rejected",
+              f"a-priori chi2 {sol.chi2_prior:.4g} over {sol.n_prior} constraints (99.9 % limit {limit:.3g})"
+              + ("" if sol.chi2_prior <= limit else ": the data and the a-priori disagree, the covariance that leans "
+                 "on the a-priori does not hold"), value=sol.chi2_prior, limit=limit)
+    vf_limit = qm.variance_factor_limit(sol.dof) if sol.dof > 0 else None
+    if sol.dof > 0 and math.isfinite(sol.variance_factor):
+        q.add("variance_factor", "ok" if sol.variance_factor <= vf_limit else "suspect",
+              f"a-posteriori variance factor {sol.variance_factor:.4g} (99.9 % limit {vf_limit:.3g})",
+              value=sol.variance_factor, limit=vf_limit)
+    # per pass: its share of the misfit and the whiteness of its residuals (time order)
+    passes = pass_residuals(problem, sol)
     total = sum(p["chi2"] for p in passes)
     if len(passes) > 1 and total > 0 and sol.dof > 0 and sol.variance_factor > vf_limit:
         worst = max(passes, key=lambda p: p["chi2"] / p["n"])
@@ -111,7 +317,8 @@ def pass_noise(problem: Problem, sol, opt: EstimateOptions):
     """The noise model of every pass's Doppler and range-rate samples from the residuals of
     ``sol`` (:func:`trackproc.methods.noise.fit_noise`: REML with the pass's Jacobian columns as
     fixed effects; the random walk of the transmitter frequency only for one-way passes with a
-    frequency offset, i.e. an :class:`~trackproc.models.modifiers.OscillatorWander` on its samples). Returns ``(PassCovariance or None when every pass is white, report)``;
+    frequency offset, i.e. an :class:`~trackproc.models.modifiers.OscillatorWander` on its
+    samples). Returns ``(PassCovariance or None when every pass is white, report)``;
     the report lists each pass's model and effective number of samples."""
     meas = problem.meas
     keep_all = ~np.asarray(sol.edited, bool)

@@ -34,7 +34,8 @@ class EstimateOptions:
     ``doppler_bias_per``: ``"pass"`` or ``"station"``; ``angle_bias``: azimuth and elevation
     biases per station with angles; ``apriori_sigma``: name -> 1-sigma (a parameter name, a
     family such as ``range_bias``, or ``position``/``velocity``/``state``); ``apriori_initial``:
-    use the initial state's 6 × 6 covariance as an a-priori constraint; ``epoch``: the solution
+    use the initial state's 6 × 6 covariance as an a-priori constraint (refine's default element
+    a-priori for a state without one, e.g. a TLE); ``epoch``: the solution
     epoch (None = the initial state's; ``"first"`` = the first sample; or a UTC datetime64);
     ``kinds``: kinds to use (None = all); ``range_rate_model``: None = from the pass files
     (default doppler); ``compare_doppler_only``, ``two_stage``: the seed 002 reports.

@@ -14,6 +14,7 @@ from typing import Optional
 import numpy as np
 import pandas as pd
 
+from trackproc.constants import MU_EARTH
 from trackproc.dynamics import propagator
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError
@@ -33,7 +34,8 @@ class Problem:
 
     ``meas`` (:class:`~trackproc.models.observation.MeasurementSet`), ``params`` (the drivers;
     the selected ones are the estimated vector), ``epoch`` (UTC datetime64) and ``frame`` of the
-    propagation, ``force``, ``range_rate_model``, ``modifiers`` (bound to ``meas``; they own the bias drivers), ``priors``,
+    propagation, ``force``, ``range_rate_model``, ``modifiers`` (bound to ``meas``; they own
+    the bias drivers), ``priors``,
     ``times`` (UTC datetime64 of the samples), ``sources`` (file of each sample).
     """
 
@@ -50,6 +52,8 @@ class Problem:
     eop: object = None
     force_model: object = None            # the ForceModel of force "full"
     evaluations: int = 0
+    #: where the state's a-priori came from (the state file's ``estimation`` record)
+    apriori_note: str = ""
 
     @property
     def names(self) -> list:
@@ -212,21 +216,38 @@ def bias_modifiers(opt: EstimateOptions, frame, t_s, known, apriori) -> list:
             + angle_modifiers(opt, kinds_by_station, apriori))
 
 
-def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial) -> list:
+def default_apriori(rv0) -> np.ndarray:
+    """refine's documented a-priori of a state without covariance (a TLE): independent errors of
+    the non-singular elements, the along-track phase loose and the period tight
+    (:data:`trackproc.pipeline.refine.DEFAULT_APRIORI_ELEMENTS`), as a GCRF 6 × 6 covariance."""
+    # imported here: refine builds its problem with this package (a module-level import would be a cycle)
+    from trackproc.pipeline.refine import default_apriori_covariance
+
+    return default_apriori_covariance(np.asarray(rv0, float), MU_EARTH)
+
+
+def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial) -> tuple[list, str]:
     """The a-priori constraints: the drivers' own sigmas, and ``--apriori-initial`` (the initial
-    state's 6 × 6 covariance)."""
+    state's 6 × 6 covariance; for a state without one, such as a TLE, refine's default element
+    a-priori, :func:`default_apriori`). Returns ``(priors, note)``."""
     priors = []
+    note = ""
     mask, centre, sigma = params.apriori()
     if mask.any():
         priors.append(Prior.diagonal(np.flatnonzero(mask), centre[mask], sigma[mask]))
+        if mask[:6].any():
+            note = "--apriori-sigma on the state"
     if opt.apriori_initial:
-        if cov0 is None:
-            raise InputError("the initial state has no covariance", file=initial.source, column="covariance",
-                             expected="a state file with a 6 x 6 covariance for --apriori-initial")
         if mask[:6].any():
             raise InputError("give --apriori-initial or state a-priori sigmas, not both", column="--apriori-sigma")
+        if cov0 is None:
+            cov0 = default_apriori(rv0)
+            note = ("the initial state has no covariance: refine's default element a-priori (a 50 m, e 5e-5, "
+                    "i and RAAN 1e-4 rad, argument of latitude 4e-4 rad)")
+        else:
+            note = "the initial state's covariance"
         priors.append(Prior(np.arange(6), np.asarray(rv0, float), np.asarray(cov0, float)))
-    return priors
+    return priors, note
 
 
 def build_problem(tables, initial, stations=None, options: EstimateOptions | None = None, eop=None) -> Problem:
@@ -271,8 +292,8 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
         bound = md.bind_all(modifiers, meas)
     except ValueError as exc:
         raise InputError(str(exc), column="--doppler-bias") from None
-    priors = priors_of(params, opt, rv0, cov0, initial)
+    priors, note = priors_of(params, opt, rv0, cov0, initial)
     frame_q = propagator.reference_frame(*(float(a) for a in ts.datetime64_to_jd_utc(epoch)), eop)
     return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force, range_rate_model=model,
                    modifiers=bound, priors=priors, times=t64, sources=frame["_source"].to_numpy(dtype=object),
-                   eop=eop, force_model=force_model)
+                   eop=eop, force_model=force_model, apriori_note=note)

@@ -86,7 +86,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     """
     opt = options or EstimateOptions()
     problem = build_problem(tables, initial, stations, opt, eop)
-    sol, noise_report = gates.solve(problem, opt)
+    sol, adaptation, noise_report = gates.solve(problem, opt)
     problem.params.set_values(sol.values)
     x = sol.values
     names = sol.names
@@ -110,7 +110,9 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     }
     if noise_report is not None:
         diagnostics["noise"] = noise_report
-    quality = gates.estimate_quality(problem, sol)
+    if adaptation is not None:
+        diagnostics["apriori_adaptation"] = adaptation
+    quality = gates.estimate_quality(problem, sol, adaptation)
     comparison = s2.compare(problem, sol) if opt.compare_doppler_only else None
     two, sol2 = s2.two_stage(problem, sol, opt) if opt.two_stage else (None, None)
     if comparison is not None:
@@ -126,6 +128,8 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         "fixed_parameters": fixed, "drift_epochs_s": drifts,
         "apriori": {n: s for n, s, m in zip(names, problem.params.apriori()[2], problem.params.apriori()[0]) if m},
         "apriori_initial": bool(opt.apriori_initial),
+        **({"apriori_default": problem.apriori_note} if problem.apriori_note.startswith("the initial state has no")
+           else {}),
         "sources": sorted({str(s) for s in problem.sources}),
     }, "quality": quality.as_dict()}
     state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=list(names), values=x, sigma=sol.sigma,

@@ -16,15 +16,25 @@ from trackproc.pipeline.estimate.options import EstimateOptions
 from trackproc.pipeline.estimate.problem import Problem
 
 
-def motion_columns(names):
-    return [i for i, n in enumerate(names) if not n.startswith("range_bias:")]
+def range_bias_drivers(problem: Problem) -> list:
+    """The drivers of the problem's :class:`~trackproc.models.modifiers.RangeBias` modifiers."""
+    return [d for b in problem.modifiers if isinstance(b.modifier, md.RangeBias)
+            for d in b.modifier.parameter_drivers()]
+
+
+def motion_columns(problem: Problem, names):
+    """Columns of ``names`` that are not range biases (the motion parameters of seed 002)."""
+    biases = {d.name for d in range_bias_drivers(problem)}
+    return [i for i, n in enumerate(names) if n not in biases]
 
 
 def compare(problem: Problem, sol) -> dict:
-    """Seed 002 eqs. 9, 15: solve without the ranges (and range biases), compare motion blocks."""
+    """Solve without the ranges (and range biases) and compare the motion blocks.
+
+    Implements seed 002 eqs. 9 and 15 (the theorem on the motion block of the extended error matrix)."""
 
     names = sol.names
-    mcol = motion_columns(names)
+    mcol = motion_columns(problem, names)
     motion = [names[i] for i in mcol]
     rows = problem.meas.kind != "range"
     out = {"parameters": motion, "extended_sigma": sol.sigma[mcol].tolist()}
@@ -59,9 +69,10 @@ def compare(problem: Problem, sol) -> dict:
 def subproblem(problem: Problem, rows, keep_range_bias: bool) -> Problem:
     """The problem restricted to ``rows`` (and without range-bias drivers unless kept)."""
     meas = problem.meas.subset(np.flatnonzero(rows))
+    biases = {d.name for d in range_bias_drivers(problem)}
     params = pm.ParameterSet()
     for d in problem.params:
-        if d.family == "range_bias" and not keep_range_bias:
+        if d.name in biases and not keep_range_bias:
             continue
         params.add(pm.ParameterDriver(d.name, d.unit, d.value, d.scale, apriori_sigma=d.apriori_sigma,
                                       apriori_value=d.apriori_value if d.apriori_value is not None else d.reference,
@@ -81,12 +92,14 @@ def subproblem(problem: Problem, rows, keep_range_bias: bool) -> Problem:
 
 
 def two_stage(problem: Problem, sol, opt: EstimateOptions):
-    """Seed 002 eqs. 17-22: stage 1 per-pass offsets from the orbit without ranges, accumulated
+    """Implements seed 002 eqs. 17-22: stage 1 per-pass offsets from the orbit without ranges, accumulated
     per station (Π); stage 2 with the bias-corrected ranges (error matrix D + E Π Eᵀ)."""
     meas = problem.meas
     is_range = meas.kind == "range"
     names = sol.names
-    bias_names = [n for n in names if n.startswith("range_bias:")]
+    owners = {d.name: b.modifier for b in problem.modifiers if isinstance(b.modifier, md.RangeBias)
+              for d in b.modifier.parameter_drivers()}
+    bias_names = [n for n in names if n in owners]
     if not bias_names or not is_range.any() or is_range.all():
         raise InputError("--two-stage needs ranges with --range-bias and other (Doppler, range-rate, angle) data",
                          column="--two-stage")
@@ -116,7 +129,7 @@ def two_stage(problem: Problem, sol, opt: EstimateOptions):
                       "noise_sigma_m": math.sqrt(var[-1])})
     a_pass = np.array(a_pass)
     c_pass = np.diag(var) + a_pass @ k1 @ a_pass.T
-    stations = [n.split(":", 1)[1] for n in bias_names]
+    stations = [owners[n].key for n in bias_names]
     means, pi, _ = tsm.accumulate(est, c_pass, pass_station, stations)
     for row, s in zip(table, pass_station):
         row["orbit_sigma_m"] = float(np.sqrt(a_pass[table.index(row)] @ k1 @ a_pass[table.index(row)]))
