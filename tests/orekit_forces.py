@@ -8,9 +8,11 @@ Configuration: ``eop`` (finals2000A file), ``state`` (GCRF ``epoch``, ``position
 ``velocity_m_s``), ``times_s`` (seconds after the epoch), ``degree``, ``order``,
 ``third_bodies`` (list of "sun", "moon"), ``relativity``, ``srp`` / ``drag`` (dicts with
 ``mass_kg``, ``area_m2``, ``cr`` / ``cd``; drag Harris-Priester with ``n``),
-``position_tolerance_m`` (DormandPrince853 tolerances of ``ToleranceProvider``), ``repeat``
+``position_tolerance_m`` (DormandPrince853 tolerances of ``ToleranceProvider``), ``max_step_s``
+(default 300), ``repeat``
 (timing runs). Output: GCRF positions/velocities at the times, the wall time of each run,
-the field's GM.
+the field's GM. With ``cases`` (a list of such dicts, each overriding the top level) all run
+in one JVM and the output holds ``cases`` (one result each).
 """
 
 from __future__ import annotations
@@ -41,6 +43,10 @@ def run(config: dict) -> dict:
     manager.clearProviders()
     manager.addProvider(DirectoryCrawler(File(str(data))))
     try:
+        if "cases" in config:
+            out = {"cases": [_propagate({**config, **case}, jvm_s, t_start) for case in config["cases"]]}
+            out.update(jvm_start_s=jvm_s, total_s=time.perf_counter() - t_start)
+            return out
         return _propagate(config, jvm_s, t_start)
     finally:
         shutil.rmtree(data, ignore_errors=True)
@@ -78,7 +84,7 @@ def _propagate(config, jvm_s, t_start):
         t0 = time.perf_counter()
         tol = ToleranceProvider.getDefaultToleranceProvider(float(config.get("position_tolerance_m", 1e-3)))
         tolerances = tol.getTolerances(orbit, OrbitType.CARTESIAN)
-        integ = DormandPrince853Integrator(1e-3, 300.0, tolerances[0], tolerances[1])
+        integ = DormandPrince853Integrator(1e-3, float(config.get("max_step_s", 300.0)), tolerances[0], tolerances[1])
         prop = NumericalPropagator(integ)
         prop.setOrbitType(OrbitType.CARTESIAN)
         prop.setInitialState(SpacecraftState(orbit).withMass(mass))

@@ -140,6 +140,7 @@ def test_harris_priester_nodes_and_bulge():
     assert rho[2] == 0.0
 
 
+@pytest.mark.slow
 def test_point_mass_full_propagation_matches_kepler():
     """Degree 0, no other force: DOP853 + the dense polynomials against the universal-variable solution."""
     fm = ForceModel(load_field(degree=0), third_bodies=(), relativity=False)
@@ -150,6 +151,7 @@ def test_point_mass_full_propagation_matches_kepler():
     assert np.abs(err[:, :3]).max() < 2e-3 and np.abs(err[:, 3:]).max() < 2e-6
 
 
+@pytest.mark.slow
 def test_stm_and_parameter_partials_match_central_differences():
     sc = Spacecraft(mass_kg=100.0, srp_area_m2=1.0, cr=1.3, drag_area_m2=1.0, cd=2.2)
     fm = ForceModel(load_field(degree=6, date="2020-04-05"), srp=True, drag=True, spacecraft=sc,

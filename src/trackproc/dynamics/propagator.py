@@ -329,7 +329,8 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
         the reference epoch matters to the dynamics).
     tol : float
         Taylor tolerance per step (combined absolute/relative; down to about 1e-16). For
-        ``"full"``: the DOP853 relative tolerance, at least ``integrator.RTOL`` (1e-13).
+        ``"full"``: the DOP853 relative tolerance; below DOP853's floor (2.3e-14, e.g. the
+        Taylor default 1e-15) ``integrator.RTOL`` (1e-12).
     stm : bool
         Also propagate the state transition matrix (first-order sensitivity spectra).
     frame : QuasiInertialFrame, optional
@@ -384,7 +385,7 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
 
         env = model.environment(jd, q, t_min, max(t_max, _MIN_SPAN_S))
         for end in ends:
-            runs.append(integrator.propagate(env, s0, end, stm=stm, rtol=max(tol, integrator.RTOL),
+            runs.append(integrator.propagate(env, s0, end, stm=stm, rtol=integrator.rtol_for(tol),
                                              max_steps=max_steps))
     else:
         for end in ends:

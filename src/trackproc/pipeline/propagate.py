@@ -327,7 +327,7 @@ def _meta(initial, options, traj, eop, has_cov, times, tle=None) -> dict:
             meta["constants"] = traj.force_model.describe()
             meta["propagator"] = {
                 "method": "DOP853 (scipy) with the variational equations, dense output (trackproc.dynamics.forces)",
-                "rtol": max(float(options.tol), integrator.RTOL), "steps": int(traj.n_steps),
+                "rtol": integrator.rtol_for(options.tol), "steps": int(traj.n_steps),
                 "integration_frame": "GCRF (rotated by a constant matrix); the field acts in ITRF through IAU "
                                      "2006/2000A at every time"}
     if tle is not None:

@@ -107,8 +107,19 @@ class GravityField:
                     b[n, m] = np.sqrt((n + m - 1) * (n - m - 1) * (2 * n + 1) / ((n + m) * (n - m) * (2 * n - 3)))
         f = np.array([0.0, np.sqrt(3.0)] + [np.sqrt((2 * m + 1) / (2 * m)) for m in range(2, size)])
         f[0] = 1.0
-        self._tables.update(fprod=np.cumprod(f), n=n_, m=m_, k0=k0 * (nf - mf + 1), kp=kp, km=km * (nf - mf + 2) * (nf - mf + 1),
-                            a=a, b=b, f=f, c=self.cbar[n_, m_], s=self.sbar[n_, m_])
+        c, s = self.cbar[n_, m_], self.sbar[n_, m_]
+        k0 = k0 * (nf - mf + 1)
+        km = km * (nf - mf + 2) * (nf - mf + 1)
+        # M&G eq. 3.33 folded into complex weights: a_x + i a_y = Σ p1 Z_n+1,m+1 + p2 conj(Z_n+1,m-1),
+        # a_z = Re Σ p3 Z_n+1,m (for m = 0 the eq.'s own form: no halving, no m-1 term)
+        kp_eff = np.where(m_ == 0, kp, 0.5 * kp)
+        p1 = -kp_eff * (c - 1j * s)
+        p2 = 0.5 * km * (c + 1j * s)
+        p3 = -k0 * (c - 1j * s)
+        size = nmax + 2
+        self._tables.update(fprod=np.cumprod(f), n=n_, m=m_, a=a, b=b, c=c, s=s, p1=p1, p2=p2, p3=p3,
+                            ip=(n_ + 1) * size + m_ + 1, im=(n_ + 1) * size + np.maximum(m_ - 1, 0),
+                            i0=(n_ + 1) * size + m_)
         return self._tables
 
     def solid_harmonics(self, r_itrf) -> np.ndarray:
@@ -147,21 +158,13 @@ class GravityField:
         t = self._coefficient_tables()
         one = np.ndim(r_itrf) == 1
         Z = self.solid_harmonics(r_itrf)
-        n, m = t["n"], t["m"]
-        c, s = t["c"], t["s"]
-        if not central:
-            c = np.where((n == 0), 0.0, c)
-        zp, zm, z0 = Z[:, n + 1, m + 1], Z[:, n + 1, np.maximum(m - 1, 0)], Z[:, n + 1, m]
-        vp, wp, vm, wm, v0, w0 = zp.real, zp.imag, zm.real, zm.imag, z0.real, z0.imag
-        zonal = m == 0
-        kp, km, k0 = t["kp"], t["km"], t["k0"]
-        ax = np.where(zonal, -c * kp * vp * 2.0,
-                      -(c * vp + s * wp) * kp + (c * vm + s * wm) * km) * 0.5
-        ay = np.where(zonal, -c * kp * wp * 2.0,
-                      (-c * wp + s * vp) * kp + (-c * wm + s * vm) * km) * 0.5
-        az = k0 * (-c * v0 - s * w0)
+        zf = Z.reshape(Z.shape[0], -1)
+        k = 0 if central else 1                     # the (0, 0) term is the first
+        zp, zm, z0 = zf[:, t["ip"][k:]], zf[:, t["im"][k:]], zf[:, t["i0"][k:]]
+        axy = zp @ t["p1"][k:] + np.conj(zm) @ t["p2"][k:]
+        az = (z0 @ t["p3"][k:]).real
         g = self.gm_m3_s2 / self.radius_m ** 2
-        out = g * np.stack([ax.sum(-1), ay.sum(-1), az.sum(-1)], -1)
+        out = g * np.stack([axy.real, axy.imag, az], -1)
         return out[0] if one else out
 
     def potential(self, r_itrf) -> np.ndarray:

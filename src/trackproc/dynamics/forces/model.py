@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from trackproc.constants import OMEGA_EARTH, WGS84_A
+from trackproc.constants import OMEGA_EARTH, WGS84_A, WGS84_F
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.forces import drag as drag_mod
 from trackproc.dynamics.forces import relativity, srp, third_body
@@ -159,8 +159,8 @@ class ForceModel:
             "relativity": "Schwarzschild (IERS 2010 eq. 10.12)" if self.relativity else None,
         }
         if self.srp:
-            out["srp"] = {"model": "cannon-ball, conical Earth shadow", "p_sun_n_m2": srp.P_SUN,
-                          "earth_radius_m": self.earth_radius_m}
+            out["srp"] = {"model": "cannon-ball, conical shadow of the WGS-84 ellipsoid (stretched to a sphere)",
+                          "p_sun_n_m2": srp.P_SUN, "earth_radius_m": self.earth_radius_m}
         if self.drag:
             out["drag"] = {"atmosphere": self.atmosphere}
             if self.atmosphere == "harris-priester":
@@ -280,7 +280,7 @@ class Environment:
         sc = mdl.spacecraft
         unit = {}
         if mdl.srp:
-            a1 = srp.acceleration(r, sun, sc.srp_area_m2 / sc.mass_kg, 1.0, mdl.earth_radius_m)
+            a1 = srp.acceleration(r, sun, sc.srp_area_m2 / sc.mass_kg, 1.0, mdl.earth_radius_m, axis, WGS84_F)
             acc = acc + sc.cr * a1
             unit["cr"] = a1
         if mdl.drag:
