@@ -48,14 +48,17 @@ def test_auto_corrects_crd_sessions_once_and_nothing_else():
     mods = range_correction_modifiers(frame, tables, STATIONS, EPOCH)
     rows = _rows(mods, frame)
     # the two sessions (1 h margins) overlap: merged, each sample once; the radar range untouched
-    assert rows == [("TroposphereDelay", [0, 1])]
-    assert mods[0].meteo is not None                        # the CRD meteo, not the standard atmosphere
+    # and the solid-Earth tides of every station (auto: on with CRD data)
+    assert rows == [("SolidTideDisplacement", [0, 1, 2]), ("TroposphereDelay", [0, 1])]
+    assert mods[1].meteo is not None                        # the CRD meteo, not the standard atmosphere
+    off = range_correction_modifiers(frame, tables, STATIONS, EPOCH, solid_tides=False)
+    assert _rows(off, frame) == [("TroposphereDelay", [0, 1])]
 
 
 def test_already_applied_sessions_and_the_centre_of_mass_offset():
     frame = _frame(["2016-02-13T01:10:00"], ["7090"])
     tables = [("f", PassTable(frame, _crd_meta(applied=True)))]
-    mods = range_correction_modifiers(frame, tables, STATIONS, EPOCH, com_offset_m=0.251)
+    mods = range_correction_modifiers(frame, tables, STATIONS, EPOCH, com_offset_m=0.251, solid_tides=False)
     assert _rows(mods, frame) == [("CentreOfMassOffset", [0])]
     with pytest.raises(InputError, match="already applied"):
         range_correction_modifiers(frame, tables, STATIONS, EPOCH, troposphere="mendes-pavlis")

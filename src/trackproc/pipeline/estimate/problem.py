@@ -280,7 +280,8 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     from trackproc.pipeline.range_corrections import range_correction_modifiers
 
     modifiers += range_correction_modifiers(frame, tables, known, epoch, troposphere=opt.troposphere,
-                                            com_offset_m=opt.com_offset_m, wavelength_nm=opt.wavelength_nm)
+                                            com_offset_m=opt.com_offset_m, wavelength_nm=opt.wavelength_nm,
+                                            solid_tides=opt.solid_tides)
     for d in md.collect_drivers(modifiers):
         params.add(d)
     unknown = [k for k in apriori if k not in params and k not in GROUPS and k not in pm.KINDS
