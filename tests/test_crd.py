@@ -115,3 +115,18 @@ def test_real_lageos2_file():
     assert f["time"].min() >= pd.Timestamp("2016-02-11T13:07:00Z")
     assert f["time"].max() <= pd.Timestamp("2016-02-14T07:38:00Z")
     assert len(raw.meta["crd"]["sessions"]) == 11          # 11 H4 session headers
+
+
+def test_cli_ingest_of_crd_with_sinex_stations_and_a_bad_record(run_cli, write):
+    from test_sinex import SNX
+
+    npt = write("v1.npt", V1)
+    snx = write("s.snx", SNX)
+    out = write("dummy", "").parent / "p.csv"
+    r = run_cli(["ingest", npt, "--stations", snx, "-o", out])
+    assert r.exit_code == 0, r.stderr
+    assert "7090-20160213T2350" in out.read_text() and '"doppler_mode":"two-way"' in out.read_text()
+    bad = write("bad.npt", V1.replace("0.039237325685", "1.5"))
+    r = run_cli(["ingest", bad, "--stations", snx, "-o", out])
+    assert r.exit_code == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "bad.npt, row 7" in r.stderr and "time of flight" in r.stderr

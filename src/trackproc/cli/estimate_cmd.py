@@ -78,6 +78,10 @@ def estimate_command(
     wavelength_nm: Optional[float] = typer.Option(
         None, "--wavelength-nm", metavar="NM", help="Laser wavelength for --troposphere mendes-pavlis on ranges "
                                                     "without a CRD configuration record."),
+    solid_tides: Optional[bool] = typer.Option(
+        None, "--solid-tides/--no-solid-tides", show_default=False,
+        help="Solid-Earth tide displacement of the stations on range samples (IERS 2010 step 1; default: on for "
+             "CRD laser data)."),
     eccentricities: Optional[str] = typer.Option(
         None, "--eccentricities", metavar="ECC.snx", help="SINEX eccentricities applied to --stations FILE.snx."),
     force=ForceOpt,
@@ -186,7 +190,7 @@ def estimate_command(
         range_rate_model=range_rate_model.value if range_rate_model else None, max_iterations=max_iterations,
         clip=clip if clip > 0 else None, epoch=epoch, kinds=kind_list, compare_doppler_only=compare_doppler_only,
         two_stage=two_stage, noise=noise.value, oscillator_noise=oscillator_noise,
-        troposphere=troposphere, com_offset_m=com_offset, wavelength_nm=wavelength_nm,
+        troposphere=troposphere, com_offset_m=com_offset, wavelength_nm=wavelength_nm, solid_tides=solid_tides,
         force_model=force_settings.model(force.value, state0.epoch, orientation, state0))
     result = estimate(tables, state0, station_table, options, orientation)
     corrections = {}

@@ -53,10 +53,13 @@ def check(troposphere: str, com_offset_m: float, wavelength_nm) -> None:
 
 
 def range_correction_modifiers(frame: pd.DataFrame, tables, stations: dict, epoch, *, troposphere: str = "auto",
-                               com_offset_m: float = 0.0, wavelength_nm: float | None = None) -> list:
+                               com_offset_m: float = 0.0, wavelength_nm: float | None = None,
+                               solid_tides: bool | None = None) -> list:
     """The correction modifiers of the range samples of ``frame`` (merged samples with ``kind``,
     ``station``, ``_source``); ``tables``: ``(source, PassTable)``; ``stations``: name -> Station;
-    ``epoch``: the solution epoch (UTC datetime64) the samples' seconds count from."""
+    ``epoch``: the solution epoch (UTC datetime64) the samples' seconds count from;
+    ``solid_tides``: the stations' solid-Earth tide displacement on every range (None: on when
+    the ranges come from CRD files, whose SINEX coordinates are tide-free)."""
     from trackproc.dynamics import timescales as ts
     from trackproc.dynamics.geodesy import DEG
     from trackproc.models import troposphere as tp
@@ -68,15 +71,21 @@ def range_correction_modifiers(frame: pd.DataFrame, tables, stations: dict, epoc
     out = []
     if com_offset_m != 0.0:
         out.append(tp.CentreOfMassOffset(com_offset_m))
+    ref = ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns"))
+    range_sources = set(frame.loc[is_range, "_source"])
+    if solid_tides is None:
+        solid_tides = any(_crd_meta(table.meta or {}) for source, table in tables if source in range_sources)
+    if solid_tides:
+        from trackproc.models.station_tides import SolidTideDisplacement
+
+        out.append(SolidTideDisplacement(tuple(float(a) for a in ref)))
     if troposphere == "none":
         return out
-    ref = ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns"))
 
     def seconds(iso) -> np.ndarray:
         t = pd.to_datetime(pd.Series(list(iso), dtype=object), utc=True).dt.tz_localize(None)
         return np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(t.to_numpy("datetime64[ns]")), ref), float)
 
-    range_sources = set(frame.loc[is_range, "_source"])
     range_stations = sorted(set(frame.loc[is_range, "station"].astype(str)))
     meteo: dict = {}
     sessions: dict = {}                     # station -> [(start_s, end_s, wavelength_nm, applied)]
@@ -110,6 +119,10 @@ def range_correction_modifiers(frame: pd.DataFrame, tables, stations: dict, epoc
                                      expected="--troposphere auto or none for such sessions")
                 continue
             wl = wl or (wavelength_nm if troposphere == "mendes-pavlis" else None)
+            if not wl and troposphere == "mendes-pavlis":
+                raise InputError("the Mendes-Pavlis troposphere needs the laser wavelength", column="--wavelength-nm",
+                                 found=f"a CRD session of {st} without a C0 wavelength",
+                                 expected="--wavelength-nm NM")
             if wl:
                 out.append(tp.TroposphereDelay(st, lat, height, wl * 1e-3, spans_s=[(start, end)], **kw))
         if troposphere == "mendes-pavlis":

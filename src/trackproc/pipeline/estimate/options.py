@@ -44,8 +44,8 @@ class EstimateOptions:
     frequency offset a random walk of the transmitter frequency and both; then GLS), ``"white"``
     (independent samples), or one of ``"ar1"``, ``"walk"``, ``"ar1+walk"``;
     ``oscillator_noise``: the random-walk intensity (Hz/√s) instead of estimating it.
-    ``troposphere`` (auto | mendes-pavlis | none), ``com_offset_m``, ``wavelength_nm``: the
-    known corrections of range samples (:mod:`trackproc.pipeline.range_corrections`).
+    ``troposphere`` (auto | mendes-pavlis | none), ``com_offset_m``, ``wavelength_nm``,
+    ``solid_tides``: the known corrections of range samples (:mod:`trackproc.pipeline.range_corrections`).
     """
 
     range_bias: bool | Sequence[str] = False
@@ -70,6 +70,7 @@ class EstimateOptions:
     troposphere: str = "auto"             # range corrections (pipeline.range_corrections)
     com_offset_m: float = 0.0
     wavelength_nm: Optional[float] = None
+    solid_tides: Optional[bool] = None    # station solid-Earth tides on ranges (None: on for CRD data)
 
 
 def check_options(opt: EstimateOptions) -> None:
