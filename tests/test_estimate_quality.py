@@ -124,3 +124,29 @@ def test_a_corrupted_pass_is_named_and_strict_turns_suspect_into_exit_1(run_cli,
     assert r.exit_code == 1 and "--strict" in r.stderr
     assert json.loads(out.read_text())["quality"]["verdict"] == "suspect"
     assert np.isfinite(json.loads(out.read_text())["values"]).all()
+
+
+def test_an_adapted_solution_resting_on_its_loosened_apriori_is_not_taken():
+    """knowledge_lost (issue 13 item 3): with posterior C = (N_d + P⁻¹)⁻¹ the generalised
+    eigenvalue against the a-priori P is 1 / (1 + d) for data information d relative to P; a
+    direction where the data weigh less than the loosened a-priori (d < 1, λ > 1/2) means the
+    solution there is the a-priori's, and the initial state is kept instead."""
+    from types import SimpleNamespace
+
+    from trackproc.methods.least_squares import Prior
+    from trackproc.pipeline.estimate.gates import knowledge_lost
+
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(6, 6))
+    p = a @ a.T + 6 * np.eye(6)                      # a correlated a-priori covariance
+    priors = [Prior(np.arange(6), np.zeros(6), p)]
+    root = np.linalg.cholesky(p)
+    for d, lost in ((np.array([9.0, 9, 9, 9, 9, 1.5]), False), (np.array([9.0, 9, 9, 9, 9, 0.5]), True)):
+        # data information d along the a-priori's whitened axes: N_d = L⁻ᵀ diag(d) L⁻¹
+        inv_root = np.linalg.inv(root)
+        n_d = inv_root.T @ np.diag(d) @ inv_root
+        post = np.linalg.inv(n_d + np.linalg.inv(p))
+        why = knowledge_lost(priors, SimpleNamespace(covariance=post))
+        assert (why is not None) == lost, (d, why)
+        if lost:
+            assert f"{1 / 1.5:.2f}" in why

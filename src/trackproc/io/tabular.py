@@ -85,7 +85,7 @@ def read_raw(path: str, layout: str = "auto", *, sidecar: str | None = None,
     data = read_input_bytes(path) if data is None else data
     if not data.strip():
         raise InputError("empty input", file=source, row=1, found="no data",
-                         expected="a CSV, Parquet, Arrow IPC, DopTrack, Orekit .aer or CCSDS TDM file")
+                         expected="a CSV, Parquet, Arrow IPC, DopTrack, Orekit .aer, CCSDS TDM or ILRS CRD file")
     if layout == "auto":
         layout = detect_layout(data, "" if is_stdio(path) else Path(path).name)
     if layout == "doptrack":
@@ -120,7 +120,7 @@ def iter_raw(path: str, layout: str = "auto", *, sidecar: str | None = None,
              tdm_two_way_range: str = "one-way-equivalent") -> Iterator[RawMeasurements]:
     """:func:`read_raw` chunk by chunk: a CSV or Parquet/Arrow table in chunks of
     :func:`~trackproc.io.csvtext.chunk_rows` rows (bounded memory, the same samples, row numbers and
-    first error as a whole read); DopTrack, Orekit .aer and TDM inputs (small files) in one chunk."""
+    first error as a whole read); DopTrack, Orekit .aer, TDM and CRD inputs (small files) in one chunk."""
     source = "<stdin>" if is_stdio(path) else str(path)
     blocks = iter_input_blocks(path)
     head = b""
@@ -130,11 +130,11 @@ def iter_raw(path: str, layout: str = "auto", *, sidecar: str | None = None,
             break
     if not head.strip():
         raise InputError("empty input", file=source, row=1, found="no data",
-                         expected="a CSV, Parquet, Arrow IPC, DopTrack, Orekit .aer or CCSDS TDM file")
+                         expected="a CSV, Parquet, Arrow IPC, DopTrack, Orekit .aer, CCSDS TDM or ILRS CRD file")
     name = "" if is_stdio(path) else Path(path).name
     if layout == "auto":
         layout = detect_layout(head, name)
-    if layout in ("doptrack", "aer", "tdm"):
+    if layout in ("doptrack", "aer", "tdm", "crd"):
         yield read_raw(path, layout, sidecar=sidecar, carrier_hz=carrier_hz, drop_invalid=drop_invalid,
                        tdm_two_way_range=tdm_two_way_range, data=head + b"".join(blocks))
         return
