@@ -45,7 +45,7 @@ def gauss_legendre(intervals, *, order: int = 16, panel_s: float = 60.0):
     if order < 1 or not panel_s > 0:
         raise ValueError(f"order must be >= 1 and panel_s > 0; found {order}, {panel_s}")
     x, wx = np.polynomial.legendre.leggauss(int(order))
-    ts, ws = [], []
+    t_parts, w_parts = [], []
     for a, b in intervals:
         a, b = float(a), float(b)
         if not b > a:
@@ -54,11 +54,11 @@ def gauss_legendre(intervals, *, order: int = 16, panel_s: float = 60.0):
         edges = np.linspace(a, b, m + 1)
         mid = 0.5 * (edges[1:] + edges[:-1])
         half = 0.5 * (edges[1:] - edges[:-1])
-        ts.append((mid[:, None] + half[:, None] * x[None, :]).ravel())
-        ws.append((half[:, None] * wx[None, :]).ravel())
-    if not ts:
+        t_parts.append((mid[:, None] + half[:, None] * x[None, :]).ravel())
+        w_parts.append((half[:, None] * wx[None, :]).ravel())
+    if not t_parts:
         raise ValueError("no interval of positive length to integrate over")
-    return np.concatenate(ts), np.concatenate(ws)
+    return np.concatenate(t_parts), np.concatenate(w_parts)
 
 
 def covered_intervals(t_s, max_gap_s: float = 30.0, min_length_s: float = 1.0) -> list:
