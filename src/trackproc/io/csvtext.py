@@ -143,6 +143,9 @@ def _plain_chunk(piece: bytes, header: list[str], line0: int) -> TextTable | Non
     n = table.num_rows
     if n != piece.count(b"\n"):
         return None
+    limit = csv.field_size_limit()   # a cell the csv module refuses: its error, with the row
+    if any((pc.max(pc.binary_length(table.column(name))).as_py() or 0) > limit for name in header):
+        return None
     cells = {name: pc.utf8_trim_whitespace(table.column(name)).to_numpy(zero_copy_only=False).astype(object)
              for name in header}
     return TextTable(list(header), cells, np.arange(line0 + 1, line0 + n + 1, dtype=np.int64), 0)
@@ -189,50 +192,68 @@ def _text_table(header, records, starts, header_row, comments, source) -> TextTa
 
 
 def _whole_records(blocks: Iterable[bytes], size: int) -> Iterator[tuple[bool, bytes]]:
-    """Byte pieces of about ``size`` that end after a newline outside double quotes (a quoted
-    cell may hold a newline); ``(is_first, piece)``. The last piece is the rest of the input."""
+    """Byte pieces of about ``size`` (the first one smaller: the header) that end after a newline
+    outside double quotes (a quoted cell may hold a newline); ``(is_first, piece)``. The last
+    piece is the rest of the input."""
     buffer = bytearray()
-    first, retry_at = True, min(size, 1 << 16)   # a small first piece: the header and comments
+    first = True
+    target = min(size, 1 << 16)
+    retry_at = target
     for block in blocks:
         buffer += block
         while len(buffer) >= retry_at:
-            cut = _balanced_cut(buffer)
+            cut = _balanced_cut(buffer, target)
             if cut <= 0:        # one open quote: wait for twice the data before scanning again
                 retry_at = 2 * len(buffer)
                 break
             yield first, bytes(buffer[:cut])
-            first, retry_at = False, size
             del buffer[:cut]
+            first, target = False, size
+            retry_at = target
     if buffer or first:
         yield first, bytes(buffer)
 
 
-def _balanced_cut(buffer: bytearray) -> int:
-    """Length of the longest prefix ending with a newline and holding an even number of quotes
-    outside comment lines (0: none); comment lines are blanked before the CSV is parsed."""
+def _balanced_cut(buffer: bytearray, size: int) -> int:
+    """Length of a prefix ending with a newline and holding an even number of quotes outside
+    comment lines (comment lines are blanked before the CSV is parsed): the longest one of at most
+    ``size`` bytes, else the shortest longer one; 0 when there is none."""
     if b"#" in buffer:
-        return _balanced_cut_by_line(buffer)
-    total = buffer.count(b'"')
-    end, after = len(buffer), 0
-    pos = buffer.rfind(b"\n", 0, end)
-    while pos >= 0:
-        after += buffer.count(b'"', pos + 1, end)
-        if (total - after) % 2 == 0:
+        return _balanced_cut_by_line(buffer, size)
+    limit = min(size, len(buffer))
+    pos = buffer.rfind(b"\n", 0, limit)
+    quotes = buffer.count(b'"', 0, pos + 1)
+    while pos >= 0:                          # back from the size
+        if quotes % 2 == 0:
             return pos + 1
-        end = pos + 1
-        pos = buffer.rfind(b"\n", 0, pos)
+        before = buffer.rfind(b"\n", 0, pos)
+        quotes -= buffer.count(b'"', before + 1, pos + 1)
+        pos = before
+    pos = buffer.find(b"\n", limit)
+    quotes = buffer.count(b'"', 0, pos + 1) if pos >= 0 else 0
+    while pos >= 0:                          # on from the size
+        if quotes % 2 == 0:
+            return pos + 1
+        after = buffer.find(b"\n", pos + 1)
+        if after < 0:
+            break
+        quotes += buffer.count(b'"', pos + 1, after + 1)
+        pos = after
     return 0
 
 
-def _balanced_cut_by_line(buffer: bytearray) -> int:
+def _balanced_cut_by_line(buffer: bytearray, size: int) -> int:
     best, parity, position = 0, 0, 0
-    lines = bytes(buffer).split(b"\n")
-    for line in lines[:-1]:          # the last piece has no newline yet
+    for line in bytes(buffer).split(b"\n")[:-1]:     # the last piece has no newline yet
         if not line.lstrip(b" \t\r\x0b\x0c").startswith(b"#"):
             parity ^= line.count(b'"') & 1
         position += len(line) + 1
         if not parity:
+            if position > size and best:
+                return best
             best = position
+            if position > size:
+                return best
     return best
 
 

@@ -19,6 +19,11 @@ range_rate ≈ −c·doppler/(2·carrier) two-way (c = 299 792 458 m/s).
 Passes: samples of a station are split where consecutive times are more than ``max_gap_s``
 apart and numbered ``<station>-001``, ``-002``, ... by start time, unless the input gives a
 ``pass_id``.
+
+Memory (issue 14 item 5): :class:`Ingest` takes each input chunk by chunk
+(:func:`trackproc.io.tabular.iter_raw`); only the valid samples are kept, in compact columns
+(:mod:`trackproc.pipeline.ingest_samples`, ~45 bytes a sample, at most ``TRACKPROC_MAX_INPUT_ROWS``),
+for the checks that need them all; the CLI writes the table slice by slice.
 """
 
 from __future__ import annotations
