@@ -39,6 +39,8 @@ __all__ = ["Spacecraft", "ForceModel", "Environment", "PARAMETERS", "GRID_S"]
 PARAMETERS = ("cr", "cd", "empirical_r", "empirical_t", "empirical_n")
 #: Spacing of the tabulated Earth orientation, Sun and Moon (s).
 GRID_S = 600.0
+#: Default degree of the field in the STM's gradient (see ForceModel.stm_degree).
+STM_DEGREE = 20
 #: Central-difference steps of the numerical Jacobian of the non-central accelerations.
 _H_R_M = 1.0
 _H_V_M_S = 1e-3
@@ -100,6 +102,9 @@ class ForceModel:
     estimated: tuple = ()
     eop: object = None
     earth_radius_m: float = WGS84_A          # shadow cone and geodetic heights (WGS-84)
+    #: Degree of the field in the STM's ∂a/∂r (None: min(field degree, STM_DEGREE)). Measured,
+    #: LEO 70x70, 3 h: a 20x20 gradient changes the STM by 1e-4 of its columns and costs a third.
+    stm_degree: int | None = None
 
     def __post_init__(self):
         bad = [b for b in self.third_bodies if b not in ("sun", "moon")]
@@ -151,7 +156,9 @@ class ForceModel:
             "name": self.label(),
             "gravity_field": {"model": f.name, "source": f.source, "degree": f.degree, "order": f.order,
                               "gm_m3_s2": f.gm_m3_s2, "radius_m": f.radius_m, "tide_system": f.tide_system,
-                              "coefficients_at": f.epoch or None},
+                              "coefficients_at": f.epoch or None,
+                              "stm_gradient_degree": min(f.degree, STM_DEGREE if self.stm_degree is None
+                                                         else self.stm_degree)},
             "earth_orientation": getattr(self.eop, "source", "none (UT1-UTC = 0, no polar motion)"),
             "third_bodies": {b: {"gm_m3_s2": third_body.GM_SUN if b == "sun" else third_body.GM_MOON,
                                  "ephemeris": "ERFA epv00" if b == "sun" else "ERFA moon98"}
@@ -254,23 +261,32 @@ class Environment:
         self._cache_t, self._cache = t, (m, sun, moon, axis)
         return self._cache
 
+    def _stm_field(self):
+        """The field of the STM's gradient when ``stm_degree`` truncates it, else None."""
+        deg = STM_DEGREE if self.model.stm_degree is None else self.model.stm_degree
+        if deg >= self.model.field.degree:
+            return None
+        if getattr(self, "_low", None) is None:
+            self._low = self.model.field.truncated(max(int(deg), 0), min(int(deg), self.model.field.order))
+        return self._low
+
     # -- accelerations -----------------------------------------------------------------------
     def central(self, r) -> np.ndarray:
         gm = self.model.field.gm_m3_s2
         rn = np.linalg.norm(r, axis=-1, keepdims=True)
         return -gm * r / rn ** 3
 
-    def perturbation(self, t: float, r, v, *, parts: bool = False):
+    def perturbation(self, t: float, r, v, *, parts: bool = False, field=None):
         """Every acceleration but the central ``-GM r/r³`` (m/s², integration frame), (P, 3).
 
         With ``parts`` also the unit-coefficient parts ``{cr, cd, empirical_*}`` (for the
-        parameter partials)."""
+        parameter partials); ``field`` replaces the model's (the STM's truncated one)."""
         mdl = self.model
         m, sun, moon, axis = self.at(t)
         r = np.atleast_2d(r)
         v = np.atleast_2d(v)
         r_itrf = r @ m.T
-        acc = mdl.field.acceleration(r_itrf, central=False) @ m
+        acc = (field or mdl.field).acceleration(r_itrf, central=False) @ m
         if "sun" in mdl.third_bodies:
             acc = acc + third_body.point_mass(r, sun, third_body.GM_SUN)
         if "moon" in mdl.third_bodies:
@@ -311,14 +327,21 @@ class Environment:
         """``(a, ∂a/∂r, ∂a/∂v, ∂a/∂p)`` at one state: (3,), (3, 3), (3, 3), (3, P).
 
         The central term's gradient is analytic; the rest by central differences (steps 1 m and
-        1 mm/s) evaluated in one vectorised call (13 points cost about 1.5 single ones).
+        1 mm/s) evaluated in one vectorised call (13 points cost about 1.5 single ones). With
+        ``stm_degree`` below the field's, the differences use the field cut to that degree and
+        the acceleration itself the full field (see docs/propagate.md for what it saves and changes).
         """
         r = np.asarray(r, float).reshape(3)
         v = np.asarray(v, float).reshape(3)
         e = np.eye(3)
         rp = np.concatenate([r[None], r + _H_R_M * e, r - _H_R_M * e, np.tile(r, (6, 1))])
         vp = np.concatenate([v[None], np.tile(v, (6, 1)), v + _H_V_M_S * e, v - _H_V_M_S * e])
-        pert, unit = self.perturbation(t, rp, vp, parts=True)
+        low = self._stm_field()
+        if low is None:
+            pert, unit = self.perturbation(t, rp, vp, parts=True)
+        else:
+            pert, unit = self.perturbation(t, rp, vp, parts=True, field=low)
+            pert[0] = self.perturbation(t, r, v)[0]
         g = (pert[1:4] - pert[4:7]).T / (2 * _H_R_M)
         hv = (pert[7:10] - pert[10:13]).T / (2 * _H_V_M_S)
         gm = self.model.field.gm_m3_s2
