@@ -10,7 +10,7 @@ from scipy.integrate import solve_ivp
 from trackproc.constants import J2, MU_EARTH, RE_EARTH
 from trackproc.dynamics import kepler
 from trackproc.dynamics import spectra as sp
-from trackproc.dynamics import taylor
+from trackproc.dynamics import taylor, taylor_series
 from trackproc.dynamics.taylor import Outcome, propagate
 from trackproc.errors import ProcessingError
 
@@ -59,11 +59,11 @@ def test_p_model_seed000_eq14_matches_generic_spectrum_rules(force):
     r0, v0 = ECC[None, :3], ECC[None, 3:]
     kj2 = -1.5 * J2 * MU_EARTH * RE_EARTH ** 2 if force == "j2" else 0.0
     scale = np.abs(ref).max(axis=0)
-    for kernel in (taylor._series_state, taylor._series_state_single):
+    for kernel in (taylor_series.series_state, taylor_series.series_state_single):
         got = kernel(r0, v0, p, MU_EARTH, kj2)[0]
         assert np.all(np.abs(got - ref) <= 1e-12 * scale), kernel.__name__
     # the dual kernel's value part is the same spectrum
-    dual = taylor._series_dual(r0, v0, np.zeros((1, 3, 1)), np.zeros((1, 3, 1)), p,
+    dual = taylor_series.series_dual(r0, v0, np.zeros((1, 3, 1)), np.zeros((1, 3, 1)), p,
                                MU_EARTH, kj2, None)[0, :, 0]
     assert np.all(np.abs(dual - ref) <= 1e-12 * scale)
 
@@ -77,8 +77,8 @@ def test_variational_fast_path_equals_dual_kernel(force, state):
     dr, dv = rng.normal(size=(1, 3, 7)), rng.normal(size=(1, 3, 7)) * 1e3
     kj2 = -1.5 * J2 * MU_EARTH * RE_EARTH ** 2 if force == "j2" else 0.0
     args = (state[None, :3], state[None, 3:], dr, dv, 24, MU_EARTH, kj2, 7)
-    a = taylor._series_dual(*args)
-    b = taylor._series_var_single(*args)
+    a = taylor_series.series_dual(*args)
+    b = taylor_series.series_var_single(*args)
     hp = 600.0 ** np.arange(26)                       # compare as they are used: at h = 600 s
     assert (np.abs((a - b) * hp).sum(-1) / np.abs(a * hp).sum(-1)).max() < 1e-14
 
@@ -97,7 +97,7 @@ def test_import_stays_light():
 
 @pytest.mark.parametrize("force", ["two-body", "j2"])
 def test_second_coefficient_is_half_the_acceleration(force):
-    x = taylor._series_state_single(LEO[None, :3], LEO[None, 3:], 20, MU_EARTH,
+    x = taylor_series.series_state_single(LEO[None, :3], LEO[None, 3:], 20, MU_EARTH,
                                     -1.5 * J2 * MU_EARTH * RE_EARTH ** 2 if force == "j2" else 0.0)
     acc = taylor.acceleration(LEO[:3], force=force)
     np.testing.assert_allclose(2.0 * x[0, :, 2], acc, rtol=1e-14)

@@ -1,0 +1,243 @@
+"""Dense output of the Taylor (DT) engine: every step's position spectra, evaluated at any times.
+
+A :class:`Propagation` keeps, for each step, the spectrum of the position (and of its
+sensitivities); the state at any set of times is the inverse transform (one matrix product per
+step: powers of the offsets x coefficients), without re-integration, and velocity and higher
+derivatives are derivatives of the same series (seed 004 eq. 13, the inverse transform).
+:func:`trackproc.dynamics.taylor.propagate` builds it; the propagator façade and the full-force
+integrator (:mod:`trackproc.dynamics.forces.integrator`) return it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+from functools import lru_cache
+
+import numpy as np
+
+from trackproc.errors import ProcessingError
+
+__all__ = ["Outcome", "Propagation"]
+
+
+class Outcome(Enum):
+    """How a propagation ended."""
+
+    SUCCESS = "success"          #: the requested end time was reached
+    STEP_LIMIT = "step_limit"    #: ``max_steps`` steps were taken before the end time
+    NON_FINITE = "non_finite"    #: a coefficient became NaN or infinite (e.g. r = 0)
+
+
+
+def _powers(dt, n):
+    """Powers ``dt^k``, k = 0..n-1, shape (n, M), by doubling (log2 n vector products)."""
+    p = np.empty((n, dt.size))
+    p[0] = 1.0
+    if n > 1:
+        p[1] = dt
+    k = 2
+    while k < n:
+        j = min(k, n - k)
+        np.multiply(p[:j], p[k - 1] * dt, out=p[k:k + j])
+        k += j
+    return p
+
+
+@lru_cache(maxsize=64)
+def _deriv_factors(n, m):
+    """(2, max(n-m,1)): K!/(K-d)! for K = d..n-1 at power K-d, d = m and m+1."""
+    nm = max(n - m, 1)
+    out = np.zeros((2, nm))
+    for i, d in enumerate((m, m + 1)):
+        for j in range(max(n - d, 0)):
+            out[i, j] = math.perm(j + d, d)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class Propagation:
+    """Result of :func:`propagate`: the outcome and every step's spectra (dense output).
+
+    Attributes
+    ----------
+    outcome : Outcome
+    step_times_s : array ``(n_steps + 1,)``
+        Step boundaries, s (decreasing for a backward propagation); ``step_times_s[-1]`` is the
+        time reached.
+    coefficients : array ``(n_steps, B, 3, p + 2)``
+        Position spectra of each step with H = 1 s around the step's start (the velocity is
+        their derivative). B = 1 for a single trajectory.
+    sensitivities : array ``(n_steps, B, 3, P, p + 2)`` or None
+        Spectra of d position / d parameter, parameters named in ``parameters``.
+    order, tol, force, mu_m3_s2, j2, re_m : the settings used.
+    batch : bool
+        True when the initial state had a leading batch axis (outputs keep it).
+
+    Evaluation (dense output, no re-integration): :meth:`state` (and its time derivatives),
+    :meth:`stm`, :meth:`jacobian`, :meth:`dstate_dmu` at any times inside the interval covered.
+
+    Examples
+    --------
+    A circular orbit of radius 7000 km comes back after one period:
+
+    >>> import numpy as np
+    >>> from trackproc.constants import MU_EARTH
+    >>> v = np.sqrt(MU_EARTH / 7.0e6); period = 2 * np.pi * 7.0e6 / v
+    >>> res = propagate([7.0e6, 0, 0, 0, v, 0], 0.0, period, force="two-body")
+    >>> res.outcome.value, res.n_steps
+    ('success', 4)
+    >>> bool(np.abs(res.state(period)[:3] - [7.0e6, 0, 0]).max() < 1e-6)
+    True
+    >>> res.state(np.linspace(0.0, 600.0, 601)).shape
+    (601, 6)
+    """
+
+    outcome: Outcome
+    step_times_s: np.ndarray
+    coefficients: np.ndarray
+    sensitivities: np.ndarray | None
+    parameters: tuple
+    order: int
+    tol: float
+    force: str
+    mu_m3_s2: float
+    j2: float
+    re_m: float
+    batch: bool
+
+    # -- summary -----------------------------------------------------------------------------
+    @property
+    def n_steps(self) -> int:
+        return self.coefficients.shape[0]
+
+    @property
+    def step_sizes_s(self) -> np.ndarray:
+        return np.diff(self.step_times_s)
+
+    @property
+    def t0_s(self) -> float:
+        return float(self.step_times_s[0])
+
+    @property
+    def t_end_s(self) -> float:
+        return float(self.step_times_s[-1])
+
+    def raise_for_outcome(self) -> "Propagation":
+        """Raise :class:`ProcessingError` unless the end time was reached; return self."""
+        if self.outcome is not Outcome.SUCCESS:
+            raise ProcessingError(
+                f"Taylor propagation stopped ({self.outcome.value}) at t = {self.t_end_s} s "
+                f"after {self.n_steps} steps",
+                {"outcome": self.outcome.value, "t_reached_s": self.t_end_s,
+                 "steps": self.n_steps})
+        return self
+
+    # -- dense output ------------------------------------------------------------------------
+    def _locate(self, t):
+        """Step index of every time in ``t`` (1-D); ValueError outside the interval."""
+        tb = self.step_times_s
+        if self.n_steps == 0:
+            raise ValueError("no step was taken; nothing to evaluate")
+        lo, hi = (tb[0], tb[-1]) if tb[-1] >= tb[0] else (tb[-1], tb[0])
+        slack = 8 * np.finfo(float).eps * max(abs(lo), abs(hi), 1.0)
+        tmin, tmax = (t.min(), t.max()) if t.size else (lo, hi)
+        if not (lo - slack <= tmin and tmax <= hi + slack):
+            raise ValueError(f"times must lie in the propagated interval [{lo}, {hi}] s; "
+                             f"found [{tmin}, {tmax}]")
+        if self.n_steps == 1:
+            return None
+        if tb[-1] >= tb[0]:
+            idx = np.searchsorted(tb, t, side="right") - 1
+        else:
+            idx = np.searchsorted(-tb, -t, side="right") - 1
+        return np.clip(idx, 0, self.n_steps - 1)
+
+    def _dense(self, coef, t_s, m):
+        """Derivatives m and m+1 of spectra coef (n_steps, B, F, n) at t_s.
+
+        Returns (B, M, 2, F) and the shape of t_s. One matrix product per step touched:
+        powers of the offsets (M, n) x derivative spectra (n, 2F).
+        """
+        t = np.asarray(t_s, dtype=float)
+        tf = t.reshape(-1)
+        idx = self._locate(tf)
+        _, nb, nf, n = coef.shape
+        tb = self.step_times_s
+        nm = max(n - m, 1)
+        fac = _deriv_factors(n, m)                                    # (2, nm)
+        if tf.size == 0:
+            return np.empty((nb, 0, 2, nf)), t.shape
+        if idx is None:
+            groups = [(0, None)]
+        elif np.all(idx[1:] >= idx[:-1]):                            # sorted: slices
+            cuts = np.flatnonzero(np.diff(idx)) + 1
+            starts = np.concatenate([[0], cuts])
+            ends = np.concatenate([cuts, [idx.size]])
+            groups = [(int(idx[a]), slice(int(a), int(b))) for a, b in zip(starts, ends)]
+        else:
+            order = np.argsort(idx, kind="stable")
+            sidx = idx[order]
+            cuts = np.flatnonzero(np.diff(sidx)) + 1
+            groups = [(int(idx[g[0]]), g) for g in np.split(order, cuts)]
+        out = None if len(groups) == 1 else np.empty((nb, tf.size, 2, nf))
+        for s, sel in groups:
+            cs = coef[s]                                              # (B, F, n)
+            cd = np.zeros((nb, 2, nf, nm))
+            if m < n:
+                cd[:, 0, :, :n - m] = cs[..., m:] * fac[0, :n - m]
+            if m + 1 < n:
+                cd[:, 1, :, :n - m - 1] = cs[..., m + 1:] * fac[1, :n - m - 1]
+            dt = (tf if sel is None else tf[sel]) - tb[s]
+            # one 2-D product of contiguous operands (BLAS), (B*2F, nm) @ (nm, M)
+            res = (cd.reshape(nb * 2 * nf, nm) @ _powers(dt, nm)).reshape(nb, 2, nf, -1)
+            res = res.transpose(0, 3, 1, 2)
+            if out is None:
+                out = res
+            else:
+                out[:, sel] = res
+        return out, t.shape
+
+    def _finish(self, arr, tshape, tail):
+        """(B, M, ...) -> (B?,) + tshape + tail."""
+        shape = tshape + tail
+        if self.batch:
+            return arr.reshape((arr.shape[0],) + shape)
+        return arr.reshape(shape)
+
+    def state(self, t_s, derivative: int = 0) -> np.ndarray:
+        """State ``[r, v]`` (m, m/s) at times ``t_s``, or its ``derivative``-th time derivative.
+
+        Shape ``t_s.shape + (6,)``, with a leading batch axis in batch mode. ``derivative=1``
+        gives ``[v, a]``, and so on (derivatives of the step's series, exact to the tolerance).
+        Times must lie inside the propagated interval.
+        """
+        m = int(derivative)
+        if m < 0:
+            raise ValueError(f"derivative must be >= 0; found {m}")
+        out, tshape = self._dense(self.coefficients, t_s, m)
+        return self._finish(out, tshape, (6,))
+
+    def jacobian(self, t_s) -> np.ndarray:
+        """d state(t) / d parameters, shape ``t_s.shape + (6, P)`` (parameters in ``.parameters``)."""
+        if self.sensitivities is None:
+            raise ValueError("this propagation carries no sensitivities; "
+                             "call propagate(..., stm=True)")
+        sens = self.sensitivities
+        nsteps, nb, _, npar, n = sens.shape
+        coef = sens.reshape(nsteps, nb, 3 * npar, n)
+        out, tshape = self._dense(coef, t_s, 0)
+        out = out.reshape(out.shape[:2] + (6, npar))
+        return self._finish(out, tshape, (6, npar))
+
+    def stm(self, t_s) -> np.ndarray:
+        """State transition matrix ``Phi(t, t0) = d state(t) / d state(t0)``, ``(..., 6, 6)``."""
+        return self.jacobian(t_s)[..., :6]
+
+    def dstate_dmu(self, t_s) -> np.ndarray:
+        """d state(t) / d mu (state units per m^3/s^2), ``(..., 6)``; needs ``mu_sensitivity``."""
+        if "mu" not in self.parameters:
+            raise ValueError("this propagation has no mu sensitivity; "
+                             "call propagate(..., stm=True, mu_sensitivity=True)")
+        return self.jacobian(t_s)[..., self.parameters.index("mu")]
