@@ -214,13 +214,14 @@ def main(argv: list[str] | None = None) -> int:
     Called without ``argv`` (as the ``trackproc`` script), the process ends here by ``os._exit``
     once stdout, stderr and the log are flushed: the interpreter's own teardown of Arrow's C++
     threads aborted the process (exit 134, "terminate called without an active exception") in a
-    few percent of runs after an input error. ``batch`` keeps the normal exit (its pool's
-    finalizers must run).
+    few percent of runs after an input error (and a serial ``batch`` stopped by SIGTERM: exit 134
+    for 143). A process that made a process pool (``batch`` with workers: its semaphores are
+    unlinked by the pool's finalizers) or still has children keeps the normal exit.
     """
     if argv is None:
         _one_blas_thread()
         code = _main(sys.argv[1:])
-        if _command_name(_hoist_global_flags(sys.argv[1:])) != "batch" and not _has_children():
+        if "multiprocessing.synchronize" not in sys.modules and not _has_children():
             _hard_exit(code)
         return code
     return _main(argv)

@@ -63,7 +63,7 @@ from trackproc.dynamics.taylor_series import series_dual, series_state, series_s
 __all__ = ["Outcome", "Propagation", "propagate", "default_order", "acceleration", "FORCES",
            "STATE_PARAMETERS"]
 
-FORCES = vocabulary.FORCES
+FORCES = vocabulary.TAYLOR_FORCES   # what the Taylor engine integrates ("full": dynamics.forces)
 STATE_PARAMETERS = vocabulary.STATE_NAMES
 
 

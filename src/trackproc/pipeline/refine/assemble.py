@@ -24,6 +24,7 @@ from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Prior
 from trackproc.pipeline.estimate import EstimateOptions, build_problem
 from trackproc.types import PassTable
+from trackproc.vocabulary import TAYLOR_FORCES
 from trackproc.pipeline.refine.options import (COSTS, DEFAULT_APRIORI_ELEMENTS, DOPPLER_BIAS, NOISE_MODELS,
                                                RefineOptions, SmoothedCurve)
 from trackproc.pipeline.refine.problem import Refinement, default_apriori_covariance, is_tle_state, link_mode
@@ -46,7 +47,7 @@ def check_options(opt: RefineOptions) -> None:
     if opt.doppler_bias not in (None,) + DOPPLER_BIAS:
         raise InputError("unknown Doppler bias model", column="--doppler-bias", found=opt.doppler_bias,
                          expected=" or ".join(DOPPLER_BIAS))
-    if opt.force not in propagator.FORCES:
+    if opt.force not in TAYLOR_FORCES:   # refine's image-domain model runs on the Taylor engine
         raise InputError("unknown force model", column="--force", found=opt.force, expected="two-body or j2")
     if not (opt.quadrature_order >= 2 and opt.quadrature_panel_s > 0 and opt.max_gap_s > 0):
         raise InputError("bad quadrature settings", column="--quadrature-order",
