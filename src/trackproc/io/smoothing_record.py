@@ -1,7 +1,7 @@
 """The smoothing record, read in one place: what ``trackproc smooth`` leaves in a pass file's
 metadata (key ``smoothing``, the same object as its ``--summary`` JSON) for later commands.
 
-Written by :func:`trackproc.pipeline.smooth.smooth` (``_fit_record``): ``{"counts": ...,
+Written by :func:`trackproc.pipeline.smooth.smooth` (:func:`trackproc.pipeline.smooth_summary.fit_record`): ``{"counts": ...,
 "fits": [record, ...], "output": "samples" | "grid", ...}``, one record per station, pass and
 kind with ``station``, ``pass_id``, ``kind``, ``unit``, ``status``, ``epoch_utc``, ``n_used``
 and, when a polynomial was fitted, ``basis``, ``domain_s``, ``degree``, ``coefficients``,
