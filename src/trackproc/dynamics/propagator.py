@@ -40,8 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trackproc.dynamics import taylor
-from trackproc.dynamics import timescales as ts
+from trackproc.dynamics import taylor, timescales as ts
 from trackproc.dynamics.frames import QuasiInertialFrame, earth_rotation
 from trackproc import vocabulary
 from trackproc.errors import ProcessingError
@@ -56,8 +55,7 @@ _MIN_SPAN_S = 1.0
 
 def force_parameters(force: str) -> tuple[float, float, float]:
     """``(mu m^3/s^2, j2, re m)`` of ``"two-body"`` or ``"j2"`` (the constants module)."""
-    from trackproc.dynamics.reference import force_parameters as fp
-
+    from trackproc.dynamics.reference import force_parameters as fp   # (scipy.integrate: only when asked)
     return fp(force)
 
 
