@@ -55,7 +55,7 @@ from typing import Optional, Sequence
 import numpy as np
 from scipy.linalg import cho_factor, solve_triangular
 
-from trackproc.methods.whitening import PassCovariance, effective_samples  # noqa: F401  (re-exported)
+from trackproc.methods.whitening import MarkovFactor, PassCovariance, effective_samples  # noqa: F401  (re-exported)
 
 __all__ = ["NoiseModel", "NoiseFit", "PassCovariance", "fit_noise", "restricted_loglik", "MODELS",
            "effective_samples", "effective_samples_beyond", "lag1_correlation"]
@@ -149,17 +149,25 @@ def _basis(x: np.ndarray) -> np.ndarray:
 
 
 class _Reml:
-    """The restricted likelihood of one set of residuals, with the time-difference matrices
-    computed once (the likelihood is evaluated many times while the hyper-parameters are sought)."""
+    """The restricted likelihood of one set of residuals. The covariance is whitened in O(n)
+    when the times are in order (:class:`~trackproc.methods.whitening.MarkovFactor`: the same
+    Cholesky whitening as the dense factor, to rounding); ``dense=True`` (or unordered times)
+    factorises the n x n covariance, with the time-difference matrices computed once (the test
+    oracle of the O(n) path)."""
 
-    def __init__(self, t, r, x, t0):
-        self.t, self.r, self.x = t, r, x
+    def __init__(self, t, r, x, t0, dense: bool = False):
+        self.t, self.r, self.x, self.t0 = t, r, x, t0
         self.n, self.p = x.shape
-        self.lag = np.abs(t[:, None] - t[None, :])
-        dt = np.clip(t - t0, 0.0, None)
-        self.walk = np.minimum(dt[:, None], dt[None, :])
+        self.dense = dense or (t.size > 1 and not np.all(np.diff(t) >= 0))
+        self.rx = np.column_stack([r, x])
+        if self.dense:
+            self.lag = np.abs(t[:, None] - t[None, :])
+            dt = np.clip(t - t0, 0.0, None)
+            self.walk = np.minimum(dt[:, None], dt[None, :])
 
     def covariance(self, model: NoiseModel) -> np.ndarray:
+        if not self.dense:
+            return model.covariance(self.t, self.t0)
         c = model.white ** 2 * np.eye(self.n)
         if model.ar_sigma > 0 and model.ar_tau_s > 0:
             c += model.ar_sigma ** 2 * np.exp(-self.lag / model.ar_tau_s)
@@ -167,36 +175,52 @@ class _Reml:
             c += model.walk ** 2 * self.walk
         return c
 
+    def _whitened(self, model: NoiseModel):
+        """``(log|C|, L⁻¹ r, L⁻¹ X)``, or None when ``C`` is not positive definite."""
+        try:
+            if self.dense:
+                chol, _ = cho_factor(self.covariance(model), lower=True, check_finite=False)
+                return (2.0 * float(np.sum(np.log(np.diag(chol)))),
+                        solve_triangular(chol, self.r, lower=True, check_finite=False),
+                        solve_triangular(chol, self.x, lower=True, check_finite=False))
+            fac = MarkovFactor(model, self.t, self.t0)
+        except np.linalg.LinAlgError:
+            return None
+        w = fac.whiten(self.rx)
+        if not (math.isfinite(fac.logdet) and np.all(np.isfinite(w))):
+            return None
+        return fac.logdet, w[:, 0], w[:, 1:]
+
     def __call__(self, model: NoiseModel, profile: bool = True) -> tuple[float, float]:
         """``(ℓ_R, ŝ)``: see :func:`restricted_loglik`; ``profile=False``: the scale is 1."""
         n, p = self.n, self.p
-        try:
-            chol, _ = cho_factor(self.covariance(model), lower=True, check_finite=False)
-        except np.linalg.LinAlgError:
+        got = self._whitened(model)
+        if got is None:
             return -math.inf, math.nan
-        xw = solve_triangular(chol, self.x, lower=True, check_finite=False)
-        rw = solve_triangular(chol, self.r, lower=True, check_finite=False)
+        logdet_c, rw, xw = got
         q, rr = np.linalg.qr(xw)
         e = rw - q @ (q.T @ rw)
         m = n - p
         rss = float(e @ e)
         if not (rss > 0 and m > 0):
             return -math.inf, math.nan
-        logdet = 2.0 * float(np.sum(np.log(np.diag(chol)))) + 2.0 * float(np.sum(np.log(np.abs(np.diag(rr)))))
+        logdet = logdet_c + 2.0 * float(np.sum(np.log(np.abs(np.diag(rr)))))
         if not profile:
             return -0.5 * (logdet + rss), 1.0
         s2 = rss / m
         return -0.5 * (m * math.log(s2) + logdet + m), math.sqrt(s2)
 
 
-def restricted_loglik(model, t, r, x, t0=None, profile: bool = True) -> tuple[float, float]:
+def restricted_loglik(model, t, r, x, t0=None, profile: bool = True, dense: bool = False) -> tuple[float, float]:
     """Restricted log-likelihood (module docstring; the constant ``-½(n-p) log 2π`` left out) of
     residuals ``r`` at times ``t`` with fixed-effect columns ``x`` (an orthonormal basis, see
     :func:`_basis`) and the covariance ``s² C`` of the :class:`NoiseModel` ``model``, the scale
-    ``s`` profiled out (``profile``; else ``s = 1``). Returns ``(ℓ_R, ŝ)``.
+    ``s`` profiled out (``profile``; else ``s = 1``); in O(n) for times in order (``dense``: by
+    the n x n Cholesky factor). Returns ``(ℓ_R, ŝ)``.
     Implements REML (Patterson & Thompson 1971; Harville 1977)."""
     t = np.asarray(t, float)
-    return _Reml(t, np.asarray(r, float), np.asarray(x, float), float(t.min()) if t0 is None else t0)(model, profile)
+    return _Reml(t, np.asarray(r, float), np.asarray(x, float), float(t.min()) if t0 is None else t0,
+                 dense)(model, profile)
 
 
 def _subset(t: np.ndarray, max_n: int = MAX_REML_SAMPLES, run: int = RUN_LENGTH) -> np.ndarray:
@@ -247,14 +271,17 @@ def _optimise(fun, start, bounds):
 
 
 def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Optional[float] = None,
-              white_floor: float = 0.0, t0: Optional[float] = None, p_select: float = SELECTION_P) -> NoiseFit:
+              white_floor: float = 0.0, t0: Optional[float] = None, p_select: float = SELECTION_P,
+              dense: bool = False) -> NoiseFit:
     """Estimate and choose the noise model of one pass by REML (module docstring).
 
     ``t_s`` (n,) times, ``residual`` (n,) residuals of a first fit, ``design`` (n, p) its
     fixed-effect columns (the Jacobian rows of the pass: state, offset, drift; only their column
     space matters), ``models`` the candidates, ``walk`` a given random-walk intensity
     (``--oscillator-noise``: then the walk is not estimated and every candidate carries it),
-    ``white_floor`` a lower bound of ``σ_w`` (quantisation), ``t0`` the start of the walk.
+    ``white_floor`` a lower bound of ``σ_w`` (quantisation), ``t0`` the start of the walk,
+    ``dense``: the likelihood by the n x n Cholesky factor instead of the O(n) whitening (the
+    test oracle; same result to rounding).
     """
     from scipy.special import gammaincinv  # chi-square quantile without scipy.stats (issue 19)
 
@@ -270,7 +297,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     step = max(float(np.median(np.diff(t))) if n > 1 else 1.0, 1e-3)
     tau_lo, tau_hi = math.log(0.5 * step), math.log(2.0 * span)
 
-    reml = _Reml(ts, rs, xs, t0)
+    reml = _Reml(ts, rs, xs, t0, dense)
     sd = max(float(np.std(rs)), 1e-12)
     cands: dict = {}
     fitted: dict = {}
