@@ -131,3 +131,15 @@ def test_reml_fit_is_the_same_in_o_n_and_dense(true):
         for key, value in cand.items():
             if isinstance(value, float):
                 assert fast.candidates[name][key] == pytest.approx(value, rel=1e-9, abs=1e-12), (name, key)
+
+
+@pytest.mark.parametrize("model", MODELS, ids=lambda m: f"{m.name}-{m.white}")
+def test_effective_samples_beyond_offset_and_drift_is_the_dense_formula(model):
+    """(tr C')²/tr(C'²), C' = P C P without a constant and a line: by the n x n matrix, and for
+    white noise by the rank of P (n - 2) without it."""
+    t = _grid(3, 150)
+    q, _ = np.linalg.qr(np.column_stack([np.ones(t.size), t - t[0]]))
+    p = np.eye(t.size) - q @ q.T
+    c = p @ model.covariance(t, float(t[0])) @ p
+    assert nz.effective_samples_beyond(model, t, float(t[0])) == pytest.approx(np.trace(c) ** 2 / np.sum(c * c),
+                                                                                rel=1e-9)

@@ -113,6 +113,8 @@ def effective_samples_beyond(model: "NoiseModel", t_s, t0: Optional[float] = Non
     offset and drift are estimated: :func:`effective_samples` of ``P C P``, ``P`` the projection
     that removes a constant and a line in time (n for white noise)."""
     t = np.asarray(t_s, float)
+    if model.is_white:               # C' = σ_w² P: the rank of the projection, without the n x n matrix
+        return float(t.size - (2 if t.size > 1 and np.ptp(t) > 0 else 1))
     t0 = float(t.min()) if t0 is None else float(t0)
     q, _ = np.linalg.qr(np.column_stack([np.ones(t.size), t - t0]))
     c = model.covariance(t, t0)
