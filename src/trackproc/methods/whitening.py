@@ -91,39 +91,30 @@ class MarkovFactor:
 
     def _kalman(self, phi, v_ar, v_walk, w2, a2):
         """The two-state filter's gains: the Riccati recursion in scalars (a 2 x 2 covariance)."""
-        n = self.n
-        sv = [0.0] * n
-        g0v = [0.0] * n
-        g1v = [0.0] * n
+        sv, h0v, h1v = [], [], []
         p00, p01, p11 = a2, 0.0, float(v_walk[0])
-        phis = phi.tolist() + [0.0]
-        var = v_ar.tolist()
-        walk = v_walk.tolist()
-        for k in range(n):
-            hp0 = p00 + p01
+        for f, va, vw in zip(phi.tolist() + [0.0], v_ar[1:].tolist() + [0.0], v_walk[1:].tolist() + [0.0]):
+            hp0 = p00 + p01                                 # P hᵀ, h = (1, 1)
             hp1 = p01 + p11
             s = hp0 + hp1 + w2
-            if not s > 0:
-                raise np.linalg.LinAlgError("covariance not positive definite")
-            g0 = hp0 / s
+            sv.append(s)
+            h0v.append(hp0)
+            h1v.append(hp1)
+            g0 = hp0 / s                                    # update with y_k (P - g S gᵀ), predict to t_k+1
             g1 = hp1 / s
-            sv[k], g0v[k], g1v[k] = s, g0, g1
-            if k + 1 < n:                                   # update with y_k, predict to t_k+1
-                f = phis[k]
-                u00 = p00 - g0 * hp0
-                u01 = p01 - g0 * hp1
-                u11 = p11 - g1 * hp1
-                p00 = f * f * u00 + var[k + 1]
-                p01 = f * u01
-                p11 = u11 + walk[k + 1]
+            p00 = f * f * (p00 - g0 * hp0) + va
+            p01 = f * (p01 - g0 * hp1)
+            p11 = p11 - g1 * hp1 + vw
         self._s = np.array(sv)
+        if not np.all(self._s > 0):
+            raise np.linalg.LinAlgError("covariance not positive definite")
         self.logdet = float(np.sum(np.log(self._s)))
-        g0 = np.array(g0v)[:-1]
-        g1 = np.array(g1v)[:-1]
+        g0 = (np.array(h0v) / self._s)[:-1]
+        g1 = (np.array(h1v) / self._s)[:-1]
         f = phi
         # x̂_k+1 = A_k x̂_k + b_k y_k with A_k = F (I - g h), b_k = F g, F = diag(φ, 1), h = (1, 1):
         # a unit lower triangular system of bandwidth 3 in the interleaved predictions
-        ab = np.zeros((4, 2 * n))
+        ab = np.zeros((4, 2 * self.n))
         ab[2, 0:-2:2] = -f * (1.0 - g0)                    # row 2k+2, column 2k
         ab[3, 0:-2:2] = g1                                 # row 2k+3, column 2k   (-(-g1))
         ab[1, 1:-2:2] = f * g0                             # row 2k+2, column 2k+1 (-(-φ g0))
