@@ -19,8 +19,9 @@ instead of factorising the dense n x n covariance (O(n³); issue 19):
   Nothing is divided by ``1 - φ²`` or by a gap: duplicate times and near-zero gaps are exact.
 * both components: the two-state Kalman filter (state: AR(1) value, walk value; measurement
   their sum plus white noise). Its innovations ``e_k`` with variances ``S_k`` are the
-  ``L D Lᵀ`` factorisation of ``C`` in time order, so ``e_k / √S_k`` is again the dense
-  Cholesky whitening and ``log|C| = Σ log S_k``. The gains are a scalar recursion; the
+  ``L D Lᵀ`` factorisation of ``C`` in time order (Kalman 1960; the innovations
+  representation, Kailath 1968), so ``e_k / √S_k`` is again the dense Cholesky whitening and
+  ``log|C| = Σ log S_k`` (the prediction-error decomposition, Schweppe 1965). The gains are a scalar recursion; the
   filtered predictions of all columns at once are one banded triangular solve.
 
 Pure numpy/scipy.
@@ -90,7 +91,8 @@ class MarkovFactor:
             self._kalman(phi, v_ar, v_walk, w2, float(model.ar_sigma) ** 2)
 
     def _kalman(self, phi, v_ar, v_walk, w2, a2):
-        """The two-state filter's gains: the Riccati recursion in scalars (a 2 x 2 covariance)."""
+        """The two-state filter's gains: the Riccati recursion in scalars (a 2 x 2 covariance).
+        Implements the Kalman (1960) filter's covariance recursion with a scalar measurement."""
         sv, h0v, h1v = [], [], []
         p00, p01, p11 = a2, 0.0, float(v_walk[0])
         for f, va, vw in zip(phi.tolist() + [0.0], v_ar[1:].tolist() + [0.0], v_walk[1:].tolist() + [0.0]):
