@@ -143,3 +143,19 @@ def test_effective_samples_beyond_offset_and_drift_is_the_dense_formula(model):
     c = p @ model.covariance(t, float(t[0])) @ p
     assert nz.effective_samples_beyond(model, t, float(t[0])) == pytest.approx(np.trace(c) ** 2 / np.sum(c * c),
                                                                                 rel=1e-9)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+@pytest.mark.parametrize("model", MODELS, ids=lambda m: f"{m.name}-{m.white}")
+def test_markov_factor_of_tiny_passes_and_empty_matrices(model, n):
+    """One to three samples (the walk started before them or at the first), and a matrix without
+    columns (returned as it is; LAPACK is not called with it)."""
+    t = 5.0 + 2.0 * np.arange(n)
+    x = np.random.default_rng(n).normal(size=(n, 2))
+    for t0 in (None, 0.0):
+        chol = np.linalg.cholesky(model.covariance(t, t0))
+        fac = MarkovFactor(model, t, t0)
+        assert fac.logdet == pytest.approx(2.0 * np.sum(np.log(np.diag(chol))), rel=1e-12, abs=1e-12)
+        assert _rel(fac.whiten(x), np.linalg.solve(chol, x)) < 1e-12
+        assert _rel(fac.whiten(x[:, 0]), np.linalg.solve(chol, x[:, 0])) < 1e-12
+        assert fac.whiten(np.zeros((n, 0))).shape == (n, 0)

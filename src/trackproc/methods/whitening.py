@@ -128,6 +128,8 @@ class MarkovFactor:
         m = np.asarray(m, float)
         vec = m.ndim == 1
         m2 = m[:, None] if vec else m
+        if m2.size == 0:                                    # LAPACK is not called with an empty matrix
+            return np.array(m, float)
         if self._mode == "white":
             out = m2 / self._sd
         elif self._mode == "one":
