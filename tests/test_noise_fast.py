@@ -125,12 +125,13 @@ def test_reml_fit_is_the_same_in_o_n_and_dense(true):
     t = np.sort(rng.uniform(0.0, 600.0, 400))
     x = np.column_stack([np.ones_like(t), t / t.max(), np.sin(t / 150.0), np.cos(t / 150.0)])
     r = np.linalg.cholesky(true.covariance(t)) @ rng.normal(size=t.size) + x @ rng.normal(size=4) * 50.0
-    fast, dense = nz.fit_noise(t, r, x), nz.fit_noise(t, r, x, dense=True)
-    assert fast.model.name == dense.model.name
-    for name, cand in dense.candidates.items():
-        for key, value in cand.items():
-            if isinstance(value, float):
-                assert fast.candidates[name][key] == pytest.approx(value, rel=1e-9, abs=1e-12), (name, key)
+    for walk in (None, 0.1):                       # the walk estimated, or given (--oscillator-noise)
+        fast, dense = nz.fit_noise(t, r, x, walk=walk), nz.fit_noise(t, r, x, walk=walk, dense=True)
+        assert fast.model.name == dense.model.name
+        for name, cand in dense.candidates.items():
+            for key, value in cand.items():
+                if isinstance(value, float):
+                    assert fast.candidates[name][key] == pytest.approx(value, rel=1e-9, abs=1e-12), (name, key, walk)
 
 
 @pytest.mark.parametrize("model", MODELS, ids=lambda m: f"{m.name}-{m.white}")
