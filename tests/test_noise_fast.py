@@ -136,14 +136,19 @@ def test_reml_fit_is_the_same_in_o_n_and_dense(true):
 
 @pytest.mark.parametrize("model", MODELS, ids=lambda m: f"{m.name}-{m.white}")
 def test_effective_samples_beyond_offset_and_drift_is_the_dense_formula(model):
-    """(tr C')²/tr(C'²), C' = P C P without a constant and a line: by the n x n matrix, and for
-    white noise by the rank of P (n - 2) without it."""
+    """(tr C')²/tr(C'²), C' = P C P without a constant and a line, in O(n) (white noise: the rank
+    of P, n - 2; correlated: traces and C Q by the Markov recursions) against the n x n matrix;
+    times out of order take the dense path, with the same number."""
     t = _grid(3, 150)
     q, _ = np.linalg.qr(np.column_stack([np.ones(t.size), t - t[0]]))
     p = np.eye(t.size) - q @ q.T
     c = p @ model.covariance(t, float(t[0])) @ p
-    assert nz.effective_samples_beyond(model, t, float(t[0])) == pytest.approx(np.trace(c) ** 2 / np.sum(c * c),
-                                                                                rel=1e-9)
+    expected = np.trace(c) ** 2 / np.sum(c * c)
+    assert nz.effective_samples_beyond(model, t, float(t[0])) == pytest.approx(expected, rel=1e-9)
+    perm = np.random.default_rng(0).permutation(t.size)
+    assert nz.effective_samples_beyond(model, t[perm], float(t[0])) == pytest.approx(expected, rel=1e-9)
+    assert nz.effective_samples_beyond(model, t, float(t[0]) - 50.0) == pytest.approx(
+        nz.effective_samples_beyond(model, t[perm], float(t[0]) - 50.0), rel=1e-9)
 
 
 @pytest.mark.parametrize("n", [1, 2, 3])
