@@ -55,7 +55,7 @@ from typing import Optional, Sequence
 import numpy as np
 from scipy.linalg import cho_factor, solve_triangular
 
-from trackproc.methods.whitening import PassCovariance, effective_samples  # noqa: F401  (re-exported)
+from trackproc.methods.whitening import MarkovFactor, PassCovariance, effective_samples  # noqa: F401  (re-exported)
 
 __all__ = ["NoiseModel", "NoiseFit", "PassCovariance", "fit_noise", "restricted_loglik", "MODELS",
            "effective_samples", "effective_samples_beyond", "lag1_correlation"]
@@ -113,11 +113,70 @@ def effective_samples_beyond(model: "NoiseModel", t_s, t0: Optional[float] = Non
     offset and drift are estimated: :func:`effective_samples` of ``P C P``, ``P`` the projection
     that removes a constant and a line in time (n for white noise)."""
     t = np.asarray(t_s, float)
+    if model.is_white:               # C' = σ_w² P: the rank of the projection, without the n x n matrix
+        return float(t.size - (2 if t.size > 1 and np.ptp(t) > 0 else 1))
     t0 = float(t.min()) if t0 is None else float(t0)
     q, _ = np.linalg.qr(np.column_stack([np.ones(t.size), t - t0]))
+    if t.size > 1 and np.all(np.diff(t) >= 0):
+        # tr C' = tr C - tr QᵀCQ, tr C'² = ‖C‖² - 2‖CQ‖² + ‖QᵀCQ‖² (P = I - QQᵀ), all in O(n)
+        tr, frob2, cq = _markov_traces(model, t, t0, q)
+        qcq = q.T @ cq
+        return float((tr - np.trace(qcq)) ** 2 / (frob2 - 2.0 * np.sum(cq * cq) + np.sum(qcq * qcq)))
     c = model.covariance(t, t0)
     cq = c - q @ (q.T @ c)
     return effective_samples(cq - (cq @ q) @ q.T)
+
+
+def _markov_traces(model: "NoiseModel", t: np.ndarray, t0: float, v: np.ndarray):
+    """``(tr C, ‖C‖_F², C v)`` of the covariance of ``model`` at non-decreasing times ``t`` without
+    forming ``C``: ``K v`` of the AR(1) correlation by a forward and a backward first-order
+    recursion (``f_i = v_i + φ_i f_i-1``; banded triangular solves), ``M v`` of the walk's
+    ``min(s_i, s_j)`` by cumulative sums, and the sums of squares of their entries likewise."""
+    from scipy.linalg.lapack import dtbtrs
+
+    n = t.size
+    w2, a2, q2 = model.white ** 2, model.ar_sigma ** 2, model.walk ** 2
+    has_ar = model.ar_sigma > 0 and model.ar_tau_s > 0
+    s = np.clip(t - t0, 0.0, None)
+
+    def kmul(phi, m):                 # Σ_j exp(-|t_i - t_j|/τ) m_j by the two recursions
+        lo = np.zeros((2, n))
+        lo[0] = 1.0
+        lo[1, :-1] = -phi
+        up = np.zeros((2, n))
+        up[1] = 1.0
+        up[0, 1:] = -phi
+        mf = np.asfortranarray(m)
+        return dtbtrs(lo, mf, uplo="L")[0] + dtbtrs(up, mf, uplo="U")[0] - m
+
+    def mmul(sv, m):                  # Σ_j min(s_i, s_j) m_j, s non-decreasing
+        inside = np.cumsum(sv[:, None] * m, axis=0)
+        beyond = np.cumsum(m[::-1], axis=0)[::-1]
+        beyond = np.vstack([beyond[1:], np.zeros((1, m.shape[1]))])
+        return inside + sv[:, None] * beyond
+
+    v = np.asarray(v, float)
+    cv = w2 * v
+    tr = n * w2
+    frob2 = n * w2 * w2
+    ones = np.ones((n, 1))
+    if has_ar:
+        phi = np.exp(-np.diff(t) / model.ar_tau_s)
+        kv = kmul(phi, np.column_stack([v, ones]))
+        cv = cv + a2 * kv[:, :-1]
+        tr += n * a2
+        frob2 += 2.0 * w2 * a2 * n + a2 * a2 * float(np.sum(kmul(phi * phi, ones)))
+    if q2 > 0:
+        cv = cv + q2 * mmul(s, v)
+        tr += q2 * float(np.sum(s))
+        frob2 += 2.0 * w2 * q2 * float(np.sum(s)) + q2 * q2 * float(np.sum(mmul(s * s, ones)))
+        if has_ar:                    # 2 Σ K_ij min(s_i, s_j): s_j for j ≤ i, s_i beyond
+            fwd = np.vstack([np.ones(n), np.concatenate([-phi, [0.0]])])     # f_i = m_i + φ_i f_i-1
+            inside = dtbtrs(fwd, np.asfortranarray(np.column_stack([s, ones])), uplo="L")[0]
+            lo_s = inside[:, 0]                                                # Σ_j≤i K_ij s_j
+            up_1 = kv[:, -1] - inside[:, 1]                                    # Σ_j>i K_ij
+            frob2 += 2.0 * a2 * q2 * float(np.sum(lo_s) + np.sum(s * up_1))
+    return tr, frob2, cv
 
 
 def lag1_correlation(t_s, r, max_gap_s: Optional[float] = None) -> float:
@@ -149,17 +208,25 @@ def _basis(x: np.ndarray) -> np.ndarray:
 
 
 class _Reml:
-    """The restricted likelihood of one set of residuals, with the time-difference matrices
-    computed once (the likelihood is evaluated many times while the hyper-parameters are sought)."""
+    """The restricted likelihood of one set of residuals. The covariance is whitened in O(n)
+    when the times are in order (:class:`~trackproc.methods.whitening.MarkovFactor`: the same
+    Cholesky whitening as the dense factor, to rounding); ``dense=True`` (or unordered times)
+    factorises the n x n covariance, with the time-difference matrices computed once (the test
+    oracle of the O(n) path)."""
 
-    def __init__(self, t, r, x, t0):
-        self.t, self.r, self.x = t, r, x
+    def __init__(self, t, r, x, t0, dense: bool = False):
+        self.t, self.r, self.x, self.t0 = t, r, x, t0
         self.n, self.p = x.shape
-        self.lag = np.abs(t[:, None] - t[None, :])
-        dt = np.clip(t - t0, 0.0, None)
-        self.walk = np.minimum(dt[:, None], dt[None, :])
+        self.dense = dense or (t.size > 1 and not np.all(np.diff(t) >= 0))
+        self.rx = np.column_stack([r, x])
+        if self.dense:
+            self.lag = np.abs(t[:, None] - t[None, :])
+            dt = np.clip(t - t0, 0.0, None)
+            self.walk = np.minimum(dt[:, None], dt[None, :])
 
     def covariance(self, model: NoiseModel) -> np.ndarray:
+        if not self.dense:
+            return model.covariance(self.t, self.t0)
         c = model.white ** 2 * np.eye(self.n)
         if model.ar_sigma > 0 and model.ar_tau_s > 0:
             c += model.ar_sigma ** 2 * np.exp(-self.lag / model.ar_tau_s)
@@ -167,36 +234,52 @@ class _Reml:
             c += model.walk ** 2 * self.walk
         return c
 
+    def _whitened(self, model: NoiseModel):
+        """``(log|C|, L⁻¹ r, L⁻¹ X)``, or None when ``C`` is not positive definite."""
+        try:
+            if self.dense:
+                chol, _ = cho_factor(self.covariance(model), lower=True, check_finite=False)
+                return (2.0 * float(np.sum(np.log(np.diag(chol)))),
+                        solve_triangular(chol, self.r, lower=True, check_finite=False),
+                        solve_triangular(chol, self.x, lower=True, check_finite=False))
+            fac = MarkovFactor(model, self.t, self.t0)
+        except np.linalg.LinAlgError:
+            return None
+        w = fac.whiten(self.rx)
+        if not (math.isfinite(fac.logdet) and np.all(np.isfinite(w))):
+            return None
+        return fac.logdet, w[:, 0], w[:, 1:]
+
     def __call__(self, model: NoiseModel, profile: bool = True) -> tuple[float, float]:
         """``(ℓ_R, ŝ)``: see :func:`restricted_loglik`; ``profile=False``: the scale is 1."""
         n, p = self.n, self.p
-        try:
-            chol, _ = cho_factor(self.covariance(model), lower=True, check_finite=False)
-        except np.linalg.LinAlgError:
+        got = self._whitened(model)
+        if got is None:
             return -math.inf, math.nan
-        xw = solve_triangular(chol, self.x, lower=True, check_finite=False)
-        rw = solve_triangular(chol, self.r, lower=True, check_finite=False)
+        logdet_c, rw, xw = got
         q, rr = np.linalg.qr(xw)
         e = rw - q @ (q.T @ rw)
         m = n - p
         rss = float(e @ e)
         if not (rss > 0 and m > 0):
             return -math.inf, math.nan
-        logdet = 2.0 * float(np.sum(np.log(np.diag(chol)))) + 2.0 * float(np.sum(np.log(np.abs(np.diag(rr)))))
+        logdet = logdet_c + 2.0 * float(np.sum(np.log(np.abs(np.diag(rr)))))
         if not profile:
             return -0.5 * (logdet + rss), 1.0
         s2 = rss / m
         return -0.5 * (m * math.log(s2) + logdet + m), math.sqrt(s2)
 
 
-def restricted_loglik(model, t, r, x, t0=None, profile: bool = True) -> tuple[float, float]:
+def restricted_loglik(model, t, r, x, t0=None, profile: bool = True, dense: bool = False) -> tuple[float, float]:
     """Restricted log-likelihood (module docstring; the constant ``-½(n-p) log 2π`` left out) of
     residuals ``r`` at times ``t`` with fixed-effect columns ``x`` (an orthonormal basis, see
     :func:`_basis`) and the covariance ``s² C`` of the :class:`NoiseModel` ``model``, the scale
-    ``s`` profiled out (``profile``; else ``s = 1``). Returns ``(ℓ_R, ŝ)``.
+    ``s`` profiled out (``profile``; else ``s = 1``); in O(n) for times in order (``dense``: by
+    the n x n Cholesky factor). Returns ``(ℓ_R, ŝ)``.
     Implements REML (Patterson & Thompson 1971; Harville 1977)."""
     t = np.asarray(t, float)
-    return _Reml(t, np.asarray(r, float), np.asarray(x, float), float(t.min()) if t0 is None else t0)(model, profile)
+    return _Reml(t, np.asarray(r, float), np.asarray(x, float), float(t.min()) if t0 is None else t0,
+                 dense)(model, profile)
 
 
 def _subset(t: np.ndarray, max_n: int = MAX_REML_SAMPLES, run: int = RUN_LENGTH) -> np.ndarray:
@@ -247,14 +330,17 @@ def _optimise(fun, start, bounds):
 
 
 def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Optional[float] = None,
-              white_floor: float = 0.0, t0: Optional[float] = None, p_select: float = SELECTION_P) -> NoiseFit:
+              white_floor: float = 0.0, t0: Optional[float] = None, p_select: float = SELECTION_P,
+              dense: bool = False) -> NoiseFit:
     """Estimate and choose the noise model of one pass by REML (module docstring).
 
     ``t_s`` (n,) times, ``residual`` (n,) residuals of a first fit, ``design`` (n, p) its
     fixed-effect columns (the Jacobian rows of the pass: state, offset, drift; only their column
     space matters), ``models`` the candidates, ``walk`` a given random-walk intensity
     (``--oscillator-noise``: then the walk is not estimated and every candidate carries it),
-    ``white_floor`` a lower bound of ``σ_w`` (quantisation), ``t0`` the start of the walk.
+    ``white_floor`` a lower bound of ``σ_w`` (quantisation), ``t0`` the start of the walk,
+    ``dense``: the likelihood by the n x n Cholesky factor instead of the O(n) whitening (the
+    test oracle; same result to rounding).
     """
     from scipy.special import gammaincinv  # chi-square quantile without scipy.stats (issue 19)
 
@@ -270,7 +356,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     step = max(float(np.median(np.diff(t))) if n > 1 else 1.0, 1e-3)
     tau_lo, tau_hi = math.log(0.5 * step), math.log(2.0 * span)
 
-    reml = _Reml(ts, rs, xs, t0)
+    reml = _Reml(ts, rs, xs, t0, dense)
     sd = max(float(np.std(rs)), 1e-12)
     cands: dict = {}
     fitted: dict = {}

@@ -5,17 +5,38 @@ ordinary least squares on ``L⁻¹ r``, ``L⁻¹ J``); the effective number of i
 a covariance (Bayley & Hammersley 1946). The noise models and their REML fit are
 :mod:`trackproc.methods.noise`.
 
+The noise of one pass (white + AR(1) + random walk, time-ordered samples) is a Markov process
+observed with white noise, so its Cholesky whitener is applied in O(n) (:class:`MarkovFactor`)
+instead of factorising the dense n x n covariance (O(n³); issue 19):
+
+* one correlated component (AR(1) or the walk): ``D x = ν`` with ``D`` unit lower bidiagonal
+  (``-φ_i`` below the diagonal, ``φ_i = exp(-Δt_i/τ)`` for the AR(1), 1 for the walk) and
+  independent ``ν_i`` of variance ``v_i`` (``σ_a²(1 - φ_i²)``, resp. ``q² Δs_i``), hence
+  ``C = σ_w² I + D⁻¹ V D⁻ᵀ = D⁻¹ B D⁻ᵀ`` with the tridiagonal ``B = σ_w² D Dᵀ + V``. With
+  ``B = L_B L_Bᵀ`` (banded Cholesky), ``L_B⁻¹ D`` is lower triangular with a positive diagonal
+  and whitens ``C``: it is the inverse Cholesky factor of ``C`` itself (the factor is unique),
+  so the whitened rows (the innovations) are those of the dense factor; ``log|C| = log|B|``.
+  Nothing is divided by ``1 - φ²`` or by a gap: duplicate times and near-zero gaps are exact.
+* both components: the two-state Kalman filter (state: AR(1) value, walk value; measurement
+  their sum plus white noise). Its innovations ``e_k`` with variances ``S_k`` are the
+  ``L D Lᵀ`` factorisation of ``C`` in time order (Kalman 1960; the innovations
+  representation, Kailath 1968), so ``e_k / √S_k`` is again the dense Cholesky whitening and
+  ``log|C| = Σ log S_k`` (the prediction-error decomposition, Schweppe 1965). The gains are a scalar recursion; the
+  filtered predictions of all columns at once are one banded triangular solve.
+
 Pure numpy/scipy.
 """
 
 from __future__ import annotations
 
-from typing import Sequence
+import math
+from typing import Optional, Sequence
 
 import numpy as np
 from scipy.linalg import solve_triangular
+from scipy.linalg.lapack import dpbtrf, dtbtrs
 
-__all__ = ["PassCovariance", "effective_samples"]
+__all__ = ["PassCovariance", "effective_samples", "MarkovFactor", "markov_factor"]
 
 
 def effective_samples(cov: np.ndarray) -> float:
@@ -26,13 +47,121 @@ def effective_samples(cov: np.ndarray) -> float:
     return float(np.trace(c) ** 2 / np.sum(c * c))
 
 
+class MarkovFactor:
+    """The Cholesky whitener ``L⁻¹`` of the covariance of a noise model (``white``, ``ar_sigma``,
+    ``ar_tau_s``, ``walk``: :class:`trackproc.methods.noise.NoiseModel`) at non-decreasing times,
+    in O(n) (module docstring). ``logdet`` is ``log|C|`` (``-inf``/``nan`` never: a covariance
+    that is not positive definite raises :class:`numpy.linalg.LinAlgError` like the dense factor).
+    ``whiten(M)`` is ``L⁻¹ M`` (rows of ``M`` at the times)."""
+
+    def __init__(self, model, t, t0: Optional[float] = None):
+        t = np.asarray(t, float)
+        n = t.size
+        t0 = float(t.min()) if t0 is None else float(t0)
+        self.n = n
+        w2 = float(model.white) ** 2
+        has_ar = model.ar_sigma > 0 and model.ar_tau_s > 0
+        has_walk = model.walk > 0
+        dt = np.diff(t)
+        if has_ar:
+            phi = np.exp(-dt / model.ar_tau_s)
+            # σ_a² (1 - φ²) without cancellation at small gaps
+            v_ar = np.concatenate([[1.0], -np.expm1(-2.0 * dt / model.ar_tau_s)]) * model.ar_sigma ** 2
+        if has_walk:
+            s = np.clip(t - t0, 0.0, None)
+            v_walk = np.concatenate([s[:1], np.diff(s)]) * model.walk ** 2
+        self._mode = "both" if has_ar and has_walk else "one" if has_ar or has_walk else "white"
+        if self._mode == "white":
+            if not w2 > 0:
+                raise np.linalg.LinAlgError("covariance not positive definite")
+            self._sd = math.sqrt(w2)
+            self.logdet = n * math.log(w2)
+        elif self._mode == "one":
+            self._phi = phi if has_ar else np.ones(n - 1)
+            v = v_ar if has_ar else v_walk
+            ab = np.zeros((2, n))                           # B = σ_w² D Dᵀ + V, lower band storage
+            ab[0] = w2 * (1.0 + np.concatenate([[0.0], self._phi ** 2])) + v
+            ab[1, :-1] = -w2 * self._phi
+            chol, info = dpbtrf(ab, lower=1)
+            if info != 0:
+                raise np.linalg.LinAlgError("covariance not positive definite")
+            self._chol = chol
+            self.logdet = 2.0 * float(np.sum(np.log(chol[0])))
+        else:
+            self._kalman(phi, v_ar, v_walk, w2, float(model.ar_sigma) ** 2)
+
+    def _kalman(self, phi, v_ar, v_walk, w2, a2):
+        """The two-state filter's gains: the Riccati recursion in scalars (a 2 x 2 covariance).
+        Implements the Kalman (1960) filter's covariance recursion with a scalar measurement."""
+        sv, h0v, h1v = [], [], []
+        p00, p01, p11 = a2, 0.0, float(v_walk[0])
+        for f, va, vw in zip(phi.tolist() + [0.0], v_ar[1:].tolist() + [0.0], v_walk[1:].tolist() + [0.0]):
+            hp0 = p00 + p01                                 # P hᵀ, h = (1, 1)
+            hp1 = p01 + p11
+            s = hp0 + hp1 + w2
+            sv.append(s)
+            h0v.append(hp0)
+            h1v.append(hp1)
+            g0 = hp0 / s                                    # update with y_k (P - g S gᵀ), predict to t_k+1
+            g1 = hp1 / s
+            p00 = f * f * (p00 - g0 * hp0) + va
+            p01 = f * (p01 - g0 * hp1)
+            p11 = p11 - g1 * hp1 + vw
+        self._s = np.array(sv)
+        if not np.all(self._s > 0):
+            raise np.linalg.LinAlgError("covariance not positive definite")
+        self.logdet = float(np.sum(np.log(self._s)))
+        g0 = (np.array(h0v) / self._s)[:-1]
+        g1 = (np.array(h1v) / self._s)[:-1]
+        f = phi
+        # x̂_k+1 = A_k x̂_k + b_k y_k with A_k = F (I - g h), b_k = F g, F = diag(φ, 1), h = (1, 1):
+        # a unit lower triangular system of bandwidth 3 in the interleaved predictions
+        ab = np.zeros((4, 2 * self.n))
+        ab[2, 0:-2:2] = -f * (1.0 - g0)                    # row 2k+2, column 2k
+        ab[3, 0:-2:2] = g1                                 # row 2k+3, column 2k   (-(-g1))
+        ab[1, 1:-2:2] = f * g0                             # row 2k+2, column 2k+1 (-(-φ g0))
+        ab[2, 1:-2:2] = -(1.0 - g1)                        # row 2k+3, column 2k+1
+        self._band = ab
+        self._b = (f * g0, g1)
+
+    def whiten(self, m) -> np.ndarray:
+        m = np.asarray(m, float)
+        vec = m.ndim == 1
+        m2 = m[:, None] if vec else m
+        if m2.size == 0:                                    # LAPACK is not called with an empty matrix
+            return np.array(m, float)
+        if self._mode == "white":
+            out = m2 / self._sd
+        elif self._mode == "one":
+            dm = np.array(m2, order="F")                 # D M; LAPACK's column order, solved in place
+            dm[1:] -= self._phi[:, None] * m2[:-1]
+            out, _ = dtbtrs(self._chol, dm, uplo="L", overwrite_b=1)
+        else:
+            rhs = np.zeros((2 * self.n, m2.shape[1]), order="F")
+            rhs[2::2] = self._b[0][:, None] * m2[:-1]
+            rhs[3::2] = self._b[1][:, None] * m2[:-1]
+            xh, _ = dtbtrs(self._band, rhs, uplo="L", diag="U", overwrite_b=1)
+            out = (m2 - xh[0::2] - xh[1::2]) / np.sqrt(self._s)[:, None]
+        return out[:, 0] if vec else out
+
+
+def markov_factor(model, t, t0: Optional[float] = None) -> Optional[MarkovFactor]:
+    """:class:`MarkovFactor` of ``model`` at times ``t``, or None when the times are not in
+    non-decreasing order (the dense factor of that order is then the one wanted)."""
+    t = np.asarray(t, float)
+    if t.size == 0 or (t.size > 1 and not np.all(np.diff(t) >= 0)):
+        return None
+    return MarkovFactor(model, t, t0)
+
+
 class PassCovariance:
     """The covariance of all samples: blocks (index arrays with a :class:`NoiseModel` and the
     walk's start) and independent samples (``sigma``) elsewhere; whitening of kept samples.
 
     ``whitener(keep)`` returns ``w(M)``: the rows of ``M`` at the kept samples (in their original
-    order) multiplied by ``L⁻¹`` of their covariance block by block (``C = L Lᵀ``). Factors are
-    cached per set of kept samples.
+    order) multiplied by ``L⁻¹`` of their covariance block by block (``C = L Lᵀ``; in O(n) by
+    :class:`MarkovFactor` when a block's times are in order). Factors are cached per set of kept
+    samples.
     """
 
     def __init__(self, sigma, t_s, blocks: Sequence[tuple] = ()):
@@ -57,8 +186,8 @@ class PassCovariance:
                 k = idx[keep[idx]]
                 if k.size == 0:
                     continue
-                c = model.covariance(self.t[k], t0)
-                fac.append((pos[k], np.linalg.cholesky(c)))
+                fast = markov_factor(model, self.t[k], t0)   # O(n); the dense factor for unordered times
+                fac.append((pos[k], fast if fast is not None else np.linalg.cholesky(model.covariance(self.t[k], t0))))
             diag = np.flatnonzero(keep & ~in_block)
             hit = (fac, pos[diag], self.sigma[diag])
             if len(self._cache) > 16:
@@ -74,7 +203,8 @@ class PassCovariance:
             m = np.asarray(m, float)[keep]
             out = np.empty_like(m)
             for pos, chol in fac:
-                out[pos] = solve_triangular(chol, m[pos], lower=True, check_finite=False)
+                out[pos] = (chol.whiten(m[pos]) if isinstance(chol, MarkovFactor)
+                            else solve_triangular(chol, m[pos], lower=True, check_finite=False))
             out[dpos] = m[dpos] / (dsig if m.ndim == 1 else dsig[:, None])
             return out
 
