@@ -264,7 +264,7 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
 #: this factor: the default of ``--model-error``. Its provenance: the scale with
 #: mean((error / sigma)^2) = 1 over the DopTrack Delfi-C3 development evenings' held-back passes
 #: (1-10 April 2020; ``benchmarks/fit_tle_doptrack.py calibrate``).
-MODEL_ERROR_SCALE = 2.0
+MODEL_ERROR_SCALE = 3.4
 
 
 def model_error_covariance(scale: float, apriori_sigmas) -> np.ndarray:
@@ -318,7 +318,8 @@ def mixed_model_step(x, covariance, informations, gradients, q_free, other_infor
         rhs += np.linalg.solve(eye + a @ q_free, g)
     if not informations:
         return np.asarray(x, float), np.asarray(covariance, float)
-    cov = np.linalg.inv(normal)
+    normal = 0.5 * (normal + normal.T)
+    cov = np.linalg.pinv(normal, hermitian=True)        # positive semi-definite even when ill-conditioned
     return np.asarray(x, float) + cov @ rhs, 0.5 * (cov + cov.T)
 
 
@@ -337,4 +338,4 @@ def position_variance(covariance, n_rev_day: float, semi_major_m: float, inclina
     g[2, 4] = a * deg * math.sin(math.radians(inclination_deg)) / math.sqrt(2.0)
     g[3, 0] = -2.0 / 3.0 * a / float(n_rev_day)                      # radial from the mean motion
     var = float(np.trace(g @ c @ g.T))
-    return var + a * a * (c[1, 1] + c[2, 2]) / 2.0                   # eccentricity: radial, orbit average
+    return max(var + a * a * (c[1, 1] + c[2, 2]) / 2.0, 0.0)        # eccentricity: radial, orbit average
