@@ -483,3 +483,49 @@ def test_one_pass_without_the_apriori_is_rejected_as_undetermined(run_cli, tmp_p
     reasons = {r["code"]: r for r in doc["quality"]["reasons"]}
     assert doc["quality"]["verdict"] == "rejected" and reasons["undetermined"]["severity"] == "rejected"
     assert (tmp_path / "x.tle").exists()
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_one_pass_is_refused_and_the_initial_tle_written(run_cli, tmp_path):
+    """One DopTrack pass (development day) cannot separate the along-track drift from that pass's
+    own SGP4 error: the fit is refused (verdict suspect, reason ``refused`` single_pass), the
+    metadata TLE written unchanged, the covariance that of the initial orbit (its a-priori + the
+    theory error) and the fit kept in the summary; --strict exits 1; --no-refusal writes the fit
+    (not the initial TLE) and says how its predicted error compares."""
+    from realdata import DOPTRACK
+
+    from trackproc.io.passfile import read_pass_table
+    from trackproc.pipeline.orbit_source import metadata_tle
+
+    raw = DOPTRACK / "data" / "Delfi-C3_32789_202004072055.csv"
+    if not raw.exists():
+        pytest.skip(f"real data not available: {raw}")
+    pass_file = tmp_path / "p.parquet"
+    assert run_cli(["ingest", raw, "-o", pass_file]).exit_code == 0
+    initial = metadata_tle([("p", read_pass_table(str(pass_file)))])
+    res = run_cli(["fit-tle", pass_file, "--initial", "metadata", "--dut1", "-0.2", "-o", tmp_path / "a.tle",
+                   "--summary", tmp_path / "a.json"])
+    assert res.exit_code == 0, res.stderr
+    doc = json.loads((tmp_path / "a.json").read_text())
+    assert doc["quality"]["verdict"] == "suspect" and doc["refused"]["code"] == "single_pass", doc["quality"]
+    written = parse_tle((tmp_path / "a.tle").read_text())
+    assert (written.line1, written.line2) == (initial.line1, initial.line2)
+    assert doc["tle"] == [initial.line1, initial.line2] and doc["refused"]["fitted_tle"] != doc["tle"]
+    cov = np.array(doc["covariance"]["matrix"])
+    est = np.array(doc["estimation_covariance"])
+    q = np.array(doc["model_error"]["element_covariance"])
+    assert np.all(np.diag(cov)[:6] >= np.diag(q)[:6]) and not np.allclose(cov, est + q)   # the initial orbit's
+    assert run_cli(["fit-tle", pass_file, "--initial", "metadata", "--dut1", "-0.2", "-o", tmp_path / "s.tle",
+                    "--strict"]).exit_code == 1
+    res = run_cli(["fit-tle", pass_file, "--initial", "metadata", "--dut1", "-0.2", "-o", tmp_path / "b.tle",
+                   "--summary", tmp_path / "b.json", "--no-refusal"])
+    assert res.exit_code == 0, res.stderr
+    doc = json.loads((tmp_path / "b.json").read_text())
+    assert doc["refused"] is None and doc["quality"]["verdict"] == "ok"
+    fitted = parse_tle((tmp_path / "b.tle").read_text())
+    assert (fitted.line1, fitted.line2) != (initial.line1, initial.line2)
+    pred = [r for r in doc["quality"]["reasons"] if r["code"] == "prediction"][0]
+    assert pred["value"] > 0 and pred["limit"] > 0
+    assert np.allclose(np.array(doc["covariance"]["matrix"]),
+                       np.array(doc["estimation_covariance"]) + np.array(doc["model_error"]["element_covariance"]))

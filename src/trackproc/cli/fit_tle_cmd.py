@@ -51,7 +51,7 @@ def fit_tle_command(
                                              "extra fit per file; 'suspect' when worse in the median)."),
     model_error: Optional[float] = typer.Option(None, "--model-error", metavar="SCALE", min=0.0,
                                                 help="SGP4's own theory error at each pass, in units of the default "
-                                                     "a-priori's element sigmas (independent per pass; default 2, "
+                                                     "a-priori's element sigmas (independent per pass; default 3.4, "
                                                      "calibrated on DopTrack Delfi-C3 passes, docs/fit-tle.md). 0: "
                                                      "none (the covariance then covers the estimation error only)."),
     refusal: bool = typer.Option(True, "--refusal/--no-refusal",

@@ -617,8 +617,8 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
                                 "epoch (map it to a pass through SGP4's partials): the estimation error with "
                                 "SGP4's theory error at the fitted passes (model_error, estimation_covariance) "
                                 "plus that error at the predicted pass (model_error.element_covariance). "
-                                "The theory error is a constant per pass, not grown with the time from the "
-                                "data (checked up to ~1 day ahead, docs/fit-tle.md)"},
+                                "Its scale (model_error) is calibrated on DopTrack Delfi-C3 passes and checked "
+                                "up to ~1 day ahead (docs/fit-tle.md)"},
         "model_error": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in model_error.items()
                         if k not in ("estimation_covariance", "covariance_without_model_error")},
         "estimation_covariance": model_error["estimation_covariance"].tolist(),
@@ -696,5 +696,12 @@ def summary_text(result: FitTleResult) -> str:
                      f"{g['samples']} samples")
     if len(shown) < len(s["groups"]):
         lines.append(f"  ... {len(s['groups']) - len(shown)} more passes and kinds (--json or --summary FILE)")
+    if s.get("refused"):
+        lines.append(f"  refused ({s['refused']['code']}): the initial orbit is written; the fit is in the summary "
+                     "(refused.fitted_tle)")
+    p = s.get("prediction")
+    if p:
+        lines.append(f"  predicted position error {p['span_days']:g} d on: {p['position_sigma_m']:.4g} m "
+                     f"(initial {p['initial_position_sigma_m']:.4g} m; SGP4's theory error included)")
     lines.append("  " + result.quality.text())
     return "\n".join(lines) + "\n"
