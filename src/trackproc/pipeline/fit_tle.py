@@ -23,8 +23,8 @@ Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project
    file's sigmas are then scaled per pass and kind by the RMS of the normalised residuals (when
    above 1) and by the square root of their integrated autocorrelation time ``τ`` (a TLE's
    misfit is smooth in time: ``n`` samples hold ``n/τ`` independent ones;
-   :func:`trackproc.pipeline.identify.integrated_autocorrelation_time`) and the fit is repeated:
-   its covariance is the one reported.
+   :func:`trackproc.pipeline.identify.integrated_autocorrelation_time`) and the fit is repeated
+   (its covariance, ``covariance_without_model_error``, is the estimation error alone: see 7).
 6. **Verdict** (as refine/estimate, :mod:`trackproc.methods.quality`): ``rejected`` when the
    solver does not converge, the data contradict the a-priori (its χ² beyond the 99.9 % point)
    or, without the a-priori, leave an element over 10x less determined than the default
