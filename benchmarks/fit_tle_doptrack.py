@@ -2,7 +2,7 @@
 than the TLE it started from? (issue 18's criterion; numbers in docs/fit-tle.md and the README)
 
 Two protocols, each for the development passes (1-10 April 2020) and the hold-out (11-15 April,
-never used while developing):
+never used while developing; evaluated twice, each time once at the end):
 
 * ``held-back``: every pass of an evening (passes < 4 h apart) but the last fitted from the
   metadata TLE (the newest of those passes, defaults: offset+drift per pass, a-priori, B* fitted),
@@ -12,9 +12,13 @@ never used while developing):
 
 Both against the initial TLE's SGP4 prediction; "pred" is also compared with the TLE stored in
 the predicted pass's own metadata (newer, when the station had updated it). RMS in Hz of the
-predicted pass's Doppler after that pass's own offset and drift (``compare``). Usage:
-``PYTHONPATH=src python benchmarks/fit_tle_doptrack.py [dev|holdout|both|covariance]`` (about a
-minute; ``covariance``: :func:`covariance_check`, development evenings only).
+predicted pass's Doppler after that pass's own offset and drift (``compare``); "fitted" is
+the fit (written or refused), "written" what ``-o`` gets. Usage:
+``PYTHONPATH=src python benchmarks/fit_tle_doptrack.py [dev|holdout|both|covariance|covariance-holdout|calibrate]``
+(about a minute each; ``covariance``: :func:`covariance_rows`, the written covariance against the
+prediction errors, development evenings; ``covariance-holdout`` the same on the hold-out, run
+once at the end; ``calibrate``: :func:`calibrate`, the theory error's scale, development only,
+about two minutes).
 """
 
 from __future__ import annotations
