@@ -49,6 +49,15 @@ def fit_tle_command(
                                         help="Also leave each pass file out in turn, fit the others and predict it: "
                                              "the fitted TLE's prediction skill against the initial orbit's (one "
                                              "extra fit per file; 'suspect' when worse in the median)."),
+    model_error: Optional[float] = typer.Option(None, "--model-error", metavar="SCALE", min=0.0,
+                                                help="SGP4's own theory error at each pass, in units of the default "
+                                                     "a-priori's element sigmas (independent per pass; default 3.4, "
+                                                     "calibrated on DopTrack Delfi-C3 passes, docs/fit-tle.md). 0: "
+                                                     "none (the covariance then covers the estimation error only)."),
+    refusal: bool = typer.Option(True, "--refusal/--no-refusal",
+                                 help="Keep the initial TLE (written unchanged, verdict suspect 'refused') when the "
+                                      "fit cannot be shown to predict better: one pass, or a predicted position "
+                                      "error one day on not below the initial orbit's. --no-refusal writes the fit."),
     earth=EarthOpt,
     range_rate_model=RangeRateModelOpt,
     eop: Optional[str] = EopOpt,
@@ -128,7 +137,7 @@ def fit_tle_command(
         kinds=[k.strip() for k in kinds.split(",") if k.strip()] if kinds else None, earth=earth.value,
         range_rate_model=range_rate_model.value, ephemeris_sigma_m=ephemeris_sigma if ephemeris_sigma > 0 else 100.0,
         clip=clip if clip > 0 else float("inf"), max_iterations=max_iterations, satnum=satnum, apriori=apriori,
-        cross_validate=cross_validate)
+        cross_validate=cross_validate, model_error=model_error, refusal=refusal)
     result = fit_tle(tables, ephemerides, orbit, options, orientation, extra)
     text = json.dumps(json_ready(result.summary), indent=2) + "\n"
     write_text(output, tle_text(result.tle))

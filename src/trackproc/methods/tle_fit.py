@@ -256,3 +256,86 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
                     chi2_data=float(rw @ rw), chi2_prior=float(g @ info @ g), n_data=int(keep.sum()),
                     n_prior=m if xp is not None else 0, iterations=it, converged=converged, message=message,
                     history=history)
+
+
+#: SGP4's own (theory) error at a pass of a TLE fitted to passes, a per-pass random effect
+#: independent from pass to pass, with the shape of the default a-priori (refine's element
+#: sigmas: a 50 m, e 5e-5, i and Ω 1e-4 rad, argument of latitude 4e-4 rad; B* none) scaled by
+#: this factor: the default of ``--model-error``. Its provenance: the scale with
+#: mean((error / sigma)^2) = 1 over the DopTrack Delfi-C3 development evenings' held-back passes
+#: (1-10 April 2020; ``benchmarks/fit_tle_doptrack.py calibrate``).
+MODEL_ERROR_SCALE = 3.4
+
+
+def model_error_covariance(scale: float, apriori_sigmas) -> np.ndarray:
+    """The covariance (7, 7) of SGP4's theory error at one pass, expressed in the fitted
+    elements: ``scale`` times the default a-priori's independent element sigmas (``apriori_sigmas``,
+    :func:`element_sigmas`), B* excluded (a pass's error is geometric). Its effect on a pass's
+    samples is ``J η``, ``J`` the pass's partials."""
+    s = np.asarray(apriori_sigmas, float).copy()
+    s[6] = 0.0
+    return np.diag(np.square(float(scale) * s))
+
+
+def pass_information(jac, weights, design) -> np.ndarray:
+    """The information (m, m) one pass's samples carry on the free elements, its own nuisance
+    columns (offset, drift) profiled out: ``Jᵀ W J − Jᵀ W B (Bᵀ W B)⁻¹ Bᵀ W J`` (``weights`` are
+    ``1/σ``; rows edited out have weight 0)."""
+    a = np.asarray(jac, float) * np.asarray(weights, float)[:, None]
+    info = a.T @ a
+    b = np.asarray(design, float)
+    if b.size:
+        bw = b * np.asarray(weights, float)[:, None]
+        keep = np.any(bw != 0.0, axis=0)
+        if keep.any():
+            bw = bw[:, keep]
+            cross = a.T @ bw
+            info = info - cross @ np.linalg.pinv(bw.T @ bw) @ cross.T
+    return 0.5 * (info + info.T)
+
+
+def mixed_model_step(x, covariance, informations, gradients, q_free, other_information, other_gradient):
+    """Generalised least squares when every pass also carries SGP4's theory error ``η_p ~ N(0,
+    Q)``, independent per pass (a random effect; its samples are correlated through ``J_p η_p``):
+    from the least-squares solution ``x`` (covariance ``C``, free elements), one Gauss-Newton step
+    with each pass's information and gradient deflated by the theory error,
+
+        A'_p = A_p (I + Q A_p)⁻¹,   g'_p = (I + A_p Q)⁻¹ g_p
+
+    (``Jᵀ (R + J Q Jᵀ)⁻¹ J`` and ``Jᵀ (R + J Q Jᵀ)⁻¹ r`` by the Woodbury identity), ``A_p`` the
+    pass's information (:func:`pass_information`), ``g_p = Jᵀ R⁻¹ r`` its gradient at ``x``
+    (nuisance terms at their optimum); ``other_information`` and ``other_gradient`` those of
+    everything else (the a-priori ``P⁻¹`` and ``P⁻¹ (x_p − x)``, ephemerides). Returns ``(x', C')``,
+    ``C' = (P⁻¹ + Σ A'_p)⁻¹`` (Tapley,
+    Schutz & Born 2004, section 4.6: correlated observation errors; a linear step, the theory error
+    being the larger error the fit's least-squares weights left out)."""
+    m = len(q_free)
+    eye = np.eye(m)
+    normal = np.asarray(other_information, float).copy()
+    rhs = np.asarray(other_gradient, float).copy()
+    for a, g in zip(informations, gradients):
+        normal += a @ np.linalg.inv(eye + q_free @ a)
+        rhs += np.linalg.solve(eye + a @ q_free, g)
+    if not informations:
+        return np.asarray(x, float), np.asarray(covariance, float)
+    normal = 0.5 * (normal + normal.T)
+    cov = np.linalg.pinv(normal, hermitian=True)        # positive semi-definite even when ill-conditioned
+    return np.asarray(x, float) + cov @ rhs, 0.5 * (cov + cov.T)
+
+
+def position_variance(covariance, n_rev_day: float, semi_major_m: float, inclination_deg: float,
+                      dt_days: float) -> float:
+    """The orbit-averaged position variance (m²) ``dt_days`` after the epoch of elements with
+    ``covariance`` (7, 7), to first order in a near-circular orbit: radial ``δa = −(2/3) a δn/n``
+    and ``a δe`` (half its square on average), along-track ``a (δλ + 360° δn Δt)``, cross-track
+    ``a δi`` and ``a sin i δΩ`` (half their squares on average). A prediction's error in one
+    number, to compare two element sets' covariances."""
+    c = np.asarray(covariance, float)
+    a, deg = float(semi_major_m), math.radians(1.0)
+    g = np.zeros((4, 7))
+    g[0, 5], g[0, 0] = a * deg, a * deg * 360.0 * dt_days          # along-track
+    g[1, 3] = a * deg / math.sqrt(2.0)                                # cross-track (i), orbit average
+    g[2, 4] = a * deg * math.sin(math.radians(inclination_deg)) / math.sqrt(2.0)
+    g[3, 0] = -2.0 / 3.0 * a / float(n_rev_day)                      # radial from the mean motion
+    var = float(np.trace(g @ c @ g.T))
+    return max(var + a * a * (c[1, 1] + c[2, 2]) / 2.0, 0.0)        # eccentricity: radial, orbit average

@@ -23,8 +23,8 @@ Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project
    file's sigmas are then scaled per pass and kind by the RMS of the normalised residuals (when
    above 1) and by the square root of their integrated autocorrelation time ``τ`` (a TLE's
    misfit is smooth in time: ``n`` samples hold ``n/τ`` independent ones;
-   :func:`trackproc.pipeline.identify.integrated_autocorrelation_time`) and the fit is repeated:
-   its covariance is the one reported.
+   :func:`trackproc.pipeline.identify.integrated_autocorrelation_time`) and the fit is repeated
+   (its covariance, ``covariance_without_model_error``, is the estimation error alone: see 7).
 6. **Verdict** (as refine/estimate, :mod:`trackproc.methods.quality`): ``rejected`` when the
    solver does not converge, the data contradict the a-priori (its χ² beyond the 99.9 % point)
    or, without the a-priori, leave an element over 10x less determined than the default
@@ -34,6 +34,16 @@ Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project
    the 99.9 % point of χ²(free elements)); ``ok``
    reasons say how the sigmas were scaled and whether the data improve significantly on the
    initial orbit (the likelihood-ratio test :func:`trackproc.methods.quality.improvement_test`).
+7. **SGP4's theory error** (:func:`_model_error`): an analytical theory misses a LEO orbit by
+   far more than the data's noise, differently at each pass; it is modelled as an independent
+   per-pass perturbation of the elements (``--model-error`` times the default a-priori's sigmas,
+   a random effect), the elements re-estimated by generalised least squares with it, and the
+   written covariance is that of a prediction at a pass (estimation + the pass's own theory
+   error). Its default scale is the maximum-likelihood one on the DopTrack development evenings.
+8. **Refusal** (``refused``, suspect): one pass (its along-track drift cannot be told from its own
+   theory error), or a fit whose predicted position error one day on is not below the initial
+   orbit's (both with the theory error): the initial TLE is written unchanged (a state's orbit
+   as a TLE at the epoch), with its covariance; ``refused.fitted_tle`` holds the fit.
 """
 
 from __future__ import annotations
@@ -75,6 +85,12 @@ class FitTleOptions:
     satnum: Optional[str] = None
     apriori: bool = True
     cross_validate: bool = False
+    #: SGP4's theory error at a pass, in a-priori sigmas; None: tle_fit.MODEL_ERROR_SCALE.
+    model_error: Optional[float] = None
+    #: Keep the initial TLE when the fit cannot be shown to predict better (``refused``).
+    refusal: bool = True
+    #: The prediction span (days after the epoch) at which fit and initial orbit are compared.
+    prediction_span_days: float = 1.0
 
 
 @dataclass
@@ -264,6 +280,85 @@ def _reepoch(orbit, epoch, template_bstar, eop):
     return sol.x, rms, force
 
 
+def _mean_elements(x, epoch):
+    from trackproc.io.tle import MeanElements
+    from trackproc.methods import tle_fit as tf
+
+    c = tf.classical(x)
+    return MeanElements(epoch=epoch, inclination_deg=c["inclination_deg"], raan_deg=c["raan_deg"],
+                        eccentricity=c["eccentricity"], arg_perigee_deg=c["arg_perigee_deg"],
+                        mean_anomaly_deg=c["mean_anomaly_deg"], mean_motion_rev_day=c["mean_motion_rev_day"],
+                        bstar=c["bstar"])
+
+
+def _model_error(options, sol, model, free, steps, obs, design, keep, sigma_eff, apriori_sigmas, prior, observed):
+    """SGP4's theory error at each station pass (:func:`trackproc.methods.tle_fit.model_error_covariance`,
+    ``options.model_error`` a-priori sigmas), a random effect: the elements by generalised least
+    squares that weigh each pass by it (Gauss-Newton steps of
+    :func:`~trackproc.methods.tle_fit.mixed_model_step` from the least-squares solution, the
+    nuisance terms refitted at each), their estimation covariance, and the prediction covariance
+    at a pass (that plus the pass's own theory error). Ephemeris rows carry none (a continuous
+    arc, not passes). ``prior`` is ``(mean, covariance)`` or None."""
+    from trackproc.methods import tle_fit as tf
+
+    scale = tf.MODEL_ERROR_SCALE if options.model_error is None else float(options.model_error)
+    q = tf.model_error_covariance(scale, apriori_sigmas)
+    idx = np.flatnonzero(free)
+    m = idx.size
+    q_free = q[np.ix_(idx, idx)]
+    c_fit = sol.covariance[:m, :m]
+    station = (obs["station"] != "").to_numpy()
+    passes = (obs["source"].astype(str) + "|" + obs["pass_id"].astype(str)).to_numpy()
+    groups = [np.flatnonzero((passes == p) & station) for p in sorted(set(passes[station]))]
+    other = np.flatnonzero(~station)                 # ephemeris rows: no theory error
+    w = np.where(keep, 1.0 / sigma_eff, 0.0)
+    if prior is not None:
+        p_info = np.linalg.inv(np.asarray(prior[1], float)[np.ix_(idx, idx)])
+    else:
+        p_info = np.zeros((m, m))
+    x, c_est, n_pass = sol.x.copy(), c_fit, 0
+    if scale > 0 and groups:
+        n_pass = len(groups)
+        for _ in range(6):
+            r = observed - model(x)
+            if design.shape[1]:
+                r = r - design @ np.linalg.lstsq(design * w[:, None], r * w, rcond=None)[0]
+            jac = tf.jacobian(model, x, free, steps)
+            infos = [tf.pass_information(jac[rows], w[rows], design[rows]) for rows in groups]
+            grads = [jac[rows].T @ (w[rows] ** 2 * r[rows]) for rows in groups]
+            o_info = p_info.copy()
+            o_grad = p_info @ ((np.asarray(prior[0], float) - x)[idx]) if prior is not None else np.zeros(m)
+            if other.size:
+                o_info = o_info + tf.pass_information(jac[other], w[other], design[other])
+                o_grad = o_grad + jac[other].T @ (w[other] ** 2 * r[other])
+            step, c_est = tf.mixed_model_step(np.zeros(m), c_fit, infos, grads, q_free, o_info, o_grad)
+            for _ in range(8):              # halved while SGP4 refuses the elements (far from linear)
+                trial = x.copy()
+                trial[idx] += step
+                try:
+                    model(trial)
+                    break
+                except (ValueError, ArithmeticError, ProcessingError):
+                    step = step / 2.0
+            else:
+                break
+            x = trial
+            if np.max(np.abs(step) / np.sqrt(np.diag(c_est))) < 0.01:
+                break
+
+    def full(block):
+        out = np.zeros((7, 7))
+        out[np.ix_(idx, idx)] = block
+        return out
+
+    return {"scale": scale, "sigma": dict(zip(tf.ELEMENT_NAMES, np.sqrt(np.diag(q)).tolist())),
+            "source": "--model-error" if options.model_error is not None else
+            "default: calibrated on the DopTrack Delfi-C3 development evenings (docs/fit-tle.md)",
+            "passes_with_it": n_pass, "element_covariance": q,
+            "estimation_covariance": full(c_est), "covariance_without_model_error": full(c_fit),
+            "prediction_covariance": full(c_est) + q, "x": x}
+
+
 def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=None,
             stations: Optional[dict] = None) -> FitTleResult:
     """Fit a TLE to ``tables`` (``(source, PassTable)``) and ``ephemerides`` (``(source,
@@ -355,9 +450,19 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
                     "sigma_scale": s}
     sigma_eff = sigma_file * scale
     sol = run(sol.x, sigma_eff, keep)
+    # SGP4's own theory error at each pass (a random effect, docs/fit-tle.md "Covariance"): the
+    # elements by generalised least squares with it, their covariance, and at a predicted pass
+    model_error = _model_error(options, sol, model, free, steps, obs, design, keep, sigma_eff, sig,
+                               (x_init, prior_cov) if options.apriori else None, observed)
+    x_fit = model_error.pop("x")
+    try:
+        model(x_fit)
+    except (ValueError, ArithmeticError, ProcessingError):
+        raise ProcessingError("the fit failed: the elements weighed for SGP4's theory error are not an orbit SGP4 "
+                              "accepts") from None
 
     # the TLE as written (fields rounded) and how it fits
-    c = tf.classical(sol.x)
+    c = tf.classical(x_fit)
     rev0 = int(template.line2[63:68]) if template is not None and template.line2[63:68].strip() else 0
     revolution = rev0 + int(math.floor(n0 * age_days)) if template is not None else 0
     elements = MeanElements(epoch=epoch, inclination_deg=c["inclination_deg"], raan_deg=c["raan_deg"],
@@ -381,7 +486,7 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         return float(rw @ rw), r
 
     chi2_written, _ = chi2_with_nuisance(written)
-    chi2_fitted, _ = chi2_with_nuisance(sol.x)
+    chi2_fitted, resid = chi2_with_nuisance(x_fit)
     chi2_initial, r_initial = chi2_with_nuisance(x_init)
 
     # the verdict
@@ -414,11 +519,13 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
     if n_edited > EDITED_LIMIT * len(obs):
         q.add("edited", "suspect", f"{n_edited} of {len(obs)} samples edited (> 10 %)", value=n_edited,
               limit=EDITED_LIMIT * len(obs))
-    gain = qm.improvement_test(chi2_initial, chi2_fitted, int(free.sum()))
+    # the likelihood-ratio test of the least-squares elements (the weights of the data alone)
+    chi2_ls, _ = chi2_with_nuisance(sol.x)
+    gain = qm.improvement_test(chi2_initial, chi2_ls, int(free.sum()))
     q.add("improvement", "ok",
           (f"the data move the elements significantly from the initial orbit (chi2 {chi2_initial:.4g} -> "
-           f"{chi2_fitted:.4g}, limit of the drop {gain['limit']:.3g})") if gain["significant"] else
-          (f"the data cannot tell the fitted TLE from the initial orbit (chi2 {chi2_initial:.4g} -> {chi2_fitted:.4g}, "
+           f"{chi2_ls:.4g}, limit of the drop {gain['limit']:.3g})") if gain["significant"] else
+          (f"the data cannot tell the fitted TLE from the initial orbit (chi2 {chi2_initial:.4g} -> {chi2_ls:.4g}, "
            f"a drop below the 99.9 % point {gain['limit']:.3g}): it is not demonstrably better"),
           value=gain["delta_chi2"], limit=gain["limit"])
     rounding = chi2_written - chi2_fitted
@@ -430,7 +537,6 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
              "determine them"), value=rounding, limit=rounding_limit)
 
     # per group summaries (the RMS the users quote: after the nuisance terms)
-    resid = sol.residual
     per_group = []
     for g in sorted(set(groups)):
         m = groups == g
@@ -446,8 +552,35 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
                                                                                           int(free.sum()) + k]))
         entry.update(noise.get(g, {}))
         per_group.append(entry)
-    cov = sol.element_covariance
-    sigma = sol.sigma
+    cov = model_error.pop("prediction_covariance")
+    # does the fit predict better than the initial TLE, both with SGP4's theory error? (refusal)
+    a_fit = (MU_WGS72 / (2 * math.pi * float(x_fit[0]) / 86400.0) ** 2) ** (1 / 3)
+    span = float(options.prediction_span_days)
+    initial_cov = prior_cov + model_error["element_covariance"]
+    var_fit = tf.position_variance(cov, float(x_fit[0]), a_fit, float(x_fit[3]), span)
+    var_init = tf.position_variance(initial_cov, float(x_init[0]), a_fit, float(x_init[3]), span)
+    station = (obs["station"] != "").to_numpy()
+    n_passes = len(set((obs["source"].astype(str) + "|" + obs["pass_id"].astype(str))[station]))
+    q.add("prediction", "ok", f"predicted position error {span:g} d after the epoch {math.sqrt(var_fit):.4g} m "
+          f"(the initial orbit's {math.sqrt(var_init):.4g} m), SGP4's theory error included",
+          value=math.sqrt(var_fit), limit=math.sqrt(var_init))
+    refusal = None
+    if options.refusal:
+        if n_passes < 2 and not ephemerides:
+            refusal = ("single_pass", "one pass cannot separate the along-track drift (mean motion) from that pass's "
+                                      "own SGP4 error: the fit cannot be shown to predict better than the initial orbit")
+        elif var_fit >= var_init:
+            refusal = ("no_predictive_gain", f"the fit's predicted position error {span:g} d after the epoch "
+                                             f"({math.sqrt(var_fit):.4g} m) is not below the initial orbit's "
+                                             f"({math.sqrt(var_init):.4g} m)")
+    if refusal is not None:
+        q.add("refused", "suspect", f"the initial orbit is written unchanged: {refusal[1]} (--no-refusal writes "
+                                    "the fit)", value=refusal[0])
+        fitted_tle = tle
+        tle = template if template is not None else format_tle(_mean_elements(x_init, epoch), None,
+                                                                satnum=options.satnum)
+        cov = initial_cov
+    sigma = np.sqrt(np.maximum(np.diag(cov), 0.0))
     cross = cross_validation(tables, ephemerides, orbit, options, eop, stations, epoch) \
         if options.cross_validate else None
     if cross is not None:
@@ -469,20 +602,33 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         "reepoch_rms_m": reepoch_rms,
         "tle": [tle.line1, tle.line2],
         "name": tle.name,
-        "elements": dict(zip(tf.ELEMENT_NAMES, sol.x.tolist())),
+        "elements": dict(zip(tf.ELEMENT_NAMES, (x_fit if refusal is None else x_init).tolist())),
+        "fitted_elements": dict(zip(tf.ELEMENT_NAMES, x_fit.tolist())),
+        "least_squares_elements": dict(zip(tf.ELEMENT_NAMES, sol.x.tolist())),
+        "refused": None if refusal is None else {"code": refusal[0], "reason": refusal[1],
+                                                 "fitted_tle": [fitted_tle.line1, fitted_tle.line2]},
+        "prediction": {"span_days": span, "position_sigma_m": math.sqrt(var_fit),
+                       "initial_position_sigma_m": math.sqrt(var_init)},
         "sigma": dict(zip(tf.ELEMENT_NAMES, sigma.tolist())),
         "covariance": {"parameters": list(tf.ELEMENT_NAMES), "matrix": cov.tolist(),
                        "note": "n rev/day, ex, ey, angles deg, B* 1/earth radii; the file sigmas scaled per pass "
                                "and kind (noise) before it is taken",
-                       "scope": "the estimation error of the mean elements under SGP4; it leaves out SGP4's own "
-                                "theory error, which dominates predictions (DopTrack: 2-40x larger at the next "
-                                "pass, docs/fit-tle.md)"},
+                       "scope": "the error of this TLE's SGP4 prediction at a pass, as element errors at the "
+                                "epoch (map it to a pass through SGP4's partials): the estimation error with "
+                                "SGP4's theory error at the fitted passes (model_error, estimation_covariance) "
+                                "plus that error at the predicted pass (model_error.element_covariance). "
+                                "Its scale (model_error) is calibrated on DopTrack Delfi-C3 passes and checked "
+                                "up to ~1 day ahead (docs/fit-tle.md)"},
+        "model_error": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in model_error.items()
+                        if k not in ("estimation_covariance", "covariance_without_model_error")},
+        "estimation_covariance": model_error["estimation_covariance"].tolist(),
+        "covariance_without_model_error": model_error["covariance_without_model_error"].tolist(),
         "classical": c,
         "initial_elements": dict(zip(tf.ELEMENT_NAMES, x_init.tolist())),
         "fixed": [] if options.fit_bstar else ["bstar"],
         "apriori": {"used": bool(options.apriori), "sigma_at_initial_epoch": dict(zip(tf.ELEMENT_NAMES, sig.tolist())),
                     "chi2": sol.chi2_prior, "elements": sol.n_prior},
-        "chi2": {"initial": chi2_initial, "fitted": chi2_fitted, "written": chi2_written},
+        "chi2": {"initial": chi2_initial, "least_squares": chi2_ls, "fitted": chi2_fitted, "written": chi2_written},
         "samples": int(len(obs)), "edited": n_edited, "iterations": sol.iterations, "converged": sol.converged,
         "solver": sol.message,
         "doppler_bias": options.doppler_bias,
@@ -515,7 +661,7 @@ def cross_validation(tables, ephemerides, orbit, options: FitTleOptions, eop, st
     if len(tables) < 2:
         return {"passes": [], "ratios": [], "note": "cross-validation needs two or more pass files: the fitted "
                                                     "TLE's prediction skill is unchecked"}
-    sub = replace(options, cross_validate=False, epoch=epoch)
+    sub = replace(options, cross_validate=False, epoch=epoch, refusal=False)
     cmp = CompareOptions(remove=options.doppler_bias, earth=options.earth, range_rate_model=options.range_rate_model)
     rows, ratios = [], []
     for k, (source, table) in enumerate(tables):
@@ -550,5 +696,12 @@ def summary_text(result: FitTleResult) -> str:
                      f"{g['samples']} samples")
     if len(shown) < len(s["groups"]):
         lines.append(f"  ... {len(s['groups']) - len(shown)} more passes and kinds (--json or --summary FILE)")
+    if s.get("refused"):
+        lines.append(f"  refused ({s['refused']['code']}): the initial orbit is written; the fit is in the summary "
+                     "(refused.fitted_tle)")
+    p = s.get("prediction")
+    if p:
+        lines.append(f"  predicted position error {p['span_days']:g} d on: {p['position_sigma_m']:.4g} m "
+                     f"(initial {p['initial_position_sigma_m']:.4g} m; SGP4's theory error included)")
     lines.append("  " + result.quality.text())
     return "\n".join(lines) + "\n"
