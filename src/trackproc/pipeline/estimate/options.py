@@ -22,7 +22,7 @@ DOPPLER_BIAS_PER = ("pass", "station")
 LIGHT_TIME_MARGIN_S = 1.0
 #: Names that stand for several parameters in ``apriori_sigma``.
 GROUPS = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"), "state": pm.STATE_NAMES,
-          "empirical": ("empirical_r", "empirical_t", "empirical_n")}
+          "empirical": ("empirical_r", "empirical_t", "empirical_n", "empirical_x", "empirical_y", "empirical_z")}
 RESIDUAL_COLUMNS = ("time", "station", "pass_id", "kind", "unit", "observed", "computed", "residual",
                     "normalized_residual", "sigma", "edited")
 
@@ -49,7 +49,8 @@ class EstimateOptions:
     ``troposphere`` (auto | mendes-pavlis | none), ``com_offset_m``, ``wavelength_nm``,
     ``solid_tides``: the known corrections of range samples (:mod:`trackproc.pipeline.range_corrections`).
     ``estimate_force``: force-model parameters to estimate with ``force="full"`` (``cr``, ``cd``,
-    ``empirical_r``/``_t``/``_n`` or ``empirical-rtn`` for the three), started from the force
+    ``empirical_r``/``_t``/``_n`` or ``empirical-rtn`` for the three, ``empirical_x``/``_y``/``_z``
+    or ``empirical-xyz`` along the GCRF axes), started from the force
     model's values (:func:`force_parameter_names`).
     """
 
@@ -120,8 +121,8 @@ def force_parameter_names(items: Sequence[str]) -> tuple:
             for name in members:
                 if name not in vocabulary.FORCE_PARAMETERS:
                     raise InputError("unknown force parameter", column="--estimate-force", found=part,
-                                     expected="a comma list of cr, cd, empirical-rtn, empirical_r, empirical_t, "
-                                              "empirical_n")
+                                     expected="a comma list of cr, cd, empirical-rtn, empirical-xyz or "
+                                              "empirical_r/_t/_n/_x/_y/_z")
                 if name in out:
                     raise InputError("duplicate parameter", column="--estimate-force", found=name,
                                      expected="each parameter once")
