@@ -46,6 +46,13 @@ def estimate_command(
     doppler_bias_per: BiasPer = typer.Option(BiasPer.pass_, "--doppler-bias-per",
                                              help="One Doppler offset (drift) per pass or per station."),
     angle_bias: bool = typer.Option(False, "--angle-bias", help="Estimate azimuth and elevation biases per station."),
+    estimate_force: List[str] = typer.Option(
+        [], "--estimate-force", metavar="cr,cd,empirical-rtn",
+        help="With --force full: estimate these force-model parameters (cr, cd, empirical-rtn = a constant "
+             "radial/along-track/cross-track acceleration, empirical-xyz = one along the GCRF axes, or single "
+             "components empirical_r ... empirical_z), from the "
+             "model's values (--cr, --cd; accelerations 0); comma list, repeatable. A-priori: --apriori-sigma "
+             "cr=0.5, empirical=1e-8."),
     noise: Noise = typer.Option(
         Noise.auto, "--noise",
         help="Noise model of each pass's Doppler/range-rate samples: auto = chosen per pass by REML among white, "
@@ -191,6 +198,7 @@ def estimate_command(
         clip=clip if clip > 0 else None, epoch=epoch, kinds=kind_list, compare_doppler_only=compare_doppler_only,
         two_stage=two_stage, noise=noise.value, oscillator_noise=oscillator_noise,
         troposphere=troposphere, com_offset_m=com_offset, wavelength_nm=wavelength_nm, solid_tides=solid_tides,
+        estimate_force=list(estimate_force),
         force_model=force_settings.model(force.value, state0.epoch, orientation, state0))
     result = estimate(tables, state0, station_table, options, orientation)
     corrections = {}

@@ -15,6 +15,9 @@ Names (the part after ``:`` is a station or pass id)::
     doppler_drift:KEY              Hz/s, times (t - epoch of the driver)
     az_bias:STATION  el_bias:STATION   added to azimuth / elevation (rad)
     r_ka                           radius of refine's circular-orbit constraints (m, seed 004 eq. 5)
+    cr  cd                         radiation-pressure and drag coefficients (force model)
+    empirical_r empirical_t empirical_n   constant empirical acceleration, R/T/N (m/s^2)
+    empirical_x empirical_y empirical_z   the same along the GCRF axes (m/s^2)
 
 This is seed 002's extended state vector (m motion parameters + N offsets, eq. 10) done
 generally: the measurement modifiers (:mod:`trackproc.models.modifiers`) own the bias drivers
@@ -36,7 +39,8 @@ from trackproc import vocabulary
 
 __all__ = ["ParameterDriver", "ParameterSet", "DuplicateParameterError", "STATE_NAMES", "KINDS",
            "state_drivers", "range_bias", "doppler_offset", "doppler_drift", "az_bias", "el_bias",
-           "split_name", "family_driver", "orbit_radius", "CONSTRAINT_NAMES"]
+           "split_name", "family_driver", "orbit_radius", "CONSTRAINT_NAMES", "FORCE_NAMES",
+           "force_parameter"]
 
 #: Names of the six state components, in order.
 STATE_NAMES = vocabulary.STATE_NAMES
@@ -44,9 +48,14 @@ STATE_NAMES = vocabulary.STATE_NAMES
 KINDS = vocabulary.BIAS_UNITS
 #: Parameters of constraints (not of a measurement): refine's circular-orbit radius, and units.
 CONSTRAINT_NAMES = vocabulary.CONSTRAINT_PARAMETERS
+#: Force-model parameters (``estimate --estimate-force``) and units; their partials come from
+#: the propagator's variational equations, not from a measurement modifier.
+FORCE_NAMES = vocabulary.FORCE_PARAMETERS
 #: Default scales (about one expected sigma): state m and m/s, then by family.
 DEFAULT_SCALES = {"position": 100.0, "velocity": 0.1, "range_bias": 10.0, "doppler_offset": 1.0,
-                  "doppler_drift": 1e-3, "az_bias": 1e-4, "el_bias": 1e-4}
+                  "doppler_drift": 1e-3, "az_bias": 1e-4, "el_bias": 1e-4, "cr": 0.1, "cd": 0.1,
+                  "empirical_r": 1e-9, "empirical_t": 1e-9, "empirical_n": 1e-9, "empirical_x": 1e-9,
+                  "empirical_y": 1e-9, "empirical_z": 1e-9}
 
 
 class DuplicateParameterError(ValueError):
@@ -119,7 +128,8 @@ class ParameterDriver:
 
     @property
     def family(self) -> str:
-        """``"state"`` for x..vz, the name for a constraint parameter (``r_ka``), else the part before ``:``."""
+        """``"state"`` for x..vz, the name for a constraint or force parameter (``r_ka``, ``cr``), else
+        the part before ``:``."""
         return "state" if self.name in STATE_NAMES else split_name(self.name)[0]
 
     @property
@@ -144,7 +154,7 @@ def split_name(name: str) -> tuple[str, Optional[str]]:
     """
     if name in STATE_NAMES:
         return "state", None
-    if name in CONSTRAINT_NAMES:
+    if name in CONSTRAINT_NAMES or name in FORCE_NAMES:
         return name, None
     family, sep, key = name.partition(":")
     if not sep or not key or family not in KINDS:
@@ -323,3 +333,22 @@ def orbit_radius(reference: float, *, scale: float = DEFAULT_SCALES["position"],
     ``|v|² = μ/r_ka`` of refine (seed 004 eq. 5), a parameter of the constraints, not of a measurement."""
     return ParameterDriver("r_ka", CONSTRAINT_NAMES["r_ka"], reference, scale, apriori_sigma=apriori_sigma,
                            bounds=(0.0, math.inf), description="circular-orbit radius (seed 004 eq. 5)")
+
+
+def force_parameter(name: str, reference: float, *, scale: float | None = None,
+                    apriori_sigma: float | None = None) -> ParameterDriver:
+    """A force-model parameter (``cr``, ``cd``, ``empirical_r/t/n``) at its model value ``reference``.
+
+    The coefficients are bounded below by 0 (a negative Cr or Cd is not physical); the empirical
+    accelerations are free. Their partials are the propagator's parameter sensitivities
+    (Montenbruck & Gill 2000 eq. 7.44, :mod:`trackproc.dynamics.forces.integrator`)."""
+    if name not in FORCE_NAMES:
+        raise ValueError(f"unknown force parameter {name!r}; expected one of {', '.join(FORCE_NAMES)}")
+    bounds = (0.0, math.inf) if name in ("cr", "cd") else (-math.inf, math.inf)
+    what = {"cr": "radiation-pressure coefficient", "cd": "drag coefficient", "empirical_r": "radial",
+            "empirical_t": "along-track", "empirical_n": "cross-track", "empirical_x": "GCRF X",
+            "empirical_y": "GCRF Y", "empirical_z": "GCRF Z"}[name]
+    if name.startswith("empirical"):
+        what = "constant empirical acceleration, " + what
+    return ParameterDriver(name, FORCE_NAMES[name], reference, DEFAULT_SCALES[name] if scale is None else scale,
+                           apriori_sigma=apriori_sigma, bounds=bounds, description=what)

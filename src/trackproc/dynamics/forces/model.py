@@ -35,8 +35,9 @@ from trackproc.dynamics.geodesy import itrf_to_geodetic
 __all__ = ["Spacecraft", "ForceModel", "Environment", "PARAMETERS", "GRID_S"]
 
 #: Force-model parameters that can carry partials (``estimate`` drivers): radiation pressure
-#: and drag coefficients, and a constant empirical acceleration in R, T, N (m/s²).
-PARAMETERS = ("cr", "cd", "empirical_r", "empirical_t", "empirical_n")
+#: and drag coefficients, and a constant empirical acceleration in R, T, N or along the GCRF
+#: axes X, Y, Z (m/s²; a leak of a spacecraft holding its attitude inertially, Orekit's W3B).
+PARAMETERS = ("cr", "cd", "empirical_r", "empirical_t", "empirical_n", "empirical_x", "empirical_y", "empirical_z")
 #: Spacing of the tabulated Earth orientation, Sun and Moon (s).
 GRID_S = 600.0
 #: Default degree of the field in the STM's gradient (see ForceModel.stm_degree).
@@ -99,6 +100,7 @@ class ForceModel:
     f107a: float = 150.0
     ap: float = 4.0
     empirical_rtn: tuple = (0.0, 0.0, 0.0)
+    empirical_gcrf: tuple = (0.0, 0.0, 0.0)       # constant acceleration along GCRF X, Y, Z (m/s²)
     estimated: tuple = ()
     eop: object = None
     earth_radius_m: float = WGS84_A          # shadow cone and geodetic heights (WGS-84)
@@ -132,21 +134,26 @@ class ForceModel:
         """A copy with ``cr``, ``cd``, ``empirical_r/t/n`` set (estimation updates)."""
         sc = self.spacecraft
         emp = list(self.empirical_rtn)
+        xyz = list(self.empirical_gcrf)
         for key, val in values.items():
             if key == "cr":
                 sc = replace(sc, cr=float(val))
             elif key == "cd":
                 sc = replace(sc, cd=float(val))
-            elif key.startswith("empirical_"):
+            elif key in ("empirical_x", "empirical_y", "empirical_z"):
+                xyz["xyz".index(key[-1])] = float(val)
+            elif key in ("empirical_r", "empirical_t", "empirical_n"):
                 emp["rtn".index(key[-1])] = float(val)
             else:
                 raise ValueError(f"unknown force parameter {key!r}; expected one of {PARAMETERS}")
-        return replace(self, spacecraft=sc, empirical_rtn=tuple(emp))
+        return replace(self, spacecraft=sc, empirical_rtn=tuple(emp), empirical_gcrf=tuple(xyz))
 
     def parameter_values(self) -> dict:
         sc = self.spacecraft
         full = {"cr": sc.cr, "cd": sc.cd, "empirical_r": self.empirical_rtn[0],
-                "empirical_t": self.empirical_rtn[1], "empirical_n": self.empirical_rtn[2]}
+                "empirical_t": self.empirical_rtn[1], "empirical_n": self.empirical_rtn[2],
+                "empirical_x": self.empirical_gcrf[0], "empirical_y": self.empirical_gcrf[1],
+                "empirical_z": self.empirical_gcrf[2]}
         return {k: full[k] for k in self.estimated}
 
     def describe(self) -> dict:
@@ -176,8 +183,10 @@ class ForceModel:
                 out["drag"].update(f107=self.f107, f107a=self.f107a, ap=self.ap)
         if self.srp or self.drag:
             out["spacecraft"] = self.spacecraft.as_dict()
-        if any(self.empirical_rtn) or any(p.startswith("empirical") for p in self.estimated):
+        if any(self.empirical_rtn) or any(p in ("empirical_r", "empirical_t", "empirical_n") for p in self.estimated):
             out["empirical_rtn_m_s2"] = list(self.empirical_rtn)
+        if any(self.empirical_gcrf) or any(p in ("empirical_x", "empirical_y", "empirical_z") for p in self.estimated):
+            out["empirical_gcrf_m_s2"] = list(self.empirical_gcrf)
         if self.estimated:
             out["estimated"] = list(self.estimated)
         return out
@@ -194,7 +203,7 @@ class ForceModel:
             parts.append(f"drag ({self.atmosphere})")
         if self.relativity:
             parts.append("relativity")
-        if any(self.empirical_rtn):
+        if any(self.empirical_rtn) or any(self.empirical_gcrf):
             parts.append("empirical")
         return "full (" + ", ".join(parts) + ")"
 
@@ -317,6 +326,12 @@ class Environment:
                 acc = acc + np.einsum("k,pki->pi", emp, rt)
             for i, key in enumerate(("empirical_r", "empirical_t", "empirical_n")):
                 unit[key] = rt[:, i, :]
+        xyz = np.asarray(mdl.empirical_gcrf, float)
+        if any(xyz):
+            acc = acc + self.q @ xyz                         # GCRF axes in the integration frame
+        if parts:
+            for i, key in enumerate(("empirical_x", "empirical_y", "empirical_z")):
+                unit[key] = np.broadcast_to(self.q[:, i], r.shape)
         return (acc, unit) if parts else acc
 
     def acceleration(self, t: float, r, v) -> np.ndarray:

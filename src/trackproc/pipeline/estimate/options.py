@@ -10,6 +10,7 @@ from trackproc.dynamics import propagator
 from trackproc.errors import InputError
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
+from trackproc import vocabulary
 from trackproc.vocabulary import DOPPLER_BIASES, KIND_UNITS, NOISE_MODELS
 
 
@@ -20,7 +21,8 @@ DOPPLER_BIAS_PER = ("pass", "station")
 #: Margin (s) added before the first sample so that emission times are covered.
 LIGHT_TIME_MARGIN_S = 1.0
 #: Names that stand for several parameters in ``apriori_sigma``.
-GROUPS = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"), "state": pm.STATE_NAMES}
+GROUPS = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"), "state": pm.STATE_NAMES,
+          "empirical": ("empirical_r", "empirical_t", "empirical_n", "empirical_x", "empirical_y", "empirical_z")}
 RESIDUAL_COLUMNS = ("time", "station", "pass_id", "kind", "unit", "observed", "computed", "residual",
                     "normalized_residual", "sigma", "edited")
 
@@ -46,6 +48,10 @@ class EstimateOptions:
     ``oscillator_noise``: the random-walk intensity (Hz/√s) instead of estimating it.
     ``troposphere`` (auto | mendes-pavlis | none), ``com_offset_m``, ``wavelength_nm``,
     ``solid_tides``: the known corrections of range samples (:mod:`trackproc.pipeline.range_corrections`).
+    ``estimate_force``: force-model parameters to estimate with ``force="full"`` (``cr``, ``cd``,
+    ``empirical_r``/``_t``/``_n`` or ``empirical-rtn`` for the three, ``empirical_x``/``_y``/``_z``
+    or ``empirical-xyz`` along the GCRF axes), started from the force
+    model's values (:func:`force_parameter_names`).
     """
 
     range_bias: bool | Sequence[str] = False
@@ -71,6 +77,7 @@ class EstimateOptions:
     com_offset_m: float = 0.0
     wavelength_nm: Optional[float] = None
     solid_tides: Optional[bool] = None    # station solid-Earth tides on ranges (None: on for CRD data)
+    estimate_force: Sequence[str] = ()    # force-model drivers (force "full"): cr, cd, empirical-rtn
 
 
 def check_options(opt: EstimateOptions) -> None:
@@ -94,6 +101,33 @@ def check_options(opt: EstimateOptions) -> None:
                              expected="a comma list of " + ",".join(ob.KINDS))
     if opt.force not in propagator.FORCES:
         raise InputError("unknown force model", column="--force", found=opt.force, expected=" or ".join(propagator.FORCES))
+    names = force_parameter_names(opt.estimate_force)
+    if names and opt.force != "full":
+        raise InputError("force parameters are estimated with the full force model only", column="--estimate-force",
+                         found=",".join(names), expected="--force full")
+
+
+def force_parameter_names(items: Sequence[str]) -> tuple:
+    """``--estimate-force`` items -> force-parameter names in the model's order
+    (:data:`trackproc.vocabulary.FORCE_PARAMETERS`); groups expanded; an unknown or repeated
+    name is an :class:`InputError`."""
+    out = []
+    for item in items:
+        for part in str(item).split(","):
+            part = part.strip().lower()
+            if not part:
+                continue
+            members = vocabulary.FORCE_PARAMETER_GROUPS.get(part, (part.replace("-", "_"),))
+            for name in members:
+                if name not in vocabulary.FORCE_PARAMETERS:
+                    raise InputError("unknown force parameter", column="--estimate-force", found=part,
+                                     expected="a comma list of cr, cd, empirical-rtn, empirical-xyz or "
+                                              "empirical_r/_t/_n/_x/_y/_z")
+                if name in out:
+                    raise InputError("duplicate parameter", column="--estimate-force", found=name,
+                                     expected="each parameter once")
+                out.append(name)
+    return tuple(n for n in vocabulary.FORCE_PARAMETERS if n in out)
 
 
 def check_apriori(apriori: Mapping[str, float]) -> None:

@@ -25,7 +25,7 @@ from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
 from trackproc.pipeline.estimate import samples as sm
 from trackproc.pipeline.estimate.options import (GROUPS, LIGHT_TIME_MARGIN_S, EstimateOptions, apriori_for,
-                                                 check_apriori, check_options)
+                                                 check_apriori, check_options, force_parameter_names)
 
 
 @dataclass
@@ -54,6 +54,8 @@ class Problem:
     evaluations: int = 0
     #: where the state's a-priori came from (the state file's ``estimation`` record)
     apriori_note: str = ""
+    #: estimated force-model parameters (``--estimate-force``), columns 6.. of the vector
+    force_names: tuple = ()
 
     @property
     def names(self) -> list:
@@ -69,13 +71,20 @@ class Problem:
         fixed = {d.name: d.value for d in self.params if not d.selected and d.family != "state"}
         return cols, fixed
 
+    def force_model_at(self, x):
+        """The force model with the estimated force parameters at their values in ``x``."""
+        if not self.force_names:
+            return self.force_model
+        return self.force_model.with_parameters(**{n: float(x[6 + i]) for i, n in enumerate(self.force_names)})
+
     def trajectory(self, x):
-        """The propagated trajectory (with STM) of the state in ``x``."""
+        """The propagated trajectory (with STM, and the force parameters' partials) of ``x``."""
         t = self.meas.t_s
         span = [float(t.min()) - LIGHT_TIME_MARGIN_S, float(t.max())]
         traj = propagator.propagate(x[:3], x[3:6], self.epoch, span, force=self.force, stm=True, frame=self.frame,
-                                    eop=self.eop, force_model=self.force_model)
-        return traj.raise_for_outcome()
+                                    eop=self.eop, force_model=self.force_model_at(x))
+        traj = traj.raise_for_outcome()
+        return _WithForceParameters(traj) if self.force_names else traj
 
     def model(self, x):
         """``(computed (N,), jacobian (N, n))`` at the selected parameter values ``x``."""
@@ -85,7 +94,8 @@ class Problem:
         values.update({n: x[i] for n, i in cols.items()})
         try:
             traj = self.trajectory(x)
-            h, jac, _ = ob.evaluate(self.meas, traj, modifiers=self.modifiers, bias_values=values, bias_columns=cols,
+            h, jac, _ = ob.evaluate(self.meas, traj, n_state_params=6 + len(self.force_names),
+                                    modifiers=self.modifiers, bias_values=values, bias_columns=cols,
                                     n_columns=x.size, range_rate_model=self.range_rate_model)
         except ValueError as exc:
             raise ArithmeticError(str(exc)) from None
@@ -117,6 +127,50 @@ class Problem:
                      scales=self.params.scales(), priors=self.priors if priors is None else priors,
                      periodic=self.meas.periodic, bounds=(lo, hi),
                      options=Options(max_iterations=max_iterations, clip=clip, rank_rtol=rank_rtol))
+
+
+class _WithForceParameters:
+    """A trajectory whose ``stm`` is ``[Φ | ∂state/∂p]`` (6 × (6 + P)): the force parameters'
+    columns of the measurement partials then follow the state's through the same chain (light
+    time, two-way legs) as the STM's: ∂h/∂p = ∂h/∂s(t_e) · ∂s(t_e)/∂p (Montenbruck & Gill 2000
+    eq. 7.44 for the sensitivities)."""
+
+    def __init__(self, traj):
+        self.traj = traj
+
+    def state(self, t_s, **kw):
+        return self.traj.state(t_s, **kw)
+
+    def stm(self, t_s):
+        return np.concatenate([self.traj.stm(t_s), self.traj.parameter_partials(t_s)], -1)
+
+    def __getattr__(self, name):
+        return getattr(self.traj, name)
+
+
+def force_drivers(force_model, names, apriori) -> list:
+    """The drivers of the estimated force parameters, at the force model's values."""
+    if not names:
+        return []
+    values = force_model.parameter_values()
+    return [pm.force_parameter(n, values[n], apriori_sigma=apriori_for(n, n, apriori)) for n in names]
+
+
+def with_estimated(force_model, names):
+    """``force_model`` carrying the partials of ``names``; an :class:`InputError` when the model
+    cannot (Cr without radiation pressure, Cd without drag)."""
+    from dataclasses import replace
+
+    if force_model is None:
+        raise InputError("force parameters need the full force model", column="--estimate-force",
+                         found=",".join(names), expected="--force full")
+    try:
+        return replace(force_model, estimated=tuple(names))
+    except ValueError as exc:
+        hint = {"cr": " (--srp and the spacecraft's mass and SRP area)", "cd": " (--drag and the spacecraft's "
+                "mass and drag area)"}
+        extra = "".join(h for k, h in hint.items() if k in names and k in str(exc))
+        raise InputError(str(exc) + extra, column="--estimate-force", found=",".join(names)) from None
 
 
 def default_force_model(epoch, eop, degree: int = 20):
@@ -272,10 +326,15 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     force_model = opt.force_model
     if opt.force == "full" and force_model is None:
         force_model = default_force_model(epoch, eop)
+    force_names = force_parameter_names(opt.estimate_force)
+    if force_names:
+        force_model = with_estimated(force_model, force_names)
     rv0, cov0 = initial_at_epoch(initial, epoch, opt.force, eop, force_model)
     apriori = dict(opt.apriori_sigma)
     check_apriori(apriori)
     params = pm.ParameterSet(pm.state_drivers(rv0, sigma=[apriori_for(s, "state", apriori) for s in pm.STATE_NAMES]))
+    for d in force_drivers(force_model, force_names, apriori):     # columns 6..: after the state, as in the STM
+        params.add(d)
     modifiers = bias_modifiers(opt, frame, meas.t_s, known, apriori)
     from trackproc.pipeline.range_corrections import range_correction_modifiers
 
@@ -296,4 +355,4 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     frame_q = propagator.reference_frame(*(float(a) for a in ts.datetime64_to_jd_utc(epoch)), eop)
     return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force, range_rate_model=model,
                    modifiers=bound, priors=priors, times=t64, sources=frame["_source"].to_numpy(dtype=object),
-                   eop=eop, apriori_note=note, force_model=force_model)
+                   eop=eop, apriori_note=note, force_model=force_model, force_names=force_names)

@@ -89,6 +89,8 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     sol, adaptation, noise_report = gates.solve(problem, opt)
     problem.params.set_values(sol.values)
     x = sol.values
+    if problem.force_names:                 # the metadata name the estimated Cr, Cd, accelerations
+        problem.force_model = problem.force_model_at(x)
     names = sol.names
     rtn = rtn_covariance(x[:3], x[3:6], sol.covariance[:6, :6])
     warnings = gates.warnings_of(sol)

@@ -88,7 +88,7 @@ def subproblem(problem: Problem, rows, keep_range_bias: bool) -> Problem:
     return Problem(meas=meas, params=params, epoch=problem.epoch, frame=problem.frame, force=problem.force,
                    range_rate_model=problem.range_rate_model, modifiers=modifiers, priors=priors,
                    times=problem.times[rows], sources=problem.sources[rows], eop=problem.eop,
-                   force_model=problem.force_model)
+                   force_model=problem.force_model, force_names=problem.force_names)
 
 
 def two_stage(problem: Problem, sol, opt: EstimateOptions):
