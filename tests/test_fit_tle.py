@@ -457,6 +457,11 @@ def test_initial_metadata_is_the_pass_files_tle(run_cli, tmp_path):
     assert [r["pass_id"][-12:] for r in cv["cross_validation"]["passes"]] == ["202004092043", "202004092217"]
     assert all(r["ratio"] < 1.0 for r in cv["cross_validation"]["passes"]), cv["cross_validation"]
     assert any(r["code"] == "cross_validation" and r["severity"] == "ok" for r in cv["quality"]["reasons"])
+    # and the covariance's check on the user's own passes: orbit error of each left-out pass over the
+    # sigma the covariance predicts there (measured RMS 0.27: covered, conservatively)
+    z = cv["cross_validation"]["rms_normalised_error"]
+    assert 0.05 < z <= 2.0, cv["cross_validation"]
+    assert any(r["code"] == "cross_validation_covariance" and r["severity"] == "ok" for r in cv["quality"]["reasons"])
     sample = Path(__file__).resolve().parents[1] / "sample_data" / "multistation.parquet"
     for command in ("refine", "estimate", "fit-tle"):
         res = run_cli([command, sample, "--initial", "metadata", "-o", tmp_path / "x.out"])
