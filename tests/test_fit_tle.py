@@ -534,3 +534,49 @@ def test_one_pass_is_refused_and_the_initial_tle_written(run_cli, tmp_path):
     assert pred["value"] > 0 and pred["limit"] > 0
     assert np.allclose(np.array(doc["covariance"]["matrix"]),
                        np.array(doc["estimation_covariance"]) + np.array(doc["model_error"]["element_covariance"]))
+
+
+def test_mixed_model_step_is_dense_generalised_least_squares():
+    """The random-effect step (Woodbury per pass, nuisance columns profiled out) against the
+    textbook dense GLS: ``x = (P⁻¹ + Jᵀ V⁻¹ J)⁻¹ (P⁻¹ gap + Jᵀ V⁻¹ r)`` with ``V = R + Σ_p J_p Q J_pᵀ``
+    block-diagonal and each pass's offset and drift given an (effectively) flat prior."""
+    rng = np.random.default_rng(5)
+    m, sizes = 7, (30, 45, 25)
+    q = np.diag(rng.uniform(0.1, 2.0, m) ** 2)
+    q[6, 6] = 0.0                                              # B*: no theory error
+    p = np.diag(rng.uniform(0.5, 3.0, m) ** 2)
+    gap = rng.normal(size=m)
+    infos, grads, blocks = [], [], []
+    for n in sizes:
+        j = rng.normal(size=(n, m))
+        t = np.linspace(0.0, 1.0, n)
+        b = np.stack([np.ones(n), t], axis=1)
+        sig = rng.uniform(0.5, 1.5, n)
+        r = rng.normal(size=n)
+        # the nuisance at its optimum: r orthogonal to B in the weights (as at the fit's solution)
+        w = 1.0 / sig
+        r = r - b @ np.linalg.lstsq(b * w[:, None], r * w, rcond=None)[0]
+        infos.append(tf.pass_information(j, w, b))
+        grads.append(j.T @ (w ** 2 * r))
+        blocks.append((j, b, sig, r))
+    step, cov = tf.mixed_model_step(np.zeros(m), None, infos, grads, q, np.linalg.inv(p), np.linalg.inv(p) @ gap)
+    # dense: the nuisance as parameters with a huge prior variance, V per pass
+    k = 2 * len(sizes)
+    big = 1e8
+    normal = np.zeros((m + k, m + k))
+    rhs = np.zeros(m + k)
+    normal[:m, :m] = np.linalg.inv(p)
+    rhs[:m] = np.linalg.inv(p) @ gap
+    normal[m:, m:] = np.eye(k) / big
+    for i, (j, b, sig, r) in enumerate(blocks):
+        v = np.diag(sig ** 2) + j @ q @ j.T
+        a = np.zeros((len(r), m + k))
+        a[:, :m] = j
+        a[:, m + 2 * i:m + 2 * i + 2] = b
+        vi = np.linalg.inv(v)
+        normal += a.T @ vi @ a
+        rhs += a.T @ vi @ r
+    dense_cov = np.linalg.inv(normal)
+    dense_step = dense_cov @ rhs
+    assert np.allclose(step, dense_step[:m], rtol=1e-6, atol=1e-8)
+    assert np.allclose(cov, dense_cov[:m, :m], rtol=1e-6, atol=1e-10)
