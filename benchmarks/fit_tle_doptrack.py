@@ -136,7 +136,7 @@ def _tle(summary):
     return parse_tle("\n".join(lines))
 
 
-def covariance_rows(dev: bool = True, model_error=None):
+def covariance_rows(dev: bool = True, model_error=None, protocols=("held-back", "next")):
     """Held-back and next-group passes: the fitted TLE's Doppler prediction error (the orbit's
     share, ``sqrt(rms^2 - noise^2)``, noise the RMS of a fit to that pass itself) against the
     spread its covariance predicts there (the written, prediction covariance and the one without
@@ -153,7 +153,7 @@ def covariance_rows(dev: bool = True, model_error=None):
             if gap.total_seconds() < 86400 and is_dev(nxt) == dev:
                 pairs.append(("next", g, nxt))
     opts = FitTleOptions(model_error=model_error, refusal=False)
-    for protocol, fit, target in pairs:
+    for protocol, fit, target in [p for p in pairs if p[0] in protocols]:
         tables = [(s, _load(s)[0]) for s in fit]
         res = fit_tle(tables, [], OrbitInput(tle=metadata_tle(tables), source="metadata"), opts, EOP)
         held = _load(target)[0]
