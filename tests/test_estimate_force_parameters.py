@@ -145,3 +145,17 @@ def test_simulated_cr_cd_and_empirical_acceleration_recovered_within_their_sigma
     assert "propagator" in doc
     described = res.state.constants
     assert described["spacecraft"]["cr"] == pytest.approx(sol.values[cr])     # the metadata carry the estimate
+
+
+def test_empirical_gcrf_acceleration_displaces_the_orbit_by_half_a_t_squared():
+    """Closed form: a constant acceleration a along GCRF X moves the orbit by a t²/2 along X over a
+    short time (the gravity gradient changes it by ~GM t²/r³, 1e-3 at t = 30 s)."""
+    from trackproc.dynamics.propagator import propagate
+
+    base = ForceModel(field=load_field(degree=4), third_bodies=(), relativity=False, eop=EOP)
+    t, a = 30.0, np.array([2e-5, -1e-5, 3e-5])
+    ref = propagate(R0, V0, EPOCH, [t], force=base).state(t)
+    pushed = propagate(R0, V0, EPOCH, [t], force=base.with_parameters(
+        empirical_x=a[0], empirical_y=a[1], empirical_z=a[2])).state(t)
+    np.testing.assert_allclose(pushed[:3] - ref[:3], 0.5 * a * t * t, rtol=3e-3)
+    np.testing.assert_allclose(pushed[3:] - ref[3:], a * t, rtol=3e-3)

@@ -77,3 +77,4 @@ def test_w3b_full_force_with_the_estimated_leak_lands_near_the_published_fit(run
     for station, kinds in diag["rms"].items():
         assert kinds["range"]["rms"] < 12.0, (station, kinds["range"])   # measured 2.5-7.3 m (sigma 20 m)
     assert doc["constants"]["empirical_gcrf_m_s2"] == pytest.approx(leak.tolist())
+    assert doc["spacecraft"]["cd"] == pytest.approx(values["cd"])       # what propagate --force full reads

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from trackproc import vocabulary
 from trackproc.constants import OMEGA_EARTH, WGS84_A, WGS84_F
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.forces import drag as drag_mod
@@ -37,7 +38,7 @@ __all__ = ["Spacecraft", "ForceModel", "Environment", "PARAMETERS", "GRID_S"]
 #: Force-model parameters that can carry partials (``estimate`` drivers): radiation pressure
 #: and drag coefficients, and a constant empirical acceleration in R, T, N or along the GCRF
 #: axes X, Y, Z (m/s²; a leak of a spacecraft holding its attitude inertially, Orekit's W3B).
-PARAMETERS = ("cr", "cd", "empirical_r", "empirical_t", "empirical_n", "empirical_x", "empirical_y", "empirical_z")
+PARAMETERS = tuple(vocabulary.FORCE_PARAMETERS)
 #: Spacing of the tabulated Earth orientation, Sun and Moon (s).
 GRID_S = 600.0
 #: Default degree of the field in the STM's gradient (see ForceModel.stm_degree).
