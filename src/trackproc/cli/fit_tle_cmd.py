@@ -101,7 +101,8 @@ def fit_tle_command(
     from trackproc.io.passfile import read_pass_table
     from trackproc.io.stations import read_stations
     from trackproc.io.tle import tle_text
-    from trackproc.pipeline.fit_tle import DOPPLER_BIAS, FitTleOptions, fit_tle, summary_text
+    from trackproc.pipeline.fit_tle import DOPPLER_BIAS, FitTleOptions, fit_tle
+    from trackproc.report.fit_tle_text import summary_text
     from trackproc.pipeline.orbit_source import initial_orbit
 
     passes = list(passes or [])

@@ -1,0 +1,54 @@
+"""Options, result and constants of ``fit-tle``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+import pandas as pd
+
+
+KINDS = ("doppler", "range_rate", "range", "azimuth", "elevation")
+DOPPLER_BIAS = ("none", "offset", "offset+drift")
+#: B* a-priori 1-sigma floor (1/earth radii): B* of LEO objects varies by this much between TLEs.
+BSTAR_SIGMA_FLOOR = 1e-4
+#: Sampling of the initial orbit when the elements are moved to the new epoch (s), and its half-span (revolutions).
+REEPOCH_STEP_S = 60.0
+REEPOCH_HALF_SPAN_REV = 1.0
+#: Share of edited samples above which the fit is suspect.
+EDITED_LIMIT = 0.10
+MU_WGS72 = 398600.8e9
+
+
+@dataclass
+class FitTleOptions:
+    """Options of :func:`fit_tle` (defaults = the CLI's)."""
+
+    epoch: Optional[np.datetime64] = None
+    fit_bstar: bool = True
+    doppler_bias: str = "offset+drift"
+    kinds: Optional[list] = None
+    earth: str = "wgs84"
+    range_rate_model: str = "doppler"
+    ephemeris_sigma_m: float = 100.0
+    clip: float = 4.0
+    max_iterations: int = 30
+    satnum: Optional[str] = None
+    apriori: bool = True
+    cross_validate: bool = False
+    #: SGP4's theory error at a pass, in a-priori sigmas; None: tle_fit.MODEL_ERROR_SCALE.
+    model_error: Optional[float] = None
+    #: Keep the initial TLE when the fit cannot be shown to predict better (``refused``).
+    refusal: bool = True
+    #: The prediction span (days after the epoch) at which fit and initial orbit are compared.
+    prediction_span_days: float = 1.0
+
+
+@dataclass
+class FitTleResult:
+    tle: object
+    summary: dict
+    quality: object
+    residuals: pd.DataFrame
+    warnings: list = field(default_factory=list)
