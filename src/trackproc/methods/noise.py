@@ -55,7 +55,8 @@ from typing import Optional, Sequence
 import numpy as np
 from scipy.linalg import cho_factor, solve_triangular
 
-from trackproc.methods.whitening import MarkovFactor, PassCovariance, effective_samples  # noqa: F401  (re-exported)
+from trackproc.methods.whitening import (MarkovFactor, PassCovariance, effective_samples,  # noqa: F401  (re-exported)
+                                        effective_samples_beyond)
 
 __all__ = ["NoiseModel", "NoiseFit", "PassCovariance", "fit_noise", "restricted_loglik", "MODELS",
            "effective_samples", "effective_samples_beyond", "lag1_correlation"]
@@ -106,77 +107,6 @@ class NoiseModel:
         return {"model": self.name, "white": self.white, "ar1_sigma": self.ar_sigma, "ar1_tau_s": self.ar_tau_s,
                 "ar1_rho_1s": math.exp(-1.0 / self.ar_tau_s) if self.ar_sigma > 0 and self.ar_tau_s > 0 else 0.0,
                 "walk_per_sqrt_s": self.walk}
-
-
-def effective_samples_beyond(model: "NoiseModel", t_s, t0: Optional[float] = None) -> float:
-    """Effective number of independent samples of the noise an orbit sees once the explicit
-    offset and drift are estimated: :func:`effective_samples` of ``P C P``, ``P`` the projection
-    that removes a constant and a line in time (n for white noise)."""
-    t = np.asarray(t_s, float)
-    if model.is_white:               # C' = σ_w² P: the rank of the projection, without the n x n matrix
-        return float(t.size - (2 if t.size > 1 and np.ptp(t) > 0 else 1))
-    t0 = float(t.min()) if t0 is None else float(t0)
-    q, _ = np.linalg.qr(np.column_stack([np.ones(t.size), t - t0]))
-    if t.size > 1 and np.all(np.diff(t) >= 0):
-        # tr C' = tr C - tr QᵀCQ, tr C'² = ‖C‖² - 2‖CQ‖² + ‖QᵀCQ‖² (P = I - QQᵀ), all in O(n)
-        tr, frob2, cq = _markov_traces(model, t, t0, q)
-        qcq = q.T @ cq
-        return float((tr - np.trace(qcq)) ** 2 / (frob2 - 2.0 * np.sum(cq * cq) + np.sum(qcq * qcq)))
-    c = model.covariance(t, t0)
-    cq = c - q @ (q.T @ c)
-    return effective_samples(cq - (cq @ q) @ q.T)
-
-
-def _markov_traces(model: "NoiseModel", t: np.ndarray, t0: float, v: np.ndarray):
-    """``(tr C, ‖C‖_F², C v)`` of the covariance of ``model`` at non-decreasing times ``t`` without
-    forming ``C``: ``K v`` of the AR(1) correlation by a forward and a backward first-order
-    recursion (``f_i = v_i + φ_i f_i-1``; banded triangular solves), ``M v`` of the walk's
-    ``min(s_i, s_j)`` by cumulative sums, and the sums of squares of their entries likewise."""
-    from scipy.linalg.lapack import dtbtrs
-
-    n = t.size
-    w2, a2, q2 = model.white ** 2, model.ar_sigma ** 2, model.walk ** 2
-    has_ar = model.ar_sigma > 0 and model.ar_tau_s > 0
-    s = np.clip(t - t0, 0.0, None)
-
-    def kmul(phi, m):                 # Σ_j exp(-|t_i - t_j|/τ) m_j by the two recursions
-        lo = np.zeros((2, n))
-        lo[0] = 1.0
-        lo[1, :-1] = -phi
-        up = np.zeros((2, n))
-        up[1] = 1.0
-        up[0, 1:] = -phi
-        mf = np.asfortranarray(m)
-        return dtbtrs(lo, mf, uplo="L")[0] + dtbtrs(up, mf, uplo="U")[0] - m
-
-    def mmul(sv, m):                  # Σ_j min(s_i, s_j) m_j, s non-decreasing
-        inside = np.cumsum(sv[:, None] * m, axis=0)
-        beyond = np.cumsum(m[::-1], axis=0)[::-1]
-        beyond = np.vstack([beyond[1:], np.zeros((1, m.shape[1]))])
-        return inside + sv[:, None] * beyond
-
-    v = np.asarray(v, float)
-    cv = w2 * v
-    tr = n * w2
-    frob2 = n * w2 * w2
-    ones = np.ones((n, 1))
-    if has_ar:
-        phi = np.exp(-np.diff(t) / model.ar_tau_s)
-        kv = kmul(phi, np.column_stack([v, ones]))
-        cv = cv + a2 * kv[:, :-1]
-        tr += n * a2
-        frob2 += 2.0 * w2 * a2 * n + a2 * a2 * float(np.sum(kmul(phi * phi, ones)))
-    if q2 > 0:
-        cv = cv + q2 * mmul(s, v)
-        tr += q2 * float(np.sum(s))
-        frob2 += 2.0 * w2 * q2 * float(np.sum(s)) + q2 * q2 * float(np.sum(mmul(s * s, ones)))
-        if has_ar:                    # 2 Σ K_ij min(s_i, s_j): s_j for j ≤ i, s_i beyond
-            fwd = np.vstack([np.ones(n), np.concatenate([-phi, [0.0]])])     # f_i = m_i + φ_i f_i-1
-            inside = dtbtrs(fwd, np.asfortranarray(np.column_stack([s, ones])), uplo="L")[0]
-            lo_s = inside[:, 0]                                                # Σ_j≤i K_ij s_j
-            up_1 = kv[:, -1] - inside[:, 1]                                    # Σ_j>i K_ij
-            frob2 += 2.0 * a2 * q2 * float(np.sum(lo_s) + np.sum(s * up_1))
-    return tr, frob2, cv
 
 
 def lag1_correlation(t_s, r, max_gap_s: Optional[float] = None) -> float:

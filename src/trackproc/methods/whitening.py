@@ -36,7 +36,7 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.linalg.lapack import dpbtrf, dtbtrs
 
-__all__ = ["PassCovariance", "effective_samples", "MarkovFactor", "markov_factor"]
+__all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor"]
 
 
 def effective_samples(cov: np.ndarray) -> float:
@@ -225,3 +225,72 @@ class PassCovariance:
             if k.size:
                 total += effective_samples(model.covariance(self.t[k], t0))
         return total + float((keep & ~in_block).sum())
+
+
+def effective_samples_beyond(model, t_s, t0: Optional[float] = None) -> float:
+    """Effective number of independent samples of the noise an orbit sees once the explicit
+    offset and drift are estimated: :func:`effective_samples` of ``P C P``, ``P`` the projection
+    that removes a constant and a line in time (n for white noise)."""
+    t = np.asarray(t_s, float)
+    if model.is_white:               # C' = σ_w² P: the rank of the projection, without the n x n matrix
+        return float(t.size - (2 if t.size > 1 and np.ptp(t) > 0 else 1))
+    t0 = float(t.min()) if t0 is None else float(t0)
+    q, _ = np.linalg.qr(np.column_stack([np.ones(t.size), t - t0]))
+    if t.size > 1 and np.all(np.diff(t) >= 0):
+        # tr C' = tr C - tr QᵀCQ, tr C'² = ‖C‖² - 2‖CQ‖² + ‖QᵀCQ‖² (P = I - QQᵀ), all in O(n)
+        tr, frob2, cq = _markov_traces(model, t, t0, q)
+        qcq = q.T @ cq
+        return float((tr - np.trace(qcq)) ** 2 / (frob2 - 2.0 * np.sum(cq * cq) + np.sum(qcq * qcq)))
+    c = model.covariance(t, t0)
+    cq = c - q @ (q.T @ c)
+    return effective_samples(cq - (cq @ q) @ q.T)
+
+
+def _markov_traces(model, t: np.ndarray, t0: float, v: np.ndarray):
+    """``(tr C, ‖C‖_F², C v)`` of the covariance of ``model`` at non-decreasing times ``t`` without
+    forming ``C``: ``K v`` of the AR(1) correlation by a forward and a backward first-order
+    recursion (``f_i = v_i + φ_i f_i-1``; banded triangular solves), ``M v`` of the walk's
+    ``min(s_i, s_j)`` by cumulative sums, and the sums of squares of their entries likewise."""
+    n = t.size
+    w2, a2, q2 = model.white ** 2, model.ar_sigma ** 2, model.walk ** 2
+    has_ar = model.ar_sigma > 0 and model.ar_tau_s > 0
+    s = np.clip(t - t0, 0.0, None)
+
+    def kmul(phi, m):                 # Σ_j exp(-|t_i - t_j|/τ) m_j by the two recursions
+        lo = np.zeros((2, n))
+        lo[0] = 1.0
+        lo[1, :-1] = -phi
+        up = np.zeros((2, n))
+        up[1] = 1.0
+        up[0, 1:] = -phi
+        mf = np.asfortranarray(m)
+        return dtbtrs(lo, mf, uplo="L")[0] + dtbtrs(up, mf, uplo="U")[0] - m
+
+    def mmul(sv, m):                  # Σ_j min(s_i, s_j) m_j, s non-decreasing
+        inside = np.cumsum(sv[:, None] * m, axis=0)
+        beyond = np.cumsum(m[::-1], axis=0)[::-1]
+        beyond = np.vstack([beyond[1:], np.zeros((1, m.shape[1]))])
+        return inside + sv[:, None] * beyond
+
+    v = np.asarray(v, float)
+    cv = w2 * v
+    tr = n * w2
+    frob2 = n * w2 * w2
+    ones = np.ones((n, 1))
+    if has_ar:
+        phi = np.exp(-np.diff(t) / model.ar_tau_s)
+        kv = kmul(phi, np.column_stack([v, ones]))
+        cv = cv + a2 * kv[:, :-1]
+        tr += n * a2
+        frob2 += 2.0 * w2 * a2 * n + a2 * a2 * float(np.sum(kmul(phi * phi, ones)))
+    if q2 > 0:
+        cv = cv + q2 * mmul(s, v)
+        tr += q2 * float(np.sum(s))
+        frob2 += 2.0 * w2 * q2 * float(np.sum(s)) + q2 * q2 * float(np.sum(mmul(s * s, ones)))
+        if has_ar:                    # 2 Σ K_ij min(s_i, s_j): s_j for j ≤ i, s_i beyond
+            fwd = np.vstack([np.ones(n), np.concatenate([-phi, [0.0]])])     # f_i = m_i + φ_i f_i-1
+            inside = dtbtrs(fwd, np.asfortranarray(np.column_stack([s, ones])), uplo="L")[0]
+            lo_s = inside[:, 0]                                                # Σ_j≤i K_ij s_j
+            up_1 = kv[:, -1] - inside[:, 1]                                    # Σ_j>i K_ij
+            frob2 += 2.0 * a2 * q2 * float(np.sum(lo_s) + np.sum(s * up_1))
+    return tr, frob2, cv
