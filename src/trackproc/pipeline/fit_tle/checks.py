@@ -6,7 +6,14 @@ import math
 
 import numpy as np
 
+from trackproc.io.tle import satrec
+from trackproc.methods import tle_fit as tf
+from trackproc.pipeline.compare import CompareOptions, compare
 from trackproc.pipeline.fit_tle.options import FitTleOptions
+from trackproc.pipeline.orbit_source import OrbitInput
+
+
+from dataclasses import replace
 
 
 def cross_validation(tables, ephemerides, orbit, options: FitTleOptions, eop, stations, epoch) -> dict:
@@ -16,10 +23,6 @@ def cross_validation(tables, ephemerides, orbit, options: FitTleOptions, eop, st
     and of the initial orbit's, and their ratio. Needs two or more pass files."""
     from trackproc.pipeline.fit_tle.run import fit_tle   # (run imports this module: the cycle of leave-one-out)
 
-    from dataclasses import replace
-
-    from trackproc.pipeline.compare import CompareOptions, compare
-    from trackproc.pipeline.orbit_source import OrbitInput
 
     if len(tables) < 2:
         return {"passes": [], "ratios": [], "note": "cross-validation needs two or more pass files: the fitted "
@@ -74,9 +77,6 @@ def trend_removed(frame, values, options):
 
 def curve_difference(table, tle, reference, options, eop, stations) -> dict:
     """RMS per pass and kind of two TLEs' predicted curves' difference, offset and drift removed."""
-    from trackproc.pipeline.compare import CompareOptions, compare
-    from trackproc.pipeline.orbit_source import OrbitInput
-
     cmp = CompareOptions(remove="none", earth=options.earth, range_rate_model=options.range_rate_model)
     a, _ = compare(table, OrbitInput(tle=tle), cmp, eop, stations)
     b, _ = compare(table, OrbitInput(tle=reference), cmp, eop, stations)
@@ -89,11 +89,6 @@ def prediction_spread(table, result, covariance, options, eop, stations) -> dict
     """RMS per pass and kind of the spread an element covariance (7, 7) of ``result``'s fitted
     elements (written, not refused) predicts for ``table``'s samples, offset and drift removed: the linear map through
     SGP4's partials (central differences), ``sqrt(trace(Π A C Aᵀ Π) / n)``."""
-    from trackproc.io.tle import satrec
-    from trackproc.methods import tle_fit as tf
-    from trackproc.pipeline.compare import CompareOptions, compare
-    from trackproc.pipeline.orbit_source import OrbitInput
-
     x = np.array(list(result.summary["fitted_elements"].values()))      # a fit not refused: its TLE's epoch
     sat = satrec(result.tle)
     ep = tf.Epoch(0, sat.jdsatepoch, sat.jdsatepochF)

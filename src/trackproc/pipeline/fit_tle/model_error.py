@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from trackproc.errors import ProcessingError
+from trackproc.methods import tle_fit as tf
 
 
 def model_error_fit(options, sol, model, free, steps, obs, design, keep, sigma_eff, apriori_sigmas, prior, observed):
@@ -16,8 +17,6 @@ def model_error_fit(options, sol, model, free, steps, obs, design, keep, sigma_e
     nuisance terms refitted at each), their estimation covariance, and the prediction covariance
     at a pass (that plus the pass's own theory error). Ephemeris rows carry none (a continuous
     arc, not passes). ``prior`` is ``(mean, covariance)`` or None."""
-    from trackproc.methods import tle_fit as tf
-
     scale = tf.MODEL_ERROR_SCALE if options.model_error is None else float(options.model_error)
     q = tf.model_error_covariance(scale, apriori_sigmas)
     idx = np.flatnonzero(free)

@@ -10,14 +10,20 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from trackproc.dynamics import kepler
+from trackproc.dynamics.timescales import datetime64_to_jd_utc
 from trackproc.errors import InputError, ProcessingError
+from trackproc.io.tle import MeanElements, satrec
+from trackproc.methods import tle_fit as tf
+from trackproc.models.measurements import station_gcrf
 from trackproc.pipeline.fit_tle.options import KINDS, MU_WGS72, REEPOCH_HALF_SPAN_REV, REEPOCH_STEP_S
+from trackproc.pipeline.orbit_source import (Satellite, Sgp4Track, station_itrf, station_observables,
+                                             teme_to_gcrf_maps)
 
 
 @dataclass
 class Block:
     """Samples of one station (or one ephemeris) and how to predict them."""
-
     rows: np.ndarray            # indices into the stacked observation vector
     kind: np.ndarray
     predict: object             # satrec -> predicted values at these rows
@@ -30,10 +36,6 @@ def utc_times(series) -> np.ndarray:
 def observations(tables, ephemerides, options, eop, stations):
     """The stacked samples (a DataFrame: time, group, kind, value, sigma, source) and the blocks
     predicting them."""
-    from trackproc.models.measurements import station_gcrf
-    from trackproc.dynamics.timescales import datetime64_to_jd_utc
-    from trackproc.pipeline.orbit_source import Sgp4Track, station_itrf, station_observables
-
     parts, blocks, offset = [], [], 0
     for source, table in tables:
         frame = table.frame
@@ -146,16 +148,10 @@ def default_epoch(tables, ephemerides) -> np.datetime64:
 def reepoch(orbit, epoch, template_bstar, eop):
     """Elements at ``epoch`` reproducing the initial orbit there: fitted to its GCRF positions
     every :data:`REEPOCH_STEP_S` over :data:`REEPOCH_HALF_SPAN_REV` revolutions either side."""
-    from trackproc.dynamics import kepler
-    from trackproc.io.tle import satrec
-    from trackproc.methods import tle_fit as tf
-    from trackproc.pipeline.orbit_source import Satellite, Sgp4Track, teme_to_gcrf_maps
-
     force = "sgp4" if orbit.tle is not None else "j2"
     # the initial guess: the osculating elements (TEME) of the initial orbit at the epoch
     probe = Satellite(orbit, force, epoch, -1.0, 1.0, eop)
     x_gcrf = np.concatenate(probe.rvaj([0.0])[:2], axis=1)[0]
-    from trackproc.dynamics.timescales import datetime64_to_jd_utc
 
     jd1, jd2 = datetime64_to_jd_utc(np.asarray([epoch], dtype="datetime64[ns]"))
     m = teme_to_gcrf_maps(jd1, jd2, eop)[0]
@@ -193,8 +189,6 @@ def reepoch(orbit, epoch, template_bstar, eop):
 
 
 def mean_elements(x, epoch):
-    from trackproc.io.tle import MeanElements
-    from trackproc.methods import tle_fit as tf
 
     c = tf.classical(x)
     return MeanElements(epoch=epoch, inclination_deg=c["inclination_deg"], raan_deg=c["raan_deg"],

@@ -9,27 +9,26 @@ from typing import Optional
 import numpy as np
 import pandas as pd
 
+from trackproc.dynamics.timescales import datetime64_to_jd_utc
 from trackproc.errors import InputError, ProcessingError
+from trackproc.io.statefile import format_epoch
+from trackproc.io.tle import MeanElements, format_tle, round_epoch, satrec, tle_epoch
+from trackproc.methods import quality as qm
+from trackproc.methods import tle_fit as tf
+from trackproc.models.observation import wrap_pi
 from trackproc.pipeline.fit_tle.checks import cross_validation
 from trackproc.pipeline.fit_tle.model_error import model_error_fit
 from trackproc.pipeline.fit_tle.observations import default_epoch, mean_elements, nuisance_design, observations, reepoch
 from trackproc.pipeline.fit_tle.options import (BSTAR_SIGMA_FLOOR, DOPPLER_BIAS, EDITED_LIMIT, MU_WGS72, FitTleOptions,
                                                 FitTleResult)
+from trackproc.pipeline.identify import integrated_autocorrelation_time
+from trackproc.pipeline.refine import DEFAULT_APRIORI_ELEMENTS
 
 
 def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=None,
             stations: Optional[dict] = None) -> FitTleResult:
     """Fit a TLE to ``tables`` (``(source, PassTable)``) and ``ephemerides`` (``(source,
     Ephemeris)``) from ``orbit`` (:class:`~trackproc.pipeline.orbit_source.OrbitInput`)."""
-    from trackproc.dynamics.timescales import datetime64_to_jd_utc
-    from trackproc.io.statefile import format_epoch
-    from trackproc.io.tle import MeanElements, format_tle, round_epoch, satrec, tle_epoch
-    from trackproc.methods import quality as qm
-    from trackproc.methods import tle_fit as tf
-    from trackproc.models.observation import wrap_pi
-    from trackproc.pipeline.identify import integrated_autocorrelation_time
-    from trackproc.pipeline.refine import DEFAULT_APRIORI_ELEMENTS
-
     if options.doppler_bias not in DOPPLER_BIAS:
         raise InputError("unknown Doppler bias model", column="--doppler-bias", found=options.doppler_bias,
                          expected=", ".join(DOPPLER_BIAS))
