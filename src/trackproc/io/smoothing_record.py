@@ -15,9 +15,18 @@ samples) is below; readers see ``smoothing_of(meta)["fits"]`` as a sequence of r
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
+from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from trackproc.errors import InputError
+from trackproc.io.atomic import read_input_bytes
+from trackproc.methods.smoothing import PolynomialFit
 
 __all__ = ["META_KEY", "smoothing_of", "output_of", "find_fit_record", "fit_from_record", "record_epoch",
            "fit_summary", "FitRecords", "records_table", "record_of", "split_records", "attach_records",
@@ -51,7 +60,6 @@ def find_fit_record(meta, station: str, pass_id: str, kind: str):
 def fit_from_record(rec: dict):
     """The :class:`~trackproc.methods.smoothing.PolynomialFit` of a record (seed 004 eq. 1's
     coefficients with their covariance; per-sample arrays are not stored and come back empty)."""
-    from trackproc.methods.smoothing import PolynomialFit
 
     n_used = int(rec.get("n_used") or 0)
     cov = np.asarray(rec["covariance_unscaled"], float)
@@ -99,7 +107,6 @@ _ARRAYS = ("coefficients", "covariance_unscaled")
 
 def sidecar_path(path) -> "Path":
     """``x.parquet`` -> ``x.passes.parquet``; any other name gets ``.passes.parquet`` appended."""
-    from pathlib import Path
 
     path = Path(path)
     stem = path.stem if path.suffix.lower() == ".parquet" else path.name
@@ -110,9 +117,6 @@ def records_table(fits):
     """The records as a compact Arrow table: key columns, the polynomial's coefficients and unscaled
     covariance as float64 lists, every other field in a JSON text column. ``covariance_scaled`` is
     left out when it is ``variance_factor * covariance_unscaled`` (as smooth writes it)."""
-    import json
-
-    import pyarrow as pa
 
     columns = {name: [] for name in ("station", "pass_id", "kind", "status", *_ARRAYS, "scaled_derived", "record")}
     for rec in fits:
@@ -161,7 +165,6 @@ def record_of(table, i: int) -> dict:
 
 def _records(table):
     """Every row of :func:`records_table` as its record (columns converted once, not cell by cell)."""
-    import json
 
     columns = {name: table.column(name).to_pylist() for name in table.column_names}
     for i in range(table.num_rows):
@@ -242,14 +245,12 @@ def split_records(meta: dict, where: str):
 
 
 def _json_size(fits) -> int:
-    import json
 
     return len(json.dumps(fits, separators=(",", ":"), default=str))
 
 
 def check_inline_size(meta_text: str, what: str) -> None:
     """Inline records beyond :data:`MAX_INLINE_BYTES`: an error before anything is written."""
-    from trackproc.errors import InputError
 
     if len(meta_text) > MAX_INLINE_BYTES:
         raise InputError(f"{len(meta_text) / 1e6:.0f} MB of smoothing records do not fit in the metadata of {what}",
@@ -271,7 +272,6 @@ def attach_records(meta: dict, source: str, stream_rest: bytes | None = None) ->
 
 
 def _check_table(table, where: str):
-    from trackproc.errors import InputError
 
     need = {"station", "pass_id", "kind", "status", *_ARRAYS, "scaled_derived", "record"}
     if not need <= set(table.column_names):
@@ -281,9 +281,6 @@ def _check_table(table, where: str):
 
 
 def _stream_records(rest: bytes | None, source: str):
-    import pyarrow as pa
-
-    from trackproc.errors import InputError
 
     try:
         if not rest:
@@ -295,14 +292,6 @@ def _stream_records(rest: bytes | None, source: str):
 
 
 def _sidecar_records(pointer: dict, source: str):
-    import hashlib
-    from pathlib import Path
-
-    import pyarrow as pa
-    import pyarrow.parquet as pq
-
-    from trackproc.errors import InputError
-    from trackproc.io.atomic import read_input_bytes
 
     name = pointer.get("file")
     if not isinstance(name, str) or Path(name).name != name:

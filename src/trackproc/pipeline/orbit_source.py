@@ -24,7 +24,13 @@ from typing import Optional
 
 import numpy as np
 
+from trackproc.dynamics import frames, geodesy, propagator, timescales as ts
+from trackproc.dynamics.timescales import datetime64_to_jd_utc
 from trackproc.errors import InputError, ProcessingError
+from trackproc.io.atomic import is_stdio, read_input_bytes
+from trackproc.io.statefile import parse_state, read_state_or_tle
+from trackproc.io.tle import parse_tle, sgp4_teme, tle_epoch, tle_state
+from trackproc.models.measurements import observables, station_gcrf
 
 DEG = np.pi / 180.0
 #: Step of the central differences giving SGP4's acceleration and jerk, s.
@@ -45,9 +51,6 @@ class OrbitInput:
 
 def read_orbit(path: str, eop=None) -> OrbitInput:
     """A JSON state file or a 2/3-line TLE (``-`` = stdin), told apart by the first character."""
-    from trackproc.io.atomic import is_stdio, read_input_bytes
-    from trackproc.io.statefile import parse_state
-    from trackproc.io.tle import parse_tle
 
     source = "<stdin>" if is_stdio(path) else str(path)
     data = read_input_bytes(path)
@@ -59,7 +62,6 @@ def read_orbit(path: str, eop=None) -> OrbitInput:
 def tle_from_pass_metadata(table, source: str = "<pass>"):
     """The TLE a pass file's metadata carries (DopTrack's ``doptrack.<file>.tle``, or a top-level
     ``tle``): the prediction the station itself used. All sources must carry the same one."""
-    from trackproc.io.tle import parse_tle
 
     found = []
     meta = table.meta or {}
@@ -82,7 +84,6 @@ def metadata_tle(tables: list):
     """``--initial metadata``: the TLE stored in the pass files' metadata (DopTrack), the newest
     by epoch when several files carry different ones (the best-informed prediction);
     ``tables`` are ``(source, PassTable)``. InputError when none carries a TLE."""
-    from trackproc.io.tle import tle_epoch
 
     found, errors = [], []
     for source, table in tables:
@@ -109,8 +110,6 @@ def initial_orbit(initial: str, tables: list, eop=None) -> OrbitInput:
 def initial_state(initial: str, tables: list, eop=None, at=None):
     """``--initial STATE.json|TLE|metadata`` of ``refine`` and ``estimate``: a GCRF state (a TLE,
     given or from the pass files' metadata, by SGP4 at its epoch or at ``at``)."""
-    from trackproc.io.statefile import read_state_or_tle
-    from trackproc.io.tle import tle_state
 
     if initial == "metadata":
         return tle_state(metadata_tle(tables), at=at, eop=eop)
@@ -135,9 +134,6 @@ def resolve_force(orbit: OrbitInput, force: Optional[str], allow_full: bool = Fa
 
 def sgp4_states(tle, times, eop=None) -> np.ndarray:
     """GCRF states ``[r m, v m/s]`` (N, 6) of a TLE by SGP4 at UTC ``datetime64`` times."""
-    from trackproc.dynamics import frames
-    from trackproc.dynamics.timescales import datetime64_to_jd_utc
-    from trackproc.io.tle import sgp4_teme
 
     jd1, jd2 = datetime64_to_jd_utc(np.asarray(times, dtype="datetime64[ns]").reshape(-1))
     r_teme, v_teme = sgp4_teme(tle, jd1, jd2)
@@ -154,7 +150,6 @@ class Satellite:
     """
 
     def __init__(self, orbit: OrbitInput, force: str, t0, lo_s: float, hi_s: float, eop=None, tol: float = 1e-13):
-        from trackproc.dynamics import timescales as ts
 
         self.force, self.eop = force, eop
         self.t0 = np.datetime64(t0, "ns")
@@ -163,10 +158,8 @@ class Satellite:
         self.traj = None
         self.initial = orbit.state
         if force != "sgp4":
-            from trackproc.dynamics import propagator
 
             if orbit.state is None:
-                from trackproc.io.tle import tle_state
 
                 self.initial = tle_state(orbit.tle, at=self.t0, eop=eop)
             shift = float(ts.seconds_since(self.jd0, self.initial.jd_utc))
@@ -181,7 +174,6 @@ class Satellite:
 
     def times(self, t_s) -> np.ndarray:
         """UTC ``datetime64[ns]`` of seconds from ``t0``."""
-        from trackproc.dynamics import timescales as ts
 
         return ts.jd_utc_to_datetime64(*ts.add_seconds_utc(self.jd0, np.atleast_1d(np.asarray(t_s, float))))
 
@@ -219,7 +211,6 @@ def teme_to_gcrf_maps(jd1, jd2, eop=None) -> np.ndarray:
     """The 6 x 6 matrices (N, 6, 6) taking a TEME state ``[r, v]`` to GCRF at each UTC date:
     :func:`trackproc.dynamics.frames.teme_to_gcrf` is linear in the state, so it is evaluated
     once on the six unit states and reused for any number of element sets."""
-    from trackproc.dynamics import frames
 
     jd1, jd2 = (np.atleast_1d(np.asarray(a, float)) for a in (jd1, jd2))
     basis = np.broadcast_to(np.eye(6)[:, None, :], (6, jd1.size, 6))
@@ -233,7 +224,6 @@ class Sgp4Track:
     transformations evaluated once: ``fit-tle`` evaluates many element sets at the same samples."""
 
     def __init__(self, times, eop=None, derivatives: bool = True):
-        from trackproc.dynamics.timescales import datetime64_to_jd_utc
 
         t = np.asarray(times, dtype="datetime64[ns]").reshape(-1)
         self.times, self.derivatives = t, derivatives
@@ -248,7 +238,6 @@ class Sgp4Track:
         return np.split(x, 3)[1] if self.derivatives else x
 
     def _all(self, sat) -> np.ndarray:
-        from trackproc.io.tle import sgp4_teme
 
         r, v = sgp4_teme(sat, self.jd1, self.jd2)
         return np.einsum("nij,nj->ni", self.maps, np.concatenate([r, v], -1))
@@ -261,7 +250,6 @@ class Sgp4Track:
 
 
 def station_itrf(station, earth: str = "wgs84") -> np.ndarray:
-    from trackproc.dynamics import geodesy
 
     return geodesy.geodetic_to_itrf(float(station.lat_deg) * DEG, float(station.lon_deg) * DEG,
                                     float(station.height_m), earth)
@@ -271,8 +259,6 @@ def observe(sat: Satellite, station, t_s, *, carrier_hz: float = 1.0, range_rate
             earth: str = "wgs84", mode: str = "one-way"):
     """:class:`~trackproc.models.measurements.Observables` of ``station`` at reception times
     ``t0 + t_s`` (the foundation model, DESIGN.md light time; ``mode`` one-way or two-way)."""
-    from trackproc.dynamics import timescales as ts
-    from trackproc.models.measurements import station_gcrf
 
     t = np.atleast_1d(np.asarray(t_s, float))
     r, v, a, j = sat.rvaj(t)
@@ -286,7 +272,6 @@ def station_observables(r, v, a, j, st, station, *, carrier_hz: float = 1.0, ran
                         mode: str = "one-way"):
     """The foundation model's observables of a satellite state (with acceleration and jerk) seen
     from ``station`` whose GCRF track ``st`` (``station_gcrf``) is at the same reception times."""
-    from trackproc.models.measurements import observables
 
     try:
         return observables(r, v, a, j, st.r, st.v, st.a, st.gcrf_to_itrf, float(station.lat_deg) * DEG,

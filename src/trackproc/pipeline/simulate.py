@@ -39,8 +39,12 @@ import pandas as pd
 
 from trackproc import vocabulary
 from trackproc.constants import force_model_constants
+from trackproc.dynamics import frames, geodesy, propagator, reference, timescales as ts
 from trackproc.errors import InputError, ProcessingError
+from trackproc.io.passfile import base_meta
+from trackproc.io.statefile import FORCE_LABELS, State
 from trackproc.isotime import iso_utc
+from trackproc.models import measurements as mm
 
 #: Kinds in canonical order (the order noise is drawn in).
 KINDS = vocabulary.KINDS
@@ -175,10 +179,6 @@ def simulate(initial, stations: Mapping, options: SimulateOptions, eop=None) -> 
 
     Raises :class:`~trackproc.errors.ProcessingError` when no pass is visible.
     """
-    from trackproc.dynamics import frames, geodesy, reference
-    from trackproc.dynamics import timescales as ts
-    from trackproc.io.statefile import State
-    from trackproc.models import measurements as mm
 
     _check_options(options, stations)
     start = np.datetime64(options.start if options.start is not None else initial.epoch, "ns")
@@ -277,7 +277,6 @@ def simulate(initial, stations: Mapping, options: SimulateOptions, eop=None) -> 
 def _full_force_orbit(initial, t_s, force_model, eop):
     """GCRF position, velocity, acceleration and jerk at ``t_s`` (s from the state's epoch) under
     the full force model (DOP853 + dense polynomials, trackproc.dynamics.forces)."""
-    from trackproc.dynamics import propagator
 
     try:
         traj = propagator.propagate_state(initial, t_s, force=force_model, eop=eop).raise_for_outcome()
@@ -288,8 +287,6 @@ def _full_force_orbit(initial, t_s, force_model, eop):
 
 
 def _meta(options, stations, names, visible, pass_ids_all, start, times, truth, initial, eop, sigmas) -> dict:
-    from trackproc.io.passfile import base_meta
-    from trackproc.io.statefile import FORCE_LABELS
 
     used = [n for s, n in enumerate(names) if visible[s].any()]
     passes = sorted({p for p in pass_ids_all[visible]})

@@ -24,6 +24,7 @@ from trackproc.pipeline.orbit_source import (Satellite, Sgp4Track, station_itrf,
 @dataclass
 class Block:
     """Samples of one station (or one ephemeris) and how to predict them."""
+
     rows: np.ndarray            # indices into the stacked observation vector
     kind: np.ndarray
     predict: object             # satrec -> predicted values at these rows
