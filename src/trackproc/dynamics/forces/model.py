@@ -102,6 +102,7 @@ class ForceModel:
     ap: float = 4.0
     empirical_rtn: tuple = (0.0, 0.0, 0.0)
     empirical_gcrf: tuple = (0.0, 0.0, 0.0)       # constant acceleration along GCRF X, Y, Z (m/s²)
+    empirical_gcrf_rate: tuple = (0.0, 0.0, 0.0)  # its growth per second from the epoch (m/s³)
     estimated: tuple = ()
     eop: object = None
     earth_radius_m: float = WGS84_A          # shadow cone and geodetic heights (WGS-84)
@@ -136,25 +137,30 @@ class ForceModel:
         sc = self.spacecraft
         emp = list(self.empirical_rtn)
         xyz = list(self.empirical_gcrf)
+        rate = list(self.empirical_gcrf_rate)
         for key, val in values.items():
             if key == "cr":
                 sc = replace(sc, cr=float(val))
             elif key == "cd":
                 sc = replace(sc, cd=float(val))
+            elif key in ("empirical_x_rate", "empirical_y_rate", "empirical_z_rate"):
+                rate["xyz".index(key[-6])] = float(val)
             elif key in ("empirical_x", "empirical_y", "empirical_z"):
                 xyz["xyz".index(key[-1])] = float(val)
             elif key in ("empirical_r", "empirical_t", "empirical_n"):
                 emp["rtn".index(key[-1])] = float(val)
             else:
                 raise ValueError(f"unknown force parameter {key!r}; expected one of {PARAMETERS}")
-        return replace(self, spacecraft=sc, empirical_rtn=tuple(emp), empirical_gcrf=tuple(xyz))
+        return replace(self, spacecraft=sc, empirical_rtn=tuple(emp), empirical_gcrf=tuple(xyz),
+                       empirical_gcrf_rate=tuple(rate))
 
     def parameter_values(self) -> dict:
         sc = self.spacecraft
         full = {"cr": sc.cr, "cd": sc.cd, "empirical_r": self.empirical_rtn[0],
                 "empirical_t": self.empirical_rtn[1], "empirical_n": self.empirical_rtn[2],
                 "empirical_x": self.empirical_gcrf[0], "empirical_y": self.empirical_gcrf[1],
-                "empirical_z": self.empirical_gcrf[2]}
+                "empirical_z": self.empirical_gcrf[2], "empirical_x_rate": self.empirical_gcrf_rate[0],
+                "empirical_y_rate": self.empirical_gcrf_rate[1], "empirical_z_rate": self.empirical_gcrf_rate[2]}
         return {k: full[k] for k in self.estimated}
 
     def describe(self) -> dict:
@@ -188,6 +194,8 @@ class ForceModel:
             out["empirical_rtn_m_s2"] = list(self.empirical_rtn)
         if any(self.empirical_gcrf) or any(p in ("empirical_x", "empirical_y", "empirical_z") for p in self.estimated):
             out["empirical_gcrf_m_s2"] = list(self.empirical_gcrf)
+        if any(self.empirical_gcrf_rate) or any(p.endswith("_rate") for p in self.estimated):
+            out["empirical_gcrf_rate_m_s3"] = list(self.empirical_gcrf_rate)
         if self.estimated:
             out["estimated"] = list(self.estimated)
         return out
@@ -204,7 +212,7 @@ class ForceModel:
             parts.append(f"drag ({self.atmosphere})")
         if self.relativity:
             parts.append("relativity")
-        if any(self.empirical_rtn) or any(self.empirical_gcrf):
+        if any(self.empirical_rtn) or any(self.empirical_gcrf) or any(self.empirical_gcrf_rate):
             parts.append("empirical")
         return "full (" + ", ".join(parts) + ")"
 
@@ -327,12 +335,13 @@ class Environment:
                 acc = acc + np.einsum("k,pki->pi", emp, rt)
             for i, key in enumerate(("empirical_r", "empirical_t", "empirical_n")):
                 unit[key] = rt[:, i, :]
-        xyz = np.asarray(mdl.empirical_gcrf, float)
+        xyz = np.asarray(mdl.empirical_gcrf, float) + t * np.asarray(mdl.empirical_gcrf_rate, float)
         if any(xyz):
             acc = acc + self.q @ xyz                         # GCRF axes in the integration frame
         if parts:
             for i, key in enumerate(("empirical_x", "empirical_y", "empirical_z")):
                 unit[key] = np.broadcast_to(self.q[:, i], r.shape)
+                unit[key + "_rate"] = np.broadcast_to(t * self.q[:, i], r.shape)
         return (acc, unit) if parts else acc
 
     def acceleration(self, t: float, r, v) -> np.ndarray:
