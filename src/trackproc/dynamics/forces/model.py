@@ -84,7 +84,9 @@ class ForceModel:
     ``third_bodies`` a subset of ``("sun", "moon")``, ``srp``/``drag``/``relativity``
     switches, ``atmosphere`` ``"harris-priester"`` (cosine exponent ``hp_exponent``) or
     ``"nrlmsis"`` (with ``f107``, ``f107a``, ``ap``), ``empirical_rtn`` a constant
-    acceleration in the radial/along-track/cross-track frame (m/s²), ``estimated`` the
+    acceleration in the radial/along-track/cross-track frame (m/s²), ``empirical_gcrf`` one along
+    the GCRF axes plus ``empirical_gcrf_rate`` times the seconds from the propagation epoch
+    (m/s², m/s³; Orekit's degree-1 ``PolynomialAccelerationModel``), ``estimated`` the
     parameters (of :data:`PARAMETERS`) whose partials the propagation carries, ``eop`` the
     Earth orientation.
     """
@@ -133,7 +135,8 @@ class ForceModel:
         return self.field.gm_m3_s2
 
     def with_parameters(self, **values) -> "ForceModel":
-        """A copy with ``cr``, ``cd``, ``empirical_r/t/n`` set (estimation updates)."""
+        """A copy with ``cr``, ``cd``, ``empirical_r/t/n``, ``empirical_x/y/z`` or
+        ``empirical_x/y/z_rate`` set (estimation updates)."""
         sc = self.spacecraft
         emp = list(self.empirical_rtn)
         xyz = list(self.empirical_gcrf)
