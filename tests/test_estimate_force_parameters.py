@@ -111,11 +111,12 @@ def test_cli_estimate_force_needs_force_full(run_cli, tmp_path):
 @pytest.mark.slow
 def test_force_parameter_columns_match_central_differences_of_the_measurement_model():
     problem = build_problem(simulated(3.0, 60.0), GUESS, STATIONS,
-                            options(estimate_force=["cr,cd,empirical-rtn,empirical-xyz"]), EOP)
+                            options(estimate_force=["cr,cd,empirical-rtn,empirical-xyz,empirical-xyz-rate"]), EOP)
     x = problem.x0.copy()
     _, jac = problem.model(x)
     # steps large against DOP853's step-selection noise (decimetres after eclipse crossings)
-    for name, h in (("cr", 0.5), ("cd", 0.5), *((f"empirical_{c}", 1e-6) for c in "rtnxyz")):
+    for name, h in (("cr", 0.5), ("cd", 0.5), *((f"empirical_{c}", 5e-6) for c in "rtnxyz"),
+                    *((f"empirical_{c}_rate", 5e-10) for c in "xyz")):
         k = problem.names.index(name)
         plus, minus = x.copy(), x.copy()
         plus[k] += h
@@ -124,7 +125,7 @@ def test_force_parameter_columns_match_central_differences_of_the_measurement_mo
         scale = np.abs(ref).max()
         assert scale > 0 and np.abs(jac[:, k] - ref).max() < 2e-2 * scale, name
         # the column is not the state's or another parameter's
-        others = [j for j in range(6, 14) if j != k]
+        others = [j for j in range(6, 17) if j != k]
         assert all(np.abs(jac[:, j] - ref).max() > 0.1 * scale for j in others), name
 
 
@@ -159,3 +160,8 @@ def test_empirical_gcrf_acceleration_displaces_the_orbit_by_half_a_t_squared():
         empirical_x=a[0], empirical_y=a[1], empirical_z=a[2])).state(t)
     np.testing.assert_allclose(pushed[:3] - ref[:3], 0.5 * a * t * t, rtol=3e-3)
     np.testing.assert_allclose(pushed[3:] - ref[3:], a * t, rtol=3e-3)
+    # a rate b (m/s³): the acceleration b t moves it by b t³/6
+    b = a / 10.0
+    grown = propagate(R0, V0, EPOCH, [t], force=base.with_parameters(
+        empirical_x_rate=b[0], empirical_y_rate=b[1], empirical_z_rate=b[2])).state(t)
+    np.testing.assert_allclose(grown[:3] - ref[:3], b * t ** 3 / 6, rtol=3e-3)

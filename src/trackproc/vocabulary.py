@@ -51,12 +51,16 @@ BIAS_UNITS = {"range_bias": "m", "doppler_offset": "Hz", "doppler_drift": "Hz/s"
 #: circular-orbit radius (seed 004 eq. 5).
 CONSTRAINT_PARAMETERS = {"r_ka": "m"}
 #: Force-model parameters ``estimate`` can estimate (``--estimate-force``) and their SI units:
-#: radiation-pressure and drag coefficients, a constant empirical acceleration in R, T, N.
+#: radiation-pressure and drag coefficients, a constant empirical acceleration in R, T, N, one
+#: along the GCRF axes X, Y, Z and its rate of change (``_rate``: the acceleration grows as
+#: ``rate * t``, t from the state's epoch; Orekit's degree-1 polynomial acceleration).
 FORCE_PARAMETERS = {"cr": "1", "cd": "1", "empirical_r": "m/s^2", "empirical_t": "m/s^2", "empirical_n": "m/s^2",
-                    "empirical_x": "m/s^2", "empirical_y": "m/s^2", "empirical_z": "m/s^2"}
+                    "empirical_x": "m/s^2", "empirical_y": "m/s^2", "empirical_z": "m/s^2",
+                    "empirical_x_rate": "m/s^3", "empirical_y_rate": "m/s^3", "empirical_z_rate": "m/s^3"}
 #: ``--estimate-force`` names standing for several parameters (R/T/N, or GCRF X/Y/Z axes).
 FORCE_PARAMETER_GROUPS = {"empirical-rtn": ("empirical_r", "empirical_t", "empirical_n"),
-                          "empirical-xyz": ("empirical_x", "empirical_y", "empirical_z")}
+                          "empirical-xyz": ("empirical_x", "empirical_y", "empirical_z"),
+                          "empirical-xyz-rate": ("empirical_x_rate", "empirical_y_rate", "empirical_z_rate")}
 #: Doppler-bias choices (``--doppler-bias``): a transmitter frequency offset, or offset and drift.
 DOPPLER_BIASES = ("offset", "offset+drift")
 #: ``refine``'s Doppler-bias choices: also ``none`` (a coherent two-way link has no offset).

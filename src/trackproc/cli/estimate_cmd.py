@@ -49,8 +49,9 @@ def estimate_command(
     estimate_force: List[str] = typer.Option(
         [], "--estimate-force", metavar="cr,cd,empirical-rtn",
         help="With --force full: estimate these force-model parameters (cr, cd, empirical-rtn = a constant "
-             "radial/along-track/cross-track acceleration, empirical-xyz = one along the GCRF axes, or single "
-             "components empirical_r ... empirical_z), from the "
+             "radial/along-track/cross-track acceleration, empirical-xyz = one along the GCRF axes, "
+             "empirical-xyz-rate = its growth per second, or single components empirical_r ... empirical_z_rate), "
+             "from the "
              "model's values (--cr, --cd; accelerations 0); comma list, repeatable. A-priori: --apriori-sigma "
              "cr=0.5, empirical=1e-8."),
     noise: Noise = typer.Option(

@@ -18,6 +18,7 @@ Names (the part after ``:`` is a station or pass id)::
     cr  cd                         radiation-pressure and drag coefficients (force model)
     empirical_r empirical_t empirical_n   constant empirical acceleration, R/T/N (m/s^2)
     empirical_x empirical_y empirical_z   the same along the GCRF axes (m/s^2)
+    empirical_x_rate ...           its growth along X, Y, Z per second from the epoch (m/s^3)
 
 This is seed 002's extended state vector (m motion parameters + N offsets, eq. 10) done
 generally: the measurement modifiers (:mod:`trackproc.models.modifiers`) own the bias drivers
@@ -55,7 +56,8 @@ FORCE_NAMES = vocabulary.FORCE_PARAMETERS
 DEFAULT_SCALES = {"position": 100.0, "velocity": 0.1, "range_bias": 10.0, "doppler_offset": 1.0,
                   "doppler_drift": 1e-3, "az_bias": 1e-4, "el_bias": 1e-4, "cr": 0.1, "cd": 0.1,
                   "empirical_r": 1e-9, "empirical_t": 1e-9, "empirical_n": 1e-9, "empirical_x": 1e-9,
-                  "empirical_y": 1e-9, "empirical_z": 1e-9}
+                  "empirical_y": 1e-9, "empirical_z": 1e-9, "empirical_x_rate": 1e-13, "empirical_y_rate": 1e-13,
+                  "empirical_z_rate": 1e-13}
 
 
 class DuplicateParameterError(ValueError):
@@ -347,8 +349,10 @@ def force_parameter(name: str, reference: float, *, scale: float | None = None,
     bounds = (0.0, math.inf) if name in ("cr", "cd") else (-math.inf, math.inf)
     what = {"cr": "radiation-pressure coefficient", "cd": "drag coefficient", "empirical_r": "radial",
             "empirical_t": "along-track", "empirical_n": "cross-track", "empirical_x": "GCRF X",
-            "empirical_y": "GCRF Y", "empirical_z": "GCRF Z"}[name]
-    if name.startswith("empirical"):
+            "empirical_y": "GCRF Y", "empirical_z": "GCRF Z"}[name.removesuffix("_rate")]
+    if name.endswith("_rate"):
+        what = "rate of the empirical acceleration (times t from the epoch), " + what
+    elif name.startswith("empirical"):
         what = "constant empirical acceleration, " + what
     return ParameterDriver(name, FORCE_NAMES[name], reference, DEFAULT_SCALES[name] if scale is None else scale,
                            apriori_sigma=apriori_sigma, bounds=bounds, description=what)

@@ -84,7 +84,9 @@ class ForceModel:
     ``third_bodies`` a subset of ``("sun", "moon")``, ``srp``/``drag``/``relativity``
     switches, ``atmosphere`` ``"harris-priester"`` (cosine exponent ``hp_exponent``) or
     ``"nrlmsis"`` (with ``f107``, ``f107a``, ``ap``), ``empirical_rtn`` a constant
-    acceleration in the radial/along-track/cross-track frame (m/s²), ``estimated`` the
+    acceleration in the radial/along-track/cross-track frame (m/s²), ``empirical_gcrf`` one along
+    the GCRF axes plus ``empirical_gcrf_rate`` times the seconds from the propagation epoch
+    (m/s², m/s³; Orekit's degree-1 ``PolynomialAccelerationModel``), ``estimated`` the
     parameters (of :data:`PARAMETERS`) whose partials the propagation carries, ``eop`` the
     Earth orientation.
     """
@@ -102,6 +104,7 @@ class ForceModel:
     ap: float = 4.0
     empirical_rtn: tuple = (0.0, 0.0, 0.0)
     empirical_gcrf: tuple = (0.0, 0.0, 0.0)       # constant acceleration along GCRF X, Y, Z (m/s²)
+    empirical_gcrf_rate: tuple = (0.0, 0.0, 0.0)  # its growth per second from the epoch (m/s³)
     estimated: tuple = ()
     eop: object = None
     earth_radius_m: float = WGS84_A          # shadow cone and geodetic heights (WGS-84)
@@ -132,29 +135,35 @@ class ForceModel:
         return self.field.gm_m3_s2
 
     def with_parameters(self, **values) -> "ForceModel":
-        """A copy with ``cr``, ``cd``, ``empirical_r/t/n`` set (estimation updates)."""
+        """A copy with ``cr``, ``cd``, ``empirical_r/t/n``, ``empirical_x/y/z`` or
+        ``empirical_x/y/z_rate`` set (estimation updates)."""
         sc = self.spacecraft
         emp = list(self.empirical_rtn)
         xyz = list(self.empirical_gcrf)
+        rate = list(self.empirical_gcrf_rate)
         for key, val in values.items():
             if key == "cr":
                 sc = replace(sc, cr=float(val))
             elif key == "cd":
                 sc = replace(sc, cd=float(val))
+            elif key in ("empirical_x_rate", "empirical_y_rate", "empirical_z_rate"):
+                rate["xyz".index(key[-6])] = float(val)
             elif key in ("empirical_x", "empirical_y", "empirical_z"):
                 xyz["xyz".index(key[-1])] = float(val)
             elif key in ("empirical_r", "empirical_t", "empirical_n"):
                 emp["rtn".index(key[-1])] = float(val)
             else:
                 raise ValueError(f"unknown force parameter {key!r}; expected one of {PARAMETERS}")
-        return replace(self, spacecraft=sc, empirical_rtn=tuple(emp), empirical_gcrf=tuple(xyz))
+        return replace(self, spacecraft=sc, empirical_rtn=tuple(emp), empirical_gcrf=tuple(xyz),
+                       empirical_gcrf_rate=tuple(rate))
 
     def parameter_values(self) -> dict:
         sc = self.spacecraft
         full = {"cr": sc.cr, "cd": sc.cd, "empirical_r": self.empirical_rtn[0],
                 "empirical_t": self.empirical_rtn[1], "empirical_n": self.empirical_rtn[2],
                 "empirical_x": self.empirical_gcrf[0], "empirical_y": self.empirical_gcrf[1],
-                "empirical_z": self.empirical_gcrf[2]}
+                "empirical_z": self.empirical_gcrf[2], "empirical_x_rate": self.empirical_gcrf_rate[0],
+                "empirical_y_rate": self.empirical_gcrf_rate[1], "empirical_z_rate": self.empirical_gcrf_rate[2]}
         return {k: full[k] for k in self.estimated}
 
     def describe(self) -> dict:
@@ -188,6 +197,8 @@ class ForceModel:
             out["empirical_rtn_m_s2"] = list(self.empirical_rtn)
         if any(self.empirical_gcrf) or any(p in ("empirical_x", "empirical_y", "empirical_z") for p in self.estimated):
             out["empirical_gcrf_m_s2"] = list(self.empirical_gcrf)
+        if any(self.empirical_gcrf_rate) or any(p.endswith("_rate") for p in self.estimated):
+            out["empirical_gcrf_rate_m_s3"] = list(self.empirical_gcrf_rate)
         if self.estimated:
             out["estimated"] = list(self.estimated)
         return out
@@ -204,7 +215,7 @@ class ForceModel:
             parts.append(f"drag ({self.atmosphere})")
         if self.relativity:
             parts.append("relativity")
-        if any(self.empirical_rtn) or any(self.empirical_gcrf):
+        if any(self.empirical_rtn) or any(self.empirical_gcrf) or any(self.empirical_gcrf_rate):
             parts.append("empirical")
         return "full (" + ", ".join(parts) + ")"
 
@@ -327,12 +338,13 @@ class Environment:
                 acc = acc + np.einsum("k,pki->pi", emp, rt)
             for i, key in enumerate(("empirical_r", "empirical_t", "empirical_n")):
                 unit[key] = rt[:, i, :]
-        xyz = np.asarray(mdl.empirical_gcrf, float)
+        xyz = np.asarray(mdl.empirical_gcrf, float) + t * np.asarray(mdl.empirical_gcrf_rate, float)
         if any(xyz):
             acc = acc + self.q @ xyz                         # GCRF axes in the integration frame
         if parts:
             for i, key in enumerate(("empirical_x", "empirical_y", "empirical_z")):
                 unit[key] = np.broadcast_to(self.q[:, i], r.shape)
+                unit[key + "_rate"] = np.broadcast_to(t * self.q[:, i], r.shape)
         return (acc, unit) if parts else acc
 
     def acceleration(self, t: float, r, v) -> np.ndarray:

@@ -22,7 +22,8 @@ DOPPLER_BIAS_PER = ("pass", "station")
 LIGHT_TIME_MARGIN_S = 1.0
 #: Names that stand for several parameters in ``apriori_sigma``.
 GROUPS = {"position": ("x", "y", "z"), "velocity": ("vx", "vy", "vz"), "state": pm.STATE_NAMES,
-          "empirical": ("empirical_r", "empirical_t", "empirical_n", "empirical_x", "empirical_y", "empirical_z")}
+          "empirical": ("empirical_r", "empirical_t", "empirical_n", "empirical_x", "empirical_y", "empirical_z"),
+          "empirical_rate": ("empirical_x_rate", "empirical_y_rate", "empirical_z_rate")}
 RESIDUAL_COLUMNS = ("time", "station", "pass_id", "kind", "unit", "observed", "computed", "residual",
                     "normalized_residual", "sigma", "edited")
 
@@ -121,8 +122,8 @@ def force_parameter_names(items: Sequence[str]) -> tuple:
             for name in members:
                 if name not in vocabulary.FORCE_PARAMETERS:
                     raise InputError("unknown force parameter", column="--estimate-force", found=part,
-                                     expected="a comma list of cr, cd, empirical-rtn, empirical-xyz or "
-                                              "empirical_r/_t/_n/_x/_y/_z")
+                                     expected="a comma list of cr, cd, empirical-rtn, empirical-xyz, "
+                                              "empirical-xyz-rate or empirical_r/_t/_n/_x/_y/_z/_x_rate/..")
                 if name in out:
                     raise InputError("duplicate parameter", column="--estimate-force", found=name,
                                      expected="each parameter once")
