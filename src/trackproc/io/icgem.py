@@ -87,7 +87,6 @@ def read_icgem(path, degree: int | None = None, order: int | None = None, date=N
         when = float(d.astype("int64")) / 86400.0
     header: dict[str, str] = {}
     in_header = False
-    seen_head = False
     static: dict = {}
     terms: list = []                     # (kind, n, m, c, s, t0, t1, period)
     lmax = None
@@ -99,12 +98,9 @@ def read_icgem(path, degree: int | None = None, order: int | None = None, date=N
             key = words[0].lower()
             where = {"file": fname, "row": lineno}
             if key == "begin_of_head":
-                in_header = seen_head = True
+                in_header = True
                 continue
             if key == "end_of_head":
-                if not seen_head:
-                    in_header = False
-                seen_head = True
                 in_header = False
                 lmax = _check_header(header, fname, lineno)
                 if degree is not None and degree > lmax:
