@@ -99,6 +99,10 @@ SLOW_SUBPROCESS = {
     "test_propagate_cli.py": {"test_subprocess_pipe_arrow_stream"},
     "test_accuracy_cli.py": {"test_real_pipe"},
     "test_cli_basics.py": {"test_reader_closing_the_pipe_early_ends_quietly_with_141"},
+    "test_batch_hostile.py": {"test_sigterm_while_waiting_for_the_lock_or_working_alone",
+                              "test_sigterm_stops_the_pool_and_the_next_run_resumes",
+                              "test_sigkill_of_the_driver_ends_its_workers"},
+    "test_hostile_time.py": {"test_parquet_year_3000_never_aborts"},
     "test_batch.py": {
         "test_dask_cluster_and_process_pool_give_the_serial_results", "test_a_dying_worker_fails_only_its_own_input",
         "test_a_killed_run_resumes_where_it_stopped", "test_two_overlapping_runs_do_not_corrupt_each_other",

@@ -44,6 +44,7 @@ def _seconds(values, start=START) -> np.ndarray:
     return (t - start) / np.timedelta64(1, "s")
 
 
+@pytest.mark.slow   # a minute-by-minute SGP4 scan of a day: seconds
 def test_tle_passes_match_a_brute_force_sgp4_erfa_scan(run_cli, write, tmp_path):
     tle = write("iss.tle", ISS)
     stations = write("st.csv", "station,lat_deg,lon_deg,height_m\nZHY,50.25,28.66,230\nCPH,55.7,12.55,30\n")
