@@ -10,6 +10,7 @@ import typer
 
 from trackproc.cli.app import app
 from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, RangeRateModelOpt
+from trackproc.cli.force_options import ForceSettings, force_options, full_force_model
 from trackproc.cli.propagate_cmd import OrbitForce, OrbitForceOpt
 
 log = logging.getLogger("trackproc")
@@ -22,6 +23,7 @@ class Remove(str, Enum):
 
 
 @app.command("compare")
+@force_options
 def compare_command(
     pass_file: str = typer.Argument(..., metavar="PASS", help="Pass file (Parquet, Arrow, CSV); - for stdin."),
     prediction: str = typer.Argument(..., metavar="STATE.json|TLE|metadata",
@@ -44,6 +46,7 @@ def compare_command(
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
                                        help="Plot the residuals per pass and kind, before and after the removal "
                                             "(needs matplotlib: trackproc[plot])."),
+    force_settings: ForceSettings = None,
 ) -> None:
     """Compare a pass with a prediction: residuals observed - predicted per sample (-o), and per
     pass and kind the RMS after removing the pass's own fitted offset (and drift), with those
@@ -94,6 +97,7 @@ def compare_command(
     extra = read_stations(stations) if stations is not None else None
     options = CompareOptions(remove=remove.value, force=force.value if force is not None else None,
                              earth=earth.value, range_rate_model=range_rate_model.value)
+    options.force_model = full_force_model(force_settings, orbit, force, orientation)
     residuals, summary = compare(table, orbit, options, orientation, extra)
     text = json.dumps(json_ready(summary), indent=2) + "\n"
     if plot is not None:

@@ -219,3 +219,14 @@ def force_options(fn):
     hints.update({name: ann for name, (_, ann) in OPTIONS.items()})
     wrapper.__annotations__ = hints
     return wrapper
+
+
+def full_force_model(force_settings, orbit, force, orientation):
+    """The ForceModel of ``--force full`` for a STATE|TLE argument (None for another force; the
+    full-only options with another force are a usage error)."""
+    from trackproc.io.tle import tle_epoch
+    from trackproc.pipeline.orbit_source import resolve_force
+
+    key = resolve_force(orbit, force.value if force is not None else None, allow_full=True)
+    epoch = orbit.state.epoch if orbit.state is not None else tle_epoch(orbit.tle)
+    return force_settings.model(key, epoch, orientation, orbit.state)

@@ -11,6 +11,7 @@ import typer
 
 from trackproc.cli.app import app
 from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, OutputOpt, RangeRateModelOpt
+from trackproc.cli.force_options import ForceSettings, force_options, full_force_model
 from trackproc.cli.propagate_cmd import OrbitForce, OrbitForceOpt
 
 log = logging.getLogger("trackproc")
@@ -23,6 +24,7 @@ class ScheduleFormat(str, Enum):
 
 
 @app.command("passes")
+@force_options
 def passes_command(
     orbit: str = typer.Argument(..., metavar="STATE.json|TLE", help="Orbit state file or TLE; - for stdin."),
     stations: str = typer.Option(..., "--stations", metavar="STATIONS.csv",
@@ -45,6 +47,7 @@ def passes_command(
                                                  help="csv, json or md (Markdown); default from the suffix, "
                                                       "else csv."),
     output: Optional[str] = OutputOpt,
+    force_settings: ForceSettings = None,
 ) -> None:
     """Pass schedule per station: AOS, TCA (closest approach), LOS times, maximum elevation,
     azimuth, elevation and range at AOS/TCA/LOS, and Doppler there with --carrier-hz. A TLE is
@@ -85,6 +88,7 @@ def passes_command(
                             range_rate_model=range_rate_model.value)
     table = read_stations(stations)
     source = read_orbit(orbit, orientation)
+    options.force_model = full_force_model(force_settings, source, force, orientation)
     frame, meta = find_passes(source, table, options, orientation)
     if "note" in meta:
         log.info("%s", meta["note"])

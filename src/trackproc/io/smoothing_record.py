@@ -245,7 +245,6 @@ def split_records(meta: dict, where: str):
 
 
 def _json_size(fits) -> int:
-
     return len(json.dumps(fits, separators=(",", ":"), default=str))
 
 
@@ -272,7 +271,6 @@ def attach_records(meta: dict, source: str, stream_rest: bytes | None = None) ->
 
 
 def _check_table(table, where: str):
-
     need = {"station", "pass_id", "kind", "status", *_ARRAYS, "scaled_derived", "record"}
     if not need <= set(table.column_names):
         raise InputError("not a table of smoothing records", file=where, found=", ".join(table.column_names),
@@ -281,7 +279,6 @@ def _check_table(table, where: str):
 
 
 def _stream_records(rest: bytes | None, source: str):
-
     try:
         if not rest:
             raise ValueError("nothing after the table")
@@ -292,7 +289,6 @@ def _stream_records(rest: bytes | None, source: str):
 
 
 def _sidecar_records(pointer: dict, source: str):
-
     name = pointer.get("file")
     if not isinstance(name, str) or Path(name).name != name:
         raise InputError("invalid metadata", file=source, column="smoothing.records.file", found=name,

@@ -40,6 +40,8 @@ UNITS = {"range": "m", "range_rate": "m/s", "doppler": "Hz", "elevation": "rad",
 class CompareOptions:
     remove: str = "offset+drift"
     force: Optional[str] = None
+    #: The ForceModel of ``force="full"`` (trackproc.dynamics.forces; cli.force_options builds it).
+    force_model: Optional[object] = None
     earth: str = "wgs84"
     range_rate_model: str = "doppler"
 
@@ -76,7 +78,7 @@ def compare(table, orbit, options: CompareOptions, eop=None, stations: Optional[
     :mod:`trackproc.io.residuals`) and the summary dict."""
     if options.remove not in REMOVE:
         raise InputError("unknown trend removal", column="--remove", found=options.remove, expected=", ".join(REMOVE))
-    force = resolve_force(orbit, options.force)
+    force = resolve_force(orbit, options.force, allow_full=options.force_model is not None)
     frame = table.frame
     if len(frame) == 0:
         raise InputError("no samples", file=table.meta.get("source"), expected="a pass file with samples")
@@ -96,7 +98,7 @@ def compare(table, orbit, options: CompareOptions, eop=None, stations: Optional[
     t0 = times.min()
     jd0 = ts.datetime64_to_jd_utc(t0)
     t_s = np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(times), jd0), float)
-    sat = Satellite(orbit, force, t0, 0.0, float(t_s.max()), eop)
+    sat = Satellite(orbit, force, t0, 0.0, float(t_s.max()), eop, force_model=options.force_model)
     predicted = np.full(len(frame), np.nan)
     station_col, kind_col = frame["station"].to_numpy(), frame["kind"].to_numpy()
     for name in sorted(set(station_col)):
@@ -138,7 +140,8 @@ def compare(table, orbit, options: CompareOptions, eop=None, stations: Optional[
     summary = {
         "generator": "trackproc compare",
         "prediction": orbit.source,
-        "force_model": SGP4_LABEL if force == "sgp4" else force,
+        "force_model": (SGP4_LABEL if force == "sgp4" else options.force_model.label() if options.force_model is not None
+                        else force),
         "remove": options.remove,
         "residual": "observed - predicted; rms after removing the fitted offset (and drift, per s from "
                     "reference_time) of each pass and kind; sigmas of the fit are formal (from the file's sigmas)",

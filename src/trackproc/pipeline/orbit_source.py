@@ -118,14 +118,14 @@ def initial_state(initial: str, tables: list, eop=None, at=None):
 
 def resolve_force(orbit: OrbitInput, force: Optional[str], allow_full: bool = False) -> str:
     """``--force``: default ``sgp4`` for a TLE, ``j2`` for a state; ``sgp4`` needs a TLE;
-    ``full`` only where the command builds the full force model (``allow_full``: propagate)."""
+    ``full`` only where the command builds the full force model (``allow_full``)."""
     if force is None:
         return "sgp4" if orbit.tle is not None else "j2"
     if force not in FORCES:
         raise InputError("unknown force model", column="--force", found=force, expected=", ".join(FORCES))
     if force == "full" and not allow_full:
         raise InputError("not offered by this command", column="--force", found="full",
-                         expected="sgp4, j2 or two-body (--force full: propagate, simulate, accuracy, estimate)")
+                         expected="sgp4, j2 or two-body (--force full: propagate, passes, compare, simulate, accuracy, estimate)")
     if force == "sgp4" and orbit.tle is None:
         raise InputError("SGP4 needs a TLE", file=orbit.source, column="--force", found="sgp4",
                          expected="a TLE input, or --force j2 / two-body for a state file")
@@ -149,8 +149,8 @@ class Satellite:
     ``j2`` (a state; a TLE is first turned into its SGP4 state at ``t0``).
     """
 
-    def __init__(self, orbit: OrbitInput, force: str, t0, lo_s: float, hi_s: float, eop=None, tol: float = 1e-13):
-
+    def __init__(self, orbit: OrbitInput, force: str, t0, lo_s: float, hi_s: float, eop=None, tol: float = 1e-13,
+                 force_model=None):
         self.force, self.eop = force, eop
         self.t0 = np.datetime64(t0, "ns")
         self.jd0 = tuple(float(x) for x in ts.datetime64_to_jd_utc(self.t0))
@@ -158,15 +158,14 @@ class Satellite:
         self.traj = None
         self.initial = orbit.state
         if force != "sgp4":
-
             if orbit.state is None:
-
                 self.initial = tle_state(orbit.tle, at=self.t0, eop=eop)
             shift = float(ts.seconds_since(self.jd0, self.initial.jd_utc))
             margin = 4 * FD_STEP_S
             span = np.array([lo_s - margin, hi_s + margin]) + shift
             try:
-                traj = propagator.propagate_state(self.initial, span, force=force, eop=eop, tol=tol)
+                traj = propagator.propagate_state(self.initial, span, force=force, eop=eop,
+                                                  tol=tol if force_model is None else 1e-12, force_model=force_model)
             except (ValueError, ArithmeticError) as exc:
                 raise ProcessingError(f"propagation failed: {exc}") from None
             self.traj = traj.raise_for_outcome()
@@ -224,7 +223,6 @@ class Sgp4Track:
     transformations evaluated once: ``fit-tle`` evaluates many element sets at the same samples."""
 
     def __init__(self, times, eop=None, derivatives: bool = True):
-
         t = np.asarray(times, dtype="datetime64[ns]").reshape(-1)
         self.times, self.derivatives = t, derivatives
         step = np.timedelta64(int(FD_STEP_S * 1e9), "ns")
@@ -238,7 +236,6 @@ class Sgp4Track:
         return np.split(x, 3)[1] if self.derivatives else x
 
     def _all(self, sat) -> np.ndarray:
-
         r, v = sgp4_teme(sat, self.jd1, self.jd2)
         return np.einsum("nij,nj->ni", self.maps, np.concatenate([r, v], -1))
 
@@ -250,7 +247,6 @@ class Sgp4Track:
 
 
 def station_itrf(station, earth: str = "wgs84") -> np.ndarray:
-
     return geodesy.geodetic_to_itrf(float(station.lat_deg) * DEG, float(station.lon_deg) * DEG,
                                     float(station.height_m), earth)
 

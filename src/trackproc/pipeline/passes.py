@@ -52,6 +52,8 @@ class PassesOptions:
     min_elevation_deg: float = 0.0
     carrier_hz: Optional[float] = None
     force: Optional[str] = None
+    #: The ForceModel of ``force="full"`` (trackproc.dynamics.forces; cli.force_options builds it).
+    force_model: Optional[object] = None
     earth: str = "wgs84"
     range_rate_model: str = "doppler"
 
@@ -212,11 +214,11 @@ def find_passes(orbit, stations: dict, options: PassesOptions, eop=None):
     ``stations`` (name -> Station): a DataFrame (columns :data:`COLUMN_ORDER`, the Doppler ones
     only with a carrier; times UTC ``datetime64``) sorted by AOS then station, and metadata."""
     _check(options)
-    force = resolve_force(orbit, options.force)
+    force = resolve_force(orbit, options.force, allow_full=options.force_model is not None)
     start = options.start
     if start is None:
         start = orbit.state.epoch if orbit.state is not None else tle_epoch(orbit.tle)
-    sat = Satellite(orbit, force, start, 0.0, options.span_s, eop)
+    sat = Satellite(orbit, force, start, 0.0, options.span_s, eop, force_model=options.force_model)
     rows = []
     for name in sorted(stations):
         rows.extend(station_passes(sat, stations[name], options))
@@ -227,7 +229,8 @@ def find_passes(orbit, stations: dict, options: PassesOptions, eop=None):
     meta = {
         "generator": "trackproc passes",
         "orbit": orbit.source,
-        "force_model": SGP4_LABEL if force == "sgp4" else force,
+        "force_model": (SGP4_LABEL if force == "sgp4" else options.force_model.label() if options.force_model is not None
+                        else force),
         "start": format_epoch(start),
         "end": format_epoch(sat.times(options.span_s)[0]),
         "step_s": options.step_s,

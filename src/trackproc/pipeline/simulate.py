@@ -287,7 +287,6 @@ def _full_force_orbit(initial, t_s, force_model, eop):
 
 
 def _meta(options, stations, names, visible, pass_ids_all, start, times, truth, initial, eop, sigmas) -> dict:
-
     used = [n for s, n in enumerate(names) if visible[s].any()]
     passes = sorted({p for p in pass_ids_all[visible]})
     station_meta = {}

@@ -190,7 +190,6 @@ def reepoch(orbit, epoch, template_bstar, eop):
 
 
 def mean_elements(x, epoch):
-
     c = tf.classical(x)
     return MeanElements(epoch=epoch, inclination_deg=c["inclination_deg"], raan_deg=c["raan_deg"],
                         eccentricity=c["eccentricity"], arg_perigee_deg=c["arg_perigee_deg"],
