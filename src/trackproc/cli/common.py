@@ -140,6 +140,10 @@ def summary(text: str) -> None:
 
 
 JsonSummaryOpt = typer.Option(False, "--json", help="The stderr summary as one JSON object (for scripts), not text.")
+#: ``--strict`` of the commands with a quality verdict (README "Exit codes").
+StrictOpt = typer.Option(False, "--strict",
+                         help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' result always exits 1); "
+                              "the outputs are written either way.")
 
 
 def elements_line(state) -> str:

@@ -12,7 +12,7 @@ from trackproc.cli.app import app
 from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc import vocabulary
 from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, Noise, OscillatorNoiseOpt,
-                                  OutputOpt, RangeRateModel, choices, named_values, resolve_output)
+                                  OutputOpt, StrictOpt, RangeRateModel, choices, named_values, resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -113,10 +113,7 @@ def estimate_command(
                                        help="Plot the residuals per kind in their units, RMS per pass (needs matplotlib: "
                                             "pip install 'trackproc[plot]')."),
     as_json: bool = JsonSummaryOpt,
-    strict: bool = typer.Option(
-        False, "--strict",
-        help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' solution always exits 1); the outputs "
-             "are written either way."),
+    strict: bool = StrictOpt,
     output: Optional[str] = OutputOpt,
     force_settings: ForceSettings = None,
 ) -> None:

@@ -8,7 +8,8 @@ from typing import List, Optional
 import typer
 
 from trackproc.cli.app import app
-from trackproc.cli.common import Dut1Opt, EarthOpt, EopOpt, JsonSummaryOpt, RangeRateModelOpt, resolve_output
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, JsonSummaryOpt, RangeRateModelOpt, StrictOpt,
+                                  resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -68,9 +69,7 @@ def fit_tle_command(
                                             help="Write the residuals of the fit (Parquet, or CSV by the .csv "
                                                  "suffix; estimate's columns)."),
     as_json: bool = JsonSummaryOpt,
-    strict: bool = typer.Option(False, "--strict",
-                                help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' fit always "
-                                     "exits 1); the TLE is written either way."),
+    strict: bool = StrictOpt,
     output: str = typer.Option("-", "-o", "--output", help="The new TLE (default: stdout)."),
 ) -> None:
     """Fit a TLE (SGP4 mean elements and B*) to Doppler, range-rate, range or angle passes and/or to

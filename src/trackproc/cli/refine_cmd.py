@@ -11,7 +11,7 @@ import typer
 from trackproc.cli.app import app
 from trackproc import vocabulary
 from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, Noise, OscillatorNoiseOpt,
-                                  OutputOpt, RangeRateModel, choices, named_values, resolve_output)
+                                  OutputOpt, StrictOpt, RangeRateModel, choices, named_values, resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -118,10 +118,7 @@ def refine_command(
                                        help="Plot the data with the refined model, the residuals and what the pass "
                                             "cannot see (needs matplotlib: pip install 'trackproc[plot]')."),
     as_json: bool = JsonSummaryOpt,
-    strict: bool = typer.Option(
-        False, "--strict",
-        help="Exit 1 when the quality verdict is 'suspect' too (a 'rejected' solution always exits 1); the output "
-             "is written either way."),
+    strict: bool = StrictOpt,
     output: Optional[str] = OutputOpt,
 ) -> None:
     """Refine a stale orbit state from one Doppler (or range-rate) pass of one station, one- or

@@ -59,7 +59,7 @@ from trackproc.methods.whitening import (MarkovFactor, PassCovariance, effective
                                         effective_samples_beyond)
 
 __all__ = ["NoiseModel", "NoiseFit", "PassCovariance", "fit_noise", "restricted_loglik", "MODELS",
-           "effective_samples", "effective_samples_beyond", "lag1_correlation"]
+           "effective_samples", "effective_samples_beyond", "lag1_correlation", "candidate_models"]
 
 #: Models, by the components they add to white noise.
 MODELS = ("white", "ar1", "walk", "ar1+walk")
@@ -257,6 +257,15 @@ def _optimise(fun, start, bounds):
                     options={"xatol": 0.05, "fatol": 0.02, "maxfev": 30 * len(start)})
     z = np.clip(best.x, [b[0] for b in bounds], [b[1] for b in bounds])
     return z, -float(fun(z))
+
+
+def candidate_models(noise: str, oscillator: bool) -> tuple:
+    """The noise models REML chooses among for ``--noise NOISE``: ``auto`` = every model on a
+    one-way link with a transmitter frequency (:data:`MODELS`), white or AR(1) otherwise (no
+    oscillator to wander); any other value is that model alone."""
+    if noise == "auto":
+        return MODELS if oscillator else ("white", "ar1")
+    return (noise,)
 
 
 def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Optional[float] = None,

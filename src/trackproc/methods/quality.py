@@ -77,6 +77,17 @@ def chi2_limit(dof: int, probability: float = GATE_PROBABILITY) -> float:
     return 2.0 * float(gammaincinv(max(int(dof), 1) / 2.0, probability))
 
 
+def add_apriori_check(q, chi2: float, rows: int, noun: str, conflict: str) -> None:
+    """Reason ``apriori_conflict`` of a solution that kept its a-priori: ``ok`` when its share of
+    χ² is within the 99.9 % point of χ²(rows), ``rejected`` (with ``conflict`` saying why the
+    covariance then fails) beyond it."""
+    limit = chi2_limit(rows)
+    ok = chi2 <= limit
+    q.add("apriori_conflict", "ok" if ok else "rejected",
+          f"a-priori chi2 {chi2:.4g} over {rows} {noun} (99.9 % limit {limit:.3g})" + ("" if ok else ": " + conflict),
+          value=chi2, limit=limit)
+
+
 def variance_factor_limit(dof: int, probability: float = GATE_PROBABILITY) -> float:
     """Upper ``probability`` quantile of the variance factor χ²(dof)/dof of a consistent fit."""
     return chi2_limit(dof, probability) / max(int(dof), 1)

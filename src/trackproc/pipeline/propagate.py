@@ -188,13 +188,7 @@ def propagate_tle(tle, options: PropagateOptions, eop=None) -> PropagateResult:
     if options.station is not None:
         prediction = observe(sat, options.station, t_s, carrier_hz=options.carrier_hz or 1.0,
                              range_rate_model=options.range_rate_model, earth=options.earth)
-        columns["range_m"] = prediction.range_m
-        columns["range_rate_m_s"] = prediction.range_rate_m_s
-        if options.carrier_hz is not None:
-            columns["doppler_hz"] = -options.carrier_hz * prediction.range_rate_m_s / C_LIGHT
-        columns["azimuth_deg"] = prediction.azimuth_rad / DEG
-        columns["elevation_deg"] = prediction.elevation_rad / DEG
-        columns["light_time_s"] = prediction.light_time_s
+        columns.update(station_columns(prediction, options.carrier_hz))
     frame = pd.DataFrame(columns)
     if options.visible_only:
         keep = visible_rows(prediction, options, times)
@@ -254,13 +248,7 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
                                     light_time=options.light_time, partials=cov0 is not None)
         except ArithmeticError as exc:
             raise ProcessingError(f"measurement prediction failed: {exc}") from None
-        columns["range_m"] = prediction.range_m
-        columns["range_rate_m_s"] = prediction.range_rate_m_s
-        if options.carrier_hz is not None:
-            columns["doppler_hz"] = -options.carrier_hz * prediction.range_rate_m_s / C_LIGHT
-        columns["azimuth_deg"] = prediction.azimuth_rad / DEG
-        columns["elevation_deg"] = prediction.elevation_rad / DEG
-        columns["light_time_s"] = prediction.light_time_s
+        columns.update(station_columns(prediction, options.carrier_hz))
         if cov0 is not None:
             h_r, h_rr = prediction.d_range_d_state, prediction.d_range_rate_d_state
             columns["sigma_range_m"] = np.sqrt(np.einsum("ni,ij,nj->n", h_r, cov0, h_r))
@@ -369,6 +357,17 @@ def oem_identity(initial, object_name: Optional[str] = None, object_id: Optional
     name = object_name or (initial.extra.get("tle_name") if isinstance(initial.extra, dict) else None) or "UNKNOWN"
     ident = object_id or (international_designator(tle[0]) if tle else None) or "UNKNOWN"
     return name, ident
+
+
+def station_columns(prediction, carrier_hz) -> dict:
+    """The ``--at-station`` columns of a prediction (either engine's): range, range-rate, one-way
+    Doppler at ``carrier_hz`` (none without), azimuth, elevation in degrees, light time."""
+    out = {"range_m": prediction.range_m, "range_rate_m_s": prediction.range_rate_m_s}
+    if carrier_hz is not None:
+        out["doppler_hz"] = -carrier_hz * prediction.range_rate_m_s / C_LIGHT
+    out.update(azimuth_deg=prediction.azimuth_rad / DEG, elevation_deg=prediction.elevation_rad / DEG,
+               light_time_s=prediction.light_time_s)
+    return out
 
 
 def visible_rows(prediction, options, times) -> np.ndarray:

@@ -306,11 +306,8 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None):
                   f"the data contradict the state a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
                   f"{a['limit']:.3g}) and cannot carry a looser one", value=a["chi2_before"], limit=a["limit"])
     elif sol.n_prior:
-        limit = qm.chi2_limit(sol.n_prior)
-        q.add("apriori_conflict", "ok" if sol.chi2_prior <= limit else "rejected",
-              f"a-priori chi2 {sol.chi2_prior:.4g} over {sol.n_prior} constraints (99.9 % limit {limit:.3g})"
-              + ("" if sol.chi2_prior <= limit else ": the data and the a-priori disagree, the covariance that leans "
-                 "on the a-priori does not hold"), value=sol.chi2_prior, limit=limit)
+        qm.add_apriori_check(q, sol.chi2_prior, sol.n_prior, "constraints",
+                             "the data and the a-priori disagree, the covariance that leans on the a-priori does not hold")
     vf_limit = qm.variance_factor_limit(sol.dof) if sol.dof > 0 else None
     if sol.dof > 0 and math.isfinite(sol.variance_factor):
         q.add("variance_factor", "ok" if sol.variance_factor <= vf_limit else "suspect",
@@ -363,13 +360,8 @@ def pass_noise(problem: Problem, sol, opt: EstimateOptions):
         jac = np.asarray(jac_all, float)[rows]
         wander = next((b.modifier for b in wanders if np.isin(rows, b.rows).all()), None)
         osc = wander is not None
-        if opt.noise == "auto":
-            models = nz.MODELS if osc else ("white", "ar1")
-        elif opt.noise == "white":
-            models = ("white",)
-        else:
-            models = (opt.noise,)
-        nf = nz.fit_noise(t[keep], np.asarray(sol.residual, float)[rows][keep], jac[keep], models=models,
+        nf = nz.fit_noise(t[keep], np.asarray(sol.residual, float)[rows][keep], jac[keep],
+                          models=nz.candidate_models(opt.noise, osc),
                           walk=wander.walk if osc else None, t0=float(t.min()))
         d = nf.as_dict()
         d.pop("candidates", None)

@@ -151,11 +151,9 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
     if not sol.converged:
         q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
     if sol.n_prior:
-        limit = qm.chi2_limit(sol.n_prior)
-        q.add("apriori_conflict", "ok" if sol.chi2_prior <= limit else "rejected",
-              f"a-priori chi2 {sol.chi2_prior:.4g} over {sol.n_prior} elements (99.9 % limit {limit:.3g})"
-              + ("" if sol.chi2_prior <= limit else ": the data contradict the initial orbit's a-priori, the "
-                 "covariance that leans on it does not hold"), value=sol.chi2_prior, limit=limit)
+        qm.add_apriori_check(q, sol.chi2_prior, sol.n_prior, "elements",
+                             "the data contradict the initial orbit's a-priori, the covariance that leans on it "
+                             "does not hold")
     # what the data leave undetermined (only possible without the a-priori): sigmas beyond the
     # default a-priori's, i.e. less than an initial TLE already knows
     loose = {name: float(sol.sigma[k] / math.sqrt(prior_cov[k, k]))

@@ -48,14 +48,8 @@ def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinem
     if osc and not has_drift:        # the drift column (Hz/s; the offset's column times t - t0)
         i_off = [i for i, n in enumerate(ref.problem.names) if n.startswith("doppler_offset")][0]
         x = np.column_stack([x, x[:, i_off] * (t - t0)])
-    if opt.noise == "auto":
-        models = nz.MODELS if osc else ("white", "ar1")
-    elif opt.noise == "white":
-        models = ("white",)
-    else:
-        models = (opt.noise,)
-    walk = opt.oscillator_noise
-    nf = nz.fit_noise(t[keep], r[keep], x[keep], models=models, walk=walk, t0=t0)
+    nf = nz.fit_noise(t[keep], r[keep], x[keep], models=nz.candidate_models(opt.noise, osc),
+                      walk=opt.oscillator_noise, t0=t0)
     cov = nz.PassCovariance(meas.sigma, t, [(np.arange(t.size), nf.model, t0)])
     want_drift = False
     drift_t = None
@@ -77,7 +71,7 @@ def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinem
                       and abs(drift_t) > max(DRIFT_T, math.sqrt(math.log(max(keep.sum(), 3)))))
     report = nf.as_dict()
     report.update({"option": opt.noise,
-                   "oscillator_noise_given": walk, "link": link_mode(ref)})
+                   "oscillator_noise_given": opt.oscillator_noise, "link": link_mode(ref)})
     if drift_t is not None:
         report["drift_t"] = drift_t
     bias = [n.split(":")[0] for n in ref.problem.names if n.startswith("doppler_")]
