@@ -27,6 +27,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "tests" / "io"))  # test_forces_orekit
 EPOCH = "2020-04-05T00:00:00"
 LADDER_RTOL = (1e-10, 3e-11, 1e-11, 3e-12, 1e-12)
 LADDER_OREKIT_M = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6)

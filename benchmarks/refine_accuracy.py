@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "report"))  # test_refine
 
 #: (label, kind, link mode, noise 1-sigma (Hz for Doppler, m/s for range-rate), bias model)
 SETS = [

@@ -43,7 +43,7 @@ from pathlib import Path  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path[:0] = [str(HERE), str(ROOT / "tests")]
+sys.path[:0] = [str(HERE), str(ROOT / "tests"), str(ROOT / "tests" / "pipeline")]  # test_refine_realdata
 
 SECTIONS = ("help", "propagation", "refine", "estimate", "batch")
 RATIOS: list[tuple[str, str]] = []      # (what, figure) collected for the closing summary

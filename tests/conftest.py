@@ -116,22 +116,21 @@ SLOW_SUBPROCESS = {
 
 
 # --- the layers -------------------------------------------------------------------------------------
-# Each test module is marked with the highest layer of src/trackproc it exercises (layer_cli ... layer_dynamics;
-# the CLI when it runs commands), read from its imports: ``pytest -m layer_dynamics`` runs the bottom
-# layer's tests. (The files stay flat in tests/ while other work edits them; this is the map for a move.)
-LAYERS = ("cli", "pipeline", "io", "methods", "models", "dynamics")
-_LAYER_IMPORT = re.compile(r"trackproc\.(" + "|".join(LAYERS) + r")\b")
-_layer_cache: dict[Path, str | None] = {}
+# The test folders mirror the layers of src/trackproc (pyproject.toml [tool.importlinter]): a test file
+# sits in tests/<layer>/ for the highest layer it exercises (the CLI when it runs commands), and is marked
+# ``layer_<layer>`` from its folder: ``pytest -m layer_dynamics`` (or ``pytest tests/dynamics``) runs the
+# bottom layer's tests. tests/test_layers.py checks that each file's imports agree with its folder. The
+# root keeps the whole-package checks (layer contract, golden outputs), the leaf modules' tests
+# (isotime) and the helpers shared by several folders (realdata.py, hostile.py, orekit_*.py, ...), which
+# are importable from every folder (pyproject ``pythonpath``), as are the test modules themselves.
+LAYERS = ("cli", "report", "pipeline", "io", "types", "methods", "models", "dynamics")
+TESTS = Path(__file__).resolve().parent
 
 
 def layer_of(path: Path) -> str | None:
-    if path not in _layer_cache:
-        text = path.read_text(encoding="utf-8")
-        found = set(_LAYER_IMPORT.findall(text))
-        if re.search(r"\brun_cli\b|\bcli_app\b|subprocess", text):
-            found.add("cli")
-        _layer_cache[path] = min(found, key=LAYERS.index) if found else None
-    return _layer_cache[path]
+    """The layer folder a test file sits in (None at the root)."""
+    folder = path.resolve().parent
+    return folder.name if folder.parent == TESTS and folder.name in LAYERS else None
 
 
 def pytest_collection_modifyitems(config, items):

@@ -159,7 +159,7 @@ def test_peak_memory_of_a_large_ingest(tmp_path):
     exe = str(Path(sys.executable).with_name("trackproc"))
     wrapper = ("import resource, subprocess, sys; p = subprocess.run(sys.argv[1:]); "
                "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, p.returncode)")
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent / "src")}
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2] / "src")}
     done = subprocess.run([sys.executable, "-c", wrapper, exe, "ingest", str(raw), "--stations", str(stations),
                            "-q", "-o", str(out)], capture_output=True, text=True, env=env, check=True)
     kb, code = done.stdout.split()

@@ -27,7 +27,7 @@ CASES = [
 def test_slant_delay_matches_orekit(tmp_path):
     cases = tmp_path / "cases.json"
     cases.write_text(json.dumps(CASES))
-    run = subprocess.run([sys.executable, str(Path(__file__).with_name("orekit_troposphere.py")), str(cases)],
+    run = subprocess.run([sys.executable, str(Path(__file__).resolve().parents[1] / "orekit_troposphere.py"), str(cases)],
                          capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-2000:]
     orekit = np.array(json.loads(run.stdout.strip().splitlines()[-1]))

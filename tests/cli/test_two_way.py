@@ -23,7 +23,7 @@ from trackproc.models import observation as ob
 from trackproc.pipeline.estimate import EstimateOptions, build_problem, estimate
 from trackproc.pipeline.simulate import SimulateOptions, simulate
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_data"
 EPOCH = np.datetime64("2026-03-20T09:30:00")
 STATE0 = np.array([3774841.0, -1538034.0, 5924146.0, -4816.6, 3936.4, 4091.1])
 CARRIER = 2.2e9

@@ -62,6 +62,6 @@ def test_manual_page_is_current():
 
     from trackproc.cli.manpage import manpage
 
-    shipped = (Path(__file__).resolve().parents[1] / "docs" / "trackproc.1").read_text()
+    shipped = (Path(__file__).resolve().parents[2] / "docs" / "trackproc.1").read_text()
     assert manpage() == shipped, "regenerate: python -m trackproc.cli.manpage > docs/trackproc.1"
     assert '.SS "trackproc refine"' in shipped and ".SH EXIT STATUS" in shipped

@@ -16,7 +16,7 @@ import pytest
 from tle_reference import ISS, sgp4_gcrf, station_view
 from trackproc.io.ephemeris import read_ephemeris
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_data"
 C = 299792458.0
 START = np.datetime64("2019-12-10T00:00:00", "ns")
 

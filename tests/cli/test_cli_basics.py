@@ -88,7 +88,7 @@ def test_atomic_write_to_a_device_writes_through(tmp_path):
 def test_reader_closing_the_pipe_early_ends_quietly_with_141(tmp_path):
     """`trackproc ... | head` : no traceback, exit 141 (as a Unix tool killed by SIGPIPE), never 0
     with a silently truncated output."""
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     cmd = [sys.executable, "-m", "trackproc", "-q", "propagate", os.path.join(root, "sample_data", "truth.json"),
            "--span", "43200", "--step", "1", "--format", "csv", "-o", "-"]
     writer = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)

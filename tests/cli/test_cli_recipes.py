@@ -10,7 +10,7 @@ import pytest
 
 from trackproc.io.passfile import read_pass_table
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.skipif(shutil.which("bash") is None, reason="needs bash")
 
 

@@ -336,7 +336,7 @@ def test_real_pipe_simulate_to_smooth_every_kind_at_the_noise_level(tmp_path):
 # --------------------------------------------------------------------------- issue 13 item 4
 
 
-SAMPLE = Path(__file__).resolve().parent.parent / "sample_data"
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_data"
 
 
 @pytest.fixture(scope="module")

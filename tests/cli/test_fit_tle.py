@@ -322,7 +322,7 @@ def test_bad_input_exit_2(run_cli, write, tmp_path):
     from tle_reference import ISS as iss
 
     tle = write("iss.tle", iss)
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    sample = Path(__file__).resolve().parents[2] / "sample_data"
     out = tmp_path / "o.tle"
     for args, needle in ((["--initial", tle], "PASS"),
                          ([sample / "multistation.parquet", "--initial", tle, "--doppler-bias", "both"], "doppler-bias"),
@@ -408,7 +408,7 @@ def test_doptrack_prediction_covariance_covers_the_held_back_pass():
 
     if not DOPTRACK.is_dir():
         pytest.skip(f"real data not available: {DOPTRACK}")
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     from fit_tle_doptrack import covariance_rows
 
     rows = covariance_rows(True, protocols=("held-back",))
@@ -468,7 +468,7 @@ def test_initial_metadata_is_the_pass_files_tle(run_cli, tmp_path):
     z = cv["cross_validation"]["rms_normalised_error"]
     assert 0.05 < z <= 2.0, cv["cross_validation"]
     assert any(r["code"] == "cross_validation_covariance" and r["severity"] == "ok" for r in cv["quality"]["reasons"])
-    sample = Path(__file__).resolve().parents[1] / "sample_data" / "multistation.parquet"
+    sample = Path(__file__).resolve().parents[2] / "sample_data" / "multistation.parquet"
     for command in ("refine", "estimate", "fit-tle"):
         res = run_cli([command, sample, "--initial", "metadata", "-o", tmp_path / "x.out"])
         assert res.exit_code == 2 and "TLE" in res.stderr and len(res.stderr.strip().splitlines()) == 1, res.stderr

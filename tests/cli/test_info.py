@@ -92,7 +92,7 @@ def test_info_summarises_an_ephemeris_from_propagate(tmp_path):
     from trackproc.cli.app import _register, app
 
     _register()
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     runner = CliRunner()
     eph = tmp_path / "eph.parquet"
     out = runner.invoke(app, ["propagate", str(root / "sample_data" / "truth.json"), "--span", "6000",

@@ -9,7 +9,7 @@ import pytest
 
 from hostile import MULTI, STATIONS, TRUTH, assert_rejected
 
-NOMINAL = Path(__file__).resolve().parent / "data" / "hostile_nominal.json"
+NOMINAL = Path(__file__).resolve().parents[1] / "data" / "hostile_nominal.json"
 
 BAD = {
     "missing": None,

@@ -28,7 +28,7 @@ import pytest
 from trackproc.pipeline import batch as batch_module
 from trackproc.pipeline.batch.schema import SCHEMA
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 STATIONS = ("station,lat_deg,lon_deg,height_m\nCPH,55.7,12.55,30\nZHY,50.25,28.66,230\nKIR,67.857,20.964,400\n"
             "MAD,40.43,-4.25,800\nSVB,78.23,15.4,500\nHBK,-25.89,27.69,1500\n")
 BROKEN = {  # input name -> what its error must say

@@ -14,7 +14,7 @@ from trackproc.constants import C_LIGHT
 from trackproc.errors import EXIT_INPUT, InputError
 from trackproc.io.tdm import read_tdm
 
-DATA = Path(__file__).parent / "data" / "tdm"
+DATA = Path(__file__).resolve().parents[1] / "data" / "tdm"
 
 
 def load(name: str, **kwargs):

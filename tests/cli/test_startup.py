@@ -38,7 +38,7 @@ def test_plain_command_runs_without_pydantic(tmp_path):
             "--carrier-hz", "2.2e9", "--mode", "one-way", "-o"]
     probe = ("import sys; from trackproc.cli import app as a; {patch}"
              "code = a._main({args!r} + [sys.argv[1]]); print(code, 'pydantic' in sys.modules)")
-    root = __import__("pathlib").Path(__file__).resolve().parents[1]
+    root = __import__("pathlib").Path(__file__).resolve().parents[2]
     fast = subprocess.run([sys.executable, "-c", probe.format(patch="", args=args), str(tmp_path / "a.parquet")],
                           capture_output=True, text=True, check=True, cwd=root)
     slow = subprocess.run([sys.executable, "-c", probe.format(

@@ -8,7 +8,7 @@ import pytest
 from trackproc.cli.app import main
 from trackproc.io.passfile import read_pass_table
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_data"
 
 
 @pytest.fixture

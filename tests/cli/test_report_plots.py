@@ -43,7 +43,7 @@ def test_refine_figure_from_a_refinement(tmp_path):
 
     from trackproc.cli.app import main
 
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    sample = Path(__file__).resolve().parents[2] / "sample_data"
     passfile = tmp_path / "p.parquet"
     assert main(["-q", "ingest", str(sample / "doppler_pass.csv"), "--stations", str(sample / "stations.csv"),
                  "--carrier-hz", "2.2e9", "--mode", "one-way", "-o", str(passfile)]) == 0
@@ -57,7 +57,7 @@ def test_detect_figure(tmp_path):
 
     from trackproc.cli.app import main
 
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    sample = Path(__file__).resolve().parents[2] / "sample_data"
     passfile = tmp_path / "b.parquet"
     assert main(["-q", "simulate", "--ballistic", str(sample / "nominal.json"), "--stations",
                  str(sample / "stations.csv"), "--hypothesis", "h1", "--step", "2", "--elevation-mask-deg", "0",
@@ -72,7 +72,7 @@ def test_smooth_figures_one_per_pass_png_and_pdf(tmp_path):
 
     from trackproc.cli.app import main
 
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    sample = Path(__file__).resolve().parents[2] / "sample_data"
     assert main(["-q", "smooth", str(sample / "multistation.parquet"), "--kinds", "elevation", "--plot",
                  str(tmp_path / "s.png"), "-o", str(tmp_path / "s.parquet")]) == 0
     pngs = sorted(p.name for p in tmp_path.glob("s-*.png"))

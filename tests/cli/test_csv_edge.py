@@ -10,7 +10,7 @@ import pandas as pd
 from trackproc.cli.app import main
 from trackproc.io.passfile import read_pass_table
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_data"
 
 
 def _smooth(tmp_path, out, *extra):

@@ -351,7 +351,7 @@ def test_real_pipe_closed_early_is_quiet(write, stations_csv, tmp_path, command)
     assert b"Traceback" not in proc.stderr and b"Error" not in proc.stderr, proc.stderr
 
 
-TDM_SAMPLE = Path(__file__).parent / "data" / "tdm" / "oneway_doppler.tdm"
+TDM_SAMPLE = Path(__file__).resolve().parents[1] / "data" / "tdm" / "oneway_doppler.tdm"
 
 
 @pytest.mark.skipif(not TDM_SAMPLE.exists(), reason="CCSDS TDM sample not present")

@@ -14,7 +14,7 @@ import pytest
 
 from trackproc.io.statefile import read_state
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_data"
 #: The station of the Table 1 scenario: the truth state of sample_data/truth.json is the traverse
 #: point of its pass (trackproc.pipeline.refine.traverse_station, 500 km left of the track).
 TRV = "station,lat_deg,lon_deg,height_m\nTRV,56.454155,9.725833,0.0\n"

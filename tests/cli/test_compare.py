@@ -15,7 +15,7 @@ import pytest
 from tle_reference import ISS, sgp4_gcrf, station_view
 from trackproc.io.passfile import read_pass_table
 
-SAMPLE = Path(__file__).resolve().parents[1] / "sample_data"
+SAMPLE = Path(__file__).resolve().parents[2] / "sample_data"
 C = 299792458.0
 
 

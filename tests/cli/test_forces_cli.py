@@ -92,7 +92,7 @@ def test_simulate_and_accuracy_take_full(run_cli, state_file, stations_csv, tmp_
                    "--step", "30", "--force", "full", "--gravity", "4", "--seed", "1", "--dut1", "0", "-o", str(sim)])
     assert res.exit_code == 0, res.stderr
     assert "full (EIGEN-6S 4x4" in sim.read_text()[:4000]
-    stale = Path(__file__).resolve().parents[1] / "sample_data" / "stale.json"
+    stale = Path(__file__).resolve().parents[2] / "sample_data" / "stale.json"
     res = run_cli(["accuracy", str(stale), "--span", "600", "--step", "300", "--force", "full",
                    "--method", "monte-carlo", "-o", str(tmp_path / "a.csv")])
     assert res.exit_code == 2 and "--force full" in res.stderr
@@ -129,7 +129,7 @@ def test_passes_and_compare_take_full(run_cli, tmp_path):
     the same dynamics, simulate's and compare's own measurement paths), while ``--force j2`` is
     off by the models' difference (measured 502 m RMS). The dynamics themselves are checked
     against Orekit in tests/test_forces_orekit.py."""
-    sample = Path(__file__).resolve().parents[1] / "sample_data"
+    sample = Path(__file__).resolve().parents[2] / "sample_data"
     cph = tmp_path / "cph.csv"
     cph.write_text("station,lat_deg,lon_deg,height_m\nCPH,55.7,12.55,30\n")
     schedule = tmp_path / "passes.json"
