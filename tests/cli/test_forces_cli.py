@@ -128,7 +128,7 @@ def test_passes_and_compare_take_full(run_cli, tmp_path):
     by ``compare --force full`` with the same settings to well under a millimetre (measured 6e-7 m:
     the same dynamics, simulate's and compare's own measurement paths), while ``--force j2`` is
     off by the models' difference (measured 502 m RMS). The dynamics themselves are checked
-    against Orekit in tests/test_forces_orekit.py."""
+    against Orekit in tests/io/test_forces_orekit.py."""
     sample = Path(__file__).resolve().parents[2] / "sample_data"
     cph = tmp_path / "cph.csv"
     cph.write_text("station,lat_deg,lon_deg,height_m\nCPH,55.7,12.55,30\n")

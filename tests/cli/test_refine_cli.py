@@ -239,7 +239,7 @@ def test_refine_integral_cost_on_a_two_way_pass_with_constraints(run_cli, two_wa
     """simulate (two-way range-rate) -> smooth -> refine --cost integral --circular: the seed's method
     on the round-trip model; the constraints hold, the state at the stale epoch is within a
     kilometre of the truth (the stale error is 7.8 km; forcing e = 0 on the truth's e = 2.7e-5
-    costs about 530 m, tests/test_refine.py), and with --circular-tolerance at that eccentricity
+    costs about 530 m, tests/report/test_refine.py), and with --circular-tolerance at that eccentricity
     within 3 sigma."""
     out = tmp_path / "seed.json"
     result = run_cli(["refine", two_way_smoothed / "smoothed.parquet", "--initial", SAMPLE / "stale.json", "--cost",
@@ -266,7 +266,7 @@ def test_refine_integral_cost_on_a_two_way_pass_with_constraints(run_cli, two_wa
                    "error the tolerance admits (sigma 4.4, 2.0, 5.6 km; 38, 54, 4.1 m/s); strict: remove when fixed")
 def test_circular_tolerance_sigma_is_of_the_order_of_what_the_constraints_cost(run_cli, two_way_smoothed, tmp_path):
     """The covariance that --circular-tolerance adds should cover what forcing e = 0 costs on this pass
-    (about 530 m and 5 m/s, tests/test_refine.py), not balloon: sigma below 3x that in every component."""
+    (about 530 m and 5 m/s, tests/report/test_refine.py), not balloon: sigma below 3x that in every component."""
     out = tmp_path / "seed.json"
     result = run_cli(["refine", two_way_smoothed / "smoothed.parquet", "--initial", SAMPLE / "stale.json", "--cost",
                       "integral", "--circular", "--circular-tolerance", "2.74e-5", "--output-epoch", "stale",

@@ -49,7 +49,7 @@ def test_bad_rows_and_options_are_input_errors(tmp_path):
         earth_orientation(bad, 0.1)
     with pytest.raises(InputError, match="0.9"):
         earth_orientation(None, 1.5)
-    eop, warning = earth_orientation(None, None)     # the bundled IERS table (tests/test_eop_bundled.py)
+    eop, warning = earth_orientation(None, None)     # the bundled IERS table (tests/io/test_eop_bundled.py)
     assert warning is None and eop.tabulated
     eop, warning = earth_orientation(None, -0.2)
     assert warning is None and eop.at(2458850.5, 0.0)[0] == pytest.approx(-0.2)

@@ -131,7 +131,7 @@ def test_doptrack_state_offset_drift_from_the_tle(stamps):
     initial = tle_state(tle, at=first, eop=eop)
     # independent samples (--noise white): the post-fit RMS is what a weighted fit minimises; under
     # the correlated model (the default) the residuals keep the oscillator's wander by design, and
-    # the criterion is the prediction of a held-back pass (tests/test_refine_realdata.py)
+    # the criterion is the prediction of a held-back pass (tests/pipeline/test_refine_realdata.py)
     opts = EstimateOptions(doppler_bias="offset+drift", epoch="first", noise="white",
                            apriori_sigma={"position": 2000.0, "velocity": 2.0})
     named = [(s, t) for s, t in zip(stamps, tables)]

@@ -20,7 +20,7 @@ What is physically defensible to assert, and is asserted:
   the development days (1-10 April) every TCA more than 5 s from upstream's is; 11-15 April are
   the hold-out, checked only at the end and reported in docs/smooth.md.
 
-Run ``python tests/test_realdata_smooth.py`` to print the table of docs/smooth.md.
+Run ``python tests/pipeline/test_realdata_smooth.py`` to print the table of docs/smooth.md.
 """
 
 from __future__ import annotations

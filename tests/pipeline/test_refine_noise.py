@@ -4,7 +4,7 @@ Independent references: the noise model's REML choice against processes of known
 (simulated), the effective sample count against its closed form, GLS against the textbook
 generalised least squares, and Monte Carlo of ``refine`` on passes with oscillator wander (random
 walk), AR(1) noise and 2 Hz quantisation (truth known): NEES of the refined state in its
-chi-square band. The seed 004 Table 1 pass (tests/test_refine.py) carries the simulation.
+chi-square band. The seed 004 Table 1 pass (tests/report/test_refine.py) carries the simulation.
 """
 
 from __future__ import annotations
