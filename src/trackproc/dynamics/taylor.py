@@ -81,7 +81,7 @@ ENGINES = ("auto", "numpy", "compiled")
 #: Predicted steps from which ``engine="auto"`` compiles (state only, with sensitivities): the
 #: break-even of a fresh process, where the numpy steps saved pay for ``import numba`` and loading
 #: the cached kernels (benchmarks/propagation.py --only jit measures both).
-COMPILED_MIN_STEPS = {False: 2000, True: 800}
+COMPILED_MIN_STEPS = {False: 2000, True: 1000}
 
 
 def _jit_mode() -> str:
