@@ -130,10 +130,19 @@ def test_outcomes_and_errors():
 
 
 def test_automatic_choice(monkeypatch):
+    from trackproc.dynamics import taylor_jit
+
+    taylor_jit.compile_all()
+    assert taylor_jit.ready(False) and taylor_jit.ready(True)
     # a pass (1 step) stays numpy; an arc predicted beyond the break-even compiles
     assert propagate(LEO, 0.0, 600.0).engine == "numpy"
     long_arc = 1.05 * taylor.COMPILED_MIN_STEPS[False] * 800.0      # LEO steps are ~800 s
     assert propagate(LEO, 0.0, long_arc).engine == "compiled"
+    with monkeypatch.context() as m:                                   # kernels never compiled
+        m.setattr(taylor_jit, "ready", lambda stm: False)
+        assert propagate(LEO, 0.0, long_arc).engine == "numpy"
+        m.setattr(taylor, "COMPILE_MIN_STEPS", {False: 1000, True: 1000})
+        assert propagate(LEO, 0.0, long_arc).engine == "compiled"
     assert propagate(np.stack([LEO, ECC]), 0.0, 600.0).engine == "numpy"   # batches stay numpy
     monkeypatch.setenv("TRACKPROC_JIT", "1")
     assert propagate(LEO, 0.0, 600.0, stm=True).engine == "compiled"

@@ -39,7 +39,8 @@ Compiled engine (optional, numba; :mod:`trackproc.dynamics.taylor_jit`): the sam
 compiled whole, for a single trajectory. ``engine="auto"`` (default) takes it when numba is
 importable, ``TRACKPROC_JIT`` is not ``0`` and the arc is long enough to repay loading numba and
 the cached kernels in a fresh process (:data:`COMPILED_MIN_STEPS`, predicted from the first
-step); ``TRACKPROC_JIT=1`` takes it for every single-trajectory propagation. The choice depends
+step; :data:`COMPILE_MIN_STEPS` while the kernels were never compiled); ``TRACKPROC_JIT=1``
+takes it for every single-trajectory propagation. The choice depends
 only on the call's arguments and the environment, so a run is reproducible; the two engines
 agree to rounding.
 
@@ -69,7 +70,7 @@ from trackproc.dynamics.taylor_dense import Outcome, Propagation
 from trackproc.dynamics.taylor_series import series_dual, series_state, series_state_single, series_var_single
 
 __all__ = ["Outcome", "Propagation", "propagate", "default_order", "acceleration", "FORCES",
-           "STATE_PARAMETERS", "ENGINES", "COMPILED_MIN_STEPS"]
+           "STATE_PARAMETERS", "ENGINES", "COMPILED_MIN_STEPS", "COMPILE_MIN_STEPS"]
 
 FORCES = vocabulary.TAYLOR_FORCES   # what the Taylor engine integrates ("full": dynamics.forces)
 STATE_PARAMETERS = vocabulary.STATE_NAMES
@@ -78,10 +79,14 @@ STATE_PARAMETERS = vocabulary.STATE_NAMES
 
 #: ``engine=`` of :func:`propagate`.
 ENGINES = ("auto", "numpy", "compiled")
-#: Predicted steps from which ``engine="auto"`` compiles (state only, with sensitivities): the
-#: break-even of a fresh process, where the numpy steps saved pay for ``import numba`` and loading
-#: the cached kernels (benchmarks/propagation.py --only jit measures both).
+#: Predicted steps from which ``engine="auto"`` takes the compiled engine (state only, with
+#: sensitivities): the break-even of a fresh process, where the numpy steps saved (~0.09 / 0.2 ms
+#: of CPU each) pay for ``import numba`` and loading the cached kernels (~0.18 s);
+#: benchmarks/propagation.py --only jit measures both (2000 / 1000 steps: 18 / 9 LEO days).
 COMPILED_MIN_STEPS = {False: 2000, True: 1000}
+#: The same when the kernels are not compiled yet (~10 s of CPU once per installation; ``python -m
+#: trackproc.dynamics.taylor_jit`` or ``TRACKPROC_JIT=1`` compiles them ahead).
+COMPILE_MIN_STEPS = {False: 100_000, True: 50_000}
 
 
 def _jit_mode() -> str:
@@ -96,6 +101,17 @@ def _compiled_available() -> bool:
     from trackproc.dynamics import jit
 
     return jit.enabled()
+
+
+def _compiled_pays(stm: bool, predicted_steps: float) -> bool:
+    """engine="auto": do the predicted steps repay loading (or first compiling) the kernels?"""
+    if predicted_steps < COMPILED_MIN_STEPS[stm] or not _compiled_available():
+        return False
+    if predicted_steps >= COMPILE_MIN_STEPS[stm]:
+        return True
+    from trackproc.dynamics import taylor_jit
+
+    return taylor_jit.ready(stm)
 
 
 def default_order(tol: float) -> int:
@@ -283,7 +299,7 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
             remaining = abs(t1 - t)
             if decide:
                 decide = False
-                if remaining >= COMPILED_MIN_STEPS[stm] * h and _compiled_available():
+                if _compiled_pays(stm, remaining / h if h > 0.0 else math.inf):
                     return _propagate_compiled(s0, t0, t1, p, mu_m3_s2, kj2, tol, stm,
                                                mu_sensitivity, max_steps, force=force, j2=j2,
                                                re_m=re_m, batch=batch)
