@@ -73,26 +73,14 @@ def _step_size(x, p, tol):
     return math.inf
 
 
-@njit(**_KW)
-def _power_step(w, s, k, a, inv_s0):
-    """Order k of w = s^a by the power rule (docs/equations.md, notation), k >= 1."""
-    acc = 0.0
-    for l in range(k):
-        acc += w[l] * ((a * (k - l) - l) / k) * s[k - l]
-    return acc * inv_s0
+# The loops below compute several Cauchy sums of one order together: without fastmath a sum is a
+# chain of dependent additions, and independent chains side by side keep the FPU busy (about 2x).
+# The power-rule weight (a(K-l) - l)/K is split as a - (a+1) l/K (two plain sums, no division in
+# the loop), as in taylor_series.series_state_single.
 
 
 @njit(**_KW)
-def _cauchy(u, v, k):
-    """Order k of the product of series u and v."""
-    acc = 0.0
-    for l in range(k + 1):
-        acc += u[l] * v[k - l]
-    return acc
-
-
-@njit(**_KW)
-def _series_state(x, p, mu, kj2, s, z2, w3, w5, w7, tt, hxy, hz):
+def _series_state(x, p, mu, kj2, s, z2, w3, w5, w7, hxy, hz):
     """Position spectra x (3, p+2) of one step (x[:, 0:2] = r0, v0 on entry).
 
     Implements seed 004 eq. 6 (two-body spectrum, r^-3 by the power rule) with J2: the
@@ -101,35 +89,83 @@ def _series_state(x, p, mu, kj2, s, z2, w3, w5, w7, tt, hxy, hz):
     j2 = kj2 != 0.0
     mt = -5.0 * kj2
     inv_s0 = 0.0
+    x0, x1, x2 = x[0], x[1], x[2]
     for k in range(p):
-        sk = 0.0
-        for i in range(3):
-            sk += _cauchy(x[i], x[i], k)
+        sx = 0.0
+        sy = 0.0
+        sz = 0.0
+        for l in range(k + 1):
+            sx += x0[l] * x0[k - l]
+            sy += x1[l] * x1[k - l]
+            sz += x2[l] * x2[k - l]
+        sk = sx + sy + sz
         s[k] = sk
+        z2[k] = sz
+        fac = 1.0 / ((k + 1.0) * (k + 2.0))
+        if not j2:
+            if k == 0:
+                inv_s0 = 1.0 / sk
+                w3[0] = sk ** -1.5
+            else:
+                a3 = 0.0
+                b3 = 0.0
+                for l in range(k):
+                    sl = s[k - l]
+                    a3 += w3[l] * sl
+                    b3 += (l * w3[l]) * sl
+                w3[k] = inv_s0 * (-1.5 * a3 + (0.5 / k) * b3)
+            ax = 0.0
+            ay = 0.0
+            az = 0.0
+            for l in range(k + 1):
+                wl = w3[k - l]
+                ax += x0[l] * wl
+                ay += x1[l] * wl
+                az += x2[l] * wl
+            f = -mu * fac
+            x0[k + 2] = ax * f
+            x1[k + 2] = ay * f
+            x2[k + 2] = az * f
+            continue
+        tk = 0.0                                  # T = z^2 w7 without its l = 0 term here
         if k == 0:
             inv_s0 = 1.0 / sk
             w3[0] = sk ** -1.5
-            if j2:
-                w5[0] = sk ** -2.5
-                w7[0] = sk ** -3.5
+            w5[0] = w3[0] * inv_s0
+            w7[0] = w5[0] * inv_s0
         else:
-            w3[k] = _power_step(w3, s, k, -1.5, inv_s0)
-            if j2:
-                w5[k] = _power_step(w5, s, k, -2.5, inv_s0)
-                w7[k] = _power_step(w7, s, k, -3.5, inv_s0)
-        fac = 1.0 / ((k + 1.0) * (k + 2.0))
-        if j2:
-            z2[k] = _cauchy(x[2], x[2], k)
-            tt[k] = _cauchy(z2, w7, k)
-            hxy[k] = -mu * w3[k] + kj2 * w5[k] + mt * tt[k]
-            hz[k] = -mu * w3[k] + 3.0 * kj2 * w5[k] + mt * tt[k]
-            x[0, k + 2] = _cauchy(x[0], hxy, k) * fac
-            x[1, k + 2] = _cauchy(x[1], hxy, k) * fac
-            x[2, k + 2] = _cauchy(x[2], hz, k) * fac
-        else:
-            f = -mu * fac
-            for i in range(3):
-                x[i, k + 2] = _cauchy(x[i], w3, k) * f
+            a3 = 0.0
+            b3 = 0.0
+            a5 = 0.0
+            b5 = 0.0
+            a7 = 0.0
+            b7 = 0.0
+            for l in range(k):
+                sl = s[k - l]
+                a3 += w3[l] * sl
+                b3 += (l * w3[l]) * sl
+                a5 += w5[l] * sl
+                b5 += (l * w5[l]) * sl
+                a7 += w7[l] * sl
+                b7 += (l * w7[l]) * sl
+                tk += z2[k - l] * w7[l]
+            w3[k] = inv_s0 * (-1.5 * a3 + (0.5 / k) * b3)
+            w5[k] = inv_s0 * (-2.5 * a5 + (1.5 / k) * b5)
+            w7[k] = inv_s0 * (-3.5 * a7 + (2.5 / k) * b7)
+        tk += z2[0] * w7[k]
+        hxy[k] = -mu * w3[k] + kj2 * w5[k] + mt * tk
+        hz[k] = -mu * w3[k] + 3.0 * kj2 * w5[k] + mt * tk
+        ax = 0.0
+        ay = 0.0
+        az = 0.0
+        for l in range(k + 1):
+            hl = hxy[k - l]
+            ax += x0[l] * hl
+            ay += x1[l] * hl
+            az += x2[l] * hz[k - l]
+        x0[k + 2] = ax * fac
+        x1[k + 2] = ay * fac
+        x2[k + 2] = az * fac
 
 
 @njit(**_KW)
@@ -148,75 +184,134 @@ def _series_var(x, ph, p, mu, kj2, mu_col, wk):
     npar = ph.shape[1]
     k = kj2
     c10 = 10.0 * k
-    # work rows: 0-5 P_ij (xx xy xz yy yz zz) | 6 s | 7-10 w3 w5 w7 w9 | 11 T | 12 V | 13 h_xy
-    #            | 14 h_z | 15 q | 16-21 q P_ij | 22-24 w7 P_iz | 25-33 G (row-major)
-    pi = (0, 0, 0, 1, 1, 2)
-    pj = (0, 1, 2, 1, 2, 2)
+    # work rows: 0-5 P_ij (xx xy xz yy yz zz) | 6 s | 7-10 w3 w5 w7 w9 | 13 h_xy | 14 h_z | 15 q
+    #            | 25-33 G (row-major)
+    pxx, pxy, pxz, pyy, pyz, pzz = wk[0], wk[1], wk[2], wk[3], wk[4], wk[5]
+    sr, w3, w5, w7, w9 = wk[6], wk[7], wk[8], wk[9], wk[10]
+    hxy, hz, q = wk[13], wk[14], wk[15]
+    x0, x1, x2 = x[0], x[1], x[2]
     inv_s0 = 0.0
     for kk in range(p):
-        for m in range(6):
-            wk[m, kk] = _cauchy(x[pi[m]], x[pj[m]], kk)
-        sk = wk[0, kk] + wk[3, kk] + wk[5, kk]
-        wk[6, kk] = sk
+        axx = 0.0
+        axy = 0.0
+        axz = 0.0
+        ayy = 0.0
+        ayz = 0.0
+        azz = 0.0
+        for l in range(kk + 1):
+            u0, u1, u2 = x0[l], x1[l], x2[l]
+            v0, v1, v2 = x0[kk - l], x1[kk - l], x2[kk - l]
+            axx += u0 * v0
+            axy += u0 * v1
+            axz += u0 * v2
+            ayy += u1 * v1
+            ayz += u1 * v2
+            azz += u2 * v2
+        pxx[kk], pxy[kk], pxz[kk], pyy[kk], pyz[kk], pzz[kk] = axx, axy, axz, ayy, ayz, azz
+        sk = axx + ayy + azz
+        sr[kk] = sk
+        tk = 0.0                                  # z^2 w7 and z^2 w9 without their l = 0 terms
+        vk = 0.0
         if kk == 0:
             inv_s0 = 1.0 / sk
-            wk[7, 0] = sk ** -1.5
-            wk[8, 0] = sk ** -2.5
-            wk[9, 0] = sk ** -3.5
-            wk[10, 0] = sk ** -4.5
+            w3[0] = sk ** -1.5
+            w5[0] = w3[0] * inv_s0
+            w7[0] = w5[0] * inv_s0
+            w9[0] = w7[0] * inv_s0
         else:
-            wk[7, kk] = _power_step(wk[7], wk[6], kk, -1.5, inv_s0)
-            wk[8, kk] = _power_step(wk[8], wk[6], kk, -2.5, inv_s0)
-            wk[9, kk] = _power_step(wk[9], wk[6], kk, -3.5, inv_s0)
-            wk[10, kk] = _power_step(wk[10], wk[6], kk, -4.5, inv_s0)
-        tk = _cauchy(wk[5], wk[9], kk)
-        vk = _cauchy(wk[5], wk[10], kk)
-        wk[11, kk] = tk
-        wk[12, kk] = vk
-        w3, w5, w7 = wk[7, kk], wk[8, kk], wk[9, kk]
-        hxy = k * (w5 - 5.0 * tk) - mu * w3
-        hz = hxy + 2.0 * k * w5
-        wk[13, kk] = hxy
-        wk[14, kk] = hz
-        ax = _cauchy(x[0], wk[13], kk)
-        ay = _cauchy(x[1], wk[13], kk)
-        az = _cauchy(x[2], wk[14], kk)
-        wk[15, kk] = 3.0 * mu * w5 - 5.0 * k * w7 + 35.0 * k * vk
-        for m in range(6):
-            wk[16 + m, kk] = _cauchy(wk[15], wk[m], kk)
-        ux = _cauchy(wk[9], wk[2], kk)
-        uy = _cauchy(wk[9], wk[4], kk)
-        uz = _cauchy(wk[9], wk[5], kk)
-        gxz = wk[18, kk] - c10 * ux
-        gyz = wk[20, kk] - c10 * uy
-        wk[25, kk] = hxy + wk[16, kk]
-        wk[26, kk] = wk[17, kk]
+            a3 = 0.0
+            b3 = 0.0
+            a5 = 0.0
+            b5 = 0.0
+            a7 = 0.0
+            b7 = 0.0
+            a9 = 0.0
+            b9 = 0.0
+            for l in range(kk):
+                sl = sr[kk - l]
+                a3 += w3[l] * sl
+                b3 += (l * w3[l]) * sl
+                a5 += w5[l] * sl
+                b5 += (l * w5[l]) * sl
+                a7 += w7[l] * sl
+                b7 += (l * w7[l]) * sl
+                a9 += w9[l] * sl
+                b9 += (l * w9[l]) * sl
+                zl = pzz[kk - l]
+                tk += zl * w7[l]
+                vk += zl * w9[l]
+            w3[kk] = inv_s0 * (-1.5 * a3 + (0.5 / kk) * b3)
+            w5[kk] = inv_s0 * (-2.5 * a5 + (1.5 / kk) * b5)
+            w7[kk] = inv_s0 * (-3.5 * a7 + (2.5 / kk) * b7)
+            w9[kk] = inv_s0 * (-4.5 * a9 + (3.5 / kk) * b9)
+        tk += pzz[0] * w7[kk]
+        vk += pzz[0] * w9[kk]
+        h1 = k * (w5[kk] - 5.0 * tk) - mu * w3[kk]
+        h2 = h1 + 2.0 * k * w5[kk]
+        hxy[kk] = h1
+        hz[kk] = h2
+        q[kk] = 3.0 * mu * w5[kk] - 5.0 * k * w7[kk] + 35.0 * k * vk
+        ax = 0.0
+        ay = 0.0
+        az = 0.0
+        qxx = 0.0
+        qxy = 0.0
+        qxz = 0.0
+        qyy = 0.0
+        qyz = 0.0
+        qzz = 0.0
+        ux = 0.0
+        uy = 0.0
+        uz = 0.0
+        for l in range(kk + 1):
+            m = kk - l
+            ql = q[m]
+            wl = w7[m]
+            ax += x0[l] * hxy[m]
+            ay += x1[l] * hxy[m]
+            az += x2[l] * hz[m]
+            qxx += pxx[l] * ql
+            qxy += pxy[l] * ql
+            qxz += pxz[l] * ql
+            qyy += pyy[l] * ql
+            qyz += pyz[l] * ql
+            qzz += pzz[l] * ql
+            ux += pxz[l] * wl
+            uy += pyz[l] * wl
+            uz += pzz[l] * wl
+        gxz = qxz - c10 * ux
+        gyz = qyz - c10 * uy
+        wk[25, kk] = h1 + qxx
+        wk[26, kk] = qxy
         wk[27, kk] = gxz
-        wk[28, kk] = wk[17, kk]
-        wk[29, kk] = hxy + wk[19, kk]
+        wk[28, kk] = qxy
+        wk[29, kk] = h1 + qyy
         wk[30, kk] = gyz
         wk[31, kk] = gxz
         wk[32, kk] = gyz
-        wk[33, kk] = hz + wk[21, kk] - 2.0 * c10 * uz
+        wk[33, kk] = h2 + qzz - 2.0 * c10 * uz
         fac = 1.0 / ((kk + 1.0) * (kk + 2.0))
-        x[0, kk + 2] = ax * fac
-        x[1, kk + 2] = ay * fac
-        x[2, kk + 2] = az * fac
-        for i in range(3):
-            for j in range(npar):
-                acc = 0.0
-                for l in range(kk + 1):
-                    g = 25 + 3 * i
-                    acc += (wk[g, l] * ph[0, j, kk - l] + wk[g + 1, l] * ph[1, j, kk - l]
-                            + wk[g + 2, l] * ph[2, j, kk - l])
-                ph[i, j, kk + 2] = acc
+        x0[kk + 2] = ax * fac
+        x1[kk + 2] = ay * fac
+        x2[kk + 2] = az * fac
+        # Phi(K+2): the (3 x P) sums over l side by side (independent chains)
+        acc = ph[:, :, kk + 2]
+        acc[:, :] = 0.0
+        for l in range(kk + 1):
+            m = kk - l
+            for i in range(3):
+                g0 = wk[25 + 3 * i, l]
+                g1 = wk[26 + 3 * i, l]
+                g2 = wk[27 + 3 * i, l]
+                for j in range(npar):
+                    acc[i, j] += g0 * ph[0, j, m] + g1 * ph[1, j, m] + g2 * ph[2, j, m]
         if mu_col >= 0:
-            ph[0, mu_col, kk + 2] += ax / mu
-            ph[1, mu_col, kk + 2] += ay / mu
-            ph[2, mu_col, kk + 2] += az / mu
+            acc[0, mu_col] += ax / mu
+            acc[1, mu_col] += ay / mu
+            acc[2, mu_col] += az / mu
         for i in range(3):
             for j in range(npar):
-                ph[i, j, kk + 2] *= fac
+                acc[i, j] *= fac
 
 
 @njit(**_KW)
@@ -253,7 +348,6 @@ def propagate_state(r0, v0, t0, t1, p, mu, kj2, tol, max_steps):
     w3 = np.zeros(p)
     w5 = np.zeros(p)
     w7 = np.zeros(p)
-    tt = np.zeros(p)
     hxy = np.zeros(p)
     hz = np.zeros(p)
     hp = np.empty(n)
@@ -274,7 +368,7 @@ def propagate_state(r0, v0, t0, t1, p, mu, kj2, tol, max_steps):
         for i in range(3):
             x[i, 0] = r[i]
             x[i, 1] = v[i]
-        _series_state(x, p, mu, kj2, s, z2, w3, w5, w7, tt, hxy, hz)
+        _series_state(x, p, mu, kj2, s, z2, w3, w5, w7, hxy, hz)
         if not _all_finite(x):
             outcome = OUTCOME_NON_FINITE
             break
