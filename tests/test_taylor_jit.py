@@ -158,6 +158,21 @@ def test_automatic_choice(monkeypatch):
     assert propagate(LEO, 0.0, long_arc).engine == "numpy"
 
 
+def test_unusable_numba_falls_back_to_numpy(monkeypatch, caplog):
+    """numba importable but the kernels' module is not (e.g. no writable cache): numpy, a warning."""
+    long_arc = 1.05 * taylor.COMPILED_MIN_STEPS[False] * 800.0
+    monkeypatch.setattr(taylor, "_JIT_MODULE", [])
+    import trackproc.dynamics
+
+    monkeypatch.delattr(trackproc.dynamics, "taylor_jit", raising=False)
+    monkeypatch.setitem(sys.modules, "trackproc.dynamics.taylor_jit", None)   # import fails
+    with caplog.at_level("WARNING"):
+        assert propagate(LEO, 0.0, long_arc).engine == "numpy"
+    assert "compiled Taylor engine unavailable" in caplog.text
+    with pytest.raises(ValueError):
+        propagate(LEO, 0.0, 10.0, engine="compiled")
+
+
 def test_njit_is_identity_when_disabled(monkeypatch):
     monkeypatch.setenv("TRACKPROC_JIT", "0")
     jit.enabled.cache_clear()

@@ -97,10 +97,35 @@ def _jit_mode() -> str:
     return "off" if v == "0" else "on" if v == "1" else "auto"
 
 
-def _compiled_available() -> bool:
+_JIT_MODULE: list = []         # [module or None] once looked up
+
+
+def _jit_module():
+    """:mod:`trackproc.dynamics.taylor_jit`, or None when numba is off, absent or unusable (cached).
+
+    numba can refuse ``cache=True`` at import (no writable cache directory); the numpy engine
+    then serves, with one warning.
+    """
     from trackproc.dynamics import jit
 
-    return jit.enabled()
+    if not jit.enabled():
+        return None
+    if not _JIT_MODULE:
+        try:
+            from trackproc.dynamics import taylor_jit as mod
+        except Exception as exc:                         # noqa: BLE001 - any failure: numpy
+            import logging
+
+            logging.getLogger(__name__).warning(
+                "compiled Taylor engine unavailable (%s: %s); using the numpy engine",
+                type(exc).__name__, exc)
+            mod = None
+        _JIT_MODULE.append(mod)
+    return _JIT_MODULE[0]
+
+
+def _compiled_available() -> bool:
+    return _jit_module() is not None
 
 
 def _compiled_pays(stm: bool, predicted_steps: float) -> bool:
@@ -109,9 +134,7 @@ def _compiled_pays(stm: bool, predicted_steps: float) -> bool:
         return False
     if predicted_steps >= COMPILE_MIN_STEPS[stm]:
         return True
-    from trackproc.dynamics import taylor_jit
-
-    return taylor_jit.ready(stm)
+    return _jit_module().ready(stm)
 
 
 def default_order(tol: float) -> int:
@@ -341,8 +364,7 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
 def _propagate_compiled(s0, t0, t1, p, mu, kj2, tol, stm, mu_sensitivity, max_steps, *, force,
                         j2, re_m, batch) -> Propagation:
     """:func:`propagate` of one trajectory by the compiled loop (:mod:`taylor_jit`)."""
-    from trackproc.dynamics import taylor_jit as tj
-
+    tj = _jit_module()
     r0 = np.ascontiguousarray(s0[0, :3], dtype=float)
     v0 = np.ascontiguousarray(s0[0, 3:], dtype=float)
     args = (float(t0), float(t1), int(p), float(mu), float(kj2))
