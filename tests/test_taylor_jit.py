@@ -183,7 +183,6 @@ def test_njit_is_identity_when_disabled(monkeypatch):
     assert jit.njit(error_model="numpy")(f) is f
 
 
-@pytest.mark.subprocess
 def test_a_pass_does_not_import_numba():
     """A single pass (what refine asks for) must not pay for ``import numba`` (issue 13 budget)."""
     code = ("import sys, numpy as np; from trackproc.dynamics import taylor; "
