@@ -40,8 +40,9 @@ __all__ = ["propagate_state", "propagate_var", "dense", "ready", "compile_all", 
 
 OUTCOME_SUCCESS, OUTCOME_STEP_LIMIT, OUTCOME_NON_FINITE = 0, 1, 2
 
-# IEEE division (x/0 = inf, then caught as NON_FINITE) instead of Python's ZeroDivisionError.
-_KW = dict(error_model="numpy")
+# IEEE division (x/0 = inf, then caught as NON_FINITE) instead of Python's ZeroDivisionError;
+# cache=True (jit.njit's default) keeps the machine code on disk; no fastmath.
+_KW = dict(error_model="numpy", nogil=True)
 
 
 @njit(**_KW)
