@@ -61,6 +61,7 @@ J2000); no event detection.
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -74,8 +75,6 @@ __all__ = ["Outcome", "Propagation", "propagate", "default_order", "acceleration
 
 FORCES = vocabulary.TAYLOR_FORCES   # what the Taylor engine integrates ("full": dynamics.forces)
 STATE_PARAMETERS = vocabulary.STATE_NAMES
-
-
 
 #: ``engine=`` of :func:`propagate`.
 ENGINES = ("auto", "numpy", "compiled")
@@ -91,8 +90,6 @@ COMPILE_MIN_STEPS = {False: 100_000, True: 50_000}
 
 def _jit_mode() -> str:
     """``"off"`` (TRACKPROC_JIT=0), ``"on"`` (TRACKPROC_JIT=1) or ``"auto"``; read at each call."""
-    import os
-
     v = os.environ.get("TRACKPROC_JIT", "").strip()
     return "off" if v == "0" else "on" if v == "1" else "auto"
 

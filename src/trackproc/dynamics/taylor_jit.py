@@ -2,23 +2,24 @@
 
 The numpy engine (:mod:`trackproc.dynamics.taylor`, kernels in
 :mod:`trackproc.dynamics.taylor_series`) pays interpreter overhead for every order of every
-step (about 0.14 ms a step for the state, 0.37 ms with the STM, at order 24), which is what made
-a J2 day 57x slower than heyoka. Here the whole loop is compiled: the series of a step by the
+step (about 0.09 ms of CPU a step for the state, 0.2 ms with the STM, at order 24: 2.4 and
+12 us compiled), which is what made a J2 day 57x slower than heyoka (1.6x compiled). Here the whole loop is compiled: the series of a step by the
 same recurrences (seed 000 eq. 14, seed 004 eqs. 6 and 19-21), the same Jorba-Zou step size and
 order, the new state from the series, the growing store of per-step spectra for the dense output,
 and the end-time event (the last step is cut to land on ``t_end``). The result is the same
 :class:`~trackproc.dynamics.taylor_dense.Propagation`; the two paths agree to rounding (tests in
-tests/test_taylor_jit.py: state and STM over a J2 day to ~1e-13 relative).
+tests/test_taylor_jit.py: state and STM over a day to 1e-13 .. 1e-12 relative).
 
 Two loop kernels, on purpose: state only, and state with sensitivities (the variational
 recurrence of :func:`trackproc.dynamics.taylor_series.series_var_single`). The sensitivity
-series cost about 5x the state's, so one kernel with a flag would make a state-only day about
-5x slower. Two-body and J2 share each kernel (a branch per order). Only a single trajectory is
+series cost about 5.5x the state's (9.5 against 1.7 us a step, J2 day), so one kernel with a
+flag would make a state-only day about 5x slower. Two-body and J2 share each kernel (a branch per order). Only a single trajectory is
 compiled: the batch kernels of the numpy engine already spread the per-order overhead over the
 batch.
 
 Dense output (:func:`dense`): Horner's scheme per step, the samples of a step in the inner loop
-(contiguous, vectorisable). Used for propagations made here (``Propagation.engine``).
+(contiguous, vectorisable). Used for propagations made here (``Propagation.engine``) when
+steps are many and samples per step few; numpy's one BLAS product per step wins otherwise.
 
 Import this module only when :func:`trackproc.dynamics.jit.enabled` is true. The kernels are
 compiled at their first call (about 10 s of CPU for all of them, once per installation: numba
