@@ -285,6 +285,12 @@ def section_jit(repeat: int):
         print(f"  {'':12} break-even of a fresh process: {even:.0f} steps "
               f"({even * DAY_S / steps / 86400:.1f} LEO days); engine='auto' compiles from "
               f"{taylor.COMPILED_MIN_STEPS[stm]} predicted steps")
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix="trackproc-numba-") as cache:   # an empty numba cache
+        out = subprocess.run([sys.executable, "-c", "from trackproc.dynamics import taylor_jit; "
+                              "print(taylor_jit.compile_all())"], capture_output=True, text=True,
+                             check=True, env={**os.environ, "NUMBA_CACHE_DIR": cache}).stdout
+    print(f"  first compile of all kernels (once per installation, empty cache): {float(out):.1f} s CPU")
 
 
 def ratio_line(name, t_other, t_taylor):

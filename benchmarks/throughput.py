@@ -151,10 +151,16 @@ def section_propagation(repeat=7):
                 line += f"; heyoka + var. eqs {t_hyv * 1e3:7.3f} ms: Taylor/heyoka {ratios}"
                 note(f"{label} + STM: Taylor / heyoka", ratios)
             print(line)
-    if "compiled" in engines:
-        print("  (numpy: what `trackproc` uses for a pass or a day in a fresh process; compiled: "
-              "warm, after `import numba` + cached kernels, ~0.18 s CPU once per process; "
-              "benchmarks/propagation.py --only jit)")
+    if "compiled" in engines:                    # cold: a fresh interpreter, kernels cached on disk
+        leo = "[" + ", ".join(repr(float(x)) for x in pb.LEO) + "]"
+        cold = {eng: pb._subprocess_seconds(pb._COLD.format(leo=leo, span=pb.DAY_S, n=1441, stm=False,
+                                                            eng=eng), 3) for eng in engines}
+        print(f"  J2 day, first call in a fresh process (CPU): numpy {cold['numpy'] * 1e3:.1f} ms, "
+              f"compiled {cold['compiled'] * 1e3:.1f} ms (import numba + cached kernels); so `trackproc` "
+              f"takes the compiled engine by itself only from {taylor.COMPILED_MIN_STEPS[False]} steps "
+              f"(benchmarks/propagation.py --only jit)")
+        note("J2 day, first call in a fresh process: numpy / compiled (CPU)",
+             f"{cold['numpy'] * 1e3:.0f} ms / {cold['compiled'] * 1e3:.0f} ms")
 
 
 def section_refine(repeat=3):
