@@ -1,12 +1,17 @@
 """Propagation benchmark (issue 3): the Taylor (DT) engine against scipy DOP853 and heyoka.
 
-Run:  python benchmarks/propagation.py [--quick] [--only import|pass|day|batch|measurements]
+Run:  python benchmarks/propagation.py [--quick] [--only import|jit|pass|day|batch|measurements]
 
 Prints, for each case, the median of >= 5 timed runs, the ratios measured in the same run,
 and the errors against references (universal-variable Kepler for two-body; DOP853 at
 rtol 1e-13 and the Taylor engine at tol 1e-16 / order 30 for J2):
 
 * import + first result (fresh interpreter, with and without numpy already imported);
+* the compiled engine (issue 19, numba, :mod:`trackproc.dynamics.taylor_jit`): its cold cost in a
+  fresh interpreter (``import numba`` + loading the cached kernels) against the numpy engine's
+  first call, the warm cost per step of both, and the break-even number of steps that
+  ``engine="auto"`` uses (``taylor.COMPILED_MIN_STEPS``); the pass and day sections print the
+  numpy and the compiled engine side by side (warm medians);
 * one 600 s LEO pass, 601 samples, tol 1e-15: two-body and two-body + J2, with and
   without the state transition matrix; DOP853 tuned to 1 mm (the loosest rtol that meets
   1 mm against the reference), DOP853 at rtol 1e-13, heyoka at tol 1e-15 (if installed);
@@ -55,21 +60,27 @@ BATCH = 1000
 KJ2 = -1.5 * J2 * MU_EARTH * RE_EARTH ** 2
 
 
+def engines():
+    """The Taylor engines to time: numpy, and the compiled one when numba is importable."""
+    from trackproc.dynamics import jit
+    return ("numpy", "compiled") if jit.enabled() else ("numpy",)
+
+
 # -- timing --------------------------------------------------------------------------------
 
-def median_time(fn, repeat: int = 7, min_s: float = 0.02) -> float:
+def median_time(fn, repeat: int = 7, min_s: float = 0.02, clock=time.perf_counter) -> float:
     """Median over ``repeat`` runs of the mean time of one call (calls batched to >= min_s)."""
     fn()                                                     # warm-up (caches, tables)
-    t0 = time.perf_counter()
+    t0 = clock()
     fn()
-    one = time.perf_counter() - t0
+    one = clock() - t0
     number = max(1, int(min_s / max(one, 1e-9)))
     runs = []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0 = clock()
         for _ in range(number):
             fn()
-        runs.append((time.perf_counter() - t0) / number)
+        runs.append((clock() - t0) / number)
     return statistics.median(runs)
 
 
@@ -229,6 +240,59 @@ def section_import(repeat: int):
           f"import of taylor alone {fmt_t(alone).strip()})")
 
 
+_COLD = """
+import sys, time
+import numpy as np, scipy.linalg  # noqa: F401  (trackproc's commands import scipy anyway)
+from trackproc.dynamics import taylor
+LEO = np.array({leo})
+t = np.linspace(0.0, {span}, {n})
+c0 = time.process_time()
+r = taylor.propagate(LEO, 0.0, {span}, stm={stm}, engine="{eng}")
+(r.stm if {stm} else r.state)(t)
+print(time.process_time() - c0)
+"""
+
+
+def section_jit(repeat: int):
+    """Cold (fresh interpreter: import numba + cached kernels) and warm cost of the compiled engine."""
+    if "compiled" not in engines():
+        print("\n== compiled engine: numba not importable (pip install trackproc[fast]) or TRACKPROC_JIT=0 ==")
+        return
+    print("\n== compiled Taylor engine (numba) vs numpy engine: J2 day, 1441 samples, CPU s ==")
+    leo = ", ".join(repr(float(x)) for x in LEO)
+    t = np.linspace(0.0, DAY_S, 1441)
+    for stm in (False, True):
+        cold = {}
+        for eng in ("numpy", "compiled"):
+            code = _COLD.format(leo=f"[{leo}]", span=DAY_S, n=1441, stm=stm, eng=eng)
+            subprocess.run([sys.executable, "-c", code], capture_output=True, check=True)  # cache
+            cold[eng] = _subprocess_seconds(code, repeat)
+        warm = {}
+        for eng in ("numpy", "compiled"):
+            def run(eng=eng):
+                r = taylor.propagate(LEO, 0.0, DAY_S, stm=stm, engine=eng)
+                return r.stm(t) if stm else r.state(t)
+            warm[eng] = median_time(run, repeat, clock=time.process_time)
+        steps = taylor.propagate(LEO, 0.0, DAY_S, engine="numpy").n_steps
+        per_np, per_c = warm["numpy"] / steps, warm["compiled"] / steps
+        load = cold["compiled"] - warm["compiled"]
+        even = load / (per_np - per_c)
+        what = "state + STM" if stm else "state"
+        print(f"  {what:<12} numpy: first call {fmt_t(cold['numpy'])}, warm {fmt_t(warm['numpy'])} "
+              f"({per_np * 1e6:.1f} us/step);  compiled: first call {fmt_t(cold['compiled'])} "
+              f"(import numba + cached kernels {fmt_t(load).strip()}), warm {fmt_t(warm['compiled'])} "
+              f"({per_c * 1e6:.1f} us/step, {warm['numpy'] / warm['compiled']:.0f}x)")
+        print(f"  {'':12} break-even of a fresh process: {even:.0f} steps "
+              f"({even * DAY_S / steps / 86400:.1f} LEO days); engine='auto' compiles from "
+              f"{taylor.COMPILED_MIN_STEPS[stm]} predicted steps")
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix="trackproc-numba-") as cache:   # an empty numba cache
+        out = subprocess.run([sys.executable, "-c", "from trackproc.dynamics import taylor_jit; "
+                              "print(taylor_jit.compile_all())"], capture_output=True, text=True,
+                             check=True, env={**os.environ, "NUMBA_CACHE_DIR": cache}).stdout
+    print(f"  first compile of all kernels (once per installation, empty cache): {float(out):.1f} s CPU")
+
+
 def ratio_line(name, t_other, t_taylor):
     r = t_other / t_taylor
     who = "Taylor" if r >= 1 else name
@@ -253,20 +317,25 @@ def section_pass(force, have_heyoka, repeat):
     else:
         ref = dop853(fun, LEO, PASS_S, t, 1e-13, 1e-9).y.T
         ref_name = "DOP853 rtol 1e-13"
-    res = taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL)
+    res = taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL, engine="numpy")
     st = res.state(t)
-    t_state = median_time(lambda: taylor.propagate(LEO, 0.0, PASS_S, force=force,
-                                                   tol=TOL).state(t), repeat)
-    t_stm = median_time(lambda: taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL,
-                                                 stm=True).stm(t), repeat)
-    resv = taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL, stm=True)
-    phi = resv.stm(t)
     print(f"  Taylor: order {res.order}, {res.n_steps} step(s) of "
           f"{np.round(np.abs(res.step_sizes_s), 1).tolist()} s")
-    print(f"  Taylor state          {fmt_t(t_state)}  (target <= 1 ms)  max |dr| vs {ref_name} "
-          f"{pos_err(st, ref):.1e} m, |dv| {np.abs(st[:, 3:] - ref[:, 3:]).max():.1e} m/s")
-    print(f"  Taylor state + STM    {fmt_t(t_stm)}  (target <= 2 ms)  max |det Phi - 1| "
-          f"{np.abs(np.linalg.det(phi) - 1.0).max():.1e}")
+    timed = {}
+    for eng in engines():
+        est = taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL, engine=eng).state(t)
+        t_state = median_time(lambda: taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL,
+                                                       engine=eng).state(t), repeat)
+        t_stm = median_time(lambda: taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL,
+                                                     stm=True, engine=eng).stm(t), repeat)
+        phi = taylor.propagate(LEO, 0.0, PASS_S, force=force, tol=TOL, stm=True,
+                               engine=eng).stm(t)
+        timed[eng] = (t_state, t_stm)
+        print(f"  Taylor {eng:<8} state   {fmt_t(t_state)}  (target <= 1 ms)  max |dr| vs {ref_name} "
+              f"{pos_err(est, ref):.1e} m, |dv| {np.abs(est[:, 3:] - ref[:, 3:]).max():.1e} m/s")
+        print(f"  Taylor {eng:<8} + STM   {fmt_t(t_stm)}  (target <= 2 ms)  max |det Phi - 1| "
+              f"{np.abs(np.linalg.det(phi) - 1.0).max():.1e}")
+    t_state, t_stm = timed["numpy"]
     rtol, sol = tune_dop853(fun, LEO, PASS_S, t, ref)
     t_dop = median_time(lambda: dop853(fun, LEO, PASS_S, t, rtol, rtol), repeat)
     print(f"  DOP853 @1 mm          {fmt_t(t_dop)}  rtol {rtol:g} (atol rtol*1 m), nfev "
@@ -292,6 +361,8 @@ def section_pass(force, have_heyoka, repeat):
         t_hy = median_time(run, repeat)
         print(f"  heyoka state          {fmt_t(t_hy)}  order {ta.order}, max |dr| vs Taylor "
               f"{pos_err(out[-1], st):.1e} m;  {ratio_line('heyoka', t_hy, t_state)}")
+        if "compiled" in timed:
+            print(f"  {'':22}{'':12}  compiled: {ratio_line('heyoka', t_hy, timed['compiled'][0])}")
         tv = hy.taylor_adaptive(hy.var_ode_sys(heyoka_system(force), hy.var_args.vars,
                                                order=1), LEO.tolist(), tol=TOL)
         run = heyoka_grid(tv, tv.state.copy(), t)
@@ -301,24 +372,31 @@ def section_pass(force, have_heyoka, repeat):
         rel = (np.linalg.norm(phi - phi_hy, axis=-2) / np.linalg.norm(phi, axis=-2)).max()
         print(f"  heyoka + var. eqs     {fmt_t(t_hyv)}  STM column rel. diff. vs Taylor "
               f"{rel:.0e};  {ratio_line('heyoka', t_hyv, t_stm)}")
+        if "compiled" in timed:
+            print(f"  {'':22}{'':12}  compiled: {ratio_line('heyoka', t_hyv, timed['compiled'][1])}")
 
 
 def section_day(force, have_heyoka, repeat):
     t = np.linspace(0.0, DAY_S, 1441)
     fun = rhs_j2 if force == "j2" else rhs_two_body
     print(f"\n== one day of LEO, 1441 samples, {force}, tol {TOL:g} ==")
-    res = taylor.propagate(LEO, 0.0, DAY_S, force=force, tol=TOL)
+    res = taylor.propagate(LEO, 0.0, DAY_S, force=force, tol=TOL, engine="numpy")
     st = res.state(t)
-    t_tay = median_time(lambda: taylor.propagate(LEO, 0.0, DAY_S, force=force,
-                                                 tol=TOL).state(t), 5)
     if force == "two-body":
         ref = kepler.propagate(LEO, t)
-        print(f"  Taylor                {fmt_t(t_tay)}  {res.n_steps} steps; max |dr| vs Kepler "
-              f"{pos_err(st, ref):.1e} m (target <= 1 mm)")
+        ref_name, target = "Kepler", "1 mm"
     else:
         ref = dop853(fun, LEO, DAY_S, t, 1e-13, 1e-9).y.T
-        print(f"  Taylor                {fmt_t(t_tay)}  {res.n_steps} steps; max |dr| vs DOP853 "
-              f"rtol 1e-13 {pos_err(st, ref):.1e} m (target <= 1 cm)")
+        ref_name, target = "DOP853 rtol 1e-13", "1 cm"
+    timed = {}
+    for eng in engines():
+        est = taylor.propagate(LEO, 0.0, DAY_S, force=force, tol=TOL, engine=eng).state(t)
+        timed[eng] = median_time(lambda: taylor.propagate(LEO, 0.0, DAY_S, force=force, tol=TOL,
+                                                          engine=eng).state(t), 5)
+        print(f"  Taylor {eng:<8}       {fmt_t(timed[eng])}  {res.n_steps} steps; max |dr| vs "
+              f"{ref_name} {pos_err(est, ref):.1e} m (target <= {target}); vs numpy engine "
+              f"{pos_err(est, st):.1e} m")
+    t_tay = timed["numpy"]
     rtol, sol = tune_dop853(fun, LEO, DAY_S, t, ref)
     if rtol is None:
         print("  DOP853 cannot reach 1 mm over the day at rtol >= 1e-13")
@@ -326,6 +404,8 @@ def section_day(force, have_heyoka, repeat):
         t_dop = median_time(lambda: dop853(fun, LEO, DAY_S, t, rtol, rtol), 5)
         print(f"  DOP853 @1 mm          {fmt_t(t_dop)}  rtol {rtol:g}, nfev {sol.nfev};  "
               f"{ratio_line('DOP853', t_dop, t_tay)}")
+        if "compiled" in timed:
+            print(f"  {'':22}{'':12}  compiled: {ratio_line('DOP853', t_dop, timed['compiled'])}")
     if have_heyoka:
         import heyoka as hy
         ta = hy.taylor_adaptive(heyoka_system(force), LEO.tolist(), tol=TOL)
@@ -334,6 +414,8 @@ def section_day(force, have_heyoka, repeat):
         t_hy = median_time(run, 5)
         print(f"  heyoka                {fmt_t(t_hy)}  max |dr| vs Taylor {pos_err(out[-1], st):.1e}"
               f" m;  {ratio_line('heyoka', t_hy, t_tay)}")
+        if "compiled" in timed:
+            print(f"  {'':22}{'':12}  compiled: {ratio_line('heyoka', t_hy, timed['compiled'])}")
 
 
 def section_batch(have_heyoka, repeat, n=BATCH):
@@ -486,7 +568,7 @@ def section_measurements(repeat):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--quick", action="store_true", help="5 repeats instead of 9, no day runs")
-    ap.add_argument("--only", choices=("import", "pass", "day", "batch", "measurements"),
+    ap.add_argument("--only", choices=("import", "jit", "pass", "day", "batch", "measurements"),
                     help="run one section only")
     args = ap.parse_args(argv)
     repeat = 5 if args.quick else 9
@@ -508,6 +590,8 @@ def main(argv=None):
 
     if want("import"):
         section_import(repeat=5)
+    if want("jit"):
+        section_jit(repeat=5)
     if want("pass"):
         for force in ("two-body", "j2"):
             section_pass(force, have_heyoka, repeat)

@@ -9,8 +9,9 @@ shared machine, CPU time is the figure to compare):
 
 * ``help``: ``trackproc COMMAND --help`` for a few commands, a fresh process each (target <= 0.1 s);
 * ``propagation``: one 600 s LEO pass (601 samples, two-body + J2, tol 1e-15) and one J2 day
-  (1441 samples): the Taylor engine against heyoka (same tolerance; optional, ``trackproc[bench]``)
-  and scipy DOP853 tuned to 1 mm (targets: a pass within 2x heyoka, a J2 day within 10x);
+  (1441 samples): the Taylor engine, numpy and compiled (numba, ``trackproc[fast]``), against
+  heyoka (same tolerance; optional, ``trackproc[bench]``) and scipy DOP853 tuned to 1 mm (targets:
+  a pass within 2x heyoka, a J2 day within 10x);
 * ``refine``: a single-pass ``refine`` (default options) on DopTrack passes of the development
   period (1-10 April 2020, ../shared/realdata; never the hold-out), CPU per pass (issue 13: < 0.5 s);
 * ``estimate``: the 3-station 24 h estimate of ``benchmarks/estimate.py`` end to end (a fresh
@@ -102,42 +103,64 @@ def section_propagation(repeat=7):
         import heyoka as hy
     except ImportError:
         hy = None
-    print(f"\n== propagation, two-body + J2, tol {pb.TOL:g}, CPU per call "
-          f"(heyoka {'not installed' if hy is None else hy.__version__}) ==")
+    engines = pb.engines()                       # numpy, and compiled when numba is importable
+    print(f"\n== propagation, two-body + J2, tol {pb.TOL:g}, CPU per call, warm "
+          f"(heyoka {'not installed' if hy is None else hy.__version__}; Taylor engines: "
+          f"{', '.join(engines)}) ==")
     for label, span, n, target in (("600 s pass, 601 samples", pb.PASS_S, 601, 2.0),
                                    ("J2 day, 1441 samples", pb.DAY_S, 1441, 10.0)):
         t = np.linspace(0.0, span, n)
         inner = 20 if span < 1000 else 1
-        res = taylor.propagate(pb.LEO, 0.0, span, tol=pb.TOL)
+        res = taylor.propagate(pb.LEO, 0.0, span, tol=pb.TOL, engine="numpy")
         st = res.state(t)
-        t_tay = cpu_median(lambda: taylor.propagate(pb.LEO, 0.0, span, tol=pb.TOL).state(t), repeat, inner)
-        line = f"  {label:<26} Taylor {t_tay * 1e3:8.3f} ms ({res.n_steps} steps)"
+        t_tay = {eng: cpu_median(lambda: taylor.propagate(pb.LEO, 0.0, span, tol=pb.TOL,
+                                                          engine=eng).state(t), repeat, inner)
+                 for eng in engines}
+        line = f"  {label:<26} Taylor numpy {t_tay['numpy'] * 1e3:8.3f} ms"
+        if "compiled" in t_tay:
+            line += f", compiled {t_tay['compiled'] * 1e3:7.3f} ms"
+        line += f" ({res.n_steps} steps)"
         ref = pb.dop853(pb.rhs_j2, pb.LEO, span, t, 1e-13, 1e-9).y.T
         rtol, _ = pb.tune_dop853(pb.rhs_j2, pb.LEO, span, t, ref)
         if rtol is not None:
             t_dop = cpu_median(lambda: pb.dop853(pb.rhs_j2, pb.LEO, span, t, rtol, rtol), 3)
-            line += f"; DOP853 @1 mm {t_dop * 1e3:8.3f} ms (Taylor {t_dop / t_tay:.1f}x faster)"
-            note(f"{label}: DOP853 (1 mm) / Taylor", f"{t_dop / t_tay:.1f}")
+            line += f"; DOP853 @1 mm {t_dop * 1e3:8.3f} ms (numpy Taylor {t_dop / t_tay['numpy']:.1f}x faster)"
+            note(f"{label}: DOP853 (1 mm) / Taylor", "; ".join(
+                f"{eng} {t_dop / t_tay[eng]:.1f}" for eng in engines))
         if hy is not None:
             ta = hy.taylor_adaptive(pb.heyoka_system("j2"), pb.LEO.tolist(), tol=pb.TOL)
             run = pb.heyoka_grid(ta, pb.LEO, t)
             out = run()
             t_hy = cpu_median(run, repeat, inner)
-            line += (f"; heyoka {t_hy * 1e3:7.3f} ms: Taylor/heyoka {t_tay / t_hy:.1f} (target <= {target:g}),"
+            ratios = "; ".join(f"{eng} {t_tay[eng] / t_hy:.1f}" for eng in engines)
+            line += (f"; heyoka {t_hy * 1e3:7.3f} ms: Taylor/heyoka {ratios} (target <= {target:g}),"
                      f" |dr| {pb.pos_err(out[-1], st):.0e} m")
-            note(f"{label}: Taylor / heyoka", f"{t_tay / t_hy:.1f} (target <= {target:g})")
+            note(f"{label}: Taylor / heyoka", f"{ratios} (target <= {target:g})")
         print(line)
         if span < 1000:                          # the pass with its STM: what refine asks for
-            t_stm = cpu_median(lambda: taylor.propagate(pb.LEO, 0.0, span, tol=pb.TOL, stm=True).stm(t),
-                               repeat, inner)
-            line = f"  {label + ' + STM':<26} Taylor {t_stm * 1e3:8.3f} ms"
+            t_stm = {eng: cpu_median(lambda: taylor.propagate(pb.LEO, 0.0, span, tol=pb.TOL, stm=True,
+                                                              engine=eng).stm(t), repeat, inner)
+                     for eng in engines}
+            line = f"  {label + ' + STM':<26} Taylor " + ", ".join(
+                f"{eng} {t_stm[eng] * 1e3:8.3f} ms" for eng in engines)
             if hy is not None:
                 tv = hy.taylor_adaptive(hy.var_ode_sys(pb.heyoka_system("j2"), hy.var_args.vars, order=1),
                                         pb.LEO.tolist(), tol=pb.TOL)
                 t_hyv = cpu_median(pb.heyoka_grid(tv, tv.state.copy(), t), repeat, inner)
-                line += f"; heyoka + var. eqs {t_hyv * 1e3:7.3f} ms: Taylor/heyoka {t_stm / t_hyv:.1f}"
-                note(f"{label} + STM: Taylor / heyoka", f"{t_stm / t_hyv:.1f}")
+                ratios = "; ".join(f"{eng} {t_stm[eng] / t_hyv:.1f}" for eng in engines)
+                line += f"; heyoka + var. eqs {t_hyv * 1e3:7.3f} ms: Taylor/heyoka {ratios}"
+                note(f"{label} + STM: Taylor / heyoka", ratios)
             print(line)
+    if "compiled" in engines:                    # cold: a fresh interpreter, kernels cached on disk
+        leo = "[" + ", ".join(repr(float(x)) for x in pb.LEO) + "]"
+        cold = {eng: pb._subprocess_seconds(pb._COLD.format(leo=leo, span=pb.DAY_S, n=1441, stm=False,
+                                                            eng=eng), 3) for eng in engines}
+        print(f"  J2 day, first call in a fresh process (CPU): numpy {cold['numpy'] * 1e3:.1f} ms, "
+              f"compiled {cold['compiled'] * 1e3:.1f} ms (import numba + cached kernels); so `trackproc` "
+              f"takes the compiled engine by itself only from {taylor.COMPILED_MIN_STEPS[False]} steps "
+              f"(benchmarks/propagation.py --only jit)")
+        note("J2 day, first call in a fresh process: numpy / compiled (CPU)",
+             f"{cold['numpy'] * 1e3:.0f} ms / {cold['compiled'] * 1e3:.0f} ms")
 
 
 def section_refine(repeat=3):

@@ -35,6 +35,15 @@ The recurrences themselves (four kernels of the same series: batch or single tra
 or without sensitivities) are in :mod:`trackproc.dynamics.taylor_series`; this module chooses
 steps and orders, keeps the dense output and runs the propagation.
 
+Compiled engine (optional, numba; :mod:`trackproc.dynamics.taylor_jit`): the same step loop
+compiled whole, for a single trajectory. ``engine="auto"`` (default) takes it when numba is
+importable, ``TRACKPROC_JIT`` is not ``0`` and the arc is long enough to repay loading numba and
+the cached kernels in a fresh process (:data:`COMPILED_MIN_STEPS`, predicted from the first
+step; :data:`COMPILE_MIN_STEPS` while the kernels were never compiled); ``TRACKPROC_JIT=1``
+takes it for every single-trajectory propagation. The choice depends
+only on the call's arguments and the environment, so a run is reproducible; the two engines
+agree to rounding.
+
 Dense output: every step keeps its position spectrum; the state at any set of times is the
 inverse transform (one matrix product per step: powers of the offsets x coefficients),
 without re-integration. Velocity and higher derivatives are derivatives of the same series.
@@ -52,6 +61,7 @@ J2000); no event detection.
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -61,11 +71,67 @@ from trackproc.dynamics.taylor_dense import Outcome, Propagation
 from trackproc.dynamics.taylor_series import series_dual, series_state, series_state_single, series_var_single
 
 __all__ = ["Outcome", "Propagation", "propagate", "default_order", "acceleration", "FORCES",
-           "STATE_PARAMETERS"]
+           "STATE_PARAMETERS", "ENGINES", "COMPILED_MIN_STEPS", "COMPILE_MIN_STEPS"]
 
 FORCES = vocabulary.TAYLOR_FORCES   # what the Taylor engine integrates ("full": dynamics.forces)
 STATE_PARAMETERS = vocabulary.STATE_NAMES
 
+#: ``engine=`` of :func:`propagate`.
+ENGINES = ("auto", "numpy", "compiled")
+#: Predicted steps from which ``engine="auto"`` takes the compiled engine (state only, with
+#: sensitivities): the break-even of a fresh process, where the numpy steps saved (~0.09 / 0.2 ms
+#: of CPU each) pay for ``import numba`` and loading the cached kernels (~0.18 s);
+#: benchmarks/propagation.py --only jit measures both (2000 / 1000 steps: 18 / 9 LEO days).
+COMPILED_MIN_STEPS = {False: 2000, True: 1000}
+#: The same when the kernels are not compiled yet (~10 s of CPU once per installation; ``python -m
+#: trackproc.dynamics.taylor_jit`` or ``TRACKPROC_JIT=1`` compiles them ahead).
+COMPILE_MIN_STEPS = {False: 100_000, True: 50_000}
+
+
+def _jit_mode() -> str:
+    """``"off"`` (TRACKPROC_JIT=0), ``"on"`` (TRACKPROC_JIT=1) or ``"auto"``; read at each call."""
+    v = os.environ.get("TRACKPROC_JIT", "").strip()
+    return "off" if v == "0" else "on" if v == "1" else "auto"
+
+
+_JIT_MODULE: list = []         # [module or None] once looked up
+
+
+def _jit_module():
+    """:mod:`trackproc.dynamics.taylor_jit`, or None when numba is off, absent or unusable (cached).
+
+    numba can refuse ``cache=True`` at import (no writable cache directory); the numpy engine
+    then serves, with one warning.
+    """
+    from trackproc.dynamics import jit
+
+    if not jit.enabled():
+        return None
+    if not _JIT_MODULE:
+        try:
+            from trackproc.dynamics import taylor_jit as mod
+        except Exception as exc:                         # noqa: BLE001 - any failure: numpy
+            import logging
+
+            logging.getLogger(__name__).warning(
+                "compiled Taylor engine unavailable (%s: %s); using the numpy engine",
+                type(exc).__name__, exc)
+            mod = None
+        _JIT_MODULE.append(mod)
+    return _JIT_MODULE[0]
+
+
+def _compiled_available() -> bool:
+    return _jit_module() is not None
+
+
+def _compiled_pays(stm: bool, predicted_steps: float) -> bool:
+    """engine="auto": do the predicted steps repay loading (or first compiling) the kernels?"""
+    if predicted_steps < COMPILED_MIN_STEPS[stm] or not _compiled_available():
+        return False
+    if predicted_steps >= COMPILE_MIN_STEPS[stm]:
+        return True
+    return _jit_module().ready(stm)
 
 
 def default_order(tol: float) -> int:
@@ -134,7 +200,8 @@ def _step_size(x, p, tol):
 def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
               mu_m3_s2: float = MU_EARTH, j2: float = J2, re_m: float = RE_EARTH,
               tol: float = 1e-15, order: int | None = None, stm: bool = False,
-              mu_sensitivity: bool = False, max_steps: int = 100_000) -> Propagation:
+              mu_sensitivity: bool = False, max_steps: int = 100_000,
+              engine: str = "auto") -> Propagation:
     """Integrate two-body (+ J2) motion from t0 to t_end with the adaptive Taylor method.
 
     Parameters
@@ -158,6 +225,10 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
         With ``stm``, also d state / d mu.
     max_steps : int
         Stop with ``Outcome.STEP_LIMIT`` after this many steps.
+    engine : ``"auto"``, ``"numpy"`` or ``"compiled"``
+        The step loop: numpy, the numba-compiled one (single trajectory; needs numba and
+        ``TRACKPROC_JIT`` != 0) or the automatic choice (module docstring). Same results to
+        rounding.
 
     Returns
     -------
@@ -186,6 +257,9 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
         raise ValueError(f"order must be >= 3; found {p}")
     if mu_sensitivity and not stm:
         raise ValueError("mu_sensitivity needs stm=True")
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine {engine!r}; expected one of {ENGINES}")
+    max_steps = int(max_steps)
     s0 = s0.reshape(-1, 6)
     nb = s0.shape[0]
     kj2 = -1.5 * j2 * mu_m3_s2 * re_m ** 2 if force == "j2" else 0.0
@@ -194,6 +268,16 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
     params = STATE_PARAMETERS + (("mu",) if mu_sensitivity else ())
     npar = len(params)
     mu_slot = 7 if mu_sensitivity else None
+
+    mode = "off" if engine == "numpy" else "on" if engine == "compiled" else _jit_mode()
+    if engine == "compiled" and (nb > 1 or not _compiled_available()):
+        raise ValueError("engine='compiled' integrates one trajectory and needs numba "
+                         "(pip install trackproc[fast]) with TRACKPROC_JIT != 0")
+    if mode == "on" and nb == 1 and _compiled_available():
+        return _propagate_compiled(s0, t0, t1, p, mu_m3_s2, kj2, tol, stm, mu_sensitivity,
+                                   max_steps, force=force, j2=j2, re_m=re_m, batch=batch)
+    # auto: decided after the first step (its size predicts the number of steps)
+    decide = mode == "auto" and nb == 1
 
     r = s0[:, :3].copy()
     v = s0[:, 3:].copy()
@@ -233,6 +317,12 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
                 break
             h = _step_size(x, p, tol)
             remaining = abs(t1 - t)
+            if decide:
+                decide = False
+                if _compiled_pays(stm, remaining / h if h > 0.0 else math.inf):
+                    return _propagate_compiled(s0, t0, t1, p, mu_m3_s2, kj2, tol, stm,
+                                               mu_sensitivity, max_steps, force=force, j2=j2,
+                                               re_m=re_m, batch=batch)
             last = not (h < remaining)
             hs = (t1 - t) if last else direction * h
             hp = hs ** kpow
@@ -266,3 +356,33 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
                        sensitivities=sens_arr, parameters=params if stm else (),
                        order=p, tol=tol, force=force, mu_m3_s2=mu_m3_s2,
                        j2=j2 if force == "j2" else 0.0, re_m=re_m, batch=batch)
+
+
+def _propagate_compiled(s0, t0, t1, p, mu, kj2, tol, stm, mu_sensitivity, max_steps, *, force,
+                        j2, re_m, batch) -> Propagation:
+    """:func:`propagate` of one trajectory by the compiled loop (:mod:`taylor_jit`)."""
+    tj = _jit_module()
+    r0 = np.ascontiguousarray(s0[0, :3], dtype=float)
+    v0 = np.ascontiguousarray(s0[0, 3:], dtype=float)
+    args = (float(t0), float(t1), int(p), float(mu), float(kj2))
+    with np.errstate(all="ignore"):
+        if stm:
+            npar = 7 if mu_sensitivity else 6
+            dr0 = np.zeros((3, npar))
+            dv0 = np.zeros((3, npar))
+            dr0[[0, 1, 2], [0, 1, 2]] = 1.0
+            dv0[[0, 1, 2], [3, 4, 5]] = 1.0
+            code, times, coefs, sens = tj.propagate_var(r0, v0, dr0, dv0, *args,
+                                                        6 if mu_sensitivity else -1,
+                                                        float(tol), int(max_steps))
+            sens = sens[:, None]
+        else:
+            code, times, coefs = tj.propagate_state(r0, v0, *args, float(tol), int(max_steps))
+            sens = None
+    outcome = {tj.OUTCOME_SUCCESS: Outcome.SUCCESS, tj.OUTCOME_STEP_LIMIT: Outcome.STEP_LIMIT,
+               tj.OUTCOME_NON_FINITE: Outcome.NON_FINITE}[int(code)]
+    params = STATE_PARAMETERS + (("mu",) if mu_sensitivity else ())
+    return Propagation(outcome=outcome, step_times_s=times, coefficients=coefs[:, None],
+                       sensitivities=sens, parameters=params if stm else (),
+                       order=p, tol=tol, force=force, mu_m3_s2=mu,
+                       j2=j2 if force == "j2" else 0.0, re_m=re_m, batch=batch, engine="compiled")
