@@ -40,6 +40,7 @@ _E3 = np.ascontiguousarray(_dc.E3)
 _E5 = np.ascontiguousarray(_dc.E5)
 _D = np.ascontiguousarray(_dc.D)
 _SAFETY, _MIN_FACTOR, _MAX_FACTOR = 0.9, 0.2, 10.0
+_EVENT_PAST_S = 1e-6                   # integrator.EVENT_PAST_S
 
 _GM_SUN, _GM_MOON, _AU = third_body.GM_SUN, third_body.GM_MOON, third_body.AU_M
 _P_SUN, _R_SUN = srp.P_SUN, srp.R_SUN
@@ -193,8 +194,8 @@ def _point_mass(r, body, gm, acc):
 
 
 @njit
-def _shadow(r, sun, re, axis, flat):
-    """Visible fraction of the solar disc (M&G eqs. 3.79-3.86, the stretched oblate Earth)."""
+def _discs(r, sun, re, axis, flat):
+    """Apparent radii of the Sun and the Earth and their separation (srp._discs)."""
     k = 1.0 / (1.0 - flat) - 1.0
     ra = r[0] * axis[0] + r[1] * axis[1] + r[2] * axis[2]
     sa = sun[0] * axis[0] + sun[1] * axis[1] + sun[2] * axis[2]
@@ -206,6 +207,13 @@ def _shadow(r, sun, re, axis, flat):
     a = math.asin(min(max(_R_SUN / dn, -1.0), 1.0))
     b = math.asin(min(max(re / rn, -1.0), 1.0))
     c = math.acos(min(max(-(rs[0] * d[0] + rs[1] * d[1] + rs[2] * d[2]) / (rn * dn), -1.0), 1.0))
+    return a, b, c
+
+
+@njit
+def _shadow(r, sun, re, axis, flat):
+    """Visible fraction of the solar disc (M&G eqs. 3.79-3.86, the stretched oblate Earth)."""
+    a, b, c = _discs(r, sun, re, axis, flat)
     if c <= b - a:
         return 0.0
     if abs(a - b) < c and c < a + b:
@@ -217,6 +225,31 @@ def _shadow(r, sun, re, axis, flat):
     if c < a - b:
         return 1.0 - (b / a) ** 2
     return 1.0
+
+
+@njit
+def _signs(t, r, E):
+    """Environment.shadow_signs: outside the penumbra, outside the umbra."""
+    cfg = E[0]
+    M = np.empty((3, 3))
+    sun, moon, axis = np.empty(3), np.empty(3), np.empty(3)
+    _at(t, E, M, sun, moon, axis)
+    a, b, c = _discs(r[:3], sun, cfg[_RE], axis, cfg[_FLAT])
+    return c - (a + b) >= 0.0, c - (b - a) >= 0.0
+
+
+@njit
+def _interp(F, y_old, x, k):
+    """scipy's Dop853DenseOutput at the fraction ``x`` of the step: the first ``k`` components."""
+    out = np.zeros(k)
+    nf = F.shape[0]
+    for i in range(nf):
+        for j in range(k):
+            out[j] += F[nf - 1 - i, j]
+            out[j] *= x if i % 2 == 0 else (1 - x)
+    for j in range(k):
+        out[j] += y_old[j]
+    return out
 
 
 @njit
@@ -498,6 +531,14 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
     ynew = np.empty(n)
     fnew = np.empty(n)
     ys = np.empty(n)
+    # shadow boundaries end the steps (as integrator.propagate's numpy loop: a redone step, then
+    # a restart at the step size from before)
+    events = E[0][_SRP] != 0.0
+    s1, s2 = False, False
+    if events:
+        s1, s2 = _signs(0.0, y0, E)
+    t_seg = t_end
+    resume_h = 0.0
     while True:
         if t == t_end:
             break
@@ -520,8 +561,8 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
                 break
             h = h_abs * direction
             t_new = t + h
-            if direction * (t_new - t_end) > 0:
-                t_new = t_end
+            if direction * (t_new - t_seg) > 0:
+                t_new = t_seg
             h = t_new - t
             h_abs = abs(h)
             K[0] = f
@@ -577,15 +618,6 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
         if not finite:
             outcome = 2
             break
-        # dense output: three extra stages and the interpolant's coefficients (scipy's F)
-        for s in range(_NS + 1, 16):
-            for i in range(n):
-                acc = 0.0
-                for j in range(s):
-                    acc += K[j, i] * _A[s, j]
-                ys[i] = y[i] + acc * h
-            _rhs(t + _C[s] * h, ys, stm, npar, E, F, FL, K[s])
-        nfev += 3
         if steps == cap:
             cap *= 2
             t2 = np.empty(cap)
@@ -595,8 +627,15 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
             d2_ = np.empty((cap, 7, n))
             d2_[:steps] = dense[:steps]
             t_olds, y_olds, dense = t2, y2, d2_
-        t_olds[steps] = t
-        y_olds[steps] = y
+        # dense output: three extra stages and the interpolant's coefficients (scipy's F)
+        for s in range(_NS + 1, 16):
+            for i in range(n):
+                acc = 0.0
+                for j in range(s):
+                    acc += K[j, i] * _A[s, j]
+                ys[i] = y[i] + acc * h
+            _rhs(t + _C[s] * h, ys, stm, npar, E, F, FL, K[s])
+        nfev += 3
         for i in range(n):
             dy = ynew[i] - y[i]
             dense[steps, 0, i] = dy
@@ -607,12 +646,36 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
                 for j in range(16):
                     acc += _D[r, j] * K[j, i]
                 dense[steps, 3 + r, i] = h * acc
+        if events:
+            n1, n2 = _signs(t_new, ynew, E)
+            if (n1 != s1 or n2 != s2) and t_new != t_seg:
+                lo, hi = t, t_new
+                while abs(hi - lo) > 1e-9:
+                    mid = 0.5 * (lo + hi)
+                    p = _interp(dense[steps], y, (mid - t) / h, 3)
+                    m1, m2 = _signs(mid, p, E)
+                    if m1 != s1 or m2 != s2:
+                        hi = mid
+                    else:
+                        lo = mid
+                t_seg = hi + _EVENT_PAST_S * direction
+                if direction * (t_seg - t_end) > 0:
+                    t_seg = t_end
+                resume_h = abs(h)
+                h_abs = abs(t_seg - t)
+                continue
+            s1, s2 = n1, n2
+        t_olds[steps] = t
+        y_olds[steps] = y
         steps += 1
         t = t_new
         y[:] = ynew
         f[:] = fnew
         if direction * (t - t_end) >= 0:
             break
+        if t_seg != t_end and direction * (t - t_seg) >= 0:
+            t_seg = t_end
+            h_abs = min(resume_h, abs(t_end - t))
     return outcome, nfev, t_olds[:steps].copy(), y_olds[:steps].copy(), dense[:steps].copy(), t
 
 
