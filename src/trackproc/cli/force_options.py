@@ -168,7 +168,8 @@ class ForceSettings:
         field = load_field(self.gravity_field, deg, order, date=epoch)
         try:
             return ForceModel(field=field, third_bodies=bodies, srp=srp, drag=drag, relativity=self.relativity,
-                              spacecraft=spacecraft, atmosphere=atmosphere, estimated=tuple(estimated), eop=eop)
+                              spacecraft=spacecraft, atmosphere=atmosphere, estimated=tuple(estimated), eop=eop,
+                              **empirical_from_state(state))
         except ValueError as exc:
             raise InputError(str(exc), column="--force") from None
 
@@ -196,6 +197,39 @@ def spacecraft_from_state(state) -> dict:
             raise InputError("bad value", file=source, column=f"spacecraft.{key}", found=value,
                              expected="a positive number")
         out[key] = float(value)
+    return out
+
+
+#: The empirical accelerations of a state file's ``constants`` (as estimate writes them, the
+#: ForceModel.describe keys) and the ForceModel fields they set.
+_EMPIRICAL_KEYS = {"empirical_rtn_m_s2": "empirical_rtn", "empirical_gcrf_m_s2": "empirical_gcrf",
+                   "empirical_gcrf_rate_m_s3": "empirical_gcrf_rate"}
+
+
+def empirical_from_state(state) -> dict:
+    """The empirical accelerations of a state file's ``constants`` (``empirical_rtn_m_s2``,
+    ``empirical_gcrf_m_s2``, ``empirical_gcrf_rate_m_s3``: estimate --estimate-force writes its
+    values there) as ForceModel keyword arguments, so that a solution propagates with the forces
+    it was fitted with; an :class:`~trackproc.errors.InputError` naming the field when malformed."""
+    import math
+
+    from trackproc.errors import InputError
+
+    constants = getattr(state, "constants", None) or {} if state is not None else {}
+    if not isinstance(constants, dict):
+        return {}
+    source = getattr(state, "source", None) or "<state>"
+    out = {}
+    for key, name in _EMPIRICAL_KEYS.items():
+        value = constants.get(key)
+        if value is None:
+            continue
+        ok = (isinstance(value, (list, tuple)) and len(value) == 3
+              and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in value))
+        if not ok:
+            raise InputError("bad value", file=source, column=f"constants.{key}", found=value,
+                             expected="three finite numbers")
+        out[name] = tuple(float(x) for x in value)
     return out
 
 

@@ -282,6 +282,15 @@ class Environment:
         self._cache_t, self._cache = t, (m, sun, moon, axis)
         return self._cache
 
+    def shadow_signs(self, t: float, r):
+        """Signs (bools) of :func:`~trackproc.dynamics.forces.srp.shadow_boundaries` at ``t``, ``r``
+        (outside the penumbra, outside the umbra); None without radiation pressure."""
+        if not self.model.srp:
+            return None
+        _, sun, _, axis = self.at(t)
+        g = srp.shadow_boundaries(np.asarray(r, float)[None, :3], sun, self.model.earth_radius_m, axis, WGS84_F)[0]
+        return bool(g[0] >= 0.0), bool(g[1] >= 0.0)
+
     def _stm_field(self):
         """The field of the STM's gradient when ``stm_degree`` truncates it, else None."""
         deg = STM_DEGREE if self.model.stm_degree is None else self.model.stm_degree

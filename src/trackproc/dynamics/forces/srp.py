@@ -20,17 +20,10 @@ P_SUN = 4.56e-6
 R_SUN = 6.957e8
 
 
-def shadow_fraction(r, sun, r_earth: float, axis=None, flattening: float = 0.0) -> np.ndarray:
-    """Fraction ``ν`` (0..1) of the solar disc seen from ``r`` (P, 3) past the Earth (conical model).
-
-    Implements Montenbruck & Gill (2000) eqs. 3.79-3.86 (apparent radii a, b and separation c
-    of the Sun and the occulting Earth; partial occultation by the overlap of two discs). With
-    ``axis`` (the Earth's rotation axis) and ``flattening`` the oblate Earth is made a sphere of
-    the equatorial radius by stretching the coordinates along the axis by ``1/(1-f)`` (exact for
-    the shadow's cylinder, a close approximation for its cone): a LEO day's SRP then agrees with
-    Orekit's ellipsoid occultation to 0.17 m instead of 0.95 m with the sphere.
-    """
-    r = np.asarray(r, float)
+def _discs(r, sun, r_earth, axis=None, flattening: float = 0.0):
+    """Apparent radii of the Sun ``a`` and the Earth ``b`` and their separation ``c`` seen from
+    ``r`` (P, 3), rad (M&G eqs. 3.80-3.82; the oblate Earth stretched to a sphere along ``axis``)."""
+    r = np.atleast_2d(np.asarray(r, float))
     if axis is not None and flattening:
         k = 1.0 / (1.0 - flattening) - 1.0
         r = r + k * (r @ axis)[:, None] * axis
@@ -41,7 +34,29 @@ def shadow_fraction(r, sun, r_earth: float, axis=None, flattening: float = 0.0) 
     a = np.arcsin(np.clip(R_SUN / dn, -1, 1))               # apparent solar radius
     b = np.arcsin(np.clip(r_earth / rn, -1, 1))             # apparent Earth radius
     c = np.arccos(np.clip(np.einsum("ij,ij->i", -r, d_sun) / (rn * dn), -1, 1))   # separation
-    nu = np.ones(r.shape[0])
+    return a, b, c
+
+
+def shadow_boundaries(r, sun, r_earth: float, axis=None, flattening: float = 0.0) -> np.ndarray:
+    """``(P, 2)``: ``c - (a + b)`` and ``c - (b - a)``, zero where the satellite enters or leaves
+    the penumbra and the umbra: the kinks of :func:`shadow_fraction`, where the integrator ends
+    its steps (an RK step across a kink loses its order: centimetres of LAGEOS in 3 days)."""
+    a, b, c = _discs(r, sun, r_earth, axis, flattening)
+    return np.stack([c - (a + b), c - (b - a)], -1)
+
+
+def shadow_fraction(r, sun, r_earth: float, axis=None, flattening: float = 0.0) -> np.ndarray:
+    """Fraction ``ν`` (0..1) of the solar disc seen from ``r`` (P, 3) past the Earth (conical model).
+
+    Implements Montenbruck & Gill (2000) eqs. 3.79-3.86 (apparent radii a, b and separation c
+    of the Sun and the occulting Earth; partial occultation by the overlap of two discs). With
+    ``axis`` (the Earth's rotation axis) and ``flattening`` the oblate Earth is made a sphere of
+    the equatorial radius by stretching the coordinates along the axis by ``1/(1-f)`` (exact for
+    the shadow's cylinder, a close approximation for its cone): a LEO day's SRP then agrees with
+    Orekit's ellipsoid occultation to 0.17 m instead of 0.95 m with the sphere.
+    """
+    a, b, c = _discs(r, sun, r_earth, axis, flattening)
+    nu = np.ones(a.shape[0])
     total = c <= b - a
     nu[total] = 0.0
     part = (np.abs(a - b) < c) & (c < a + b)

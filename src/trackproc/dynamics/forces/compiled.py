@@ -1,0 +1,702 @@
+"""The full force model and its DOP853 integration compiled with numba (optional, ``[fast]``).
+
+The same physics as the numpy path, term for term and in the same order of summation where it
+matters, so that the two agree to rounding: the field by the normalised Cunningham recursion of
+:mod:`~trackproc.dynamics.forces.gravity_field` (Montenbruck & Gill 2000 eqs. 3.27-3.33), Sun
+and Moon (eq. 3.37), SRP with the conical shadow (eqs. 3.75, 3.79-3.86), Harris-Priester drag
+(eqs. 3.97, 3.99-3.104), the Schwarzschild term (IERS 2010 eq. 10.12), the empirical
+accelerations, the Jacobians by the same central differences as
+:meth:`~trackproc.dynamics.forces.model.Environment.partials`, and scipy's DOP853 (Hairer,
+Nørsett & Wanner, *Solving ODEs I*, II.5: the same coefficients, error norm, step-size
+controller and first-step guess) with the variational equations (M&G eqs. 7.42-7.44), all in
+one compiled loop: no Python per right-hand-side call.
+
+:func:`integrate` returns each accepted step's dense-output coefficients; the caller
+(:func:`trackproc.dynamics.forces.integrator.propagate`) turns them into the step polynomials
+exactly as for scipy's steps. Only the Harris-Priester atmosphere is compiled (NRLMSIS stays
+on the numpy path). Imported only when :func:`trackproc.dynamics.jit.enabled`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.integrate._ivp import dop853_coefficients as _dc
+
+from trackproc.constants import C_LIGHT, OMEGA_EARTH, WGS84_A, WGS84_F
+from trackproc.dynamics.forces import drag as drag_mod
+from trackproc.dynamics.forces import srp, third_body
+from trackproc.dynamics.jit import njit
+
+__all__ = ["supported", "field_tables", "environment_tables", "integrate", "perturbation", "partials"]
+
+# DOP853 tableau (scipy's copy of Hairer's coefficients)
+_NS = _dc.N_STAGES
+_A = np.ascontiguousarray(_dc.A)
+_B = np.ascontiguousarray(_dc.B)
+_C = np.ascontiguousarray(_dc.C)
+_E3 = np.ascontiguousarray(_dc.E3)
+_E5 = np.ascontiguousarray(_dc.E5)
+_D = np.ascontiguousarray(_dc.D)
+_SAFETY, _MIN_FACTOR, _MAX_FACTOR = 0.9, 0.2, 10.0
+_EVENT_PAST_S = 1e-6                   # integrator.EVENT_PAST_S
+
+_GM_SUN, _GM_MOON, _AU = third_body.GM_SUN, third_body.GM_MOON, third_body.AU_M
+_P_SUN, _R_SUN = srp.P_SUN, srp.R_SUN
+_HP_H = np.ascontiguousarray(drag_mod.HP_TABLE[:, 0] * 1e3)
+_HP_LMIN = np.log(drag_mod.HP_TABLE[:, 1] * 1e-12)
+_HP_LMAX = np.log(drag_mod.HP_TABLE[:, 2] * 1e-12)
+_LAG = drag_mod.LAG_RAD
+
+# cfg slots of environment_tables
+(_GM, _T0, _GRID, _NNODES, _SUN, _MOON, _REL, _SRP, _DRAG, _AM_SRP, _CR, _AM_DRAG, _CD, _RE, _FLAT,
+ _HPN, _ER, _EX, _EXR, _LOW, _NCFG) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 19, 22, 25, 26)
+
+
+def supported(model) -> bool:
+    """Whether :func:`integrate` covers the model (everything but the NRLMSIS atmosphere)."""
+    return not (model.drag and model.atmosphere != "harris-priester")
+
+
+def field_tables(field):
+    """The field's recursion and summation tables as a tuple of arrays for the kernels."""
+    t = field._coefficient_tables()
+    dims = np.array([field.degree + 1, min(field.order + 1, field.degree + 1)], np.int64)
+    consts = np.array([field.gm_m3_s2, field.radius_m])
+    return (np.ascontiguousarray(t["a"]), np.ascontiguousarray(t["b"]), np.ascontiguousarray(t["fprod"]),
+            np.ascontiguousarray(t["p1"]), np.ascontiguousarray(t["p2"]), np.ascontiguousarray(t["p3"]),
+            t["n"].astype(np.int64), t["m"].astype(np.int64), dims, consts)
+
+
+def environment_tables(env, estimated=()):
+    """An :class:`~trackproc.dynamics.forces.model.Environment` as a tuple of arrays: settings,
+    the integration frame, the tabulated Earth rotation, Sun and Moon, the estimated parameters'
+    codes (their index in :data:`~trackproc.dynamics.forces.model.PARAMETERS`)."""
+    from trackproc.dynamics.forces.model import GRID_S, PARAMETERS
+
+    mdl = env.model
+    sc = mdl.spacecraft
+    cfg = np.zeros(_NCFG)
+    cfg[_GM] = mdl.field.gm_m3_s2
+    cfg[_T0], cfg[_GRID], cfg[_NNODES] = env.t0_grid, GRID_S, env.n_nodes
+    cfg[_SUN] = "sun" in mdl.third_bodies
+    cfg[_MOON] = "moon" in mdl.third_bodies
+    cfg[_REL] = bool(mdl.relativity)
+    cfg[_SRP] = bool(mdl.srp)
+    cfg[_DRAG] = bool(mdl.drag)
+    if mdl.srp:
+        cfg[_AM_SRP], cfg[_CR] = sc.srp_area_m2 / sc.mass_kg, sc.cr
+    if mdl.drag:
+        cfg[_AM_DRAG], cfg[_CD] = sc.drag_area_m2 / sc.mass_kg, sc.cd
+    cfg[_RE], cfg[_FLAT], cfg[_HPN] = mdl.earth_radius_m, WGS84_F, mdl.hp_exponent
+    cfg[_ER:_ER + 3] = mdl.empirical_rtn
+    cfg[_EX:_EX + 3] = mdl.empirical_gcrf
+    cfg[_EXR:_EXR + 3] = mdl.empirical_gcrf_rate
+    cfg[_LOW] = env._stm_field() is not None
+    codes = np.array([PARAMETERS.index(p) for p in estimated], np.int64)
+    return (cfg, np.ascontiguousarray(env.q, float), np.ascontiguousarray(env._qq), np.ascontiguousarray(env._w),
+            np.ascontiguousarray(env._era), np.ascontiguousarray(env._sun), np.ascontiguousarray(env._moon), codes)
+
+
+# -- forces ----------------------------------------------------------------------------------
+@njit
+def _field_acc(r, F, central, out):
+    """Field acceleration at ITRF ``r`` (3,) into ``out`` (normalised Cunningham recursion,
+    Montenbruck & Gill 2000 eqs. 3.27-3.33, as GravityField.acceleration)."""
+    a, b, fprod, p1, p2, p3, nn, mm, dims, consts = F
+    nmax, mmax = dims[0], dims[1]
+    gm, R = consts[0], consts[1]
+    x, y, z = r[0], r[1], r[2]
+    r2 = x * x + y * y + z * z
+    x0, y0, z0 = x * (R / r2), y * (R / r2), z * (R / r2)
+    rho = R * R / r2
+    Z = np.zeros((nmax + 1, nmax + 1), np.complex128)
+    w = complex(x0, y0)
+    p = 1.0 + 0.0j
+    ron = R / math.sqrt(r2)
+    for m in range(mmax + 1):
+        Z[m, m] = fprod[m] * p * ron
+        p = p * w
+    for n in range(1, nmax + 1):
+        k = min(n, mmax + 1)
+        if n >= 2:
+            for m in range(k):
+                Z[n, m] = a[n, m] * z0 * Z[n - 1, m] - b[n, m] * rho * Z[n - 2, m]
+        else:
+            for m in range(k):
+                Z[n, m] = a[n, m] * z0 * Z[n - 1, m]
+    s1 = 0.0j
+    s2 = 0.0j
+    s3 = 0.0
+    for j in range(0 if central else 1, nn.size):
+        n, m = nn[j], mm[j]
+        s1 += Z[n + 1, m + 1] * p1[j]
+        s2 += Z[n + 1, max(m - 1, 0)].conjugate() * p2[j]
+        s3 += (Z[n + 1, m] * p3[j]).real
+    g = gm / (R * R)
+    axy = s1 + s2
+    out[0], out[1], out[2] = g * axy.real, g * axy.imag, g * s3
+
+
+@njit
+def _mat3(a, b):
+    out = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = a[i, 0] * b[0, j] + a[i, 1] * b[1, j] + a[i, 2] * b[2, j]
+    return out
+
+
+@njit
+def _mv(m, x):
+    return np.array([m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2], m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2],
+                     m[2, 0] * x[0] + m[2, 1] * x[1] + m[2, 2] * x[2]])
+
+
+@njit
+def _hermite(tab, k, x, h, out):
+    x2, x3 = x * x, x * x * x
+    for i in range(3):
+        out[i] = ((2 * x3 - 3 * x2 + 1) * tab[k, 0, i] + (x3 - 2 * x2 + x) * h * tab[k, 1, i]
+                  + (-2 * x3 + 3 * x2) * tab[k + 1, 0, i] + (x3 - x2) * h * tab[k + 1, 1, i])
+
+
+@njit
+def _at(t, E, M, sun, moon, axis):
+    """Environment.at: integration -> ITRF matrix, Sun, Moon, the Earth's axis at ``t``."""
+    cfg, q, QQ, W, ERA = E[0], E[1], E[2], E[3], E[4]
+    grid = cfg[_GRID]
+    u = (t - cfg[_T0]) / grid
+    k = int(min(max(math.floor(u), 0.0), cfg[_NNODES] - 2))
+    x = u - k
+    qq = ((1 - x) * QQ[k] + x * QQ[k + 1]).reshape(3, 3)
+    w = ((1 - x) * W[k] + x * W[k + 1]).reshape(3, 3)
+    era = (1 - x) * ERA[k] + x * ERA[k + 1]
+    c, sn = math.cos(era), math.sin(era)
+    r3 = np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]])
+    M[:, :] = _mat3(_mat3(w, r3), qq)
+    _hermite(E[5], k, x, grid, sun)
+    _hermite(E[6], k, x, grid, moon)
+    axis[:] = qq[2]
+
+
+@njit
+def _point_mass(r, body, gm, acc):
+    """M&G eq. 3.37, added to ``acc``."""
+    d0, d1, d2 = body[0] - r[0], body[1] - r[1], body[2] - r[2]
+    dn = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    sn = math.sqrt(body[0] ** 2 + body[1] ** 2 + body[2] ** 2)
+    dn3, sn3 = dn ** 3, sn ** 3
+    acc[0] += gm * (d0 / dn3 - body[0] / sn3)
+    acc[1] += gm * (d1 / dn3 - body[1] / sn3)
+    acc[2] += gm * (d2 / dn3 - body[2] / sn3)
+
+
+@njit
+def _discs(r, sun, re, axis, flat):
+    """Apparent radii of the Sun and the Earth and their separation (srp._discs)."""
+    k = 1.0 / (1.0 - flat) - 1.0
+    ra = r[0] * axis[0] + r[1] * axis[1] + r[2] * axis[2]
+    sa = sun[0] * axis[0] + sun[1] * axis[1] + sun[2] * axis[2]
+    rs = r + k * ra * axis
+    ss = sun + k * sa * axis
+    d = ss - rs
+    rn = math.sqrt(rs[0] ** 2 + rs[1] ** 2 + rs[2] ** 2)
+    dn = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+    a = math.asin(min(max(_R_SUN / dn, -1.0), 1.0))
+    b = math.asin(min(max(re / rn, -1.0), 1.0))
+    c = math.acos(min(max(-(rs[0] * d[0] + rs[1] * d[1] + rs[2] * d[2]) / (rn * dn), -1.0), 1.0))
+    return a, b, c
+
+
+@njit
+def _shadow(r, sun, re, axis, flat):
+    """Visible fraction of the solar disc (M&G eqs. 3.79-3.86, the stretched oblate Earth)."""
+    a, b, c = _discs(r, sun, re, axis, flat)
+    if c <= b - a:
+        return 0.0
+    if abs(a - b) < c and c < a + b:
+        x = (c * c + a * a - b * b) / (2 * c)
+        y = math.sqrt(max(a * a - x * x, 0.0))
+        area = (a * a * math.acos(min(max(x / a, -1.0), 1.0)) + b * b * math.acos(min(max((c - x) / b, -1.0), 1.0))
+                - c * y)
+        return 1.0 - area / (math.pi * a * a)
+    if c < a - b:
+        return 1.0 - (b / a) ** 2
+    return 1.0
+
+
+@njit
+def _signs(t, r, E):
+    """Environment.shadow_signs: outside the penumbra, outside the umbra."""
+    cfg = E[0]
+    M = np.empty((3, 3))
+    sun, moon, axis = np.empty(3), np.empty(3), np.empty(3)
+    _at(t, E, M, sun, moon, axis)
+    a, b, c = _discs(r[:3], sun, cfg[_RE], axis, cfg[_FLAT])
+    return c - (a + b) >= 0.0, c - (b - a) >= 0.0
+
+
+@njit
+def _interp(F, y_old, x, k):
+    """scipy's Dop853DenseOutput at the fraction ``x`` of the step: the first ``k`` components."""
+    out = np.zeros(k)
+    nf = F.shape[0]
+    for i in range(nf):
+        for j in range(k):
+            out[j] += F[nf - 1 - i, j]
+            out[j] *= x if i % 2 == 0 else (1 - x)
+    for j in range(k):
+        out[j] += y_old[j]
+    return out
+
+
+@njit
+def _height(r):
+    """Geodetic height (m) on WGS-84 (ERFA gc2gde, Fukushima's method)."""
+    a, f = WGS84_A, WGS84_F
+    aeps2 = a * a * 1e-32
+    e2 = (2.0 - f) * f
+    e4t = e2 * e2 * 1.5
+    ec2 = 1.0 - e2
+    ec = math.sqrt(ec2)
+    x, y, z = r[0], r[1], r[2]
+    p2 = x * x + y * y
+    absz = abs(z)
+    if p2 > aeps2:
+        p = math.sqrt(p2)
+        s0 = absz / a
+        pn = p / a
+        zc = ec * s0
+        c0 = ec * pn
+        c02 = c0 * c0
+        c03 = c02 * c0
+        s02 = s0 * s0
+        s03 = s02 * s0
+        a02 = c02 + s02
+        a0 = math.sqrt(a02)
+        a03 = a02 * a0
+        d0 = zc * a03 + e2 * s03
+        f0 = pn * a03 - e2 * c03
+        b0 = e4t * s02 * c02 * pn * (a0 - ec)
+        s1 = d0 * f0 - b0 * s0
+        cc = ec * (f0 * f0 - b0 * c0)
+        s12 = s1 * s1
+        cc2 = cc * cc
+        return (p * cc + absz * s1 - a * math.sqrt(ec2 * s12 + cc2)) / math.sqrt(s12 + cc2)
+    return absz - a * ec
+
+
+@njit
+def _harris_priester(h, r_itrf, sun_itrf, n):
+    """Density (kg/m³), M&G eqs. 3.99-3.104 as drag.harris_priester."""
+    if h > _HP_H[-1]:
+        return 0.0
+    hc = min(max(h, _HP_H[0]), _HP_H[-1])
+    rho_min = math.exp(np.interp(hc, _HP_H, _HP_LMIN))
+    rho_max = math.exp(np.interp(hc, _HP_H, _HP_LMAX))
+    sn = math.sqrt(sun_itrf[0] ** 2 + sun_itrf[1] ** 2 + sun_itrf[2] ** 2)
+    s0, s1, s2 = sun_itrf[0] / sn, sun_itrf[1] / sn, sun_itrf[2] / sn
+    c, si = math.cos(_LAG), math.sin(_LAG)
+    ax, ay, az = c * s0 - si * s1, si * s0 + c * s1, s2
+    rn = math.sqrt(r_itrf[0] ** 2 + r_itrf[1] ** 2 + r_itrf[2] ** 2)
+    cos_psi = (r_itrf[0] * ax + r_itrf[1] * ay + r_itrf[2] * az) / rn
+    cos2 = min(max(0.5 * (1.0 + cos_psi), 0.0), 1.0)
+    return rho_min + (rho_max - rho_min) * cos2 ** (n / 2.0)
+
+
+@njit
+def _position_part(t, r, F, central, E, M, sun, moon, out):
+    """Field (in ITRF through M) + Sun + Moon at inertial ``r`` into ``out``."""
+    cfg = E[0]
+    r_itrf = _mv(M, r)
+    fi = np.empty(3)
+    _field_acc(r_itrf, F, central, fi)
+    for i in range(3):
+        out[i] = fi[0] * M[0, i] + fi[1] * M[1, i] + fi[2] * M[2, i]
+    if cfg[_SUN]:
+        _point_mass(r, sun, _GM_SUN, out)
+    if cfg[_MOON]:
+        _point_mass(r, moon, _GM_MOON, out)
+
+
+@njit
+def _rest(t, r, v, E, M, sun, axis, acc, unit, with_units):
+    """Relativity, SRP, drag and the empirical accelerations added to ``acc`` (the position
+    part); ``unit`` (11, 3) gets the unit-coefficient parts in PARAMETERS order."""
+    cfg, q = E[0], E[1]
+    if cfg[_REL]:
+        gm = cfg[_GM]
+        rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+        v2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+        rv = r[0] * v[0] + r[1] * v[1] + r[2] * v[2]
+        f = gm / (C_LIGHT ** 2 * rn ** 3)
+        for i in range(3):
+            acc[i] += f * ((4 * gm / rn - v2) * r[i] + 4 * rv * v[i])
+    if cfg[_SRP]:
+        d = r - sun
+        dn = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+        nu = _shadow(r, sun, cfg[_RE], axis, cfg[_FLAT])
+        for i in range(3):
+            a1 = nu * 1.0 * _P_SUN * (_AU / dn) ** 2 * cfg[_AM_SRP] * d[i] / dn
+            acc[i] += cfg[_CR] * a1
+            unit[0, i] = a1
+    if cfg[_DRAG]:
+        cx = axis[1] * r[2] - axis[2] * r[1]
+        cy = axis[2] * r[0] - axis[0] * r[2]
+        cz = axis[0] * r[1] - axis[1] * r[0]
+        vr = np.array([v[0] - OMEGA_EARTH * cx, v[1] - OMEGA_EARTH * cy, v[2] - OMEGA_EARTH * cz])
+        r_itrf = _mv(M, r)
+        rho = _harris_priester(_height(r_itrf), r_itrf, _mv(M, sun), cfg[_HPN])
+        vn = math.sqrt(vr[0] ** 2 + vr[1] ** 2 + vr[2] ** 2)
+        for i in range(3):
+            a1 = -0.5 * rho * 1.0 * cfg[_AM_DRAG] * vn * vr[i]
+            acc[i] += cfg[_CD] * a1
+            unit[1, i] = a1
+    er, et, en = cfg[_ER], cfg[_ER + 1], cfg[_ER + 2]
+    emp = er != 0.0 or et != 0.0 or en != 0.0
+    if emp or with_units:
+        rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+        ru = r / rn
+        h = np.array([r[1] * v[2] - r[2] * v[1], r[2] * v[0] - r[0] * v[2], r[0] * v[1] - r[1] * v[0]])
+        nu_ = h / math.sqrt(h[0] ** 2 + h[1] ** 2 + h[2] ** 2)
+        tu = np.array([nu_[1] * ru[2] - nu_[2] * ru[1], nu_[2] * ru[0] - nu_[0] * ru[2],
+                       nu_[0] * ru[1] - nu_[1] * ru[0]])
+        if emp:
+            for i in range(3):
+                acc[i] += er * ru[i] + et * tu[i] + en * nu_[i]
+        for i in range(3):
+            unit[2, i], unit[3, i], unit[4, i] = ru[i], tu[i], nu_[i]
+    xyz = np.empty(3)
+    anyx = False
+    for j in range(3):
+        xyz[j] = cfg[_EX + j] + t * cfg[_EXR + j]
+        anyx = anyx or xyz[j] != 0.0
+    if anyx:
+        for i in range(3):
+            acc[i] += q[i, 0] * xyz[0] + q[i, 1] * xyz[1] + q[i, 2] * xyz[2]
+    if with_units:
+        for j in range(3):
+            for i in range(3):
+                unit[5 + j, i] = q[i, j]
+                unit[8 + j, i] = t * q[i, j]
+
+
+@njit
+def _acceleration(t, r, v, E, F, acc):
+    """Total acceleration (central + perturbation) at one state into ``acc``."""
+    M = np.empty((3, 3))
+    sun, moon, axis = np.empty(3), np.empty(3), np.empty(3)
+    _at(t, E, M, sun, moon, axis)
+    unit = np.zeros((11, 3))
+    _position_part(t, r, F, False, E, M, sun, moon, acc)
+    _rest(t, r, v, E, M, sun, axis, acc, unit, False)
+    gm = E[0][_GM]
+    rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+    for i in range(3):
+        acc[i] = -gm * r[i] / rn ** 3 + acc[i]
+
+
+@njit
+def _partials(t, r, v, E, F, FL, a, g, hv, dp):
+    """Environment.partials: ``a``, ``∂a/∂r`` (central analytic + central differences of the
+    rest, steps 1 m and 1 mm/s, the STM's truncated field ``FL`` when cfg says so), ``∂a/∂v``,
+    ``∂a/∂p`` of the estimated parameters."""
+    cfg = E[0]
+    codes = E[7]
+    M = np.empty((3, 3))
+    sun, moon, axis = np.empty(3), np.empty(3), np.empty(3)
+    _at(t, E, M, sun, moon, axis)
+    unit = np.zeros((11, 3))
+    scratch = np.zeros((11, 3))
+    low = cfg[_LOW] != 0.0
+    p0 = np.empty(3)
+    _position_part(t, r, F, False, E, M, sun, moon, p0)
+    _rest(t, r, v, E, M, sun, axis, p0, unit, True)
+    hr, hvs = 1.0, 1e-3
+    pp, pm = np.empty(3), np.empty(3)
+    rr = r.copy()
+    for j in range(3):
+        rr[j] = r[j] + hr
+        _position_part(t, rr, FL if low else F, False, E, M, sun, moon, pp)
+        _rest(t, rr, v, E, M, sun, axis, pp, scratch, True)
+        rr[j] = r[j] - hr
+        _position_part(t, rr, FL if low else F, False, E, M, sun, moon, pm)
+        _rest(t, rr, v, E, M, sun, axis, pm, scratch, True)
+        rr[j] = r[j]
+        for i in range(3):
+            g[i, j] = (pp[i] - pm[i]) / (2 * hr)
+    # the position part at r with the gradient's field (the same for the six velocity points)
+    base = np.empty(3)
+    _position_part(t, r, FL if low else F, False, E, M, sun, moon, base)
+    vv = v.copy()
+    for j in range(3):
+        vv[j] = v[j] + hvs
+        pp[:] = base
+        _rest(t, r, vv, E, M, sun, axis, pp, scratch, True)
+        vv[j] = v[j] - hvs
+        pm[:] = base
+        _rest(t, r, vv, E, M, sun, axis, pm, scratch, True)
+        vv[j] = v[j]
+        for i in range(3):
+            hv[i, j] = (pp[i] - pm[i]) / (2 * hvs)
+    gm = cfg[_GM]
+    rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+    for i in range(3):
+        for j in range(3):
+            g[i, j] = g[i, j] + gm * (3.0 * r[i] * r[j] / rn ** 5 - (1.0 if i == j else 0.0) / rn ** 3)
+        a[i] = p0[i] - gm * r[i] / rn ** 3
+    for k in range(codes.size):
+        for i in range(3):
+            dp[i, k] = unit[codes[k], i]
+
+
+@njit
+def _rhs(t, y, stm, npar, E, F, FL, out):
+    """The state's derivative, with Φ' = A Φ and S' = A S + [0; ∂a/∂p] when ``stm``."""
+    out[0], out[1], out[2] = y[3], y[4], y[5]
+    if not stm:
+        acc = np.empty(3)
+        _acceleration(t, y[:3], y[3:6], E, F, acc)
+        out[3], out[4], out[5] = acc[0], acc[1], acc[2]
+        return
+    a, g, hv = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
+    dp = np.zeros((3, max(npar, 1)))
+    _partials(t, y[:3], y[3:6], E, F, FL, a, g, hv, dp)
+    out[3], out[4], out[5] = a[0], a[1], a[2]
+    ncol = 6 + npar
+    # Φ rows 0..5 at y[6:42] (6 x 6), S at y[42:] (6 x npar): treat [Φ S] column by column
+    for c in range(ncol):
+        if c < 6:
+            base, stride, col = 6, 6, c
+        else:
+            base, stride, col = 42, npar, c - 6
+        for i in range(3):
+            out[base + i * stride + col] = y[base + (3 + i) * stride + col]
+        for i in range(3):
+            s1, s2 = 0.0, 0.0
+            for k in range(3):
+                s1 += g[i, k] * y[base + k * stride + col]
+                s2 += hv[i, k] * y[base + (3 + k) * stride + col]
+            s = s1 + s2
+            if c >= 6:
+                s += dp[i, col]
+            out[base + (3 + i) * stride + col] = s
+
+
+@njit
+def _rms(x):
+    s = 0.0
+    for i in range(x.size):
+        s += x[i] * x[i]
+    return math.sqrt(s) / math.sqrt(x.size)
+
+
+@njit
+def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
+    """DOP853 from t = 0 to ``t_end`` as scipy's (same tableau, error norm, controller and
+    first step). Returns ``(outcome, nfev, t_old (S,), y_old (S, n), dense (S, 7, n), t)``:
+    outcome 0 success, 1 step limit, 2 non-finite or too small a step; ``t`` where it stopped."""
+    n = y0.size
+    direction = 1.0 if t_end >= 0.0 else -1.0
+    t = 0.0
+    y = y0.copy()
+    f = np.empty(n)
+    _rhs(t, y, stm, npar, E, F, FL, f)
+    nfev = 1
+    # select_initial_step (scipy common.py; Hairer et al. II.4)
+    interval = abs(t_end)
+    scale = atol + np.abs(y) * rtol
+    d0, d1 = _rms(y / scale), _rms(f / scale)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, interval)
+    f1 = np.empty(n)
+    _rhs(t + h0 * direction, y + h0 * direction * f, stm, npar, E, F, FL, f1)
+    nfev += 1
+    d2 = _rms((f1 - f) / scale) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / 8.0)
+    h_abs = min(100 * h0, h1, interval, max_step)
+    K = np.empty((16, n))
+    cap = 64
+    t_olds = np.empty(cap)
+    y_olds = np.empty((cap, n))
+    dense = np.empty((cap, 7, n))
+    steps = 0
+    outcome = 0
+    err_exp = -1.0 / 8.0
+    ynew = np.empty(n)
+    fnew = np.empty(n)
+    ys = np.empty(n)
+    # shadow boundaries end the steps (as integrator.propagate's numpy loop: a redone step, then
+    # a restart at the step size from before)
+    events = E[0][_SRP] != 0.0
+    s1, s2 = False, False
+    if events:
+        s1, s2 = _signs(0.0, y0, E)
+    t_seg = t_end
+    resume_h = 0.0
+    while True:
+        if t == t_end:
+            break
+        if steps >= max_steps:
+            outcome = 1
+            break
+        min_step = 10 * abs(np.nextafter(t, direction * np.inf) - t)
+        if h_abs > max_step:
+            h_abs = max_step
+        elif h_abs < min_step:
+            h_abs = min_step
+        accepted = False
+        rejected = False
+        failed = False
+        h = 0.0
+        t_new = t
+        while not accepted:
+            if h_abs < min_step:
+                failed = True
+                break
+            h = h_abs * direction
+            t_new = t + h
+            if direction * (t_new - t_seg) > 0:
+                t_new = t_seg
+            h = t_new - t
+            h_abs = abs(h)
+            K[0] = f
+            for s in range(1, _NS):
+                for i in range(n):
+                    acc = 0.0
+                    for j in range(s):
+                        acc += K[j, i] * _A[s, j]
+                    ys[i] = y[i] + acc * h
+                _rhs(t + _C[s] * h, ys, stm, npar, E, F, FL, K[s])
+            for i in range(n):
+                acc = 0.0
+                for j in range(_NS):
+                    acc += K[j, i] * _B[j]
+                ynew[i] = y[i] + h * acc
+            _rhs(t + h, ynew, stm, npar, E, F, FL, fnew)
+            nfev += _NS
+            K[_NS] = fnew
+            e5, e3 = 0.0, 0.0
+            for i in range(n):
+                sc = atol[i] + max(abs(y[i]), abs(ynew[i])) * rtol[i]
+                s5, s3 = 0.0, 0.0
+                for j in range(_NS + 1):
+                    s5 += K[j, i] * _E5[j]
+                    s3 += K[j, i] * _E3[j]
+                s5 /= sc
+                s3 /= sc
+                e5 += s5 * s5
+                e3 += s3 * s3
+            if e5 == 0.0 and e3 == 0.0:
+                err = 0.0
+            else:
+                err = abs(h) * e5 / math.sqrt((e5 + 0.01 * e3) * n)
+            if err < 1:
+                if err == 0:
+                    factor = _MAX_FACTOR
+                else:
+                    factor = min(_MAX_FACTOR, _SAFETY * err ** err_exp)
+                if rejected:
+                    factor = min(1.0, factor)
+                h_abs *= factor
+                accepted = True
+            else:
+                h_abs *= max(_MIN_FACTOR, _SAFETY * err ** err_exp)
+                rejected = True
+        if failed:
+            outcome = 2
+            break
+        finite = True
+        for i in range(n):
+            if not math.isfinite(ynew[i]):
+                finite = False
+        if not finite:
+            outcome = 2
+            break
+        if steps == cap:
+            cap *= 2
+            t2 = np.empty(cap)
+            t2[:steps] = t_olds[:steps]
+            y2 = np.empty((cap, n))
+            y2[:steps] = y_olds[:steps]
+            d2_ = np.empty((cap, 7, n))
+            d2_[:steps] = dense[:steps]
+            t_olds, y_olds, dense = t2, y2, d2_
+        # dense output: three extra stages and the interpolant's coefficients (scipy's F)
+        for s in range(_NS + 1, 16):
+            for i in range(n):
+                acc = 0.0
+                for j in range(s):
+                    acc += K[j, i] * _A[s, j]
+                ys[i] = y[i] + acc * h
+            _rhs(t + _C[s] * h, ys, stm, npar, E, F, FL, K[s])
+        nfev += 3
+        for i in range(n):
+            dy = ynew[i] - y[i]
+            dense[steps, 0, i] = dy
+            dense[steps, 1, i] = h * K[0, i] - dy
+            dense[steps, 2, i] = 2 * dy - h * (fnew[i] + K[0, i])
+            for r in range(4):
+                acc = 0.0
+                for j in range(16):
+                    acc += _D[r, j] * K[j, i]
+                dense[steps, 3 + r, i] = h * acc
+        if events:
+            n1, n2 = _signs(t_new, ynew, E)
+            if (n1 != s1 or n2 != s2) and t_new != t_seg:
+                lo, hi = t, t_new
+                while abs(hi - lo) > 1e-9:
+                    mid = 0.5 * (lo + hi)
+                    p = _interp(dense[steps], y, (mid - t) / h, 3)
+                    m1, m2 = _signs(mid, p, E)
+                    if m1 != s1 or m2 != s2:
+                        hi = mid
+                    else:
+                        lo = mid
+                t_seg = hi + _EVENT_PAST_S * direction
+                if direction * (t_seg - t_end) > 0:
+                    t_seg = t_end
+                resume_h = abs(h)
+                h_abs = abs(t_seg - t)
+                continue
+            s1, s2 = n1, n2
+        t_olds[steps] = t
+        y_olds[steps] = y
+        steps += 1
+        t = t_new
+        y[:] = ynew
+        f[:] = fnew
+        if direction * (t - t_end) >= 0:
+            break
+        if t_seg != t_end and direction * (t - t_seg) >= 0:
+            t_seg = t_end
+            h_abs = min(resume_h, abs(t_end - t))
+    return outcome, nfev, t_olds[:steps].copy(), y_olds[:steps].copy(), dense[:steps].copy(), t
+
+
+# -- thin wrappers for tests -----------------------------------------------------------------
+def perturbation(env, t, r, v):
+    """Total acceleration at one state through the compiled kernels (for tests)."""
+    E = environment_tables(env)
+    F = field_tables(env.model.field)
+    acc = np.empty(3)
+    _acceleration(float(t), np.asarray(r, float), np.asarray(v, float), E, F, acc)
+    return acc
+
+
+def partials(env, t, r, v):
+    """``(a, ∂a/∂r, ∂a/∂v, ∂a/∂p)`` through the compiled kernels (for tests)."""
+    est = tuple(env.model.estimated)
+    E = environment_tables(env, est)
+    F = field_tables(env.model.field)
+    low = env._stm_field()
+    FL = field_tables(low) if low is not None else F
+    a, g, hv = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
+    dp = np.zeros((3, max(len(est), 1)))
+    _partials(float(t), np.asarray(r, float), np.asarray(v, float), E, F, FL, a, g, hv, dp)
+    return a, g, hv, dp[:, :len(est)]
