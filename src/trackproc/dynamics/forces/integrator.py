@@ -127,11 +127,10 @@ def _run_compiled(env, y0, t_end_s, rt, at, max_step, max_steps, stm, est):
 
     model = env.model
     F = compiled.field_tables(model.field)
-    low = env._stm_field() if stm else None
-    FL = compiled.field_tables(low) if low is not None else F
+    HT = compiled.hessian_tables(compiled.stm_field(env))
     E = compiled.environment_tables(env, est)
     code, _, t_old, y_old, dense, t_last = compiled.integrate(
-        y0, float(t_end_s), rt, at, float(max_step), int(max_steps), bool(stm), len(est), E, F, FL)
+        y0, float(t_end_s), rt, at, float(max_step), int(max_steps), bool(stm), len(est), E, F, HT)
     outcome = (Outcome.SUCCESS, Outcome.STEP_LIMIT, Outcome.NON_FINITE)[code]
     t_new = np.append(t_old[1:], t_last)[:t_old.size]
     h = t_new - t_old
