@@ -5,7 +5,7 @@ matters, so that the two agree to rounding: the field by the normalised Cunningh
 :mod:`~trackproc.dynamics.forces.gravity_field` (Montenbruck & Gill 2000 eqs. 3.27-3.33), Sun
 and Moon (eq. 3.37), SRP with the conical shadow (eqs. 3.75, 3.79-3.86), Harris-Priester drag
 (eqs. 3.97, 3.99-3.104), the Schwarzschild term (IERS 2010 eq. 10.12), the empirical
-accelerations, the Jacobians by the same central differences as
+accelerations, the Jacobians of
 :meth:`~trackproc.dynamics.forces.model.Environment.partials`, and scipy's DOP853 (Hairer,
 Nørsett & Wanner, *Solving ODEs I*, II.5: the same coefficients, error norm, step-size
 controller and first-step guess) with the variational equations (M&G eqs. 7.42-7.44), all in
@@ -13,8 +13,10 @@ one compiled loop: no Python per right-hand-side call.
 
 :func:`integrate` returns each accepted step's dense-output coefficients; the caller
 (:func:`trackproc.dynamics.forces.integrator.propagate`) turns them into the step polynomials
-exactly as for scipy's steps. Only the Harris-Priester atmosphere is compiled (NRLMSIS stays
-on the numpy path). Imported only when :func:`trackproc.dynamics.jit.enabled`.
+exactly as for scipy's steps. One difference in method: ``∂a/∂r`` of the field and of Sun and
+Moon is analytic here (:func:`hessian_tables`), by central differences on the numpy path. Only
+the Harris-Priester atmosphere is compiled (NRLMSIS stays on the numpy path). Imported only when
+:func:`trackproc.dynamics.jit.enabled`.
 """
 
 from __future__ import annotations
@@ -52,7 +54,7 @@ _LAG = drag_mod.LAG_RAD
 
 # cfg slots of environment_tables
 (_GM, _T0, _GRID, _NNODES, _SUN, _MOON, _REL, _SRP, _DRAG, _AM_SRP, _CR, _AM_DRAG, _CD, _RE, _FLAT,
- _HPN, _ER, _EX, _EXR, _LOW, _NCFG) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 19, 22, 25, 26)
+ _HPN, _ER, _EX, _EXR, _NCFG) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 19, 22, 25)
 
 
 def supported(model) -> bool:
@@ -167,7 +169,6 @@ def environment_tables(env, estimated=()):
     cfg[_ER:_ER + 3] = mdl.empirical_rtn
     cfg[_EX:_EX + 3] = mdl.empirical_gcrf
     cfg[_EXR:_EXR + 3] = mdl.empirical_gcrf_rate
-    cfg[_LOW] = env._stm_field() is not None
     codes = np.array([PARAMETERS.index(p) for p in estimated], np.int64)
     return (cfg, np.ascontiguousarray(env.q, float), np.ascontiguousarray(env._qq), np.ascontiguousarray(env._w),
             np.ascontiguousarray(env._era), np.ascontiguousarray(env._sun), np.ascontiguousarray(env._moon), codes)

@@ -17,7 +17,9 @@ being its derivative.
 Steps are at most ``T / (2N)`` (:func:`max_step_s`: T the orbital period, N the field's
 degree), else DOP853's error estimate misses the field's shortest waves. Tolerances: ``rtol`` on the state (scaled by √(6/n) because scipy's error norm is the RMS
 over all n integrated components), a loose ``STM_RTOL`` on Φ and S so that the step size is
-set by the orbit alone.
+set by the orbit alone. With radiation pressure, steps end at the shadow boundaries (penumbra
+and umbra entry and exit, where the force's slope jumps and an RK step loses its order): a step
+across one is redone to end :data:`EVENT_PAST_S` past it.
 
 With numba (``[fast]``) the same DOP853 and right-hand side run compiled
 (:mod:`trackproc.dynamics.forces.compiled`: no Python per step); chosen automatically for runs
