@@ -131,17 +131,18 @@ def test_step_limit_and_backward_runs_like_the_numpy_path():
     assert np.linalg.norm(end(a) - end(b)) < 1e-5
 
 
-@pytest.mark.parametrize("orbit", ["leo", "lageos"])
+@pytest.mark.parametrize("orbit", ["leo", "lageos", "leo_backward"])
 def test_radiation_pressure_converges_with_the_tolerance(orbit):
     """Steps end at the shadow boundaries (Environment.shadow_signs): with SRP the rtol 1e-12 run
     is within 1 mm of the 3e-14 one over a LEO day (measured 0.28 mm; 1.2 m when steps crossed
-    the penumbra) and 3 days of LAGEOS (0.40 mm; 15 mm before), as without SRP (0.28 mm)."""
+    the penumbra) and 3 days of LAGEOS (0.40 mm; 15 mm before), as without SRP (0.28 mm); and
+    half a LEO day backwards (0.09 mm)."""
     from test_forces_orekit import LAGEOS
 
     state, span, sc = ((LEO, 86400.0, SC) if orbit == "leo" else
                        (LAGEOS, 3 * 86400.0, Spacecraft(mass_kg=405.38, srp_area_m2=0.2827, cr=1.13)))
     model = _model(field=load_field(degree=20, date=EPOCH), srp=True, spacecraft=sc)
-    t = np.linspace(0.0, span, 73)[1:]
+    t = np.linspace(0.0, span, 73)[1:] * (-0.5 if orbit == "leo_backward" else 1.0)
     ref = propagate(state[0], state[1], EPOCH, t, force=model, tol=3e-14).state(t)[:, :3]
     run = propagate(state[0], state[1], EPOCH, t, force=model, tol=1e-12).state(t)[:, :3]
     assert np.linalg.norm(run - ref, axis=1).max() < 1e-3
