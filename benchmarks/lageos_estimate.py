@@ -237,9 +237,10 @@ def main(argv=None) -> int:
             r = run_trackproc(d, case, jit)
             x, cr, sig, sig_cr = _ours(r["result"])
             tp = tp or (x, cr, sig, sig_cr)
-            it = r["result"]["diagnostics"]["iterations"]
+            diag = r["result"]["diagnostics"]
+            it = f"{diag['iterations']} iterations, {diag.get('damped_steps', 0)} damped"
             print(f"{label:40s} wall {r['wall_s']:6.1f} s  CPU {r['cpu_s']:6.1f} s  peak RSS {r['maxrss_mb']:5.0f} MB"
-                  f"  {it} iterations")
+                  f"  {it}")
             print(f"  |r - truth| {np.linalg.norm(x[:3] - truth[:3]) * 100:.2f} cm (sigma "
                   f"{np.linalg.norm(sig[:3]) * 100:.2f} cm), Cr {cr:.5f} +- {sig_cr:.5f} (truth {SC['cr']})")
             rows.append((label, r["wall_s"], r["cpu_s"], r["maxrss_mb"]))

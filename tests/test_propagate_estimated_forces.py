@@ -1,6 +1,7 @@
-"""A solution of ``estimate --estimate-force`` propagates with the forces it was fitted with: the
-empirical accelerations in its ``constants`` (and Cr/Cd in its ``spacecraft`` block) are read
-back by every ``--force full`` command (cli/force_options.empirical_from_state)."""
+"""A solution of ``estimate --force full`` propagates with the forces it was fitted with: the
+empirical accelerations in its ``constants`` (cli/force_options.empirical_from_state) and the
+spacecraft with Cr/Cd in its ``spacecraft`` block (written whenever SRP or drag was on) are read
+back by every ``--force full`` command."""
 
 from __future__ import annotations
 
@@ -49,6 +50,19 @@ def test_compare_and_propagate_of_a_solution_reproduce_the_fit(run_cli, write, s
     assert r.exit_code == 0, r.stderr
     meta = read_ephemeris(str(eph)).meta
     assert "empirical" in meta["force_model"] and meta["constants"]["empirical_gcrf_m_s2"] == emp
+
+    # fitted with radiation pressure, nothing estimated: the spacecraft travels with the solution
+    srp = ["--srp", "--mass-kg", "100", "--srp-area-m2", "1", "--cr", "1.4"]
+    r = run_cli(["estimate", sim, "--initial", truth, "--stations", stations_csv, "--residuals", res_e, "-o", fit,
+                 *FULL, *srp])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(fit.read_text())
+    assert doc["spacecraft"] == doc["constants"]["spacecraft"] and doc["spacecraft"]["cr"] == 1.4
+    r = run_cli(["compare", sim, fit, "--remove", "none", "-o", res_c, *FULL])
+    assert r.exit_code == 0, r.stderr
+    both = pd.read_csv(res_e, comment="#").merge(pd.read_csv(res_c, comment="#"), on=["time", "station", "kind"],
+                                                  suffixes=("_e", "_c"))
+    assert np.abs(both.residual_e - both.residual_c)[both.kind == "range"].max() < 1e-4
 
 
 def test_malformed_empirical_constants_are_a_one_line_error(run_cli, write, tmp_path):

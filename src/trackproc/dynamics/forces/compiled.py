@@ -5,7 +5,7 @@ matters, so that the two agree to rounding: the field by the normalised Cunningh
 :mod:`~trackproc.dynamics.forces.gravity_field` (Montenbruck & Gill 2000 eqs. 3.27-3.33), Sun
 and Moon (eq. 3.37), SRP with the conical shadow (eqs. 3.75, 3.79-3.86), Harris-Priester drag
 (eqs. 3.97, 3.99-3.104), the Schwarzschild term (IERS 2010 eq. 10.12), the empirical
-accelerations, the Jacobians by the same central differences as
+accelerations, the Jacobians of
 :meth:`~trackproc.dynamics.forces.model.Environment.partials`, and scipy's DOP853 (Hairer,
 Nørsett & Wanner, *Solving ODEs I*, II.5: the same coefficients, error norm, step-size
 controller and first-step guess) with the variational equations (M&G eqs. 7.42-7.44), all in
@@ -13,13 +13,16 @@ one compiled loop: no Python per right-hand-side call.
 
 :func:`integrate` returns each accepted step's dense-output coefficients; the caller
 (:func:`trackproc.dynamics.forces.integrator.propagate`) turns them into the step polynomials
-exactly as for scipy's steps. Only the Harris-Priester atmosphere is compiled (NRLMSIS stays
-on the numpy path). Imported only when :func:`trackproc.dynamics.jit.enabled`.
+exactly as for scipy's steps. One difference in method: ``∂a/∂r`` of the field and of Sun and
+Moon is analytic here (:func:`hessian_tables`), by central differences on the numpy path. Only
+the Harris-Priester atmosphere is compiled (NRLMSIS stays on the numpy path). Imported only when
+:func:`trackproc.dynamics.jit.enabled`.
 """
 
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dc
@@ -51,7 +54,7 @@ _LAG = drag_mod.LAG_RAD
 
 # cfg slots of environment_tables
 (_GM, _T0, _GRID, _NNODES, _SUN, _MOON, _REL, _SRP, _DRAG, _AM_SRP, _CR, _AM_DRAG, _CD, _RE, _FLAT,
- _HPN, _ER, _EX, _EXR, _LOW, _NCFG) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 19, 22, 25, 26)
+ _HPN, _ER, _EX, _EXR, _NCFG) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 19, 22, 25)
 
 
 def supported(model) -> bool:
@@ -67,6 +70,79 @@ def field_tables(field):
     return (np.ascontiguousarray(t["a"]), np.ascontiguousarray(t["b"]), np.ascontiguousarray(t["fprod"]),
             np.ascontiguousarray(t["p1"]), np.ascontiguousarray(t["p2"]), np.ascontiguousarray(t["p3"]),
             t["n"].astype(np.int64), t["m"].astype(np.int64), dims, consts)
+
+
+def _normalisation(n: int, m: int) -> float:
+    """``N_nm = sqrt((n+m)! / ((2-δ_m0)(2n+1)(n-m)!))``: ``V_nm = N_nm V̄_nm`` (gravity_field's convention)."""
+    from fractions import Fraction
+
+    return math.sqrt(Fraction(math.factorial(n + m), math.factorial(n - m) * (1 if m == 0 else 2) * (2 * n + 1)))
+
+
+def _derivative(w: dict, axis: int) -> dict:
+    """``∂/∂x_axis`` (times R) of ``Re Σ w_nm Z_nm`` (unnormalised ``Z = V + iW``) as the same form
+    one degree up: M&G eq. 3.33 read for C = 1, S = 0 and C = 0, S = 1::
+
+        R ∂Z_nm/∂x = ½ (-Z_n+1,m+1 + (n-m+2)(n-m+1) Z_n+1,m-1),   m = 0: -Re Z_n+1,1
+        R ∂Z_nm/∂y = ½ i (Z_n+1,m+1 + (n-m+2)(n-m+1) Z_n+1,m-1),  m = 0: -Im Z_n+1,1
+        R ∂Z_nm/∂z = -(n-m+1) Z_n+1,m
+    """
+    out: dict = {}
+
+    def add(key, value):
+        out[key] = out.get(key, 0.0) + value
+
+    for (n, m), q in w.items():
+        k = (n - m + 2) * (n - m + 1)
+        if axis == 2:
+            add((n + 1, m), -(n - m + 1) * q)
+        elif m == 0:                       # Z_n0 is real: only Re q counts
+            add((n + 1, 1), -q.real if axis == 0 else 1j * q.real)
+        elif axis == 0:
+            add((n + 1, m + 1), -0.5 * q)
+            add((n + 1, m - 1), 0.5 * k * q)
+        else:
+            add((n + 1, m + 1), 0.5j * q)
+            add((n + 1, m - 1), 0.5j * k * q)
+    return out
+
+
+_HESSIANS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def stm_field(env):
+    """The field of the STM's gradient (Environment._stm_field: cut to ForceModel.stm_degree)."""
+    low = env._stm_field()
+    return low if low is not None else env.model.field
+
+
+def hessian_tables(field):
+    """The field's second derivatives as weights of the normalised solid harmonics to degree
+    N+2: ``∂²U/∂x_i∂x_j = GM/R³ Re Σ H_ij,nm Z̄_nm`` (the six of xx, xy, xz, yy, yz, zz; the
+    central term left out), with the recursion tables to that degree (two applications of
+    :func:`_derivative` to ``w = (C̄ - i S̄) / N``)."""
+    deg, order = field.degree, field.order
+    nmax, mmax = deg + 2, min(order + 2, deg + 2)
+    w = {(n, m): complex(field.cbar[n, m], -field.sbar[n, m]) / _normalisation(n, m)
+         for n in range(1, deg + 1) for m in range(min(n, order) + 1)
+         if field.cbar[n, m] != 0.0 or field.sbar[n, m] != 0.0}
+    first = [_derivative(w, i) for i in range(3)]
+    H = np.zeros((6, nmax + 1, nmax + 1), np.complex128)
+    for k, (i, j) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+        for (n, m), q in _derivative(first[j], i).items():
+            H[k, n, m] += q * _normalisation(n, m)
+    a = np.zeros((nmax + 1, nmax + 1))
+    b = np.zeros((nmax + 1, nmax + 1))
+    for n in range(1, nmax + 1):
+        for m in range(min(n, mmax + 1)):
+            a[n, m] = math.sqrt((2 * n - 1) * (2 * n + 1) / ((n - m) * (n + m)))
+            if n - m >= 2:
+                b[n, m] = math.sqrt((n + m - 1) * (n - m - 1) * (2 * n + 1) / ((n + m) * (n - m) * (2 * n - 3)))
+    f = np.array([1.0, math.sqrt(3.0)] + [math.sqrt((2 * m + 1) / (2 * m)) for m in range(2, nmax + 1)])[:nmax + 1]
+    dims = np.array([nmax, mmax], np.int64)
+    out = (H, a, b, np.cumprod(f), dims, np.array([field.gm_m3_s2, field.radius_m]))
+    _HESSIANS[field] = out
+    return out
 
 
 def environment_tables(env, estimated=()):
@@ -93,7 +169,6 @@ def environment_tables(env, estimated=()):
     cfg[_ER:_ER + 3] = mdl.empirical_rtn
     cfg[_EX:_EX + 3] = mdl.empirical_gcrf
     cfg[_EXR:_EXR + 3] = mdl.empirical_gcrf_rate
-    cfg[_LOW] = env._stm_field() is not None
     codes = np.array([PARAMETERS.index(p) for p in estimated], np.int64)
     return (cfg, np.ascontiguousarray(env.q, float), np.ascontiguousarray(env._qq), np.ascontiguousarray(env._w),
             np.ascontiguousarray(env._era), np.ascontiguousarray(env._sun), np.ascontiguousarray(env._moon), codes)
@@ -152,6 +227,53 @@ def _mat3(a, b):
 def _mv(m, x):
     return np.array([m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2], m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2],
                      m[2, 0] * x[0] + m[2, 1] * x[1] + m[2, 2] * x[2]])
+
+
+@njit
+def _field_hessian(r, HT, out):
+    """``∂a/∂r`` of the field (no central term) at ITRF ``r`` into ``out`` (3, 3): the solid
+    harmonics to degree N+2 by the same normalised recursion, weighted by hessian_tables."""
+    H, a, b, fprod, dims, consts = HT
+    nmax, mmax = dims[0], dims[1]
+    gm, R = consts[0], consts[1]
+    x, y, z = r[0], r[1], r[2]
+    r2 = x * x + y * y + z * z
+    x0, y0, z0 = x * (R / r2), y * (R / r2), z * (R / r2)
+    rho = R * R / r2
+    Z = np.zeros((nmax + 1, nmax + 1), np.complex128)
+    w = complex(x0, y0)
+    p = 1.0 + 0.0j
+    ron = R / math.sqrt(r2)
+    for m in range(mmax + 1):
+        Z[m, m] = fprod[m] * p * ron
+        p = p * w
+    for n in range(1, nmax + 1):
+        for m in range(min(n, mmax + 1)):
+            zn = a[n, m] * z0 * Z[n - 1, m]
+            if n >= 2:
+                zn = zn - b[n, m] * rho * Z[n - 2, m]
+            Z[n, m] = zn
+    g = gm / (R * R * R)
+    v = np.zeros(6)
+    for k in range(6):
+        acc = 0.0
+        for n in range(nmax + 1):
+            for m in range(min(n, mmax) + 1):
+                acc += (H[k, n, m] * Z[n, m]).real
+        v[k] = g * acc
+    out[0, 0], out[0, 1], out[0, 2] = v[0], v[1], v[2]
+    out[1, 0], out[1, 1], out[1, 2] = v[1], v[3], v[4]
+    out[2, 0], out[2, 1], out[2, 2] = v[2], v[4], v[5]
+
+
+@njit
+def _point_mass_gradient(r, body, gm, g):
+    """∂/∂r of M&G eq. 3.37: ``GM (3 d dᵀ/|d|⁵ - I/|d|³)``, d = body - r, added to ``g``."""
+    d = body - r
+    dn = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+    for i in range(3):
+        for j in range(3):
+            g[i, j] += gm * (3.0 * d[i] * d[j] / dn ** 5 - (1.0 if i == j else 0.0) / dn ** 3)
 
 
 @njit
@@ -399,10 +521,11 @@ def _acceleration(t, r, v, E, F, acc):
 
 
 @njit
-def _partials(t, r, v, E, F, FL, a, g, hv, dp):
-    """Environment.partials: ``a``, ``∂a/∂r`` (central analytic + central differences of the
-    rest, steps 1 m and 1 mm/s, the STM's truncated field ``FL`` when cfg says so), ``∂a/∂v``,
-    ``∂a/∂p`` of the estimated parameters."""
+def _partials(t, r, v, E, F, HT, a, g, hv, dp):
+    """Environment.partials with the field's and the Sun's and Moon's ``∂a/∂r`` analytic (the
+    field's from ``HT``, hessian_tables of the STM's field), the rest (relativity, SRP, drag,
+    empirical) by the same central differences (1 m, 1 mm/s), the central term analytic;
+    ``∂a/∂v`` and ``∂a/∂p`` as there."""
     cfg = E[0]
     codes = E[7]
     M = np.empty((3, 3))
@@ -410,33 +533,39 @@ def _partials(t, r, v, E, F, FL, a, g, hv, dp):
     _at(t, E, M, sun, moon, axis)
     unit = np.zeros((11, 3))
     scratch = np.zeros((11, 3))
-    low = cfg[_LOW] != 0.0
     p0 = np.empty(3)
     _position_part(t, r, F, False, E, M, sun, moon, p0)
     _rest(t, r, v, E, M, sun, axis, p0, unit, True)
+    gi = np.empty((3, 3))
+    _field_hessian(_mv(M, r), HT, gi)
+    gf = _mat3(_mat3(M.T.copy(), gi), M)                    # ITRF -> integration frame
+    for i in range(3):
+        for j in range(3):
+            g[i, j] = gf[i, j]
+    if cfg[_SUN]:
+        _point_mass_gradient(r, sun, _GM_SUN, g)
+    if cfg[_MOON]:
+        _point_mass_gradient(r, moon, _GM_MOON, g)
     hr, hvs = 1.0, 1e-3
     pp, pm = np.empty(3), np.empty(3)
     rr = r.copy()
     for j in range(3):
         rr[j] = r[j] + hr
-        _position_part(t, rr, FL if low else F, False, E, M, sun, moon, pp)
+        pp[:] = 0.0
         _rest(t, rr, v, E, M, sun, axis, pp, scratch, True)
         rr[j] = r[j] - hr
-        _position_part(t, rr, FL if low else F, False, E, M, sun, moon, pm)
+        pm[:] = 0.0
         _rest(t, rr, v, E, M, sun, axis, pm, scratch, True)
         rr[j] = r[j]
         for i in range(3):
-            g[i, j] = (pp[i] - pm[i]) / (2 * hr)
-    # the position part at r with the gradient's field (the same for the six velocity points)
-    base = np.empty(3)
-    _position_part(t, r, FL if low else F, False, E, M, sun, moon, base)
+            g[i, j] += (pp[i] - pm[i]) / (2 * hr)
     vv = v.copy()
     for j in range(3):
         vv[j] = v[j] + hvs
-        pp[:] = base
+        pp[:] = 0.0
         _rest(t, r, vv, E, M, sun, axis, pp, scratch, True)
         vv[j] = v[j] - hvs
-        pm[:] = base
+        pm[:] = 0.0
         _rest(t, r, vv, E, M, sun, axis, pm, scratch, True)
         vv[j] = v[j]
         for i in range(3):
@@ -453,7 +582,7 @@ def _partials(t, r, v, E, F, FL, a, g, hv, dp):
 
 
 @njit
-def _rhs(t, y, stm, npar, E, F, FL, out):
+def _rhs(t, y, stm, npar, E, F, HT, out):
     """The state's derivative, with Φ' = A Φ and S' = A S + [0; ∂a/∂p] when ``stm``."""
     out[0], out[1], out[2] = y[3], y[4], y[5]
     if not stm:
@@ -463,7 +592,7 @@ def _rhs(t, y, stm, npar, E, F, FL, out):
         return
     a, g, hv = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
     dp = np.zeros((3, max(npar, 1)))
-    _partials(t, y[:3], y[3:6], E, F, FL, a, g, hv, dp)
+    _partials(t, y[:3], y[3:6], E, F, HT, a, g, hv, dp)
     out[3], out[4], out[5] = a[0], a[1], a[2]
     ncol = 6 + npar
     # Φ rows 0..5 at y[6:42] (6 x 6), S at y[42:] (6 x npar): treat [Φ S] column by column
@@ -494,7 +623,7 @@ def _rms(x):
 
 
 @njit
-def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
+def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
     """DOP853 from t = 0 to ``t_end`` as scipy's (same tableau, error norm, controller and
     first step). Returns ``(outcome, nfev, t_old (S,), y_old (S, n), dense (S, 7, n), t)``:
     outcome 0 success, 1 step limit, 2 non-finite or too small a step; ``t`` where it stopped."""
@@ -503,7 +632,7 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
     t = 0.0
     y = y0.copy()
     f = np.empty(n)
-    _rhs(t, y, stm, npar, E, F, FL, f)
+    _rhs(t, y, stm, npar, E, F, HT, f)
     nfev = 1
     # select_initial_step (scipy common.py; Hairer et al. II.4)
     interval = abs(t_end)
@@ -512,7 +641,7 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
     h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
     h0 = min(h0, interval)
     f1 = np.empty(n)
-    _rhs(t + h0 * direction, y + h0 * direction * f, stm, npar, E, F, FL, f1)
+    _rhs(t + h0 * direction, y + h0 * direction * f, stm, npar, E, F, HT, f1)
     nfev += 1
     d2 = _rms((f1 - f) / scale) / h0
     if d1 <= 1e-15 and d2 <= 1e-15:
@@ -572,13 +701,13 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
                     for j in range(s):
                         acc += K[j, i] * _A[s, j]
                     ys[i] = y[i] + acc * h
-                _rhs(t + _C[s] * h, ys, stm, npar, E, F, FL, K[s])
+                _rhs(t + _C[s] * h, ys, stm, npar, E, F, HT, K[s])
             for i in range(n):
                 acc = 0.0
                 for j in range(_NS):
                     acc += K[j, i] * _B[j]
                 ynew[i] = y[i] + h * acc
-            _rhs(t + h, ynew, stm, npar, E, F, FL, fnew)
+            _rhs(t + h, ynew, stm, npar, E, F, HT, fnew)
             nfev += _NS
             K[_NS] = fnew
             e5, e3 = 0.0, 0.0
@@ -634,7 +763,7 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, FL):
                 for j in range(s):
                     acc += K[j, i] * _A[s, j]
                 ys[i] = y[i] + acc * h
-            _rhs(t + _C[s] * h, ys, stm, npar, E, F, FL, K[s])
+            _rhs(t + _C[s] * h, ys, stm, npar, E, F, HT, K[s])
         nfev += 3
         for i in range(n):
             dy = ynew[i] - y[i]
@@ -694,9 +823,8 @@ def partials(env, t, r, v):
     est = tuple(env.model.estimated)
     E = environment_tables(env, est)
     F = field_tables(env.model.field)
-    low = env._stm_field()
-    FL = field_tables(low) if low is not None else F
+    HT = hessian_tables(stm_field(env))
     a, g, hv = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
     dp = np.zeros((3, max(len(est), 1)))
-    _partials(float(t), np.asarray(r, float), np.asarray(v, float), E, F, FL, a, g, hv, dp)
+    _partials(float(t), np.asarray(r, float), np.asarray(v, float), E, F, HT, a, g, hv, dp)
     return a, g, hv, dp[:, :len(est)]

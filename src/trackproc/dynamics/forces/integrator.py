@@ -17,7 +17,9 @@ being its derivative.
 Steps are at most ``T / (2N)`` (:func:`max_step_s`: T the orbital period, N the field's
 degree), else DOP853's error estimate misses the field's shortest waves. Tolerances: ``rtol`` on the state (scaled by √(6/n) because scipy's error norm is the RMS
 over all n integrated components), a loose ``STM_RTOL`` on Φ and S so that the step size is
-set by the orbit alone.
+set by the orbit alone. With radiation pressure, steps end at the shadow boundaries (penumbra
+and umbra entry and exit, where the force's slope jumps and an RK step loses its order): a step
+across one is redone to end :data:`EVENT_PAST_S` past it.
 
 With numba (``[fast]``) the same DOP853 and right-hand side run compiled
 (:mod:`trackproc.dynamics.forces.compiled`: no Python per step); chosen automatically for runs
@@ -127,11 +129,10 @@ def _run_compiled(env, y0, t_end_s, rt, at, max_step, max_steps, stm, est):
 
     model = env.model
     F = compiled.field_tables(model.field)
-    low = env._stm_field() if stm else None
-    FL = compiled.field_tables(low) if low is not None else F
+    HT = compiled.hessian_tables(compiled.stm_field(env))
     E = compiled.environment_tables(env, est)
     code, _, t_old, y_old, dense, t_last = compiled.integrate(
-        y0, float(t_end_s), rt, at, float(max_step), int(max_steps), bool(stm), len(est), E, F, FL)
+        y0, float(t_end_s), rt, at, float(max_step), int(max_steps), bool(stm), len(est), E, F, HT)
     outcome = (Outcome.SUCCESS, Outcome.STEP_LIMIT, Outcome.NON_FINITE)[code]
     t_new = np.append(t_old[1:], t_last)[:t_old.size]
     h = t_new - t_old

@@ -135,8 +135,9 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
            else {}),
         "sources": sorted({str(s) for s in problem.sources}),
     }, "quality": quality.as_dict()}
-    if problem.force_names and (problem.force_model.srp or problem.force_model.drag):
-        # the estimated Cr/Cd where propagate --force full reads a state file's spacecraft
+    if problem.force_model is not None and (problem.force_model.srp or problem.force_model.drag):
+        # the spacecraft (with the estimated Cr/Cd) where --force full commands read it back, so that
+        # the solution propagates with the forces it was fitted with
         extra["spacecraft"] = problem.force_model.spacecraft.as_dict()
     state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=list(names), values=x, sigma=sol.sigma,
                                covariance=sol.covariance,
