@@ -58,10 +58,10 @@ class RefineOptions:
     ``pass_id``/``kind``: which pass and kind when the file holds several; quadrature:
     ``quadrature_order`` nodes per panel of at most ``quadrature_panel_s`` seconds, over the
     parts of the pass without gaps longer than ``max_gap_s``; ``circular_tolerance``: the
-    eccentricity to which the orbit is taken to be circular under ``circular``: it adds the
-    covariance of an approximate constraint (:func:`~trackproc.methods.refinement.constraint_error_covariance`);
-    0 (the default, the seed's assumption) makes the covariance conditional on an exactly circular
-    orbit. With J2 the osculating eccentricity of a mean-circular LEO orbit swings by
+    eccentricity to which the orbit is taken to be circular under ``circular``: the constraints
+    are then soft, estimated with the state from their covariance for such an orbit
+    (:func:`~trackproc.methods.refinement.solve_soft_kkt`); 0 (the default, the seed's assumption)
+    imposes them exactly and makes the covariance conditional on an exactly circular orbit. With J2 the osculating eccentricity of a mean-circular LEO orbit swings by
     ``1.5 J2 (Re/r)^2`` (about 1e-3): see docs/refine.md before trusting a conditional covariance.
     ``reweight``: weigh the data by their actual scatter (:data:`REWEIGHT_THRESHOLD`).
     ``covariance``: ``"profile"`` (pointwise without ``circular``: the linear covariance plus the

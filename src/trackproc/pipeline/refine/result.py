@@ -222,6 +222,13 @@ def constraint_report(ref: Refinement, x, cov, sigma, kkt=None, consistency: dic
                             "tolerance_note": "the covariance includes the constraints' own uncertainty for an orbit "
                                               "circular only to this eccentricity (0: conditional on an exactly "
                                               "circular orbit)"})
+        if kkt.soft is not None:            # --circular-tolerance: the constraint values estimated with the state
+            soft = np.flatnonzero(kkt.soft)
+            constraints["soft"] = {"names": [rf.CONSTRAINT_NAMES[i] for i in soft],
+                                   "values": kkt.target[soft].tolist(),
+                                   "sigma": np.sqrt(np.diag(kkt.target_covariance)).tolist(),
+                                   "note": "f(x) = eps with eps ~ N(0, Sigma_eps) of an orbit circular to the "
+                                           "tolerance; maximum a-posteriori estimate (soft constraints)"}
         i_rka = names.index("r_ka")
         constraints["r_ka_sigma_m"] = float(sigma[i_rka])
         if consistency is not None:
@@ -270,8 +277,10 @@ def refine_warnings(ref: Refinement, sol, obs, kkt=None, sigma_scale: float = 1.
         warnings.append(f"the pass contradicts the circular-orbit constraints (delta chi2 = {c['delta_chi2']:.4g}, 2 "
                         f"degrees of freedom, p = {c['p_value']:.2g}; the unconstrained fit's eccentricity is "
                         f"{c['free_fit_eccentricity']:.2g}): the constrained state is biased and its covariance too "
-                        "small; give --circular-tolerance (the eccentricity the orbit is circular to) or drop "
-                        "--circular")
+                        "small; " + ("give --circular-tolerance (the eccentricity the orbit is circular to) or drop "
+                                     "--circular" if ref.tolerance() == 0.0 else
+                                     f"the orbit is not circular to {ref.tolerance():g}: give a larger "
+                                     "--circular-tolerance or drop --circular"))
     if opt.circular and kkt is not None and ref.tolerance() == 0.0:
         warnings.append("--circular: the covariance is conditional on an exactly circular orbit; with J2 the "
                         "osculating eccentricity of a circular orbit swings by about 1e-3 (give --circular-tolerance)")
