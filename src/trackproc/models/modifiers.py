@@ -12,8 +12,13 @@ troposphere delay — is one object that
   (:meth:`BoundModifier.apply`, after :meth:`Modifier.bind` to one measurement set).
 
 The estimator collects the drivers from its modifiers (:func:`collect_drivers`); nothing
-parses parameter names to find out what a driver does. Adding a bias kind is one subclass
-here (and its family name in :data:`trackproc.vocabulary.BIAS_UNITS`).
+parses parameter names to find out what a driver does — neither ``estimate`` nor ``refine``,
+which builds its problem with estimate's and binds the same modifiers to the quadrature nodes
+of its integral cost. Adding a bias kind is one subclass here (and its family name in
+:data:`trackproc.vocabulary.BIAS_UNITS`); it is then estimated by both when given in
+``EstimateOptions.modifiers`` / ``RefineOptions.modifiers`` (tests/test_refine_modifiers.py
+does that with a toy kind), and a command-line option that creates it is the one further
+edit (``pipeline.estimate.problem.bias_modifiers``, as ``--range-bias`` does).
 
 Linear modifiers add ``Σ_k coefficient_k × value_k`` of their drivers, so their partials are
 the coefficients (seed 002 eq. 10: the E block of the extended state's offsets):

@@ -12,6 +12,7 @@ import numpy as np
 
 from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Options, Prior, solve, solve_gls
+from trackproc.models import modifiers as md
 from trackproc.methods.refinement import (ELEMENT_NAMES, CachedModel, circular_constraints, constraint_scales,
                                            element_covariance, geodesic_retraction, profile_mixture, solve_kkt,
                                            solve_soft_kkt)
@@ -82,6 +83,18 @@ class Refinement:
     @property
     def n_problem(self) -> int:
         return len(self.problem.names)
+
+    def modifier_drivers(self, *kinds) -> list:
+        """The estimated drivers of the problem's measurement modifiers of the classes ``kinds``
+        (:mod:`trackproc.models.modifiers`), in the order of the parameters."""
+        return [d for b in self.problem.modifiers if isinstance(b.modifier, kinds)
+                for d in b.modifier.parameter_drivers() if d.selected]
+
+    def oscillator_link(self) -> bool:
+        """The pass's transmitter frequency can wander: an
+        :class:`~trackproc.models.modifiers.OscillatorWander` acts on its samples (a one-way link
+        with a frequency offset; a coherent two-way link has no free oscillator)."""
+        return any(isinstance(b.modifier, md.OscillatorWander) and b.rows.size for b in self.problem.modifiers)
 
     # -- models ------------------------------------------------------------------------------
     def pointwise_model(self, x):

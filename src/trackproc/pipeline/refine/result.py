@@ -18,6 +18,7 @@ from trackproc.errors import ProcessingError
 from trackproc.isotime import iso_utc
 from trackproc.methods import refinement as rf
 from trackproc.methods.quality import chi2_limit
+from trackproc.models import modifiers as md
 from trackproc.pipeline.estimate import UNITS, residual_frame
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, RefineResult
 from trackproc.types import State
@@ -171,7 +172,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
               "apriori": apriori_note, "covariance": covariance_note,
               "kind": ref.kind, "station": ref.station_name, "pass_id": ref.pass_id,
               "range_rate_model": problem.range_rate_model, "force_model": opt.force, "earth": opt.earth,
-              "doppler_bias": [n for n in problem.names if n.startswith("doppler_")],
+              "doppler_bias": [d.name for d in ref.modifier_drivers(md.DopplerOffset, md.DopplerDrift)],
               "propagator": "Taylor (DT) with first-order sensitivity spectra, quasi-inertial frame of the traverse "
                             "epoch"}
     if opt.cost == "integral":
