@@ -51,6 +51,7 @@ from typing import Iterable, Optional, Sequence
 import numpy as np
 
 from trackproc.constants import C_LIGHT
+from trackproc.dynamics import geodesy
 from trackproc.models import parameters as pm
 
 __all__ = ["Modifier", "BoundModifier", "RangeBias", "DopplerOffset", "DopplerDrift", "AzimuthBias",
@@ -291,8 +292,8 @@ class RangeCorrection(Modifier):
 def elevation(meas, rows, geometry) -> np.ndarray:
     """The satellite's elevation (rad) seen from the station at the samples ``rows``: the
     geometry's station -> satellite direction in the station's east-north-up frame."""
-    up = np.einsum("nj,nj->n", meas.gcrf_to_enu[rows][:, 2, :], geometry.u[rows])
-    return np.arcsin(np.clip(up, -1.0, 1.0))
+    enu = np.einsum("nij,nj->ni", meas.gcrf_to_enu[rows], geometry.u[rows])
+    return geodesy.enu_to_azel(enu)[1]
 
 
 # ----------------------------------------------------------------------------- registry
