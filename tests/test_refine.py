@@ -444,8 +444,9 @@ def test_seed004_table1_two_way_integral_with_and_without_constraints():
     one pass sees poorly, whatever the cost (pointwise + --circular lands within a metre of it)
     and whatever the noise (1e-5 m/s gives the same). The covariance conditional on an exactly
     circular orbit (tens of metres) does not cover that; with --circular-tolerance at the
-    truth's eccentricity (soft constraints) the error is within its sigma of a few hundred metres. Without the constraints, the integral converges alone (sigma of
-    kilometres) or with the stale a-priori to tens of metres, each within 3 sigma."""
+    truth's eccentricity (soft constraints) the error is within its sigma of a few hundred metres.
+    Without the constraints, the integral converges alone (sigma of kilometres) or with the stale
+    a-priori to tens of metres, each within 3 sigma."""
     _, _, sim = scenario(two_way_sigma_m_s=1e-3)
     ecc = float(np.linalg.norm(np.cross(TRUTH.v_m_s, np.cross(TRUTH.r_m, TRUTH.v_m_s)) / MU_EARTH
                                - TRUTH.r_m / np.linalg.norm(TRUTH.r_m)))

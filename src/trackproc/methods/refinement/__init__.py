@@ -80,6 +80,6 @@ from trackproc.methods.refinement.observability import (  # noqa: F401
 
 __all__ = ["nonsingular_elements", "state_from_elements", "element_covariance", "ELEMENT_NAMES", "gauss_legendre",
            "covered_intervals", "pseudo_sigma", "circular_constraints", "constraint_scales", "IntegralModel",
-           "KKTResult", "CachedModel", "geodesic_retraction", "solve_kkt", "solve_soft_kkt", "circular_tolerance_covariance",
-           "constraint_error_covariance", "sandwich_covariance", "observability", "Observability", "RTN_NAMES",
-           "CONSTRAINT_NAMES", "profile_mixture", "PROFILE_NODES", "range_rate_samples"]
+           "KKTResult", "CachedModel", "geodesic_retraction", "solve_kkt", "solve_soft_kkt",
+           "circular_tolerance_covariance", "constraint_error_covariance", "sandwich_covariance", "observability",
+           "Observability", "RTN_NAMES", "CONSTRAINT_NAMES", "profile_mixture", "PROFILE_NODES", "range_rate_samples"]

@@ -204,6 +204,7 @@ def solve_soft_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *,
                    constraint_covariance: Callable[[np.ndarray], np.ndarray], scales=None, priors=(), periodic=None,
                    options: Options | None = None, retract=None) -> KKTResult:
     """Minimise ``χ²(x) + εᵀ Σ_ε⁻¹ ε`` subject to ``f(x) = ε`` (module docstring: soft constraints).
+    Implements seed 004 eqs. 15-17 generalised to constraints that hold to a covariance.
 
     ``constraint_covariance(x) -> Σ_ε`` (m, m): the covariance of the constraint values (a zero
     row and column: that constraint is hard). Other arguments as in :func:`solve_kkt`, whose

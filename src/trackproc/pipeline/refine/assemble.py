@@ -170,7 +170,8 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
 
 def integral_setup(ref: Refinement, frame) -> dict:
     """Gauss-Legendre nodes on the covered parts of the pass, the curve there (range-rate), the
-    pseudo-sigmas, the bias coefficients and the basis (for the sandwich covariance)."""
+    pseudo-sigmas, the bias coefficients and the basis (for the sandwich covariance). Implements
+    seed 004 eq. 14 (the integral cost, by quadrature on the smoothed curve)."""
     opt = ref.options
     curve = ref.curve
     intervals = rf.covered_intervals(curve.used_t_s, opt.max_gap_s)
