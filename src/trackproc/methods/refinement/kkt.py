@@ -6,8 +6,8 @@ Soft constraints. Seed 004 imposes ``f(x) = 0`` exactly. When the constraints ho
 correct estimate is the maximum a-posteriori one, ``min χ²(x) + εᵀ Σ_ε⁻¹ ε`` subject to
 ``f(x) = ε``: the data decide the combinations of ε they see, the prior the others. It is found
 on the hard solver: for fixed ε the KKT solution gives the profiled cost's gradient ``-λ`` and
-half-Hessian ``G = Dᵀ Aᵀ A D`` (D = dx̂/dε), and Newton steps on ε,
-``δε = (G + Σ_ε⁻¹)⁻¹ (λ/2 - Σ_ε⁻¹ ε)``, converge in a few solves. Its covariance is the Laplace
+half-Hessian ``G = Dᵀ J_wᵀ J_w D`` (D = dx̂/dε, J_w the whitened data and a-priori rows), and
+Newton steps on ε, ``δε = (G + Σ_ε⁻¹)⁻¹ (λ/2 - Σ_ε⁻¹ ε)``, converge in a few solves. Its covariance is the Laplace
 one, ``K(x | ε) + D C_ε Dᵀ`` with ``C_ε = (G + Σ_ε⁻¹)⁻¹``. Adding ``D Σ_ε Dᵀ`` to the hard
 solution's covariance instead (the error of the estimate that forces ``ε = 0``) is honest for
 that estimate but ignores what the data say about ε: on the seed 004 Table 1 pass it is 10 to 20
@@ -45,8 +45,8 @@ class KKTResult:
     KKT point: ``∇χ² + Aᵀλ = 0``),
     ``restorations`` minimum-norm Newton steps taken to stay feasible, ``sensitivity`` (n, m)
     ``dx̂/dε``: how the solution moves if the constraints were ``f = ε`` instead of 0 (for the
-    covariance of a constraint that holds only approximately, :func:`constraint_error_covariance`);
-    ``curvature`` (m, m) ``G = Dᵀ Aᵀ A D``: half the Hessian of the profiled cost with respect to ε.
+    soft constraints, :func:`solve_soft_kkt`);
+    ``curvature`` (m, m) ``G = Dᵀ J_wᵀ J_w D``: half the Hessian of the profiled cost with respect to ε.
 
     From :func:`solve_soft_kkt` (soft constraints): ``soft`` (m,) bool, the constraints held to a
     covariance; ``target`` ε (m,) the constraint values at the solution; ``target_covariance``
