@@ -235,24 +235,24 @@ def solve_soft_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *,
         except ProcessingError:      # round-off stops short of the tight tolerance: the caller's will do
             return solve_kkt(model, xv, observed, sigma, options=opt, **common)
 
+    def posterior(kk):
+        """``(Σ_ε⁻¹, C_ε)`` of the soft constraints at the solution ``kk``."""
+        s_inv = np.linalg.inv(np.asarray(constraint_covariance(kk.solution.values), float)[np.ix_(soft, soft)])
+        c = np.linalg.inv(kk.curvature[np.ix_(soft, soft)] + s_inv)
+        return s_inv, 0.5 * (c + c.T)
+
     k = solve_at(x, eps.copy())
     for _ in range(MAX_SOFT_STEPS):
-        x = k.solution.values
-        s_inv = np.linalg.inv(np.asarray(constraint_covariance(x), float)[np.ix_(soft, soft)])
-        c_eps = np.linalg.inv(k.curvature[np.ix_(soft, soft)] + s_inv)
-        c_eps = 0.5 * (c_eps + c_eps.T)
-        step = c_eps @ (k.multipliers[soft] / 2.0 - s_inv @ eps[soft])
+        s_inv, c_eps = posterior(k)
+        step = c_eps @ (k.multipliers[soft] / 2.0 - s_inv @ eps[soft])        # Newton on the profiled cost
         eps[soft] += step
-        k = solve_at(x + k.sensitivity[:, soft] @ step, eps.copy())
+        k = solve_at(k.solution.values + k.sensitivity[:, soft] @ step, eps.copy())
         if np.all(np.abs(step) <= SOFT_STEP_TOL * np.sqrt(np.diag(c_eps))):
             break
     else:
         raise ProcessingError(f"the soft constraints did not settle in {MAX_SOFT_STEPS} steps (last step "
                               f"{np.max(np.abs(step) / np.sqrt(np.diag(c_eps))):.3g} sigma)")
-    x = k.solution.values
-    s_inv = np.linalg.inv(np.asarray(constraint_covariance(x), float)[np.ix_(soft, soft)])
-    c_eps = np.linalg.inv(k.curvature[np.ix_(soft, soft)] + s_inv)
-    c_eps = 0.5 * (c_eps + c_eps.T)
+    s_inv, c_eps = posterior(k)
     sol = k.solution
     d = k.sensitivity[:, soft]
     cov = sol.covariance + d @ c_eps @ d.T
