@@ -165,8 +165,8 @@ SCHEMA: tuple[Opt, ...] = (
     Opt("refine", "circular", "bool", False, ("--circular/--no-circular",),
         "Impose the circular-orbit constraints of seed 004 eq. 5 (Lagrange multipliers).", affects=True),
     Opt("refine", "circular_tolerance", "float", 0.0, ("--circular-tolerance",),
-        "With circular: the eccentricity to which the orbit is circular, added to the covariance (0: conditional "
-        "on an exactly circular orbit).", affects=True, check=_NONNEG, metavar="E"),
+        "With circular: the eccentricity to which the orbit is circular; the constraints hold to it (0: exact, "
+        "covariance conditional on an exactly circular orbit).", affects=True, check=_NONNEG, metavar="E"),
     Opt("refine", "doppler_bias", "choice", "auto", ("--refine-doppler-bias",),
         "Transmitter frequency offset (and drift) to estimate; auto: offset for one-way Doppler, none for "
         "range-rate.", choices=("auto", "none", "offset", "offset+drift"), affects=True),
