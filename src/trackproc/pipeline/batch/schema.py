@@ -27,6 +27,8 @@ import math
 from dataclasses import dataclass
 from typing import Any, Optional
 
+from trackproc.vocabulary import RANGE_RATE_MODELS
+
 #: Sections in the order they are documented; ``batch`` holds the run options.
 SECTIONS = ("batch", "ingest", "smooth", "refine", "estimate")
 ENV_PREFIX = "TRACKPROC_BATCH_"
@@ -182,7 +184,7 @@ SCHEMA: tuple[Opt, ...] = (
         choices=("wgs84", "sphere"), affects=True),
     Opt("refine", "range_rate_model", "choice", None, ("--refine-range-rate-model",),
         "doppler or instantaneous (default: the pass file's metadata, else doppler).",
-        choices=("doppler", "instantaneous"), affects=True),
+        choices=RANGE_RATE_MODELS, affects=True),
     Opt("refine", "max_iterations", "int", 30, ("--refine-max-iterations",),
         "Gauss-Newton iterations at most; an input whose refinement does not converge fails.", affects=True,
         check=_INT_POS, metavar="N"),
@@ -229,7 +231,7 @@ SCHEMA: tuple[Opt, ...] = (
         choices=("wgs84", "sphere"), affects=True),
     Opt("estimate", "range_rate_model", "choice", None, ("--range-rate-model",),
         "doppler or instantaneous (default: the pass files' metadata, else doppler).",
-        choices=("doppler", "instantaneous"), affects=True),
+        choices=RANGE_RATE_MODELS, affects=True),
     Opt("estimate", "max_iterations", "int", 20, ("--max-iterations",), "Gauss-Newton iterations at most.",
         affects=True, check=_INT_POS, metavar="N"),
     Opt("estimate", "clip", "float", 4.0, ("--estimate-clip",),
