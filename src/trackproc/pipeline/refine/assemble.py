@@ -129,7 +129,8 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     est = EstimateOptions(doppler_bias=None if bias == "none" else bias, doppler_bias_per="pass",
                           apriori_sigma=apriori_sigma, apriori_initial=apriori_initial, force=opt.force,
                           earth=opt.earth, range_rate_model=opt.range_rate_model, max_iterations=opt.max_iterations,
-                          clip=opt.clip, epoch=t_traverse, kinds=[kind], modifiers=opt.modifiers)
+                          clip=opt.clip, epoch=t_traverse, kinds=[kind], modifiers=opt.modifiers,
+                          oscillator_noise=opt.oscillator_noise)
     problem = build_problem([(source, PassTable(frame, meta))], initial, stations, est, eop)
     mu = propagator.force_parameters(opt.force)[0]
     if default_prior:

@@ -40,7 +40,8 @@ def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinem
     keep = ~np.asarray(sol.edited, bool)
     t = meas.t_s
     t0 = float(t.min())
-    osc = oscillator_link(ref)
+    wander = ref.oscillator_wander()        # its walk: given (--oscillator-noise) or None (by REML)
+    osc = wander is not None
     r = np.asarray(sol.residual, float)
     npb = ref.n_problem
     _, jac = ref.pointwise_model(sol.values)
@@ -50,7 +51,7 @@ def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinem
         i_off = ref.problem.names.index(ref.modifier_drivers(md.DopplerOffset)[0].name)
         x = np.column_stack([x, x[:, i_off] * (t - t0)])
     nf = nz.fit_noise(t[keep], r[keep], x[keep], models=nz.candidate_models(opt.noise, osc),
-                      walk=opt.oscillator_noise, t0=t0)
+                      walk=wander.walk if wander is not None else opt.oscillator_noise, t0=t0)
     cov = nz.PassCovariance(meas.sigma, t, [(np.arange(t.size), nf.model, t0)])
     want_drift = False
     drift_t = None

@@ -90,11 +90,15 @@ class Refinement:
         return [d for b in self.problem.modifiers if isinstance(b.modifier, kinds)
                 for d in b.modifier.parameter_drivers() if d.selected]
 
+    def oscillator_wander(self):
+        """The :class:`~trackproc.models.modifiers.OscillatorWander` acting on the pass's samples
+        (a one-way link with a frequency offset; a coherent two-way link has no free oscillator), or None."""
+        return next((b.modifier for b in self.problem.modifiers
+                     if isinstance(b.modifier, md.OscillatorWander) and b.rows.size), None)
+
     def oscillator_link(self) -> bool:
-        """The pass's transmitter frequency can wander: an
-        :class:`~trackproc.models.modifiers.OscillatorWander` acts on its samples (a one-way link
-        with a frequency offset; a coherent two-way link has no free oscillator)."""
-        return any(isinstance(b.modifier, md.OscillatorWander) and b.rows.size for b in self.problem.modifiers)
+        """The pass's transmitter frequency can wander (:meth:`oscillator_wander`)."""
+        return self.oscillator_wander() is not None
 
     # -- models ------------------------------------------------------------------------------
     def pointwise_model(self, x):
