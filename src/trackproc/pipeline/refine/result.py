@@ -91,7 +91,10 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                            rtn_jacobian(x[:3], x[3:6], rotating=False), reference, cov[:6, :6],
                            other_scales=problem.params.scales()[6:], reference=ref_name,
                            station_axis=ref.station_axis, state=x[:6])
-    if opt.circular:
+    if opt.circular and ref.tolerance() > 0:
+        obs.notes.append(f"--circular with --circular-tolerance {ref.tolerance():g}: the constraints of eq. 5 hold "
+                         "to the spread of an orbit circular to that eccentricity (soft), estimated with the state")
+    elif opt.circular:
         obs.notes.append("--circular: the three constraints of eq. 5 fix three combinations of the state; "
                          "the covariance is zero across them (it is conditional on a circular orbit)")
     if ref.priors and opt.cost == "pointwise" and obs.unobservable:
