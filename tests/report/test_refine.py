@@ -444,20 +444,22 @@ def test_seed004_table1_two_way_integral_with_and_without_constraints():
     one pass sees poorly, whatever the cost (pointwise + --circular lands within a metre of it)
     and whatever the noise (1e-5 m/s gives the same). The covariance conditional on an exactly
     circular orbit (tens of metres) does not cover that; with --circular-tolerance at the
-    truth's eccentricity it does. Without the constraints, the integral converges alone (sigma of
-    kilometres) or with the stale a-priori to tens of metres, each within 3 sigma."""
+    truth's eccentricity (soft constraints) the error is within its sigma of a few hundred metres.
+    Without the constraints, the integral converges alone (sigma of kilometres) or with the stale
+    a-priori to tens of metres, each within 3 sigma."""
     _, _, sim = scenario(two_way_sigma_m_s=1e-3)
     ecc = float(np.linalg.norm(np.cross(TRUTH.v_m_s, np.cross(TRUTH.r_m, TRUTH.v_m_s)) / MU_EARTH
                                - TRUTH.r_m / np.linalg.norm(TRUTH.r_m)))
     assert 2e-5 < ecc < 3e-5
     res = refine(table(sim), STALE, None, RefineOptions(cost="integral", circular=True, circular_tolerance=ecc), EOP)
     assert res.solution.converged
-    assert np.all(np.abs(res.constraints["relative"]) < 1e-9), res.constraints["relative"]
+    rel = np.asarray(res.constraints["relative"])                   # soft: within the tolerance
+    assert abs(rel[0]) < 1e-9 and np.all(np.abs(rel[1:]) < 3 * ecc), rel
     err = res.stale_epoch_state.rv - TRUTH.rv
     sigma = res.stale_epoch_state.sigma[:6]
     print(f"two-way integral --circular: error {err.round(3)}, sigma {sigma.round(3)}, |dr| "
           f"{np.linalg.norm(err[:3]):.1f} m")
-    assert np.linalg.norm(err[:3]) < np.linalg.norm(PAPER_POSITION_ERROR) / 10      # |dr| 10 x better
+    assert np.linalg.norm(err[:3]) < np.linalg.norm(PAPER_POSITION_ERROR) / 5       # |dr| 5 x better
     assert np.all(np.abs(err) < 3 * sigma), err / sigma
     m = res.state.extra["refinement"]
     assert m["integral"]["link"] == "two-way" and "round-trip" in m["integral"]["gradient"]
@@ -466,9 +468,16 @@ def test_seed004_table1_two_way_integral_with_and_without_constraints():
     # vanishes within a millisecond of the curve's zero
     assert abs(res.state.diagnostics["traverse"]["refined_orbit_zero_range_rate_s"]) < 1e-3
     # the same estimate conditional on a circular orbit, and pointwise under the same constraints
+    # (the tolerance makes the constraints soft; the exactly circular estimate's sigma is over ten times
+    # smaller and does not cover its error, and the pass rejects it: delta chi2 = 51 over 2, p = 1e-11,
+    # against 0.14 for the soft estimate)
     cond = refine(table(sim), STALE, None, RefineOptions(cost="integral", circular=True), EOP)
-    np.testing.assert_allclose(cond.stale_epoch_state.rv, res.stale_epoch_state.rv, rtol=0, atol=1e-6)
+    assert cond.constraints["consistency"]["p_value"] < 1e-3 < res.constraints["consistency"]["p_value"]
     assert np.all(cond.stale_epoch_state.sigma[:6] < sigma / 10)
+    assert np.any(np.abs(cond.stale_epoch_state.rv - TRUTH.rv) > 5 * cond.stale_epoch_state.sigma[:6])
+    # the paper's exactly circular estimate: |dr| 10 x better than the paper's (this truth is near perigee,
+    # where forcing r.v = 0 costs little; the soft estimate's sigma covers every eccentric anomaly)
+    assert np.linalg.norm(cond.stale_epoch_state.rv[:3] - TRUTH.r_m) < np.linalg.norm(PAPER_POSITION_ERROR) / 10
     point = refine(table(sim), STALE, None, RefineOptions(circular=True), EOP)
     assert np.all(np.abs(point.stale_epoch_state.rv - cond.stale_epoch_state.rv)
                   < 3 * cond.stale_epoch_state.sigma[:6])

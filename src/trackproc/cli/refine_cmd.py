@@ -59,8 +59,9 @@ def refine_command(
              "pass contradicts them (likelihood-ratio test)."),
     circular_tolerance: float = typer.Option(
         0.0, "--circular-tolerance", metavar="E", min=0.0,
-        help="With --circular: the eccentricity to which the orbit is circular; adds that uncertainty to the "
-             "covariance (0: covariance conditional on an exactly circular orbit)."),
+        help="With --circular: the eccentricity to which the orbit is circular; the constraints then hold to "
+             "that uncertainty and are estimated with the state (0: exact constraints, covariance conditional "
+             "on an exactly circular orbit)."),
     doppler_bias: Optional[DopplerBias] = typer.Option(
         None, "--doppler-bias",
         help="Transmitter frequency offset (and drift) to estimate; default: offset for one-way Doppler, none "

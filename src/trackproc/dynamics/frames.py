@@ -154,12 +154,7 @@ def earth_rotation(jd1, jd2, eop: ts.EarthOrientation | None = None, rates: bool
     _, xpm, ypm = eop.at(jd1, jd2 - d)
     w_dot = (np.asarray(erfa.pom00(xpp, ypp, erfa.sp00(tt1, tt2 + d)))
              - np.asarray(erfa.pom00(xpm, ypm, erfa.sp00(tt1, tt2 - d)))) / (2.0 * _RATE_DELTA_S)
-    if eop.tabulated:
-        mjd = jd1 - 2400000.5 + jd2
-        ut1_tai = [np.interp(mjd + k * d, eop.mjd, eop.ut1_minus_tai_s) for k in (1, -1)]
-        era_rate = OMEGA_ERA * (1.0 + (ut1_tai[0] - ut1_tai[1]) / (2.0 * _RATE_DELTA_S))
-    else:
-        era_rate = np.full(jd1.shape, OMEGA_ERA)
+    era_rate = era_rate_si(jd1, jd2, eop)
     return EarthRotation(q=q, era=np.asarray(era), w=np.asarray(w),
                          q_dot=q_dot, era_rate=era_rate, w_dot=w_dot)
 
@@ -303,3 +298,16 @@ class QuasiInertialFrame:
         r_tirs = _mtv(self.w, np.asarray(r_itrf, float))
         r = _mtv(_r3(self.era(t_s)), np.broadcast_to(r_tirs, t_s.shape + (3,)))
         return r, _omega_cross(r) * (self.omega / OMEGA_ERA)
+
+
+def era_rate_si(jd1, jd2, eop) -> np.ndarray:
+    """Earth Rotation Angle rate (rad per SI second) at UTC two-part JDs: ``OMEGA_ERA`` times
+    ``1 + d(UT1 - TAI)/dt`` of a tabulated EOP (central differences over ±60 s), else ``OMEGA_ERA``.
+    The one home of the ERA rate (:func:`earth_rotation`, the image-domain station model)."""
+    jd1, jd2 = np.asarray(jd1, float), np.asarray(jd2, float)
+    if not eop.tabulated:
+        return np.full(np.broadcast(jd1, jd2).shape, OMEGA_ERA)
+    d = _RATE_DELTA_S / ts.DAY_S
+    mjd = jd1 - 2400000.5 + jd2
+    ut1_tai = [np.interp(mjd + k * d, eop.mjd, eop.ut1_minus_tai_s) for k in (1, -1)]
+    return OMEGA_ERA * (1.0 + (ut1_tai[0] - ut1_tai[1]) / (2.0 * _RATE_DELTA_S))

@@ -297,7 +297,7 @@ def vandermonde(dt, n: int, h: float = 1.0, derivative: int = 0) -> np.ndarray:
 
     ``V[i, K] = K!/(K-m)! dt_i^(K-m) / H^K`` (zero for K < m). Dense output of a batch of
     spectra is then one matrix product (the inverse transform, docs/equations.md, notation). Shape
-    ``(len(dt), n)``.
+    ``(len(dt), n)``. Implements seed 004 eq. 13 (the inverse transform) for many offsets at once.
     """
     x = np.asarray(dt, dtype=float).reshape(-1)
     m = int(derivative)

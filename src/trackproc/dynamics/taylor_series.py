@@ -192,7 +192,8 @@ _G_VAR_IDX = _gidx([(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2),          # P
 
 
 def series_var_single(r0, v0, dr0, dv0, p, mu, kj2, mu_slot):
-    """Same result as :func:`series_dual` for B = 1: (1, 3, 1+P, p+2)."""
+    """Same result as :func:`series_dual` for B = 1: (1, 3, 1+P, p+2). Implements seed 004
+    eqs. 18-21 (two-dimensional DT, first order in the parameters)."""
     n = p + 2
     npar = dr0.shape[2]
     x0, y0, z0 = (float(c) for c in r0[0])

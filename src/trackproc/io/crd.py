@@ -44,6 +44,7 @@ from trackproc.constants import C_LIGHT
 from trackproc.errors import InputError
 from trackproc.io.raw import RawMeasurements
 from trackproc.io.tabular import decode_text
+from trackproc.isotime import iso_utc
 
 #: H2 time-scale codes that are UTC (USNO, GPS-steered, BIPM, station UTC).
 UTC_SCALES = {3, 4, 7, 10}
@@ -202,7 +203,7 @@ def _pass_id(session) -> str:
 
 
 def _iso(ns: int) -> str:
-    return pd.Timestamp(ns, tz="UTC").strftime("%Y-%m-%dT%H:%M:%S.%fZ")
+    return iso_utc(np.datetime64(int(ns), "ns"), 6)
 
 
 def _session_meta(s) -> dict:

@@ -291,10 +291,16 @@ def read_state_or_tle(path: str, eop=None, at=None) -> State:
     return parse_state_or_tle(read_input_bytes(path), source, eop, at)
 
 
+def is_state_json(data: bytes) -> bool:
+    """A JSON state file (its bytes start with ``{``) rather than a TLE: the one rule that tells
+    ``STATE|TLE`` arguments apart (:func:`parse_state_or_tle`, ``pipeline.orbit_source.read_orbit``)."""
+    return data.lstrip()[:1] == b"{"
+
+
 def parse_state_or_tle(data: bytes, source: str, eop=None, at=None) -> State:
     """The bytes of a JSON state file (they start with ``{``), or of a TLE (2 or 3 lines) converted
-    by SGP4 at its epoch or at ``at``: the one place that tells the two apart."""
-    if data.lstrip()[:1] == b"{":
+    by SGP4 at its epoch or at ``at`` (:func:`is_state_json` tells them apart)."""
+    if is_state_json(data):
         return parse_state(data, source, eop)
     from trackproc.io.tle import parse_tle, tle_state   # here: io.tle builds a State from this module
 

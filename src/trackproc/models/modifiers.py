@@ -12,8 +12,13 @@ troposphere delay — is one object that
   (:meth:`BoundModifier.apply`, after :meth:`Modifier.bind` to one measurement set).
 
 The estimator collects the drivers from its modifiers (:func:`collect_drivers`); nothing
-parses parameter names to find out what a driver does. Adding a bias kind is one subclass
-here (and its family name in :data:`trackproc.vocabulary.BIAS_UNITS`).
+parses parameter names to find out what a driver does — neither ``estimate`` nor ``refine``,
+which builds its problem with estimate's and binds the same modifiers to the quadrature nodes
+of its integral cost. Adding a bias kind is one subclass here (and its family name in
+:data:`trackproc.vocabulary.BIAS_UNITS`); it is then estimated by both when given in
+``EstimateOptions.modifiers`` / ``RefineOptions.modifiers`` (tests/test_refine_modifiers.py
+does that with a toy kind), and a command-line option that creates it is the one further
+edit (``pipeline.estimate.problem.bias_modifiers``, as ``--range-bias`` does).
 
 Linear modifiers add ``Σ_k coefficient_k × value_k`` of their drivers, so their partials are
 the coefficients (seed 002 eq. 10: the E block of the extended state's offsets):
@@ -46,6 +51,7 @@ from typing import Iterable, Optional, Sequence
 import numpy as np
 
 from trackproc.constants import C_LIGHT
+from trackproc.dynamics import geodesy
 from trackproc.models import parameters as pm
 
 __all__ = ["Modifier", "BoundModifier", "RangeBias", "DopplerOffset", "DopplerDrift", "AzimuthBias",
@@ -286,8 +292,8 @@ class RangeCorrection(Modifier):
 def elevation(meas, rows, geometry) -> np.ndarray:
     """The satellite's elevation (rad) seen from the station at the samples ``rows``: the
     geometry's station -> satellite direction in the station's east-north-up frame."""
-    up = np.einsum("nj,nj->n", meas.gcrf_to_enu[rows][:, 2, :], geometry.u[rows])
-    return np.arcsin(np.clip(up, -1.0, 1.0))
+    enu = np.einsum("nij,nj->ni", meas.gcrf_to_enu[rows], geometry.u[rows])
+    return geodesy.enu_to_azel(enu)[1]
 
 
 # ----------------------------------------------------------------------------- registry

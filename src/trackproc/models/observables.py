@@ -73,7 +73,8 @@ def wrap_pi(angle_rad):
 def range_partials(r_e, r_st):
     """Range ``ρ`` (m), unit vector ``û`` and ``∂ρ/∂r_e = û`` (fixed ``t_e``), eq. (1); shapes (...,), (..., 3).
 
-    Implements seed 002 eq. 17 (range, with the light-time emission point)."""
+    Implements seed 002 eq. 17 (range, with the light-time emission point) and, pointwise, seed 004
+    eqs. 11-12 (D = √(ρ·ρ))."""
     d = np.asarray(r_e, float) - np.asarray(r_st, float)
     rho = np.linalg.norm(d, axis=-1)
     u = d / rho[..., None]
@@ -96,7 +97,8 @@ def range_rate_value(r_e, v_e, r_st, v_st, model: str = "doppler", c: float = C_
 
 def range_rate_partials(r_e, v_e, r_st, v_st, model: str = "doppler", c: float = C_LIGHT):
     """Range-rate (eq. 2 or 3) and its partials ``∂ρ̇/∂r_e`` and ``∂ρ̇/∂v_e`` at fixed ``t_e``
-    (module docstring). Implements seed 002 eq. 17 (range-rate) with its partials.
+    (module docstring). Implements seed 002 eq. 17 (range-rate) with its partials and, pointwise,
+    seed 004 eqs. 11-12 (Vr = dD/dt).
 
     Returns ``(rr, d_rr_d_r (..., 3), d_rr_d_v (..., 3))``.
     """

@@ -28,7 +28,7 @@ from trackproc.dynamics import frames, geodesy, propagator, timescales as ts
 from trackproc.dynamics.timescales import datetime64_to_jd_utc
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.atomic import is_stdio, read_input_bytes
-from trackproc.io.statefile import parse_state, read_state_or_tle
+from trackproc.io.statefile import is_state_json, parse_state, read_state_or_tle
 from trackproc.io.tle import parse_tle, sgp4_teme, tle_epoch, tle_state
 from trackproc.models.measurements import observables, station_gcrf
 
@@ -54,7 +54,7 @@ def read_orbit(path: str, eop=None) -> OrbitInput:
 
     source = "<stdin>" if is_stdio(path) else str(path)
     data = read_input_bytes(path)
-    if data.lstrip()[:1] == b"{":
+    if is_state_json(data):
         return OrbitInput(state=parse_state(data, source, eop), source=source)
     return OrbitInput(tle=parse_tle(data.decode("utf-8", errors="replace"), source), source=source)
 
@@ -247,8 +247,8 @@ class Sgp4Track:
 
 
 def station_itrf(station, earth: str = "wgs84") -> np.ndarray:
-    return geodesy.geodetic_to_itrf(float(station.lat_deg) * DEG, float(station.lon_deg) * DEG,
-                                    float(station.height_m), earth)
+    """ITRF position (m) of a stations-table row (:func:`trackproc.dynamics.geodesy.station_itrf`)."""
+    return geodesy.station_itrf(station, earth)[2]
 
 
 def observe(sat: Satellite, station, t_s, *, carrier_hz: float = 1.0, range_rate_model: str = "doppler",

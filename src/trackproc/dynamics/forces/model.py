@@ -32,6 +32,7 @@ from trackproc.dynamics.forces import relativity, srp, third_body
 from trackproc.dynamics.forces.gravity_field import GravityField
 from trackproc.dynamics.frames import earth_rotation
 from trackproc.dynamics.geodesy import itrf_to_geodetic
+from trackproc.dynamics.rtn import rtn_rotation
 
 __all__ = ["Spacecraft", "ForceModel", "Environment", "PARAMETERS", "GRID_S"]
 
@@ -342,7 +343,7 @@ class Environment:
             unit["cd"] = a1
         emp = np.asarray(mdl.empirical_rtn, float)
         if any(emp) or parts:
-            rt = _rtn_axes(r, v)                                # (P, 3, 3): rows R, T, N
+            rt = rtn_rotation(r, v)                             # (P, 3, 3): rows R, T, N
             if any(emp):
                 acc = acc + np.einsum("k,pki->pi", emp, rt)
             for i, key in enumerate(("empirical_r", "empirical_t", "empirical_n")):
@@ -388,12 +389,3 @@ class Environment:
         est = self.model.estimated
         dp = np.stack([unit[p][0] for p in est], -1) if est else np.zeros((3, 0))
         return a, g, hv, dp
-
-
-def _rtn_axes(r, v) -> np.ndarray:
-    """Unit radial, along-track (transverse) and cross-track vectors, rows of (P, 3, 3)."""
-    rn = r / np.linalg.norm(r, axis=-1, keepdims=True)
-    h = np.cross(r, v)
-    nn = h / np.linalg.norm(h, axis=-1, keepdims=True)
-    tn = np.cross(nn, rn)
-    return np.stack([rn, tn, nn], -2)

@@ -11,7 +11,7 @@ import numpy as np
 
 from trackproc.dynamics import geodesy
 from trackproc.dynamics import timescales as ts
-from trackproc.dynamics.frames import OMEGA_ERA, earth_rotation, rotation_z
+from trackproc.dynamics.frames import earth_rotation, era_rate_si, rotation_z
 
 
 #: Spacing of the nodes of the slow rotation (precession-nutation, polar motion), s.
@@ -56,19 +56,11 @@ def _times_poly(series, poly) -> np.ndarray:
 
 def _era_rate(jd1, jd2, eop):
     """Earth Rotation Angle (rad) and its rate per SI second at UTC dates (the UT1 rate of a
-    tabulated EOP by central differences over +-60 s, as :func:`frames.earth_rotation`)."""
+    tabulated EOP, :func:`~trackproc.dynamics.frames.era_rate_si`)."""
     dut1, _, _ = eop.at(jd1, jd2)
     u1, u2 = ts.utc_to_ut1(jd1, jd2, dut1)
     era = np.asarray(erfa.era00(u1, u2), float)
-    if eop.tabulated:
-        d = 60.0 / ts.DAY_S
-        mjd = np.asarray(jd1) - 2400000.5 + np.asarray(jd2)
-        up = np.interp(mjd + d, eop.mjd, eop.ut1_minus_tai_s)
-        dn = np.interp(mjd - d, eop.mjd, eop.ut1_minus_tai_s)
-        rate = OMEGA_ERA * (1.0 + (up - dn) / 120.0)
-    else:
-        rate = np.full(era.shape, OMEGA_ERA)
-    return era, rate
+    return era, era_rate_si(jd1, jd2, eop)
 
 
 def _quadratic_about(nodes_t, values, c):

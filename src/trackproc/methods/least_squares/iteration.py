@@ -173,7 +173,7 @@ class Problem:
         return a, b
 
     def solution(self, names, run: Run, cov_scaled, s, *, free: int, constrained: bool = False) -> Solution:
-        """The :class:`Solution` at the end of ``run``, with ``K_out = S cov_scaled S`` (eq. 9) and
+        """The :class:`Solution` at the end of ``run``, with ``K_out = S cov_scaled S`` (seed 002 eq. 9) and
         ``free`` parameters in the degrees of freedom; ``constrained``: the covariance may be
         singular (zero sigmas, zero correlations there)."""
         scales = self.scales

@@ -50,7 +50,7 @@ class Prior:
 class Solution:
     """Result of :func:`solve`.
 
-    Parameters: ``names``, ``values``, physical ``covariance`` (eq. 9, including any a-priori
+    Parameters: ``names``, ``values``, physical ``covariance`` (seed 002 eq. 9, including any a-priori
     information), ``sigma``, ``correlation``, ``covariance_scaled`` (of ξ = (x - x_ref)/scale:
     Orekit's "normalized" covariance), ``scales``.
 

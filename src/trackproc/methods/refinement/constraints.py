@@ -1,4 +1,5 @@
-"""The circular-orbit constraints of seed 004 eq. 5, their scales, and the covariance an approximate constraint adds.
+"""The circular-orbit constraints of seed 004 eq. 5, their scales, and the covariance of their values for an orbit
+circular only to an eccentricity (the soft constraints of :func:`~trackproc.methods.refinement.solve_soft_kkt`).
 """
 
 from __future__ import annotations
@@ -53,11 +54,3 @@ def circular_tolerance_covariance(x, mu_m3_s2: float, eccentricity: float, *, st
     r = float(np.linalg.norm(x[list(state_index)[:3]]))
     e2 = float(eccentricity) ** 2 / 2.0
     return np.diag([0.0, (mu_m3_s2 / r) ** 2 * e2, mu_m3_s2 * r * e2])
-
-
-def constraint_error_covariance(sensitivity, constraint_covariance) -> np.ndarray:
-    """``D Σ_ε Dᵀ``: the covariance a constraint that holds only to ``Σ_ε`` adds to the solution
-    (D = dx̂/dε from :func:`solve_kkt`)."""
-    d = np.asarray(sensitivity, float)
-    out = d @ np.asarray(constraint_covariance, float) @ d.T
-    return 0.5 * (out + out.T)

@@ -27,6 +27,8 @@ import math
 from dataclasses import dataclass
 from typing import Any, Optional
 
+from trackproc.vocabulary import RANGE_RATE_MODELS
+
 #: Sections in the order they are documented; ``batch`` holds the run options.
 SECTIONS = ("batch", "ingest", "smooth", "refine", "estimate")
 ENV_PREFIX = "TRACKPROC_BATCH_"
@@ -165,8 +167,8 @@ SCHEMA: tuple[Opt, ...] = (
     Opt("refine", "circular", "bool", False, ("--circular/--no-circular",),
         "Impose the circular-orbit constraints of seed 004 eq. 5 (Lagrange multipliers).", affects=True),
     Opt("refine", "circular_tolerance", "float", 0.0, ("--circular-tolerance",),
-        "With circular: the eccentricity to which the orbit is circular, added to the covariance (0: conditional "
-        "on an exactly circular orbit).", affects=True, check=_NONNEG, metavar="E"),
+        "With circular: the eccentricity to which the orbit is circular; the constraints hold to it (0: exact, "
+        "covariance conditional on an exactly circular orbit).", affects=True, check=_NONNEG, metavar="E"),
     Opt("refine", "doppler_bias", "choice", "auto", ("--refine-doppler-bias",),
         "Transmitter frequency offset (and drift) to estimate; auto: offset for one-way Doppler, none for "
         "range-rate.", choices=("auto", "none", "offset", "offset+drift"), affects=True),
@@ -182,7 +184,7 @@ SCHEMA: tuple[Opt, ...] = (
         choices=("wgs84", "sphere"), affects=True),
     Opt("refine", "range_rate_model", "choice", None, ("--refine-range-rate-model",),
         "doppler or instantaneous (default: the pass file's metadata, else doppler).",
-        choices=("doppler", "instantaneous"), affects=True),
+        choices=RANGE_RATE_MODELS, affects=True),
     Opt("refine", "max_iterations", "int", 30, ("--refine-max-iterations",),
         "Gauss-Newton iterations at most; an input whose refinement does not converge fails.", affects=True,
         check=_INT_POS, metavar="N"),
@@ -229,7 +231,7 @@ SCHEMA: tuple[Opt, ...] = (
         choices=("wgs84", "sphere"), affects=True),
     Opt("estimate", "range_rate_model", "choice", None, ("--range-rate-model",),
         "doppler or instantaneous (default: the pass files' metadata, else doppler).",
-        choices=("doppler", "instantaneous"), affects=True),
+        choices=RANGE_RATE_MODELS, affects=True),
     Opt("estimate", "max_iterations", "int", 20, ("--max-iterations",), "Gauss-Newton iterations at most.",
         affects=True, check=_INT_POS, metavar="N"),
     Opt("estimate", "clip", "float", 4.0, ("--estimate-clip",),

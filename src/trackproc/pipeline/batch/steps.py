@@ -29,6 +29,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from trackproc.errors import InputError, ProcessingError
+from trackproc.isotime import iso_utc
 from trackproc.pipeline.batch.chain import InputContext, Step, WindowContext, register
 
 #: Kinds in the order their fit is reported as the input's key numbers.
@@ -206,7 +207,7 @@ def refine_pass(table) -> tuple:
     counts, starts = groups.size(), groups.min()
     order = sorted(counts.index, key=lambda k: (-int(counts[k]), starts[k], k))
     candidates = [{"station": st, "pass_id": pid, "samples": int(counts[(st, pid)]),
-                   "start_utc": starts[(st, pid)].tz_convert("UTC").strftime("%Y-%m-%dT%H:%M:%S.%fZ")}
+                   "start_utc": iso_utc(starts[(st, pid)], 6)}
                   for st, pid in order]
     station, pass_id = order[0]
     if len(order) == 1:

@@ -18,6 +18,7 @@ from typing import Optional
 import trackproc.pipeline.batch.steps  # noqa: F401 - registers the steps (a worker unpickling run_task needs them)
 from trackproc.errors import InputError, TrackprocError
 from trackproc.io.jsonutil import json_ready
+from trackproc.isotime import iso_utc
 from trackproc.pipeline.batch.chain import STEPS, InputContext, WindowContext
 
 @dataclass
@@ -160,10 +161,10 @@ def run_task(task: Task) -> TaskResult:
 def _table_numbers(table) -> dict:
     frame = table.frame
     times = frame["time"]
-    iso = lambda t: t.tz_convert("UTC").strftime("%Y-%m-%dT%H:%M:%S.%fZ")  # noqa: E731
     return {"samples": int(len(frame)), "passes": int(frame[["station", "pass_id"]].drop_duplicates().shape[0]),
             "stations": " ".join(sorted(frame["station"].astype(str).unique())),
             "kinds": " ".join(sorted(frame["kind"].astype(str).unique())),
-            "start_utc": iso(times.min()) if len(frame) else None, "end_utc": iso(times.max()) if len(frame) else None}
+            "start_utc": iso_utc(times.min(), 6) if len(frame) else None,
+            "end_utc": iso_utc(times.max(), 6) if len(frame) else None}
 
 

@@ -53,6 +53,9 @@ class EstimateOptions:
     ``empirical_r``/``_t``/``_n`` or ``empirical-rtn`` for the three, ``empirical_x``/``_y``/``_z``
     or ``empirical-xyz`` along the GCRF axes), started from the force
     model's values (:func:`force_parameter_names`).
+    ``modifiers``: further :class:`~trackproc.models.modifiers.Modifier` instances (a bias kind
+    without an option of its own), applied and their drivers estimated like the ones above
+    (copied per problem: their drivers' values do not leak between problems).
     """
 
     range_bias: bool | Sequence[str] = False
@@ -79,6 +82,7 @@ class EstimateOptions:
     wavelength_nm: Optional[float] = None
     solid_tides: Optional[bool] = None    # station solid-Earth tides on ranges (None: on for CRD data)
     estimate_force: Sequence[str] = ()    # force-model drivers (force "full"): cr, cd, empirical-rtn
+    modifiers: Sequence = ()              # further measurement modifiers (models.modifiers.Modifier)
 
 
 def check_options(opt: EstimateOptions) -> None:

@@ -8,6 +8,7 @@ modifiers bound to the samples (steps 3-5 of :mod:`trackproc.pipeline.estimate`)
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 from typing import Optional
 
@@ -335,7 +336,7 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     params = pm.ParameterSet(pm.state_drivers(rv0, sigma=[apriori_for(s, "state", apriori) for s in pm.STATE_NAMES]))
     for d in force_drivers(force_model, force_names, apriori):     # columns 6..: after the state, as in the STM
         params.add(d)
-    modifiers = bias_modifiers(opt, frame, meas.t_s, known, apriori)
+    modifiers = bias_modifiers(opt, frame, meas.t_s, known, apriori) + [copy.deepcopy(m) for m in opt.modifiers]
     from trackproc.pipeline.range_corrections import range_correction_modifiers
 
     modifiers += range_correction_modifiers(frame, tables, known, epoch, troposphere=opt.troposphere,

@@ -22,6 +22,8 @@ from trackproc.io import smoothing_record
 from trackproc.io.tle import parse_tle, tle_state
 from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Prior
+from trackproc.models import observation as ob
+from trackproc.models import parameters as pm
 from trackproc.pipeline.estimate import EstimateOptions, build_problem
 from trackproc.types import PassTable
 from trackproc.vocabulary import TAYLOR_FORCES
@@ -127,7 +129,8 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     est = EstimateOptions(doppler_bias=None if bias == "none" else bias, doppler_bias_per="pass",
                           apriori_sigma=apriori_sigma, apriori_initial=apriori_initial, force=opt.force,
                           earth=opt.earth, range_rate_model=opt.range_rate_model, max_iterations=opt.max_iterations,
-                          clip=opt.clip, epoch=t_traverse, kinds=[kind])
+                          clip=opt.clip, epoch=t_traverse, kinds=[kind], modifiers=opt.modifiers,
+                          oscillator_noise=opt.oscillator_noise)
     problem = build_problem([(source, PassTable(frame, meta))], initial, stations, est, eop)
     mu = propagator.force_parameters(opt.force)[0]
     if default_prior:
@@ -137,10 +140,11 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     names = list(problem.names)
     x0 = problem.x0.copy()
     scales = problem.params.scales()
-    if opt.circular:
-        names.append("r_ka")
-        x0 = np.r_[x0, np.linalg.norm(x0[:3])]
-        scales = np.r_[scales, scales[0]]
+    if opt.circular:                 # the constraints' own driver, r_ka (seed 004 eq. 5), after the problem's
+        rka = pm.orbit_radius(float(np.linalg.norm(x0[:3])), scale=float(scales[0]))
+        names.append(rka.name)
+        x0 = np.r_[x0, rka.reference]
+        scales = np.r_[scales, rka.scale]
 
     # the station in the image domain (seed 004 eqs. 7-10), for the integral and the model traverse time
     known = dict(stations or {})
@@ -167,7 +171,8 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
 
 def integral_setup(ref: Refinement, frame) -> dict:
     """Gauss-Legendre nodes on the covered parts of the pass, the curve there (range-rate), the
-    pseudo-sigmas, the bias coefficients and the basis (for the sandwich covariance)."""
+    pseudo-sigmas, the bias coefficients and the basis (for the sandwich covariance). Implements
+    seed 004 eq. 14 (the integral cost, by quadrature on the smoothed curve)."""
     opt = ref.options
     curve = ref.curve
     intervals = rf.covered_intervals(curve.used_t_s, opt.max_gap_s)
@@ -194,15 +199,7 @@ def integral_setup(ref: Refinement, frame) -> dict:
     if opt.reweight and math.isfinite(vf_curve) and vf_curve > 1.0:
         sigma_ref *= math.sqrt(vf_curve)           # the samples' actual scatter about the curve
     sigma_nodes = rf.pseudo_sigma(w, sigma_ref, spacing)
-    bias_cols = []
-    for d in ref.problem.params.selected[6:]:
-        # an offset in Hz on range-rate: -c/f one-way, -c/(2f) two-way (observation.bias_modifiers)
-        coef = -C_LIGHT / (k_link * ref.carrier_hz) * np.ones(t_nodes.size)
-        if d.family == "doppler_drift":
-            coef = coef * (t_nodes - d.epoch_s)
-        elif d.family != "doppler_offset":
-            raise ProcessingError(f"parameter {d.name} has no meaning for the integral cost")
-        bias_cols.append(coef)
+    bias_cols = node_bias_columns(ref, t_nodes, mode)
     model = rf.IntegralModel(ref.problem.epoch, ref.problem.frame, ref.station_model, t_nodes, bias_cols,
                              force=opt.force, eop=ref.problem.eop, range_rate_model=ref.problem.range_rate_model,
                              n_extra=1 if opt.circular else 0, mode=mode)
@@ -210,3 +207,32 @@ def integral_setup(ref: Refinement, frame) -> dict:
             "t_poly": t_poly, "design": design, "coefficient_covariance": curve.fit.cov_scaled,
             "intervals": intervals, "sigma_ref": sigma_ref, "spacing": spacing, "to_range_rate": to_rr,
             "mode": mode}
+
+
+def node_bias_columns(ref: Refinement, t_nodes, mode: str) -> list:
+    """The partials of the curve's range-rate at the nodes with respect to the problem's
+    non-state drivers, in their order: each measurement modifier of the problem bound to the
+    nodes as range-rate samples of the pass's station, pass and link (a Doppler offset becomes
+    ``-c/f`` one-way, ``-c/(2f)`` two-way; a drift that times ``t - t0``), as the estimator's own
+    model does on samples. :class:`ProcessingError` for a driver no modifier sets at the nodes."""
+    k = t_nodes.size
+    nodes = ob.MeasurementSet(t_s=np.asarray(t_nodes, float), kind=["range_rate"] * k, station=[ref.station_name] * k,
+                              pass_id=[ref.pass_id] * k, observed=np.zeros(k), sigma=np.ones(k), r_st=np.zeros((k, 3)),
+                              v_st=np.zeros((k, 3)), carrier_hz=ref.carrier_hz, mode=mode)
+    columns = {}
+    for bound in ref.problem.modifiers:
+        mod = bound.modifier
+        if not mod.parameter_drivers():
+            continue                                   # a known correction or the oscillator's wander
+        try:
+            at_nodes = mod.bind(nodes)
+        except ValueError:
+            continue                                   # acts on no node: reported below if estimated
+        for j, name in enumerate(at_nodes.names):
+            columns[name] = at_nodes.coefficients(j)
+    out = []
+    for name in ref.problem.names[6:]:
+        if name not in columns:
+            raise ProcessingError(f"parameter {name} has no meaning for the integral cost")
+        out.append(columns[name])
+    return out

@@ -12,6 +12,7 @@ import numpy as np
 
 from trackproc.methods import noise as nz
 from trackproc.methods.least_squares import prior_rhs, prior_rows
+from trackproc.models import modifiers as md
 from trackproc.pipeline.refine.assemble import prepare
 from trackproc.pipeline.refine.gates import solve_weighted
 from trackproc.pipeline.refine.problem import Refinement, link_mode
@@ -23,8 +24,8 @@ DRIFT_T = 3.29
 
 
 def oscillator_link(ref: Refinement) -> bool:
-    """A one-way link with a transmitter offset: the frequency can wander."""
-    return link_mode(ref) == "one-way" and any(n.startswith("doppler_offset") for n in ref.problem.names)
+    """A one-way link with a transmitter offset: the frequency can wander (:meth:`Refinement.oscillator_link`)."""
+    return ref.oscillator_link()
 
 
 def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinement, bool]:
@@ -39,17 +40,18 @@ def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinem
     keep = ~np.asarray(sol.edited, bool)
     t = meas.t_s
     t0 = float(t.min())
-    osc = oscillator_link(ref)
+    wander = ref.oscillator_wander()        # its walk: given (--oscillator-noise) or None (by REML)
+    osc = wander is not None
     r = np.asarray(sol.residual, float)
     npb = ref.n_problem
     _, jac = ref.pointwise_model(sol.values)
     x = np.asarray(jac, float)[:, :npb]
-    has_drift = any(n.startswith("doppler_drift") for n in ref.problem.names)
+    has_drift = bool(ref.modifier_drivers(md.DopplerDrift))
     if osc and not has_drift:        # the drift column (Hz/s; the offset's column times t - t0)
-        i_off = [i for i, n in enumerate(ref.problem.names) if n.startswith("doppler_offset")][0]
+        i_off = ref.problem.names.index(ref.modifier_drivers(md.DopplerOffset)[0].name)
         x = np.column_stack([x, x[:, i_off] * (t - t0)])
     nf = nz.fit_noise(t[keep], r[keep], x[keep], models=nz.candidate_models(opt.noise, osc),
-                      walk=opt.oscillator_noise, t0=t0)
+                      walk=wander.walk if wander is not None else opt.oscillator_noise, t0=t0)
     cov = nz.PassCovariance(meas.sigma, t, [(np.arange(t.size), nf.model, t0)])
     want_drift = False
     drift_t = None
@@ -74,7 +76,7 @@ def noise_model(ref: Refinement, sol, sigma_scale: float = 1.0) -> tuple[Refinem
                    "oscillator_noise_given": opt.oscillator_noise, "link": link_mode(ref)})
     if drift_t is not None:
         report["drift_t"] = drift_t
-    bias = [n.split(":")[0] for n in ref.problem.names if n.startswith("doppler_")]
+    bias = ref.modifier_drivers(md.DopplerOffset, md.DopplerDrift)
     report["transmitter"] = ("offset+drift" if (want_drift or has_drift) else "offset" if bias else "none") + \
         ("+wander" if nf.model.walk > 0 else "")
     model = None if nf.model.is_white else cov

@@ -58,11 +58,12 @@ class RefineOptions:
     ``pass_id``/``kind``: which pass and kind when the file holds several; quadrature:
     ``quadrature_order`` nodes per panel of at most ``quadrature_panel_s`` seconds, over the
     parts of the pass without gaps longer than ``max_gap_s``; ``circular_tolerance``: the
-    eccentricity to which the orbit is taken to be circular under ``circular``: it adds the
-    covariance of an approximate constraint (:func:`~trackproc.methods.refinement.constraint_error_covariance`);
-    0 (the default, the seed's assumption) makes the covariance conditional on an exactly circular
-    orbit. With J2 the osculating eccentricity of a mean-circular LEO orbit swings by
-    ``1.5 J2 (Re/r)^2`` (about 1e-3): see docs/refine.md before trusting a conditional covariance.
+    eccentricity to which the orbit is taken to be circular under ``circular``: the constraints
+    are then soft, estimated with the state from their covariance for such an orbit
+    (:func:`~trackproc.methods.refinement.solve_soft_kkt`); 0 (the default, the seed's assumption)
+    imposes them exactly and makes the covariance conditional on an exactly circular orbit. With
+    J2 the osculating eccentricity of a mean-circular LEO orbit swings by ``1.5 J2 (Re/r)^2``
+    (about 1e-3): see docs/refine.md before trusting a conditional covariance.
     ``reweight``: weigh the data by their actual scatter (:data:`REWEIGHT_THRESHOLD`).
     ``covariance``: ``"profile"`` (pointwise without ``circular``: the linear covariance plus the
     curvature along the directions the pass cannot see, :meth:`Refinement.profile_covariance`)
@@ -73,6 +74,9 @@ class RefineOptions:
     samples: the weighted least squares of before), or one of ``"ar1"``, ``"walk"``,
     ``"ar1+walk"`` (that model, its parameters by REML); ``oscillator_noise``: the random-walk
     intensity of the transmitter frequency (Hz/√s) instead of estimating it.
+    ``modifiers``: further measurement modifiers (:class:`~trackproc.models.modifiers.Modifier`),
+    passed to the estimator's problem (``EstimateOptions.modifiers``): refine, like estimate,
+    collects the drivers from the modifiers and never from parameter names.
     """
 
     cost: str = "pointwise"
@@ -101,6 +105,7 @@ class RefineOptions:
     traverse_epoch: Optional[np.datetime64] = None
     #: Refuse (keep the stale state) when the pass cannot improve it (:func:`refusal_test`).
     allow_refusal: bool = True
+    modifiers: tuple = ()
 
 
 @dataclass

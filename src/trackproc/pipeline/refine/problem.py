@@ -12,8 +12,10 @@ import numpy as np
 
 from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Options, Prior, solve, solve_gls
+from trackproc.models import modifiers as md
 from trackproc.methods.refinement import (ELEMENT_NAMES, CachedModel, circular_constraints, constraint_scales,
-                                           element_covariance, geodesic_retraction, profile_mixture, solve_kkt)
+                                           element_covariance, geodesic_retraction, profile_mixture, solve_kkt,
+                                           solve_soft_kkt)
 from trackproc.pipeline.refine.options import DEFAULT_APRIORI_ELEMENTS, RefineOptions, SmoothedCurve
 
 
@@ -82,6 +84,22 @@ class Refinement:
     def n_problem(self) -> int:
         return len(self.problem.names)
 
+    def modifier_drivers(self, *kinds) -> list:
+        """The estimated drivers of the problem's measurement modifiers of the classes ``kinds``
+        (:mod:`trackproc.models.modifiers`), in the order of the parameters."""
+        return [d for b in self.problem.modifiers if isinstance(b.modifier, kinds)
+                for d in b.modifier.parameter_drivers() if d.selected]
+
+    def oscillator_wander(self):
+        """The :class:`~trackproc.models.modifiers.OscillatorWander` acting on the pass's samples
+        (a one-way link with a frequency offset; a coherent two-way link has no free oscillator), or None."""
+        return next((b.modifier for b in self.problem.modifiers
+                     if isinstance(b.modifier, md.OscillatorWander) and b.rows.size), None)
+
+    def oscillator_link(self) -> bool:
+        """The pass's transmitter frequency can wander (:meth:`oscillator_wander`)."""
+        return self.oscillator_wander() is not None
+
     # -- models ------------------------------------------------------------------------------
     def pointwise_model(self, x):
         h, jac = self.problem.model(np.asarray(x, float)[: self.n_problem])
@@ -140,13 +158,27 @@ class Refinement:
         model = CachedModel(model)
         retract = geodesic_retraction(model, sigma, self.scales, priors)
         if self.options.circular:
-            kkt = solve_kkt(model, start, y, sigma, names=self.names, constraints=self.constraints,
-                            constraint_scale=self.constraint_scale, scales=self.scales, priors=priors,
-                            periodic=periodic, options=opts, retract=retract)
+            kkt = self.solve_circular(model, start, y, sigma, priors=priors, periodic=periodic, options=opts,
+                                      retract=retract)
             return kkt.solution, kkt
         lo, hi = self.bounds()
         return solve(model, start, y, sigma, names=self.names, scales=self.scales, priors=priors, periodic=periodic,
                      bounds=(lo, hi), options=opts, retract=retract), None
+
+    def solve_circular(self, model, start, y, sigma, **kw):
+        """The circular-orbit constraints of seed 004 eq. 5: exact (:func:`solve_kkt`, the seed's
+        Lagrange multipliers), or with ``circular_tolerance`` soft, ``f(x) = ε`` with ε of the
+        covariance an orbit circular to that eccentricity has (:func:`circular_tolerance_covariance`;
+        ``|r| = r_ka`` stays exact), solved by :func:`solve_soft_kkt`."""
+        common = dict(names=self.names, constraints=self.constraints, constraint_scale=self.constraint_scale,
+                      scales=self.scales, **kw)
+        tol = self.tolerance()
+        if tol > 0:
+            def sigma_eps(x):
+                return rf.circular_tolerance_covariance(x, self.mu, tol)
+
+            return solve_soft_kkt(model, start, y, sigma, constraint_covariance=sigma_eps, **common)
+        return solve_kkt(model, start, y, sigma, **common)
 
     def bounds(self):
         lo, hi = self.problem.params.bounds()
@@ -168,9 +200,7 @@ class Refinement:
             ones = np.ones(y_w.size)
             retract = geodesic_retraction(cached, ones, self.scales, priors)
             if self.options.circular:
-                kkt = solve_kkt(cached, start, y_w, ones, names=self.names, constraints=self.constraints,
-                                constraint_scale=self.constraint_scale, scales=self.scales, priors=priors,
-                                options=opts, retract=retract)
+                kkt = self.solve_circular(cached, start, y_w, ones, priors=priors, options=opts, retract=retract)
                 return kkt.solution, kkt
             return solve(cached, start, y_w, ones, names=self.names, scales=self.scales, priors=priors,
                          bounds=(lo, hi), options=opts, retract=retract), None
@@ -244,15 +274,21 @@ class Refinement:
         return float(self.options.circular_tolerance or 0.0)
 
     def covariance(self, sol, kkt=None, priors=None) -> np.ndarray:
-        """The reported covariance: the solver's (pointwise) or the sandwich (integral), plus,
-        under ``--circular``, what a constraint holding only to :meth:`tolerance` adds."""
+        """The reported covariance: the solver's (pointwise; with ``circular_tolerance`` the soft
+        constraints' Laplace covariance, :func:`solve_soft_kkt`) or the sandwich (integral; with
+        soft constraints on the joint problem in the state and the constraint values, whose
+        a-priori enters as one more a-priori term)."""
         if self.options.cost != "integral":
-            cov = sol.covariance
-        else:
-            d = self.integral
-            cov = rf.sandwich_covariance(sol, d["sigma"], d["design"], d["coefficient_covariance"],
-                                         self.priors if priors is None else priors)
-        if kkt is not None and self.tolerance() > 0:
-            sigma_eps = rf.circular_tolerance_covariance(sol.values, self.mu, self.tolerance())
-            cov = cov + rf.constraint_error_covariance(kkt.sensitivity, sigma_eps)
-        return cov
+            return sol.covariance
+        d = self.integral
+        priors = list(self.priors if priors is None else priors)
+        if kkt is None or kkt.soft is None:
+            return rf.sandwich_covariance(sol, d["sigma"], d["design"], d["coefficient_covariance"], priors)
+        n = len(sol.values)
+        cov_j, jac_j, scales_j = kkt.joint()
+        soft = np.flatnonzero(kkt.soft)
+        sigma_eps = rf.circular_tolerance_covariance(sol.values, self.mu, self.tolerance())[np.ix_(soft, soft)]
+        joint = replace(sol, covariance_scaled=cov_j, jacobian=jac_j, scales=scales_j)
+        prior_eps = Prior(n + np.arange(soft.size), np.zeros(soft.size), sigma_eps)
+        return rf.sandwich_covariance(joint, d["sigma"], d["design"], d["coefficient_covariance"],
+                                      priors + [prior_eps])[:n, :n]

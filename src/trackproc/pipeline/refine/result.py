@@ -18,6 +18,7 @@ from trackproc.errors import ProcessingError
 from trackproc.isotime import iso_utc
 from trackproc.methods import refinement as rf
 from trackproc.methods.quality import chi2_limit
+from trackproc.models import modifiers as md
 from trackproc.pipeline.estimate import UNITS, residual_frame
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, RefineResult
 from trackproc.types import State
@@ -90,7 +91,10 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                            rtn_jacobian(x[:3], x[3:6], rotating=False), reference, cov[:6, :6],
                            other_scales=problem.params.scales()[6:], reference=ref_name,
                            station_axis=ref.station_axis, state=x[:6])
-    if opt.circular:
+    if opt.circular and ref.tolerance() > 0:
+        obs.notes.append(f"--circular with --circular-tolerance {ref.tolerance():g}: the constraints of eq. 5 hold "
+                         "to the spread of an orbit circular to that eccentricity (soft), estimated with the state")
+    elif opt.circular:
         obs.notes.append("--circular: the three constraints of eq. 5 fix three combinations of the state; "
                          "the covariance is zero across them (it is conditional on a circular orbit)")
     if ref.priors and opt.cost == "pointwise" and obs.unobservable:
@@ -171,7 +175,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
               "apriori": apriori_note, "covariance": covariance_note,
               "kind": ref.kind, "station": ref.station_name, "pass_id": ref.pass_id,
               "range_rate_model": problem.range_rate_model, "force_model": opt.force, "earth": opt.earth,
-              "doppler_bias": [n for n in problem.names if n.startswith("doppler_")],
+              "doppler_bias": [d.name for d in ref.modifier_drivers(md.DopplerOffset, md.DopplerDrift)],
               "propagator": "Taylor (DT) with first-order sensitivity spectra, quasi-inertial frame of the traverse "
                             "epoch"}
     if opt.cost == "integral":
@@ -222,6 +226,13 @@ def constraint_report(ref: Refinement, x, cov, sigma, kkt=None, consistency: dic
                             "tolerance_note": "the covariance includes the constraints' own uncertainty for an orbit "
                                               "circular only to this eccentricity (0: conditional on an exactly "
                                               "circular orbit)"})
+        if kkt.soft is not None:            # --circular-tolerance: the constraint values estimated with the state
+            soft = np.flatnonzero(kkt.soft)
+            constraints["soft"] = {"names": [rf.CONSTRAINT_NAMES[i] for i in soft],
+                                   "values": kkt.target[soft].tolist(),
+                                   "sigma": np.sqrt(np.diag(kkt.target_covariance)).tolist(),
+                                   "note": "f(x) = eps with eps ~ N(0, Sigma_eps) of an orbit circular to the "
+                                           "tolerance; maximum a-posteriori estimate (soft constraints)"}
         i_rka = names.index("r_ka")
         constraints["r_ka_sigma_m"] = float(sigma[i_rka])
         if consistency is not None:
@@ -270,8 +281,10 @@ def refine_warnings(ref: Refinement, sol, obs, kkt=None, sigma_scale: float = 1.
         warnings.append(f"the pass contradicts the circular-orbit constraints (delta chi2 = {c['delta_chi2']:.4g}, 2 "
                         f"degrees of freedom, p = {c['p_value']:.2g}; the unconstrained fit's eccentricity is "
                         f"{c['free_fit_eccentricity']:.2g}): the constrained state is biased and its covariance too "
-                        "small; give --circular-tolerance (the eccentricity the orbit is circular to) or drop "
-                        "--circular")
+                        "small; " + ("give --circular-tolerance (the eccentricity the orbit is circular to) or drop "
+                                     "--circular" if ref.tolerance() == 0.0 else
+                                     f"the orbit is not circular to {ref.tolerance():g}: give a larger "
+                                     "--circular-tolerance or drop --circular"))
     if opt.circular and kkt is not None and ref.tolerance() == 0.0:
         warnings.append("--circular: the covariance is conditional on an exactly circular orbit; with J2 the "
                         "osculating eccentricity of a circular orbit swings by about 1e-3 (give --circular-tolerance)")

@@ -9,6 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from trackproc.errors import ProcessingError
+from trackproc.models import modifiers as md
 from trackproc.pipeline.refine.assemble import prepare
 from trackproc.pipeline.refine.gates import circular_consistency, solve_gated, solve_weighted, with_noise_of
 from trackproc.pipeline.refine.noise import solve_noise
@@ -46,7 +47,7 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
         epoch = ref.problem.epoch + np.timedelta64(int(round(t_model * 1e9)), "ns")
         try:
             # the same transmitter model (a drift the pass wanted) and a noise model refitted there
-            bias = "offset+drift" if any(n.startswith("doppler_drift") for n in ref.names) else opt.doppler_bias
+            bias = "offset+drift" if ref.modifier_drivers(md.DopplerDrift) else opt.doppler_bias
             moved = prepare(table, initial, stations, replace(opt, traverse_epoch=epoch, doppler_bias=bias), eop,
                             source, curve=ref.curve)
             moved.warnings[:] = list(ref.warnings)

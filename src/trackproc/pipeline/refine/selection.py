@@ -12,6 +12,7 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.io import smoothing_record
 from trackproc.methods.smoothing import SmoothingError, closest_approach
 from trackproc.pipeline.refine.options import LINK_MODES, RANGE_RATE_KINDS, RefineOptions, SmoothedCurve
+from trackproc.pipeline.estimate.samples import utc_times
 from trackproc.pipeline.smooth import SmoothOptions, smooth
 from trackproc.types import PassTable
 
@@ -55,19 +56,12 @@ def select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple[
     return PassTable(sub.reset_index(drop=True), dict(table.meta or {})), kind, station, pass_id
 
 
-def utc64(times) -> np.ndarray:
-    t = pd.DatetimeIndex(times)
-    if t.tz is not None:
-        t = t.tz_convert("UTC").tz_localize(None)
-    return t.to_numpy(dtype="datetime64[ns]")
-
-
 def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source: str) -> SmoothedCurve:
     """The smoothed polynomial of the pass: from the ``smoothing`` metadata when ``smooth`` made
     it (seed 004 eq. 1), else fitted here with ``smooth``'s defaults; and its closest approach."""
     meta = sub.meta or {}
     mode = str(meta.get("doppler_mode") or "one-way")
-    times = utc64(sub.frame["time"])
+    times = utc_times(sub.frame)
     rec = smoothing_record.find_fit_record(meta, station, pass_id, kind)
     if rec is not None:
         fit = smoothing_record.fit_from_record(rec)

@@ -95,6 +95,7 @@ def traverse_station(state, *, cross_track_m: float = 600e3, side: str = "left",
     Earth-fixed velocity), then moved along the track until the one-way range-rate received at
     the epoch (light time, station motion, ``range_rate_model``) is zero to 1 µm/s. Returns
     ``(Station, info)`` with the elevation and range at the epoch (the top of the pass).
+    Implements the seed 004 Table 1 scenario (the truth is the traverse point).
     """
     jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(np.datetime64(state.epoch, "ns")))
     r_itrf, v_itrf = frames.gcrf_to_itrf(state.r_m, state.v_m_s, *jd, eop)
