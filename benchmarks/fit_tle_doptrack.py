@@ -2,7 +2,7 @@
 than the TLE it started from? (issue 18's criterion; numbers in docs/fit-tle.md and the README)
 
 Two protocols, each for the development passes (1-10 April 2020) and the hold-out (11-15 April,
-never used while developing; evaluated twice, each time once at the end):
+never used while developing; evaluated three times, each time once at the end of a version):
 
 * ``held-back``: every pass of an evening (passes < 4 h apart) but the last fitted from the
   metadata TLE (the newest of those passes, defaults: offset+drift per pass, a-priori, B* fitted),
@@ -64,8 +64,8 @@ def _row(fit, target, options=None, fitted=None):
             "fitted_hz": round(_rms(table, _tle(res.summary)), 2), "written_hz": round(_rms(table, res.tle), 2),
             "own_tle_hz": round(_rms(table, own), 2), "quality": res.quality.verdict,
             "refused": (res.summary["refused"] or {}).get("code"),
-            "p_better": round(res.summary["prediction"]["probability_better"], 3),
-            "moved_m": round(res.summary["prediction"]["change_m"])}
+            "p_better": round(res.summary["prediction"].get("probability_better", float("nan")), 3),
+            "moved_m": round(res.summary["prediction"].get("change_m", float("nan")), 1)}
 
 
 def _stamp_time(s):

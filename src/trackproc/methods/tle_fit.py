@@ -282,12 +282,13 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
                     history=history)
 
 
-#: SGP4's own (theory) error at a pass of a TLE fitted to passes, a per-pass random effect
-#: independent from pass to pass, with the shape of the default a-priori (refine's element
-#: sigmas: a 50 m, e 5e-5, i and Ω 1e-4 rad, argument of latitude 4e-4 rad; B* none) scaled by
-#: this factor: the default of ``--model-error``. Its provenance: the scale with
-#: mean((error / sigma)^2) = 1 over the DopTrack Delfi-C3 development evenings' held-back passes
-#: (1-10 April 2020; ``benchmarks/fit_tle_doptrack.py calibrate``).
+#: SGP4's own (theory) error at a pass of a TLE fitted to passes (on DopTrack mostly the
+#: station's per-pass timing), a per-pass random effect independent from pass to pass, with the
+#: shape of the default a-priori (refine's element sigmas: e 5e-5, i and Ω 1e-4 rad, argument of
+#: latitude 4e-4 rad; mean motion and B* none) scaled by this factor: the default of
+#: ``--model-error``. Its provenance: the maximum-likelihood scale over the 68 DopTrack Delfi-C3
+#: development pairs (1-10 April 2020; −2 log L 781, 669, 677 at 2, 3.4, 5;
+#: ``benchmarks/fit_tle_doptrack.py`` :func:`honesty_rows`, docs/fit-tle.md "Covariance").
 MODEL_ERROR_SCALE = 3.4
 
 

@@ -33,6 +33,8 @@ def summary_text(result: FitTleResult) -> str:
     p = s.get("prediction")
     if p:
         lines.append(f"  predicted position error {p['span_days']:g} d on: {p['position_sigma_m']:.4g} m "
-                     f"(initial {p['initial_position_sigma_m']:.4g} m; SGP4's theory error included)")
+                     f"(initial {p['initial_position_sigma_m']:.4g} m; SGP4's theory error included)"
+                     + (f"; the fit moves it {p['change_m']:.4g} m: better with probability "
+                        f"{p['probability_better']:.3g}" if "probability_better" in p else ""))
     lines.append("  " + result.quality.text())
     return "\n".join(lines) + "\n"
