@@ -49,7 +49,8 @@ def fit_tle_command(
                                       help="The initial TLE's a-priori: 'tle' its measured accuracy (TLE "
                                            "differencing: 200 m along-track at its epoch growing 550 m/day, radial "
                                            "100 m, cross-track 50 m; docs/fit-tle.md) or 'refine' refine's default "
-                                           "element sigmas (~10x looser; always for a state)."),
+                                           "element sigmas (~10x looser; always for a state and a TLE over 3.2 "
+                                           "days from the epoch)."),
     horizon: float = typer.Option(1.0, "--horizon", metavar="DAYS", min=0.0,
                                   help="How far after the epoch the TLE must predict better than the initial one "
                                        "(the refusal test and the summary's prediction)."),

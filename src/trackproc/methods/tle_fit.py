@@ -104,6 +104,10 @@ def element_sigmas(a_m: float, ex: float, ey: float, i_rad: float, raan_rad: flo
 #: radial 30-125 m, cross-track 17-52 m (``benchmarks/fit_tle_doptrack.py tle-apriori``).
 #: Refine's default element sigmas (``--apriori-model refine``) are ~10x looser along-track.
 TLE_APRIORI = {"radial_m": 100.0, "along_m": 200.0, "cross_m": 50.0, "along_m_per_day": 550.0}
+#: The ages (days) TLE_APRIORI was measured at. Older TLEs drift faster than linearly (drag):
+#: along-track 2.6 km at 3.2-5 d, 5.3 km at 5-7 d, 17 km at 7-10 d against the model's 2.2, 3.3
+#: and 4.7 km, radial and cross-track growing too; fit-tle then uses refine's looser a-priori.
+TLE_APRIORI_MAX_AGE_DAYS = 3.2
 
 
 def tle_element_sigmas(radial_m: float, along_m: float, cross_m: float, along_m_per_day: float, bstar: float,

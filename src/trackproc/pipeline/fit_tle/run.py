@@ -58,7 +58,9 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
     age_days = float((epoch - np.datetime64(initial_epoch, "ns")) / np.timedelta64(1, "s")) / 86400.0
     # a TLE's own accuracy (TLE differencing) unless asked for refine's; the default a-priori's
     # sigmas stay the unit of the theory error (Q), the partials' steps and the undetermined check
-    use_tle = template is not None and options.apriori_model == "tle"
+    # (beyond the ages it was measured at a TLE's error grows faster than the model: refine's)
+    too_old = template is not None and abs(age_days) > tf.TLE_APRIORI_MAX_AGE_DAYS
+    use_tle = template is not None and options.apriori_model == "tle" and not too_old
     prior_sig = tf.tle_element_sigmas(**tf.TLE_APRIORI, bstar=sig[6], n_rev_day=n0, semi_major_m=a0,
                                       inclination_deg=float(x_init[3])) if use_tle else sig
     prior_cov = tf.age_covariance(prior_sig, age_days)
@@ -160,6 +162,11 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
 
     # the verdict
     q = qm.Quality()
+    if options.apriori and options.apriori_model == "tle" and too_old:
+        q.add("apriori_model", "ok", f"the initial TLE is {abs(age_days):.3g} days from the epoch, beyond the "
+              f"{tf.TLE_APRIORI_MAX_AGE_DAYS:g} days its measured accuracy covers (TLE differencing: its error grows "
+              "faster after): refine's looser default a-priori is used", value=abs(age_days),
+              limit=tf.TLE_APRIORI_MAX_AGE_DAYS)
     if not sol.converged:
         q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
     if sol.n_prior:
