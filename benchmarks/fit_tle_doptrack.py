@@ -90,14 +90,16 @@ def visits(dev: bool = True):
 
 def pairs(options=None, dev: bool = True, horizon_h: float = 30.0, quiet: bool = False):
     """The extended development protocol (more pairs than ``held-back``/``next`` to decide on): every
-    visit (one or more passes < 4 h apart), and every run of consecutive passes in it, fitted; every later pass of the same set within ``horizon_h`` hours of the last fitted pass
+    visit (one or more passes < 4 h apart), and every run of consecutive passes in it, fitted;
+    every later pass of the same set within ``horizon_h`` hours of the last fitted pass
     predicted. Prints the counts of fitted <= initial, by horizon (< 4 h: the same evening;
     else next day) and by the number of passes fitted, and the refusals."""
     allp = [s for v in visits(dev) for s in v]
     rows = []
     for v in visits(dev):
         for fit in [v[i:j] for i in range(len(v)) for j in range(i + 1, len(v) + 1)]:
-            targets = [s for s in allp if 0 < (_stamp_time(s) - _stamp_time(fit[-1])).total_seconds() <= horizon_h * 3600]
+            targets = [s for s in allp
+                       if 0 < (_stamp_time(s) - _stamp_time(fit[-1])).total_seconds() <= horizon_h * 3600]
             if not targets:
                 continue
             fitted = _fit(fit, options)
@@ -107,8 +109,9 @@ def pairs(options=None, dev: bool = True, horizon_h: float = 30.0, quiet: bool =
                 rows.append(r)
                 if not quiet:
                     print(json.dumps(r), flush=True)
-    for name, sel in (("all", lambda r: True), ("< 4 h", lambda r: r["hours"] < 4), (">= 4 h", lambda r: r["hours"] >= 4),
-                      ("1 pass fitted", lambda r: len(r["fit"]) == 1), ("2+ passes fitted", lambda r: len(r["fit"]) > 1)):
+    for name, sel in (("all", lambda r: True), ("< 4 h", lambda r: r["hours"] < 4),
+                      (">= 4 h", lambda r: r["hours"] >= 4), ("1 pass fitted", lambda r: len(r["fit"]) == 1),
+                      ("2+ passes fitted", lambda r: len(r["fit"]) > 1)):
         sub = [r for r in rows if sel(r)]
         if not sub:
             continue
@@ -163,7 +166,9 @@ def tle_apriori():
         print(f"age {lo}-{hi} d, {m.sum()} pairs: RMS radial {math.sqrt(np.mean(rows[m, 1] ** 2)):.0f} m, along-track "
               f"{math.sqrt(np.mean(rows[m, 2] ** 2)):.0f} m, cross-track {math.sqrt(np.mean(rows[m, 3] ** 2)):.0f} m")
     drift = float(np.sum(rows[:, 0] * rows[:, 2]) / np.sum(rows[:, 0] ** 2))
-    print(f"along-track drift {drift:.0f} m/day over {len(rows)} pairs (TLE_APRIORI: {json.dumps(__import__('trackproc.methods.tle_fit', fromlist=['x']).TLE_APRIORI)})")
+    from trackproc.methods.tle_fit import TLE_APRIORI
+
+    print(f"along-track drift {drift:.0f} m/day over {len(rows)} pairs (TLE_APRIORI: {json.dumps(TLE_APRIORI)})")
     return rows
 
 

@@ -37,7 +37,8 @@ def cross_validation(tables, ephemerides, orbit, options: FitTleOptions, eop, st
         _, theirs = compare(table, orbit, cmp, eop, stations)
         # the covariance's check: the prediction's orbit error (its curve against that of a
         # least-squares fit to the left-out file itself) over the spread the covariance predicts
-        own = fit_tle([(source, table)], [], orbit, replace(sub, epoch=None, model_error=0.0, apriori_model="refine"), eop, stations)
+        own = fit_tle([(source, table)], [], orbit,
+                      replace(sub, epoch=None, model_error=0.0, apriori_model="refine"), eop, stations)
         error = curve_difference(table, fitted.tle, own.tle, options, eop, stations)
         spread = prediction_spread(table, fitted, fitted.summary["covariance"]["matrix"], options, eop, stations)
         own_spread = prediction_spread(table, own, own.summary["covariance"]["matrix"], options, eop, stations)

@@ -252,8 +252,8 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
                                       "own SGP4 error: the fit cannot be shown to predict better than the initial orbit")
         elif p_better < REFUSAL_PROBABILITY:
             refusal = ("no_predictive_gain", f"the fit moves the predicted position {span:g} d after the epoch by "
-                                             f"{moved:.4g} m, against the fitted elements' own {moved_sigma:.4g} m error "
-                                             f"there: it predicts better than the initial orbit with probability "
+                                             f"{moved:.4g} m, against the fitted elements' own {moved_sigma:.4g} m "
+                                             f"error there: it predicts better than the initial orbit with probability "
                                              f"{p_better:.3g} only (< {REFUSAL_PROBABILITY:g})")
     if refusal is not None:
         q.add("refused", "suspect", f"the initial orbit is written unchanged: {refusal[1]} (--no-refusal writes "
