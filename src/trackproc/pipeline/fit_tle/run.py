@@ -16,7 +16,7 @@ from trackproc.io.tle import MeanElements, format_tle, round_epoch, satrec, tle_
 from trackproc.methods import quality as qm
 from trackproc.methods import tle_fit as tf
 from trackproc.models.observation import wrap_pi
-from trackproc.pipeline.fit_tle.checks import cross_validation
+from trackproc.pipeline.fit_tle.checks import cross_validation, time_shifts
 from trackproc.pipeline.fit_tle.model_error import model_error_fit
 from trackproc.pipeline.fit_tle.observations import default_epoch, mean_elements, nuisance_design, observations, reepoch
 from trackproc.pipeline.fit_tle.options import (APRIORI_MODELS, BSTAR_SIGMA_FLOOR, DOPPLER_BIAS, EDITED_LIMIT,
@@ -210,6 +210,17 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
           + ("" if rounding <= rounding_limit else ": the TLE format cannot hold elements as precise as the data "
              "determine them"), value=rounding, limit=rounding_limit)
 
+    # the passes' timing against the initial orbit: what a fit would read as along-track error
+    rate = (obs["kind"].isin(["doppler", "range_rate"]) & (obs["station"] != "")).to_numpy()
+    shifts = time_shifts(model, x_init, float(steps[5]), groups, rate, np.where(keep, 1.0 / sigma_eff, 0.0), design,
+                         observed) if rate.any() else {}
+    if shifts:
+        v = np.array([t for t, _ in shifts.values()])
+        along_s = math.sqrt(prior_cov[5, 5]) / (360.0 * float(x_init[0])) * 86400.0
+        q.add("timing", "ok", f"the passes' apparent time shifts against the initial orbit (Doppler and range-rate; "
+              f"an along-track error of the orbit and the station's time tags look alike): mean {v.mean():.3g} s, "
+              f"RMS {np.sqrt(np.mean(v ** 2)):.3g} s over {v.size}; the initial orbit's along-track sigma at the epoch "
+              f"is {along_s:.3g} s (docs/fit-tle.md 'A-priori')", value=float(np.sqrt(np.mean(v ** 2))), limit=along_s)
     # per group summaries (the RMS the users quote: after the nuisance terms)
     per_group = []
     for g in sorted(set(groups)):
@@ -224,6 +235,8 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
                 entry[name.rsplit(" ", 1)[1]] = float(sol.nuisance[k])
                 entry[name.rsplit(" ", 1)[1] + "_sigma"] = float(math.sqrt(sol.covariance[int(free.sum()) + k,
                                                                                           int(free.sum()) + k]))
+        if g in shifts:
+            entry["time_shift_initial_s"], entry["time_shift_initial_sigma_s"] = shifts[g]
         entry.update(noise.get(g, {}))
         per_group.append(entry)
     cov = model_error.pop("prediction_covariance")
