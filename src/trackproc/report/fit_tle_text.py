@@ -24,7 +24,9 @@ def summary_text(result: FitTleResult) -> str:
         unit = {"doppler": "Hz", "range_rate": "m/s", "range": "m", "azimuth": "rad", "elevation": "rad"}.get(
             g["kind"], "m")
         lines.append(f"  {g['group']}: RMS {g['rms']:.4g} {unit} (initial {g['rms_initial']:.4g}), "
-                     f"{g['samples']} samples")
+                     f"{g['samples']} samples"
+                     + (f", time shift against the initial orbit {g['time_shift_initial_s']:.3g} ± "
+                        f"{g['time_shift_initial_sigma_s']:.2g} s" if "time_shift_initial_s" in g else ""))
     if len(shown) < len(s["groups"]):
         lines.append(f"  ... {len(s['groups']) - len(shown)} more passes and kinds (--json or --summary FILE)")
     if s.get("refused"):
