@@ -14,14 +14,15 @@ Both against the initial TLE's SGP4 prediction; "pred" is also compared with the
 the predicted pass's own metadata (newer, when the station had updated it). RMS in Hz of the
 predicted pass's Doppler after that pass's own offset and drift (``compare``); "fitted" is
 the fit (written or refused), "written" what ``-o`` gets. Usage:
-``PYTHONPATH=src python benchmarks/fit_tle_doptrack.py [dev|holdout|both|covariance|covariance-holdout|calibrate|pairs|tle-apriori|timing]``
+``PYTHONPATH=src python benchmarks/fit_tle_doptrack.py [dev|holdout|both|covariance|covariance-holdout|calibrate|pairs|tle-apriori|timing|upstream-tca]``
 (about a minute each; ``covariance``: :func:`covariance_rows`, the written covariance against the
 prediction errors, development evenings; ``covariance-holdout`` the same on the hold-out, run
 once at the end; ``calibrate``: :func:`calibrate`, the theory error's scale, development only,
 about two minutes; ``pairs``: :func:`pairs`, every development run of passes against every later
 pass within 30 h (68 pairs; :func:`honesty_rows` the same pairs' covariance check);
 ``tle-apriori``: :func:`tle_apriori`, the initial TLE's a-priori by TLE differencing;
-``timing``: :func:`timing`, the passes' apparent time shifts against fresh TLEs).
+``timing``: :func:`timing`, the passes' apparent time shifts against fresh TLEs;
+``upstream-tca``: :func:`upstream_tca`, the DopTrack team's own TCA against the TLE's).
 """
 
 from __future__ import annotations
@@ -223,6 +224,39 @@ def timing(dev: bool = True):
     print(f"{len(shifts)} passes; |shift| < 2 s: {core.size}, mean {core.mean():.2f} s, SD {core.std(ddof=1):.2f} s; "
           f"larger: {np.round([v for v in shifts if abs(v) >= 2.0], 1).tolist()}")
     return shifts
+
+
+def upstream_tca(dev: bool = True):
+    """An independent look at the passes' timing: the DopTrack team's own time of closest approach
+    (the metadata's ``tracking.tca``, from their processing of the same recording) minus the
+    time the pass's metadata TLE crosses zero Doppler at the station (interpolated between
+    samples). Development days only."""
+    import pandas as pd
+    import yaml
+
+    from test_refine_realdata import BAD_PASSES, DOPTRACK
+
+    stamps = sorted(p.stem.rsplit("_", 1)[-1] for p in (DOPTRACK / "data").glob("Delfi-C3_32789_*.csv"))
+    out = []
+    for s in [s for s in stamps if is_dev(s) == dev and s not in BAD_PASSES]:
+        table, tle = _load(s)
+        doc = yaml.safe_load((DOPTRACK / "metadata" / f"Delfi-C3_32789_{s}.yml").read_text())
+        tca = pd.Timestamp(doc["tracking"]["tca"]).tz_localize("UTC")
+        r, _ = compare(table, OrbitInput(tle=tle), CompareOptions(remove="none"), EOP)
+        r = r[r["kind"] == "doppler"]
+        t = (r["time"] - tca).dt.total_seconds().to_numpy()
+        d = r["computed"].to_numpy()
+        if abs(np.median(d)) > 1e6:                        # received frequency, not the shift
+            d = d - table.meta["carrier_hz"]
+        k = np.flatnonzero(np.diff(np.sign(d)) != 0)
+        if k.size:
+            k = k[0]
+            out.append(-(t[k] - d[k] * (t[k + 1] - t[k]) / (d[k + 1] - d[k])))
+            print(json.dumps({"pass": s, "upstream_tca_minus_tle_s": round(out[-1], 3)}), flush=True)
+    v = np.array(out)
+    print(f"{v.size} passes: median {np.median(v):.2f} s; {np.sum((v > -1.6) & (v <= 0))} between -1.6 and 0 s; "
+          f"range {v.min():.1f} to {v.max():.1f} s")
+    return v
 
 
 def table(dev: bool, options=None):
@@ -441,3 +475,5 @@ if __name__ == "__main__":
         tle_apriori()
     if which == "timing":
         timing()
+    if which == "upstream-tca":
+        upstream_tca()
