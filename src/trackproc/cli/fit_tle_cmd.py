@@ -43,8 +43,17 @@ def fit_tle_command(
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Edit samples beyond K x max(1, RMS) sigmas of their pass and kind. 0: off."),
     apriori: bool = typer.Option(True, "--apriori/--no-apriori",
-                                 help="Constrain the elements by the initial orbit (refine's default element sigmas, "
-                                      "grown with the age of the initial TLE)."),
+                                 help="Constrain the elements by the initial orbit (--apriori-model, its along-track "
+                                      "error grown with the age of the initial TLE)."),
+    apriori_model: str = typer.Option("tle", "--apriori-model", metavar="tle|refine",
+                                      help="The initial TLE's a-priori: 'tle' its measured accuracy (TLE "
+                                           "differencing: 200 m along-track at its epoch growing 550 m/day, radial "
+                                           "100 m, cross-track 50 m; docs/fit-tle.md) or 'refine' refine's default "
+                                           "element sigmas (~10x looser; always for a state and a TLE over 3.2 "
+                                           "days from the epoch)."),
+    horizon: float = typer.Option(1.0, "--horizon", metavar="DAYS", min=0.0,
+                                  help="How far after the epoch the TLE must predict better than the initial one "
+                                       "(the refusal test and the summary's prediction)."),
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Iterations at most."),
     cross_validate: bool = typer.Option(False, "--cross-validate",
                                         help="Also leave each pass file out in turn, fit the others and predict it: "
@@ -57,8 +66,9 @@ def fit_tle_command(
                                                      "none (the covariance then covers the estimation error only)."),
     refusal: bool = typer.Option(True, "--refusal/--no-refusal",
                                  help="Keep the initial TLE (written unchanged, verdict suspect 'refused') when the "
-                                      "fit cannot be shown to predict better: one pass, or a predicted position "
-                                      "error one day on not below the initial orbit's. --no-refusal writes the fit."),
+                                      "fit cannot be shown to predict better: one pass, or a fit that predicts the "
+                                      "position --horizon days on better with probability below 0.9. --no-refusal "
+                                      "writes the fit."),
     earth=EarthOpt,
     range_rate_model=RangeRateModelOpt,
     eop: Optional[str] = EopOpt,
@@ -109,6 +119,10 @@ def fit_tle_command(
     if doppler_bias not in DOPPLER_BIAS:
         raise typer.BadParameter(f"{doppler_bias!r} is not one of {', '.join(DOPPLER_BIAS)}",
                                  param_hint="--doppler-bias")
+    if apriori_model not in ("tle", "refine"):
+        raise typer.BadParameter(f"{apriori_model!r} is not one of tle, refine", param_hint="--apriori-model")
+    if not horizon > 0:
+        raise typer.BadParameter(f"{horizon:g} is not a positive number of days", param_hint="--horizon")
     if not passes and not ephemeris:
         raise typer.BadParameter("give pass files and/or --ephemeris files to fit", param_hint="PASS")
     stdin_users = [p for p in passes + list(ephemeris) if is_stdio(p)] + ([initial] if is_stdio(initial) else [])
@@ -137,7 +151,8 @@ def fit_tle_command(
         kinds=[k.strip() for k in kinds.split(",") if k.strip()] if kinds else None, earth=earth.value,
         range_rate_model=range_rate_model.value, ephemeris_sigma_m=ephemeris_sigma if ephemeris_sigma > 0 else 100.0,
         clip=clip if clip > 0 else float("inf"), max_iterations=max_iterations, satnum=satnum, apriori=apriori,
-        cross_validate=cross_validate, model_error=model_error, refusal=refusal)
+        cross_validate=cross_validate, model_error=model_error, refusal=refusal, apriori_model=apriori_model,
+        prediction_span_days=horizon)
     result = fit_tle(tables, ephemerides, orbit, options, orientation, extra)
     text = json.dumps(json_ready(result.summary), indent=2) + "\n"
     write_text(output, tle_text(result.tle))

@@ -95,6 +95,34 @@ def element_sigmas(a_m: float, ex: float, ey: float, i_rad: float, raan_rad: flo
     return np.array([1.5 * n_rev_day * a_m / semi_major_m, ex, ey, i_rad / DEG, raan_rad / DEG, u_rad / DEG, bstar])
 
 
+#: The a-priori of an initial TLE's mean elements, as 1-σ position errors of its SGP4 prediction:
+#: radial, along-track and cross-track (m) at its epoch, and the along-track error's growth per
+#: day (a mean-motion error). Calibrated by TLE differencing (each older TLE's SGP4 prediction
+#: against a newer one's, over 1.6 h about the newer epoch, RMS over the pairs; ages 0.4-3.2 days)
+#: on the 10 Delfi-C3 TLEs of the DopTrack development days (1-10 April 2020), no Doppler data:
+#: along-track 250 m at 0.4-0.8 d, 680 m at 0.8-1.7 d, 1300 m at 1.7-3.2 d (drift ~520 m/day),
+#: radial 30-125 m, cross-track 17-52 m (``benchmarks/fit_tle_doptrack.py tle-apriori``).
+#: Refine's default element sigmas (``--apriori-model refine``) are ~10x looser along-track.
+TLE_APRIORI = {"radial_m": 100.0, "along_m": 200.0, "cross_m": 50.0, "along_m_per_day": 550.0}
+#: The ages (days) TLE_APRIORI was measured at. Older TLEs drift faster than linearly (drag):
+#: along-track 2.6 km at 3.2-5 d, 5.3 km at 5-7 d, 17 km at 7-10 d against the model's 2.2, 3.3
+#: and 4.7 km, radial and cross-track growing too; fit-tle then uses refine's looser a-priori.
+TLE_APRIORI_MAX_AGE_DAYS = 3.2
+
+
+def tle_element_sigmas(radial_m: float, along_m: float, cross_m: float, along_m_per_day: float, bstar: float,
+                       n_rev_day: float, semi_major_m: float, inclination_deg: float) -> np.ndarray:
+    """1-σ of the fitted vector from a TLE's position error model (:data:`TLE_APRIORI`), near-circular
+    orbit, first order: ``σ_n = along_m_per_day / (2π a)`` (rev/day: the along-track drift),
+    ``σ_ex = σ_ey = radial / a`` (an eccentricity error ``δe`` gives a radial RMS ``a δe / √2`` per
+    component), ``σ_i = cross / a``, ``σ_Ω = cross / (a sin i)`` (cross-track RMS ``a δi / √2``,
+    ``a sin i δΩ / √2``), ``σ_λ = along / a``; angles in degrees."""
+    a = float(semi_major_m)
+    sin_i = max(abs(math.sin(math.radians(inclination_deg))), 0.1)
+    return np.array([along_m_per_day / (2 * math.pi * a), radial_m / a, radial_m / a, math.degrees(cross_m / a),
+                     math.degrees(cross_m / (a * sin_i)), math.degrees(along_m / a), bstar])
+
+
 def age_covariance(sigmas, dt_days: float) -> np.ndarray:
     """The a-priori covariance (7, 7) of independent element errors ``sigmas`` given at the
     initial TLE's epoch, carried ``dt_days`` along: an error ``δn`` in the mean motion moves the
@@ -258,21 +286,27 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
                     history=history)
 
 
-#: SGP4's own (theory) error at a pass of a TLE fitted to passes, a per-pass random effect
-#: independent from pass to pass, with the shape of the default a-priori (refine's element
-#: sigmas: a 50 m, e 5e-5, i and Ω 1e-4 rad, argument of latitude 4e-4 rad; B* none) scaled by
-#: this factor: the default of ``--model-error``. Its provenance: the scale with
-#: mean((error / sigma)^2) = 1 over the DopTrack Delfi-C3 development evenings' held-back passes
-#: (1-10 April 2020; ``benchmarks/fit_tle_doptrack.py calibrate``).
+#: SGP4's own (theory) error at a pass of a TLE fitted to passes (on DopTrack mostly the
+#: station's per-pass timing), a per-pass random effect independent from pass to pass, with the
+#: shape of the default a-priori (refine's element sigmas: e 5e-5, i and Ω 1e-4 rad, argument of
+#: latitude 4e-4 rad; mean motion and B* none) scaled by this factor: the default of
+#: ``--model-error``. Its provenance: the maximum-likelihood scale over the 68 DopTrack Delfi-C3
+#: development pairs (1-10 April 2020; −2 log L 781, 669, 677 at 2, 3.4, 5;
+#: ``benchmarks/fit_tle_doptrack.py`` :func:`honesty_rows`, docs/fit-tle.md "Covariance").
 MODEL_ERROR_SCALE = 3.4
 
 
 def model_error_covariance(scale: float, apriori_sigmas) -> np.ndarray:
     """The covariance (7, 7) of SGP4's theory error at one pass, expressed in the fitted
     elements: ``scale`` times the default a-priori's independent element sigmas (``apriori_sigmas``,
-    :func:`element_sigmas`), B* excluded (a pass's error is geometric). Its effect on a pass's
-    samples is ``J η``, ``J`` the pass's partials."""
+    :func:`element_sigmas`), mean motion and B* excluded: a pass's error is a displacement at that
+    pass (along-track through λ, radial through e, cross-track through i and Ω), not one that
+    grows with the pass's distance from the epoch as a mean-motion error would (with it, the
+    DopTrack development predictions were covered 2x too loosely a day ahead and too tightly
+    within hours: docs/fit-tle.md). Its effect on a pass's samples is ``J η``, ``J`` the pass's
+    partials."""
     s = np.asarray(apriori_sigmas, float).copy()
+    s[0] = 0.0
     s[6] = 0.0
     return np.diag(np.square(float(scale) * s))
 
@@ -323,19 +357,47 @@ def mixed_model_step(x, covariance, informations, gradients, q_free, other_infor
     return np.asarray(x, float) + cov @ rhs, 0.5 * (cov + cov.T)
 
 
+def position_map(n_rev_day: float, semi_major_m: float, inclination_deg: float, dt_days: float) -> np.ndarray:
+    """The linear map (6, 7) from element errors at the epoch to orbit-averaged position errors (m)
+    ``dt_days`` after it, first order in a near-circular orbit: along-track ``a (δλ + 360° δn Δt)``,
+    cross-track ``a δi`` and ``a sin i δΩ`` (each ``/√2``: the orbit average of its square is half),
+    radial ``δa = −(2/3) a δn/n`` and ``a δex``, ``a δey`` (``/√2``). ``|G δx|²`` is the orbit
+    average of the squared position error."""
+    a, deg, r2 = float(semi_major_m), math.radians(1.0), math.sqrt(2.0)
+    g = np.zeros((6, 7))
+    g[0, 5], g[0, 0] = a * deg, a * deg * 360.0 * dt_days          # along-track
+    g[1, 3] = a * deg / r2                                            # cross-track (i)
+    g[2, 4] = a * deg * math.sin(math.radians(inclination_deg)) / r2  # cross-track (Ω)
+    g[3, 0] = -2.0 / 3.0 * a / float(n_rev_day)                      # radial from the mean motion
+    g[4, 1] = g[5, 2] = a / r2                                        # radial from the eccentricity
+    return g
+
+
 def position_variance(covariance, n_rev_day: float, semi_major_m: float, inclination_deg: float,
                       dt_days: float) -> float:
     """The orbit-averaged position variance (m²) ``dt_days`` after the epoch of elements with
-    ``covariance`` (7, 7), to first order in a near-circular orbit: radial ``δa = −(2/3) a δn/n``
-    and ``a δe`` (half its square on average), along-track ``a (δλ + 360° δn Δt)``, cross-track
-    ``a δi`` and ``a sin i δΩ`` (half their squares on average). A prediction's error in one
-    number, to compare two element sets' covariances."""
-    c = np.asarray(covariance, float)
-    a, deg = float(semi_major_m), math.radians(1.0)
-    g = np.zeros((4, 7))
-    g[0, 5], g[0, 0] = a * deg, a * deg * 360.0 * dt_days          # along-track
-    g[1, 3] = a * deg / math.sqrt(2.0)                                # cross-track (i), orbit average
-    g[2, 4] = a * deg * math.sin(math.radians(inclination_deg)) / math.sqrt(2.0)
-    g[3, 0] = -2.0 / 3.0 * a / float(n_rev_day)                      # radial from the mean motion
-    var = float(np.trace(g @ c @ g.T))
-    return max(var + a * a * (c[1, 1] + c[2, 2]) / 2.0, 0.0)        # eccentricity: radial, orbit average
+    ``covariance`` (7, 7): ``trace(G C Gᵀ)``, ``G`` :func:`position_map`. A prediction's error in
+    one number, to compare two element sets' covariances."""
+    g = position_map(n_rev_day, semi_major_m, inclination_deg, dt_days)
+    return max(float(np.trace(g @ np.asarray(covariance, float) @ g.T)), 0.0)
+
+
+def probability_better(change, covariance, n_rev_day: float, semi_major_m: float, inclination_deg: float,
+                       dt_days: float) -> tuple:
+    """The probability that elements ``x_fit`` predict the position ``dt_days`` after the epoch
+    better than ``x_init`` when ``x_fit``'s prediction error is ``N(0, covariance)`` (7, 7) and
+    ``change = x_fit − x_init``. With ``d = G change`` (:func:`position_map`) and the fit's error
+    ``e``, the initial's is ``e − d``, so ``|e − d|² > |e|²`` exactly when ``e·u < |d|/2`` (``u =
+    d/|d|``): probability ``Φ(|d| / (2 σ_u))``, ``σ_u² = uᵀ G C Gᵀ u``. 0.5 when the fit does not
+    move the prediction (a coin toss, not a gain); near 1 when it moves it by several σ. Returns
+    ``(probability, |d| in m, σ_u in m)``."""
+    g = position_map(n_rev_day, semi_major_m, inclination_deg, dt_days)
+    d = g @ np.asarray(change, float)
+    size = float(np.linalg.norm(d))
+    if size == 0.0:
+        return 0.5, 0.0, 0.0
+    u = d / size
+    sigma = math.sqrt(max(float(u @ g @ np.asarray(covariance, float) @ g.T @ u), 0.0))
+    if sigma == 0.0:
+        return 1.0, size, 0.0
+    return 0.5 * math.erfc(-size / (2.0 * sigma) / math.sqrt(2.0)), size, sigma

@@ -24,7 +24,9 @@ def summary_text(result: FitTleResult) -> str:
         unit = {"doppler": "Hz", "range_rate": "m/s", "range": "m", "azimuth": "rad", "elevation": "rad"}.get(
             g["kind"], "m")
         lines.append(f"  {g['group']}: RMS {g['rms']:.4g} {unit} (initial {g['rms_initial']:.4g}), "
-                     f"{g['samples']} samples")
+                     f"{g['samples']} samples"
+                     + (f", time shift against the initial orbit {g['time_shift_initial_s']:.3g} ± "
+                        f"{g['time_shift_initial_sigma_s']:.2g} s" if "time_shift_initial_s" in g else ""))
     if len(shown) < len(s["groups"]):
         lines.append(f"  ... {len(s['groups']) - len(shown)} more passes and kinds (--json or --summary FILE)")
     if s.get("refused"):
@@ -33,6 +35,8 @@ def summary_text(result: FitTleResult) -> str:
     p = s.get("prediction")
     if p:
         lines.append(f"  predicted position error {p['span_days']:g} d on: {p['position_sigma_m']:.4g} m "
-                     f"(initial {p['initial_position_sigma_m']:.4g} m; SGP4's theory error included)")
+                     f"(initial {p['initial_position_sigma_m']:.4g} m; SGP4's theory error included)"
+                     + (f"; the fit moves it {p['change_m']:.4g} m: better with probability "
+                        f"{p['probability_better']:.3g}" if "probability_better" in p else ""))
     lines.append("  " + result.quality.text())
     return "\n".join(lines) + "\n"

@@ -8,10 +8,13 @@ Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project
    integrator) is sampled every minute over one revolution either side of the epoch and a TLE at
    the epoch is fitted to those GCRF positions (:func:`trackproc.methods.tle_fit.solve`, B* kept):
    it reproduces the initial TLE's own prediction there (metres: same theory).
-3. **A-priori.** refine's default element sigmas (:data:`trackproc.pipeline.refine.DEFAULT_APRIORI_ELEMENTS`:
-   a 50 m, e 5e-5, i and Ω 1e-4 rad, argument of latitude 4e-4 rad) at the initial TLE's epoch,
-   B* ``max(|B*|, 1e-4)``, carried to the new epoch by the along-track drift a mean-motion
-   error causes (:func:`trackproc.methods.tle_fit.age_covariance`).
+3. **A-priori.** For a TLE its measured accuracy (:data:`trackproc.methods.tle_fit.TLE_APRIORI`,
+   TLE differencing: along-track 200 m at its epoch + 550 m/day, radial 100 m, cross-track 50 m;
+   :func:`~trackproc.methods.tle_fit.tle_element_sigmas`); for a state (or ``apriori_model
+   "refine"``) refine's default element sigmas (:data:`trackproc.pipeline.refine.DEFAULT_APRIORI_ELEMENTS`:
+   a 50 m, e 5e-5, i and Ω 1e-4 rad, argument of latitude 4e-4 rad); B* ``max(|B*|, 1e-4)``;
+   carried to the new epoch by the along-track drift a mean-motion error causes
+   (:func:`trackproc.methods.tle_fit.age_covariance`).
 4. **Model.** Each sample predicted by SGP4 -> GCRF and the foundation measurement model
    (:func:`trackproc.pipeline.orbit_source.station_observables`: light time, one- or two-way,
    the model ``compare`` and ``simulate`` use); an ephemeris row gives three position samples.
@@ -34,16 +37,20 @@ Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project
    the 99.9 % point of χ²(free elements)); ``ok``
    reasons say how the sigmas were scaled and whether the data improve significantly on the
    initial orbit (the likelihood-ratio test :func:`trackproc.methods.quality.improvement_test`).
-7. **SGP4's theory error** (:func:`_model_error`): an analytical theory misses a LEO orbit by
-   far more than the data's noise, differently at each pass; it is modelled as an independent
-   per-pass perturbation of the elements (``--model-error`` times the default a-priori's sigmas,
-   a random effect), the elements re-estimated by generalised least squares with it, and the
-   written covariance is that of a prediction at a pass (estimation + the pass's own theory
-   error). Its default scale is the maximum-likelihood one on the DopTrack development evenings.
+7. **SGP4's theory error** (:func:`_model_error`): an analytical theory (and a station's own
+   per-pass errors) misses a LEO orbit by far more than the data's noise, differently at each
+   pass; it is modelled as an independent per-pass displacement (``--model-error`` times the
+   default a-priori's sigmas of e, i, Ω and λ; no mean-motion part), a random effect, the
+   elements re-estimated by generalised least squares with it, and the written covariance is
+   that of a prediction at a pass (estimation + the pass's own theory error). Its default scale
+   is the maximum-likelihood one on the DopTrack development days.
 8. **Refusal** (``refused``, suspect): one pass (its along-track drift cannot be told from its own
-   theory error), or a fit whose predicted position error one day on is not below the initial
-   orbit's (both with the theory error): the initial TLE is written unchanged (a state's orbit
-   as a TLE at the epoch), with its covariance; ``refused.fitted_tle`` holds the fit.
+   theory error), or a fit that predicts the position ``prediction_span_days`` (``--horizon``)
+   after the epoch better than the initial orbit with probability below
+   :data:`~trackproc.pipeline.fit_tle.options.REFUSAL_PROBABILITY`
+   (:func:`trackproc.methods.tle_fit.probability_better`): the initial TLE is written unchanged
+   (a state's orbit as a TLE at the epoch), with its covariance; ``refused.fitted_tle`` holds
+   the fit.
 """
 
 from trackproc.pipeline.fit_tle.options import (DOPPLER_BIAS, KINDS, FitTleOptions, FitTleResult)  # noqa: F401

@@ -37,7 +37,8 @@ def cross_validation(tables, ephemerides, orbit, options: FitTleOptions, eop, st
         _, theirs = compare(table, orbit, cmp, eop, stations)
         # the covariance's check: the prediction's orbit error (its curve against that of a
         # least-squares fit to the left-out file itself) over the spread the covariance predicts
-        own = fit_tle([(source, table)], [], orbit, replace(sub, epoch=None, model_error=0.0), eop, stations)
+        own = fit_tle([(source, table)], [], orbit,
+                      replace(sub, epoch=None, model_error=0.0, apriori_model="refine"), eop, stations)
         error = curve_difference(table, fitted.tle, own.tle, options, eop, stations)
         spread = prediction_spread(table, fitted, fitted.summary["covariance"]["matrix"], options, eop, stations)
         own_spread = prediction_spread(table, own, own.summary["covariance"]["matrix"], options, eop, stations)
@@ -54,6 +55,46 @@ def cross_validation(tables, ephemerides, orbit, options: FitTleOptions, eop, st
     zs = [r["normalised_error"] for r in rows if math.isfinite(r["normalised_error"])]
     return {"passes": rows, "ratios": ratios,
             "rms_normalised_error": float(np.sqrt(np.mean(np.square(zs)))) if zs else None}
+
+
+def time_shifts(model, x, step, groups, rate, weights, design, observed, iterations: int = 4) -> dict:
+    """Per pass and kind of Doppler or range-rate (``rate``, a row mask), the time shift (s) of
+    the orbit ``x`` that best matches the samples ``observed``, and its 1-σ (the samples' ``1/σ``
+    weights; the data's noise only): ``λ`` alone moved, that group's
+    offset and drift columns of ``design`` refitted (profiled out), by Gauss-Newton (a pass's
+    Doppler curve is far from linear in a shift of seconds), as time ``−δλ / (360° n)``:
+    positive when the satellite passes later than ``x`` predicts. ``weights`` are 1/σ, 0 for
+    edited rows. An along-track error of the orbit and a time-tag error of the station look the
+    same here."""
+    out = {}
+    for g in sorted(set(groups[rate])):
+        m = (groups == g) & rate & (weights > 0)
+        if m.sum() < 3:
+            continue
+        w = weights[m]
+        b = design[m][:, np.any(design[m] != 0.0, axis=0)] * w[:, None]
+
+        def profiled(v):
+            v = v * w
+            return v - b @ np.linalg.lstsq(b, v, rcond=None)[0] if b.size else v
+
+        dlam, info = 0.0, 0.0
+        for _ in range(iterations):
+            xx = np.array(x, float)
+            xx[5] += dlam
+            d = np.zeros(len(xx))
+            d[5] = step
+            col = profiled(((model(xx + d) - model(xx - d)) / (2.0 * step))[m])
+            if not float(col @ col) > 0:
+                break
+            info = float(col @ col)
+            inc = float(col @ profiled((observed - model(xx))[m])) / info
+            dlam += inc
+            if abs(inc) < 1e-3 * step:
+                break
+        to_s = 86400.0 / (360.0 * float(x[0]))
+        out[g] = (float(-dlam * to_s), float(to_s / np.sqrt(info)) if info > 0 else float("inf"))
+    return out
 
 
 def trend_removed(frame, values, options):

@@ -11,6 +11,7 @@ import pandas as pd
 
 KINDS = ("doppler", "range_rate", "range", "azimuth", "elevation")
 DOPPLER_BIAS = ("none", "offset", "offset+drift")
+APRIORI_MODELS = ("tle", "refine")
 #: B* a-priori 1-sigma floor (1/earth radii): B* of LEO objects varies by this much between TLEs.
 BSTAR_SIGMA_FLOOR = 1e-4
 #: Sampling of the initial orbit when the elements are moved to the new epoch (s), and its half-span (revolutions).
@@ -19,6 +20,10 @@ REEPOCH_HALF_SPAN_REV = 1.0
 #: Share of edited samples above which the fit is suspect.
 EDITED_LIMIT = 0.10
 MU_WGS72 = 398600.8e9
+#: The fit is written only when it predicts the position at the horizon better than the initial
+#: orbit with at least this probability (``no_predictive_gain``; tle_fit.probability_better: 0.5
+#: is a coin toss). Chosen on the DopTrack development days (docs/fit-tle.md "Refusal").
+REFUSAL_PROBABILITY = 0.9
 
 
 @dataclass
@@ -41,7 +46,11 @@ class FitTleOptions:
     model_error: Optional[float] = None
     #: Keep the initial TLE when the fit cannot be shown to predict better (``refused``).
     refusal: bool = True
-    #: The prediction span (days after the epoch) at which fit and initial orbit are compared.
+    #: The initial orbit's a-priori: "tle" (a TLE's measured accuracy, tle_fit.TLE_APRIORI; the
+    #: default for a TLE) or "refine" (refine's default element sigmas; always for a state).
+    apriori_model: str = "tle"
+    #: The prediction horizon (days after the epoch) at which fit and initial orbit are compared
+    #: (``--horizon``).
     prediction_span_days: float = 1.0
 
 

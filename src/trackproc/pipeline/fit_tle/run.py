@@ -16,11 +16,11 @@ from trackproc.io.tle import MeanElements, format_tle, round_epoch, satrec, tle_
 from trackproc.methods import quality as qm
 from trackproc.methods import tle_fit as tf
 from trackproc.models.observation import wrap_pi
-from trackproc.pipeline.fit_tle.checks import cross_validation
+from trackproc.pipeline.fit_tle.checks import cross_validation, time_shifts
 from trackproc.pipeline.fit_tle.model_error import model_error_fit
 from trackproc.pipeline.fit_tle.observations import default_epoch, mean_elements, nuisance_design, observations, reepoch
-from trackproc.pipeline.fit_tle.options import (BSTAR_SIGMA_FLOOR, DOPPLER_BIAS, EDITED_LIMIT, MU_WGS72, FitTleOptions,
-                                                FitTleResult)
+from trackproc.pipeline.fit_tle.options import (APRIORI_MODELS, BSTAR_SIGMA_FLOOR, DOPPLER_BIAS, EDITED_LIMIT,
+                                                MU_WGS72, REFUSAL_PROBABILITY, FitTleOptions, FitTleResult)
 from trackproc.pipeline.identify import integrated_autocorrelation_time
 from trackproc.pipeline.refine import DEFAULT_APRIORI_ELEMENTS
 
@@ -32,6 +32,12 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
     if options.doppler_bias not in DOPPLER_BIAS:
         raise InputError("unknown Doppler bias model", column="--doppler-bias", found=options.doppler_bias,
                          expected=", ".join(DOPPLER_BIAS))
+    if options.apriori_model not in APRIORI_MODELS:
+        raise InputError("unknown a-priori model", column="--apriori-model", found=options.apriori_model,
+                         expected=", ".join(APRIORI_MODELS))
+    if not options.prediction_span_days > 0:
+        raise InputError("the prediction horizon must be positive", column="--horizon",
+                         found=f"{options.prediction_span_days:g}", expected="days > 0")
     template = orbit.tle
     epoch = round_epoch(options.epoch if options.epoch is not None else default_epoch(tables, ephemerides))
     obs, blocks = observations(tables, ephemerides, options, eop, stations)
@@ -50,7 +56,15 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
                             max(abs(bstar0), BSTAR_SIGMA_FLOOR), n0, a0)
     initial_epoch = tle_epoch(template) if template is not None else orbit.state.epoch
     age_days = float((epoch - np.datetime64(initial_epoch, "ns")) / np.timedelta64(1, "s")) / 86400.0
-    prior_cov = tf.age_covariance(sig, age_days)
+    # a TLE's own accuracy (TLE differencing) unless asked for refine's; the default a-priori's
+    # sigmas stay the unit of the theory error (Q), the partials' steps and the undetermined check
+    # (beyond the ages it was measured at a TLE's error grows faster than the model: refine's)
+    too_old = template is not None and abs(age_days) > tf.TLE_APRIORI_MAX_AGE_DAYS
+    use_tle = template is not None and options.apriori_model == "tle" and not too_old
+    prior_sig = tf.tle_element_sigmas(**tf.TLE_APRIORI, bstar=sig[6], n_rev_day=n0, semi_major_m=a0,
+                                      inclination_deg=float(x_init[3])) if use_tle else sig
+    prior_cov = tf.age_covariance(prior_sig, age_days)
+    default_cov = tf.age_covariance(sig, age_days)
     free = np.r_[np.ones(6, bool), bool(options.fit_bstar)]
     steps = tf.STEP_FRACTION * sig
     observed = obs["value"].to_numpy(float)
@@ -148,6 +162,11 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
 
     # the verdict
     q = qm.Quality()
+    if options.apriori and options.apriori_model == "tle" and too_old:
+        q.add("apriori_model", "ok", f"the initial TLE is {abs(age_days):.3g} days from the epoch, beyond the "
+              f"{tf.TLE_APRIORI_MAX_AGE_DAYS:g} days its measured accuracy covers (TLE differencing: its error grows "
+              "faster after): refine's looser default a-priori is used", value=abs(age_days),
+              limit=tf.TLE_APRIORI_MAX_AGE_DAYS)
     if not sol.converged:
         q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
     if sol.n_prior:
@@ -156,8 +175,8 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
                              "does not hold")
     # what the data leave undetermined (only possible without the a-priori): sigmas beyond the
     # default a-priori's, i.e. less than an initial TLE already knows
-    loose = {name: float(sol.sigma[k] / math.sqrt(prior_cov[k, k]))
-             for k, name in enumerate(tf.ELEMENT_NAMES) if free[k] and sol.sigma[k] > 1.01 * math.sqrt(prior_cov[k, k])}
+    loose = {name: float(sol.sigma[k] / math.sqrt(default_cov[k, k])) for k, name in enumerate(tf.ELEMENT_NAMES)
+             if free[k] and sol.sigma[k] > 1.01 * math.sqrt(default_cov[k, k])}
     if loose:
         worst_ratio = max(loose.values())
         q.add("undetermined", "rejected" if worst_ratio > 10.0 else "suspect",
@@ -191,6 +210,17 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
           + ("" if rounding <= rounding_limit else ": the TLE format cannot hold elements as precise as the data "
              "determine them"), value=rounding, limit=rounding_limit)
 
+    # the passes' timing against the initial orbit: what a fit would read as along-track error
+    rate = (obs["kind"].isin(["doppler", "range_rate"]) & (obs["station"] != "")).to_numpy()
+    shifts = time_shifts(model, x_init, float(steps[5]), groups, rate, np.where(keep, 1.0 / sigma_eff, 0.0), design,
+                         observed) if rate.any() else {}
+    if shifts:
+        v = np.array([t for t, _ in shifts.values()])
+        along_s = math.sqrt(prior_cov[5, 5]) / (360.0 * float(x_init[0])) * 86400.0
+        q.add("timing", "ok", f"the passes' apparent time shifts against the initial orbit (Doppler and range-rate; "
+              f"an along-track error of the orbit and the station's time tags look alike): mean {v.mean():.3g} s, "
+              f"RMS {np.sqrt(np.mean(v ** 2)):.3g} s over {v.size}; the initial orbit's along-track sigma at the epoch "
+              f"is {along_s:.3g} s (docs/fit-tle.md 'A-priori')", value=float(np.sqrt(np.mean(v ** 2))), limit=along_s)
     # per group summaries (the RMS the users quote: after the nuisance terms)
     per_group = []
     for g in sorted(set(groups)):
@@ -205,6 +235,8 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
                 entry[name.rsplit(" ", 1)[1]] = float(sol.nuisance[k])
                 entry[name.rsplit(" ", 1)[1] + "_sigma"] = float(math.sqrt(sol.covariance[int(free.sum()) + k,
                                                                                           int(free.sum()) + k]))
+        if g in shifts:
+            entry["time_shift_initial_s"], entry["time_shift_initial_sigma_s"] = shifts[g]
         entry.update(noise.get(g, {}))
         per_group.append(entry)
     cov = model_error.pop("prediction_covariance")
@@ -216,18 +248,26 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
     var_init = tf.position_variance(initial_cov, float(x_init[0]), a_fit, float(x_init[3]), span)
     station = (obs["station"] != "").to_numpy()
     n_passes = len(set((obs["source"].astype(str) + "|" + obs["pass_id"].astype(str))[station]))
+    # the chance that the fitted elements predict the position at the horizon better than the
+    # initial orbit's, given how far the fit moves that prediction against the fitted elements'
+    # own error there (estimation, with the theory error at the fitted passes; the predicted
+    # pass's own theory error is the same for both element sets and is left out)
+    p_better, moved, moved_sigma = tf.probability_better(x_fit - x_init, model_error["estimation_covariance"],
+                                                         float(x_fit[0]), a_fit, float(x_fit[3]), span)
     q.add("prediction", "ok", f"predicted position error {span:g} d after the epoch {math.sqrt(var_fit):.4g} m "
-          f"(the initial orbit's {math.sqrt(var_init):.4g} m), SGP4's theory error included",
-          value=math.sqrt(var_fit), limit=math.sqrt(var_init))
+          f"(the initial orbit's {math.sqrt(var_init):.4g} m), SGP4's theory error included; the fit moves that "
+          f"prediction by {moved:.4g} m (the fitted elements' error there {moved_sigma:.4g} m 1-sigma): better than "
+          f"the initial orbit's with probability {p_better:.3g}", value=math.sqrt(var_fit), limit=math.sqrt(var_init))
     refusal = None
     if options.refusal:
         if n_passes < 2 and not ephemerides:
             refusal = ("single_pass", "one pass cannot separate the along-track drift (mean motion) from that pass's "
                                       "own SGP4 error: the fit cannot be shown to predict better than the initial orbit")
-        elif var_fit >= var_init:
-            refusal = ("no_predictive_gain", f"the fit's predicted position error {span:g} d after the epoch "
-                                             f"({math.sqrt(var_fit):.4g} m) is not below the initial orbit's "
-                                             f"({math.sqrt(var_init):.4g} m)")
+        elif p_better < REFUSAL_PROBABILITY:
+            refusal = ("no_predictive_gain", f"the fit moves the predicted position {span:g} d after the epoch by "
+                                             f"{moved:.4g} m, against the fitted elements' own {moved_sigma:.4g} m "
+                                             f"error there: it predicts better than the initial orbit with probability "
+                                             f"{p_better:.3g} only (< {REFUSAL_PROBABILITY:g})")
     if refusal is not None:
         q.add("refused", "suspect", f"the initial orbit is written unchanged: {refusal[1]} (--no-refusal writes "
                                     "the fit)", value=refusal[0])
@@ -269,7 +309,8 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         "refused": None if refusal is None else {"code": refusal[0], "reason": refusal[1],
                                                  "fitted_tle": [fitted_tle.line1, fitted_tle.line2]},
         "prediction": {"span_days": span, "position_sigma_m": math.sqrt(var_fit),
-                       "initial_position_sigma_m": math.sqrt(var_init)},
+                       "initial_position_sigma_m": math.sqrt(var_init), "change_m": moved,
+                       "change_sigma_m": moved_sigma, "probability_better": p_better},
         "sigma": dict(zip(tf.ELEMENT_NAMES, sigma.tolist())),
         "covariance": {"parameters": list(tf.ELEMENT_NAMES), "matrix": cov.tolist(),
                        "note": "n rev/day, ex, ey, angles deg, B* 1/earth radii; the file sigmas scaled per pass "
@@ -282,12 +323,14 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
                                 "up to ~1 day ahead (docs/fit-tle.md)"},
         "model_error": {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in model_error.items()
                         if k not in ("estimation_covariance", "covariance_without_model_error")},
+        "initial_covariance": initial_cov.tolist(),
         "estimation_covariance": model_error["estimation_covariance"].tolist(),
         "covariance_without_model_error": model_error["covariance_without_model_error"].tolist(),
         "classical": c,
         "initial_elements": dict(zip(tf.ELEMENT_NAMES, x_init.tolist())),
         "fixed": [] if options.fit_bstar else ["bstar"],
-        "apriori": {"used": bool(options.apriori), "sigma_at_initial_epoch": dict(zip(tf.ELEMENT_NAMES, sig.tolist())),
+        "apriori": {"used": bool(options.apriori), "model": "tle" if use_tle else "refine",
+                    "sigma_at_initial_epoch": dict(zip(tf.ELEMENT_NAMES, prior_sig.tolist())),
                     "chi2": sol.chi2_prior, "elements": sol.n_prior},
         "chi2": {"initial": chi2_initial, "least_squares": chi2_ls, "fitted": chi2_fitted, "written": chi2_written},
         "samples": int(len(obs)), "edited": n_edited, "iterations": sol.iterations, "converged": sol.converged,
