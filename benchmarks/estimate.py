@@ -45,10 +45,10 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))     # the Orekit driver, shared with tests/test_against_orekit.py
+sys.path.insert(0, str(ROOT / "tests"))     # the Orekit driver, shared with tests/cli/test_against_orekit.py
 import orekit_helpers as oh
 
-GUESS, MODEL = oh.GUESS, oh.MODEL   # the case shared with tests/test_against_orekit.py
+GUESS, MODEL = oh.GUESS, oh.MODEL   # the case shared with tests/cli/test_against_orekit.py
 TARGET_S, TARGET_MB = 4.0, 1024.0
 
 

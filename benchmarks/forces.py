@@ -4,7 +4,7 @@ side and Orekit 13's NumericalPropagator with the same forces, side by side in o
 
 Run: python benchmarks/forces.py [--degree 20] [--repeat 3] [--no-orekit]
 
-Case: 500 km sun-synchronous orbit (tests/test_forces_orekit.py's LEO), 2020-04-05, 24 h, EIGEN-6S
+Case: 500 km sun-synchronous orbit (tests/io/test_forces_orekit.py's LEO), 2020-04-05, 24 h, EIGEN-6S
 DEGxDEG + Sun + Moon + relativity, states every hour. Each tool's accuracy is measured against
 its own converged run (trackproc and scipy: rtol 3e-14; Orekit: 1e-8 m position tolerance), and
 the loosest tolerance of a ladder that keeps every hourly position within 1 mm of it is timed

@@ -5,7 +5,7 @@ forces, side by side in one run.
 Run:  python benchmarks/lageos_estimate.py [--days 3] [--step 120] [--numpy] [--no-orekit] [--keep DIR]
 
 The case: ``trackproc simulate --force full`` of a LAGEOS-like orbit (a 12,162 km, e 0.0138,
-109.8 deg; tests/test_forces_orekit.py's LAGEOS) from six SLR stations (Yarragadee, Graz,
+109.8 deg; tests/io/test_forces_orekit.py's LAGEOS) from six SLR stations (Yarragadee, Graz,
 Greenbelt, Herstmonceux, Matera, Hartebeesthoek; 20 deg mask) every --step s over --days days:
 two-way ranges with 1 cm noise, no troposphere, no biases. Force model of both sides: EIGEN-6S
 20x20 (tide-free, its own GM and radius), Sun and Moon point masses, cannon-ball SRP with the
@@ -21,7 +21,7 @@ with numba's cached kernels when installed, and with ``--numpy`` once more with 
 JVM start, the set-up and ``estimate()`` apart), peak resident memory (``os.wait4``),
 iterations, and the difference of the two solutions in metres and in trackproc's sigmas. The
 two models differ by design in small things (ERFA vs DE-440 Sun and Moon, the shadow of the
-ellipsoid), a few centimetres over three days (tests/test_forces_orekit.py); that difference,
+ellipsoid), a few centimetres over three days (tests/io/test_forces_orekit.py); that difference,
 not the estimators, sets how close the two answers can be. Timing is never asserted.
 """
 

@@ -265,10 +265,10 @@ def test_refine_integral_cost_on_a_two_way_pass_with_constraints(run_cli, two_wa
 
 def test_circular_tolerance_sigma_is_of_the_order_of_what_the_constraints_cost(run_cli, two_way_smoothed, tmp_path):
     """The covariance with --circular-tolerance should cover what forcing e = 0 costs on this pass
-    (about 530 m and 5 m/s, tests/test_refine.py), not balloon: sigma below 3x that in every component.
+    (about 530 m and 5 m/s, tests/report/test_refine.py), not balloon: sigma below 3x that in every component.
     (Issue 15 item 8: the hard estimate's sensitivity to the constraints gave 4.4, 2.0, 5.6 km and 38,
     54, 4.1 m/s; the soft constraints of solve_soft_kkt give 0.27, 0.23, 0.38 km and 2.1, 2.9, 0.24 m/s,
-    and a Monte Carlo over the eccentric anomaly in tests/test_refine_circular_tolerance.py.)"""
+    and a Monte Carlo over the eccentric anomaly in tests/pipeline/test_refine_circular_tolerance.py.)"""
     out = tmp_path / "seed.json"
     result = run_cli(["refine", two_way_smoothed / "smoothed.parquet", "--initial", SAMPLE / "stale.json", "--cost",
                       "integral", "--circular", "--circular-tolerance", "2.74e-5", "--output-epoch", "stale",

@@ -1,6 +1,6 @@
 """The ``trackproc(1)`` manual page, generated from the commands' own help (issue 16).
 
-``python -m trackproc.cli.manpage > docs/trackproc.1`` writes it; ``tests/test_help.py`` checks the
+``python -m trackproc.cli.manpage > docs/trackproc.1`` writes it; ``tests/cli/test_help.py`` checks the
 shipped page is current, so the page and ``--help`` never disagree. Read it with
 ``man docs/trackproc.1`` (or install it under ``share/man/man1``).
 """

@@ -107,7 +107,7 @@ def precession_nutation(tt1, tt2, rates: bool = True):
     so ``c2i06a`` (the full IAU 2000A series, ~30 us a date) is evaluated on a 30-minute grid and
     interpolated by the 4-point Lagrange cubic; dQ/dt is that cubic's derivative. Against the
     direct evaluation over 2019-2027: |dQ| < 1e-15 (rounding; 3e-9 m at 7000 km) and dQ/dt
-    within 6e-7 relative (tests/test_frames_grid.py). The result does not depend on which
+    within 6e-7 relative (tests/io/test_frames_grid.py). The result does not depend on which
     other dates are asked for in the same call or earlier (nodes are fixed in TT).
 
     Implements seed 004 eq. 7 in general form (IAU 2006/2000A precession-nutation).

@@ -21,7 +21,7 @@ Accuracy. No returned state comes from the 7th-order dense-output interpolant: D
 its own adaptive steps, and each requested time gets one extra DOP853 step of its own from
 the last accepted step before it (vectorized over all requested times). Measured for the
 seed 004 LEO orbit (a = 7191 km) against the universal-variable Kepler solution: 1.2e-5 m
-and 1.2e-8 m/s after one day (tests/test_reference.py); the interpolant would add about
+and 1.2e-8 m/s after one day (tests/dynamics/test_reference.py); the interpolant would add about
 1e-6 m. A day of LEO at a 10 s output step costs about 0.1 s (≈ 900 steps).
 """
 

@@ -8,7 +8,7 @@ same recurrences (seed 000 eq. 14, seed 004 eqs. 6 and 19-21), the same Jorba-Zo
 order, the new state from the series, the growing store of per-step spectra for the dense output,
 and the end-time event (the last step is cut to land on ``t_end``). The result is the same
 :class:`~trackproc.dynamics.taylor_dense.Propagation`; the two paths agree to rounding (tests in
-tests/test_taylor_jit.py: state and STM over a day to 1e-13 .. 1e-12 relative).
+tests/dynamics/test_taylor_jit.py: state and STM over a day to 1e-13 .. 1e-12 relative).
 
 Two loop kernels, on purpose: state only, and state with sensitivities (the variational
 recurrence of :func:`trackproc.dynamics.taylor_series.series_var_single`). The sensitivity

@@ -12,7 +12,7 @@ per call, not per flop), :func:`series_dual` (a batch with the sensitivities to 
 and mu, seed 004 eqs. 19-21) and :func:`series_var_single` (its single-trajectory fast path, the
 variational recurrence). The kernels are separate on purpose: a generic kernel costs the
 per-order Python overhead that dominates this engine (benchmarks/throughput.py), and the tests
-(tests/test_taylor.py) hold all four to the same numbers to rounding. Pure numpy; no state.
+(tests/dynamics/test_taylor.py) hold all four to the same numbers to rounding. Pure numpy; no state.
 """
 
 from __future__ import annotations

@@ -353,7 +353,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     # (BIC, and at least the χ² point, so that white noise stays white); among those that do,
     # the most general one (with both components when it passes: an AR(1) and a walk are hard
     # to tell apart on one pass, and taking the one for the other leaves the offset and drift
-    # overconfident, checked by Monte Carlo in tests/test_refine_noise.py)
+    # overconfident, checked by Monte Carlo in tests/pipeline/test_refine_noise.py)
     base = min(models, key=lambda name: fitted[name][2])
     _, ll_base, k_base = fitted[base]
     passing = [base]

@@ -16,7 +16,7 @@ parses parameter names to find out what a driver does — neither ``estimate`` n
 which builds its problem with estimate's and binds the same modifiers to the quadrature nodes
 of its integral cost. Adding a bias kind is one subclass here (and its family name in
 :data:`trackproc.vocabulary.BIAS_UNITS`); it is then estimated by both when given in
-``EstimateOptions.modifiers`` / ``RefineOptions.modifiers`` (tests/test_refine_modifiers.py
+``EstimateOptions.modifiers`` / ``RefineOptions.modifiers`` (tests/pipeline/test_refine_modifiers.py
 does that with a toy kind), and a command-line option that creates it is the one further
 edit (``pipeline.estimate.problem.bias_modifiers``, as ``--range-bias`` does).
 

@@ -36,7 +36,7 @@ ratio 1; the up leg from ``R(T)``, ``V(T)`` of :func:`~trackproc.models.light_ti
 (``ρ̇_u`` is dρ_u/dt_r: the up leg's ends move with ``dt_b/dt_r = 1 - ρ̇_d/c`` and
 ``dt_t/dt_r = dt_b/dt_r - ρ̇_u/c``). The partials of (6)-(7) are derived in
 :mod:`trackproc.models.observation` (its eqs. 11-13). Every partial is checked against central
-finite differences in ``tests/test_observation.py`` and ``tests/test_two_way.py``, and every
+finite differences in ``tests/models/test_observation.py`` and ``tests/cli/test_two_way.py``, and every
 value against the independent implementation in ``tests/oracles/measurements_oracle.py``.
 
 Aberration is neglected (the station's inertial velocity, ≤ 465 m/s, shifts the apparent

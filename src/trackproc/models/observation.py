@@ -91,7 +91,7 @@ two-way Doppler (``ρ̇ = -c Δf / (2f)``). A range bias of a two-way range is i
 (half round trip) metres.
 
 Every partial here is checked against central finite differences in
-``tests/test_observation.py`` (one-way) and ``tests/test_two_way.py`` (two-way).
+``tests/models/test_observation.py`` (one-way) and ``tests/cli/test_two_way.py`` (two-way).
 """
 
 from __future__ import annotations

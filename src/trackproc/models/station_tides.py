@@ -14,7 +14,7 @@ l₃ = 0.015 (eq. 7.2). The vector form holds in any geocentric frame (here GCRF
 out-of-phase and latitude-correction terms of step 1 (below 1 mm) and step 2's frequency
 dependence (up to ~13 mm radially, the K1 term) and the permanent tide (conventional
 tide-free coordinates, as SINEX ITRF solutions are): checked against the IERS DEHANTTIDEINEL
-test cases to 15 mm (``tests/test_station_tides.py``), against 0.1–0.4 m of signal.
+test cases to 15 mm (``tests/models/test_station_tides.py``), against 0.1–0.4 m of signal.
 
 A range to a station that moved by Δr changes by ``−û·Δr`` (``û`` from the station to the
 satellite): :class:`SolidTideDisplacement`, a driver-free range modifier.

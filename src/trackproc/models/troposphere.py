@@ -32,7 +32,7 @@ The model is for optical wavelengths (0.355–1.064 µm); a radio range needs an
 down legs, which at one elevation is ``d`` itself).
 
 Checked against the IERS Conventions' McDonald test case (ZHD 1.932992 m, ZWD 2.23375 mm,
-m(15°) = 3.80024367) in ``tests/test_troposphere.py``.
+m(15°) = 3.80024367) in ``tests/models/test_troposphere.py``.
 """
 
 from __future__ import annotations

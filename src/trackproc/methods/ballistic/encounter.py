@@ -149,7 +149,7 @@ def observer_motion_error(t_s, elevation_rad, range_m, latitude_rad: float, *, r
     at range d and elevation ε from O in the orbit plane, ``r = (d sin ε, side · d cos ε, 0)``.
     ``side = -1``: the object on the other side of O than the observer's (time-reversed)
     displacement, i.e. in forward time the two converge on O from opposite sides (head-on,
-    "against"); this side reproduces Table 1 cell by cell (tests/test_ballistic_model.py).
+    "against"); this side reproduces Table 1 cell by cell (tests/pipeline/test_ballistic_model.py).
     ``side = +1`` (converging from the same side, "with") gives errors of the same order.
     Returns ``(Δd, Δl, Δε)``: ``Δd = d_f - d_H`` (m), the shift ``Δl = Δd / cos ε`` (m) and
     the elevation error ``Δε = (Δd / d) tan ε`` (rad), as the paper's Fig. 2.

@@ -11,7 +11,7 @@ Newton steps on ε, ``δε = (G + Σ_ε⁻¹)⁻¹ (λ/2 - Σ_ε⁻¹ ε)``, con
 one, ``K(x | ε) + D C_ε Dᵀ`` with ``C_ε = (G + Σ_ε⁻¹)⁻¹``. Adding ``D Σ_ε Dᵀ`` to the hard
 solution's covariance instead (the error of the estimate that forces ``ε = 0``) is honest for
 that estimate but ignores what the data say about ε: on the seed 004 Table 1 pass it is 10 to 20
-times the soft estimate's (tests/test_refine_circular_tolerance.py). ``Σ_ε = 0`` is seed 004's
+times the soft estimate's (tests/pipeline/test_refine_circular_tolerance.py). ``Σ_ε = 0`` is seed 004's
 hard case, solved by :func:`solve_kkt` alone.
 """
 
