@@ -41,6 +41,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "tests" / "io"))  # test_forces_orekit
 import orekit_helpers as oh  # noqa: E402
 
 EPOCH = "2020-04-05T00:00:00"
