@@ -24,7 +24,7 @@ instead of factorising the dense n x n covariance (O(n³); issue 19):
   ``log|C| = Σ log S_k`` (the prediction-error decomposition, Schweppe 1965). The gains are a scalar recursion; the
   filtered predictions of all columns at once are one banded triangular solve.
 
-Pure numpy/scipy.
+Pure numpy/scipy; the gain recursion optionally compiled (numba, :func:`compiled_riccati`).
 """
 
 from __future__ import annotations
@@ -36,7 +36,8 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.linalg.lapack import dpbtrf, dtbtrs
 
-__all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor"]
+__all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor",
+           "compiled_riccati"]
 
 
 def effective_samples(cov: np.ndarray) -> float:
@@ -93,21 +94,25 @@ class MarkovFactor:
     def _kalman(self, phi, v_ar, v_walk, w2, a2):
         """The two-state filter's gains: the Riccati recursion in scalars (a 2 x 2 covariance).
         Implements the Kalman (1960) filter's covariance recursion with a scalar measurement."""
-        sv, h0v, h1v = [], [], []
-        p00, p01, p11 = a2, 0.0, float(v_walk[0])
-        for f, va, vw in zip(phi.tolist() + [0.0], v_ar[1:].tolist() + [0.0], v_walk[1:].tolist() + [0.0]):
-            hp0 = p00 + p01                                 # P hᵀ, h = (1, 1)
-            hp1 = p01 + p11
-            s = hp0 + hp1 + w2
-            sv.append(s)
-            h0v.append(hp0)
-            h1v.append(hp1)
-            g0 = hp0 / s                                    # update with y_k (P - g S gᵀ), predict to t_k+1
-            g1 = hp1 / s
-            p00 = f * f * (p00 - g0 * hp0) + va
-            p01 = f * (p01 - g0 * hp1)
-            p11 = p11 - g1 * hp1 + vw
-        self._s = np.array(sv)
+        kernel = compiled_riccati()
+        if kernel is not None:                              # the same loop, compiled (same bits)
+            self._s, h0v, h1v = kernel(phi, v_ar, v_walk, float(w2), float(a2))
+        else:
+            sv, h0v, h1v = [], [], []
+            p00, p01, p11 = a2, 0.0, float(v_walk[0])
+            for f, va, vw in zip(phi.tolist() + [0.0], v_ar[1:].tolist() + [0.0], v_walk[1:].tolist() + [0.0]):
+                hp0 = p00 + p01                             # P hᵀ, h = (1, 1)
+                hp1 = p01 + p11
+                s = hp0 + hp1 + w2
+                sv.append(s)
+                h0v.append(hp0)
+                h1v.append(hp1)
+                g0 = hp0 / s                                # update with y_k (P - g S gᵀ), predict to t_k+1
+                g1 = hp1 / s
+                p00 = f * f * (p00 - g0 * hp0) + va
+                p01 = f * (p01 - g0 * hp1)
+                p11 = p11 - g1 * hp1 + vw
+            self._s = np.array(sv)
         if not np.all(self._s > 0):
             raise np.linalg.LinAlgError("covariance not positive definite")
         self.logdet = float(np.sum(np.log(self._s)))
@@ -143,6 +148,34 @@ class MarkovFactor:
             xh, _ = dtbtrs(self._band, rhs, uplo="L", diag="U", overwrite_b=1)
             out = (m2 - xh[0::2] - xh[1::2]) / np.sqrt(self._s)[:, None]
         return out[:, 0] if vec else out
+
+
+_RICCATI: list = []        # [compiled kernel or None] once looked up
+
+
+def compiled_riccati():
+    """The compiled gain recursion (:mod:`trackproc.methods.whitening_jit`) when it pays, else None.
+
+    ``TRACKPROC_JIT=0``: never; ``TRACKPROC_JIT=1``: whenever numba is importable; unset: only
+    when numba is already loaded in this process (a compiled engine or ``trackproc batch`` paid
+    its import, ~0.15 s; a single refine's few hundred filter runs save less than that)."""
+    import os
+    import sys
+
+    mode = os.environ.get("TRACKPROC_JIT", "").strip()
+    if mode == "0" or (mode != "1" and "numba" not in sys.modules):
+        return None
+    if not _RICCATI:
+        from trackproc.dynamics import jit
+
+        kernel = None
+        if jit.enabled():
+            try:
+                from trackproc.methods.whitening_jit import riccati as kernel
+            except Exception:                      # noqa: BLE001 - numba unusable here: the Python loop
+                kernel = None
+        _RICCATI.append(kernel)
+    return _RICCATI[0]
 
 
 def markov_factor(model, t, t0: Optional[float] = None) -> Optional[MarkovFactor]:

@@ -94,7 +94,26 @@ def interruptible():
             signal.signal(number, handler)
 
 
-def start_worker(driver: int) -> None:
+#: Tasks per worker from which a run with refine or estimate switches the compiled kernels on
+#: (``TRACKPROC_JIT=1`` in its workers, unless the variable is set): ``import numba`` and loading
+#: the cached kernels (~0.2 s of CPU per process) is then a small part of the work they save.
+JIT_MIN_TASKS_PER_WORKER = 20
+
+
+def compiled_kernels_pay(settings: Settings, n_tasks: int, workers: int) -> bool:
+    """Whether this run's processes should use the optional compiled kernels (numba): the user
+    did not choose (``TRACKPROC_JIT`` unset), numba is importable, the chain refines or
+    estimates, and each worker has at least :data:`JIT_MIN_TASKS_PER_WORKER` tasks."""
+    if os.environ.get("TRACKPROC_JIT", "").strip() or n_tasks < JIT_MIN_TASKS_PER_WORKER * max(workers, 1):
+        return False
+    if not {"refine", "estimate"} & set(settings.get("batch.steps")):
+        return False
+    import importlib.util
+
+    return importlib.util.find_spec("numba") is not None
+
+
+def start_worker(driver: int, jit: bool = False) -> None:
     """Initializer of a pool worker: one BLAS thread, the stop signals left to the driver, and an
     exit of its own when the driver (pid ``driver``) dies.
 
@@ -106,6 +125,8 @@ def start_worker(driver: int) -> None:
     and ends the worker when not. Workers write no files: killing one loses nothing.
     """
     single_thread_blas()
+    if jit:                                       # compiled_kernels_pay: the user did not set it
+        os.environ["TRACKPROC_JIT"] = "1"
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the driver decides
     parent = os.getppid()
     if not _running(driver):  # died while this worker started
@@ -136,10 +157,16 @@ def _watch_driver(driver: int, parent: int) -> None:
 
 
 class SerialExecutor:
-    """Runs each task in this process when it is submitted."""
+    """Runs each task in this process when it is submitted; ``jit``: with ``TRACKPROC_JIT=1`` in
+    this process until :meth:`close` (:func:`compiled_kernels_pay`)."""
 
     label = "this process (--workers 1)"
     slots = 1
+
+    def __init__(self, jit: bool = False):
+        self._jit = jit and not os.environ.get("TRACKPROC_JIT")
+        if self._jit:
+            os.environ["TRACKPROC_JIT"] = "1"
 
     def submit(self, task: Task):
         from concurrent.futures import Future
@@ -153,7 +180,9 @@ class SerialExecutor:
         return set(futures), set()
 
     def close(self):
-        pass
+        if self._jit and os.environ.get("TRACKPROC_JIT") == "1":
+            del os.environ["TRACKPROC_JIT"]
+            self._jit = False
 
     abort = close
 
@@ -161,7 +190,7 @@ class SerialExecutor:
 class PoolExecutor:
     """A process pool (forkserver start: no fork of this process's threads)."""
 
-    def __init__(self, workers: int):
+    def __init__(self, workers: int, jit: bool = False):
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
@@ -171,7 +200,8 @@ class PoolExecutor:
             context.set_forkserver_preload(["trackproc.pipeline.batch.tasks"])
         self.workers = workers
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=start_worker,
-                                        initargs=(os.getpid(),))
+                                        initargs=(os.getpid(), jit))
+        self.jit = jit
         self.label = f"{workers} worker processes"
         self.slots = 2 * workers
 
@@ -302,7 +332,7 @@ def execute(executor, tasks: Sequence, make_task: Callable, on_result: Callable)
                 broken.append((item, task))
             pending.clear()
             executor.close()
-            executor.__init__(executor.workers)
+            executor.__init__(executor.workers, executor.jit)
             for item, task in broken:
                 on_result(item, _run_isolated(task))
             broken.clear()
@@ -344,7 +374,8 @@ def make_executor(settings: Settings, n_tasks: int):
         return DaskExecutor(scheduler)
     workers = settings.get("batch.workers") or _cores()
     workers = max(1, min(workers, n_tasks))
-    return SerialExecutor() if workers == 1 else PoolExecutor(workers)
+    jit = compiled_kernels_pay(settings, n_tasks, workers)
+    return SerialExecutor(jit) if workers == 1 else PoolExecutor(workers, jit)
 
 
 def _cores() -> int:
