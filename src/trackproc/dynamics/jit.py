@@ -1,38 +1,34 @@
-"""Optional numba compilation (issues 17, 19): one switch for every compiled kernel.
+"""Optional numba compilation: whether compiled kernels may be used, and the decorator.
 
-numba is optional (``pip install trackproc[fast]``); every compiled path has a pure-numpy path
-beside it. ``TRACKPROC_JIT=0`` in the environment switches compilation off. Kernels are compiled
-with ``cache=True`` (the machine code is kept on disk, so a later process only loads it) and
-without ``fastmath`` (IEEE arithmetic: the compiled and numpy paths agree to rounding).
+numba is an optional dependency (``pip install trackproc[fast]``); every compiled kernel has a
+pure-numpy path beside it. ``TRACKPROC_JIT=0`` forces the numpy paths.
 """
 
 from __future__ import annotations
 
+import functools
 import os
-from functools import lru_cache
 
 __all__ = ["enabled", "njit"]
 
 
-@lru_cache(maxsize=1)
-def enabled() -> bool:
-    """True when ``TRACKPROC_JIT`` is not ``"0"`` and numba can be imported (cached)."""
-    if os.environ.get("TRACKPROC_JIT", "").strip() == "0":
-        return False
+@functools.lru_cache(maxsize=1)
+def _numba_importable() -> bool:
     try:
         import numba  # noqa: F401
-    except ImportError:
+    except Exception:                                              # pragma: no cover - optional
         return False
     return True
 
 
-def njit(**kw):
-    """Decorator factory: ``numba.njit(cache=True, nogil=True, **kw)`` when :func:`enabled`.
+def enabled() -> bool:
+    """True when compiled kernels may be used: numba importable and ``TRACKPROC_JIT`` not ``0``."""
+    return os.environ.get("TRACKPROC_JIT", "1") != "0" and _numba_importable()
 
-    Otherwise the function is returned unchanged (callers choose the numpy path then).
-    """
-    if not enabled():
-        return lambda fn: fn
+
+def njit(*args, **kwargs):
+    """``numba.njit(cache=True, ...)`` (IEEE arithmetic: no fastmath); import numba only here."""
     import numba
 
-    return numba.njit(cache=True, nogil=True, **kw)
+    kwargs.setdefault("cache", True)
+    return numba.njit(*args, **kwargs)
