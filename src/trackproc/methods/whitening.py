@@ -37,7 +37,7 @@ from scipy.linalg import solve_triangular
 from scipy.linalg.lapack import dpbtrf, dtbtrs
 
 __all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor",
-           "compiled_riccati"]
+           "compiled_riccati", "markov_grid"]
 
 
 def effective_samples(cov: np.ndarray) -> float:
@@ -55,7 +55,7 @@ class MarkovFactor:
     that is not positive definite raises :class:`numpy.linalg.LinAlgError` like the dense factor).
     ``whiten(M)`` is ``L⁻¹ M`` (rows of ``M`` at the times)."""
 
-    def __init__(self, model, t, t0: Optional[float] = None):
+    def __init__(self, model, t, t0: Optional[float] = None, grid: Optional[tuple] = None):
         t = np.asarray(t, float)
         n = t.size
         t0 = float(t.min()) if t0 is None else float(t0)
@@ -63,14 +63,14 @@ class MarkovFactor:
         w2 = float(model.white) ** 2
         has_ar = model.ar_sigma > 0 and model.ar_tau_s > 0
         has_walk = model.walk > 0
-        dt = np.diff(t)
+        # ``grid``: :func:`markov_grid` of these times (a REML search evaluates hundreds of models on one grid)
+        dt, ds = grid if grid is not None else markov_grid(t, t0)
         if has_ar:
             phi = np.exp(-dt / model.ar_tau_s)
             # σ_a² (1 - φ²) without cancellation at small gaps
             v_ar = np.concatenate([[1.0], -np.expm1(-2.0 * dt / model.ar_tau_s)]) * model.ar_sigma ** 2
         if has_walk:
-            s = np.clip(t - t0, 0.0, None)
-            v_walk = np.concatenate([s[:1], np.diff(s)]) * model.walk ** 2
+            v_walk = ds * model.walk ** 2
         self._mode = "both" if has_ar and has_walk else "one" if has_ar or has_walk else "white"
         if self._mode == "white":
             if not w2 > 0:
@@ -116,6 +116,7 @@ class MarkovFactor:
         if not np.all(self._s > 0):
             raise np.linalg.LinAlgError("covariance not positive definite")
         self.logdet = float(np.sum(np.log(self._s)))
+        self._sd = np.sqrt(self._s)
         g0 = (np.array(h0v) / self._s)[:-1]
         g1 = (np.array(h1v) / self._s)[:-1]
         f = phi
@@ -146,7 +147,7 @@ class MarkovFactor:
             rhs[2::2] = self._b[0][:, None] * m2[:-1]
             rhs[3::2] = self._b[1][:, None] * m2[:-1]
             xh, _ = dtbtrs(self._band, rhs, uplo="L", diag="U", overwrite_b=1)
-            out = (m2 - xh[0::2] - xh[1::2]) / np.sqrt(self._s)[:, None]
+            out = (m2 - xh[0::2] - xh[1::2]) / self._sd[:, None]
         return out[:, 0] if vec else out
 
 
@@ -176,6 +177,13 @@ def compiled_riccati():
                 kernel = None
         _RICCATI.append(kernel)
     return _RICCATI[0]
+
+
+def markov_grid(t: np.ndarray, t0: float) -> tuple:
+    """``(Δt, Δs)`` of times ``t`` for :class:`MarkovFactor`: the gaps and the increments of the
+    walk's clock ``s = max(t - t0, 0)`` (its first value first)."""
+    s = np.clip(t - t0, 0.0, None)
+    return np.diff(t), np.concatenate([s[:1], np.diff(s)])
 
 
 def markov_factor(model, t, t0: Optional[float] = None) -> Optional[MarkovFactor]:
