@@ -211,7 +211,8 @@ def section_batch(passes: int, serial_passes: int):
     try:
         n = bb.make_passes(d, max(passes, serial_passes), 1.0)
         inbox = d / "inbox"
-        names = sorted(inbox.iterdir())
+        # every distinct pass once before any repeat (make_passes repeats the day's passes as -01, -02, ...)
+        names = sorted(inbox.iterdir(), key=lambda p: (p.stem.rsplit("-", 1)[-1], p.name))
         serial_dir = d / "serial-inbox"
         serial_dir.mkdir()
         for p in names[:serial_passes]:
