@@ -94,23 +94,34 @@ def interruptible():
             signal.signal(number, handler)
 
 
-#: Tasks per worker from which a run with refine or estimate switches the compiled kernels on
-#: (``TRACKPROC_JIT=1`` in its workers, unless the variable is set): ``import numba`` and loading
-#: the cached kernels (~0.2 s of CPU per process) is then a small part of the work they save.
+#: Tasks per worker from which a run with refine or estimate loads numba in its processes, so
+#: that the compiled kernels that give the numpy paths' own bits are used (the noise model's
+#: Kalman gains, :func:`trackproc.methods.whitening.compiled_riccati`): ``import numba`` and the
+#: cached kernels (~0.2 s of CPU a process) are then a small part of the work they save.
 JIT_MIN_TASKS_PER_WORKER = 20
 
 
 def compiled_kernels_pay(settings: Settings, n_tasks: int, workers: int) -> bool:
-    """Whether this run's processes should use the optional compiled kernels (numba): the user
-    did not choose (``TRACKPROC_JIT`` unset), numba is importable, the chain refines or
-    estimates, and each worker has at least :data:`JIT_MIN_TASKS_PER_WORKER` tasks."""
-    if os.environ.get("TRACKPROC_JIT", "").strip() or n_tasks < JIT_MIN_TASKS_PER_WORKER * max(workers, 1):
+    """Whether this run's processes should load numba: not switched off (``TRACKPROC_JIT=0``),
+    numba importable, a chain that refines or estimates, and at least
+    :data:`JIT_MIN_TASKS_PER_WORKER` tasks per worker. Only kernels that reproduce the numpy
+    paths bit for bit follow this choice, so the results do not depend on it (nor on the
+    number of workers); ``TRACKPROC_JIT=1`` (the user's) turns every compiled path on."""
+    if os.environ.get("TRACKPROC_JIT", "").strip() == "0" or n_tasks < JIT_MIN_TASKS_PER_WORKER * max(workers, 1):
         return False
     if not {"refine", "estimate"} & set(settings.get("batch.steps")):
         return False
     import importlib.util
 
     return importlib.util.find_spec("numba") is not None
+
+
+def load_numba() -> None:
+    """Import numba in this process (:func:`compiled_kernels_pay`); nothing when it cannot be."""
+    try:
+        import numba  # noqa: F401
+    except Exception:  # noqa: BLE001 - optional: the numpy paths serve
+        pass
 
 
 def start_worker(driver: int, jit: bool = False) -> None:
@@ -125,8 +136,8 @@ def start_worker(driver: int, jit: bool = False) -> None:
     and ends the worker when not. Workers write no files: killing one loses nothing.
     """
     single_thread_blas()
-    if jit:                                       # compiled_kernels_pay: the user did not set it
-        os.environ["TRACKPROC_JIT"] = "1"
+    if jit:                                       # compiled_kernels_pay
+        load_numba()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the driver decides
     parent = os.getppid()
     if not _running(driver):  # died while this worker started
@@ -157,16 +168,15 @@ def _watch_driver(driver: int, parent: int) -> None:
 
 
 class SerialExecutor:
-    """Runs each task in this process when it is submitted; ``jit``: with ``TRACKPROC_JIT=1`` in
-    this process until :meth:`close` (:func:`compiled_kernels_pay`)."""
+    """Runs each task in this process when it is submitted; ``jit``: numba loaded first
+    (:func:`compiled_kernels_pay`)."""
 
     label = "this process (--workers 1)"
     slots = 1
 
     def __init__(self, jit: bool = False):
-        self._jit = jit and not os.environ.get("TRACKPROC_JIT")
-        if self._jit:
-            os.environ["TRACKPROC_JIT"] = "1"
+        if jit:
+            load_numba()
 
     def submit(self, task: Task):
         from concurrent.futures import Future
@@ -180,9 +190,7 @@ class SerialExecutor:
         return set(futures), set()
 
     def close(self):
-        if self._jit and os.environ.get("TRACKPROC_JIT") == "1":
-            del os.environ["TRACKPROC_JIT"]
-            self._jit = False
+        pass
 
     abort = close
 
