@@ -13,6 +13,13 @@ from trackproc.isotime import iso_utc
 def json_ready(value):
     """A JSON-ready copy: numpy scalars/arrays to Python, NaN/Inf to None (JSON has neither),
     tuples to lists, datetime64 to ISO 8601 UTC with Z."""
+    kind = type(value)
+    if kind is float:                         # the common leaves first (issue 19: thousands per pass)
+        return value if math.isfinite(value) else None
+    if kind is str or kind is int or kind is bool or value is None:
+        return value
+    if kind is np.ndarray and value.dtype.kind == "f" and np.isfinite(value).all():
+        return value.tolist()                 # nothing to replace: Python floats already
     if isinstance(value, dict):
         return {str(k): json_ready(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

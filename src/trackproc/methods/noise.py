@@ -56,7 +56,7 @@ import numpy as np
 from scipy.linalg import cho_factor, solve_triangular
 
 from trackproc.methods.whitening import (MarkovFactor, PassCovariance, effective_samples,  # noqa: F401  (re-exported)
-                                        effective_samples_beyond)
+                                        effective_samples_beyond, markov_grid)
 
 __all__ = ["NoiseModel", "NoiseFit", "PassCovariance", "fit_noise", "restricted_loglik", "MODELS",
            "effective_samples", "effective_samples_beyond", "lag1_correlation", "candidate_models"]
@@ -149,6 +149,7 @@ class _Reml:
         self.n, self.p = x.shape
         self.dense = dense or (t.size > 1 and not np.all(np.diff(t) >= 0))
         self.rx = np.column_stack([r, x])
+        self.grid = None if self.dense else markov_grid(t, t0)      # shared by every model evaluated
         if self.dense:
             self.lag = np.abs(t[:, None] - t[None, :])
             dt = np.clip(t - t0, 0.0, None)
@@ -172,7 +173,7 @@ class _Reml:
                 return (2.0 * float(np.sum(np.log(np.diag(chol)))),
                         solve_triangular(chol, self.r, lower=True, check_finite=False),
                         solve_triangular(chol, self.x, lower=True, check_finite=False))
-            fac = MarkovFactor(model, self.t, self.t0)
+            fac = MarkovFactor(model, self.t, self.t0, self.grid)
         except np.linalg.LinAlgError:
             return None
         w = fac.whiten(self.rx)

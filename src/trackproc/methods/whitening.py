@@ -24,7 +24,7 @@ instead of factorising the dense n x n covariance (O(n³); issue 19):
   ``log|C| = Σ log S_k`` (the prediction-error decomposition, Schweppe 1965). The gains are a scalar recursion; the
   filtered predictions of all columns at once are one banded triangular solve.
 
-Pure numpy/scipy.
+Pure numpy/scipy; the gain recursion optionally compiled (numba, :func:`compiled_riccati`).
 """
 
 from __future__ import annotations
@@ -36,7 +36,8 @@ import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.linalg.lapack import dpbtrf, dtbtrs
 
-__all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor"]
+__all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor",
+           "compiled_riccati", "markov_grid"]
 
 
 def effective_samples(cov: np.ndarray) -> float:
@@ -54,7 +55,7 @@ class MarkovFactor:
     that is not positive definite raises :class:`numpy.linalg.LinAlgError` like the dense factor).
     ``whiten(M)`` is ``L⁻¹ M`` (rows of ``M`` at the times)."""
 
-    def __init__(self, model, t, t0: Optional[float] = None):
+    def __init__(self, model, t, t0: Optional[float] = None, grid: Optional[tuple] = None):
         t = np.asarray(t, float)
         n = t.size
         t0 = float(t.min()) if t0 is None else float(t0)
@@ -62,14 +63,14 @@ class MarkovFactor:
         w2 = float(model.white) ** 2
         has_ar = model.ar_sigma > 0 and model.ar_tau_s > 0
         has_walk = model.walk > 0
-        dt = np.diff(t)
+        # ``grid``: :func:`markov_grid` of these times (a REML search evaluates hundreds of models on one grid)
+        dt, ds = grid if grid is not None else markov_grid(t, t0)
         if has_ar:
             phi = np.exp(-dt / model.ar_tau_s)
             # σ_a² (1 - φ²) without cancellation at small gaps
             v_ar = np.concatenate([[1.0], -np.expm1(-2.0 * dt / model.ar_tau_s)]) * model.ar_sigma ** 2
         if has_walk:
-            s = np.clip(t - t0, 0.0, None)
-            v_walk = np.concatenate([s[:1], np.diff(s)]) * model.walk ** 2
+            v_walk = ds * model.walk ** 2
         self._mode = "both" if has_ar and has_walk else "one" if has_ar or has_walk else "white"
         if self._mode == "white":
             if not w2 > 0:
@@ -93,24 +94,29 @@ class MarkovFactor:
     def _kalman(self, phi, v_ar, v_walk, w2, a2):
         """The two-state filter's gains: the Riccati recursion in scalars (a 2 x 2 covariance).
         Implements the Kalman (1960) filter's covariance recursion with a scalar measurement."""
-        sv, h0v, h1v = [], [], []
-        p00, p01, p11 = a2, 0.0, float(v_walk[0])
-        for f, va, vw in zip(phi.tolist() + [0.0], v_ar[1:].tolist() + [0.0], v_walk[1:].tolist() + [0.0]):
-            hp0 = p00 + p01                                 # P hᵀ, h = (1, 1)
-            hp1 = p01 + p11
-            s = hp0 + hp1 + w2
-            sv.append(s)
-            h0v.append(hp0)
-            h1v.append(hp1)
-            g0 = hp0 / s                                    # update with y_k (P - g S gᵀ), predict to t_k+1
-            g1 = hp1 / s
-            p00 = f * f * (p00 - g0 * hp0) + va
-            p01 = f * (p01 - g0 * hp1)
-            p11 = p11 - g1 * hp1 + vw
-        self._s = np.array(sv)
+        kernel = compiled_riccati()
+        if kernel is not None:                              # the same loop, compiled (same bits)
+            self._s, h0v, h1v = kernel(phi, v_ar, v_walk, float(w2), float(a2))
+        else:
+            sv, h0v, h1v = [], [], []
+            p00, p01, p11 = a2, 0.0, float(v_walk[0])
+            for f, va, vw in zip(phi.tolist() + [0.0], v_ar[1:].tolist() + [0.0], v_walk[1:].tolist() + [0.0]):
+                hp0 = p00 + p01                             # P hᵀ, h = (1, 1)
+                hp1 = p01 + p11
+                s = hp0 + hp1 + w2
+                sv.append(s)
+                h0v.append(hp0)
+                h1v.append(hp1)
+                g0 = hp0 / s                                # update with y_k (P - g S gᵀ), predict to t_k+1
+                g1 = hp1 / s
+                p00 = f * f * (p00 - g0 * hp0) + va
+                p01 = f * (p01 - g0 * hp1)
+                p11 = p11 - g1 * hp1 + vw
+            self._s = np.array(sv)
         if not np.all(self._s > 0):
             raise np.linalg.LinAlgError("covariance not positive definite")
         self.logdet = float(np.sum(np.log(self._s)))
+        self._sd = np.sqrt(self._s)
         g0 = (np.array(h0v) / self._s)[:-1]
         g1 = (np.array(h1v) / self._s)[:-1]
         f = phi
@@ -141,8 +147,43 @@ class MarkovFactor:
             rhs[2::2] = self._b[0][:, None] * m2[:-1]
             rhs[3::2] = self._b[1][:, None] * m2[:-1]
             xh, _ = dtbtrs(self._band, rhs, uplo="L", diag="U", overwrite_b=1)
-            out = (m2 - xh[0::2] - xh[1::2]) / np.sqrt(self._s)[:, None]
+            out = (m2 - xh[0::2] - xh[1::2]) / self._sd[:, None]
         return out[:, 0] if vec else out
+
+
+_RICCATI: list = []        # [compiled kernel or None] once looked up
+
+
+def compiled_riccati():
+    """The compiled gain recursion (:mod:`trackproc.methods.whitening_jit`) when it pays, else None.
+
+    ``TRACKPROC_JIT=0``: never; ``TRACKPROC_JIT=1``: whenever numba is importable; unset: only
+    when numba is already loaded in this process (a compiled engine or ``trackproc batch`` paid
+    its import, ~0.15 s; a single refine's few hundred filter runs save less than that)."""
+    import os
+    import sys
+
+    mode = os.environ.get("TRACKPROC_JIT", "").strip()
+    if mode == "0" or (mode != "1" and "numba" not in sys.modules):
+        return None
+    if not _RICCATI:
+        from trackproc.dynamics import jit
+
+        kernel = None
+        if jit.enabled():
+            try:
+                from trackproc.methods.whitening_jit import riccati as kernel
+            except Exception:                      # noqa: BLE001 - numba unusable here: the Python loop
+                kernel = None
+        _RICCATI.append(kernel)
+    return _RICCATI[0]
+
+
+def markov_grid(t: np.ndarray, t0: float) -> tuple:
+    """``(Δt, Δs)`` of times ``t`` for :class:`MarkovFactor`: the gaps and the increments of the
+    walk's clock ``s = max(t - t0, 0)`` (its first value first)."""
+    s = np.clip(t - t0, 0.0, None)
+    return np.diff(t), np.concatenate([s[:1], np.diff(s)])
 
 
 def markov_factor(model, t, t0: Optional[float] = None) -> Optional[MarkovFactor]:

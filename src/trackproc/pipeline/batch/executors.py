@@ -94,7 +94,37 @@ def interruptible():
             signal.signal(number, handler)
 
 
-def start_worker(driver: int) -> None:
+#: Tasks per worker from which a run with refine or estimate loads numba in its processes, so
+#: that the compiled kernels that give the numpy paths' own bits are used (the noise model's
+#: Kalman gains, :func:`trackproc.methods.whitening.compiled_riccati`): ``import numba`` and the
+#: cached kernels (~0.2 s of CPU a process) are then a small part of the work they save.
+JIT_MIN_TASKS_PER_WORKER = 20
+
+
+def compiled_kernels_pay(settings: Settings, n_tasks: int, workers: int) -> bool:
+    """Whether this run's processes should load numba: not switched off (``TRACKPROC_JIT=0``),
+    numba importable, a chain that refines or estimates, and at least
+    :data:`JIT_MIN_TASKS_PER_WORKER` tasks per worker. Only kernels that reproduce the numpy
+    paths bit for bit follow this choice, so the results do not depend on it (nor on the
+    number of workers); ``TRACKPROC_JIT=1`` (the user's) turns every compiled path on."""
+    if os.environ.get("TRACKPROC_JIT", "").strip() == "0" or n_tasks < JIT_MIN_TASKS_PER_WORKER * max(workers, 1):
+        return False
+    if not {"refine", "estimate"} & set(settings.get("batch.steps")):
+        return False
+    import importlib.util
+
+    return importlib.util.find_spec("numba") is not None
+
+
+def load_numba() -> None:
+    """Import numba in this process (:func:`compiled_kernels_pay`); nothing when it cannot be."""
+    try:
+        import numba  # noqa: F401
+    except Exception:  # noqa: BLE001 - optional: the numpy paths serve
+        pass
+
+
+def start_worker(driver: int, jit: bool = False) -> None:
     """Initializer of a pool worker: one BLAS thread, the stop signals left to the driver, and an
     exit of its own when the driver (pid ``driver``) dies.
 
@@ -106,6 +136,8 @@ def start_worker(driver: int) -> None:
     and ends the worker when not. Workers write no files: killing one loses nothing.
     """
     single_thread_blas()
+    if jit:                                       # compiled_kernels_pay
+        load_numba()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the driver decides
     parent = os.getppid()
     if not _running(driver):  # died while this worker started
@@ -136,10 +168,15 @@ def _watch_driver(driver: int, parent: int) -> None:
 
 
 class SerialExecutor:
-    """Runs each task in this process when it is submitted."""
+    """Runs each task in this process when it is submitted; ``jit``: numba loaded first
+    (:func:`compiled_kernels_pay`)."""
 
     label = "this process (--workers 1)"
     slots = 1
+
+    def __init__(self, jit: bool = False):
+        if jit:
+            load_numba()
 
     def submit(self, task: Task):
         from concurrent.futures import Future
@@ -161,7 +198,7 @@ class SerialExecutor:
 class PoolExecutor:
     """A process pool (forkserver start: no fork of this process's threads)."""
 
-    def __init__(self, workers: int):
+    def __init__(self, workers: int, jit: bool = False):
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
@@ -171,7 +208,8 @@ class PoolExecutor:
             context.set_forkserver_preload(["trackproc.pipeline.batch.tasks"])
         self.workers = workers
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=start_worker,
-                                        initargs=(os.getpid(),))
+                                        initargs=(os.getpid(), jit))
+        self.jit = jit
         self.label = f"{workers} worker processes"
         self.slots = 2 * workers
 
@@ -302,7 +340,7 @@ def execute(executor, tasks: Sequence, make_task: Callable, on_result: Callable)
                 broken.append((item, task))
             pending.clear()
             executor.close()
-            executor.__init__(executor.workers)
+            executor.__init__(executor.workers, executor.jit)
             for item, task in broken:
                 on_result(item, _run_isolated(task))
             broken.clear()
@@ -344,7 +382,8 @@ def make_executor(settings: Settings, n_tasks: int):
         return DaskExecutor(scheduler)
     workers = settings.get("batch.workers") or _cores()
     workers = max(1, min(workers, n_tasks))
-    return SerialExecutor() if workers == 1 else PoolExecutor(workers)
+    jit = compiled_kernels_pay(settings, n_tasks, workers)
+    return SerialExecutor(jit) if workers == 1 else PoolExecutor(workers, jit)
 
 
 def _cores() -> int:

@@ -198,7 +198,7 @@ def refine_pass(table) -> tuple:
     from trackproc.pipeline.refine import RANGE_RATE_KINDS
 
     frame = table.frame
-    kinds = set(frame["kind"].astype(str))
+    kinds = set(frame["kind"].astype(str).unique())
     kind = next((k for k in RANGE_RATE_KINDS if k in kinds), None)
     if kind is None:
         return table, None, []

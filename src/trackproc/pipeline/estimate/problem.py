@@ -266,7 +266,7 @@ def angle_modifiers(opt: EstimateOptions, kinds_by_station: dict, apriori) -> li
 
 def bias_modifiers(opt: EstimateOptions, frame, t_s, known, apriori) -> list:
     """Every modifier the options ask for, in the order of their drivers in the extended state."""
-    kinds_by_station = frame.groupby("station")["kind"].agg(lambda k: set(k.astype(str))).to_dict()
+    kinds_by_station = frame.groupby("station")["kind"].agg(lambda k: set(k.astype(str).unique())).to_dict()
     return (range_bias_modifiers(opt, kinds_by_station, known, apriori) + frequency_modifiers(opt, frame, t_s, apriori)
             + angle_modifiers(opt, kinds_by_station, apriori))
 

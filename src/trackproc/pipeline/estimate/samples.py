@@ -25,7 +25,7 @@ def merge_tables(tables, kinds):
         if len(frame) == 0:
             raise InputError("no samples", file=source, expected="a pass file with at least one sample")
         mode = meta.get("doppler_mode") or "one-way"
-        kinds_here = set(frame["kind"].astype(str))
+        kinds_here = set(frame["kind"].astype(str).unique())   # not a Python loop over the rows
         if mode not in ob.MODES and kinds_here & set(ob.LINK_KINDS):
             raise InputError("unknown link mode", file=source, column="doppler_mode", found=mode,
                              expected="one-way or two-way (a round trip through a transponder of ratio 1)")
@@ -71,7 +71,7 @@ def resolve_stations(frame, tables, stations):
     for source, table in tables:
         for name, st in table.stations().items():
             known.setdefault(name, st)
-    missing = sorted(set(frame["station"].astype(str)) - set(known))
+    missing = sorted(set(frame["station"].astype(str).unique()) - set(known))
     if missing:
         name = missing[0]
         src = frame.loc[frame["station"] == name, "_source"].iloc[0]

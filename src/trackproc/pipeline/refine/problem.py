@@ -251,7 +251,7 @@ class Refinement:
         n = x_hat.size
         priors = self.priors_at(prior_centre)
         opts = Options(max_iterations=self.options.max_iterations, clip=None, rank_rtol=self.options.rank_rtol)
-        cached = CachedModel(kept)
+        cached = CachedModel(kept, size=32)   # all the profile solves: each starts from x_hat
         out = cov.copy()
         for i in obs.unobservable:
             row = np.r_[obs.dual[i], np.zeros(n - 6)]

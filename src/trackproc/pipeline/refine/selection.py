@@ -21,7 +21,7 @@ def select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple[
     frame = table.frame
     if len(frame) == 0:
         raise InputError("no samples", file=source, expected="a pass file with one Doppler or range-rate pass")
-    kinds = set(frame["kind"].astype(str))
+    kinds = set(frame["kind"].astype(str).unique())      # not a Python loop over the rows
     if options.kind is not None:
         if options.kind not in RANGE_RATE_KINDS:
             raise InputError("refine uses Doppler or range-rate", column="--kind", found=options.kind,
@@ -43,7 +43,8 @@ def select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple[
             found = ", ".join(sorted(set(frame.loc[frame["kind"] == kind, "pass_id"].astype(str))))
             raise InputError("no such pass", file=source, column="--pass-id", found=options.pass_id,
                              expected=f"one of {found}")
-    keys = sorted(set(zip(sub["station"].astype(str), sub["pass_id"].astype(str))))
+    pairs = sub[["station", "pass_id"]].astype(str).drop_duplicates()
+    keys = sorted(set(zip(pairs["station"], pairs["pass_id"])))
     if len(keys) > 1:
         listed = ", ".join(f"{s}/{p}" for s, p in keys[:8]) + (" ..." if len(keys) > 8 else "")
         raise InputError("more than one pass", file=source, column="pass_id", found=listed,

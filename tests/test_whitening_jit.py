@@ -1,0 +1,97 @@
+"""The compiled gain recursion of the two-state Kalman filter (methods/whitening_jit.py, numba,
+optional) against the Python loop it replaces (methods/whitening.py MarkovFactor._kalman): the
+same bits (innovation variances, log|C|, whitened rows) on irregular grids with duplicate times
+and near-zero gaps, and the REML noise fit of a pass identical either way; TRACKPROC_JIT=0 and
+an unset TRACKPROC_JIT in a process without numba keep the Python loop."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from trackproc.methods import noise as nz
+from trackproc.methods import whitening
+
+numba = pytest.importorskip("numba")
+
+BOTH = [
+    nz.NoiseModel(0.7, 1.5, 12.0, 0.2),
+    nz.NoiseModel(0.05, 2.0, 300.0, 0.05),         # white small beside them (ill-conditioned C)
+    nz.NoiseModel(3.0, 0.1, 1.0, 1e-4),
+]
+
+
+def _grid(seed: int, n: int = 300) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    gaps = rng.exponential(2.0, n - 1)
+    gaps[rng.choice(n - 1, 8, replace=False)] = 0.0                          # duplicate times
+    gaps[rng.choice(n - 1, 8, replace=False)] = 10.0 ** rng.uniform(-9, -4, 8)   # near-zero gaps
+    return 50.0 + np.concatenate([[0.0], np.cumsum(gaps)])
+
+
+def _factor(model, t, t0, mode, monkeypatch):
+    monkeypatch.setenv("TRACKPROC_JIT", mode)
+    fac = whitening.MarkovFactor(model, t, t0)
+    assert (whitening.compiled_riccati() is not None) == (mode == "1")
+    return fac
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("model", BOTH, ids=lambda m: f"both-{m.white}")
+def test_compiled_riccati_gives_the_same_bits(model, seed, monkeypatch):
+    t = _grid(seed)
+    m = np.random.default_rng(seed).normal(size=(t.size, 4))
+    for t0 in (None, float(t[0]) - 3.0):
+        py = _factor(model, t, t0, "0", monkeypatch)
+        jit = _factor(model, t, t0, "1", monkeypatch)
+        assert py._mode == jit._mode == "both"
+        assert np.array_equal(py._s, jit._s)
+        assert py.logdet == jit.logdet
+        assert np.array_equal(py.whiten(m), jit.whiten(m))
+
+
+def test_reml_fit_identical_with_and_without_the_kernel(monkeypatch):
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 500.0, 1.0)
+    walk = np.cumsum(rng.normal(0.0, 0.05, t.size))
+    ar = np.zeros(t.size)
+    for i in range(1, t.size):
+        ar[i] = 0.9 * ar[i - 1] + rng.normal(0.0, 0.4)
+    r = rng.normal(0.0, 0.6, t.size) + walk + ar
+    x = np.column_stack([np.ones(t.size), t - t[0]])
+    fits = []
+    for mode in ("0", "1"):
+        monkeypatch.setenv("TRACKPROC_JIT", mode)
+        fits.append(nz.fit_noise(t, r, x))
+    assert fits[0].model == fits[1].model
+    assert fits[0].candidates == fits[1].candidates
+
+
+def test_unset_switch_uses_the_kernel_only_once_numba_is_loaded(monkeypatch):
+    import sys
+
+    monkeypatch.delenv("TRACKPROC_JIT", raising=False)
+    monkeypatch.delitem(sys.modules, "numba")           # a process that has not paid for numba
+    assert whitening.compiled_riccati() is None
+    monkeypatch.setitem(sys.modules, "numba", numba)    # one that has (a batch worker)
+    assert whitening.compiled_riccati() is not None
+    monkeypatch.setenv("TRACKPROC_JIT", "0")
+    assert whitening.compiled_riccati() is None
+
+
+def test_batch_loads_numba_for_long_refine_runs_only(monkeypatch, tmp_path):
+    from trackproc.pipeline.batch.config import resolve
+    from trackproc.pipeline.batch.executors import JIT_MIN_TASKS_PER_WORKER, compiled_kernels_pay
+
+    def settings(steps):
+        return resolve(None, {"batch.inputs": [str(tmp_path)], "batch.output": str(tmp_path / "out"),
+                              "batch.steps": steps, "refine.initial": str(tmp_path / "stale.json")}, environ={})
+
+    monkeypatch.delenv("TRACKPROC_JIT", raising=False)
+    refine = settings(["ingest", "smooth", "refine"])
+    n = 2 * JIT_MIN_TASKS_PER_WORKER
+    assert compiled_kernels_pay(refine, n, 2)
+    assert not compiled_kernels_pay(refine, n - 1, 2)                       # too few per worker
+    assert not compiled_kernels_pay(settings(["ingest", "smooth"]), 10 * n, 2)   # nothing compiled to use
+    monkeypatch.setenv("TRACKPROC_JIT", "0")                                 # switched off: numpy only
+    assert not compiled_kernels_pay(refine, 10 * n, 2)
