@@ -107,16 +107,15 @@ def _rhs(env, stm: bool, n_par: int):
 
 def use_compiled(model, t_end_s: float, stm: bool = False) -> bool:
     """Whether a run of ``t_end_s`` seconds goes to the compiled integrator: numba usable
-    (:func:`trackproc.dynamics.jit.enabled`), the model covered (not NRLMSIS), and the kernels
-    already loaded in this process or the numpy path's expected cost above loading them."""
-    import sys
-
+    (:func:`trackproc.dynamics.jit.enabled`), the model covered (not NRLMSIS), and the numpy
+    path's expected cost above loading the kernels. The choice depends on the call alone, never
+    on what the process ran before (the two paths agree to micrometres, not to the bit, and a
+    batch's outputs must not depend on which tasks a worker happened to run first)."""
     from trackproc.dynamics import jit
 
     if not jit.enabled():
         return False
-    loaded = "trackproc.dynamics.forces.compiled" in sys.modules
-    if not loaded and abs(t_end_s) * NUMPY_COST[bool(stm)] < JIT_LOAD_S:
+    if abs(t_end_s) * NUMPY_COST[bool(stm)] < JIT_LOAD_S:
         return False
     from trackproc.dynamics.forces import compiled
 
