@@ -508,7 +508,7 @@ def test_doptrack_next_day_fits_are_refused_and_never_worse():
 
     if not DOPTRACK.is_dir():
         pytest.skip(f"real data not available: {DOPTRACK}")
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     from fit_tle_doptrack import table
 
     rows = table(True)["next"]
