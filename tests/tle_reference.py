@@ -26,13 +26,22 @@ def _jd(times):
     return np.full(t.shape, 2451545.0), days.astype(float)
 
 
+#: the last c2t result: a TLE's states and each station's view are usually asked at the same times
+#: (a day of 1-s samples: 1.5 s of ERFA per call)
+_C2T_LAST: dict = {}
+
+
 def c2t(times, dut1=0.0):
     """GCRS -> ITRS matrices (N, 3, 3) and UT1 dates at UTC times (no polar motion)."""
-    u1, u2 = _jd(times)
-    tai1, tai2 = erfa.utctai(u1, u2)
-    tt1, tt2 = erfa.taitt(tai1, tai2)
-    ut1, ut2 = u1, u2 + dut1 / 86400.0
-    return erfa.c2t06a(tt1, tt2, ut1, ut2, 0.0, 0.0), ut1, ut2
+    key = (np.asarray(times, dtype="datetime64[ns]").tobytes(), float(dut1))
+    if key not in _C2T_LAST:
+        u1, u2 = _jd(times)
+        tai1, tai2 = erfa.utctai(u1, u2)
+        tt1, tt2 = erfa.taitt(tai1, tai2)
+        ut1, ut2 = u1, u2 + dut1 / 86400.0
+        _C2T_LAST.clear()
+        _C2T_LAST[key] = erfa.c2t06a(tt1, tt2, ut1, ut2, 0.0, 0.0), ut1, ut2
+    return _C2T_LAST[key]
 
 
 def sgp4_gcrf(tle_text: str, times, dut1=0.0):

@@ -619,6 +619,7 @@ def test_refine_step_writes_refined_states_and_fails_only_the_pass_it_cannot_ref
     assert [p.name for p in (out / "passes").glob("short.*")] == ["short.batch.json"]
     # the others: a refined state file and the key numbers
     truth = read_state(str(ROOT / "sample_data" / "truth.json"))
+    prior_sigma = np.array(json.loads((refine_passes / "stale.json").read_text())["sigma"][:6])   # 10 km, 5 m/s
     for name in REFINED:
         record = records[name]
         assert record["status"] == "ok", record["error"]
@@ -633,6 +634,9 @@ def test_refine_step_writes_refined_states_and_fails_only_the_pass_it_cannot_ref
         stale = doc["at_stale_epoch"]  # the refined orbit at the stale epoch holds the truth within 3 sigma
         err = np.r_[stale["position_m"], stale["velocity_m_s"]] - truth.rv
         assert np.all(np.abs(err) < 3 * np.array(stale["sigma"][:6])), name
+        # ... with a sigma the pass supports: the stale covariance is refine's a-priori, and data only add
+        # information (a posterior is never wider than its prior): each sigma at most the a-priori's
+        assert np.all(np.array(stale["sigma"][:6]) <= prior_sigma), (name, stale["sigma"][:6])
         assert record["details"]["refine"]["traverse"]["epoch"] == n["traverse_utc"]
     assert [records[n]["numbers"]["refined_pass"] for n in REFINED] == list(REFINED_PASSES)
     # an input of two passes: the one with the most samples is refined, and the summary says so

@@ -54,6 +54,13 @@ def test_doppler_pass_rms_at_noise_and_offset_drift_recovered(run_cli, write, tm
     assert p["offset_sigma_aposteriori"] == pytest.approx(p["offset_sigma"] * p["rms_over_sigma"], rel=0.01)
     table = pd.read_csv(out, comment="#")
     assert len(table) == n and np.allclose(table["residual"], table["observed"] - table["computed"])
+    # ... and the sigmas are the ones the samples support, not merely large enough to cover the error: the
+    # weighted straight-line fit's closed form, (A^T W A)^-1 with A = [1, t - t_ref], from the samples' times
+    # and sigmas (n = 650 at 0.5 Hz, 1 s apart: offset 0.039 Hz, drift 1.05e-4 Hz/s)
+    t = (pd.to_datetime(table["time"]) - pd.Timestamp(p["reference_time"])).dt.total_seconds().to_numpy()
+    a = np.c_[np.ones_like(t), t] / table["sigma"].to_numpy()[:, None]
+    closed = np.sqrt(np.diag(np.linalg.inv(a.T @ a)))
+    assert [p["offset_sigma"], p["drift_sigma"]] == pytest.approx(closed, rel=1e-9)
     png = tmp_path / "fit.png"
     _ok(run_cli(["compare", pass_file, SAMPLE / "truth.json", "--plot", png]))
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -64,8 +71,9 @@ def test_doppler_pass_rms_at_noise_and_offset_drift_recovered(run_cli, write, tm
 def test_multistation_range_biases_recovered_and_every_kind_at_noise(run_cli, tmp_path):
     # the default Earth orientation: the one sample_data was simulated with (sample_data/README.md)
     res = _ok(run_cli(["compare", SAMPLE / "multistation.parquet", SAMPLE / "truth_at_start.json", "--remove",
-                       "offset"]))
+                       "offset", "-o", tmp_path / "res.csv"]))
     doc = _summary(res.stderr)
+    table = pd.read_csv(tmp_path / "res.csv", comment="#")
     biases = {"CPH": 120.0, "ZHY": -80.0, "KIR": 45.0}
     kinds = set()
     for p in doc["passes"]:
@@ -77,6 +85,10 @@ def test_multistation_range_biases_recovered_and_every_kind_at_noise(run_cli, tm
         else:
             assert abs(p["offset"]) < 4.5 * p["offset_sigma"], p
         assert 0.5 < p["rms_over_sigma"] < 1.6, p
+        # the offset's sigma is the one the samples support: a weighted mean's, 1/sqrt(sum 1/sigma_i^2)
+        used = table[(table["pass_id"] == p["pass_id"]) & (table["kind"] == p["kind"]) & ~table["edited"]]
+        assert len(used) == p["samples"], p
+        assert p["offset_sigma"] == pytest.approx(np.sum(used["sigma"].to_numpy() ** -2.0) ** -0.5, rel=1e-9), p
     assert kinds == {"range", "range_rate", "elevation", "azimuth"}
 
 

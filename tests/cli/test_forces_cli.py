@@ -119,6 +119,9 @@ def test_estimate_full_recovers_the_simulated_truth(run_cli, write, stations_csv
     fit = json.loads(out.read_text())
     err = np.r_[np.subtract(fit["position_m"], truth["position_m"]), np.subtract(fit["velocity_m_s"], V0)]
     assert np.all(np.abs(err) < 4 * np.asarray(fit["sigma"][:6])), (err, fit["sigma"][:6])
+    # ... and tight, not only covering: 6 h of samples determine the state better than one sample does,
+    # position sigma below one range's noise (2 m), velocity sigma below one range-rate's (2 mm/s)
+    assert np.all(np.asarray(fit["sigma"][:3]) < 2.0) and np.all(np.asarray(fit["sigma"][3:6]) < 0.002), fit["sigma"]
     assert fit["constants"]["gravity_field"]["degree"] == 4
 
 

@@ -129,6 +129,10 @@ def test_a_tle_as_the_stale_state(run_cli, tmp_path):
     assert any("TLE is evaluated by SGP4" in w for w in doc["diagnostics"]["warnings"])
     i = doc["parameters"].index("doppler_offset:ISS-001")
     assert abs(doc["values"][i] + 40.0) < 3 * doc["sigma"][i]
+    # ... with a sigma the pass supports: above the closed form with the orbit known, 1/sqrt(sum 1/sigma^2) of
+    # the samples, and below one sample's noise (measured 0.064 Hz: 9x the floor, the offset trades with timing)
+    samples = pd.read_parquet(tmp_path / "p.parquet")["sigma"].to_numpy()
+    assert np.sum(samples ** -2.0) ** -0.5 <= doc["sigma"][i] < samples.min(), doc["sigma"][i]
 
 
 @pytest.mark.parametrize("args, needle", [
