@@ -21,6 +21,10 @@ Dense output (:func:`dense`): Horner's scheme per step, the samples of a step in
 (contiguous, vectorisable). Used for propagations made here (``Propagation.engine``) when
 steps are many and samples per step few; numpy's one BLAS product per step wins otherwise.
 
+One module over 400 lines, on purpose: numba's on-disk cache is keyed on the file that defines a
+kernel and does not follow the kernels it calls in other files (an edit there would leave a
+stale compiled caller), so kernels that call each other live in one file.
+
 Import this module only when :func:`trackproc.dynamics.jit.enabled` is true. The kernels are
 compiled at their first call (about 10 s of CPU for all of them, once per installation: numba
 keeps the machine code on disk) and later processes only load them (~0.03 s, after the ~0.15 s

@@ -18,8 +18,7 @@ with ``h`` the SGP4 prediction (partials by central differences, steps of 1 % of
 sigma; STRF's rffit minimises a cost like it with a downhill simplex), ``B c`` the linear nuisance terms (a
 transmitter's frequency offset and drift per pass) and the a-priori ``x_p, P`` (the initial
 TLE). The covariance of ``[x_free, c]`` is the inverse normal matrix at the solution (Tapley,
-Schutz & Born, Statistical Orbit Determination, 2004, section 4.4: least squares with a-priori
-information).
+Schutz & Born, Statistical Orbit Determination, 2004, section 4.4: least squares with a-priori).
 """
 
 from __future__ import annotations
@@ -44,8 +43,7 @@ STEP_FRACTION = 0.01
 
 @dataclass(frozen=True)
 class Epoch:
-    """What an element set carries besides the fitted vector: the catalogue number (an integer
-    for sgp4init) and the UTC epoch as a two-part Julian date."""
+    """What an element set carries besides the fitted vector: catalogue number, UTC epoch (2-part JD)."""
 
     satnum: int
     jd1: float
@@ -183,10 +181,9 @@ def jacobian(model: Callable, x, free, steps) -> np.ndarray:
 
 def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, prior_cov=None, design=None,
           steps=None, keep=None, max_iterations: int = 30, tolerance: float = 1e-2) -> Solution:
-    """Weighted least squares with a-priori information (Tapley, Schutz & Born 2004, section 4.4)
-    of the elements (``free`` mask) and linear nuisance terms
-    (``design`` columns) with an optional Gaussian a-priori on the elements (``prior_cov`` (7, 7)
-    of all elements; the rows of free ones are used). ``keep`` (bool, N) excludes edited samples.
+    """Weighted least squares with a-priori information (Tapley, Schutz & Born 2004, section 4.4) of
+    the elements (``free`` mask) and linear nuisance terms (``design`` columns), with an optional
+    Gaussian a-priori (``prior_cov`` (7, 7), rows of the free ones used). ``keep`` excludes samples.
     Converged when every update is below ``tolerance`` of its formal 1-σ. ``model(x)`` may raise
     ValueError, ArithmeticError or ProcessingError for elements SGP4 cannot use: such a trial
     step is refused."""

@@ -17,6 +17,11 @@ exactly as for scipy's steps. One difference in method: ``∂a/∂r`` of the fie
 Moon is analytic here (:func:`hessian_tables`), by central differences on the numpy path. Only
 the Harris-Priester atmosphere is compiled (NRLMSIS stays on the numpy path). Imported only when
 :func:`trackproc.dynamics.jit.enabled`.
+
+One module over 400 lines, on purpose: numba's on-disk cache is keyed on the file that defines a
+kernel and does not follow the kernels it calls in other files (an edit there would leave a
+stale compiled caller), so the kernels that call each other (field, bodies, shadow, drag, right-hand
+side, integrator) live in one file.
 """
 
 from __future__ import annotations
