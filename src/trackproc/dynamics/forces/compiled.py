@@ -292,7 +292,7 @@ def _hermite(tab, k, x, h, out):
 @njit
 def _at(t, E, M, sun, moon, axis):
     """Environment.at: integration -> ITRF matrix, Sun, Moon, the Earth's axis at ``t``."""
-    cfg, q, QQ, W, ERA = E[0], E[1], E[2], E[3], E[4]
+    cfg, QQ, W, ERA = E[0], E[2], E[3], E[4]
     grid = cfg[_GRID]
     u = (t - cfg[_T0]) / grid
     k = int(min(max(math.floor(u), 0.0), cfg[_NNODES] - 2))
