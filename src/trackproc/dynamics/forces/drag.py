@@ -79,7 +79,8 @@ def nrlmsis_density(datetime_utc, r_itrf, height_m, f107: float, f107a: float, a
     ``datetime_utc`` a UTC ``datetime64``; the geodetic (WGS-84) longitude and latitude from the ITRF
     positions ``r_itrf`` (P, 3), ``height_m`` (P,) their geodetic heights; ``f107`` the previous
     day's F10.7, ``f107a`` its 81-day mean, ``ap`` the daily Ap (pymsis's daily-Ap mode reads only
-    the first of its seven ap values). pymsis computes in float32: ~1e-7 relative.
+    the first of its seven ap values). NRLMSIS computes in single precision: the
+    density scatters by ~1e-6 relative about a smooth curve (docs/propagate.md "NRLMSIS").
     Raises ``ImportError`` with the install hint when pymsis is absent.
     """
     try:
