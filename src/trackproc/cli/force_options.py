@@ -1,7 +1,7 @@
 """The options of the full force model (``--force full``), defined once for every command
 that propagates: ``--gravity DEG[xORD]``, ``--gravity-field FILE.gfc``, ``--third-body``,
-``--srp/--no-srp``, ``--drag/--no-drag``, ``--atmosphere``, ``--relativity/--no-relativity``,
-and the spacecraft (``--mass-kg``, ``--srp-area-m2``, ``--cr``, ``--drag-area-m2``, ``--cd``,
+``--srp/--no-srp``, ``--drag/--no-drag``, ``--atmosphere`` (NRLMSIS's ``--f107``, ``--f107a``, ``--ap``),
+``--relativity/--no-relativity``, and the spacecraft (``--mass-kg``, ``--srp-area-m2``, ``--cr``, ``--drag-area-m2``, ``--cd``,
 else the state file's ``spacecraft: {...}``).
 
 A command takes them all by one decorator, :func:`force_options`, placed under
@@ -66,8 +66,18 @@ OPTIONS = {
                      Optional[float]),
     "cd": (typer.Option(None, "--cd", metavar="CD", rich_help_panel=PANEL, help="Drag coefficient (default 2.2)."),
            Optional[float]),
+    "f107": (typer.Option(None, "--f107", metavar="SFU", rich_help_panel=PANEL,
+                          help="--atmosphere nrlmsis: F10.7 solar flux of the previous day (default 150)."),
+             Optional[float]),
+    "f107a": (typer.Option(None, "--f107a", metavar="SFU", rich_help_panel=PANEL,
+                           help="--atmosphere nrlmsis: 81-day mean F10.7 (default 150)."),
+              Optional[float]),
+    "ap": (typer.Option(None, "--ap", metavar="AP", rich_help_panel=PANEL,
+                        help="--atmosphere nrlmsis: daily geomagnetic Ap (default 4)."),
+           Optional[float]),
 }
 _SPACECRAFT_KEYS = ("mass_kg", "srp_area_m2", "cr", "drag_area_m2", "cd")
+_SPACE_WEATHER_KEYS = ("f107", "f107a", "ap")   # NRLMSIS's fixed space weather (ForceModel fields)
 
 
 @dataclass
@@ -86,6 +96,9 @@ class ForceSettings:
     cr: Optional[float] = None
     drag_area_m2: Optional[float] = None
     cd: Optional[float] = None
+    f107: Optional[float] = None
+    f107a: Optional[float] = None
+    ap: Optional[float] = None
 
     def given(self) -> list[str]:
         """Flags given that only ``--force full`` uses."""
@@ -159,6 +172,18 @@ class ForceSettings:
             raise typer.BadParameter("drag needs the spacecraft mass and drag area (--mass-kg, --drag-area-m2, or "
                                      "spacecraft: in the state file)", param_hint="--drag")
         atmosphere = getattr(self.atmosphere, "value", self.atmosphere)
+        weather = {}
+        for key in _SPACE_WEATHER_KEYS:
+            value = getattr(self, key)
+            if value is None:
+                continue
+            flag = "--" + key.replace("_", "-")
+            if not (drag and atmosphere == "nrlmsis"):
+                raise typer.BadParameter("only with --drag --atmosphere nrlmsis", param_hint=flag)
+            if not (0 <= value < float("inf")) or (key != "ap" and value == 0):
+                raise typer.BadParameter(f"expected a {'non-negative' if key == 'ap' else 'positive'} number, "
+                                         f"got {value}", param_hint=flag)
+            weather[key] = float(value)
         if drag and atmosphere == "nrlmsis":
             import importlib.util
 
@@ -169,7 +194,7 @@ class ForceSettings:
         try:
             return ForceModel(field=field, third_bodies=bodies, srp=srp, drag=drag, relativity=self.relativity,
                               spacecraft=spacecraft, atmosphere=atmosphere, estimated=tuple(estimated), eop=eop,
-                              **empirical_from_state(state))
+                              **weather, **empirical_from_state(state))
         except ValueError as exc:
             raise InputError(str(exc), column="--force") from None
 

@@ -8,15 +8,16 @@ same 30° bulge lag as Orekit's ``HarrisPriester``): between tabulated heights `
 minimum (antapex) and maximum (apex) densities are interpolated exponentially, and
 ``ρ = ρ_min + (ρ_max - ρ_min) cos^n(ψ/2)`` with ψ the angle between the satellite and the
 apex of the diurnal bulge (the Sun direction turned 30° east about the Earth's axis); zero
-above 1000 km, and the density at 100 km held below it. NRLMSIS 2.0 through ``pymsis`` when
-installed (F10.7 and Ap given).
+above 1000 km, and the density at 100 km held below it. NRLMSIS 2.1 (Emmert et al. 2022, the
+current release of the NRLMSIS 2.0 line of Emmert et al. 2021) through ``pymsis`` when installed,
+with fixed F10.7, 81-day F10.7 and daily Ap (no space-weather file).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["harris_priester", "acceleration", "HP_TABLE"]
+__all__ = ["harris_priester", "acceleration", "nrlmsis_density", "HP_TABLE", "NRLMSIS_VERSION"]
 
 #: Height (km), minimum and maximum density (g/km³ = 1e-12 kg/m³): M&G 2000 Table 3.8.
 HP_TABLE = np.array([
@@ -68,10 +69,18 @@ def acceleration(v_rel, rho, cd: float, area_over_mass: float) -> np.ndarray:
     return -0.5 * np.asarray(rho)[:, None] * cd * area_over_mass * vn * v_rel
 
 
-def nrlmsis_density(datetime_utc, r_itrf, height_m, f107: float, f107a: float, ap: float) -> np.ndarray:
-    """Total mass density (kg/m³) of NRLMSIS 2.0 through ``pymsis`` (optional dependency).
+#: The NRLMSIS release asked of pymsis: named, not pymsis's default (which changed 2.0 -> 2.1 once).
+NRLMSIS_VERSION = "2.1"
 
-    ``datetime_utc`` a ``datetime64``; the geodetic latitude/longitude from ``r_itrf``.
+
+def nrlmsis_density(datetime_utc, r_itrf, height_m, f107: float, f107a: float, ap: float) -> np.ndarray:
+    """Total mass density (kg/m³) of NRLMSIS 2.1 through ``pymsis`` (optional dependency), (P,).
+
+    ``datetime_utc`` a UTC ``datetime64``; the geodetic (WGS-84) longitude and latitude from the ITRF
+    positions ``r_itrf`` (P, 3), ``height_m`` (P,) their geodetic heights; ``f107`` the previous
+    day's F10.7, ``f107a`` its 81-day mean, ``ap`` the daily Ap (pymsis's daily-Ap mode reads only
+    the first of its seven ap values). NRLMSIS computes in single precision: the
+    density scatters by ~1e-6 relative about a smooth curve (docs/propagate.md "NRLMSIS").
     Raises ``ImportError`` with the install hint when pymsis is absent.
     """
     try:
@@ -81,7 +90,9 @@ def nrlmsis_density(datetime_utc, r_itrf, height_m, f107: float, f107a: float, a
     from trackproc.dynamics.geodesy import itrf_to_geodetic
 
     lat, lon, _ = itrf_to_geodetic(np.atleast_2d(r_itrf))
-    out = pymsis.calculate(np.full(lat.shape, np.datetime64(datetime_utc, "ns")), np.degrees(lon), np.degrees(lat),
-                           np.asarray(height_m) / 1e3, f107s=[f107] * lat.size, f107as=[f107a] * lat.size,
-                           aps=[[ap] * 7] * lat.size)
-    return np.asarray(out)[..., 0].reshape(lat.shape)
+    n = lat.size
+    # equal lengths: pymsis's fly-through mode (one output row per point, no grid)
+    out = pymsis.calculate(np.full(n, np.datetime64(datetime_utc, "ns")), np.degrees(lon), np.degrees(lat),
+                           np.broadcast_to(np.asarray(height_m, float) / 1e3, (n,)), f107s=np.full(n, float(f107)),
+                           f107as=np.full(n, float(f107a)), aps=np.full((n, 7), float(ap)), version=NRLMSIS_VERSION)
+    return np.asarray(out[..., 0], float).reshape(n)

@@ -191,7 +191,8 @@ class ForceModel:
             if self.atmosphere == "harris-priester":
                 out["drag"]["cosine_exponent"] = self.hp_exponent
             else:
-                out["drag"].update(f107=self.f107, f107a=self.f107a, ap=self.ap)
+                out["drag"].update(model=f"NRLMSIS {drag_mod.NRLMSIS_VERSION} (pymsis)", f107=self.f107,
+                                    f107a=self.f107a, ap=self.ap)
         if self.srp or self.drag:
             out["spacecraft"] = self.spacecraft.as_dict()
         if any(self.empirical_rtn) or any(p in ("empirical_r", "empirical_t", "empirical_n") for p in self.estimated):
