@@ -40,9 +40,9 @@ compiled whole, for a single trajectory. ``engine="auto"`` (default) takes it wh
 importable, ``TRACKPROC_JIT`` is not ``0`` and the arc is long enough to repay loading numba and
 the cached kernels in a fresh process (:data:`COMPILED_MIN_STEPS`, predicted from the first
 step; :data:`COMPILE_MIN_STEPS` while the kernels were never compiled); ``TRACKPROC_JIT=1``
-takes it for every single-trajectory propagation. The choice depends
-only on the call's arguments and the environment, so a run is reproducible; the two engines
-agree to rounding.
+takes it for every single-trajectory propagation. The choice depends on the call's arguments,
+the environment and (for arcs between the two thresholds) whether this installation has compiled
+the kernels, never on what the process ran before; the two engines agree to rounding (~1e-13).
 
 Dense output: every step keeps its position spectrum; the state at any set of times is the
 inverse transform (one matrix product per step: powers of the offsets x coefficients),
