@@ -427,6 +427,7 @@ def test_bad_input_exit_2(run_cli, write, tmp_path):
                          ([sample / "multistation.parquet", "--initial", "metadata"], "TLE"),
                          ([sample / "multistation.parquet", "--initial", write("bad.tle", "1 2 3\n")], "bad.tle"),
                          ([sample / "multistation.parquet", "--initial", tle, "--epoch", "yesterday"], "--epoch"),
+                         ([sample / "multistation.parquet", "--initial", tle, "--horizon", "inf"], "--horizon"),
                          ([sample / "multistation.parquet", "--initial", tle], "does not exist")):
         res = run_cli(["fit-tle", *args, "-o", tmp_path / "no" / "x.tle" if needle == "does not exist" else out])
         assert res.exit_code == 2 and needle in res.stderr and "Traceback" not in res.stderr, (args, res.stderr)

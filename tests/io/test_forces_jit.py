@@ -109,6 +109,17 @@ def test_switch_and_fallbacks(monkeypatch):
     assert integrator.use_compiled(model, 86400.0, True)
     msis = _model(field=load_field(degree=8, date=EPOCH), drag=True, spacecraft=SC, atmosphere="nrlmsis")
     assert not integrator.use_compiled(msis, 86400.0, True)
+    monkeypatch.setenv("TRACKPROC_JIT", "")          # automatic: a short run stays on numpy, =1 forces
+    assert not integrator.use_compiled(model, 60.0, False) and integrator.use_compiled(model, 86400.0, False)
+    monkeypatch.setenv("TRACKPROC_JIT", " 1 ")
+    assert integrator.use_compiled(model, 60.0, False)
+    # numba importable but the kernels not loadable (e.g. no writable cache): the numpy path, no traceback
+    import sys
+
+    import trackproc.dynamics.forces as forces_package
+    monkeypatch.setitem(sys.modules, "trackproc.dynamics.forces.compiled", None)
+    monkeypatch.delattr(forces_package, "compiled", raising=False)
+    assert not integrator.use_compiled(model, 86400.0, True)
 
 
 def test_step_limit_and_backward_runs_like_the_numpy_path():

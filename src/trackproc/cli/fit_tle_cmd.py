@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import math
 from typing import List, Optional
 
 import typer
@@ -121,8 +122,8 @@ def fit_tle_command(
                                  param_hint="--doppler-bias")
     if apriori_model not in ("tle", "refine"):
         raise typer.BadParameter(f"{apriori_model!r} is not one of tle, refine", param_hint="--apriori-model")
-    if not horizon > 0:
-        raise typer.BadParameter(f"{horizon:g} is not a positive number of days", param_hint="--horizon")
+    if not (horizon > 0 and math.isfinite(horizon)):
+        raise typer.BadParameter(f"{horizon:g} is not a positive, finite number of days", param_hint="--horizon")
     if not passes and not ephemeris:
         raise typer.BadParameter("give pass files and/or --ephemeris files to fit", param_hint="PASS")
     stdin_users = [p for p in passes + list(ephemeris) if is_stdio(p)] + ([initial] if is_stdio(initial) else [])

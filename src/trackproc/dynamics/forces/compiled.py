@@ -792,12 +792,14 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
                         hi = mid
                     else:
                         lo = mid
-                t_seg = hi + _EVENT_PAST_S * direction
-                if direction * (t_seg - t_end) > 0:
-                    t_seg = t_end
-                resume_h = abs(h)
-                h_abs = abs(t_seg - t)
-                continue
+                t_next = hi + _EVENT_PAST_S * direction
+                if direction * (t_next - t_end) > 0:
+                    t_next = t_end
+                if direction * (t_next - t_new) < 0:     # else a redo would repeat this step
+                    t_seg = t_next
+                    resume_h = abs(h)
+                    h_abs = abs(t_seg - t)
+                    continue
             s1, s2 = n1, n2
         t_olds[steps] = t
         y_olds[steps] = y

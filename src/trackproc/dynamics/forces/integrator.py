@@ -115,11 +115,25 @@ def use_compiled(model, t_end_s: float, stm: bool = False) -> bool:
 
     if not jit.enabled():
         return False
-    if abs(t_end_s) * NUMPY_COST[bool(stm)] < JIT_LOAD_S:
+    if not jit.forced() and abs(t_end_s) * NUMPY_COST[bool(stm)] < JIT_LOAD_S:
         return False
-    from trackproc.dynamics.forces import compiled
-
+    try:
+        from trackproc.dynamics.forces import compiled
+    except Exception as exc:                  # noqa: BLE001 - e.g. no writable numba cache: numpy
+        _warn_once(f"compiled force model unavailable ({type(exc).__name__}: {exc}); using the numpy path")
+        return False
     return compiled.supported(model)
+
+
+_WARNED: set = set()
+
+
+def _warn_once(message: str) -> None:
+    if message not in _WARNED:
+        _WARNED.add(message)
+        import logging
+
+        logging.getLogger(__name__).warning(message)
 
 
 def _run_compiled(env, y0, t_end_s, rt, at, max_step, max_steps, stm, est):
@@ -210,13 +224,16 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
         if signs is not None:
             new = env.shadow_signs(solver.t, solver.y)
             if new != signs and solver.t != t_seg:
-                # a shadow boundary inside the step: redo it to just past the boundary
+                # a shadow boundary inside the step: redo it to just past the boundary (unless
+                # that point is not before the step's end: a redo would repeat the same step)
                 t_star = _boundary(env, dense, t_old, solver.t, signs)
-                t_seg = t_star + EVENT_PAST_S * np.sign(h)
-                t_seg = min(t_seg, t_end) if h > 0 else max(t_seg, t_end)
-                resume_h = abs(h)
-                solver = solver_from(t_old, solver.y_old, t_seg, abs(t_seg - t_old))
-                continue
+                t_next = t_star + EVENT_PAST_S * np.sign(h)
+                t_next = min(t_next, t_end) if h > 0 else max(t_next, t_end)
+                if (t_next - solver.t) * np.sign(h) < 0:
+                    t_seg = t_next
+                    resume_h = abs(h)
+                    solver = solver_from(t_old, solver.y_old, t_seg, abs(t_seg - t_old))
+                    continue
             signs = new
         vals = dense(t_old + h * _NODES)                            # (n, 8); 3 extra evaluations
         c = (_VINV @ vals.T).T / h ** np.arange(_DEGREE + 1)        # (n, 8), seconds
