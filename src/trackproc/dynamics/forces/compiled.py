@@ -181,12 +181,10 @@ def environment_tables(env, estimated=()):
 
 # -- forces ----------------------------------------------------------------------------------
 @njit
-def _field_acc(r, F, central, out):
-    """Field acceleration at ITRF ``r`` (3,) into ``out`` (normalised Cunningham recursion,
-    Montenbruck & Gill 2000 eqs. 3.27-3.33, as GravityField.acceleration)."""
-    a, b, fprod, p1, p2, p3, nn, mm, dims, consts = F
-    nmax, mmax = dims[0], dims[1]
-    gm, R = consts[0], consts[1]
+def _solid_harmonics(r, a, b, fprod, nmax, mmax, R):
+    """The normalised solid harmonics ``Z[n, m]`` (n <= nmax, m <= mmax) at ITRF ``r`` by the
+    Cunningham recursion (Montenbruck & Gill 2000 eqs. 3.29-3.30, normalised as
+    GravityField.acceleration); shared by the acceleration and its gradient."""
     x, y, z = r[0], r[1], r[2]
     r2 = x * x + y * y + z * z
     x0, y0, z0 = x * (R / r2), y * (R / r2), z * (R / r2)
@@ -199,13 +197,21 @@ def _field_acc(r, F, central, out):
         Z[m, m] = fprod[m] * p * ron
         p = p * w
     for n in range(1, nmax + 1):
-        k = min(n, mmax + 1)
-        if n >= 2:
-            for m in range(k):
-                Z[n, m] = a[n, m] * z0 * Z[n - 1, m] - b[n, m] * rho * Z[n - 2, m]
-        else:
-            for m in range(k):
-                Z[n, m] = a[n, m] * z0 * Z[n - 1, m]
+        for m in range(min(n, mmax + 1)):
+            zn = a[n, m] * z0 * Z[n - 1, m]
+            if n >= 2:
+                zn = zn - b[n, m] * rho * Z[n - 2, m]
+            Z[n, m] = zn
+    return Z
+
+
+@njit
+def _field_acc(r, F, central, out):
+    """Field acceleration at ITRF ``r`` (3,) into ``out`` (normalised Cunningham recursion,
+    Montenbruck & Gill 2000 eqs. 3.27-3.33, as GravityField.acceleration)."""
+    a, b, fprod, p1, p2, p3, nn, mm, dims, consts = F
+    gm, R = consts[0], consts[1]
+    Z = _solid_harmonics(r, a, b, fprod, dims[0], dims[1], R)
     s1 = 0.0j
     s2 = 0.0j
     s3 = 0.0
@@ -241,23 +247,7 @@ def _field_hessian(r, HT, out):
     H, a, b, fprod, dims, consts = HT
     nmax, mmax = dims[0], dims[1]
     gm, R = consts[0], consts[1]
-    x, y, z = r[0], r[1], r[2]
-    r2 = x * x + y * y + z * z
-    x0, y0, z0 = x * (R / r2), y * (R / r2), z * (R / r2)
-    rho = R * R / r2
-    Z = np.zeros((nmax + 1, nmax + 1), np.complex128)
-    w = complex(x0, y0)
-    p = 1.0 + 0.0j
-    ron = R / math.sqrt(r2)
-    for m in range(mmax + 1):
-        Z[m, m] = fprod[m] * p * ron
-        p = p * w
-    for n in range(1, nmax + 1):
-        for m in range(min(n, mmax + 1)):
-            zn = a[n, m] * z0 * Z[n - 1, m]
-            if n >= 2:
-                zn = zn - b[n, m] * rho * Z[n - 2, m]
-            Z[n, m] = zn
+    Z = _solid_harmonics(r, a, b, fprod, nmax, mmax, R)
     g = gm / (R * R * R)
     v = np.zeros(6)
     for k in range(6):
