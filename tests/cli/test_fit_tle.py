@@ -32,6 +32,25 @@ from trackproc.methods import tle_fit as tf
 SGP4_VER = Path(__import__("sgp4").__file__).parent / "SGP4-VER.TLE"
 
 
+def _simulated_day(tmp_path, tle: str, *args: str):
+    """A day of passes of ``tle`` over one station (ZHY) from 2019-12-09T16:40Z, simulated by
+    ``trackproc simulate`` in this process (UT1 = UTC); ``args``: its --step, --kinds, sigma and
+    --seed options. Returns the pass table."""
+    from trackproc.cli import app as cli_app
+    from trackproc.io.passfile import read_pass_table
+    from typer.testing import CliRunner
+
+    cli_app._register()
+    (tmp_path / "sim.tle").write_text(tle)
+    (tmp_path / "st.csv").write_text("station,lat_deg,lon_deg,height_m\nZHY,50.25,28.66,230\n")
+    out = tmp_path / "p.parquet"
+    with CliRunner().isolation():
+        assert cli_app.main(["simulate", "--tle", str(tmp_path / "sim.tle"), "--stations", str(tmp_path / "st.csv"),
+                             "--start", "2019-12-09T16:40:00Z", "--duration", "86400", *args,
+                             "--dut1", "0", "-o", str(out)]) == 0
+    return read_pass_table(str(out))
+
+
 def _elements(sat, epoch) -> MeanElements:
     c = tf.classical(tf.elements_of(sat))
     return MeanElements(epoch, c["inclination_deg"], c["raan_deg"], c["eccentricity"], c["arg_perigee_deg"],
@@ -143,25 +162,14 @@ def test_covariance_covers_the_element_error_monte_carlo(tmp_path, apriori_model
     a-priori sigmas (else the test is empty)."""
     from scipy.stats import chi2
 
-    from trackproc.cli import app as cli_app
     from trackproc.dynamics import timescales as ts
-    from trackproc.io.passfile import read_pass_table
     from trackproc.pipeline.compare import CompareOptions, compare
     from trackproc.pipeline.fit_tle import FitTleOptions, fit_tle
     from trackproc.pipeline.orbit_source import OrbitInput
-    from typer.testing import CliRunner
 
-    cli_app._register()
-    (tmp_path / "iss.tle").write_text(ISS)
-    (tmp_path / "st.csv").write_text("station,lat_deg,lon_deg,height_m\nZHY,50.25,28.66,230\n")
-    out = tmp_path / "p.parquet"
-    with CliRunner().isolation():
-        assert cli_app.main(["simulate", "--tle", str(tmp_path / "iss.tle"), "--stations", str(tmp_path / "st.csv"),
-                             "--start", "2019-12-09T16:40:00Z", "--duration", "86400", "--step", "4", "--kinds",
-                             "doppler", "--carrier-hz", "145.8e6", "--sigma-doppler-hz", "1.0", "--seed", "3",
-                             "--dut1", "0", "-o", str(out)]) == 0
+    table = _simulated_day(tmp_path, ISS, "--step", "4",
+                           "--kinds", "doppler", "--carrier-hz", "145.8e6", "--sigma-doppler-hz", "1.0", "--seed", "3")
     eop = ts.EarthOrientation.constant(0.0)
-    table = read_pass_table(str(out))
     truth = parse_tle(ISS)
     exact, _ = compare(table, OrbitInput(tle=truth), CompareOptions(remove="none"), eop)
     x_true = tf.elements_of(satrec(truth))
@@ -221,25 +229,14 @@ def test_covariance_covers_sgp4_theory_error_monte_carlo(tmp_path):
     χ²(7): mean within [3.5, 10.5]; in the covariance without the theory error they are not (mean
     above 20: the old covariance fails this test); the prediction of a further pass with its own
     ``η`` in the written covariance is χ²(6) (B* has no theory error): mean within [3, 9]."""
-    from trackproc.cli import app as cli_app
     from trackproc.dynamics import timescales as ts
-    from trackproc.io.passfile import read_pass_table
     from trackproc.pipeline.compare import CompareOptions, compare
     from trackproc.pipeline.fit_tle import FitTleOptions, fit_tle
     from trackproc.pipeline.orbit_source import OrbitInput
-    from typer.testing import CliRunner
 
-    cli_app._register()
-    (tmp_path / "iss.tle").write_text(ISS)
-    (tmp_path / "st.csv").write_text("station,lat_deg,lon_deg,height_m\nZHY,50.25,28.66,230\n")
-    out = tmp_path / "p.parquet"
-    with CliRunner().isolation():
-        assert cli_app.main(["simulate", "--tle", str(tmp_path / "iss.tle"), "--stations", str(tmp_path / "st.csv"),
-                             "--start", "2019-12-09T16:40:00Z", "--duration", "86400", "--step", "8", "--kinds",
-                             "doppler", "--carrier-hz", "145.8e6", "--sigma-doppler-hz", "1.0", "--seed", "3",
-                             "--dut1", "0", "-o", str(out)]) == 0
+    table = _simulated_day(tmp_path, ISS, "--step", "8",
+                           "--kinds", "doppler", "--carrier-hz", "145.8e6", "--sigma-doppler-hz", "1.0", "--seed", "3")
     eop = ts.EarthOrientation.constant(0.0)
-    table = read_pass_table(str(out))
     truth = parse_tle(ISS)
     sat = satrec(truth)
     ep = tf.Epoch(0, sat.jdsatepoch, sat.jdsatepochF)
@@ -327,29 +324,18 @@ def test_time_shift_of_a_pass_is_the_epoch_shift(tmp_path):
     TLE would differ from it by SGP4's own theory away from the new epoch) reports +0.7 s for
     every pass within 3 of its sigmas (measured 0.95 ± 0.35 on a 21-sample pass, 0.64-0.71 ±
     0.01-0.06 on the others), and the ``timing`` reason their RMS."""
-    from trackproc.cli import app as cli_app
     from trackproc.dynamics import timescales as ts
-    from trackproc.io.passfile import read_pass_table
     from trackproc.pipeline.compare import CompareOptions, compare
     from trackproc.pipeline.fit_tle import FitTleOptions, fit_tle
     from trackproc.pipeline.orbit_source import OrbitInput
-    from typer.testing import CliRunner
 
     truth = parse_tle(ISS)
     late = format_tle(_elements(satrec(truth), np.datetime64(tle_epoch(truth), "ns") + np.timedelta64(700, "ms")),
                       truth)
     assert satrec(late).jdsatepochF - satrec(truth).jdsatepochF == pytest.approx(0.7 / 86400, abs=1e-8)
-    cli_app._register()
-    (tmp_path / "late.tle").write_text(tle_text(late))
-    (tmp_path / "st.csv").write_text("station,lat_deg,lon_deg,height_m\nZHY,50.25,28.66,230\n")
-    out = tmp_path / "p.parquet"
-    with CliRunner().isolation():
-        assert cli_app.main(["simulate", "--tle", str(tmp_path / "late.tle"), "--stations", str(tmp_path / "st.csv"),
-                             "--start", "2019-12-09T16:40:00Z", "--duration", "86400", "--step", "8", "--kinds",
-                             "doppler", "--carrier-hz", "145.8e6", "--sigma-doppler-hz", "1.0", "--seed", "5",
-                             "--dut1", "0", "-o", str(out)]) == 0
-    eop = ts.EarthOrientation.constant(0.0)
-    table = read_pass_table(str(out))          # the samples' times and geometry; values: SGP4 of the late TLE
+    table = _simulated_day(tmp_path, tle_text(late), "--step", "8",
+                           "--kinds", "doppler", "--carrier-hz", "145.8e6", "--sigma-doppler-hz", "1.0", "--seed", "5")
+    eop = ts.EarthOrientation.constant(0.0)          # the samples' times and geometry; values: SGP4 of the late TLE
     exact, _ = compare(table, OrbitInput(tle=late), CompareOptions(remove="none"), eop)
     rng = np.random.default_rng(5)
     table.frame = table.frame.assign(value=exact["computed"].to_numpy() + rng.normal(0, 1.0, len(exact)))
@@ -373,25 +359,14 @@ def test_range_and_angle_passes_recover_the_elements(tmp_path):
     range and angle residuals at their noise."""
     from scipy.stats import chi2
 
-    from trackproc.cli import app as cli_app
     from trackproc.dynamics import timescales as ts
-    from trackproc.io.passfile import read_pass_table
     from trackproc.pipeline.compare import CompareOptions, compare
     from trackproc.pipeline.fit_tle import FitTleOptions, fit_tle
     from trackproc.pipeline.orbit_source import OrbitInput
-    from typer.testing import CliRunner
 
-    cli_app._register()
-    (tmp_path / "iss.tle").write_text(ISS)
-    (tmp_path / "st.csv").write_text("station,lat_deg,lon_deg,height_m\nZHY,50.25,28.66,230\n")
-    out = tmp_path / "p.parquet"
-    with CliRunner().isolation():
-        assert cli_app.main(["simulate", "--tle", str(tmp_path / "iss.tle"), "--stations", str(tmp_path / "st.csv"),
-                             "--start", "2019-12-09T16:40:00Z", "--duration", "86400", "--step", "10", "--kinds",
-                             "range,azimuth,elevation", "--sigma-range-m", "10", "--sigma-angle-deg", "0.01",
-                             "--dut1", "0", "-o", str(out)]) == 0
+    table = _simulated_day(tmp_path, ISS, "--step", "10",
+                           "--kinds", "range,azimuth,elevation", "--sigma-range-m", "10", "--sigma-angle-deg", "0.01")
     eop = ts.EarthOrientation.constant(0.0)
-    table = read_pass_table(str(out))
     truth = parse_tle(ISS)
     exact, _ = compare(table, OrbitInput(tle=truth), CompareOptions(remove="none"), eop)
     rng = np.random.default_rng(18)
