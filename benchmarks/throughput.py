@@ -19,7 +19,7 @@ shared machine, CPU time is the figure to compare):
   target >= 25x);
 * ``batch``: simulated one-second passes (``benchmarks/batch.py``), ingest -> smooth -> refine from
   ``sample_data/stale.json``: ``--serial-passes`` in this process (1 worker; CPU per pass, with the
-  numpy paths and with the compiled kernels batch chooses when numba is installed; with
+  numpy paths and with the compiled kernels batch uses when numba is installed; with
   ``TRACKPROC_JIT`` set, that setting only) and then all ``--passes`` really run with 2 worker
   processes (wall time from the start of the run to the summary, pool start-up included; the
   load average before the run is printed, the figure counts only on an idle machine; target:
@@ -225,7 +225,6 @@ def section_estimate(orekit: bool, runs=2):
 def section_batch(passes: int, serial_passes: int):
     import batch as bb
     from trackproc.pipeline.batch import run_batch
-    from trackproc.pipeline.batch.executors import JIT_MIN_TASKS_PER_WORKER
 
     logging.getLogger("trackproc").setLevel(logging.ERROR)
     print("\n== batch: ingest -> smooth -> refine, simulated 1 s passes ==")
@@ -247,8 +246,8 @@ def section_batch(passes: int, serial_passes: int):
             return bb.settings_for(d, d / out, **{**flags, "batch.workers": workers, "batch.inputs": [str(src)]})
 
         def serial(label, jit):
-            # TRACKPROC_JIT=0: the numpy paths; unset: batch's own choice (compiled kernels when
-            # numba is installed and each worker has >= JIT_MIN_TASKS_PER_WORKER passes)
+            # TRACKPROC_JIT=0: the numpy paths; unset: batch's own choice (the compiled kernels
+            # when numba is installed)
             if jit is None:
                 os.environ.pop("TRACKPROC_JIT", None)
             else:
@@ -264,7 +263,7 @@ def section_batch(passes: int, serial_passes: int):
 
         if user_jit is None:
             per_numpy = serial("numpy (TRACKPROC_JIT=0)", "0")
-            per_pass = serial("batch's choice", None) if serial_passes >= JIT_MIN_TASKS_PER_WORKER else per_numpy
+            per_pass = serial("batch's choice", None)
             note("batch, ingest -> smooth -> refine, 1 worker", f"{per_numpy:.3f} s CPU per pass (numpy), "
                  f"{per_pass:.3f} s (with the compiled kernels batch chooses)")
         else:

@@ -647,9 +647,12 @@ def test_refine_step_writes_refined_states_and_fails_only_the_pass_it_cannot_ref
     assert candidates[0]["pass_id"] == "TRN-001" and candidates[0]["samples"] > 100
     assert any(w.startswith("2 passes in the input: refined TRN/TRN-001") and "not refined: TRW/TRW-001 (40)" in w
                for w in multi["warnings"])
-    # the batch's refinement is trackproc refine's on the stored pass file, byte for byte
-    cli = run_cli(["-q", "refine", out / "passes" / "multi.parquet", "--initial", refine_passes / "stale.json",
-                   "--pass-id", "TRN-001", "--dut1", "0", "-o", tmp_path / "cli.json"])
+    # the batch's refinement is trackproc refine's on the stored pass file, byte for byte: batch
+    # runs its tasks as TRACKPROC_JIT=1 does (the compiled kernels when numba is installed)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("TRACKPROC_JIT", "1")
+        cli = run_cli(["-q", "refine", out / "passes" / "multi.parquet", "--initial", refine_passes / "stale.json",
+                       "--pass-id", "TRN-001", "--dut1", "0", "-o", tmp_path / "cli.json"])
     assert cli.exit_code == 0, cli.stderr
     assert (tmp_path / "cli.json").read_bytes() == (out / "passes" / "multi.refined.json").read_bytes()
     # summary.csv: the refine columns

@@ -67,7 +67,9 @@ def test_plain_values_equal_typers_own_coercion():
              (float, {}, ["0", "2.2e9", "-1.5", ".5", "3.", "1e-3", "7", "+.5", "-0", "007.5", "1E5", "-.0e-3"]),
              (int, {}, ["0", "-3", "42", "007", "+3", "-0"]), (Colour, {}, ["red", "dark-red", Colour.red]),
              (Optional[float], {}, ["0.25"]), (List[str], {}, [("a", "b"), ()]),
-             (float, {}, [2.5]), (int, {}, [3])]
+             (float, {}, [2.5]), (int, {}, [3]),
+             (float, {"min": 0.0}, ["0", "1", "2.5e3"]), (int, {"max": 3}, [2, "3", "-1"]),     # within their range
+             (float, {"min": 0.0, "max": 1.0}, ["0.5", "1", "0"])]
     for ann, kwargs, values in cases:
         desc = _coercion.resolve_type_descriptor(ann, OptionInfo(**kwargs))
         typer_param = _coercion.build_runtime_param(desc)
@@ -76,9 +78,10 @@ def test_plain_values_equal_typers_own_coercion():
             assert mine is not a._NOT_PLAIN, (ann, value)
             theirs = typer_param._coerce_value(value, param=None, ctx=None)
             assert type(mine) is type(theirs) and mine == theirs, (ann, value, mine, theirs)
-    # left to typer: bad values, constrained numbers, non-decimal spellings
+    # left to typer: bad values, numbers out of their range or clamped, non-decimal spellings
     for ann, kwargs, value in [(float, {}, "abc"), (float, {}, "nan"), (float, {}, "1_000"), (float, {}, "1e999"),
-                               (int, {}, "1.0"), (float, {"min": 0.0}, "1"), (int, {"max": 3}, 2),
+                               (int, {}, "1.0"), (float, {"min": 0.0}, "-1"), (int, {"max": 3}, 4),
+                               (float, {"min": 0.0, "clamp": True}, "1"), (float, {"max": 1.0}, "1.5"),
                                (Colour, {}, "RED"), (Colour, {}, "blue")]:
         desc = _coercion.resolve_type_descriptor(ann, OptionInfo(**kwargs))
         assert a._plain_value(desc, value) is a._NOT_PLAIN, (ann, kwargs, value)

@@ -79,9 +79,12 @@ def test_unset_switch_uses_the_kernel_only_once_numba_is_loaded(monkeypatch):
     assert whitening.compiled_riccati() is None
 
 
-def test_batch_loads_numba_for_long_refine_runs_only(monkeypatch, tmp_path):
+def test_batch_runs_its_refine_and_estimate_tasks_with_the_compiled_kernels(monkeypatch, tmp_path):
+    """A chain that refines or estimates runs its tasks as under TRACKPROC_JIT=1 when numba is
+    installed, whatever the number of tasks or workers; TRACKPROC_JIT=0 (the user's) wins."""
+    from trackproc.dynamics import jit, taylor
     from trackproc.pipeline.batch.config import resolve
-    from trackproc.pipeline.batch.executors import JIT_MIN_TASKS_PER_WORKER, compiled_kernels_pay
+    from trackproc.pipeline.batch.executors import compiled_kernels
 
     def settings(steps):
         return resolve(None, {"batch.inputs": [str(tmp_path)], "batch.output": str(tmp_path / "out"),
@@ -89,9 +92,13 @@ def test_batch_loads_numba_for_long_refine_runs_only(monkeypatch, tmp_path):
 
     monkeypatch.delenv("TRACKPROC_JIT", raising=False)
     refine = settings(["ingest", "smooth", "refine"])
-    n = 2 * JIT_MIN_TASKS_PER_WORKER
-    assert compiled_kernels_pay(refine, n, 2)
-    assert not compiled_kernels_pay(refine, n - 1, 2)                       # too few per worker
-    assert not compiled_kernels_pay(settings(["ingest", "smooth"]), 10 * n, 2)   # nothing compiled to use
-    monkeypatch.setenv("TRACKPROC_JIT", "0")                                 # switched off: numpy only
-    assert not compiled_kernels_pay(refine, 10 * n, 2)
+    assert compiled_kernels(refine)
+    assert not compiled_kernels(settings(["ingest", "smooth"]))          # nothing compiled to use
+    assert taylor._jit_mode() == "auto"
+    with jit.default("1"):                                                 # what run_task does for such a task
+        assert taylor._jit_mode() == "on" and whitening.compiled_riccati() is not None
+        monkeypatch.setenv("TRACKPROC_JIT", "0")                           # the user's setting wins
+        assert taylor._jit_mode() == "off" and whitening.compiled_riccati() is None
+        assert not compiled_kernels(refine)
+    monkeypatch.delenv("TRACKPROC_JIT")
+    assert taylor._jit_mode() == "auto"                                    # restored after the block

@@ -96,8 +96,8 @@ class _LightCoercion:
     --help`` and ~50 ms of every command (issue 19). Values whose conversion is unambiguous pass
     here with exactly the result typer's adapter gives (:func:`_plain_value`): None, a value
     already of the annotated type, a string for a ``str`` option, an enum member's exact value,
-    a plain decimal number for an unconstrained number option. Anything else (a bad value, a
-    number option with min/max, a custom parser, ...) goes to typer's own coercion, built on
+    a plain decimal number for a number option (within its min/max if it has them). Anything
+    else (a bad value, a number out of its range, clamping, a custom parser, ...) goes to typer's own coercion, built on
     first use, so validation and messages stay typer's.
     """
 
@@ -168,20 +168,24 @@ def _plain_leaf(ann, info, value):
                 return _NOT_PLAIN
         return _NOT_PLAIN
     if ann in (int, float):
-        if (getattr(info, "min", None) is not None or getattr(info, "max", None) is not None
-                or getattr(info, "clamp", False)):
-            return _NOT_PLAIN                # constraints: typer's adapter checks them
+        if getattr(info, "clamp", False):
+            return _NOT_PLAIN                # clamping: typer's adapter does it
         if type(value) is ann:
-            return value
-        if not isinstance(value, str):
+            number = value
+        elif not isinstance(value, str):
             return _NOT_PLAIN
-        if ann is int:
-            return int(value) if _INTEGER.fullmatch(value) else _NOT_PLAIN
-        if _DECIMAL.fullmatch(value):
+        elif ann is int:
+            if not _INTEGER.fullmatch(value):
+                return _NOT_PLAIN
+            number = int(value)
+        elif _DECIMAL.fullmatch(value) and float(value) - float(value) == 0.0:     # finite
             number = float(value)
-            if number - number == 0.0:       # finite
-                return number
-        return _NOT_PLAIN
+        else:
+            return _NOT_PLAIN
+        lo, hi = getattr(info, "min", None), getattr(info, "max", None)
+        if (lo is not None and not number >= lo) or (hi is not None and not number <= hi):
+            return _NOT_PLAIN                # out of range: typer's adapter says so, in its words
+        return number
     return _NOT_PLAIN
 
 

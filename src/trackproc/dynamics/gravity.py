@@ -11,9 +11,20 @@ from __future__ import annotations
 
 import numpy as np
 
+from trackproc.constants import J2 as J2_EARTH
 from trackproc.constants import MU_EARTH, RE_EARTH
 
-__all__ = ["acceleration", "jerk"]
+__all__ = ["acceleration", "force_parameters", "jerk"]
+
+
+def force_parameters(force: str) -> tuple[float, float, float]:
+    """``(mu, j2, re)`` of a force model name: ``"two-body"`` or ``"j2"`` (constants module)."""
+    key = str(getattr(force, "value", force)).strip().lower()
+    if key in ("two-body", "twobody", "2body", "keplerian"):
+        return MU_EARTH, 0.0, RE_EARTH
+    if key in ("j2", "two-body+j2"):
+        return MU_EARTH, J2_EARTH, RE_EARTH
+    raise ValueError(f"unknown force model {force!r}; expected two-body or j2")
 
 
 def acceleration(r, mu: float = MU_EARTH, j2: float = 0.0, re: float = RE_EARTH) -> np.ndarray:

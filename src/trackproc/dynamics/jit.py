@@ -6,10 +6,14 @@ pure-numpy path beside it. ``TRACKPROC_JIT=0`` forces the numpy paths.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
+import threading
 
-__all__ = ["enabled", "forced", "mode", "njit"]
+__all__ = ["default", "enabled", "forced", "mode", "njit"]
+
+_LOCAL = threading.local()
 
 
 @functools.lru_cache(maxsize=1)
@@ -23,8 +27,21 @@ def _numba_importable() -> bool:
 
 def mode() -> str:
     """``TRACKPROC_JIT`` read at each call: ``"0"`` (numpy paths only), ``"1"`` (every compiled
-    path, whatever the size of the work) or ``""`` (automatic)."""
-    return os.environ.get("TRACKPROC_JIT", "").strip()
+    path, whatever the size of the work) or ``""`` (automatic); when it is unset or empty, the
+    value :func:`default` gives this thread (``trackproc batch`` runs its tasks under ``"1"``)."""
+    return os.environ.get("TRACKPROC_JIT", "").strip() or getattr(_LOCAL, "mode", "")
+
+
+@contextlib.contextmanager
+def default(value: str):
+    """Within the block, :func:`mode` in this thread is ``value`` unless ``TRACKPROC_JIT`` is set
+    (the user's setting wins, ``0`` included)."""
+    saved = getattr(_LOCAL, "mode", "")
+    _LOCAL.mode = value
+    try:
+        yield
+    finally:
+        _LOCAL.mode = saved
 
 
 def enabled() -> bool:

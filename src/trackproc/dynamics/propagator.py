@@ -42,6 +42,7 @@ import numpy as np
 
 from trackproc.dynamics import taylor, timescales as ts
 from trackproc.dynamics.frames import QuasiInertialFrame, earth_rotation
+from trackproc.dynamics.gravity import force_parameters  # noqa: F401  (re-exported: propagator.force_parameters)
 from trackproc import vocabulary
 from trackproc.errors import ProcessingError
 from trackproc.isotime import iso_utc
@@ -51,12 +52,6 @@ __all__ = ["FORCES", "Trajectory", "Steps", "propagate", "propagate_state", "for
 FORCES = vocabulary.FORCES
 #: Length of the run made when every requested time is the epoch itself (s).
 _MIN_SPAN_S = 1.0
-
-
-def force_parameters(force: str) -> tuple[float, float, float]:
-    """``(mu m^3/s^2, j2, re m)`` of ``"two-body"`` or ``"j2"`` (the constants module)."""
-    from trackproc.dynamics.reference import force_parameters as fp   # (scipy.integrate: only when asked)
-    return fp(force)
 
 
 @dataclass(frozen=True)

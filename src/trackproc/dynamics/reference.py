@@ -30,25 +30,14 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import DOP853
 
-from trackproc.constants import J2 as J2_EARTH
 from trackproc.constants import MU_EARTH, RE_EARTH
-from trackproc.dynamics.gravity import acceleration, jerk  # noqa: F401  (re-exported)
+from trackproc.dynamics.gravity import acceleration, force_parameters, jerk  # noqa: F401  (re-exported)
 
 #: Default relative tolerance of the reference integration.
 RTOL = 1e-13
 #: Default absolute tolerances: metres for position, m/s for velocity.
 ATOL_M = 1e-7
 ATOL_M_S = 1e-10
-
-
-def force_parameters(force: str) -> tuple[float, float, float]:
-    """``(mu, j2, re)`` of a force model name: ``"two-body"`` or ``"j2"`` (constants module)."""
-    key = str(getattr(force, "value", force)).strip().lower()
-    if key in ("two-body", "twobody", "2body", "keplerian"):
-        return MU_EARTH, 0.0, RE_EARTH
-    if key in ("j2", "two-body+j2"):
-        return MU_EARTH, J2_EARTH, RE_EARTH
-    raise ValueError(f"unknown force model {force!r}; expected two-body or j2")
 
 
 def _rhs(mu: float, j2: float, re: float):

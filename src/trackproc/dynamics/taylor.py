@@ -61,7 +61,6 @@ J2000); no event detection.
 from __future__ import annotations
 
 import math
-import os
 
 import numpy as np
 
@@ -89,8 +88,11 @@ COMPILE_MIN_STEPS = {False: 100_000, True: 50_000}
 
 
 def _jit_mode() -> str:
-    """``"off"`` (TRACKPROC_JIT=0), ``"on"`` (TRACKPROC_JIT=1) or ``"auto"``; read at each call."""
-    v = os.environ.get("TRACKPROC_JIT", "").strip()
+    """``"off"`` (TRACKPROC_JIT=0), ``"on"`` (TRACKPROC_JIT=1) or ``"auto"``; read at each call
+    (:func:`trackproc.dynamics.jit.mode`)."""
+    from trackproc.dynamics import jit
+
+    v = jit.mode()
     return "off" if v == "0" else "on" if v == "1" else "auto"
 
 

@@ -75,8 +75,9 @@ def load_arrow(data: bytes, source: str, container: str) -> pa.Table:
     try:
         if container == "parquet":
             import pyarrow.parquet as pq
-            check_input_rows(pq.ParquetFile(pa.BufferReader(data)).metadata.num_rows, file=source)
-            return pq.read_table(pa.BufferReader(data))
+            parquet = pq.ParquetFile(pa.BufferReader(data))
+            check_input_rows(parquet.metadata.num_rows, file=source)
+            return parquet.read()      # not pq.read_table: it imports pyarrow.dataset (~0.1 s CPU)
         if container == "arrow-file":
             return pa.ipc.open_file(pa.BufferReader(data)).read_all()
         return pa.ipc.open_stream(pa.BufferReader(data)).read_all()

@@ -304,7 +304,7 @@ def _sidecar_records(pointer: dict, source: str):
                          file=str(path), column="smoothing.records.sha256",
                          expected=f"the {name} that smooth wrote with {Path(source).name}")
     try:
-        return _check_table(pq.read_table(pa.BufferReader(data)), str(path))
+        return _check_table(pq.ParquetFile(pa.BufferReader(data)).read(), str(path))   # no pyarrow.dataset
     except (pa.ArrowException, OSError, ValueError) as exc:
         raise InputError(f"unreadable smoothing records ({exc})", file=str(path),
                          expected="the Parquet file smooth wrote") from None

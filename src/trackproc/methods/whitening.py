@@ -160,15 +160,14 @@ def compiled_riccati():
     ``TRACKPROC_JIT=0``: never; ``TRACKPROC_JIT=1``: whenever numba is importable; unset: only
     when numba is already loaded in this process (a compiled engine or ``trackproc batch`` paid
     its import, ~0.15 s; a single refine's few hundred filter runs save less than that)."""
-    import os
     import sys
 
-    mode = os.environ.get("TRACKPROC_JIT", "").strip()
+    from trackproc.dynamics import jit
+
+    mode = jit.mode()
     if mode == "0" or (mode != "1" and "numba" not in sys.modules):
         return None
     if not _RICCATI:
-        from trackproc.dynamics import jit
-
         kernel = None
         if jit.enabled():
             try:

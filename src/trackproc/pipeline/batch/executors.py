@@ -94,20 +94,17 @@ def interruptible():
             signal.signal(number, handler)
 
 
-#: Tasks per worker from which a run with refine or estimate loads numba in its processes, so
-#: that the compiled kernels that give the numpy paths' own bits are used (the noise model's
-#: Kalman gains, :func:`trackproc.methods.whitening.compiled_riccati`): ``import numba`` and the
-#: cached kernels (~0.2 s of CPU a process) are then a small part of the work they save.
-JIT_MIN_TASKS_PER_WORKER = 20
-
-
-def compiled_kernels_pay(settings: Settings, n_tasks: int, workers: int) -> bool:
-    """Whether this run's processes should load numba: not switched off (``TRACKPROC_JIT=0``),
-    numba importable, a chain that refines or estimates, and at least
-    :data:`JIT_MIN_TASKS_PER_WORKER` tasks per worker. Only kernels that reproduce the numpy
-    paths bit for bit follow this choice, so the results do not depend on it (nor on the
-    number of workers); ``TRACKPROC_JIT=1`` (the user's) turns every compiled path on."""
-    if os.environ.get("TRACKPROC_JIT", "").strip() == "0" or n_tasks < JIT_MIN_TASKS_PER_WORKER * max(workers, 1):
+def compiled_kernels(settings: Settings) -> bool:
+    """Whether this run's tasks use the compiled kernels (numba, ``trackproc[fast]``): a chain
+    that refines or estimates, numba importable, and ``TRACKPROC_JIT`` not ``0``. Its tasks then
+    run as under ``TRACKPROC_JIT=1`` (:class:`~trackproc.pipeline.batch.tasks.Task` ``jit``):
+    every single-trajectory propagation and the noise model's Kalman gains compiled, whatever the
+    task, the number of workers or their order, so a batch's outputs are those of
+    ``TRACKPROC_JIT=1 trackproc refine`` (``TRACKPROC_JIT=0 trackproc batch``: those of plain
+    ``trackproc refine``; the two agree to ~1e-13 relative, not bit for bit). ``import numba``
+    and loading the cached kernels cost ~0.2 s of CPU a process; the compiled Taylor engine
+    saves ~0.03 s a pass (measured in ``benchmarks/throughput.py``)."""
+    if os.environ.get("TRACKPROC_JIT", "").strip() == "0":
         return False
     if not {"refine", "estimate"} & set(settings.get("batch.steps")):
         return False
@@ -117,9 +114,14 @@ def compiled_kernels_pay(settings: Settings, n_tasks: int, workers: int) -> bool
 
 
 def load_numba() -> None:
-    """Import numba in this process (:func:`compiled_kernels_pay`); nothing when it cannot be."""
+    """Import numba and load (or, the first time on this installation, compile) the compiled
+    Taylor kernels in this process (:func:`compiled_kernels`); nothing when they cannot be."""
     try:
-        import numba  # noqa: F401
+        from trackproc.dynamics import taylor
+
+        module = taylor._jit_module()
+        if module is not None and not (module.ready(True) and module.ready(False)):
+            module.compile_all()
     except Exception:  # noqa: BLE001 - optional: the numpy paths serve
         pass
 
@@ -136,7 +138,7 @@ def start_worker(driver: int, jit: bool = False) -> None:
     and ends the worker when not. Workers write no files: killing one loses nothing.
     """
     single_thread_blas()
-    if jit:                                       # compiled_kernels_pay
+    if jit:                                       # compiled_kernels
         load_numba()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the driver decides
     parent = os.getppid()
@@ -168,8 +170,8 @@ def _watch_driver(driver: int, parent: int) -> None:
 
 
 class SerialExecutor:
-    """Runs each task in this process when it is submitted; ``jit``: numba loaded first
-    (:func:`compiled_kernels_pay`)."""
+    """Runs each task in this process when it is submitted; ``jit``: the compiled kernels loaded
+    first (:func:`compiled_kernels`)."""
 
     label = "this process (--workers 1)"
     slots = 1
@@ -352,6 +354,7 @@ class Executors:
     def __init__(self, settings: Settings):
         self.settings = settings
         self.executor = None
+        self.jit = compiled_kernels(settings)      # the tasks' Task.jit
 
     def get(self, n_tasks: int):
         if self.executor is None:
@@ -382,7 +385,9 @@ def make_executor(settings: Settings, n_tasks: int):
         return DaskExecutor(scheduler)
     workers = settings.get("batch.workers") or _cores()
     workers = max(1, min(workers, n_tasks))
-    jit = compiled_kernels_pay(settings, n_tasks, workers)
+    jit = compiled_kernels(settings)
+    if jit and workers > 1:
+        load_numba()        # compiled here first, if never before, so that the workers only load them
     return SerialExecutor(jit) if workers == 1 else PoolExecutor(workers, jit)
 
 

@@ -190,7 +190,7 @@ def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, p
                 if sha256(table) == info.get("sha256"):
                     return Task(kind="input", name=item.name, key=key, steps=(), options=options, files=task_files,
                                 paths=task_paths, source=item.path, data=table, reads_raw=False,
-                                side_steps=chain.side_steps, stage=stage, table_key=table_key)
+                                side_steps=chain.side_steps, stage=stage, table_key=table_key, jit=executors.jit)
         try:
             data = Path(item.path).read_bytes()
         except OSError as exc:
@@ -204,7 +204,7 @@ def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, p
         key, table_key = keys(data)  # the bytes sent are the bytes hashed
         return Task(kind="input", name=item.name, key=key, steps=chain.table_steps, options=options,
                     files=task_files, paths=task_paths, source=item.path, data=data, reads_raw=chain.reads_raw,
-                    side_steps=chain.side_steps, table_key=table_key)
+                    side_steps=chain.side_steps, table_key=table_key, jit=executors.jit)
 
     def on_result(entry, result: TaskResult):
         item = entry[0]
@@ -277,7 +277,7 @@ def _run_windows(settings, chain, records, files, paths, hashes, out, executors)
         data = [(f"{PASSES_DIR}/{r.name}.parquet", (out / PASSES_DIR / f"{r.name}.parquet").read_bytes())
                 for r in members]
         return Task(kind="window", name=name, key=key, steps=chain.window_steps, options=options, files=task_files,
-                    paths=task_paths, members=data)
+                    paths=task_paths, members=data, jit=executors.jit)
 
     def on_result(entry, result: TaskResult):
         name, key, members = entry

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 import trackproc.pipeline.batch.steps  # noqa: F401 - registers the steps (a worker unpickling run_task needs them)
+from trackproc.dynamics import jit
 from trackproc.errors import InputError, TrackprocError
 from trackproc.io.jsonutil import json_ready
 from trackproc.isotime import iso_utc
@@ -47,6 +48,9 @@ class Task:
     side_steps: tuple = ()
     stage: Optional[dict] = None
     table_key: str = ""
+    #: run under ``TRACKPROC_JIT=1`` unless the environment says otherwise
+    #: (:func:`trackproc.pipeline.batch.executors.compiled_kernels`)
+    jit: bool = False
 
 
 @dataclass
@@ -96,6 +100,11 @@ _TASK_LOG_FILTER = _TaskLogFilter()
 
 def run_task(task: Task) -> TaskResult:
     """Run one task; every exception becomes a failed :class:`TaskResult` (never raises)."""
+    with jit.default("1" if task.jit else ""):
+        return _run_task(task)
+
+
+def _run_task(task: Task) -> TaskResult:
     t0 = time.perf_counter()
     ctx = None
     logger = logging.getLogger("trackproc")

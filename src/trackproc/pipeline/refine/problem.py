@@ -255,13 +255,21 @@ class Refinement:
         out = cov.copy()
         for i in obs.unobservable:
             row = np.r_[obs.dual[i], np.zeros(n - 6)]
-            sigma_i = float(np.sqrt(row @ cov @ row))
+            gain = cov @ row
+            sigma_i = float(np.sqrt(row @ gain))
 
-            def fixed(target, row=row, sigma_i=sigma_i):
+            def fixed(target, row=row, sigma_i=sigma_i, gain=gain):
+                # the centre node is the solution itself, with the Gaussian conditional covariance
+                # (what the constrained solve returns there, without its model evaluations); the
+                # others start from the linear conditional mean, which lies on the constraint
+                if target == 0.0:
+                    return x_hat, cov - np.outer(gain, gain) / sigma_i ** 2
+
                 def constraint(x):
                     return np.array([row @ (x - x_hat) - target]), row[None, :]
 
-                k = solve_kkt(cached, x_hat, y, sigma, names=self.names, constraints=constraint,
+                start = x_hat + gain * (target / sigma_i ** 2)
+                k = solve_kkt(cached, start, y, sigma, names=self.names, constraints=constraint,
                               constraint_scale=lambda x: np.array([max(sigma_i, 1.0)]), scales=self.scales,
                               priors=priors, periodic=periodic, options=opts)
                 return k.solution.values, k.solution.covariance
