@@ -174,7 +174,8 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         # the score test of the a-priori under the fit's own error model (the theory error at each
         # pass included): methods/tle_fit.apriori_conflict_chi2; its limit the 99.9 % point of
         # chi2(free elements), conservative when the data see fewer directions
-        qm.add_apriori_check(q, conflict["chi2"], sol.n_prior, "elements",
+        qm.add_apriori_check(q, conflict["chi2"], sol.n_prior,
+                             f"elements (the data see {conflict['directions']} directions)",
                              "the data contradict the initial orbit's a-priori even with SGP4's theory error at each "
                              "pass: the covariance that leans on it does not hold")
     # what the data leave undetermined (only possible without the a-priori): sigmas beyond the
