@@ -14,12 +14,15 @@ Both against the initial TLE's SGP4 prediction; "pred" is also compared with the
 the predicted pass's own metadata (newer, when the station had updated it). RMS in Hz of the
 predicted pass's Doppler after that pass's own offset and drift (``compare``); "fitted" is
 the fit (written or refused), "written" what ``-o`` gets. Usage:
-``PYTHONPATH=src python benchmarks/fit_tle_doptrack.py [dev|holdout|both|covariance|covariance-holdout|calibrate|pairs|tle-apriori|timing|upstream-tca]``
+``PYTHONPATH=src python benchmarks/fit_tle_doptrack.py [dev|holdout|both|covariance|covariance-holdout|calibrate|pairs|pairs-holdout|verdicts|verdicts-holdout|tle-apriori|timing|upstream-tca]``
 (about a minute each; ``covariance``: :func:`covariance_rows`, the written covariance against the
 prediction errors, development evenings; ``covariance-holdout`` the same on the hold-out, run
 once at the end; ``calibrate``: :func:`calibrate`, the theory error's scale, development only,
 about two minutes; ``pairs``: :func:`pairs`, every development run of passes against every later
 pass within 30 h (68 pairs; :func:`honesty_rows` the same pairs' covariance check);
+``verdicts``: :func:`verdicts`, every run of development passes fitted: verdicts, refusals and
+the a-priori conflict test (``verdicts-holdout``, ``pairs-holdout``: the same on the hold-out, run
+once at the end);
 ``tle-apriori``: :func:`tle_apriori`, the initial TLE's a-priori by TLE differencing;
 ``timing``: :func:`timing`, the passes' apparent time shifts against fresh TLEs;
 ``upstream-tca``: :func:`upstream_tca`, the DopTrack team's own TCA against the TLE's).
@@ -123,6 +126,42 @@ def pairs(options=None, dev: bool = True, horizon_h: float = 30.0, quiet: bool =
               f"geometric mean {np.exp(np.mean(np.log(f))):.3f}, worst {f.max():.2f}; written <= initial "
               f"{(w <= 1.0).sum()} (refused {sum(r['refused'] is not None for r in sub)}), worst {w.max():.2f}",
               flush=True)
+    return rows
+
+
+def verdicts(dev: bool = True, options=None):
+    """Every run of consecutive passes of every visit (:func:`visits`) fitted with the defaults:
+    the verdicts (exit 1 exactly when ``rejected``), the refusals, and the a-priori conflict
+    test (``apriori.chi2``, under the fit's error model, against the 99.9 % point of
+    χ²(elements)) beside the a-priori's share of the least-squares cost (``least_squares_share``:
+    the check before issue 18's fix, which rejected a pass whose timing error is large against
+    the TLE's a-priori although the theory error covers it)."""
+    from trackproc.methods.quality import chi2_limit
+
+    rows = []
+    for v in visits(dev):
+        for fit in [v[i:j] for i in range(len(v)) for j in range(i + 1, len(v) + 1)]:
+            _, res = _fit(fit, options)
+            a = res.summary["apriori"]
+            limit = chi2_limit(a["elements"])
+            others = [r["code"] for r in res.quality.as_dict()["reasons"]
+                      if r["severity"] == "rejected" and r["code"] != "apriori_conflict"]
+            row = {"fit": fit, "verdict": res.quality.verdict, "refused": (res.summary["refused"] or {}).get("code"),
+                   "apriori_chi2": round(a["chi2"], 2), "directions": a["directions"],
+                   "least_squares_share": round(a["least_squares_share"], 2), "limit": round(limit, 2),
+                   "rejected_before": bool(a["least_squares_share"] > limit or others), "other_rejections": others}
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    for name, sel in (("1 pass", lambda r: len(r["fit"]) == 1), ("2+ passes", lambda r: len(r["fit"]) > 1)):
+        sub = [r for r in rows if sel(r)]
+        if not sub:
+            continue
+        count = {k: sum(r["verdict"] == k for r in sub) for k in ("ok", "suspect", "rejected")}
+        chi2 = np.array([r["apriori_chi2"] for r in sub])
+        print(f"{'development' if dev else 'HOLD-OUT'} fits of {name}: {len(sub)}; verdicts {count}; rejected before "
+              f"(least-squares a-priori share) {sum(r['rejected_before'] for r in sub)}; refused "
+              f"{sum(r['refused'] is not None for r in sub)}; a-priori chi2 {chi2.min():.3g}-{chi2.max():.3g} "
+              f"(median {np.median(chi2):.3g}, limit {sub[0]['limit']})", flush=True)
     return rows
 
 
@@ -474,6 +513,12 @@ if __name__ == "__main__":
         calibrate()
     if which == "pairs":
         pairs()
+    if which == "pairs-holdout":
+        pairs(dev=False)
+    if which == "verdicts":
+        verdicts(True)
+    if which == "verdicts-holdout":
+        verdicts(False)
     if which == "tle-apriori":
         tle_apriori()
     if which == "timing":

@@ -38,5 +38,8 @@ def summary_text(result: FitTleResult) -> str:
                      f"(initial {p['initial_position_sigma_m']:.4g} m; SGP4's theory error included)"
                      + (f"; the fit moves it {p['change_m']:.4g} m: better with probability "
                         f"{p['probability_better']:.3g}" if "probability_better" in p else ""))
+    conflict = [r for r in result.quality.as_dict()["reasons"] if r["code"] == "apriori_conflict"]
+    if conflict:                      # how close the data come to contradicting the initial orbit
+        lines.append("  " + conflict[0]["message"].split(": ")[0])
     lines.append("  " + result.quality.text())
     return "\n".join(lines) + "\n"

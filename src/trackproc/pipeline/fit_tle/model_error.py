@@ -33,20 +33,29 @@ def model_error_fit(options, sol, model, free, steps, obs, design, keep, sigma_e
     else:
         p_info = np.zeros((m, m))
     x, c_est, n_pass = sol.x.copy(), c_fit, 0
+
+    def data_terms(x):
+        """Per pass the information and gradient of its samples (nuisance profiled out), and those
+        of the other (ephemeris) rows, at ``x``."""
+        r = observed - model(x)
+        if design.shape[1]:
+            r = r - design @ np.linalg.lstsq(design * w[:, None], r * w, rcond=None)[0]
+        jac = tf.jacobian(model, x, free, steps)
+        infos = [tf.pass_information(jac[rows], w[rows], design[rows]) for rows in groups]
+        grads = [jac[rows].T @ (w[rows] ** 2 * r[rows]) for rows in groups]
+        o_info, o_grad = np.zeros((m, m)), np.zeros(m)
+        if other.size:
+            o_info = tf.pass_information(jac[other], w[other], design[other])
+            o_grad = jac[other].T @ (w[other] ** 2 * r[other])
+        return infos, grads, o_info, o_grad
+
     if scale > 0 and groups:
         n_pass = len(groups)
         for _ in range(6):
-            r = observed - model(x)
-            if design.shape[1]:
-                r = r - design @ np.linalg.lstsq(design * w[:, None], r * w, rcond=None)[0]
-            jac = tf.jacobian(model, x, free, steps)
-            infos = [tf.pass_information(jac[rows], w[rows], design[rows]) for rows in groups]
-            grads = [jac[rows].T @ (w[rows] ** 2 * r[rows]) for rows in groups]
-            o_info = p_info.copy()
-            o_grad = p_info @ ((np.asarray(prior[0], float) - x)[idx]) if prior is not None else np.zeros(m)
-            if other.size:
-                o_info = o_info + tf.pass_information(jac[other], w[other], design[other])
-                o_grad = o_grad + jac[other].T @ (w[other] ** 2 * r[other])
+            infos, grads, o_info, o_grad = data_terms(x)
+            o_info = o_info + p_info
+            if prior is not None:
+                o_grad = o_grad + p_info @ ((np.asarray(prior[0], float) - x)[idx])
             step, c_est = tf.mixed_model_step(np.zeros(m), c_fit, infos, grads, q_free, o_info, o_grad)
             for _ in range(8):              # halved while SGP4 refuses the elements (far from linear)
                 trial = x.copy()
@@ -62,6 +71,16 @@ def model_error_fit(options, sol, model, free, steps, obs, design, keep, sigma_e
             if np.max(np.abs(step) / np.sqrt(np.diag(c_est))) < 0.01:
                 break
 
+    # the a-priori conflict test under the same error model (theory error included): the data's
+    # information and gradient at the final elements (one more Jacobian), linearised to x_p
+    conflict = None
+    if prior is not None:
+        infos, grads, o_info, o_grad = data_terms(x)
+        a_data, g_data = tf.deflated_normal(infos, grads, q_free if scale > 0 else np.zeros((m, m)), o_info, o_grad)
+        score = g_data + a_data @ (x - np.asarray(prior[0], float))[idx]
+        chi2, used = tf.apriori_conflict_chi2(score, a_data, np.asarray(prior[1], float)[np.ix_(idx, idx)])
+        conflict = {"chi2": chi2, "directions": used}
+
     def full(block):
         out = np.zeros((7, 7))
         out[np.ix_(idx, idx)] = block
@@ -72,4 +91,4 @@ def model_error_fit(options, sol, model, free, steps, obs, design, keep, sigma_e
             "default: calibrated on the DopTrack Delfi-C3 development evenings (docs/fit-tle.md)",
             "passes_with_it": n_pass, "element_covariance": q,
             "estimation_covariance": full(c_est), "covariance_without_model_error": full(c_fit),
-            "prediction_covariance": full(c_est) + q, "x": x}
+            "prediction_covariance": full(c_est) + q, "x": x, "apriori_conflict": conflict}

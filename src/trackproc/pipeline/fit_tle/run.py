@@ -126,6 +126,7 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
     model_error = model_error_fit(options, sol, model, free, steps, obs, design, keep, sigma_eff, sig,
                                (x_init, prior_cov) if options.apriori else None, observed)
     x_fit = model_error.pop("x")
+    conflict = model_error.pop("apriori_conflict")
     try:
         model(x_fit)
     except (ValueError, ArithmeticError, ProcessingError):
@@ -169,10 +170,14 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
               limit=tf.TLE_APRIORI_MAX_AGE_DAYS)
     if not sol.converged:
         q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
-    if sol.n_prior:
-        qm.add_apriori_check(q, sol.chi2_prior, sol.n_prior, "elements",
-                             "the data contradict the initial orbit's a-priori, the covariance that leans on it "
-                             "does not hold")
+    if conflict is not None:
+        # the score test of the a-priori under the fit's own error model (the theory error at each
+        # pass included): methods/tle_fit.apriori_conflict_chi2; its limit the 99.9 % point of
+        # chi2(free elements), conservative when the data see fewer directions
+        qm.add_apriori_check(q, conflict["chi2"], sol.n_prior,
+                             f"elements (the data see {conflict['directions']} directions)",
+                             "the data contradict the initial orbit's a-priori even with SGP4's theory error at each "
+                             "pass: the covariance that leans on it does not hold")
     # what the data leave undetermined (only possible without the a-priori): sigmas beyond the
     # default a-priori's, i.e. less than an initial TLE already knows
     loose = {name: float(sol.sigma[k] / math.sqrt(default_cov[k, k])) for k, name in enumerate(tf.ELEMENT_NAMES)
@@ -331,7 +336,14 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         "fixed": [] if options.fit_bstar else ["bstar"],
         "apriori": {"used": bool(options.apriori), "model": "tle" if use_tle else "refine",
                     "sigma_at_initial_epoch": dict(zip(tf.ELEMENT_NAMES, prior_sig.tolist())),
-                    "chi2": sol.chi2_prior, "elements": sol.n_prior},
+                    "chi2": None if conflict is None else conflict["chi2"], "elements": sol.n_prior,
+                    "directions": None if conflict is None else conflict["directions"],
+                    "chi2_definition": "the a-priori conflict test (quality reason apriori_conflict): the data's "
+                                       "gradient at the initial elements against its covariance under the fit's "
+                                       "error model (SGP4's theory error at each pass included), "
+                                       "b^T (A + A P A)^+ b, chi2(directions) when consistent "
+                                       "(methods/tle_fit.apriori_conflict_chi2)",
+                    "least_squares_share": sol.chi2_prior},
         "chi2": {"initial": chi2_initial, "least_squares": chi2_ls, "fitted": chi2_fitted, "written": chi2_written},
         "samples": int(len(obs)), "edited": n_edited, "iterations": sol.iterations, "converged": sol.converged,
         "solver": sol.message,
