@@ -100,8 +100,8 @@ def test_the_tour_does_not_import_scipy_optimize(tmp_path):
          "--range-bias", "-o", f"{out}/solution.json"]]
     probe = ("import sys; from trackproc.cli import app as a; "
              f"codes = [a._main(c) for c in {commands!r}]; "
-             "print(*codes, 'trackproc.methods.noise' in sys.modules, *[m for m in ('scipy.optimize', 'scipy.integrate') "
-             "if m in sys.modules])")
+             "print(*codes, 'trackproc.methods.noise' in sys.modules, "
+             "*[m for m in ('scipy.optimize', 'scipy.integrate') if m in sys.modules])")
     root = __import__("pathlib").Path(__file__).resolve().parents[2]
     res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=root)
     # the refinement ran the REML noise model (methods.noise imported), without scipy.optimize
