@@ -85,3 +85,27 @@ def test_plain_values_equal_typers_own_coercion():
                                (Colour, {}, "RED"), (Colour, {}, "blue")]:
         desc = _coercion.resolve_type_descriptor(ann, OptionInfo(**kwargs))
         assert a._plain_value(desc, value) is a._NOT_PLAIN, (ann, kwargs, value)
+
+
+@pytest.mark.subprocess
+def test_the_tour_does_not_import_scipy_optimize(tmp_path):
+    """ingest -> smooth -> refine -> estimate of the README tour in one process: none of them
+    imports scipy.optimize (or scipy.integrate, which imports it): the noise model's simplex and
+    the root finders are methods/simplex.py (scipy's iterates, tests/methods/test_simplex.py)."""
+    out = str(tmp_path)
+    commands = [
+        ["ingest", "sample_data/doppler_pass.csv", "--stations", "sample_data/stations.csv", "--carrier-hz", "2.2e9",
+         "--mode", "one-way", "-o", f"{out}/pass.parquet"],
+        ["smooth", f"{out}/pass.parquet", "-o", f"{out}/smoothed.parquet"],
+        ["refine", f"{out}/smoothed.parquet", "--initial", "sample_data/stale.json", "--doppler-bias", "offset+drift",
+         "-o", f"{out}/refined.json"],
+        ["estimate", "sample_data/multistation.parquet", "--initial", f"{out}/refined.json", "--apriori-initial",
+         "--range-bias", "-o", f"{out}/solution.json"]]
+    probe = ("import sys; from trackproc.cli import app as a; "
+             f"codes = [a._main(c) for c in {commands!r}]; "
+             "print(*codes, 'trackproc.methods.noise' in sys.modules, "
+             "*[m for m in ('scipy.optimize', 'scipy.integrate') if m in sys.modules])")
+    root = __import__("pathlib").Path(__file__).resolve().parents[2]
+    res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=root)
+    # the refinement ran the REML noise model (methods.noise imported), without scipy.optimize
+    assert res.stdout.split() == ["0", "0", "0", "0", "True"], res.stdout + res.stderr[-2000:]

@@ -28,7 +28,6 @@ and 1.2e-8 m/s after one day (tests/dynamics/test_reference.py); the interpolant
 from __future__ import annotations
 
 import numpy as np
-from scipy.integrate import DOP853
 
 from trackproc.constants import MU_EARTH, RE_EARTH
 from trackproc.dynamics.gravity import acceleration, force_parameters, jerk  # noqa: F401  (re-exported)
@@ -81,6 +80,8 @@ def _integrate_to_nodes(fun, y0: np.ndarray, nodes: np.ndarray, rtol: float, ato
     start (t_k, y_k). Each node t then gets one extra DOP853 step from the last t_k before it,
     of size t - t_k (smaller than the accepted step there, so with a smaller local error).
     """
+    from scipy.integrate import DOP853   # here: propagator.force_parameters imports this module (issue 19)
+
     tableau = _dop853_tableau()
     if tableau is None:  # pragma: no cover
         return _restart_at_nodes(fun, y0, nodes, rtol, atol)
@@ -110,6 +111,8 @@ def _integrate_to_nodes(fun, y0: np.ndarray, nodes: np.ndarray, rtol: float, ato
 
 def _restart_at_nodes(fun, y0, nodes, rtol, atol):  # pragma: no cover - fallback only
     """Slow fallback: restart the solver at every node (each node the end of a step)."""
+    from scipy.integrate import DOP853
+
     out = np.empty((nodes.size, y0.size))
     t, y, h = 0.0, np.asarray(y0, float), None
     for i, t_next in enumerate(nodes):

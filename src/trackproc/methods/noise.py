@@ -252,11 +252,11 @@ class NoiseFit:
 
 
 def _optimise(fun, start, bounds):
-    from scipy.optimize import minimize
+    # scipy's Nelder-Mead written out (the same iterates) without importing scipy.optimize (issue 19)
+    from trackproc.methods.simplex import nelder_mead
 
-    best = minimize(fun, np.asarray(start, float), method="Nelder-Mead",
-                    options={"xatol": 0.05, "fatol": 0.02, "maxfev": 30 * len(start)})
-    z = np.clip(best.x, [b[0] for b in bounds], [b[1] for b in bounds])
+    x, _, _ = nelder_mead(fun, np.asarray(start, float), xatol=0.05, fatol=0.02, maxfev=30 * len(start))
+    z = np.clip(x, [b[0] for b in bounds], [b[1] for b in bounds])
     return z, -float(fun(z))
 
 

@@ -5,8 +5,8 @@ for the fit's own projection (see :mod:`trackproc.methods.smoothing`).
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import brentq
 
+from trackproc.methods.simplex import brentq
 from trackproc.methods.smoothing.fit import (MAX_RHO, NoiseModel, check_arrays, design_matrix, ou_apply, pass_domain,
                                              replace_fit)
 

@@ -10,13 +10,13 @@ import math
 from typing import Optional
 
 import numpy as np
-from scipy.optimize import brentq
 
 from trackproc.dynamics import frames, geodesy, propagator
 from trackproc.dynamics import measurement_spectra as ms
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import ProcessingError
 from trackproc.methods.refinement import range_rate_samples
+from trackproc.methods.simplex import brentq
 from trackproc.models import observation as ob
 from trackproc.pipeline.refine.problem import Refinement, link_mode
 from trackproc.types import Station
