@@ -34,7 +34,8 @@ def solve(problem: Problem, opt: EstimateOptions):
     if opt.noise != "white" or opt.oscillator_noise is not None:
         previous = None
         for _ in range(2):            # REML on the residuals, GLS, REML again on its residuals
-            cov, noise_report = pass_noise(problem, sol, opt)
+            # the weighted fit's Jacobian is the model's at its solution; a GLS solution's is whitened
+            cov, noise_report = pass_noise(problem, sol, opt, jacobian=sol.jacobian if previous is None else None)
             if cov is None and previous is None:
                 break                 # white: the weighted fit stands
             sol = problem.solve(max_iterations=opt.max_iterations, clip=opt.clip, rank_rtol=opt.rank_rtol,
@@ -338,19 +339,20 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None):
     return q
 
 
-def pass_noise(problem: Problem, sol, opt: EstimateOptions):
+def pass_noise(problem: Problem, sol, opt: EstimateOptions, jacobian=None):
     """The noise model of every pass's Doppler and range-rate samples from the residuals of
     ``sol`` (:func:`trackproc.methods.noise.fit_noise`: REML with the pass's Jacobian columns as
     fixed effects; the random walk of the transmitter frequency only for one-way passes with a
     frequency offset, i.e. an :class:`~trackproc.models.modifiers.OscillatorWander` on its
-    samples). Returns ``(PassCovariance or None when every pass is white, report)``;
-    the report lists each pass's model and effective number of samples."""
+    samples). ``jacobian``: the model's (unwhitened) Jacobian at ``sol.values`` when the caller
+    has it, else evaluated here. Returns ``(PassCovariance or None when every pass is white,
+    report)``; the report lists each pass's model and effective number of samples."""
     meas = problem.meas
     keep_all = ~np.asarray(sol.edited, bool)
     rr = np.isin(meas.kind, ["doppler", "range_rate"])
     blocks, report = [], {}
     wanders = [b for b in problem.modifiers if isinstance(b.modifier, md.OscillatorWander)]
-    _, jac_all = problem.model(np.asarray(sol.values, float))     # (a GLS solution's own rows are whitened)
+    jac_all = problem.model(np.asarray(sol.values, float))[1] if jacobian is None else jacobian
     for st, pid in sorted(set(zip(meas.station[rr], meas.pass_id[rr]))):
         rows = np.flatnonzero(rr & (meas.station == st) & (meas.pass_id == pid))
         keep = keep_all[rows]
