@@ -103,7 +103,7 @@ def compiled_kernels(settings: Settings) -> bool:
     ``TRACKPROC_JIT=1 trackproc refine`` (``TRACKPROC_JIT=0 trackproc batch``: those of plain
     ``trackproc refine``; the two agree to ~1e-13 relative, not bit for bit). ``import numba``
     and loading the cached kernels cost ~0.2 s of CPU a process; the compiled Taylor engine
-    saves ~0.03 s a pass (measured in ``benchmarks/throughput.py``)."""
+    saves ~0.03–0.04 s of CPU a pass (measured in ``benchmarks/throughput.py``)."""
     if os.environ.get("TRACKPROC_JIT", "").strip() == "0":
         return False
     if not {"refine", "estimate"} & set(settings.get("batch.steps")):
