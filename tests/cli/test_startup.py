@@ -109,3 +109,24 @@ def test_the_tour_does_not_import_scipy_optimize(tmp_path):
     res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=root)
     # the refinement ran the REML noise model (methods.noise imported), without scipy.optimize
     assert res.stdout.split() == ["0", "0", "0", "0", "True"], res.stdout + res.stderr[-2000:]
+
+
+@pytest.mark.subprocess
+def test_commands_leave_numpys_unused_modules_unloaded_and_usable(tmp_path):
+    """A command that uses scipy (estimate) does not load numpy.f2py and numpy.testing, which
+    scipy only looks at (cli/app.py ``_defer_unused_numpy_modules``: lazy modules); both still
+    work when used afterwards; ``--help`` does not even import numpy."""
+    probe = ("import sys, contextlib, io; from trackproc.cli import app as a\n"
+             "with contextlib.redirect_stdout(io.StringIO()): h = a._main(['estimate', '--help'])\n"
+             "numpy_at_help = 'numpy' in sys.modules\n"
+             "code = a._main(['-q', 'estimate', 'sample_data/multistation.parquet', '--initial', "
+             f"'sample_data/stale.json', '--apriori-initial', '--range-bias', '-o', '{tmp_path}/s.json'])\n"
+             "lazy = [type(sys.modules[m]).__name__ == '_LazyModule' for m in a._UNUSED_NUMPY_MODULES]\n"
+             "import numpy, numpy.testing; numpy.testing.assert_allclose(1.0, 1.0)\n"
+             "print('RESULT', h, numpy_at_help, code, 'scipy.linalg' in sys.modules, *lazy, "
+             "type(sys.modules['numpy.testing']).__name__)")
+    root = __import__("pathlib").Path(__file__).resolve().parents[2]
+    res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=root)
+    last = [line for line in res.stdout.splitlines() if line.startswith("RESULT")]
+    assert last and last[-1].split()[1:] == ["0", "False", "0", "True", "True", "True", "module"], \
+        res.stdout[-2000:] + res.stderr[-2000:]
