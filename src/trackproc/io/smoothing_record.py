@@ -26,7 +26,6 @@ import pyarrow.parquet as pq
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import read_input_bytes
-from trackproc.methods.smoothing import PolynomialFit
 
 __all__ = ["META_KEY", "smoothing_of", "output_of", "find_fit_record", "fit_from_record", "record_epoch",
            "fit_summary", "FitRecords", "records_table", "record_of", "split_records", "attach_records",
@@ -63,6 +62,8 @@ def fit_from_record(rec: dict):
 
     n_used = int(rec.get("n_used") or 0)
     cov = np.asarray(rec["covariance_unscaled"], float)
+    from trackproc.methods.smoothing import PolynomialFit   # (numpy.polynomial: only for a smoothed pass)
+
     return PolynomialFit(basis=str(rec["basis"]), domain_s=tuple(float(a) for a in rec["domain_s"]),
                          degree=int(rec["degree"]), coef=np.asarray(rec["coefficients"], float), cov_unscaled=cov,
                          chi2=float(rec["chi2"]), dof=int(rec["dof"]), used=np.ones(n_used, bool),

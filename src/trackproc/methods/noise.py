@@ -313,8 +313,18 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
             q = walk if given else (math.sqrt(math.exp(z[2 if has_ar else 0])) if has_walk else 0.0)
             return NoiseModel(w, a, tau, q or 0.0)
 
-        def neg(z, build=build, given=given):
-            return -reml(build(z), profile=not given)[0]
+        memo: dict = {}
+
+        def evaluate(z, build=build, given=given, memo=memo):
+            """``(ℓ_R, ŝ)`` at ``z``, each point once: the search starts at the best grid point and
+            ends by re-reading its best vertex (the same numbers, one likelihood evaluation each)."""
+            key = np.asarray(z, float).tobytes()
+            if key not in memo:
+                memo[key] = reml(build(z), profile=not given)
+            return memo[key]
+
+        def neg(z, evaluate=evaluate):
+            return -evaluate(z)[0]
 
         starts = [[]]
         bounds: list = []
@@ -342,7 +352,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
             z0 = min(starts, key=lambda z: neg(np.asarray(z)))
             z, ll = _optimise(neg, z0, bounds)
             nm = build(z)
-            s = 1.0 if given else reml(nm)[1]
+            s = 1.0 if given else evaluate(z)[1]
             nm = NoiseModel(nm.white * s, nm.ar_sigma * s, nm.ar_tau_s, nm.walk * s if not given else nm.walk)
             k = len(z) + (0 if given else 1)
         if white_floor > 0 and nm.white < white_floor:
