@@ -1,6 +1,6 @@
 """Optional numba compilation: whether compiled kernels may be used, and the decorator.
 
-numba is an optional dependency (``pip install trackproc[fast]``); every compiled kernel has a
+numba is a dependency (skipped on a Python it has no wheels for); every compiled kernel has a
 pure-numpy path beside it. ``TRACKPROC_JIT=0`` forces the numpy paths.
 """
 

@@ -274,7 +274,7 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
     mode = "off" if engine == "numpy" else "on" if engine == "compiled" else _jit_mode()
     if engine == "compiled" and (nb > 1 or not _compiled_available()):
         raise ValueError("engine='compiled' integrates one trajectory and needs numba "
-                         "(pip install trackproc[fast]) with TRACKPROC_JIT != 0")
+                         "(pip install numba) with TRACKPROC_JIT != 0")
     if mode == "on" and nb == 1 and _compiled_available():
         return _propagate_compiled(s0, t0, t1, p, mu_m3_s2, kj2, tol, stm, mu_sensitivity,
                                    max_steps, force=force, j2=j2, re_m=re_m, batch=batch)

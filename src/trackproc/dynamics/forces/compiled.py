@@ -1,4 +1,4 @@
-"""The full force model and its DOP853 integration compiled with numba (optional, ``[fast]``).
+"""The full force model and its DOP853 integration compiled with numba (a dependency; numpy path beside it).
 
 The same physics as the numpy path, term for term and in the same order of summation where it
 matters, so that the two agree to rounding: the field by the normalised Cunningham recursion of

@@ -21,7 +21,7 @@ set by the orbit alone. With radiation pressure, steps end at the shadow boundar
 and umbra entry and exit, where the force's slope jumps and an RK step loses its order): a step
 across one is redone to end :data:`EVENT_PAST_S` past it.
 
-With numba (``[fast]``) the same DOP853 and right-hand side run compiled
+With numba (a dependency) the same DOP853 and right-hand side run compiled
 (:mod:`trackproc.dynamics.forces.compiled`: no Python per step); chosen automatically for runs
 long enough to pay for loading numba (:func:`use_compiled`), ``TRACKPROC_JIT=0`` keeps scipy's.
 The right-hand sides agree to rounding; the steps differ slightly because DOP853's error

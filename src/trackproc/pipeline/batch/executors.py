@@ -95,7 +95,7 @@ def interruptible():
 
 
 def compiled_kernels(settings: Settings) -> bool:
-    """Whether this run's tasks use the compiled kernels (numba, ``trackproc[fast]``): a chain
+    """Whether this run's tasks use the compiled kernels (numba): a chain
     that refines or estimates, numba importable, and ``TRACKPROC_JIT`` not ``0``. Its tasks then
     run as under ``TRACKPROC_JIT=1`` (:class:`~trackproc.pipeline.batch.tasks.Task` ``jit``):
     every single-trajectory propagation and the noise model's Kalman gains compiled, whatever the
