@@ -20,12 +20,13 @@ shared machine, CPU time is the figure to compare):
 * ``batch``: simulated one-second passes (``benchmarks/batch.py``), ingest -> smooth -> refine from
   ``sample_data/stale.json``: ``--serial-passes`` in this process (1 worker; CPU per pass, with the
   numpy paths and with the compiled kernels batch uses when numba is installed; with
-  ``TRACKPROC_JIT`` set, that setting only) and then all ``--passes`` really run with 2 worker
+  ``TRACKPROC_JIT`` set, that setting only), then all ``--passes`` really run with 1 worker (this
+  process, warm) and with 2 worker
   processes (wall time from the start of the run to the summary, pool start-up included; the
   load average before the run is printed, the figure counts only on an idle machine; target:
   500 passes <= 30 s on an idle 2-core machine).
 
-One BLAS thread per process, as ``trackproc`` itself runs. The defaults take about three minutes.
+One BLAS thread per process, as ``trackproc`` itself runs. The defaults take about four minutes.
 """
 
 from __future__ import annotations
@@ -273,6 +274,12 @@ def section_batch(passes: int, serial_passes: int):
             return
         if user_jit is None:
             os.environ.pop("TRACKPROC_JIT", None)
+        # every pass with 1 worker (this process, already warm), then with 2 worker processes
+        t0 = time.perf_counter()
+        res = run_batch(settings(inbox, "out-1worker", 1))
+        wall1 = time.perf_counter() - t0
+        print(f"  1 worker (this process), {n} passes: wall {wall1:.1f} s, {n / wall1:.1f} passes/s (exit {res.exit_code})")
+        note(f"batch, {n} passes, 1 worker", f"{wall1:.1f} s wall")
         # the real run the issue asks for: every pass, 2 worker processes, wall time from the
         # start of the run (pool start-up: two interpreters importing numpy, scipy, pandas, and
         # loading the compiled kernels) to the summary; only meaningful on an idle machine

@@ -121,6 +121,7 @@ def load_numba() -> None:
 
         module = taylor._jit_module()
         if module is not None and not (module.ready(True) and module.ready(False)):
+            log.info("compiling the Taylor engine's kernels for this installation (once: ~10 s of CPU)")
             module.compile_all()
     except Exception:  # noqa: BLE001 - optional: the numpy paths serve
         pass
