@@ -126,7 +126,7 @@ def test_circular_tolerance_integral_cost_covariance_by_monte_carlo():
     along /= np.linalg.norm(along)
     l_c = np.linalg.cholesky(d["coefficient_covariance"])
     rng = np.random.default_rng(12)
-    z, sds = [], []
+    z, sds, z_eps, z_eps_laplace = [], [], [], []
     for big_e in rng.uniform(0.0, 2 * np.pi, 16):
         v_r = np.sqrt(mu / rn) * e * np.sin(big_e)
         v2 = mu / rn * (1.0 + e * np.cos(big_e))
@@ -136,9 +136,17 @@ def test_circular_tolerance_integral_cost_covariance_by_monte_carlo():
         sd = np.sqrt(np.diag(ref.covariance(sol, kkt)))[:6]
         z.append((sol.values[:6] - x_true[:6]) / sd)
         sds.append(sd)
+        # the soft constraint values (the report's constraints.soft): estimate against the truth's own
+        soft = np.flatnonzero(kkt.soft)
+        eps_true = rf.circular_constraints(x_true, mu)[0][soft]
+        z_eps.append((kkt.target[soft] - eps_true) / ref.soft_sigma(kkt))
+        z_eps_laplace.append((kkt.target[soft] - eps_true) / np.sqrt(np.diag(kkt.target_covariance)))
     z = np.array(z)
     ms = np.mean(z ** 2, axis=0)
     print("mean square of the normalised errors (integral)", ms.round(2))
+    ms_eps = np.mean(np.array(z_eps) ** 2, axis=0)
+    print("soft constraint values: sandwich", ms_eps.round(2), "Laplace", np.mean(np.array(z_eps_laplace) ** 2, axis=0).round(2))
+    assert np.all(ms_eps < 2.2) and np.all(ms_eps > 0.25), ms_eps
     # 16 draws: mean square of chi2(1)/16 is within [0.27, 2.2] at 99.9 % when honest
     assert np.all(ms < 2.2) and np.all(ms > 0.25), ms
     assert np.abs(z).max() < 4.5

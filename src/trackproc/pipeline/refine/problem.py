@@ -289,9 +289,19 @@ class Refinement:
         if self.options.cost != "integral":
             return sol.covariance
         d = self.integral
-        priors = list(self.priors if priors is None else priors)
         if kkt is None or kkt.soft is None:
+            priors = list(self.priors if priors is None else priors)
             return rf.sandwich_covariance(sol, d["sigma"], d["design"], d["coefficient_covariance"], priors)
+        n = len(sol.values)
+        return self.joint_covariance(sol, kkt, priors)[:n, :n]
+
+    def joint_covariance(self, sol, kkt, priors=None) -> np.ndarray:
+        """Integral cost with soft constraints (``--circular-tolerance``): the sandwich covariance of
+        the joint problem in the state and the soft constraint values ``ε`` (their a-priori one
+        more a-priori term), ``(n + s, n + s)``: the state block is :meth:`covariance`, the ``ε``
+        block what the pass and the smoothed curve's own error leave of the tolerance."""
+        d = self.integral
+        priors = list(self.priors if priors is None else priors)
         n = len(sol.values)
         cov_j, jac_j, scales_j = kkt.joint()
         soft = np.flatnonzero(kkt.soft)
@@ -299,4 +309,13 @@ class Refinement:
         joint = replace(sol, covariance_scaled=cov_j, jacobian=jac_j, scales=scales_j)
         prior_eps = Prior(n + np.arange(soft.size), np.zeros(soft.size), sigma_eps)
         return rf.sandwich_covariance(joint, d["sigma"], d["design"], d["coefficient_covariance"],
-                                      priors + [prior_eps])[:n, :n]
+                                      priors + [prior_eps])
+
+    def soft_sigma(self, kkt) -> np.ndarray:
+        """1-σ of the soft constraint values of a ``--circular-tolerance`` solution: the joint
+        sandwich's for the integral cost (as its state covariance), the Laplace covariance of the
+        soft-constrained MAP problem otherwise."""
+        if self.options.cost == "integral":
+            n = len(kkt.solution.values)
+            return np.sqrt(np.clip(np.diag(self.joint_covariance(kkt.solution, kkt)[n:, n:]), 0.0, None))
+        return np.sqrt(np.diag(kkt.target_covariance))

@@ -230,7 +230,7 @@ def constraint_report(ref: Refinement, x, cov, sigma, kkt=None, consistency: dic
             soft = np.flatnonzero(kkt.soft)
             constraints["soft"] = {"names": [rf.CONSTRAINT_NAMES[i] for i in soft],
                                    "values": kkt.target[soft].tolist(),
-                                   "sigma": np.sqrt(np.diag(kkt.target_covariance)).tolist(),
+                                   "sigma": ref.soft_sigma(kkt).tolist(),
                                    "note": "f(x) = eps with eps ~ N(0, Sigma_eps) of an orbit circular to the "
                                            "tolerance; maximum a-posteriori estimate (soft constraints)"}
         i_rka = names.index("r_ka")
