@@ -115,14 +115,22 @@ def compiled_kernels(settings: Settings) -> bool:
 
 def load_numba() -> None:
     """Import numba and load (or, the first time on this installation, compile) the compiled
-    Taylor kernels in this process (:func:`compiled_kernels`); nothing when they cannot be."""
+    Taylor kernels and the Kalman gains in this process (:func:`compiled_kernels`), so that the
+    workers only load them; nothing when they cannot be."""
     try:
-        from trackproc.dynamics import taylor
+        import numpy as np
+
+        from trackproc.dynamics import jit, taylor
+        from trackproc.methods.whitening import compiled_riccati
 
         module = taylor._jit_module()
         if module is not None and not (module.ready(True) and module.ready(False)):
             log.info("compiling the Taylor engine's kernels for this installation (once: ~10 s of CPU)")
             module.compile_all()
+        with jit.default("1"):
+            riccati = compiled_riccati()
+        if riccati is not None:
+            riccati(np.ones(1), np.ones(2), np.ones(2), 1.0, 1.0)     # compiled or loaded here, once
     except Exception:  # noqa: BLE001 - optional: the numpy paths serve
         pass
 
