@@ -598,6 +598,25 @@ def refine_config(path: Path, root: Path, output: Path, **sections) -> Path:
     return write_config(path, root, output, batch=batch, ingest=ingest, refine=refine, **sections)
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
+def test_refine_chain_on_dask_threads_gives_the_serial_bytes(refine_passes, tmp_path, run_cli):
+    """A refine chain runs its tasks with the compiled kernels (as TRACKPROC_JIT=1, a per-thread
+    default): on a Dask cluster whose workers run two tasks at a time in threads, the refined
+    states are the serial run's, byte for byte."""
+    distributed = pytest.importorskip("distributed")
+    serial, dask = tmp_path / "serial", tmp_path / "dask"
+    config = refine_config(tmp_path / "r.toml", refine_passes, tmp_path / "unused")
+    assert run_cli(["batch", config, "-o", serial, "--workers", "1"]).exit_code == 3
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=2, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        run = run_cli(["batch", config, "-o", dask, "--scheduler", cluster.scheduler_address])
+    assert run.exit_code == 3, run.stderr
+    reference = digest(serial)
+    assert sum(name.endswith(".refined.json") for name in reference) == 5
+    assert digest(dask) == reference
+
+
 def test_refine_step_writes_refined_states_and_fails_only_the_pass_it_cannot_refine(refine_passes, tmp_path,
                                                                                     run_cli):
     import numpy as np
