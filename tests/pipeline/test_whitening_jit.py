@@ -84,7 +84,7 @@ def test_batch_runs_its_refine_and_estimate_tasks_with_the_compiled_kernels(monk
     installed, whatever the number of tasks or workers; TRACKPROC_JIT=0 (the user's) wins."""
     from trackproc.dynamics import jit, taylor
     from trackproc.pipeline.batch.config import resolve
-    from trackproc.pipeline.batch.executors import compiled_kernels
+    from trackproc.pipeline.batch.kernels import compiled_kernels
 
     def settings(steps):
         return resolve(None, {"batch.inputs": [str(tmp_path)], "batch.output": str(tmp_path / "out"),

@@ -27,6 +27,7 @@ from typing import Callable, Sequence
 
 from trackproc.errors import InputError, ProcessingError
 from trackproc.pipeline.batch.config import Settings
+from trackproc.pipeline.batch.kernels import compiled_kernels, load_numba
 from trackproc.pipeline.batch.tasks import Task, TaskResult, run_task
 
 log = logging.getLogger("trackproc.batch")
@@ -92,47 +93,6 @@ def interruptible():
     finally:
         for number, handler in saved.items():
             signal.signal(number, handler)
-
-
-def compiled_kernels(settings: Settings) -> bool:
-    """Whether this run's tasks use the compiled kernels (numba): a chain
-    that refines or estimates, numba importable, and ``TRACKPROC_JIT`` not ``0``. Its tasks then
-    run as under ``TRACKPROC_JIT=1`` (:class:`~trackproc.pipeline.batch.tasks.Task` ``jit``):
-    every single-trajectory propagation and the noise model's Kalman gains compiled, whatever the
-    task, the number of workers or their order, so a batch's outputs are those of
-    ``TRACKPROC_JIT=1 trackproc refine`` (``TRACKPROC_JIT=0 trackproc batch``: those of plain
-    ``trackproc refine``; the two agree to ~1e-13 relative, not bit for bit). ``import numba``
-    and loading the cached kernels cost ~0.2 s of CPU a process; the compiled Taylor engine
-    saves ~0.03–0.04 s of CPU a pass (measured in ``benchmarks/throughput.py``)."""
-    if os.environ.get("TRACKPROC_JIT", "").strip() == "0":
-        return False
-    if not {"refine", "estimate"} & set(settings.get("batch.steps")):
-        return False
-    import importlib.util
-
-    return importlib.util.find_spec("numba") is not None
-
-
-def load_numba() -> None:
-    """Import numba and load (or, the first time on this installation, compile) the compiled
-    Taylor kernels and the Kalman gains in this process (:func:`compiled_kernels`), so that the
-    workers only load them; nothing when they cannot be."""
-    try:
-        import numpy as np
-
-        from trackproc.dynamics import jit, taylor
-        from trackproc.methods.whitening import compiled_riccati
-
-        module = taylor._jit_module()
-        if module is not None and not (module.ready(True) and module.ready(False)):
-            log.info("compiling the Taylor engine's kernels for this installation (once: ~10 s of CPU)")
-            module.compile_all()
-        with jit.default("1"):
-            riccati = compiled_riccati()
-        if riccati is not None:
-            riccati(np.ones(1), np.ones(2), np.ones(2), 1.0, 1.0)     # compiled or loaded here, once
-    except Exception:  # noqa: BLE001 - optional: the numpy paths serve
-        pass
 
 
 def start_worker(driver: int, jit: bool = False) -> None:
@@ -367,7 +327,7 @@ class Executors:
 
     def get(self, n_tasks: int):
         if self.executor is None:
-            self.executor = make_executor(self.settings, n_tasks)
+            self.executor = make_executor(self.settings, n_tasks, self.jit)
             log.info("running on %s", self.executor.label)
         return self.executor
 
@@ -385,7 +345,9 @@ class Executors:
             self.executor.abort()
 
 
-def make_executor(settings: Settings, n_tasks: int):
+def make_executor(settings: Settings, n_tasks: int, jit: bool = False):
+    """The executor of a run: a Dask client, this process or a process pool; ``jit``: the tasks
+    use the compiled kernels (:func:`compiled_kernels`), so this process and the workers load them."""
     scheduler = settings.get("batch.scheduler")
     if scheduler:
         if settings.origins.get("batch.workers") != "default":
@@ -394,7 +356,6 @@ def make_executor(settings: Settings, n_tasks: int):
         return DaskExecutor(scheduler)
     workers = settings.get("batch.workers") or _cores()
     workers = max(1, min(workers, n_tasks))
-    jit = compiled_kernels(settings)
     if jit and workers > 1:
         load_numba()        # compiled here first, if never before, so that the workers only load them
     return SerialExecutor(jit) if workers == 1 else PoolExecutor(workers, jit)

@@ -49,7 +49,7 @@ class Task:
     stage: Optional[dict] = None
     table_key: str = ""
     #: run under ``TRACKPROC_JIT=1`` unless the environment says otherwise
-    #: (:func:`trackproc.pipeline.batch.executors.compiled_kernels`)
+    #: (:func:`trackproc.pipeline.batch.kernels.compiled_kernels`)
     jit: bool = False
 
 
