@@ -36,13 +36,13 @@ def test_plain_command_runs_without_pydantic(tmp_path):
     # strings, an enum given by value, a plain float: no pydantic import, same output as typer's
     args = ["-q", "ingest", "sample_data/doppler_pass.csv", "--stations", "sample_data/stations.csv",
             "--carrier-hz", "2.2e9", "--mode", "one-way", "-o"]
-    probe = ("import sys; from trackproc.cli import app as a; {patch}"
+    probe = ("import sys; from trackproc.cli import app as a, coercion as c; {patch}"
              "code = a._main({args!r} + [sys.argv[1]]); print(code, 'pydantic' in sys.modules)")
     root = __import__("pathlib").Path(__file__).resolve().parents[2]
     fast = subprocess.run([sys.executable, "-c", probe.format(patch="", args=args), str(tmp_path / "a.parquet")],
                           capture_output=True, text=True, check=True, cwd=root)
     slow = subprocess.run([sys.executable, "-c", probe.format(
-        patch="a._plain_value = lambda d, v: a._NOT_PLAIN; a._plain_default = lambda p, v, c: False; ", args=args),
+        patch="c.plain_value = lambda d, v: c.NOT_PLAIN; c.plain_default = lambda p, v, x: False; ", args=args),
         str(tmp_path / "b.parquet")], capture_output=True, text=True, check=True, cwd=root)
     assert fast.stdout.split() == ["0", "False"], fast.stdout + fast.stderr
     assert slow.stdout.split() == ["0", "True"], slow.stdout + slow.stderr
@@ -57,7 +57,7 @@ def test_plain_values_equal_typers_own_coercion():
     from typer import _coercion
     from typer.models import OptionInfo
 
-    from trackproc.cli import app as a
+    from trackproc.cli import coercion as a
 
     class Colour(enum.Enum):
         red = "red"
@@ -74,8 +74,8 @@ def test_plain_values_equal_typers_own_coercion():
         desc = _coercion.resolve_type_descriptor(ann, OptionInfo(**kwargs))
         typer_param = _coercion.build_runtime_param(desc)
         for value in values:
-            mine = a._plain_value(desc, value)
-            assert mine is not a._NOT_PLAIN, (ann, value)
+            mine = a.plain_value(desc, value)
+            assert mine is not a.NOT_PLAIN, (ann, value)
             theirs = typer_param._coerce_value(value, param=None, ctx=None)
             assert type(mine) is type(theirs) and mine == theirs, (ann, value, mine, theirs)
     # left to typer: bad values, numbers out of their range or clamped, non-decimal spellings
@@ -84,7 +84,7 @@ def test_plain_values_equal_typers_own_coercion():
                                (float, {"min": 0.0, "clamp": True}, "1"), (float, {"max": 1.0}, "1.5"),
                                (Colour, {}, "RED"), (Colour, {}, "blue")]:
         desc = _coercion.resolve_type_descriptor(ann, OptionInfo(**kwargs))
-        assert a._plain_value(desc, value) is a._NOT_PLAIN, (ann, kwargs, value)
+        assert a.plain_value(desc, value) is a.NOT_PLAIN, (ann, kwargs, value)
 
 
 @pytest.mark.subprocess
