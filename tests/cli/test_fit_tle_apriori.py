@@ -1,6 +1,6 @@
 """``fit-tle``'s a-priori conflict check (reason ``apriori_conflict``) under the fit's own error
 model (issue 18, docs/fit-tle.md "Refusal"): the score test of the initial TLE's a-priori with
-SGP4's per-pass theory error (:func:`trackproc.methods.tle_fit.apriori_conflict_chi2`), against
+SGP4's per-pass theory error (:func:`trackproc.methods.tle_theory_error.apriori_conflict_chi2`), against
 independent references:
 
 * a simulated ISS Doppler pass (``trackproc simulate`` from the TLE) whose time tags are shifted by

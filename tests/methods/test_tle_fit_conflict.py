@@ -1,4 +1,4 @@
-"""fit-tle's a-priori conflict statistic (:func:`trackproc.methods.tle_fit.apriori_conflict_chi2`)
+"""fit-tle's a-priori conflict statistic (:func:`trackproc.methods.tle_theory_error.apriori_conflict_chi2`)
 against independent references on a linear Gaussian model with a per-pass random effect (SGP4's
 theory error) and per-pass nuisance terms (offset, drift):
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from trackproc.methods import tle_fit as tf
+from trackproc.methods import tle_theory_error as te
 
 M, SIZES = 7, (30, 45, 25)
 
@@ -40,16 +40,16 @@ def _draw(rng, p, q, passes, x_true):
 
 def _statistic(p, q, passes, data, x_p, at):
     """``apriori_conflict_chi2`` with the data's terms at the elements ``at`` (as fit-tle: the
-    nuisance profiled out per pass, :func:`tle_fit.pass_information`, :func:`tle_fit.deflated_normal`)."""
+    nuisance profiled out per pass, :func:`tle_theory_error.pass_information`, :func:`tle_theory_error.deflated_normal`)."""
     infos, grads = [], []
     for (j, b, s), z in zip(passes, data):
         w = 1.0 / s
         r = z - j @ at
         r = r - b @ np.linalg.lstsq(b * w[:, None], r * w, rcond=None)[0]
-        infos.append(tf.pass_information(j, w, b))
+        infos.append(te.pass_information(j, w, b))
         grads.append(j.T @ (w ** 2 * r))
-    a, g = tf.deflated_normal(infos, grads, q, np.zeros((M, M)), np.zeros(M))
-    return tf.apriori_conflict_chi2(g + a @ (at - x_p), a, p)
+    a, g = te.deflated_normal(infos, grads, q, np.zeros((M, M)), np.zeros(M))
+    return te.apriori_conflict_chi2(g + a @ (at - x_p), a, p)
 
 
 def _dense(p, q, passes, data):

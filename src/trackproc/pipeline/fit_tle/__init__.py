@@ -30,7 +30,7 @@ Reference behaviour: STRF's ``rffit`` (Doppler curves -> TLE), with this project
    (its covariance, ``covariance_without_model_error``, is the estimation error alone: see 7).
 6. **Verdict** (as refine/estimate, :mod:`trackproc.methods.quality`): ``rejected`` when the
    solver does not converge, the data contradict the a-priori under the fit's own error model
-   (:func:`trackproc.methods.tle_fit.apriori_conflict_chi2`, SGP4's theory error at each pass
+   (:func:`trackproc.methods.tle_theory_error.apriori_conflict_chi2`, SGP4's theory error at each pass
    included, computed after step 7; beyond the 99.9 % point of χ²(free elements)) or, without the a-priori, leave an element over 10x less determined than the default
    a-priori (``undetermined``; ``suspect`` beyond 1x),
    ``suspect`` when more than 10 % of the samples are edited or the written TLE (rounded to its

@@ -7,18 +7,19 @@ import numpy as np
 
 from trackproc.errors import ProcessingError
 from trackproc.methods import tle_fit as tf
+from trackproc.methods import tle_theory_error as te
 
 
 def model_error_fit(options, sol, model, free, steps, obs, design, keep, sigma_eff, apriori_sigmas, prior, observed):
-    """SGP4's theory error at each station pass (:func:`trackproc.methods.tle_fit.model_error_covariance`,
+    """SGP4's theory error at each station pass (:func:`trackproc.methods.tle_theory_error.model_error_covariance`,
     ``options.model_error`` a-priori sigmas), a random effect: the elements by generalised least
     squares that weigh each pass by it (Gauss-Newton steps of
-    :func:`~trackproc.methods.tle_fit.mixed_model_step` from the least-squares solution, the
+    :func:`~trackproc.methods.tle_theory_error.mixed_model_step` from the least-squares solution, the
     nuisance terms refitted at each), their estimation covariance, and the prediction covariance
     at a pass (that plus the pass's own theory error). Ephemeris rows carry none (a continuous
     arc, not passes). ``prior`` is ``(mean, covariance)`` or None."""
-    scale = tf.MODEL_ERROR_SCALE if options.model_error is None else float(options.model_error)
-    q = tf.model_error_covariance(scale, apriori_sigmas)
+    scale = te.MODEL_ERROR_SCALE if options.model_error is None else float(options.model_error)
+    q = te.model_error_covariance(scale, apriori_sigmas)
     idx = np.flatnonzero(free)
     m = idx.size
     q_free = q[np.ix_(idx, idx)]
@@ -41,11 +42,11 @@ def model_error_fit(options, sol, model, free, steps, obs, design, keep, sigma_e
         if design.shape[1]:
             r = r - design @ np.linalg.lstsq(design * w[:, None], r * w, rcond=None)[0]
         jac = tf.jacobian(model, x, free, steps)
-        infos = [tf.pass_information(jac[rows], w[rows], design[rows]) for rows in groups]
+        infos = [te.pass_information(jac[rows], w[rows], design[rows]) for rows in groups]
         grads = [jac[rows].T @ (w[rows] ** 2 * r[rows]) for rows in groups]
         o_info, o_grad = np.zeros((m, m)), np.zeros(m)
         if other.size:
-            o_info = tf.pass_information(jac[other], w[other], design[other])
+            o_info = te.pass_information(jac[other], w[other], design[other])
             o_grad = jac[other].T @ (w[other] ** 2 * r[other])
         return infos, grads, o_info, o_grad
 
@@ -56,7 +57,7 @@ def model_error_fit(options, sol, model, free, steps, obs, design, keep, sigma_e
             o_info = o_info + p_info
             if prior is not None:
                 o_grad = o_grad + p_info @ ((np.asarray(prior[0], float) - x)[idx])
-            step, c_est = tf.mixed_model_step(np.zeros(m), c_fit, infos, grads, q_free, o_info, o_grad)
+            step, c_est = te.mixed_model_step(np.zeros(m), c_fit, infos, grads, q_free, o_info, o_grad)
             for _ in range(8):              # halved while SGP4 refuses the elements (far from linear)
                 trial = x.copy()
                 trial[idx] += step
@@ -76,9 +77,9 @@ def model_error_fit(options, sol, model, free, steps, obs, design, keep, sigma_e
     conflict = None
     if prior is not None:
         infos, grads, o_info, o_grad = data_terms(x)
-        a_data, g_data = tf.deflated_normal(infos, grads, q_free if scale > 0 else np.zeros((m, m)), o_info, o_grad)
+        a_data, g_data = te.deflated_normal(infos, grads, q_free if scale > 0 else np.zeros((m, m)), o_info, o_grad)
         score = g_data + a_data @ (x - np.asarray(prior[0], float))[idx]
-        chi2, used = tf.apriori_conflict_chi2(score, a_data, np.asarray(prior[1], float)[np.ix_(idx, idx)])
+        chi2, used = te.apriori_conflict_chi2(score, a_data, np.asarray(prior[1], float)[np.ix_(idx, idx)])
         conflict = {"chi2": chi2, "directions": used}
 
     def full(block):

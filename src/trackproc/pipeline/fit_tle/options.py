@@ -42,7 +42,7 @@ class FitTleOptions:
     satnum: Optional[str] = None
     apriori: bool = True
     cross_validate: bool = False
-    #: SGP4's theory error at a pass, in a-priori sigmas; None: tle_fit.MODEL_ERROR_SCALE.
+    #: SGP4's theory error at a pass, in a-priori sigmas; None: tle_theory_error.MODEL_ERROR_SCALE.
     model_error: Optional[float] = None
     #: Keep the initial TLE when the fit cannot be shown to predict better (``refused``).
     refusal: bool = True

@@ -172,7 +172,7 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
         q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
     if conflict is not None:
         # the score test of the a-priori under the fit's own error model (the theory error at each
-        # pass included): methods/tle_fit.apriori_conflict_chi2; its limit the 99.9 % point of
+        # pass included): methods/tle_theory_error.apriori_conflict_chi2; its limit the 99.9 % point of
         # chi2(free elements), conservative when the data see fewer directions
         qm.add_apriori_check(q, conflict["chi2"], sol.n_prior,
                              f"elements (the data see {conflict['directions']} directions)",
@@ -342,7 +342,7 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
                                        "gradient at the initial elements against its covariance under the fit's "
                                        "error model (SGP4's theory error at each pass included), "
                                        "b^T (A + A P A)^+ b, chi2(directions) when consistent "
-                                       "(methods/tle_fit.apriori_conflict_chi2)",
+                                       "(methods/tle_theory_error.apriori_conflict_chi2)",
                     "least_squares_share": sol.chi2_prior},
         "chi2": {"initial": chi2_initial, "least_squares": chi2_ls, "fitted": chi2_fitted, "written": chi2_written},
         "samples": int(len(obs)), "edited": n_edited, "iterations": sol.iterations, "converged": sol.converged,
