@@ -53,6 +53,28 @@ def test_soft_constraints_match_the_closed_form_of_a_linear_problem():
     assert sol.solution.chi2 == pytest.approx(r @ r + (c2 @ x) ** 2 / s_soft ** 2, rel=1e-9)
 
 
+def eccentric_truths(ref, e: float):
+    """``truth_at(E)``: the Table 1 truth at the pass epoch (its position moved along its velocity)
+    with the velocity turned and scaled, to first order in ``e``, to an orbit of eccentricity ``e``
+    at eccentric anomaly ``E``; the state with ``r_ka`` = |r| (8 values, as ``--circular`` fits)."""
+    from test_refine import TRUTH
+
+    mu = ref.mu
+    dt = float((ref.problem.epoch - np.datetime64(TRUTH.epoch, "ns")) / np.timedelta64(1, "ns")) * 1e-9
+    r0 = TRUTH.r_m + TRUTH.v_m_s * dt
+    rn = np.linalg.norm(r0)
+    u = r0 / rn
+    along = np.cross(np.cross(u, TRUTH.v_m_s), u)
+    along /= np.linalg.norm(along)
+
+    def truth_at(big_e: float) -> np.ndarray:
+        v_r = np.sqrt(mu / rn) * e * np.sin(big_e)                 # r.v = sqrt(mu r) e sin E
+        v2 = mu / rn * (1.0 + e * np.cos(big_e))                    # |v|^2 - mu/r = (mu/r) e cos E
+        return np.r_[r0, v_r * u + np.sqrt(v2 - v_r ** 2) * along, rn]
+
+    return truth_at
+
+
 @pytest.mark.slow
 @pytest.mark.statistical
 def test_circular_tolerance_covariance_is_honest_and_not_pessimistic_by_monte_carlo():
@@ -61,28 +83,20 @@ def test_circular_tolerance_covariance_is_honest_and_not_pessimistic_by_monte_ca
     (the same position, the velocity turned and scaled to first order in e), noise and a-priori
     centre drawn from their covariances. The normalised errors have mean square within the χ²
     bounds (honest) and the sigma is not more than twice the scatter of the errors."""
-    from test_refine import EOP, STALE, TRUTH, scenario, table
+    from test_refine import EOP, STALE, scenario, table
     from trackproc.pipeline.refine import RefineOptions, prepare, state_prior_covariance
 
     e = 2.74e-5
     _, _, sim = scenario(two_way_sigma_m_s=1e-3)
     ref = prepare(table(sim), STALE, None, RefineOptions(circular=True, circular_tolerance=e, noise="white"), EOP)
-    mu = ref.mu
-    dt = float((ref.problem.epoch - np.datetime64(TRUTH.epoch, "ns")) / np.timedelta64(1, "ns")) * 1e-9
-    r0 = TRUTH.r_m + TRUTH.v_m_s * dt
-    rn = np.linalg.norm(r0)
-    u = r0 / rn
-    along = np.cross(np.cross(u, TRUTH.v_m_s), u)
-    along /= np.linalg.norm(along)
+    truth_at = eccentric_truths(ref, e)
     p0 = state_prior_covariance(ref.priors)
     l0 = np.linalg.cholesky(p0)
     sig_meas = ref.problem.meas.sigma
     rng = np.random.default_rng(11)
     z, sds = [], []
     for big_e in rng.uniform(0.0, 2 * np.pi, 24):
-        v_r = np.sqrt(mu / rn) * e * np.sin(big_e)                 # r.v = sqrt(mu r) e sin E
-        v2 = mu / rn * (1.0 + e * np.cos(big_e))                    # |v|^2 - mu/r = (mu/r) e cos E
-        x_true = np.r_[r0, v_r * u + np.sqrt(v2 - v_r ** 2) * along, rn]
+        x_true = truth_at(big_e)
         observed = ref.pointwise_model(x_true)[0] + sig_meas * rng.normal(size=sig_meas.size)
         centre = x_true[:6] + l0 @ rng.normal(size=6)
         sol, kkt = ref.solve(observed=observed, prior_centre=centre, x0=np.r_[centre, np.linalg.norm(centre[:3])])
@@ -110,27 +124,19 @@ def test_circular_tolerance_integral_cost_covariance_by_monte_carlo():
     curve at the nodes is the truth's range-rate plus the polynomial's own error (coefficients
     drawn from their covariance). Mean square of the normalised errors within the χ² bounds, and
     the sigma not above twice the scatter."""
-    from test_refine import EOP, STALE, TRUTH, scenario, table
+    from test_refine import EOP, STALE, scenario, table
     from trackproc.pipeline.refine import RefineOptions, prepare
 
     e = 2.74e-5
     _, _, sim = scenario(two_way_sigma_m_s=1e-3)
     ref = prepare(table(sim), STALE, None, RefineOptions(cost="integral", circular=True, circular_tolerance=e), EOP)
     d = ref.integral
-    mu = ref.mu
-    dt = float((ref.problem.epoch - np.datetime64(TRUTH.epoch, "ns")) / np.timedelta64(1, "ns")) * 1e-9
-    r0 = TRUTH.r_m + TRUTH.v_m_s * dt
-    rn = np.linalg.norm(r0)
-    u = r0 / rn
-    along = np.cross(np.cross(u, TRUTH.v_m_s), u)
-    along /= np.linalg.norm(along)
+    truth_at = eccentric_truths(ref, e)
     l_c = np.linalg.cholesky(d["coefficient_covariance"])
     rng = np.random.default_rng(12)
     z, sds, z_eps, z_eps_laplace = [], [], [], []
     for big_e in rng.uniform(0.0, 2 * np.pi, 16):
-        v_r = np.sqrt(mu / rn) * e * np.sin(big_e)
-        v2 = mu / rn * (1.0 + e * np.cos(big_e))
-        x_true = np.r_[r0, v_r * u + np.sqrt(v2 - v_r ** 2) * along, rn]
+        x_true = truth_at(big_e)
         observed = d["model"](x_true)[0] + d["design"] @ (l_c @ rng.normal(size=l_c.shape[0]))
         sol, kkt = ref.solve(observed=observed)
         sd = np.sqrt(np.diag(ref.covariance(sol, kkt)))[:6]
@@ -138,7 +144,7 @@ def test_circular_tolerance_integral_cost_covariance_by_monte_carlo():
         sds.append(sd)
         # the soft constraint values (the report's constraints.soft): estimate against the truth's own
         soft = np.flatnonzero(kkt.soft)
-        eps_true = rf.circular_constraints(x_true, mu)[0][soft]
+        eps_true = rf.circular_constraints(x_true, ref.mu)[0][soft]
         z_eps.append((kkt.target[soft] - eps_true) / ref.soft_sigma(kkt))
         z_eps_laplace.append((kkt.target[soft] - eps_true) / np.sqrt(np.diag(kkt.target_covariance)))
     z = np.array(z)
