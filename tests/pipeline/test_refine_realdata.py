@@ -63,18 +63,46 @@ class _Sgp4Trajectory:
 
 def _rms_after_own_offset_drift(t_s, residual):
     """RMS (Hz) after the pass's own offset and drift (straight-line fit, 4-sigma editing)."""
+    return _fit_after_own_offset_drift(t_s, residual)[0]
+
+
+def _fit_after_own_offset_drift(t_s, residual, *extra):
+    """``(rms, coefficients of extra)``: the RMS (Hz) after the pass's own offset and drift and
+    the ``extra`` columns fitted together (least squares, 4-sigma editing)."""
     t = t_s - t_s.min()
+    a = np.column_stack([np.ones_like(t), t, *extra])
     keep = np.ones(t.size, bool)
     for _ in range(5):
-        c = np.polyfit(t[keep], residual[keep], 1)
-        r = residual - np.polyval(c, t)
+        c = np.linalg.lstsq(a[keep], residual[keep], rcond=None)[0]
+        r = residual - a @ c
         keep = np.abs(r) < 4 * max(1.0, float(np.sqrt(np.mean(r[keep] ** 2))))
-    return float(np.sqrt(np.mean(r[keep] ** 2)))
+    return float(np.sqrt(np.mean(r[keep] ** 2))), c[2:]
+
+
+def timing_split(table, state, tle=None):
+    """The part of a pass's predicted Doppler error that is timing: ``(rms, rms_after_shift,
+    shift_s)``: the RMS after the pass's own offset and drift, then also after the best time
+    shift of the prediction (positive when the satellite passes later than predicted, fit-tle's
+    convention), and that shift. An along-track error of the orbit and a time-tag error of the
+    station look the same here."""
+    t_s, residual, computed = _predicted_residuals(table, state, tle)
+    order = np.argsort(t_s)
+    rate = np.empty_like(computed)
+    rate[order] = np.gradient(computed[order], t_s[order])
+    rms_after, (c,) = _fit_after_own_offset_drift(t_s, residual, rate)
+    return _rms_after_own_offset_drift(t_s, residual), rms_after, -float(c)
 
 
 def _predicted_rms(table, state, tle=None):
     """The next pass's Doppler residual RMS predicted by ``state`` (propagated by the Taylor
     engine, J2) or by the ``tle`` (SGP4)."""
+    t_s, residual, _ = _predicted_residuals(table, state, tle)
+    return _rms_after_own_offset_drift(t_s, residual)
+
+
+def _predicted_residuals(table, state, tle=None):
+    """``(t_s, observed - computed, computed)`` (Hz) of a pass's Doppler samples predicted by
+    ``state`` (Taylor, J2) or by the ``tle`` (SGP4)."""
     pb = build_problem([("next", table)], state, None, EstimateOptions(kinds=["doppler"]), EOP)
     meas = pb.meas
     if tle is None:
@@ -84,7 +112,7 @@ def _predicted_rms(table, state, tle=None):
                                   meas.t_s, meas.r_st)
         rr = ob.range_rate_value(geo.state[:, :3], geo.state[:, 3:], meas.r_st, meas.v_st, pb.range_rate_model)
         computed = -meas.carrier_hz * rr / C_LIGHT
-    return _rms_after_own_offset_drift(meas.t_s, meas.observed - computed)
+    return meas.t_s, meas.observed - computed, computed
 
 
 def _pairs():

@@ -12,13 +12,15 @@ from trackproc.methods import quality as qm
 from trackproc.pipeline.refine.gates import state_prior_chi2
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, TRAVERSE_TOLERANCE_S
 from trackproc.pipeline.refine.problem import Refinement
+from trackproc.pipeline.refine.timing import add_timing_reason
 
 
 def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, improvement=None, refusal=None,
-                   t_model=None, max_el=None, consistency=None):
+                   t_model=None, max_el=None, consistency=None, timing=None):
     """The :class:`~trackproc.methods.quality.Quality` of a refinement: a-priori conflict (and
     its adaptation), variance factor of the nominal sigmas, residual whiteness, traverse-epoch
-    mismatch, low pass, circular-constraint conflict, edited samples, refusal."""
+    mismatch, low pass, circular-constraint conflict, edited samples, refusal, and the along-track
+    move from a stale TLE against its accuracy (:func:`~trackproc.pipeline.refine.timing.tle_timing`)."""
     q = qm.Quality()
     opt = ref.options
     if refusal is not None:
@@ -91,6 +93,7 @@ def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, im
         q.add("circular_conflict", "suspect" if bad else "ok",
               f"circular-orbit constraints: delta chi2 {consistency['delta_chi2']:.4g} over 2, p = "
               f"{consistency['p_value']:.2g}", value=consistency["p_value"], limit=CIRCULAR_TEST_P)
+    add_timing_reason(q, timing)
     if opt.cost == "pointwise" and sol.n_edited > 0.1 * sol.n_measurements:
         q.add("edited", "suspect", f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)",
               value=int(sol.n_edited), limit=0.1 * sol.n_measurements)

@@ -25,6 +25,7 @@ from trackproc.types import State
 from trackproc.pipeline.refine.problem import (Refinement, default_apriori_covariance, link_mode,
                                                state_prior_covariance)
 from trackproc.pipeline.refine.quality import refine_quality
+from trackproc.pipeline.refine.timing import tle_timing
 from trackproc.pipeline.refine.traverse import eccentricity, max_elevation_deg, model_traverse
 
 
@@ -113,6 +114,18 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                                f"direction(s) the pass cannot see ({rf.PROFILE_NODES} Gauss-Hermite points each)")
         except ProcessingError as exc:
             warnings.append(f"the profile covariance could not be computed ({exc}); the linear one is reported")
+    # a pass whose timing contradicts its TLE: the covariance takes the shift as a possible
+    # time-tag error (pipeline/refine/timing.py)
+    timing = tle_timing(ref, x, cov) if refusal is None else None
+    if timing is not None:
+        cov = timing.pop("covariance")
+    if timing is not None and timing["inflated"]:
+        sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        obs.posterior_sigma_rtn = np.sqrt(np.clip(np.diag(big @ cov[:6, :6] @ big.T), 0.0, None))
+        constraints = constraint_report(ref, x, cov, sigma, kkt, consistency)
+        warnings.append(f"the pass moves the TLE's state {timing['along_m'] / 1000:+.3g} km along-track "
+                        f"({timing['shift_s']:+.3g} s), {abs(timing['z']):.3g} sigma of the TLE's accuracy: a time-tag "
+                        "error of the pass looks the same; the covariance includes it (see docs/refine.md, Timing)")
     # how far the pass moved the stale state, along what it sees and along what it cannot
     # (a large unseen part means the a-priori, not the data, put the state there)
     obs.correction_rtn = {part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))
@@ -142,7 +155,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     warnings += refine_warnings(ref, sol, obs, kkt, sigma_scale, consistency, max_el)
 
     quality = refine_quality(ref, sol, sigma_scale=sigma_scale, adaptation=adaptation, improvement=improvement,
-                             refusal=refusal, t_model=t_model, max_el=max_el, consistency=consistency)
+                             refusal=refusal, t_model=t_model, max_el=max_el, consistency=consistency,
+                             timing=timing)
     if refusal is not None:
         warnings.append(f"the stale state is kept: {refusal['reason']}")
     apriori_note = ref.apriori_note
@@ -162,6 +176,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         "sigma_scale": sigma_scale, "max_elevation_deg": max_el,
         "residual_rms": {"value": rms, "unit": UNITS[ref.kind], "range_rate_m_s": rms * rr_factor},
         "apriori_adaptation": adaptation, "improvement": without_nuisance(improvement), "refused": refusal,
+        "tle_timing": timing,
         "traverse": traverse, "constraints": constraints, "observability": obs.as_dict(),
         "covariance_rtn": rtn,
         "sigma_rtn": dict(zip(rf.RTN_NAMES, np.sqrt(np.clip(np.diag(rtn), 0.0, None)).tolist())),
