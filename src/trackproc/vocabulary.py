@@ -65,6 +65,8 @@ FORCE_PARAMETER_GROUPS = {"empirical-rtn": ("empirical_r", "empirical_t", "empir
 DOPPLER_BIASES = ("offset", "offset+drift")
 #: ``refine``'s Doppler-bias choices: also ``none`` (a coherent two-way link has no offset).
 REFINE_DOPPLER_BIASES = ("none",) + DOPPLER_BIASES
+#: estimate: auto = offset and drift for each pass of one-way Doppler (a transmitter of its own), none elsewhere
+ESTIMATE_DOPPLER_BIASES = ("auto", "none") + DOPPLER_BIASES
 
 
 def check_range_rate_model(model: str) -> None:

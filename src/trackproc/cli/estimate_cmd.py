@@ -17,7 +17,7 @@ from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSumma
 log = logging.getLogger("trackproc")
 
 
-DopplerBias = choices("DopplerBias", vocabulary.DOPPLER_BIASES)
+DopplerBias = choices("DopplerBias", vocabulary.ESTIMATE_DOPPLER_BIASES)
 
 
 
@@ -41,8 +41,11 @@ def estimate_command(
     range_bias: bool = typer.Option(False, "--range-bias", help="Estimate a range bias for every station with ranges."),
     range_bias_station: List[str] = typer.Option(
         [], "--range-bias-station", metavar="STATION", help="Estimate a range bias for this station only (repeatable)."),
-    doppler_bias: Optional[DopplerBias] = typer.Option(
-        None, "--doppler-bias", help="Estimate a Doppler frequency offset (a one-way transmitter's), or offset and drift."),
+    doppler_bias: DopplerBias = typer.Option(
+        "auto", "--doppler-bias",
+        help="Transmitter frequency parameters: auto = an offset and a drift for each pass of one-way Doppler (the "
+             "satellite's own oscillator), none for two-way links and range-rate; none; or offset / offset+drift on "
+             "every pass with Doppler or range-rate samples."),
     doppler_bias_per: BiasPer = typer.Option(BiasPer.pass_, "--doppler-bias-per",
                                              help="One Doppler offset (drift) per pass or per station."),
     angle_bias: bool = typer.Option(False, "--angle-bias", help="Estimate azimuth and elevation biases per station."),
@@ -64,13 +67,15 @@ def estimate_command(
         [], "--apriori-sigma", metavar="NAME=SIGMA",
         help="A-priori 1-sigma (SI units) of a parameter (x, vx, range_bias:KIR), a family (range_bias, "
              "doppler_offset) or position/velocity/state; repeatable."),
-    apriori_initial: bool = typer.Option(
-        False, "--apriori-initial",
+    apriori_initial: Optional[bool] = typer.Option(
+        None, "--apriori-initial/--no-apriori-initial",
         help="Use the initial state's covariance as an a-priori constraint (a state without one, such as a TLE: "
              "refine's default element a-priori, along-track loose). A contradicted a-priori is scaled by the data, "
-             "or the initial state is kept when the data's noise model is in doubt (quality: refused)."),
+             "or the initial state is kept when the data's noise model is in doubt (quality: refused). Default: on "
+             "for a TLE, off otherwise.", show_default=False),
     epoch: Optional[str] = typer.Option(None, "--epoch", metavar="ISO|initial|first",
-                                        help="Solution epoch (default: the initial state's; first = first sample)."),
+                                        help="Solution epoch (default: the initial state's, a TLE's at the first "
+                                             "sample; first = first sample; initial = the TLE's epoch)."),
     kinds: Optional[str] = typer.Option(None, "--kinds", metavar="KIND[,KIND]",
                                         help="Kinds to use: range, range_rate, doppler, azimuth, elevation (default all)."),
     max_iterations: int = typer.Option(20, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
@@ -160,7 +165,7 @@ def estimate_command(
     from trackproc.io.residuals import write_residuals
     from trackproc.io.stations import read_stations
     from trackproc.io.statefile import format_epoch, write_state
-    from trackproc.pipeline.orbit_source import initial_state
+    from trackproc.pipeline.orbit_source import initial_state, tle_evaluation_epoch
     from trackproc.pipeline.estimate import EstimateOptions, estimate, require_matplotlib, summary_text
     from trackproc.report.plots import residuals_png
 
@@ -174,14 +179,8 @@ def estimate_command(
     check_distinct_files(passes, "PASS")
     tables = [("<stdin>" if is_stdio(p) else p, read_pass_table(p)) for p in passes]
     check_no_repeated_samples([(source, t.frame) for source, t in tables])
-    at = None                                       # where a TLE is evaluated by SGP4
-    if epoch is not None and epoch.lower() == "first":
-        at = min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
-    elif epoch is not None and epoch.lower() != "initial":
-        from trackproc.io.statefile import parse_epoch
-
-        at = parse_epoch(epoch, column="--epoch")
-    state0 = initial_state(initial, tables, orientation, at=at)
+    # a TLE is evaluated by SGP4 at the solution epoch (default: the first sample)
+    state0 = initial_state(initial, tables, orientation, at=tle_evaluation_epoch(epoch, tables))
     station_table = None
     if stations is not None:
         lo = min(t.frame["time"].min() for _, t in tables)
@@ -189,7 +188,7 @@ def estimate_command(
         mid = (lo + (hi - lo) / 2).tz_convert("UTC").tz_localize(None).to_datetime64()
         station_table = read_stations(stations, epoch=mid, eccentricities=eccentricities)
     options = EstimateOptions(
-        range_bias=True if range_bias else list(range_bias_station), doppler_bias=doppler_bias.value if doppler_bias else None,
+        range_bias=True if range_bias else list(range_bias_station), doppler_bias=doppler_bias.value,
         doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,
         apriori_initial=apriori_initial, force=force.value, earth=earth.value,
         range_rate_model=range_rate_model.value if range_rate_model else None, max_iterations=max_iterations,

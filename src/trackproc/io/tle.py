@@ -117,6 +117,11 @@ def sgp4_teme(tle, jd1, jd2):
     return np.asarray(r) * 1e3, np.asarray(v) * 1e3
 
 
+def is_tle_state(state) -> bool:
+    """Whether a :class:`~trackproc.io.statefile.State` is a TLE's SGP4 state (:func:`tle_state`)."""
+    return getattr(state, "force_model", None) == "sgp4" and bool((getattr(state, "extra", None) or {}).get("tle"))
+
+
 def tle_state(tle: Tle, at=None, eop=None):
     """GCRF :class:`~trackproc.io.statefile.State` of the TLE at UTC ``at`` (default: its epoch).
 

@@ -116,6 +116,20 @@ def initial_state(initial: str, tables: list, eop=None, at=None):
     return read_state_or_tle(initial, eop, at=at)
 
 
+def tle_evaluation_epoch(epoch: Optional[str], tables: list, column: str = "--epoch"):
+    """Where ``estimate`` evaluates a TLE given as its initial state: at ``epoch`` (ISO time), at
+    the TLE's own epoch (``initial``), else at the first sample (``first``, and the default: SGP4's
+    state at the data, rather than the state at the TLE's epoch carried to the data by another
+    force model, which on a LEO TLE a day old costs kilometres of drag). ``None``: the TLE's epoch."""
+    if epoch is not None and epoch.lower() == "initial":
+        return None
+    if epoch is not None and epoch.lower() != "first":
+        from trackproc.io.statefile import parse_epoch
+
+        return parse_epoch(epoch, column=column)
+    return min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
+
+
 def resolve_force(orbit: OrbitInput, force: Optional[str], allow_full: bool = False) -> str:
     """``--force``: default ``sgp4`` for a TLE, ``j2`` for a state; ``sgp4`` needs a TLE;
     ``full`` only where the command builds the full force model (``allow_full``)."""

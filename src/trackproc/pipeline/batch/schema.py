@@ -214,8 +214,9 @@ SCHEMA: tuple[Opt, ...] = (
         "Leave out the samples the smoother rejected (flag = true).", affects=True),
     Opt("estimate", "range_bias", "bool", False, ("--range-bias/--no-range-bias",),
         "Estimate a range bias per station with ranges.", affects=True),
-    Opt("estimate", "doppler_bias", "choice", None, ("--doppler-bias",),
-        "Estimate a Doppler frequency offset, or offset and drift.", choices=("offset", "offset+drift"),
+    Opt("estimate", "doppler_bias", "choice", "auto", ("--doppler-bias",),
+        "Transmitter frequency parameters: auto = offset and drift for each pass of one-way Doppler; none; or "
+        "offset / offset+drift on every Doppler or range-rate pass.", choices=("auto", "none", "offset", "offset+drift"),
         affects=True),
     Opt("estimate", "doppler_bias_per", "choice", "pass", ("--doppler-bias-per",),
         "One Doppler offset (drift) per pass or per station.", choices=("pass", "station"), affects=True),

@@ -125,8 +125,9 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
     from trackproc.io.passfile import PassTable, parse_pass_table
     from trackproc.io.residuals import residuals_bytes
     from trackproc.io.stations import parse_stations
-    from trackproc.io.statefile import format_epoch, parse_epoch, parse_state_or_tle, state_json
+    from trackproc.io.statefile import format_epoch, parse_state_or_tle, state_json
     from trackproc.pipeline.estimate import EstimateOptions, estimate
+    from trackproc.pipeline.orbit_source import tle_evaluation_epoch
 
     orientation, warning = earth_orientation(opt["eop"], opt["dut1"])
     if warning:
@@ -142,13 +143,8 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
     if not tables:
         raise ProcessingError("no samples left in the window (all flagged by the smoother)")
     initial_bytes, initial_path = ctx.files["estimate.initial"], ctx.paths["estimate.initial"]
-    at = None
-    if initial_bytes.lstrip()[:1] != b"{":          # a TLE: by SGP4 at the solution epoch
-        epoch = opt["epoch"]
-        if epoch is not None and epoch.lower() == "first":
-            at = min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
-        elif epoch is not None and epoch.lower() != "initial":
-            at = parse_epoch(epoch, column="estimate.epoch")
+    # a TLE: by SGP4 at the solution epoch (default: the first sample)
+    at = tle_evaluation_epoch(opt["epoch"], tables, column="estimate.epoch")
     state0 = parse_state_or_tle(initial_bytes, initial_path, orientation, at=at)
     stations = (None if ctx.files.get("ingest.stations") is None
                 else parse_stations(ctx.files["ingest.stations"], ctx.paths["ingest.stations"]))

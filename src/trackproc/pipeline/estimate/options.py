@@ -11,7 +11,7 @@ from trackproc.errors import InputError
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
 from trackproc import vocabulary
-from trackproc.vocabulary import DOPPLER_BIASES, KIND_UNITS, NOISE_MODELS
+from trackproc.vocabulary import DOPPLER_BIASES, ESTIMATE_DOPPLER_BIASES, KIND_UNITS, NOISE_MODELS
 
 
 #: Unit of each kind's values (SI).
@@ -33,12 +33,16 @@ class EstimateOptions:
     """Options of :func:`estimate` (defaults = the CLI's).
 
     ``range_bias``: estimate a range bias for every station with ranges (True), for the listed
-    stations, or none (False); ``doppler_bias``: None, ``"offset"`` or ``"offset+drift"``,
+    stations, or none (False); ``doppler_bias``: ``"auto"`` (an offset and a drift for each pass of
+    one-way Doppler, whose transmitter is the satellite's own oscillator; nothing for two-way
+    links and range-rate), ``"none"`` (or None), ``"offset"`` or ``"offset+drift"`` (on every pass
+    with Doppler or range-rate samples),
     ``doppler_bias_per``: ``"pass"`` or ``"station"``; ``angle_bias``: azimuth and elevation
     biases per station with angles; ``apriori_sigma``: name -> 1-sigma (a parameter name, a
     family such as ``range_bias``, or ``position``/``velocity``/``state``); ``apriori_initial``:
     use the initial state's 6 × 6 covariance as an a-priori constraint (refine's default element
-    a-priori for a state without one, e.g. a TLE); ``epoch``: the solution
+    a-priori for a state without one, e.g. a TLE); None: on for a TLE (a guess whose accuracy is
+    known, which one station's passes cannot replace), off otherwise; ``epoch``: the solution
     epoch (None = the initial state's; ``"first"`` = the first sample; or a UTC datetime64);
     ``kinds``: kinds to use (None = all); ``range_rate_model``: None = from the pass files
     (default doppler); ``compare_doppler_only``, ``two_stage``: the seed 002 reports.
@@ -59,11 +63,11 @@ class EstimateOptions:
     """
 
     range_bias: bool | Sequence[str] = False
-    doppler_bias: Optional[str] = None
+    doppler_bias: Optional[str] = "auto"
     doppler_bias_per: str = "pass"
     angle_bias: bool = False
     apriori_sigma: Mapping[str, float] = field(default_factory=dict)
-    apriori_initial: bool = False
+    apriori_initial: Optional[bool] = None
     force: str = "j2"
     earth: str = "wgs84"
     range_rate_model: Optional[str] = None
@@ -93,9 +97,9 @@ def check_options(opt: EstimateOptions) -> None:
     if opt.oscillator_noise is not None and not (math.isfinite(opt.oscillator_noise) and opt.oscillator_noise > 0):
         raise InputError("the oscillator noise must be positive", column="--oscillator-noise",
                          found=opt.oscillator_noise, expected="a random-walk intensity > 0 in Hz per sqrt(s)")
-    if opt.doppler_bias not in (None,) + DOPPLER_BIAS:
+    if opt.doppler_bias not in (None,) + ESTIMATE_DOPPLER_BIASES:
         raise InputError("unknown Doppler bias model", column="--doppler-bias", found=opt.doppler_bias,
-                         expected=" or ".join(DOPPLER_BIAS))
+                         expected=" or ".join(ESTIMATE_DOPPLER_BIASES))
     if opt.doppler_bias_per not in DOPPLER_BIAS_PER:
         raise InputError("unknown Doppler bias grouping", column="--doppler-bias-per", found=opt.doppler_bias_per,
                          expected=" or ".join(DOPPLER_BIAS_PER))

@@ -19,6 +19,7 @@ from trackproc.constants import MU_EARTH
 from trackproc.dynamics import propagator
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError
+from trackproc.io.tle import is_tle_state
 from trackproc.methods.least_squares import Options, Prior, solve, solve_gls
 from trackproc.methods.refinement import CachedModel, geodesic_retraction
 from trackproc.models import modifiers as md
@@ -231,10 +232,20 @@ def frequency_modifiers(opt: EstimateOptions, frame, t_s, apriori) -> list:
     """``--doppler-bias``: a :class:`~trackproc.models.modifiers.DopplerOffset` (and
     :class:`~trackproc.models.modifiers.DopplerDrift` from the first sample) per pass or station
     with Doppler or range-rate samples, each with the :class:`~trackproc.models.modifiers.OscillatorWander`
-    of that transmitter (given by ``--oscillator-noise`` or estimated)."""
-    if not opt.doppler_bias:
+    of that transmitter (given by ``--oscillator-noise`` or estimated). ``auto``: offset and drift
+    for the passes (stations) of one-way Doppler only — a transmitter of its own, whose offset is
+    kHz at VHF and whose drift DopTrack's passes all show (0.3-0.7 Hz/s); a drift a pass does not
+    need costs that pass a little precision and no bias."""
+    bias = "none" if opt.doppler_bias is None else opt.doppler_bias
+    if bias == "none":
         return []
-    rr_rows = frame["kind"].isin(["doppler", "range_rate"]).to_numpy()
+    if bias == "auto":
+        rr_rows = ((frame["kind"] == "doppler") & (frame["_mode"] == "one-way")).to_numpy()
+        if not rr_rows.any():
+            return []
+        bias = "offset+drift"
+    else:
+        rr_rows = frame["kind"].isin(["doppler", "range_rate"]).to_numpy()
     keys_col = "pass_id" if opt.doppler_bias_per == "pass" else "station"
     keys = frame.loc[rr_rows, keys_col].astype(str)
     first = pd.Series(t_s[rr_rows], index=keys.index).groupby(keys.to_numpy()).min()
@@ -245,7 +256,7 @@ def frequency_modifiers(opt: EstimateOptions, frame, t_s, apriori) -> list:
     for key in sorted(first.index):
         out.append(md.DopplerOffset(key, apriori_sigma=apriori_for(f"doppler_offset:{key}", "doppler_offset",
                                                                    apriori)))
-        if opt.doppler_bias == "offset+drift":
+        if bias == "offset+drift":
             out.append(md.DopplerDrift(key, float(first[key]),
                                        apriori_sigma=apriori_for(f"doppler_drift:{key}", "doppler_drift", apriori)))
         out.append(md.OscillatorWander(key, opt.oscillator_noise))
@@ -284,7 +295,7 @@ def default_apriori(rv0) -> np.ndarray:
 def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial) -> tuple[list, str]:
     """The a-priori constraints: the drivers' own sigmas, and ``--apriori-initial`` (the initial
     state's 6 × 6 covariance; for a state without one, such as a TLE, refine's default element
-    a-priori, :func:`default_apriori`). Returns ``(priors, note)``."""
+    a-priori, :func:`default_apriori`; by default on for a TLE). Returns ``(priors, note)``."""
     priors = []
     note = ""
     mask, centre, sigma = params.apriori()
@@ -292,7 +303,10 @@ def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial)
         priors.append(Prior.diagonal(np.flatnonzero(mask), centre[mask], sigma[mask]))
         if mask[:6].any():
             note = "--apriori-sigma on the state"
-    if opt.apriori_initial:
+    apriori_initial = opt.apriori_initial
+    if apriori_initial is None:         # auto: a TLE's state, unless the state's a-priori is given otherwise
+        apriori_initial = cov0 is None and is_tle_state(initial) and not mask[:6].any()
+    if apriori_initial:
         if mask[:6].any():
             raise InputError("give --apriori-initial or state a-priori sigmas, not both", column="--apriori-sigma")
         if cov0 is None:

@@ -57,7 +57,8 @@ from trackproc.pipeline.refine.options import (  # noqa: F401
     TRAVERSE_TOLERANCE_S, RefineOptions, RefineResult, SmoothedCurve)
 from trackproc.pipeline.refine.selection import curve_traverse_epoch, select_pass, smoothed_curve  # noqa: F401
 from trackproc.pipeline.refine.problem import (  # noqa: F401
-    Refinement, default_apriori_covariance, is_tle_state, link_mode, state_prior_covariance)
+    Refinement, default_apriori_covariance, link_mode, state_prior_covariance)
+from trackproc.io.tle import is_tle_state  # noqa: F401
 from trackproc.pipeline.refine.assemble import apriori_choice, check_options, integral_setup, prepare  # noqa: F401
 from trackproc.pipeline.refine.traverse import (  # noqa: F401
     eccentricity, link_range_rate, max_elevation_deg, model_traverse, traverse_station)

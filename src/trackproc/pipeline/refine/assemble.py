@@ -29,7 +29,8 @@ from trackproc.types import PassTable
 from trackproc.vocabulary import TAYLOR_FORCES
 from trackproc.pipeline.refine.options import (COSTS, DEFAULT_APRIORI_ELEMENTS, DOPPLER_BIAS, NOISE_MODELS,
                                                RefineOptions, SmoothedCurve)
-from trackproc.pipeline.refine.problem import Refinement, default_apriori_covariance, is_tle_state, link_mode
+from trackproc.io.tle import is_tle_state
+from trackproc.pipeline.refine.problem import Refinement, default_apriori_covariance, link_mode
 from trackproc.pipeline.refine.selection import curve_traverse_epoch, select_pass, smoothed_curve
 
 

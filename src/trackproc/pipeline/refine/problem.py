@@ -19,10 +19,6 @@ from trackproc.methods.refinement import (ELEMENT_NAMES, CachedModel, circular_c
 from trackproc.pipeline.refine.options import DEFAULT_APRIORI_ELEMENTS, RefineOptions, SmoothedCurve
 
 
-def is_tle_state(state) -> bool:
-    return state.force_model == "sgp4" and bool((state.extra or {}).get("tle"))
-
-
 def state_prior_covariance(priors) -> Optional[np.ndarray]:
     """The 6 × 6 a-priori covariance of x..vz from the problem's priors (None unless all six)."""
     cov = np.full((6, 6), np.nan)

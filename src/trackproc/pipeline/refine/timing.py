@@ -22,7 +22,8 @@ import numpy as np
 
 from trackproc.dynamics.rtn import rtn_jacobian
 from trackproc.methods.quality import chi2_limit
-from trackproc.pipeline.refine.problem import Refinement, is_tle_state
+from trackproc.io.tle import is_tle_state
+from trackproc.pipeline.refine.problem import Refinement
 
 
 def tle_age_days(ref: Refinement) -> Optional[float]:
