@@ -89,7 +89,8 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
         raise ProcessingError(
             f"did not converge in {opt.max_iterations} iterations (cost {history[-2]:.6g} -> {history[-1]:.6g}; "
             f"condition number {s[0] / s[-1]:.3g}, weakest combination {weakest}); "
-            "try --max-iterations, a better --initial state, or a-priori sigmas",
+            "try --max-iterations, a better --initial state, or an a-priori (estimate: --apriori-initial, "
+            "--apriori-sigma; one station's passes leave some directions of an orbit free)",
             {"iterations": run.iterations, "cost_history": history, "edited": int(run.mask.sum()),
              "condition_number": float(s[0] / s[-1]), "weakest_combination": weakest})
 
