@@ -56,6 +56,8 @@ class Problem:
     evaluations: int = 0
     #: where the state's a-priori came from (the state file's ``estimation`` record)
     apriori_note: str = ""
+    #: the initial state is an a-priori (``--apriori-initial``, or by default a TLE's)
+    apriori_initial: bool = False
     #: estimated force-model parameters (``--estimate-force``), columns 6.. of the vector
     force_names: tuple = ()
 
@@ -292,10 +294,11 @@ def default_apriori(rv0) -> np.ndarray:
     return default_apriori_covariance(np.asarray(rv0, float), MU_EARTH)
 
 
-def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial) -> tuple[list, str]:
+def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial) -> tuple[list, str, bool]:
     """The a-priori constraints: the drivers' own sigmas, and ``--apriori-initial`` (the initial
     state's 6 × 6 covariance; for a state without one, such as a TLE, refine's default element
-    a-priori, :func:`default_apriori`; by default on for a TLE). Returns ``(priors, note)``."""
+    a-priori, :func:`default_apriori`; by default on for a TLE). Returns ``(priors, note, whether the
+    initial state is one of them)``."""
     priors = []
     note = ""
     mask, centre, sigma = params.apriori()
@@ -312,11 +315,12 @@ def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial)
         if cov0 is None:
             cov0 = default_apriori(rv0)
             note = ("the initial state has no covariance: refine's default element a-priori (a 50 m, e 5e-5, "
-                    "i and RAAN 1e-4 rad, argument of latitude 4e-4 rad)")
+                    "i and RAAN 1e-4 rad, argument of latitude 4e-4 rad)"
+                    + ("; on by default for a TLE" if opt.apriori_initial is None else ""))
         else:
             note = "the initial state's covariance"
         priors.append(Prior(np.arange(6), np.asarray(rv0, float), np.asarray(cov0, float)))
-    return priors, note
+    return priors, note, bool(apriori_initial)
 
 
 def build_problem(tables, initial, stations=None, options: EstimateOptions | None = None, eop=None) -> Problem:
@@ -366,8 +370,9 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
         bound = md.bind_all(modifiers, meas)
     except ValueError as exc:
         raise InputError(str(exc), column="--doppler-bias") from None
-    priors, note = priors_of(params, opt, rv0, cov0, initial)
+    priors, note, initial_prior = priors_of(params, opt, rv0, cov0, initial)
     frame_q = propagator.reference_frame(*(float(a) for a in ts.datetime64_to_jd_utc(epoch)), eop)
     return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force, range_rate_model=model,
                    modifiers=bound, priors=priors, times=t64, sources=frame["_source"].to_numpy(dtype=object),
-                   eop=eop, apriori_note=note, force_model=force_model, force_names=force_names)
+                   eop=eop, apriori_note=note, force_model=force_model, force_names=force_names,
+                   apriori_initial=initial_prior)

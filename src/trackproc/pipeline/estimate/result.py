@@ -130,7 +130,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         "earth": opt.earth, "doppler_bias": opt.doppler_bias, "doppler_bias_per": opt.doppler_bias_per,
         "fixed_parameters": fixed, "drift_epochs_s": drifts,
         "apriori": {n: s for n, s, m in zip(names, problem.params.apriori()[2], problem.params.apriori()[0]) if m},
-        "apriori_initial": bool(opt.apriori_initial),
+        "apriori_initial": problem.apriori_initial,
         **({"apriori_default": problem.apriori_note} if problem.apriori_note.startswith("the initial state has no")
            else {}),
         "sources": sorted({str(s) for s in problem.sources}),
