@@ -50,15 +50,23 @@ def _stations_csv(stations: dict, moved: dict | None = None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _cli(args) -> int:
-    from trackproc.cli import app as cli_app
+#: The command-line entry point the scenarios run (``trackproc.cli.app.main`` unless a test sets it).
+RUNNER = None
 
+
+def _cli(args) -> int:
+    if RUNNER is None:
+        from trackproc.cli import app as cli_app
+
+        main = cli_app.main
+    else:
+        main = RUNNER
     root = logging.getLogger()
     handlers, level = list(root.handlers), root.level
     err = io.StringIO()
     try:
         with contextlib.redirect_stderr(err):
-            return cli_app.main([str(a) for a in args])
+            return main([str(a) for a in args])
     finally:
         root.handlers[:] = handlers
         root.setLevel(level)
@@ -174,10 +182,17 @@ def scenario(sets: Sets, name: str):
     if name == "bias_not_estimated":
         return dict(multi, files=[sets.multi], options=("--doppler-bias", "offset", "--dut1", "0.1"),
                     truth={}, culprit=None)
-    if name == "bias_jump":                               # +50 m on KIR's second pass only
+    if name.startswith("bias_jump"):                      # +50 m (bias_jump_M: M m) on KIR's second pass only
         f = frame.copy()
         rows, pid = _pass_rows(f, "KIR", 1, "range")
-        f.loc[rows, "value"] = f.loc[rows, "value"].to_numpy() + 50.0
+        f.loc[rows, "value"] = f.loc[rows, "value"].to_numpy() + (float(name.split("_")[2]) if name.count("_") == 2
+                                                                  else 50.0)
+        return dict(multi, files=sets.write(name, PassTable(f, dict(base.meta))), culprit=pid)
+    if name.startswith("range_step_"):                    # +M m on the second half of KIR's second pass's ranges
+        f = frame.copy()
+        rows, pid = _pass_rows(f, "KIR", 1, "range")
+        idx = np.flatnonzero(rows)
+        f.loc[idx[idx.size // 2:], "value"] = f.loc[idx[idx.size // 2:], "value"].to_numpy() + float(name.split("_")[2])
         return dict(multi, files=sets.write(name, PassTable(f, dict(base.meta))), culprit=pid)
     if name == "carrier_3khz":                            # one pass's carrier labelled 3 kHz high
         rows, pid = _pass_rows(frame, "KIR", 1)
@@ -238,12 +253,13 @@ def scenario(sets: Sets, name: str):
         rest, one = _split(vtab, rows)
         one.meta["carrier_hz"] = VHF_CARRIER + 3000.0
         return dict(vhf, files=sets.write(name, rest, one), culprit=pid)
-    if name == "vhf_oscillator_step":                     # 20 Hz thermal step, 60 s time constant, mid-pass 2
+    if name.startswith("vhf_oscillator_step"):            # 20 Hz (_A: A Hz) thermal step, 60 s time constant, mid-pass 2
         f = vf.copy()
         rows, pid = _pass_rows(f, None, 1)
         t = (f.loc[rows, "time"] - f.loc[rows, "time"].min()).dt.total_seconds().to_numpy()
         ts = 0.5 * t.max()
-        f.loc[rows, "value"] = f.loc[rows, "value"].to_numpy() + np.where(t > ts, 20.0 * (1 - np.exp(-(t - ts) / 60.0)), 0.0)
+        amp = float(name.split("_")[3]) if name.count("_") == 3 else 20.0
+        f.loc[rows, "value"] = f.loc[rows, "value"].to_numpy() + np.where(t > ts, amp * (1 - np.exp(-(t - ts) / 60.0)), 0.0)
         return dict(vhf, files=sets.write(name, PassTable(f, dict(vtab.meta))), culprit=pid)
     if name == "vhf_other_satellite":                     # pass 2 is of a satellite 30 s behind
         later = {**VHF_STATE, "epoch": "2026-03-20T17:00:30.000Z"}
@@ -269,7 +285,10 @@ MULTI = ["clean", "station_300", "station_1000", "timetag_0.5", "timetag_2", "bi
 VHF = ["vhf_clean", "vhf_station_1000", "vhf_timetag_0.5", "vhf_timetag_2", "vhf_carrier_3khz",
        "vhf_oscillator_step", "vhf_other_satellite"]
 DYNAMICS = ["drag_1", "drag_3"]
-ALL = MULTI + VHF + DYNAMICS
+#: Near the detection limits: smaller versions of the same errors.
+SMALL = ["station_100", "timetag_0.05", "bias_jump_15", "range_step_20", "vhf_station_300", "vhf_oscillator_step_10",
+         "vhf_oscillator_step_5"]
+ALL = MULTI + VHF + DYNAMICS + SMALL
 
 
 def run(sets: Sets, name: str, *extra) -> dict:
@@ -297,6 +316,7 @@ def run(sets: Sets, name: str, *extra) -> dict:
     named = [r["message"].split(": ", 1)[-1].split(" (")[0] for r in bad if r["code"] == "pass_consistency"]
     named += [r["message"].split(" carries")[0] for r in bad if r["code"] == "dominant_pass"]
     named += [r["message"].split(": ", 1)[-1] for r in bad if r["code"] == "edited_pass"]
+    named += [r["message"].split(":")[0].removeprefix("pass ") for r in bad if r["code"] == "step"]
     text = named[0] if named else ""
     row.update(verdict=q["verdict"], reasons=",".join(r["code"] for r in bad), z_state=float(np.max(np.abs(err / sig))),
                z_bias=float(max(zb)) if zb else 0.0,

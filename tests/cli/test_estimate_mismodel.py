@@ -17,10 +17,12 @@ from __future__ import annotations
 import pytest
 
 import mismodel_scenarios as ms
+from trackproc.cli import app as cli_app
 
 
 @pytest.fixture(scope="module")
 def sets(tmp_path_factory):
+    ms.RUNNER = cli_app.main            # simulate and estimate through the real entry point
     return ms.Sets(tmp_path_factory.mktemp("mismodel"), 1)
 
 
@@ -48,11 +50,15 @@ def test_consistent_passes_are_ok_and_cover_the_truth(sets, name):
     ("timetag_0.5", "KIR"),             # one station's time tags 0.5 s late
     ("bias_jump", "KIR/KIR-002"),       # a 50 m range bias step in one pass
     ("other_satellite", "KIR/KIR-002"),  # a pass of a satellite 30 s behind
+    ("range_step_20", "KIR/KIR-002"),    # +20 m on the second half of one pass's ranges (10 m noise)
 ])
 def test_a_wrong_station_or_pass_is_said_and_named(sets, name, culprit):
     row = ms.run(sets, name)
     _check(row)
     assert row["verdict"] == "suspect" and culprit in row["first_named"], row
+    if name == "range_step_20":
+        step = [r for r in row["doc"]["quality"]["reasons"] if r["code"] == "step"][0]
+        assert step["severity"] == "suspect" and "KIR/KIR-002 range" in step["message"], step
 
 
 def test_an_oscillator_step_absorbed_by_the_state_is_found_by_pass_consistency(sets):

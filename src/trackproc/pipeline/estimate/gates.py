@@ -250,6 +250,70 @@ def pass_residuals(problem: Problem, sol) -> list:
     return passes
 
 
+def _whitened(problem: Problem, sol):
+    """The kept samples' indices, whitened Jacobian (``sol.jacobian / sigma``), whitened
+    residuals (``sol.normalized``: a GLS solution's innovations) and the covariance; None when
+    the solution carries no usable Jacobian."""
+    kept = ~np.asarray(sol.edited, bool)
+    sigma = np.asarray(problem.meas.sigma, float)
+    jac = np.asarray(sol.jacobian, float)
+    if jac.ndim != 2 or jac.shape[0] != kept.size:
+        return None
+    idx = np.flatnonzero(kept)
+    jw = jac[idx] / sigma[idx, None]
+    z = np.asarray(sol.normalized, float)[idx]
+    if not (np.isfinite(jw).all() and np.isfinite(z).all()):
+        return None
+    return idx, jw, z, np.asarray(sol.covariance, float)
+
+
+def add_step(q, problem: Problem, sol, noise_report: dict | None = None) -> None:
+    """Reason ``step``: a level shift inside one pass and kind (a transmitter frequency step, a
+    bias or time-tag jump) beyond what the orbit, the offsets and the drifts absorb:
+    :func:`~trackproc.methods.quality.step_scan` on each white pass (a pass whose noise model has
+    a random walk or AR(1) already allows for wander), ``suspect`` when the largest statistic is
+    beyond the χ²(1) point at 0.001 / (all positions of all passes) (Bonferroni: at most 0.1 %
+    false alarms, conservative since neighbouring positions are correlated). A step of 10 Hz in
+    one of three 1.5 Hz VHF passes can move the state 5-6 sigma while the pass fits white and
+    agrees with the others (its direction is its own)."""
+    w = _whitened(problem, sol)
+    if w is None:
+        return
+    idx, jw, z, cov = w
+    meas = problem.meas
+    station, pass_id = meas.station.astype(str)[idx], meas.pass_id.astype(str)[idx]
+    kind = meas.kind.astype(str)[idx]
+    times = np.asarray(meas.t_s, float)[idx]          # SI seconds from the solution epoch
+    sigma = np.asarray(meas.sigma, float)[idx]
+    correlated = {k for k, v in (noise_report or {}).items() if v.get("model", "white") != "white"}
+    scans = []
+    for key in sorted(set(zip(station, pass_id, kind))):
+        if f"{key[0]}/{key[1]}" in correlated and key[2] in ("doppler", "range_rate"):
+            continue
+        rows = np.flatnonzero((station == key[0]) & (pass_id == key[1]) & (kind == key[2]))
+        if rows.size < 20:
+            continue
+        rows = rows[np.argsort(times[rows], kind="stable")]
+        r = qm.step_scan(jw, z, cov, rows, 1.0 / sigma[rows])
+        if r["candidates"]:
+            scans.append((key, rows, r))
+    total = sum(r["candidates"] for _, _, r in scans)
+    if not scans:
+        return
+    alpha = (1.0 - qm.GATE_PROBABILITY) / total
+    limit = qm.chi2_limit(1, 1.0 - alpha)
+    key, rows, r = max(scans, key=lambda x: x[2]["statistic"])
+    bad = r["statistic"] > limit
+    at = float(times[rows[r["index"]]] - times[rows[0]])
+    name = f"{key[0]}/{key[1]} {key[2]}"
+    q.add("step", "suspect" if bad else "ok",
+          (f"pass {name}: a level shift {at:.0f} s into the pass (chi2 {r['statistic']:.4g} over 1, limit {limit:.3g}: "
+           f"99.9 % for the worst of {total} positions in {len(scans)} passes) that the orbit, offsets and drifts do "
+           "not absorb: an oscillator step, a bias or time-tag jump; check it, or leave the pass out") if bad else
+          (f"no level shift inside a pass (worst {name}: chi2 {r['statistic']:.3g} over 1, limit {limit:.3g})"),
+          value=r["statistic"], limit=limit)
+
+
 def pass_consistency(problem: Problem, sol, scale: float = 1.0) -> list:
     """Per pass (station/pass id, all its kinds, kept samples) and per station with more than
     one pass (all its passes), the score test of "this block has its own state and biases"
@@ -261,17 +325,10 @@ def pass_consistency(problem: Problem, sol, scale: float = 1.0) -> list:
     divided by ``scale`` (the caller's variance factor when above 1: the samples' sigmas scaled
     by the a-posteriori variance factor, as an F test)."""
     meas = problem.meas
-    kept = ~np.asarray(sol.edited, bool)
-    sigma = np.asarray(meas.sigma, float)
-    jac = np.asarray(sol.jacobian, float)
-    if jac.ndim != 2 or jac.shape[0] != kept.size:
+    w = _whitened(problem, sol)
+    if w is None:
         return []
-    idx = np.flatnonzero(kept)
-    jw = jac[idx] / sigma[idx, None]
-    z = np.asarray(sol.normalized, float)[idx]
-    if not (np.isfinite(jw).all() and np.isfinite(z).all()):
-        return []
-    cov = np.asarray(sol.covariance, float)
+    idx, jw, z, cov = w
     station, pass_id = meas.station.astype(str)[idx], meas.pass_id.astype(str)[idx]
     keys = sorted(set(zip(station, pass_id)))
     blocks = [(f"{st}/{pid}", (station == st) & (pass_id == pid)) for st, pid in keys]
@@ -378,7 +435,8 @@ def add_edited_pass(q, problem: Problem, sol, clip: float | None) -> None:
               "check their kind, mode, carrier or time tags", value=bad[0][0], limit=0.1)
 
 
-def estimate_quality(problem: Problem, sol, adaptation: dict | None = None, clip: float | None = None):
+def estimate_quality(problem: Problem, sol, adaptation: dict | None = None, clip: float | None = None,
+                     noise_report: dict | None = None):
     """The :class:`~trackproc.methods.quality.Quality` of a batch solution: convergence, a-priori
     conflict (``rejected``: the covariance leans on an a-priori the data contradict), variance
     factor against its 99.9 % point, the pass that dominates the misfit (named), residual
@@ -427,6 +485,7 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None, clip
     qm.add_whiteness_family(q, passes)
     if not (adaptation is not None and adaptation.get("refused")):
         add_pass_consistency(q, problem, sol)     # (a refused solution's state is held, not fitted)
+        add_step(q, problem, sol, noise_report)
     add_edited_pass(q, problem, sol, clip)
     if sol.n_edited > 0.1 * sol.n_measurements:
         q.add("edited", "suspect", f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)",
