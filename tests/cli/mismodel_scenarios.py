@@ -137,6 +137,14 @@ class Sets:
                                                            "covariance": np.diag(sig ** 2).tolist()}))
         (self.d / "vhf_stations.csv").write_text(_stations_csv(VHF_STATION))
 
+    def range_rate(self) -> Path:
+        """The 3-station set with one-way range-rate (1 cm/s) instead of Doppler (made once)."""
+        if not (self.d / "rr.parquet").exists():
+            _simulate(self.d, "rr", STATE, STATIONS, "--duration", "21600", "--step", "30", "--seed", self.seed,
+                      "--kinds", "range,range_rate",
+                      *sum((["--range-bias", f"{k}={v}"] for k, v in BIASES.items()), []))
+        return self.d / "rr.parquet"
+
     # -- scenario builders: each returns (pass files, estimate options, truth of the biases, named pass)
     def write(self, name: str, *tables: PassTable) -> list:
         paths = []
@@ -148,17 +156,26 @@ class Sets:
 
 
 MULTI_OPTS = ("--range-bias", "--doppler-bias", "offset", "--dut1", "0.1")
+RR_OPTS = ("--range-bias", "--dut1", "0.1")
+#: The scenarios also run on the range-rate set (prefix ``rr_``).
+RR = ("clean", "station_300", "timetag_0.5", "bias_jump", "range_step_20", "bias_jump_15")
 VHF_OPTS = ("--doppler-bias", "offset+drift", "--apriori-initial", "--dut1", "0.1")
 
 
 def scenario(sets: Sets, name: str):
     """``(files, initial, stations, options, truth dict, expected culprit or None)`` of one scenario."""
     d = sets.d
-    base = read_pass_table(str(sets.multi))
+    rr = name.startswith("rr_")                           # the 3-station set with range-rate instead of Doppler
+    if rr:
+        name = name[3:]
+        if name not in RR:
+            raise KeyError(name)
+    base_path = sets.range_rate() if rr else sets.multi
+    base = read_pass_table(str(base_path))
     frame = base.frame
     truth = {f"range_bias:{k}": v for k, v in BIASES.items()}
-    multi = dict(initial=d / "guess.json", stations=d / "stations.csv", options=MULTI_OPTS, truth=truth,
-                 state=d / "multi.truth.json")
+    multi = dict(initial=d / "guess.json", stations=d / "stations.csv", options=RR_OPTS if rr else MULTI_OPTS,
+                 truth=truth, state=d / "multi.truth.json")
     vt = {}
     for pid, (off, drift) in sets.vhf_offsets.items():
         vt[f"doppler_offset:{pid}"] = off
@@ -167,18 +184,18 @@ def scenario(sets: Sets, name: str):
                state=d / "vhf.truth.json")
     vtab = read_pass_table(str(sets.vhf))
     if name == "clean":
-        return dict(multi, files=[sets.multi], culprit=None)
+        return dict(multi, files=[base_path], culprit=None)
     if name.startswith("station_"):                       # station_300 / station_1000: KIR moved north
         dn = float(name.split("_")[1])
         p = d / f"{name}.stations.csv"
         p.write_text(_stations_csv(STATIONS, {"KIR": dn}))
-        return dict(multi, files=[sets.multi], stations=p, culprit="KIR")
+        return dict(multi, files=[base_path], stations=p, culprit="KIR")
     if name.startswith("timetag_"):                       # timetag_0.5 / timetag_2: KIR's time tags late
         dt = float(name.split("_")[1])
         f = frame.copy()
         rows = (f["station"].astype(str) == "KIR").to_numpy()
         f.loc[rows, "time"] = f.loc[rows, "time"] + pd.Timedelta(seconds=dt)
-        return dict(multi, files=sets.write(name, PassTable(f, dict(base.meta))), culprit="KIR")
+        return dict(multi, files=sets.write(("rr_" if rr else "") + name, PassTable(f, dict(base.meta))), culprit="KIR")
     if name == "bias_not_estimated":
         return dict(multi, files=[sets.multi], options=("--doppler-bias", "offset", "--dut1", "0.1"),
                     truth={}, culprit=None)
@@ -187,13 +204,13 @@ def scenario(sets: Sets, name: str):
         rows, pid = _pass_rows(f, "KIR", 1, "range")
         f.loc[rows, "value"] = f.loc[rows, "value"].to_numpy() + (float(name.split("_")[2]) if name.count("_") == 2
                                                                   else 50.0)
-        return dict(multi, files=sets.write(name, PassTable(f, dict(base.meta))), culprit=pid)
+        return dict(multi, files=sets.write(("rr_" if rr else "") + name, PassTable(f, dict(base.meta))), culprit=pid)
     if name.startswith("range_step_"):                    # +M m on the second half of KIR's second pass's ranges
         f = frame.copy()
         rows, pid = _pass_rows(f, "KIR", 1, "range")
         idx = np.flatnonzero(rows)
         f.loc[idx[idx.size // 2:], "value"] = f.loc[idx[idx.size // 2:], "value"].to_numpy() + float(name.split("_")[2])
-        return dict(multi, files=sets.write(name, PassTable(f, dict(base.meta))), culprit=pid)
+        return dict(multi, files=sets.write(("rr_" if rr else "") + name, PassTable(f, dict(base.meta))), culprit=pid)
     if name == "carrier_3khz":                            # one pass's carrier labelled 3 kHz high
         rows, pid = _pass_rows(frame, "KIR", 1)
         rest, one = _split(base, rows)
@@ -224,7 +241,7 @@ def scenario(sets: Sets, name: str):
         sub = of[orow].copy()
         sub["pass_id"] = pid
         f = pd.concat([frame[~rows], sub], ignore_index=True).sort_values("time", kind="stable").reset_index(drop=True)
-        return dict(multi, files=sets.write(name, PassTable(f, dict(base.meta))), culprit=pid)
+        return dict(multi, files=sets.write(("rr_" if rr else "") + name, PassTable(f, dict(base.meta))), culprit=pid)
     if name.startswith("drag_"):                          # drag_1 / drag_3 (days): drag + SRP in the truth
         days = int(name.split("_")[1])
         sim = _simulate(d, name, STATE, STATIONS, "--duration", str(86400 * days), "--step", "60", "--seed",
@@ -288,7 +305,7 @@ DYNAMICS = ["drag_1", "drag_3"]
 #: Near the detection limits: smaller versions of the same errors.
 SMALL = ["station_100", "timetag_0.05", "bias_jump_15", "range_step_20", "vhf_station_300", "vhf_oscillator_step_10",
          "vhf_oscillator_step_5"]
-ALL = MULTI + VHF + DYNAMICS + SMALL
+ALL = MULTI + VHF + DYNAMICS + SMALL + ["rr_" + n for n in RR]
 
 
 def run(sets: Sets, name: str, *extra) -> dict:

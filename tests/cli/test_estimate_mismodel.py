@@ -51,6 +51,8 @@ def test_consistent_passes_are_ok_and_cover_the_truth(sets, name):
     ("bias_jump", "KIR/KIR-002"),       # a 50 m range bias step in one pass
     ("other_satellite", "KIR/KIR-002"),  # a pass of a satellite 30 s behind
     ("range_step_20", "KIR/KIR-002"),    # +20 m on the second half of one pass's ranges (10 m noise)
+    ("rr_station_300", "KIR"),          # the same with range-rate instead of Doppler
+    ("rr_bias_jump_15", "KIR/KIR-002"),  # +15 m on one pass: ok with a bias 4.1-4.3 sigma off before
 ])
 def test_a_wrong_station_or_pass_is_said_and_named(sets, name, culprit):
     row = ms.run(sets, name)
