@@ -99,3 +99,28 @@ def test_unmodelled_drag_and_another_satellite_cover_or_say_so(sets, name):
         assert row["verdict"] == "suspect" and "variance_factor" in row["reasons"], row
     if name == "vhf_other_satellite":         # 225 km along-track from the others: no convergence, exit 1
         assert row["verdict"] == "(failed)" and row["exit"] == 1, row
+
+
+def test_a_long_dense_set_does_not_crash_the_noise_model(run_cli, tmp_path):
+    """12 h of range and Doppler every 2 s from 3 stations, no range bias, estimated with
+    `--doppler-bias offset`: REML's simplex stepped to a log-variance whose exp overflowed
+    (``internal error (OverflowError)``, exit 1) before the cap in methods/noise.py; now it
+    converges, covers the truth and is ok."""
+    import json
+
+    import numpy as np
+
+    d = tmp_path
+    (d / "state.json").write_text(json.dumps(ms.STATE))
+    (d / "guess.json").write_text(json.dumps(ms.GUESS))
+    (d / "stations.csv").write_text(ms._stations_csv(ms.STATIONS))
+    assert run_cli(["simulate", "--state", d / "state.json", "--stations", d / "stations.csv", "--duration", "43200",
+                    "--step", "2", "--seed", "3", "--kinds", "range,doppler", "--dut1", "0.1",
+                    "-o", d / "p.parquet"]).exit_code == 0
+    r = run_cli(["estimate", d / "p.parquet", "--initial", d / "guess.json", "--stations", d / "stations.csv",
+                 "--doppler-bias", "offset", "--dut1", "0.1", "-o", d / "sol.json"])
+    assert r.exit_code == 0 and "Traceback" not in r.stderr, r.stderr
+    doc = json.loads((d / "sol.json").read_text())
+    err = np.asarray(doc["values"][:6]) - np.r_[ms.STATE["position_m"], ms.STATE["velocity_m_s"]]
+    assert np.all(np.abs(err) < 4 * np.asarray(doc["sigma"][:6])), err / np.asarray(doc["sigma"][:6])
+    assert doc["quality"]["verdict"] == "ok", doc["quality"]
