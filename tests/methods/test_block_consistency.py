@@ -15,7 +15,7 @@ from trackproc.methods import quality as qm
 def _problem(rng, blocks=(30, 30, 30), n_par=4, n_local=1, prior_sigma=None):
     """A whitened linear model: common parameters (random partials: each block sees them its
     own way) plus ``n_local`` parameters per block (an offset: only that block sees it)."""
-    rows, cols = [], []
+    rows = []
     n_all = n_par + n_local * len(blocks)
     jac = np.zeros((sum(blocks), n_all))
     start = 0
