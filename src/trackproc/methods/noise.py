@@ -251,6 +251,11 @@ class NoiseFit:
         return out
 
 
+def _exp(x: float) -> float:
+    """``exp`` of a log-parameter, capped at exp(600)."""
+    return math.exp(min(float(x), 600.0))
+
+
 def _optimise(fun, start, bounds):
     # scipy's Nelder-Mead written out (the same iterates) without importing scipy.optimize (issue 19)
     from trackproc.methods.simplex import nelder_mead
@@ -307,10 +312,12 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
 
         def build(z, has_ar=has_ar, has_walk=has_walk, given=given) -> NoiseModel:
             # z: log(σ_a/σ_w)², log τ (AR); log(q/σ_w)² (walk); log σ_w (when the walk is given)
-            w = math.exp(z[-1]) if given else 1.0
-            a = math.sqrt(math.exp(z[0])) * w if has_ar else 0.0
-            tau = math.exp(z[1]) if has_ar else 0.0
-            q = walk if given else (math.sqrt(math.exp(z[2 if has_ar else 0])) if has_walk else 0.0)
+            # (the simplex is unbounded, its result clipped to the bounds: exp is capped so that a far
+            # excursion is a poor likelihood, not an OverflowError)
+            w = _exp(z[-1]) if given else 1.0
+            a = math.sqrt(_exp(z[0])) * w if has_ar else 0.0
+            tau = _exp(z[1]) if has_ar else 0.0
+            q = walk if given else (math.sqrt(_exp(z[2 if has_ar else 0])) if has_walk else 0.0)
             return NoiseModel(w, a, tau, q or 0.0)
 
         memo: dict = {}

@@ -198,3 +198,117 @@ def improvement_test(chi2_stale: float, chi2_refined: float, dof: int, inflation
     limit = chi2_limit(dof, probability)
     return {"delta_chi2": delta, "inflation": float(inflation), "delta_chi2_effective": eff, "dof": int(dof),
             "limit": limit, "significant": bool(eff > limit)}
+
+
+def block_consistency(jac_w, z, covariance, rows, tol: float = 1e-6) -> dict:
+    """Does one block of samples (a pass) agree with the solution the others give? The score
+    (Rao) statistic of the alternative "the block has its own copy of every parameter it is
+    sensitive to" in the linearised whitened problem: with ``E`` the block's whitened Jacobian
+    columns (zero outside the block), ``g = Eᵀ z`` and ``M = Eᵀ Q_vv E = AᵀA − AᵀJ_B C J_Bᵀ A``
+    (``Q_vv = I − J C Jᵀ`` the residuals' cofactor matrix, ``C`` the posterior covariance with
+    any a-priori), ``T = gᵀ M⁺ g`` is χ²(rank M) when the model holds (the test of added
+    parameters in a Gauss-Markov model; Koch, Parameter Estimation and Hypothesis Testing, 1999,
+    sec. 4.3; for one parameter per sample it is Baarda's data snooping). It is the χ² a block
+    gains by being allowed its own state: large when one pass pulls the solution its own way (an
+    oscillator step absorbed by the orbit, another satellite's pass) even when the pass then fits
+    white. Directions the block alone determines (its own offsets; ``M``'s eigenvalues below
+    ``tol`` of the column-normalised matrix) cannot be tested and are not counted.
+
+    ``jac_w`` (N, n) whitened Jacobian of the kept samples, ``z`` (N,) whitened residuals,
+    ``covariance`` (n, n), ``rows`` the block's indices. Returns ``{"statistic", "dof"}``."""
+    jac_w = np.asarray(jac_w, float)
+    jb = jac_w[np.asarray(rows, int)]
+    cols = np.flatnonzero(np.any(jb != 0.0, axis=0))
+    if cols.size == 0:
+        return {"statistic": 0.0, "dof": 0}
+    a = jb[:, cols]
+    g = a.T @ np.asarray(z, float)[np.asarray(rows, int)]
+    h = a.T @ jb                                           # AᵀJ_B
+    m = a.T @ a - h @ np.asarray(covariance, float) @ h.T
+    d = 1.0 / np.sqrt(np.maximum(np.diag(a.T @ a), 1e-300))
+    lam, vec = np.linalg.eigh((m * d[:, None]) * d[None, :])
+    keep = lam > tol * max(float(lam.max()), 0.0)
+    if not keep.any():
+        return {"statistic": 0.0, "dof": 0}
+    proj = vec[:, keep].T @ (g * d)
+    return {"statistic": float(np.sum(proj ** 2 / lam[keep])), "dof": int(keep.sum())}
+
+
+def chi2_survival(x: float, dof: int) -> float:
+    """P(χ²(dof) > x)."""
+    from scipy.special import gammaincc
+
+    return float(gammaincc(max(int(dof), 1) / 2.0, max(float(x), 0.0) / 2.0))
+
+
+def whiteness_score(w: dict) -> float:
+    """One pass's evidence of time correlation, in normal scores: the larger of the lag-1
+    autocorrelation times ``√n`` (≈ N(0, 1) for white residuals; Box & Jenkins) and the runs
+    test's ``|z|``."""
+    rho, z = w["lag1_autocorrelation"], w["runs_z"]
+    runs = abs(z) if math.isfinite(z) else 0.0
+    return max(rho * math.sqrt(w["n"]) if math.isfinite(rho) else 0.0, runs)
+
+
+def whiteness_family_limit(m: int, probability: float = GATE_PROBABILITY) -> float:
+    """The normal score above which the worst of ``m`` passes' :func:`whiteness_score` is not
+    chance at ``probability`` (Bonferroni over the m passes and the two tests:
+    ``Φ⁻¹(1 - (1 - probability)/(2m))``)."""
+    from scipy.special import ndtri
+
+    return float(ndtri(1.0 - (1.0 - probability) / (2 * max(int(m), 1))))
+
+
+def add_whiteness_family(q: Quality, passes: list) -> None:
+    """The residual-whiteness reason over several passes (``[{"pass", "whiteness"}, ...]``):
+    ``suspect`` when the worst pass's :func:`whiteness_score` is beyond
+    :func:`whiteness_family_limit` (a false alarm on at most 0.1 % of white solutions, however
+    many passes; the fixed ρ > :data:`WHITENESS_RHO` of :func:`add_whiteness` fires on the worst
+    of twelve 22-sample white passes about one time in two), the worst pass named."""
+    passes = [p for p in passes if math.isfinite(p["whiteness"]["lag1_autocorrelation"])]
+    if not passes:
+        return
+    limit = whiteness_family_limit(len(passes))
+    worst = max(passes, key=lambda p: whiteness_score(p["whiteness"]))
+    w = worst["whiteness"]
+    score = whiteness_score(w)
+    bad = score > limit
+    q.add("whiteness", "suspect" if bad else "ok",
+          (f"pass {worst['pass']}: the residuals are correlated in time (lag-1 autocorrelation "
+           f"{w['lag1_autocorrelation']:.2f} over {w['n']} samples, runs-test z {w['runs_z']:.1f}: score {score:.2f}, "
+           f"limit {limit:.2f} for the worst of {len(passes)} passes; worth {w['effective_samples']:.0f} independent "
+           "samples): a covariance that assumes white noise is optimistic") if bad else
+          (f"residuals white enough (worst pass {worst['pass']}: lag-1 autocorrelation "
+           f"{w['lag1_autocorrelation']:.2f} over {w['n']}, runs-test z {w['runs_z']:.1f}; score {score:.2f}, "
+           f"limit {limit:.2f})"),
+          value=w["lag1_autocorrelation"], limit=limit / math.sqrt(w["n"]))
+
+
+def step_scan(jac_w, z, covariance, rows, weights, margin: int = 3) -> dict:
+    """The largest score statistic of "a level shift from sample s on" in one block of white
+    samples (time order), over every s with ``margin`` samples either side: the step column
+    ``e_s = weights · 1[i ≥ s]`` (``weights`` = 1/σ of the block's samples, so that ``e_s`` is
+    whitened like the rows) tested as :func:`block_consistency` tests a block's own parameters,
+    ``T_s = (e_sᵀz)² / (e_sᵀe_s − u_sᵀ C u_s)``, ``u_s = J_Bᵀ e_s``: χ²(1) for each s when the
+    model holds (Koch 1999 sec. 4.3). A frequency step of the transmitter inside a pass, a bias
+    or time-tag jump: what the orbit, an offset and a drift can absorb is not counted, the rest
+    is. Returns ``{"statistic", "index" (position in ``rows``), "candidates"}``."""
+    rows = np.asarray(rows, int)
+    n = rows.size
+    if n < 2 * margin + 1:
+        return {"statistic": 0.0, "index": -1, "candidates": 0}
+    jb = np.asarray(jac_w, float)[rows]
+    w = np.asarray(weights, float)
+    zb = np.asarray(z, float)[rows]
+    # suffix sums: g_s = Σ_{i≥s} w_i z_i, ee_s = Σ w_i², u_s = Σ w_i J_B[i]
+    g = np.cumsum((w * zb)[::-1])[::-1]
+    ee = np.cumsum((w * w)[::-1])[::-1]
+    u = np.cumsum((w[:, None] * jb)[::-1], axis=0)[::-1]
+    s = np.arange(margin, n - margin + 1)
+    m = ee[s] - np.einsum("ij,jk,ik->i", u[s], np.asarray(covariance, float), u[s])
+    ok = m > 1e-9 * ee[s]
+    if not ok.any():
+        return {"statistic": 0.0, "index": -1, "candidates": 0}
+    t = np.where(ok, g[s] ** 2 / np.where(ok, m, 1.0), 0.0)
+    k = int(np.argmax(t))
+    return {"statistic": float(t[k]), "index": int(s[k]), "candidates": int(ok.sum())}

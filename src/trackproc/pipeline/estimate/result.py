@@ -114,7 +114,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         diagnostics["noise"] = noise_report
     if adaptation is not None:
         diagnostics["apriori_adaptation"] = adaptation
-    quality = gates.estimate_quality(problem, sol, adaptation)
+    quality = gates.estimate_quality(problem, sol, adaptation, clip=opt.clip, noise_report=noise_report)
     comparison = s2.compare(problem, sol) if opt.compare_doppler_only else None
     two, sol2 = s2.two_stage(problem, sol, opt) if opt.two_stage else (None, None)
     if comparison is not None:
