@@ -14,6 +14,11 @@ from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, TRA
 from trackproc.pipeline.refine.problem import Refinement
 
 
+def default_apriori(ref: Refinement) -> bool:
+    """The state's a-priori is the default one (a stale state without covariance), not stated."""
+    return str(ref.apriori_note).startswith("default")
+
+
 def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, improvement=None, refusal=None,
                    t_model=None, max_el=None, consistency=None):
     """The :class:`~trackproc.methods.quality.Quality` of a refinement: a-priori conflict (and
@@ -30,9 +35,17 @@ def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, im
                               "limit": a["limit"]}
         said = f"{t['test']} chi2 {t['statistic']:.4g} over {t['dof']}, limit {t['limit']:.3g}"
         if a.get("resolved", True):
-            q.add("apriori_conflict", "ok",
+            # the default a-priori is this tool's guess for a state without covariance: adapting it is
+            # routine. A stated covariance (the stale file's, --apriori-sigma) contradicted at 99.9 %
+            # means that either it or the pass is wrong, and one pass cannot tell which: a time-tag
+            # offset, a station error or the ionosphere move the orbit without leaving a trace in the
+            # residuals (docs/refine.md, "Mis-modelled passes")
+            stated = not default_apriori(ref)
+            q.add("apriori_conflict", "suspect" if stated else "ok",
                   f"the pass contradicted the a-priori ({said}); its covariance was scaled by {a['factor']:.3g} "
-                  f"(sigmas x{a['sigma_factor']:.3g}, maximum-likelihood variance component)",
+                  f"(sigmas x{a['sigma_factor']:.3g}, maximum-likelihood variance component)"
+                  + ("; the stated covariance or the pass is wrong (a systematic error an orbit absorbs: time "
+                     "tags, station coordinates, ionosphere), one pass cannot tell which" if stated else ""),
                   value=t["statistic"], limit=t["limit"])
         else:
             q.add("apriori_conflict", "suspect" if refusal is not None else "rejected",
