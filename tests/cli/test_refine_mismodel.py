@@ -15,7 +15,8 @@ labelled one-way. The table of docs/refine.md ("Mis-modelled passes") is
 
 Independent references: the truth of the simulation; the chi-square law of the a-priori innovation
 (Monte Carlo of a linear Gaussian problem); and, for a time-tag offset, the closed form of the orbit
-the pass cannot tell from the truth (the truth shifted in time and turned with the Earth).
+the pass cannot tell from the truth (the truth shifted in time and turned with the Earth), whose
+derivative is the direction of the ``--time-tag-sigma`` consider term.
 """
 
 from __future__ import annotations
@@ -229,6 +230,42 @@ def test_time_tag_offset_is_the_truth_shifted_and_turned_with_the_earth(dt):
     z_equivalent = (res.state.values[:6] - equivalent) / res.state.sigma[:6]
     assert np.all(np.abs(z_equivalent) < 0.5), z_equivalent
     assert out["verdict"] == "ok" and out["max_z"] > 4.0 * dt
+
+
+def test_time_tag_direction_is_the_derivative_of_the_equivalent_orbit():
+    """:func:`time_tag_direction` (the force model's acceleration, the Earth's spin) against the
+    central difference of the equivalent orbit of the test above built from the simulator's
+    reference propagation (DOP853), at the Table 1 traverse point: to 1e-3 of its size."""
+    from trackproc.pipeline.refine import prepare
+    from trackproc.pipeline.refine.traverse import time_tag_direction
+
+    table, _ = mismodelled("S55", "clean")
+    ref = prepare(table, STALE, None, RefineOptions(), EOP)
+    epoch = np.datetime64(ref.problem.epoch, "ns")
+    x = truth_at(epoch)
+
+    def equivalent(dt):
+        shifted = truth_at(epoch - np.timedelta64(int(round(dt * 1e9)), "ns"))
+        c, s = math.cos(OMEGA_EARTH * dt), math.sin(OMEGA_EARTH * dt)
+        turn = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return np.r_[turn @ shifted[:3], turn @ shifted[3:]]
+
+    numeric = (equivalent(0.01) - equivalent(-0.01)) / 0.02
+    g = time_tag_direction(ref, x)
+    assert np.linalg.norm(g[:3] - numeric[:3]) < 1e-3 * np.linalg.norm(numeric[:3])
+    assert np.linalg.norm(g[3:] - numeric[3:]) < 1e-3 * np.linalg.norm(numeric[3:])
+
+
+@pytest.mark.parametrize("geometry,stale,dt", [("S55", "cov", 2.0), ("V55", "nocov", 2.0)])
+def test_a_stated_time_tag_uncertainty_covers_the_offset(geometry, stale, dt):
+    """``time_tag_sigma_s`` (``--time-tag-sigma``) adds the offset's effect to the covariance as a
+    consider parameter: time tags 2 s late, stated 2 s: 37 and 13 sigma before, within 2 now."""
+    table, stations = mismodelled(geometry, f"timetag{dt}")
+    res = refine(table, STALES[stale], stations, RefineOptions(time_tag_sigma_s=dt), EOP)
+    z = (res.state.values[:6] - truth_at(res.state.epoch)) / res.state.sigma[:6]
+    assert np.all(np.abs(z) < 2.0), z
+    consider = res.state.diagnostics["time_tag_consider"]        # absent without --time-tag-sigma
+    assert consider["sigma_s"] == dt and 0.8 * 7.4e3 * dt < consider["position_sigma_m"] < 1.2 * 7.4e3 * dt
 
 
 def test_cli_says_so_for_a_stated_covariance_the_pass_contradicts(run_cli, tmp_path):
