@@ -92,6 +92,10 @@ def refine_command(
              "(exponentially correlated), random walk of the transmitter frequency (one-way) and both, then GLS; "
              "white = independent samples (the plain weighted fit); or that model. See docs/refine.md."),
     oscillator_noise: Optional[float] = OscillatorNoiseOpt,
+    time_tag_sigma: float = typer.Option(
+        0.0, "--time-tag-sigma", metavar="S", min=0.0,
+        help="1-sigma uncertainty of the station's time tags (s), added to the covariance (pointwise): one pass "
+             "cannot see a time-tag offset (it is the orbit shifted along-track). See docs/refine.md."),
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Pointwise: edit samples beyond K x max(1, WRMS) sigmas. 0: off."),
@@ -186,7 +190,7 @@ def refine_command(
         max_iterations=max_iterations, clip=clip if clip > 0 else None, pass_id=pass_id,
         kind=kind.value if kind else None, quadrature_order=quadrature_order, quadrature_panel_s=quadrature_panel,
         max_gap_s=max_gap, reweight=reweight, covariance=covariance.value, noise=noise.value,
-        oscillator_noise=oscillator_noise)
+        oscillator_noise=oscillator_noise, time_tag_sigma_s=time_tag_sigma)
     result = refine(table, state0, station_table, options, orientation, source=source)
 
     state = result.state if output_epoch is OutputEpoch.traverse else result.stale_epoch_state

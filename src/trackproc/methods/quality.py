@@ -312,3 +312,38 @@ def step_scan(jac_w, z, covariance, rows, weights, margin: int = 3) -> dict:
     t = np.where(ok, g[s] ** 2 / np.where(ok, m, 1.0), 0.0)
     k = int(np.argmax(t))
     return {"statistic": float(t[k]), "index": int(s[k]), "candidates": int(ok.sum())}
+
+
+#: :func:`prior_innovation_chi2` uses the directions where the data's information is at least this
+#: fraction of the a-priori's (posterior variance at most 1/(1 + floor) of the a-priori's). The
+#: statistic is χ² with that many degrees of freedom whatever the floor; the floor only leaves out
+#: the directions the pass barely sees, where it has no power (an a-priori error there must exceed
+#: ``4/√floor`` a-priori sigmas to be seen) and where the linear statistic would rest on the
+#: curvature of the cost (the rotation about the station axis).
+PRIOR_INNOVATION_FLOOR = 0.1
+
+
+def prior_innovation_chi2(delta, prior_cov, posterior_cov, floor: float = PRIOR_INNOVATION_FLOOR) -> tuple:
+    """Do the data contradict an a-priori ``x_p ~ N(x_true, P)``? The innovation of the a-priori,
+    ``T = δᵀ (P − C)⁺ δ`` with ``δ = x̂ − x_p`` the correction made by a (generalised)
+    least-squares solution with the a-priori and ``C`` its covariance (nuisance parameters
+    profiled: the state block of the full covariance), ``P − C`` being the covariance of ``δ``
+    when the a-priori is right (Tapley, Schutz & Born 2004, section 4.4; the same statistic as
+    :func:`trackproc.methods.tle_theory_error.apriori_conflict_chi2`, written with the posterior
+    instead of the data's information). Computed in the a-priori's whitened coordinates
+    (``P = L Lᵀ``, ``L⁻¹ C L⁻ᵀ = V diag(c) Vᵀ``, the data's information ``λ = 1/c − 1``,
+    ``u = Vᵀ L⁻¹ δ``): ``T = Σ u² (1 + λ)/λ`` over the directions with ``λ >= floor``, χ² with
+    that many degrees of freedom under the a-priori. Unlike the a-priori's share of the cost
+    ``δᵀ P⁻¹ δ`` (distributed as ``Σ λ/(1+λ) χ²₁``, mean the redundancy, tested against χ²(6)),
+    it keeps its power where the pass is weak against the a-priori (a low, short or noisy pass; a
+    wandering oscillator). Returns ``(T, degrees of freedom)``."""
+    p = np.asarray(prior_cov, float)
+    low = np.linalg.cholesky(0.5 * (p + p.T))
+    li = np.linalg.inv(low)
+    cw = li @ np.asarray(posterior_cov, float) @ li.T
+    c, vec = np.linalg.eigh(0.5 * (cw + cw.T))
+    c = np.clip(c, 1e-300, None)
+    lam = 1.0 / c - 1.0
+    u = vec.T @ (li @ np.asarray(delta, float))
+    use = lam >= floor
+    return float(np.sum(u[use] ** 2 * (1.0 + lam[use]) / lam[use])), int(use.sum())

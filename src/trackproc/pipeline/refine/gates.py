@@ -67,11 +67,12 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
         # holds: time-correlated residuals overstate the data's information just as much, and
         # loosening the a-priori would then let the pass move the state by its own systematic
         # errors (docs/refine.md, "Quality")
-        chi2, rows = state_prior_chi2(work, first[0].values)
+        test = apriori_test(work, first[0], first[1])
         w = improvement["whiteness"]
         correlated = (w["lag1_autocorrelation"] > qm.WHITENESS_RHO
                       or (np.isfinite(w["runs_z"]) and abs(w["runs_z"]) > qm.RUNS_Z))
-        if rows and chi2 > qm.chi2_limit(rows) and correlated:
+        if test is not None and test["conflict"] and correlated:
+            chi2 = test["chi2"]
             # the kept covariance: the a-priori scaled by its variance component with the data's
             # information deflated by the correlation (never below the a-priori as given)
             pcov = state_prior_covariance([work.priors[k] for k in state_prior_indices(work)])
@@ -81,8 +82,8 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
             return work, first[0], first[1], first[2], None, improvement, {
                 "code": "apriori_conflict_correlated", "state_covariance": original * factor,
                 "covariance_factor": factor,
-                "reason": (f"the pass contradicts the stale state's a-priori (chi2 {chi2:.4g} over {rows}, limit "
-                           f"{qm.chi2_limit(rows):.3g}) but its residuals are correlated in time (lag-1 "
+                "reason": (f"the pass contradicts the stale state's a-priori ({test['test']} chi2 "
+                           f"{test['statistic']:.4g} over {test['dof']}, limit {test['limit']:.3g}) but its residuals are correlated in time (lag-1 "
                            f"{w['lag1_autocorrelation']:.2f}, runs-test z {w['runs_z']:.1f}): the data's noise model "
                            "is as doubtful as the a-priori, so neither the refined state nor a loosened a-priori "
                            "can be trusted; the stale covariance is scaled by "
@@ -180,6 +181,38 @@ def state_prior_chi2(ref: Refinement, x) -> tuple[float, int]:
     return chi2, rows
 
 
+def apriori_test(ref: Refinement, sol, kkt=None) -> Optional[dict]:
+    """Do the data contradict the state's a-priori? Pointwise without ``circular``: the innovation
+    of the a-priori (:func:`~trackproc.methods.quality.prior_innovation_chi2`: the correction
+    ``x̂ − x_p`` against its own covariance ``P − C``, over the directions the pass sees), χ² with
+    that many degrees of freedom when the a-priori is right; it keeps its power when the pass is
+    weak against the a-priori (a short, low or noisy pass, a wandering oscillator), where the
+    a-priori's share of χ² (mean: the redundancy, a fraction of 6) stays below χ²(6)'s point
+    whatever the stale error. Otherwise (integral cost: a sandwich covariance; ``circular``: a
+    covariance singular across the constraints) that share against χ²(rows). Returns
+    ``{"chi2", "rows", "statistic", "dof", "limit", "conflict", "test"}`` (``chi2``/``rows`` the
+    share), or None without a state a-priori."""
+    chi2, rows = state_prior_chi2(ref, sol.values)
+    if not rows:
+        return None
+    out = {"chi2": chi2, "rows": rows, "statistic": chi2, "dof": rows, "test": "a-priori share of chi2"}
+    pcov = state_prior_covariance([ref.priors[k] for k in state_prior_indices(ref)])
+    if pcov is not None and ref.options.cost == "pointwise" and not ref.options.circular:
+        centre = np.zeros(6)
+        for k in state_prior_indices(ref):
+            p = ref.priors[k]
+            centre[np.asarray(p.index, int)] = np.asarray(p.centre, float)
+        post = np.asarray(ref.covariance(sol, kkt), float)[:6, :6]
+        try:
+            stat, dof = qm.prior_innovation_chi2(np.asarray(sol.values, float)[:6] - centre, pcov, post)
+            out.update(statistic=stat, dof=dof, test="innovation of the a-priori")
+        except np.linalg.LinAlgError:
+            pass
+    out["limit"] = qm.chi2_limit(out["dof"])
+    out["conflict"] = bool(out["dof"] > 0 and out["statistic"] > out["limit"])
+    return out
+
+
 def scaled_priors(ref: Refinement, factor: float) -> Refinement:
     """``ref`` with the covariance of its state a-priori terms multiplied by ``factor``."""
     priors = list(ref.priors)
@@ -206,11 +239,11 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
         sol, kkt, scale = solve_weighted(work, x0=x0)
     if not (ref.priors and state_prior_indices(ref)):
         return work, sol, kkt, scale, None
-    chi2, rows = state_prior_chi2(work, sol.values)
-    limit = qm.chi2_limit(rows)
-    if chi2 <= limit and start_factor == 1.0:
+    test = apriori_test(work, sol, kkt)
+    chi2, rows = test["chi2"], test["rows"]
+    if not test["conflict"] and start_factor == 1.0:
         return work, sol, kkt, scale, None
-    start = {"chi2": chi2, "rows": rows, "limit": limit}
+    start = {"chi2": chi2, "rows": rows, "limit": qm.chi2_limit(rows), "test": test}
     factor = start_factor
     history = []
     kept = (work, sol, kkt, scale)
@@ -240,16 +273,24 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
                 "method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
                 "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start["chi2"], "chi2_after": chi2,
                 "rows": rows, "limit": start["limit"], "iterations": history, "resolved": False,
+                "test": _test_report(start["test"]),
                 "failure": f"with the a-priori scaled by {history[-1]['factor']:.3g} the refinement failed: "
                            f"{str(exc).split(' (')[0]}"}
         kept = (work, sol, kkt, scale)
         chi2, rows = state_prior_chi2(work, sol.values)
+    after = apriori_test(work, sol, kkt)
     adaptation = {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
                   "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start["chi2"],
                   "chi2_after": chi2, "rows": rows, "limit": start["limit"], "iterations": history,
-                  "resolved": bool(chi2 <= start["limit"] or (history and history[-1].get("component") is not None
+                  "test": _test_report(start["test"]), "test_after": _test_report(after),
+                  "resolved": bool(not after["conflict"] or (history and history[-1].get("component") is not None
                                                              and abs(history[-1]["component"] - 1.0) < 0.1))}
     return work, sol, kkt, scale, adaptation
+
+
+def _test_report(test: dict) -> dict:
+    """The a-priori test (:func:`apriori_test`) as the diagnostics give it."""
+    return {k: test[k] for k in ("test", "statistic", "dof", "limit", "conflict")}
 
 
 def solve_weighted(ref: Refinement, observed=None, prior_centre=None, x0=None):

@@ -105,6 +105,10 @@ class RefineOptions:
     traverse_epoch: Optional[np.datetime64] = None
     #: Refuse (keep the stale state) when the pass cannot improve it (:func:`refusal_test`).
     allow_refusal: bool = True
+    #: 1-sigma uncertainty (s) of the station's time tags, a consider parameter: one pass cannot
+    #: see a time-tag offset (docs/refine.md, "Mis-modelled passes"), so its effect is added to the
+    #: covariance (:func:`~trackproc.pipeline.refine.traverse.time_tag_covariance`); 0 = exact tags.
+    time_tag_sigma_s: float = 0.0
     modifiers: tuple = ()
 
 

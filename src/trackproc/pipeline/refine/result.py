@@ -26,7 +26,7 @@ from trackproc.pipeline.refine.problem import (Refinement, default_apriori_covar
                                                state_prior_covariance)
 from trackproc.pipeline.refine.quality import refine_quality
 from trackproc.pipeline.refine.timing import tle_timing
-from trackproc.pipeline.refine.traverse import eccentricity, max_elevation_deg, model_traverse
+from trackproc.pipeline.refine.traverse import eccentricity, max_elevation_deg, model_traverse, time_tag_covariance
 
 
 def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None,
@@ -114,6 +114,20 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                                f"direction(s) the pass cannot see ({rf.PROFILE_NODES} Gauss-Hermite points each)")
         except ProcessingError as exc:
             warnings.append(f"the profile covariance could not be computed ({exc}); the linear one is reported")
+    time_tags = None
+    if opt.time_tag_sigma_s > 0 and opt.cost == "pointwise" and not opt.circular and refusal is None:
+        # a time-tag offset the pass cannot see (docs/refine.md, "Mis-modelled passes"): a consider term
+        extra_cov = time_tag_covariance(ref, x, ref.covariance(sol, kkt), opt.time_tag_sigma_s)
+        if extra_cov is None:
+            warnings.append("the time-tag uncertainty could not be added to the covariance (propagation failed)")
+        else:
+            cov = cov + extra_cov
+            sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+            obs.posterior_sigma_rtn = np.sqrt(np.clip(np.diag(big @ cov[:6, :6] @ big.T), 0.0, None))
+            covariance_note += f"; plus a time-tag uncertainty of {opt.time_tag_sigma_s:g} s (consider parameter)"
+            time_tags = {"sigma_s": opt.time_tag_sigma_s,
+                         "position_sigma_m": float(np.sqrt(np.trace(extra_cov[:3, :3]))),
+                         "velocity_sigma_m_s": float(np.sqrt(np.trace(extra_cov[3:6, 3:6])))}
     # a pass whose timing contradicts its TLE: the covariance takes the shift as a possible
     # time-tag error (pipeline/refine/timing.py)
     timing = tle_timing(ref, x, cov) if refusal is None else None
@@ -162,8 +176,9 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     apriori_note = ref.apriori_note
     if adaptation is not None and adaptation.get("factor", 1.0) > 1.0 and refusal is None:
         a = adaptation
-        warnings.append(f"the pass contradicted the a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, 99.9 % limit "
-                        f"{a['limit']:.3g}): its covariance was scaled by {a['factor']:.3g} (sigmas x"
+        t = a.get("test") or {"statistic": a["chi2_before"], "dof": a["rows"], "limit": a["limit"]}
+        warnings.append(f"the pass contradicted the a-priori (chi2 {t['statistic']:.4g} over {t['dof']}, 99.9 % limit "
+                        f"{t['limit']:.3g}): its covariance was scaled by {a['factor']:.3g} (sigmas x"
                         f"{a['sigma_factor']:.3g}; maximum-likelihood variance component) and the pass refined again")
         apriori_note += f"; scaled by {a['factor']:.3g} (the pass contradicted it)"
     rtn = rtn_covariance(x[:3], x[3:6], cov[:6, :6])
@@ -182,6 +197,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         "sigma_rtn": dict(zip(rf.RTN_NAMES, np.sqrt(np.clip(np.diag(rtn), 0.0, None)).tolist())),
         "units": units, "warnings": warnings,
     }
+    if time_tags is not None:                         # --time-tag-sigma: the consider term
+        diagnostics["time_tag_consider"] = time_tags
     if ref.noise_report is not None:                  # the noise model of the pass (methods/noise.py)
         diagnostics["noise"] = ref.noise_report
     method = {"cost": opt.cost, "circular": bool(opt.circular),

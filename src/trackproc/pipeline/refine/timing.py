@@ -8,9 +8,12 @@ minutes apart: errors of each pass, not of the orbit (docs/refine.md, "The whole
 timing"). One pass cannot tell the two apart. When the stale state is a TLE, whose accuracy is
 known (TLE differencing, :data:`trackproc.methods.tle_fit.TLE_APRIORI`), the refined state's
 along-track move is tested against it; when the move is beyond the TLE's accuracy (99.9 %), the
-covariance takes the shift as a possible time-tag error of the pass — ``ẋ ẋᵀ τ²``, the state
-moved along its trajectory by ``τ`` — so that it covers the error whichever of the two is right,
-and the verdict says so (reason ``timing``, ``suspect``).
+covariance takes the shift as a possible time-tag error of the pass — ``g gᵀ τ²``, with ``g``
+how the state a pass describes moves per second of its time tags (the orbit shifted along its
+track and turned with the Earth, :func:`~trackproc.pipeline.refine.traverse.time_tag_direction`)
+— so that it covers the error whichever of the two is right, and the verdict says so (reason
+``timing``, ``suspect``). ``--time-tag-sigma`` is the same term for a time-tag error the user
+states.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ from trackproc.dynamics.rtn import rtn_jacobian
 from trackproc.methods.quality import chi2_limit
 from trackproc.io.tle import is_tle_state
 from trackproc.pipeline.refine.problem import Refinement
+from trackproc.pipeline.refine.traverse import time_tag_direction
 
 
 def tle_age_days(ref: Refinement) -> Optional[float]:
@@ -63,12 +67,14 @@ def tle_timing(ref: Refinement, x, cov) -> Optional[dict]:
     out = {"along_m": along, "shift_s": -along / speed, "tle_sigma_m": tle_sigma, "posterior_sigma_m": posterior,
            "z": z, "limit": limit, "age_days": age, "inflated": abs(z) > limit, "covariance": cov}
     if out["inflated"]:
-        # the state moved along its trajectory by the shift: d(x)/dt = (v, a), two-body acceleration
-        rn = float(np.linalg.norm(r))
-        xdot = np.r_[v, -ref.mu * r / rn ** 3]
-        tau = along / speed
+        # the move the pass's timing explains: g dt with g the state's move per second of time tag
+        # (two-body d(x)/dt if the orbit cannot be propagated), dt to the along-track move
+        g = time_tag_direction(ref, x)
+        if g is None:
+            g = np.r_[v, -ref.mu * r / float(np.linalg.norm(r)) ** 3]
+        dt = along / float(along_row @ g[:6])
         cov = cov.copy()
-        cov[:6, :6] += tau ** 2 * np.outer(xdot, xdot)
+        cov[:6, :6] += dt ** 2 * np.outer(g, g)
         out["covariance"] = cov
     return out
 
