@@ -48,7 +48,8 @@ from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-ex
 from trackproc.pipeline.estimate.options import (DOPPLER_BIAS, DOPPLER_BIAS_PER, RESIDUAL_COLUMNS, UNITS,
                                                  EstimateOptions)
 from trackproc.pipeline.estimate.problem import Problem, build_problem
-from trackproc.pipeline.estimate.gates import estimate_quality, pass_noise
+from trackproc.pipeline.estimate.gates import pass_noise
+from trackproc.pipeline.estimate.quality import estimate_quality
 from trackproc.pipeline.estimate.result import EstimateResult, estimate, residual_frame
 from trackproc.pipeline.estimate.summary import summary_text
 

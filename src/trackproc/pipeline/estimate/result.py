@@ -15,6 +15,7 @@ from trackproc.dynamics.rtn import rtn_covariance
 from trackproc.io.statefile import State
 from trackproc.models import observation as ob
 from trackproc.pipeline.estimate import gates
+from trackproc.pipeline.estimate.quality import estimate_quality
 from trackproc.pipeline.estimate import seed002 as s2
 from trackproc.pipeline.estimate.options import UNITS, EstimateOptions
 from trackproc.pipeline.estimate.problem import Problem, build_problem
@@ -114,7 +115,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         diagnostics["noise"] = noise_report
     if adaptation is not None:
         diagnostics["apriori_adaptation"] = adaptation
-    quality = gates.estimate_quality(problem, sol, adaptation, clip=opt.clip, noise_report=noise_report)
+    quality = estimate_quality(problem, sol, adaptation, clip=opt.clip, noise_report=noise_report)
     comparison = s2.compare(problem, sol) if opt.compare_doppler_only else None
     two, sol2 = s2.two_stage(problem, sol, opt) if opt.two_stage else (None, None)
     if comparison is not None:
