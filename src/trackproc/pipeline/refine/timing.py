@@ -24,6 +24,7 @@ from typing import Optional
 import numpy as np
 
 from trackproc.dynamics.rtn import rtn_jacobian
+from trackproc.errors import InputError
 from trackproc.methods.quality import chi2_limit
 from trackproc.io.tle import is_tle_state
 from trackproc.pipeline.refine.problem import Refinement
@@ -36,9 +37,9 @@ def tle_age_days(ref: Refinement) -> Optional[float]:
         return None
     from trackproc.io.tle import parse_tle, tle_epoch
 
-    try:
+    try:            # the lines were parsed once already (tle_state); a hand-made state may hold others
         epoch = tle_epoch(parse_tle("\n".join(ref.initial.extra["tle"])))
-    except Exception:                       # the lines were read once already; a state file may hold others
+    except (InputError, KeyError, TypeError, ValueError):
         return None
     return abs(float((ref.problem.epoch - epoch) / np.timedelta64(1, "s"))) / 86400.0
 
