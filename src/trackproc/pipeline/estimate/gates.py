@@ -40,8 +40,8 @@ def solve(problem: Problem, opt: EstimateOptions):
             sol = problem.solve(max_iterations=opt.max_iterations, clip=opt.clip, rank_rtol=opt.rank_rtol,
                                 noise=cov, edited=sol.edited, x0=sol.values)
             previous = used = cov
-    chi2, rows = state_prior_chi2(problem.priors, sol.values)
-    if not rows or chi2 <= qm.chi2_limit(rows) or state_prior_covariance(problem.priors) is None:
+    test = apriori_test(problem.priors, sol)
+    if test is None or not test["conflict"] or state_prior_covariance(problem.priors) is None:
         return sol, None, noise_report
     # The a-priori is scaled by the data; but a conflict is evidence against the a-priori only if
     # the data's own noise model holds on the adapted solution: residuals still correlated in
@@ -59,7 +59,7 @@ def solve(problem: Problem, opt: EstimateOptions):
             adaptation["failure"] = loss
     if doubt or not adaptation["resolved"]:
         problem.priors = original
-        return refuse(problem, opt, sol, used, chi2, rows, doubt, adaptation) + (noise_report,)
+        return refuse(problem, opt, sol, used, test, doubt, adaptation) + (noise_report,)
     return sol_a, adaptation, noise_report
 
 
@@ -102,6 +102,42 @@ def state_prior_chi2(priors, x) -> tuple[float, int]:
     return chi2, rows
 
 
+def state_prior_centre(priors) -> np.ndarray:
+    """The a-priori centre of x..vz (NaN where none)."""
+    centre = np.full(6, np.nan)
+    for p in priors:
+        sel = _state_rows(p)
+        centre[np.asarray(p.index, int)[sel]] = np.asarray(p.centre, float)[sel]
+    return centre
+
+
+def apriori_test(priors, sol) -> dict | None:
+    """Do the data contradict the state's a-priori? With a full 6 × 6 state a-priori, the innovation
+    of the a-priori (:func:`~trackproc.methods.quality.prior_innovation_chi2`: the correction
+    against its own covariance ``P − C`` over the directions the data see; refine's test,
+    :func:`trackproc.pipeline.refine.gates.apriori_test`), χ² with that many degrees of freedom
+    when the a-priori is right: it keeps its power when the data are weak against the a-priori
+    (one station's evening), where the a-priori's share of χ² (mean: its redundancy, a fraction
+    of the rows) stays below χ²(rows)'s point whatever the initial error. Otherwise that share
+    against χ²(rows). Returns ``{"chi2", "rows" (the share), "statistic", "dof", "limit",
+    "conflict", "test"}``, or None without a state a-priori."""
+    chi2, rows = state_prior_chi2(priors, sol.values)
+    if not rows:
+        return None
+    out = {"chi2": chi2, "rows": rows, "statistic": chi2, "dof": rows, "test": "a-priori share of chi2"}
+    pcov = state_prior_covariance(priors)
+    if pcov is not None:
+        try:
+            stat, dof = qm.prior_innovation_chi2(np.asarray(sol.values, float)[:6] - state_prior_centre(priors), pcov,
+                                                 np.asarray(sol.covariance, float)[:6, :6])
+            out.update(statistic=stat, dof=dof, test="innovation of the a-priori")
+        except np.linalg.LinAlgError:
+            pass
+    out["limit"] = qm.chi2_limit(out["dof"])
+    out["conflict"] = bool(out["dof"] > 0 and out["statistic"] > out["limit"])
+    return out
+
+
 def state_prior_covariance(priors):
     """The 6 × 6 a-priori covariance of x..vz (None unless all six have one)."""
     cov = np.full((6, 6), np.nan)
@@ -127,21 +163,20 @@ def scaled_priors(priors, factor: float) -> list:
     return out
 
 
-def refuse(problem: Problem, opt: EstimateOptions, sol, noise, chi2: float, rows: int, doubt: list,
+def refuse(problem: Problem, opt: EstimateOptions, sol, noise, test: dict, doubt: list,
            adaptation: dict | None = None):
     """Keep the initial state: the state at the a-priori centre with the a-priori covariance
     scaled by its variance component (the larger of the adapted one and one step on ``sol``,
     never below 1, so that it covers the conflict),
     the other parameters (biases) fitted with the state held there (their covariance is
     conditional on it: no cross-covariance with the state is written). Returns ``(solution,
-    adaptation)`` with ``adaptation["refused"]`` saying why."""
+    adaptation)`` with ``adaptation["refused"]`` saying why; ``test``: the conflict (:func:`apriori_test`)."""
+    chi2 = test["chi2"]
+    said = f"{test['test']} chi2 {test['statistic']:.4g} over {test['dof']}, limit {test['limit']:.3g}"
     pcov = state_prior_covariance(problem.priors)
     red = qm.prior_redundancy(np.asarray(sol.covariance, float)[:6, :6], pcov)
     factor = max(1.0, (adaptation or {}).get("factor", 1.0), qm.prior_variance_component(chi2, red) or 1.0)
-    centre = np.empty(6)
-    for p in problem.priors:
-        sel = _state_rows(p)
-        centre[np.asarray(p.index, int)[sel]] = np.asarray(p.centre, float)[sel]
+    centre = state_prior_centre(problem.priors)
     x0 = np.asarray(sol.values, float).copy()
     x0[:6] = centre
     pinned = scaled_priors(problem.priors, 1e-10)      # the state held at the a-priori centre (sigmas x 1e-5)
@@ -159,18 +194,17 @@ def refuse(problem: Problem, opt: EstimateOptions, sol, noise, chi2: float, rows
     why = ("; ".join(doubt) + ", with the a-priori scaled by the data" if doubt else
            f"the data cannot carry a looser a-priori ({(adaptation or {}).get('failure') or 'not resolved'})")
     out = dict(adaptation or {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner)",
-                              "chi2_before": chi2, "rows": rows, "limit": qm.chi2_limit(rows)})
+                              "chi2_before": test["statistic"], "rows": test["dof"], "limit": test["limit"],
+                              "test": test["test"]})
     out.update({"factor": factor, "sigma_factor": math.sqrt(factor), "resolved": False,
                 "refused": {"code": "apriori_conflict_doubtful_noise" if doubt else "apriori_conflict",
                             "covariance_factor": factor,
-                            "reason": (f"the data contradict the initial state's a-priori (chi2 {chi2:.4g} over "
-                                       f"{rows}, limit {qm.chi2_limit(rows):.3g}) but their noise model is in doubt: "
-                                       f"{why}; "
+                            "reason": (f"the data contradict the initial state's a-priori ({said}) but their noise "
+                                       f"model is in doubt: {why}; "
                                        "neither the estimated state nor a loosened a-priori can be trusted"
                                        if doubt else
-                                       f"the data contradict the initial state's a-priori (chi2 {chi2:.4g} over "
-                                       f"{rows}) and {why}") + f"; the initial state is kept, its a-priori covariance "
-                                                               f"scaled by {factor:.3g}"}})
+                                       f"the data contradict the initial state's a-priori ({said}) and {why}")
+                            + f"; the initial state is kept, its a-priori covariance scaled by {factor:.3g}"}})
     return kept, out
 
 
@@ -183,11 +217,11 @@ def adapt_apriori(problem: Problem, opt: EstimateOptions, sol, noise=None):
     to be, and the covariance covers that (refine's gate, :func:`trackproc.pipeline.refine.solve_adapted`).
     ``problem.priors`` become the scaled ones. Returns ``(solution, adaptation dict or None)``;
     the adaptation is ``resolved`` False when the data cannot carry a looser a-priori."""
-    chi2, rows = state_prior_chi2(problem.priors, sol.values)
-    if not rows or chi2 <= qm.chi2_limit(rows) or state_prior_covariance(problem.priors) is None:
+    test = apriori_test(problem.priors, sol)
+    if test is None or not test["conflict"] or state_prior_covariance(problem.priors) is None:
         return sol, None
-    limit = qm.chi2_limit(rows)
-    start, factor, history, failure = chi2, 1.0, [], None
+    chi2 = test["chi2"]             # the a-priori's share of chi2: the variance component's input
+    factor, history, failure = 1.0, [], None
     priors = problem.priors
     for _ in range(MAX_APRIORI_ADAPT):
         red = qm.prior_redundancy(np.asarray(sol.covariance, float)[:6, :6], state_prior_covariance(priors))
@@ -205,13 +239,16 @@ def adapt_apriori(problem: Problem, opt: EstimateOptions, sol, noise=None):
                        f"{str(exc).split(' (')[0]}")
             break
         factor, priors = trial_factor, trial
-        chi2, rows = state_prior_chi2(priors, sol.values)
+        chi2, _ = state_prior_chi2(priors, sol.values)
     problem.priors = priors
     last = history[-1].get("component")
-    resolved = failure is None and (chi2 <= limit or (last is not None and abs(last - 1.0) < 0.1))
+    after = apriori_test(priors, sol)
+    resolved = failure is None and (not after["conflict"] or (last is not None and abs(last - 1.0) < 0.1))
+    # chi2_before/rows/limit: the test that fired (chi2_after: the same test with the scaled a-priori)
     return sol, {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
-                 "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start, "chi2_after": chi2,
-                 "rows": rows, "limit": limit, "iterations": history, "resolved": bool(resolved),
+                 "factor": factor, "sigma_factor": math.sqrt(factor), "test": test["test"],
+                 "chi2_before": test["statistic"], "chi2_after": after["statistic"], "rows": test["dof"],
+                 "limit": test["limit"], "iterations": history, "resolved": bool(resolved),
                  **({"failure": failure} if failure else {})}
 
 

@@ -210,20 +210,20 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None, clip
     if adaptation is not None and adaptation.get("refused"):
         a = adaptation
         q.add("refused", "suspect", f"the initial state is kept: {a['refused']['reason']}", value=a["refused"]["code"])
-        q.add("apriori_conflict", "suspect", f"a-priori chi2 {a['chi2_before']:.4g} over {a['rows']} (limit "
-              f"{a['limit']:.3g}) of the refused solution", value=a["chi2_before"], limit=a["limit"])
+        q.add("apriori_conflict", "suspect", f"{a.get('test', 'a-priori')} chi2 {a['chi2_before']:.4g} over "
+              f"{a['rows']} (limit {a['limit']:.3g}) of the refused solution", value=a["chi2_before"], limit=a["limit"])
     elif adaptation is not None:
         a = adaptation
         if a["resolved"]:
             q.add("apriori_conflict", "ok",
-                  f"the data contradicted the state a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
-                  f"{a['limit']:.3g}); its covariance was scaled by {a['factor']:.3g} "
+                  f"the data contradicted the state a-priori ({a.get('test', 'a-priori')} chi2 {a['chi2_before']:.4g} "
+                  f"over {a['rows']}, limit {a['limit']:.3g}); its covariance was scaled by {a['factor']:.3g} "
                   f"(sigmas x{a['sigma_factor']:.3g}, maximum-likelihood variance component)",
                   value=a["chi2_before"], limit=a["limit"])
         else:           # (solve refuses such a solution: kept for a caller of adapt_apriori alone)
             q.add("apriori_conflict", "rejected",
-                  f"the data contradict the state a-priori (chi2 {a['chi2_before']:.4g} over {a['rows']}, limit "
-                  f"{a['limit']:.3g}) and cannot carry a looser one", value=a["chi2_before"], limit=a["limit"])
+                  f"the data contradict the state a-priori ({a.get('test', 'a-priori')} chi2 {a['chi2_before']:.4g} "
+                  f"over {a['rows']}, limit {a['limit']:.3g}) and cannot carry a looser one", value=a["chi2_before"], limit=a["limit"])
     elif sol.n_prior:
         qm.add_apriori_check(q, sol.chi2_prior, sol.n_prior, "constraints",
                              "the data and the a-priori disagree, the covariance that leans on the a-priori does not hold")
