@@ -13,6 +13,7 @@ import numpy as np
 
 from trackproc.methods import quality as qm
 from trackproc.pipeline.estimate.problem import Problem
+from trackproc.pipeline.timing import add_timing_reason
 
 
 def pass_residuals(problem: Problem, sol) -> list:
@@ -197,13 +198,14 @@ def add_edited_pass(q, problem: Problem, sol, clip: float | None) -> None:
 
 
 def estimate_quality(problem: Problem, sol, adaptation: dict | None = None, clip: float | None = None,
-                     noise_report: dict | None = None):
+                     noise_report: dict | None = None, timing: dict | None = None):
     """The :class:`~trackproc.methods.quality.Quality` of a batch solution: convergence, a-priori
     conflict (``rejected``: the covariance leans on an a-priori the data contradict), variance
     factor against its 99.9 % point, the pass that dominates the misfit (named), residual
     whiteness per pass (the worst named, Bonferroni over the passes), the passes that pull the
     solution their own way (:func:`pass_consistency`), a level shift inside a pass, passes and
-    samples edited away."""
+    samples edited away, and the along-track move from an initial TLE against its accuracy
+    (:func:`trackproc.pipeline.timing.tle_timing`)."""
     q = qm.Quality()
     if not sol.converged:
         q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
@@ -250,6 +252,7 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None, clip
         add_pass_consistency(q, problem, sol)     # (a refused solution's state is held, not fitted)
         add_step(q, problem, sol, noise_report)
     add_edited_pass(q, problem, sol, clip)
+    add_timing_reason(q, timing, "the passes")
     if sol.n_edited > 0.1 * sol.n_measurements:
         q.add("edited", "suspect", f"{sol.n_edited} of {sol.n_measurements} samples edited (> 10 %)",
               value=int(sol.n_edited), limit=0.1 * sol.n_measurements)

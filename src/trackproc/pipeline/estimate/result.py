@@ -4,13 +4,13 @@ what it returns (:class:`EstimateResult`, with the residual table and the state 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Optional
 
 import numpy as np
 import pandas as pd
 
-from trackproc.constants import force_model_constants
+from trackproc.constants import MU_EARTH, force_model_constants
 from trackproc.dynamics.rtn import rtn_covariance
 from trackproc.io.statefile import State
 from trackproc.models import observation as ob
@@ -19,6 +19,7 @@ from trackproc.pipeline.estimate.quality import estimate_quality
 from trackproc.pipeline.estimate import seed002 as s2
 from trackproc.pipeline.estimate.options import UNITS, EstimateOptions
 from trackproc.pipeline.estimate.problem import Problem, build_problem
+from trackproc.pipeline.timing import time_tag_rate, timing_warning, tle_reference, tle_timing
 
 
 @dataclass
@@ -78,6 +79,31 @@ def residual_frame(problem: Problem, sol) -> pd.DataFrame:
     return frame.iloc[order].reset_index(drop=True)
 
 
+def tle_timing_gate(problem: Problem, opt: EstimateOptions, initial, sol, adaptation):
+    """An initial TLE moved along-track beyond its accuracy (:func:`trackproc.pipeline.timing.tle_timing`;
+    a station's clock offset moves an estimate the same way): the solution's covariance then
+    takes the shift. Returns ``(solution, timing report or None)``; nothing for a refused solution
+    (the initial state is kept)."""
+    if (adaptation or {}).get("refused"):
+        return sol, None
+    x0 = tle_reference(initial, problem.epoch, problem.eop)
+    if x0 is None:
+        return sol, None
+    x = np.asarray(sol.values, float)
+    force = opt.force if opt.force in ("two-body", "j2") else "j2"   # the rate's acceleration: J2 is enough
+    timing = tle_timing(initial, problem.epoch, x0, x, sol.covariance,
+                        lambda: time_tag_rate(x, problem.epoch, force, problem.frame, problem.eop), MU_EARTH)
+    if timing is None:
+        return sol, None
+    cov = timing.pop("covariance")
+    if timing["inflated"]:
+        sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            corr = np.nan_to_num(cov / np.outer(sigma, sigma))
+        sol = replace(sol, covariance=cov, sigma=sigma, correlation=corr)
+    return sol, timing
+
+
 def estimate(tables, initial, stations=None, options: EstimateOptions | None = None, eop=None) -> EstimateResult:
     """Estimate the orbit state and the selected biases from pass tables (see the module docstring).
 
@@ -88,6 +114,8 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     opt = options or EstimateOptions()
     problem = build_problem(tables, initial, stations, opt, eop)
     sol, adaptation, noise_report = gates.solve(problem, opt)
+    fitted = sol                    # the estimator's own covariance: what the quality tests take
+    sol, timing = tle_timing_gate(problem, opt, initial, sol, adaptation)
     problem.params.set_values(sol.values)
     x = sol.values
     if problem.force_names:                 # the metadata name the estimated Cr, Cd, accelerations
@@ -95,6 +123,8 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     names = sol.names
     rtn = rtn_covariance(x[:3], x[3:6], sol.covariance[:6, :6])
     warnings = gates.warnings_of(sol)
+    if timing is not None and timing["inflated"]:
+        warnings.append(timing_warning(timing, "the passes"))
     fixed = {d.name: d.value for d in problem.params if not d.selected}
     drifts = {d.name: d.epoch_s for d in problem.params if d.epoch_s is not None}
     diagnostics = {
@@ -115,9 +145,10 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         diagnostics["noise"] = noise_report
     if adaptation is not None:
         diagnostics["apriori_adaptation"] = adaptation
-    quality = estimate_quality(problem, sol, adaptation, clip=opt.clip, noise_report=noise_report)
-    comparison = s2.compare(problem, sol) if opt.compare_doppler_only else None
-    two, sol2 = s2.two_stage(problem, sol, opt) if opt.two_stage else (None, None)
+    diagnostics["tle_timing"] = timing
+    quality = estimate_quality(problem, fitted, adaptation, clip=opt.clip, noise_report=noise_report, timing=timing)
+    comparison = s2.compare(problem, fitted) if opt.compare_doppler_only else None
+    two, sol2 = s2.two_stage(problem, fitted, opt) if opt.two_stage else (None, None)
     if comparison is not None:
         diagnostics["compare_doppler_only"] = comparison
     if two is not None:

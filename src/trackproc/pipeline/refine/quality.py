@@ -12,7 +12,7 @@ from trackproc.methods import quality as qm
 from trackproc.pipeline.refine.gates import apriori_test
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, TRAVERSE_TOLERANCE_S
 from trackproc.pipeline.refine.problem import Refinement
-from trackproc.pipeline.refine.timing import add_timing_reason
+from trackproc.pipeline.timing import add_timing_reason
 
 
 def default_apriori(ref: Refinement) -> bool:
@@ -25,7 +25,7 @@ def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, im
     """The :class:`~trackproc.methods.quality.Quality` of a refinement: a-priori conflict (and
     its adaptation), variance factor of the nominal sigmas, residual whiteness, traverse-epoch
     mismatch, low pass, circular-constraint conflict, edited samples, refusal, and the along-track
-    move from a stale TLE against its accuracy (:func:`~trackproc.pipeline.refine.timing.tle_timing`)."""
+    move from a stale TLE against its accuracy (:func:`~trackproc.pipeline.timing.tle_timing`)."""
     q = qm.Quality()
     opt = ref.options
     if refusal is not None:

@@ -25,8 +25,9 @@ from trackproc.types import State
 from trackproc.pipeline.refine.problem import (Refinement, default_apriori_covariance, link_mode,
                                                state_prior_covariance)
 from trackproc.pipeline.refine.quality import refine_quality
-from trackproc.pipeline.refine.timing import tle_timing
-from trackproc.pipeline.refine.traverse import eccentricity, max_elevation_deg, model_traverse, time_tag_covariance
+from trackproc.pipeline.refine.traverse import (eccentricity, max_elevation_deg, model_traverse, time_tag_covariance,
+                                                time_tag_direction)
+from trackproc.pipeline.timing import timing_warning, tle_timing
 
 
 def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None,
@@ -129,17 +130,16 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                          "position_sigma_m": float(np.sqrt(np.trace(extra_cov[:3, :3]))),
                          "velocity_sigma_m_s": float(np.sqrt(np.trace(extra_cov[3:6, 3:6])))}
     # a pass whose timing contradicts its TLE: the covariance takes the shift as a possible
-    # time-tag error (pipeline/refine/timing.py)
-    timing = tle_timing(ref, x, cov) if refusal is None else None
+    # time-tag error (pipeline/timing.py)
+    timing = (tle_timing(ref.initial, problem.epoch, ref.x0, x, cov, lambda: time_tag_direction(ref, x), ref.mu)
+              if refusal is None else None)
     if timing is not None:
         cov = timing.pop("covariance")
     if timing is not None and timing["inflated"]:
         sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         obs.posterior_sigma_rtn = np.sqrt(np.clip(np.diag(big @ cov[:6, :6] @ big.T), 0.0, None))
         constraints = constraint_report(ref, x, cov, sigma, kkt, consistency)
-        warnings.append(f"the pass moves the TLE's state {timing['along_m'] / 1000:+.3g} km along-track "
-                        f"({timing['shift_s']:+.3g} s), {abs(timing['z']):.3g} sigma of the TLE's accuracy: a time-tag "
-                        "error of the pass looks the same; the covariance includes it (see docs/refine.md, Timing)")
+        warnings.append(timing_warning(timing))
     # how far the pass moved the stale state, along what it sees and along what it cannot
     # (a large unseen part means the a-priori, not the data, put the state there)
     obs.correction_rtn = {part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))

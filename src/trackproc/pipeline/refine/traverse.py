@@ -14,12 +14,12 @@ import numpy as np
 from trackproc.dynamics import frames, geodesy, propagator
 from trackproc.dynamics import measurement_spectra as ms
 from trackproc.dynamics import timescales as ts
-from trackproc.constants import OMEGA_EARTH
 from trackproc.errors import ProcessingError
 from trackproc.methods.refinement import range_rate_samples
 from trackproc.methods.simplex import brentq
 from trackproc.models import observation as ob
 from trackproc.pipeline.refine.problem import Refinement, link_mode, state_prior_covariance
+from trackproc.pipeline.timing import time_tag_rate
 from trackproc.types import Station
 
 
@@ -80,20 +80,8 @@ def model_traverse(ref: Refinement, x) -> Optional[float]:
 
 
 def time_tag_direction(ref: Refinement, x) -> Optional[np.ndarray]:
-    """How the state at the solution epoch that a pass's samples describe moves per second of a
-    time-tag offset (6,): samples tagged ``Δt`` late are those of the orbit shifted by ``−Δt`` and
-    turned by ``ω⊕ Δt`` about the Earth's axis (the station is where it is ``Δt`` later; the
-    gravity field of the force model is axisymmetric), so ``d/dΔt = (−v + ω⊕ ẑ × r, −a + ω⊕ ẑ × v)``
-    with ``a`` the force model's acceleration. ``ẑ`` is the GCRF pole: the Earth's axis is 6e-3 rad
-    from it in 2026, a 0.04 % change of this vector. None if the orbit cannot be propagated."""
-    try:
-        traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [-1.0, 1.0], force=ref.options.force,
-                                    frame=ref.problem.frame, eop=ref.problem.eop).raise_for_outcome()
-        rate = np.asarray(traj.state(np.array([0.0]), derivative=1), float).reshape(6)
-    except (ArithmeticError, ValueError, ProcessingError):
-        return None
-    spin = np.array([0.0, 0.0, OMEGA_EARTH])
-    return np.r_[-rate[:3] + np.cross(spin, x[:3]), -rate[3:] + np.cross(spin, x[3:6])]
+    """:func:`trackproc.pipeline.timing.time_tag_rate` of a refinement's solution ``x``."""
+    return time_tag_rate(x, ref.problem.epoch, ref.options.force, ref.problem.frame, ref.problem.eop)
 
 
 def time_tag_covariance(ref: Refinement, x, linear_cov, sigma_s: float) -> Optional[np.ndarray]:

@@ -1,4 +1,4 @@
-"""``refine`` from a TLE whose pass is late (docs/refine.md, "Timing"; pipeline/refine/timing.py).
+"""``refine`` and ``estimate`` from a TLE whose pass is late (docs/refine.md, "Timing"; pipeline/timing.py).
 
 A station's time tags 1 s late move one pass's refined state 7.7 km along the ISS's track, with
 a posterior sigma of tens of metres: a confident wrong answer. The along-track move is tested
@@ -111,3 +111,30 @@ def test_a_stale_state_file_is_not_tested_for_timing(run_cli, iss_pass, tmp_path
     doc = json.loads((tmp_path / "o.json").read_text())
     assert "timing" not in {r["code"] for r in doc["quality"]["reasons"]}
     assert doc["diagnostics"]["tle_timing"] is None
+
+
+def _estimate(run_cli, d, name, *extra):
+    out = d / f"est_{name}.json"
+    res = run_cli(["estimate", d / f"{name}.parquet", "--initial", d / "iss.tle", "-q", "-o", out, *extra])
+    return res, out
+
+
+def test_estimate_from_a_tle_on_a_late_pass_is_suspect_and_covers_the_error(run_cli, iss_pass):
+    """The same late pass through ``estimate`` with its defaults (the TLE's a-priori, an offset and
+    a drift for the one-way Doppler): the along-track move is tested as refine's, the covariance
+    takes it, the verdict says so; the pass on time keeps its covariance."""
+    res, out = _estimate(run_cli, iss_pass, "late")
+    assert res.exit_code == 0, res.stderr
+    doc = json.loads(out.read_text())
+    reasons = {r["code"]: r for r in doc["quality"]["reasons"]}
+    timing = doc["diagnostics"]["tle_timing"]
+    assert reasons["timing"]["severity"] == "suspect" and timing["inflated"], (reasons, timing)
+    assert timing["shift_s"] == pytest.approx(1.0, abs=0.1), timing
+    z = _z(out, iss_pass / "truth.json")
+    assert np.all(np.abs(z) < 4.0), z
+    res, out = _estimate(run_cli, iss_pass, "p")
+    assert res.exit_code == 0, res.stderr
+    doc = json.loads(out.read_text())
+    assert not doc["diagnostics"]["tle_timing"]["inflated"]
+    assert {r["code"]: r for r in doc["quality"]["reasons"]}["timing"]["severity"] == "ok"
+    assert np.all(np.abs(_z(out, iss_pass / "truth.json")) < 4.0)
