@@ -87,12 +87,16 @@ def log_record(record: Record, result: Optional[TaskResult] = None) -> None:
                            f"{n.get('residual_rms') or math.nan:.4g} {n.get('residual_rms_unit')}, sigma RTN "
                            + "/".join(f"{n.get(k) or math.nan:.3g}" for k in ("sigma_radial_m", "sigma_along_m",
                                                                                 "sigma_cross_m")) + " m")
+            if n.get("quality"):
+                refined += f", quality {n['quality']}" + (f" ({n['quality_reasons']})" if n.get("quality_reasons") else "")
             log.info("%s: ok (%s samples, %s pass(es)%s%s) in %.2f s", record.name, n.get("samples"), n.get("passes"),
                      f", {n['kind']} RMS {n['rms']:.4g} {n['rms_unit']}" if n.get("rms") is not None else "",
                      refined, record.seconds)
         else:
-            log.info("estimate %s: ok (%s inputs, %s samples, %s iterations, WRMS %.3g) in %.2f s", record.name,
-                     n.get("inputs"), n.get("samples"), n.get("iterations"), n.get("wrms") or math.nan,
+            quality = (f", quality {n['quality']}" + (f" ({n['quality_reasons']})" if n.get("quality_reasons") else "")
+                       if n.get("quality") else "")
+            log.info("estimate %s: ok (%s inputs, %s samples, %s iterations, WRMS %.3g%s) in %.2f s", record.name,
+                     n.get("inputs"), n.get("samples"), n.get("iterations"), n.get("wrms") or math.nan, quality,
                      record.seconds)
         for warning in record.warnings:
             log.warning("%s%s: %s", what, record.name, warning)
@@ -107,14 +111,21 @@ def finish(settings, chain, records, windows, out, started, t0, label) -> BatchR
     """The exit status and counts of the run; writes summary.json and summary.csv."""
     units = records + windows
     failed = sum(r.status == "failed" for r in units)
-    ok = len(units) - failed
-    exit_code = EXIT_OK if failed == 0 else EXIT_PROCESSING if ok == 0 else EXIT_PARTIAL
+    # a solution its own checks reject (or, with --strict, call suspect) counts against the run as
+    # a failure does (exit 3, or 1 when nothing else succeeded), its outputs written for inspection
+    refused_verdicts = ("rejected", "suspect") if settings.section("batch").get("strict") else ("rejected",)
+    flagged = sum(r.status == "ok" and r.numbers.get("quality") in refused_verdicts for r in units)
+    ok = len(units) - failed - flagged
+    exit_code = EXIT_OK if failed + flagged == 0 else EXIT_PROCESSING if ok == 0 else EXIT_PARTIAL
     counts = {"inputs": len(records), "inputs_ok": sum(r.status == "ok" for r in records),
               "inputs_failed": sum(r.status == "failed" for r in records),
               "inputs_skipped": sum(r.skipped for r in records),
               "windows": len(windows), "windows_ok": sum(r.status == "ok" for r in windows),
               "windows_failed": sum(r.status == "failed" for r in windows),
-              "windows_skipped": sum(r.skipped for r in windows)}
+              "windows_skipped": sum(r.skipped for r in windows),
+              "quality_suspect": sum(r.status == "ok" and r.numbers.get("quality") == "suspect" for r in units),
+              "quality_rejected": sum(r.status == "ok" and r.numbers.get("quality") == "rejected" for r in units),
+              "quality_counted_as_failed": flagged}
     seconds = time.perf_counter() - t0
     summary = {"trackproc_version": __version__, "command": "batch", "started_utc": started,
                "finished_utc": utc_now(), "seconds": round(seconds, 3), "exit_code": exit_code,
@@ -124,10 +135,12 @@ def finish(settings, chain, records, windows, out, started, t0, label) -> BatchR
                "inputs": [r.as_dict() for r in records], "estimates": [r.as_dict() for r in windows]}
     write_text(out / SUMMARY_JSON, dumps(summary))
     write_text(out / SUMMARY_CSV, summary_csv(units))
-    log.info("done in %.1f s: %d input(s) ok, %d failed, %d up to date%s -> %s (exit %d)", seconds,
+    log.info("done in %.1f s: %d input(s) ok, %d failed, %d up to date%s%s -> %s (exit %d)", seconds,
              counts["inputs_ok"], counts["inputs_failed"], counts["inputs_skipped"],
              (f"; {counts['windows_ok']} estimate window(s) ok, {counts['windows_failed']} failed"
-              if windows else ""), out / SUMMARY_JSON, exit_code)
+              if windows else ""),
+             (f"; {flagged} solution(s) counted as failed by their quality verdict ({'/'.join(refused_verdicts)})"
+              if flagged else ""), out / SUMMARY_JSON, exit_code)
     return BatchResult(inputs=records, windows=windows, exit_code=exit_code, counts=counts, summary=summary,
                        executor=label)
 

@@ -116,6 +116,9 @@ SCHEMA: tuple[Opt, ...] = (
     Opt("batch", "wait_timeout_s", "float", 0.0, ("--wait-timeout",),
         "Give up waiting for the lock after S seconds (0: wait as long as it takes).", check=_NONNEG,
         metavar="S"),
+    Opt("batch", "strict", "bool", False, ("--strict/--no-strict",),
+        "A refined or estimated solution whose quality verdict is suspect makes the run exit 3 (1 when "
+        "nothing else succeeded), as a rejected one always does; the outputs are written either way."),
     Opt("batch", "log", "path", None, ("--log",),
         "Append the log to FILE instead of stderr.", metavar="FILE"),
     # ------------------------------------------------------------------ [ingest]

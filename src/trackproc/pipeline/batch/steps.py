@@ -166,11 +166,19 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
         converged=bool(diag["converged"]), iterations=int(diag["iterations"]), wrms=diag.get("wrms"),
         variance_factor=diag.get("variance_factor"), edited=int(diag.get("edited", 0)),
         epoch_utc=format_epoch(state.epoch), sigma_radial_m=sig.get("radial_m"), sigma_along_m=sig.get("along_m"),
-        sigma_cross_m=sig.get("cross_m"))
+        sigma_cross_m=sig.get("cross_m"), **quality_numbers(result.quality))
+    ctx.details["quality"] = result.quality.as_dict()
     ctx.details["parameters"] = {n: {"value": float(v), "sigma": float(s)}
                                  for n, v, s in zip(result.solution.names, np.asarray(result.solution.values),
                                                     np.asarray(result.solution.sigma))}
     ctx.warnings.extend(result.warnings)
+
+
+def quality_numbers(quality) -> dict:
+    """A solution's ``quality`` in the summary's numbers: the verdict and the codes of the reasons
+    that made it (the whole reasons are in the details)."""
+    return {"quality": quality.verdict,
+            "quality_reasons": ",".join(r["code"] for r in quality.reasons if r["severity"] != "ok")}
 
 
 def initial_state(data: bytes, path: str, orientation):
@@ -253,7 +261,7 @@ def refine_step(ctx: InputContext, opt: dict) -> None:
         refined_pass=f"{method['station']}/{method['pass_id']}", traverse_utc=diag["traverse"]["epoch"],
         converged=bool(diag["converged"]), iterations=int(diag["iterations"]), residual_rms=rms["value"],
         residual_rms_unit=rms["unit"], sigma_radial_m=sig["radial_m"], sigma_along_m=sig["along_m"],
-        sigma_cross_m=sig["cross_m"])
+        sigma_cross_m=sig["cross_m"], **quality_numbers(result.quality))
     ctx.details["refine"] = {
         "station": method["station"], "pass_id": method["pass_id"], "kind": method["kind"],
         "rule": REFINE_PASS_RULE, "candidates": candidates, "cost": method["cost"], "circular": method["circular"],
@@ -262,7 +270,8 @@ def refine_step(ctx: InputContext, opt: dict) -> None:
         "traverse": diag["traverse"], "sigma_rtn": sig, "output_epoch": opt["output_epoch"],
         "unobservable": diag["observability"].get("unobservable"),
         "parameters": {n: {"value": float(v), "sigma": float(e)}
-                       for n, v, e in zip(result.state.parameters, result.state.values, result.state.sigma)}}
+                       for n, v, e in zip(result.state.parameters, result.state.values, result.state.sigma)},
+        "quality": result.quality.as_dict()}
     ctx.warnings.extend(result.warnings)
 
 

@@ -35,7 +35,8 @@ MANIFEST_SUFFIX = ".batch.json"
 CSV_COLUMNS = ("task", "input", "status", "skipped", "samples", "passes", "stations", "start_utc", "end_utc",
                "fits_ok", "fits_suspect", "fits_failed", "kind", "rms", "rms_unit", "tca_utc", "tca_sigma_s",
                "fca_hz", "refined_pass", "traverse_utc", "converged", "iterations", "wrms", "residual_rms",
-               "residual_rms_unit", "sigma_radial_m", "sigma_along_m", "sigma_cross_m", "output", "error")
+               "residual_rms_unit", "sigma_radial_m", "sigma_along_m", "sigma_cross_m", "quality", "quality_reasons",
+               "output", "error")
 
 
 def utc_now() -> str:
