@@ -138,3 +138,17 @@ def test_estimate_from_a_tle_on_a_late_pass_is_suspect_and_covers_the_error(run_
     assert not doc["diagnostics"]["tle_timing"]["inflated"]
     assert {r["code"]: r for r in doc["quality"]["reasons"]}["timing"]["severity"] == "ok"
     assert np.all(np.abs(_z(out, iss_pass / "truth.json")) < 4.0)
+
+
+def test_refine_opm_carries_the_quality_verdict_and_the_covariance(run_cli, iss_pass, tmp_path):
+    """``refine --opm``: the state written by -o as an OPM, its verdict as ``COMMENT QUALITY``."""
+    from trackproc.io.opm import parse_opm
+
+    out, opm = tmp_path / "late.json", tmp_path / "late.opm"
+    res = run_cli(["refine", iss_pass / "late.parquet", "--initial", iss_pass / "iss.tle", "--opm", opm,
+                   "--object-name", "ISS", "-q", "-o", out])
+    assert res.exit_code == 0, res.stderr
+    text = opm.read_text()
+    assert "COMMENT QUALITY verdict=suspect reasons=timing" in text and "OBJECT_NAME = ISS" in text
+    doc, back = json.loads(out.read_text()), parse_opm(text)
+    assert np.allclose(back["covariance"], np.asarray(doc["covariance"])[:6, :6], rtol=1e-12)

@@ -119,6 +119,11 @@ def refine_command(
              "the file holds the other one too."),
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Write the residuals at the samples (Parquet, or CSV by the suffix)."),
+    opm: Optional[str] = typer.Option(None, "--opm", metavar="FILE",
+                                      help="Also write the state written by -o as a CCSDS OPM (KVN) with its covariance "
+                                           "and a COMMENT QUALITY line."),
+    object_name: str = typer.Option("UNKNOWN", "--object-name", help="OBJECT_NAME of the OPM."),
+    object_id: str = typer.Option("UNKNOWN", "--object-id", help="OBJECT_ID of the OPM."),
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
                                        help="Plot the data with the refined model, the residuals and what the pass "
                                             "cannot see (needs matplotlib: pip install 'trackproc[plot]')."),
@@ -152,9 +157,11 @@ def refine_command(
             -o seed004.json
     """
     out = resolve_output(output, "output state file")
-    if residuals == "-" and out == "-":
-        raise typer.BadParameter("stdout already carries the state file; give --residuals a file",
-                                 param_hint="--residuals")
+    if out == "-" and "-" in (residuals, opm):
+        raise typer.BadParameter("stdout already carries the state file; give --residuals/--opm a file",
+                                 param_hint="--residuals/--opm")
+    if residuals == "-" and opm == "-":
+        raise typer.BadParameter("--residuals and --opm cannot both go to stdout", param_hint="--residuals/--opm")
     sigmas = named_values(apriori_sigma, "--apriori-sigma")
     if plot == "-":
         raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
@@ -195,6 +202,11 @@ def refine_command(
 
     state = result.state if output_epoch is OutputEpoch.traverse else result.stale_epoch_state
     write_state(state, out, force=force.value, eop_source=orientation.source)
+    if opm is not None:
+        from trackproc.io.opm import write_opm
+
+        write_opm(state, opm, object_name=object_name, object_id=object_id,
+                  comments=[f"trackproc refine, {cost.value} cost, pass {result.state.extra['refinement']['pass_id']}"])
     if residuals is not None:
         meta = {"epoch": format_epoch(result.state.epoch), "parameters": result.names, "command": "refine",
                 "cost": cost.value, "force_model": force.value, "range_rate_model": result.problem.range_rate_model,
