@@ -92,13 +92,19 @@ def test_other_mismodellings_cover_or_say_so(sets, name):
 
 
 @pytest.mark.parametrize("name", ["drag_1", "vhf_other_satellite", "vhf_oscillator_step"])
-def test_unmodelled_drag_and_another_satellite_cover_or_say_so(sets, name):
+def test_unmodelled_drag_and_another_satellite_cover_or_say_so(sets, name, run_cli, tmp_path):
     row = ms.run(sets, name)
     _check(row, culprit_named=name != "drag_1")
     if name == "drag_1":                      # drag and SRP over a day with --force j2: 19 sigma, said
         assert row["verdict"] == "suspect" and "variance_factor" in row["reasons"], row
     if name == "vhf_other_satellite":         # 225 km along-track from the others: no convergence, exit 1
         assert row["verdict"] == "(failed)" and row["exit"] == 1, row
+        # ... and the error names the pass without which the others converge
+        sc = ms.scenario(sets, name)
+        res = run_cli(["estimate", *sc["files"], "--initial", sc["initial"], "--stations", sc["stations"],
+                       *sc["options"], "-o", tmp_path / "x.json"])
+        assert res.exit_code == 1, res.stderr
+        assert f"without pass DLF/{sc['culprit']} the others converge and agree" in res.stderr, res.stderr
 
 
 def test_a_long_dense_set_does_not_crash_the_noise_model(run_cli, tmp_path):

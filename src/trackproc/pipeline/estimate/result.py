@@ -12,7 +12,9 @@ import pandas as pd
 
 from trackproc.constants import MU_EARTH, force_model_constants
 from trackproc.dynamics.rtn import rtn_covariance
+from trackproc.errors import ProcessingError, TrackprocError
 from trackproc.io.statefile import State
+from trackproc.methods import quality as qm
 from trackproc.models import observation as ob
 from trackproc.pipeline.estimate import gates
 from trackproc.pipeline.estimate.quality import estimate_quality
@@ -79,6 +81,43 @@ def residual_frame(problem: Problem, sol) -> pd.DataFrame:
     return frame.iloc[order].reset_index(drop=True)
 
 
+#: Passes at most for which a failed estimate looks for the one pass without which it succeeds.
+MAX_CULPRIT_PASSES = 12
+
+
+def failure_culprit(exc: ProcessingError, tables, initial, stations, opt: EstimateOptions, eop) -> ProcessingError:
+    """A failed estimate (no convergence, rank deficiency) of several passes: is one pass the
+    cause? Each pass is left out in turn (at most :data:`MAX_CULPRIT_PASSES`); when exactly one
+    left out lets the others converge to a consistent solution (variance factor within its 99.9 %
+    point, not refused), the error names it (another object's pass, a wrong station or time
+    tags). Returns the error to raise (``exc`` itself when no single pass is to blame)."""
+    keys = sorted({(str(s), str(p)) for _, t in tables
+                   for s, p in zip(t.frame["station"].astype(str), t.frame["pass_id"].astype(str))})
+    if not 2 <= len(keys) <= MAX_CULPRIT_PASSES:
+        return exc
+    from trackproc.io.passfile import PassTable
+
+    fine = []
+    for station, pass_id in keys:
+        rest = []
+        for source, t in tables:
+            keep = ~((t.frame["station"].astype(str) == station) & (t.frame["pass_id"].astype(str) == pass_id))
+            if keep.any():
+                rest.append((source, PassTable(t.frame[keep.to_numpy()].reset_index(drop=True), t.meta)))
+        try:
+            sol, adaptation, _ = gates.solve(build_problem(rest, initial, stations, opt, eop), opt)
+        except TrackprocError:
+            continue
+        if (sol.dof > 0 and sol.variance_factor <= qm.variance_factor_limit(sol.dof)
+                and not (adaptation or {}).get("refused")):
+            fine.append(f"{station}/{pass_id}")
+    if len(fine) != 1:
+        return exc
+    return ProcessingError(f"{exc}; without pass {fine[0]} the others converge and agree: check that pass "
+                           "(another object's, a wrong station or time tags?), or leave it out",
+                           {**exc.diagnostics, "culprit_pass": fine[0]})
+
+
 def tle_timing_gate(problem: Problem, opt: EstimateOptions, initial, sol, adaptation):
     """An initial TLE moved along-track beyond its accuracy (:func:`trackproc.pipeline.timing.tle_timing`;
     a station's clock offset moves an estimate the same way): the solution's covariance then
@@ -113,7 +152,10 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     """
     opt = options or EstimateOptions()
     problem = build_problem(tables, initial, stations, opt, eop)
-    sol, adaptation, noise_report = gates.solve(problem, opt)
+    try:
+        sol, adaptation, noise_report = gates.solve(problem, opt)
+    except ProcessingError as exc:
+        raise failure_culprit(exc, tables, initial, stations, opt, eop) from None
     fitted = sol                    # the estimator's own covariance: what the quality tests take
     sol, timing = tle_timing_gate(problem, opt, initial, sol, adaptation)
     problem.params.set_values(sol.values)
