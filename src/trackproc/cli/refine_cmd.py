@@ -120,8 +120,8 @@ def refine_command(
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Write the residuals at the samples (Parquet, or CSV by the suffix)."),
     opm: Optional[str] = typer.Option(None, "--opm", metavar="FILE",
-                                      help="Also write the state written by -o as a CCSDS OPM (KVN) with its covariance "
-                                           "and a COMMENT QUALITY line."),
+                                      help="Also write the state written by -o as a CCSDS OPM (KVN) with its "
+                                           "covariance and a COMMENT QUALITY line."),
     object_name: str = typer.Option("UNKNOWN", "--object-name", help="OBJECT_NAME of the OPM."),
     object_id: str = typer.Option("UNKNOWN", "--object-id", help="OBJECT_ID of the OPM."),
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",

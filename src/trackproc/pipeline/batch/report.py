@@ -88,7 +88,8 @@ def log_record(record: Record, result: Optional[TaskResult] = None) -> None:
                            + "/".join(f"{n.get(k) or math.nan:.3g}" for k in ("sigma_radial_m", "sigma_along_m",
                                                                                 "sigma_cross_m")) + " m")
             if n.get("quality"):
-                refined += f", quality {n['quality']}" + (f" ({n['quality_reasons']})" if n.get("quality_reasons") else "")
+                refined += (f", quality {n['quality']}"
+                            + (f" ({n['quality_reasons']})" if n.get("quality_reasons") else ""))
             log.info("%s: ok (%s samples, %s pass(es)%s%s) in %.2f s", record.name, n.get("samples"), n.get("passes"),
                      f", {n['kind']} RMS {n['rms']:.4g} {n['rms_unit']}" if n.get("rms") is not None else "",
                      refined, record.seconds)

@@ -219,7 +219,8 @@ SCHEMA: tuple[Opt, ...] = (
         "Estimate a range bias per station with ranges.", affects=True),
     Opt("estimate", "doppler_bias", "choice", "auto", ("--doppler-bias",),
         "Transmitter frequency parameters: auto = offset and drift for each pass of one-way Doppler; none; or "
-        "offset / offset+drift on every Doppler or range-rate pass.", choices=("auto", "none", "offset", "offset+drift"),
+        "offset / offset+drift on every Doppler or range-rate pass.",
+        choices=("auto", "none", "offset", "offset+drift"),
         affects=True),
     Opt("estimate", "doppler_bias_per", "choice", "pass", ("--doppler-bias-per",),
         "One Doppler offset (drift) per pass or per station.", choices=("pass", "station"), affects=True),

@@ -225,7 +225,8 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None, clip
         else:           # (solve refuses such a solution: kept for a caller of adapt_apriori alone)
             q.add("apriori_conflict", "rejected",
                   f"the data contradict the state a-priori ({a.get('test', 'a-priori')} chi2 {a['chi2_before']:.4g} "
-                  f"over {a['rows']}, limit {a['limit']:.3g}) and cannot carry a looser one", value=a["chi2_before"], limit=a["limit"])
+                  f"over {a['rows']}, limit {a['limit']:.3g}) and cannot carry a looser one", value=a["chi2_before"],
+                  limit=a["limit"])
     elif sol.n_prior:
         qm.add_apriori_check(q, sol.chi2_prior, sol.n_prior, "constraints",
                              "the data and the a-priori disagree, the covariance that leans on the a-priori does not hold")

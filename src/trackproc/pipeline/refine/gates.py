@@ -83,7 +83,8 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
                 "code": "apriori_conflict_correlated", "state_covariance": original * factor,
                 "covariance_factor": factor,
                 "reason": (f"the pass contradicts the stale state's a-priori ({test['test']} chi2 "
-                           f"{test['statistic']:.4g} over {test['dof']}, limit {test['limit']:.3g}) but its residuals are correlated in time (lag-1 "
+                           f"{test['statistic']:.4g} over {test['dof']}, limit {test['limit']:.3g}) but its residuals "
+                           "are correlated in time (lag-1 "
                            f"{w['lag1_autocorrelation']:.2f}, runs-test z {w['runs_z']:.1f}): the data's noise model "
                            "is as doubtful as the a-priori, so neither the refined state nor a loosened a-priori "
                            "can be trusted; the stale covariance is scaled by "
