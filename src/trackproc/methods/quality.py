@@ -347,3 +347,21 @@ def prior_innovation_chi2(delta, prior_cov, posterior_cov, floor: float = PRIOR_
     u = vec.T @ (li @ np.asarray(delta, float))
     use = lam >= floor
     return float(np.sum(u[use] ** 2 * (1.0 + lam[use]) / lam[use])), int(use.sum())
+
+
+def apriori_conflict(chi2: float, rows: int, delta=None, prior_cov=None, posterior_cov=None) -> dict:
+    """Do the data contradict a state a-priori? :func:`prior_innovation_chi2` of the correction
+    ``delta`` when the full a-priori and posterior covariances are given (it keeps its power when
+    the data are weak against the a-priori), else the a-priori's share of χ² ``chi2`` over its
+    ``rows`` against χ²(rows); at 99.9 %. Returns ``{"chi2", "rows" (the share), "statistic",
+    "dof", "limit", "conflict", "test"}`` (refine's and estimate's a-priori gate)."""
+    out = {"chi2": chi2, "rows": rows, "statistic": chi2, "dof": rows, "test": "a-priori share of chi2"}
+    if delta is not None and prior_cov is not None and posterior_cov is not None:
+        try:
+            stat, dof = prior_innovation_chi2(delta, prior_cov, posterior_cov)
+            out.update(statistic=stat, dof=dof, test="innovation of the a-priori")
+        except np.linalg.LinAlgError:
+            pass
+    out["limit"] = chi2_limit(out["dof"])
+    out["conflict"] = bool(out["dof"] > 0 and out["statistic"] > out["limit"])
+    return out

@@ -124,18 +124,11 @@ def apriori_test(priors, sol) -> dict | None:
     chi2, rows = state_prior_chi2(priors, sol.values)
     if not rows:
         return None
-    out = {"chi2": chi2, "rows": rows, "statistic": chi2, "dof": rows, "test": "a-priori share of chi2"}
     pcov = state_prior_covariance(priors)
-    if pcov is not None:
-        try:
-            stat, dof = qm.prior_innovation_chi2(np.asarray(sol.values, float)[:6] - state_prior_centre(priors), pcov,
-                                                 np.asarray(sol.covariance, float)[:6, :6])
-            out.update(statistic=stat, dof=dof, test="innovation of the a-priori")
-        except np.linalg.LinAlgError:
-            pass
-    out["limit"] = qm.chi2_limit(out["dof"])
-    out["conflict"] = bool(out["dof"] > 0 and out["statistic"] > out["limit"])
-    return out
+    if pcov is None:
+        return qm.apriori_conflict(chi2, rows)
+    return qm.apriori_conflict(chi2, rows, np.asarray(sol.values, float)[:6] - state_prior_centre(priors), pcov,
+                               np.asarray(sol.covariance, float)[:6, :6])
 
 
 def state_prior_covariance(priors):
