@@ -69,12 +69,9 @@ def test_contradicted_apriori_is_scaled_by_the_data_and_the_covariance_covers_th
     assert "Traceback" not in r.stderr
 
 
-def test_a_conflict_with_a_doubtful_noise_model_keeps_the_initial_state(run_cli, files, tmp_path):
-    """A tight a-priori contradicted by passes whose noise model fails (one pass carries a
-    0.01 Hz/s ramp no offset absorbs: variance factor beyond its limit): loosening the a-priori
-    would let that pass move the state, so the initial state is kept, with its a-priori
-    covariance scaled by the variance component; the verdict says so (suspect: exit 0, 1 with
-    --strict) and the kept covariance covers the initial state's real error."""
+def _ramped_pass(files, tmp_path):
+    """The simulated passes with the first Doppler pass carrying a 0.01 Hz/s ramp (no per-pass
+    offset absorbs it): ``(path, station, pass id)`` of the ramped pass."""
     table = read_pass_table(str(files / "passes.parquet"))
     frame = table.frame.copy()
     dop = frame["kind"].astype(str) == "doppler"
@@ -84,6 +81,16 @@ def test_a_conflict_with_a_doubtful_noise_model_keeps_the_initial_state(run_cli,
     frame.loc[rows, "value"] = frame.loc[rows, "value"].to_numpy() + 0.01 * (t - t.mean())
     bad = tmp_path / "bad.parquet"
     write_pass_table(PassTable(frame, table.meta), str(bad))
+    return bad, frame.loc[rows, "station"].astype(str).iloc[0], first
+
+
+def test_a_conflict_with_a_doubtful_noise_model_keeps_the_initial_state(run_cli, files, tmp_path):
+    """A tight a-priori contradicted by passes whose noise model fails (one pass carries a
+    0.01 Hz/s ramp no offset absorbs: variance factor beyond its limit): loosening the a-priori
+    would let that pass move the state, so the initial state is kept, with its a-priori
+    covariance scaled by the variance component; the verdict says so (suspect: exit 0, 1 with
+    --strict) and the kept covariance covers the initial state's real error."""
+    bad, _, _ = _ramped_pass(files, tmp_path)
     tight = ("--apriori-sigma", "position=1", "--apriori-sigma", "velocity=0.001", "--clip", "0")
     r, out, _ = _run(run_cli, files, tmp_path, *tight, passes=bad)
     assert r.exit_code == 0, r.stderr
@@ -104,21 +111,12 @@ def test_a_conflict_with_a_doubtful_noise_model_keeps_the_initial_state(run_cli,
 def test_a_corrupted_pass_is_named_and_strict_turns_suspect_into_exit_1(run_cli, files, tmp_path):
     """One pass's Doppler gets a 0.01 Hz/s ramp (0.1 Hz noise; no editing) (no per-pass offset absorbs it): the misfit is
     that pass's, named in ``dominant_pass``; the verdict is suspect, exit 0, and 1 with --strict."""
-    table = read_pass_table(str(files / "passes.parquet"))
-    frame = table.frame.copy()
-    dop = frame["kind"].astype(str) == "doppler"
-    first = sorted(set(frame.loc[dop, "pass_id"].astype(str)))[0]
-    rows = dop & (frame["pass_id"].astype(str) == first)
-    t = (frame.loc[rows, "time"] - frame.loc[rows, "time"].min()).dt.total_seconds().to_numpy()
-    frame.loc[rows, "value"] = frame.loc[rows, "value"].to_numpy() + 0.01 * (t - t.mean())
-    bad = tmp_path / "bad.parquet"
-    write_pass_table(PassTable(frame, table.meta), str(bad))
+    bad, station, first = _ramped_pass(files, tmp_path)
     r, out, _ = _run(run_cli, files, tmp_path, "--clip", "0", passes=bad)
     assert r.exit_code == 0, r.stderr
     q = json.loads(out.read_text())["quality"]
     assert q["verdict"] == "suspect", q
     dom = [x for x in q["reasons"] if x["code"] == "dominant_pass"]
-    station = frame.loc[rows, "station"].astype(str).iloc[0]
     assert dom and f"{station}/{first} doppler" in dom[0]["message"] and dom[0]["value"] > 0.5
     r, out, _ = _run(run_cli, files, tmp_path, "--clip", "0", "--strict", passes=bad)
     assert r.exit_code == 1 and "--strict" in r.stderr
