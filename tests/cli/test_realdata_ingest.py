@@ -8,9 +8,7 @@ from __future__ import annotations
 
 import json
 import math
-import re
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -20,7 +18,7 @@ from trackproc.constants import C_LIGHT
 from trackproc.io.passfile import read_pass_table, write_pass_table
 from trackproc.io.tabular import read_raw
 from trackproc.pipeline.ingest import ingest
-from realdata import SHARED, DOPTRACK, W3B, requires
+from realdata import SHARED, DOPTRACK, W3B, requires, w3b_stations_csv
 
 
 pytestmark = requires(SHARED)
@@ -91,24 +89,8 @@ def test_doptrack_info_summary(doptrack_table, run_cli):
     assert all(60 < p["duration_s"] < 1200 for p in info["passes"])
 
 
-def _w3b_stations_csv(path: Path) -> Path:
-    """Stations table from the ``ground.station.*  [i] = value`` keys of Orekit's od_test_W3.in."""
-    keys = {"name": "station", "latitude": "lat_deg", "longitude": "lon_deg", "altitude": "height_m",
-            "range.bias": "range_bias_m"}
-    stations: dict[int, dict] = {}
-    pattern = re.compile(r"^ground\.station\.([a-z.]+)\s*\[(\d+)\]\s*=\s*(\S+)")
-    for line in (W3B / "od_test_W3.in").read_text().splitlines():
-        match = pattern.match(line.strip())
-        if match and match.group(1) in keys:
-            stations.setdefault(int(match.group(2)), {})[keys[match.group(1)]] = match.group(3)
-    columns = ["station", "lat_deg", "lon_deg", "height_m", "range_bias_m"]
-    rows = [",".join(s[c] for c in columns) for _, s in sorted(stations.items())]
-    path.write_text(",".join(columns) + "\n" + "\n".join(rows) + "\n")
-    return path
-
-
 def test_w3b_aer_ingest_and_summary(run_cli, tmp_path):
-    stations = _w3b_stations_csv(tmp_path / "w3b_stations.csv")
+    stations = w3b_stations_csv(tmp_path / "w3b_stations.csv")
     out = tmp_path / "w3b.parquet"
     result = run_cli(["ingest", W3B / "W3B.aer", "--stations", stations, "--sigma-range-m", "20",
                       "--sigma-angle-deg", "0.02", "-o", out])

@@ -13,12 +13,11 @@ GCRF axes (``--estimate-force cd,empirical-xyz``).
 from __future__ import annotations
 
 import json
-import re
 
 import numpy as np
 
 from trackproc.dynamics import frames
-from realdata import W3B, requires
+from realdata import W3B, requires, w3b_stations_csv
 
 import pytest
 
@@ -32,23 +31,8 @@ INITIAL = {"epoch": "2010-11-02T02:56:15.690Z", "frame": "EME2000",
            "spacecraft": {"mass_kg": 1000.0, "srp_area_m2": 13.12, "cr": 2.0, "drag_area_m2": 13.12, "cd": 2.0}}
 
 
-def _stations_csv(path):
-    keys = {"name": "station", "latitude": "lat_deg", "longitude": "lon_deg", "altitude": "height_m",
-            "range.bias": "range_bias_m"}
-    rows: dict[int, dict] = {}
-    pattern = re.compile(r"^ground\.station\.([a-z.]+)\s*\[(\d+)\]\s*=\s*(\S+)")
-    for line in (W3B / "od_test_W3.in").read_text().splitlines():
-        match = pattern.match(line.strip())
-        if match and match.group(1) in keys:
-            rows.setdefault(int(match.group(2)), {})[keys[match.group(1)]] = match.group(3)
-    columns = ["station", "lat_deg", "lon_deg", "height_m", "range_bias_m"]
-    path.write_text(",".join(columns) + "\n" + "\n".join(",".join(r[c] for c in columns)
-                                                         for _, r in sorted(rows.items())) + "\n")
-    return path
-
-
 def test_w3b_full_force_with_the_estimated_leak_lands_near_the_published_fit(run_cli, tmp_path):
-    stations = _stations_csv(tmp_path / "stations.csv")
+    stations = w3b_stations_csv(tmp_path / "stations.csv")
     passes, initial, out = tmp_path / "w3b.parquet", tmp_path / "initial.json", tmp_path / "w3b.json"
     initial.write_text(json.dumps(INITIAL))
     result = run_cli(["ingest", W3B / "W3B.aer", "--stations", stations, "--sigma-range-m", "20",

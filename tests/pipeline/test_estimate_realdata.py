@@ -10,7 +10,6 @@ removed per pass).
 from __future__ import annotations
 
 import json
-import re
 
 import numpy as np
 import pytest
@@ -24,7 +23,7 @@ from trackproc.io.tle import parse_tle, sgp4_teme, tle_state
 from trackproc.models import observation as ob
 from trackproc.pipeline.estimate import EstimateOptions, build_problem, estimate
 from trackproc.pipeline.ingest import IngestOptions, ingest
-from realdata import REALDATA, DOPTRACK, W3B, requires
+from realdata import REALDATA, DOPTRACK, W3B, requires, w3b_station_rows
 
 
 pytestmark = requires(REALDATA)
@@ -37,16 +36,8 @@ DUT1_2020 = -0.2
 def _w3b_stations():
     from trackproc.io.stations import Station
 
-    keys = {"name": "station", "latitude": "lat_deg", "longitude": "lon_deg", "altitude": "height_m",
-            "range.bias": "range_bias_m"}
-    rows: dict[int, dict] = {}
-    pattern = re.compile(r"^ground\.station\.([a-z.]+)\s*\[(\d+)\]\s*=\s*(\S+)")
-    for line in (W3B / "od_test_W3.in").read_text().splitlines():
-        match = pattern.match(line.strip())
-        if match and match.group(1) in keys:
-            rows.setdefault(int(match.group(2)), {})[keys[match.group(1)]] = match.group(3)
     return {r["station"]: Station(r["station"], float(r["lat_deg"]), float(r["lon_deg"]), float(r["height_m"]),
-                                  float(r["range_bias_m"])) for r in rows.values()}
+                                  float(r["range_bias_m"])) for r in w3b_station_rows()}
 
 
 def test_w3b_angles_and_biased_ranges_against_the_published_fit():
