@@ -49,26 +49,37 @@ def time_tag_rate(x, epoch, force: str, frame=None, eop=None) -> Optional[np.nda
     return np.r_[-rate[:3] + np.cross(spin, x[:3]), -rate[3:] + np.cross(spin, x[3:6])]
 
 
-def tle_age_days(initial, epoch) -> Optional[float]:
-    """Days between the initial TLE's epoch and ``epoch`` (None unless ``initial`` is a TLE's state)."""
+def initial_tle(initial):
+    """The TLE whose SGP4 state ``initial`` is (:func:`~trackproc.io.tle.tle_state` records its
+    lines), or None."""
     if not is_tle_state(initial):
         return None
-    from trackproc.io.tle import parse_tle, tle_epoch
+    from trackproc.io.tle import parse_tle
 
     try:            # the lines were parsed once already (tle_state); a hand-made state may hold others
-        tle_t = tle_epoch(parse_tle("\n".join(initial.extra["tle"])))
+        return parse_tle("\n".join(initial.extra["tle"]))
     except (InputError, KeyError, TypeError, ValueError):
         return None
-    return abs(float((np.datetime64(epoch, "ns") - tle_t) / np.timedelta64(1, "s"))) / 86400.0
+
+
+def tle_age_days(initial, epoch) -> Optional[float]:
+    """Days between the initial TLE's epoch and ``epoch`` (None unless ``initial`` is a TLE's state)."""
+    tle = initial_tle(initial)
+    if tle is None:
+        return None
+    from trackproc.io.tle import tle_epoch
+
+    return abs(float((np.datetime64(epoch, "ns") - tle_epoch(tle)) / np.timedelta64(1, "s"))) / 86400.0
 
 
 def tle_reference(initial, epoch, eop=None) -> Optional[np.ndarray]:
     """The initial TLE's SGP4 state at ``epoch`` (6,), the reference of its accuracy (None unless a TLE)."""
-    if tle_age_days(initial, epoch) is None:
+    tle = initial_tle(initial)
+    if tle is None:
         return None
-    from trackproc.io.tle import parse_tle, tle_state
+    from trackproc.io.tle import tle_state
 
-    st = tle_state(parse_tle("\n".join(initial.extra["tle"])), at=np.datetime64(epoch, "ns"), eop=eop)
+    st = tle_state(tle, at=np.datetime64(epoch, "ns"), eop=eop)
     return np.r_[st.r_m, st.v_m_s]
 
 
