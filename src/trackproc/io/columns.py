@@ -197,8 +197,10 @@ def _arrow_chunks(stream, source: str, container: str) -> Iterator[SourceTable]:
 def _arrow_column(name: str, array: pa.Array) -> Column:
     if pa.types.is_dictionary(array.type):
         array = array.cast(array.type.value_type)
+    # string_view exists from pyarrow 16 (the oldest supported is 12)
+    is_view = getattr(pa.types, "is_string_view", None)
     if pa.types.is_string(array.type) or pa.types.is_large_string(array.type) or \
-            pa.types.is_string_view(array.type):
+            (is_view is not None and is_view(array.type)):
         # one Python string per distinct value (station, pass and kind repeat): ~8 bytes a row
         encoded = pc.dictionary_encode(pc.fill_null(array.cast(pa.string()), ""))
         values = np.array([v.strip() for v in encoded.dictionary.to_pylist()] or [""], dtype=object)

@@ -52,7 +52,7 @@ def write_pass_batches(batches, schema: pa.Schema, path: str, fmt: str = "parque
         if fmt == "parquet":
             import pyarrow.parquet as pq
 
-            writer = pq.ParquetWriter(sink, schema, compression="zstd")
+            writer = pq.ParquetWriter(sink, schema, compression="zstd", version="2.6")   # nanosecond times (io/tables.py)
             empty = True
             for batch in batches:
                 writer.write_table(pa.Table.from_batches([batch], schema=schema))

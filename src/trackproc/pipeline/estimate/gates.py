@@ -11,8 +11,10 @@ import numpy as np
 
 from trackproc.errors import ProcessingError
 from trackproc.methods import noise as nz
-from trackproc.methods.least_squares import Prior
 from trackproc.methods import quality as qm
+from trackproc.methods.estimation import prior as pr
+from trackproc.methods.estimation.prior import (scaled_priors, state_prior_centre, state_prior_chi2,  # noqa: F401
+                                               state_prior_covariance)
 from trackproc.models import modifiers as md
 from trackproc.pipeline.estimate.options import EstimateOptions
 from trackproc.pipeline.estimate.problem import Problem
@@ -86,74 +88,10 @@ def knowledge_lost(priors, sol) -> str | None:
             f"(posterior/a-priori variance {worst:.2f} > 0.5): the solution there is the loosened a-priori's")
 
 
-def _state_rows(p) -> np.ndarray:
-    return np.flatnonzero(np.asarray(p.index, int) < 6)
-
-
-def state_prior_chi2(priors, x) -> tuple[float, int]:
-    """The state a-priori's share of χ² at ``x`` and its number of rows (x..vz rows of every prior)."""
-    chi2, rows = 0.0, 0
-    for p in priors:
-        sel = _state_rows(p)
-        if sel.size:
-            r = np.asarray(x, float)[np.asarray(p.index, int)[sel]] - np.asarray(p.centre, float)[sel]
-            chi2 += float(r @ np.linalg.solve(np.asarray(p.covariance, float)[np.ix_(sel, sel)], r))
-            rows += sel.size
-    return chi2, rows
-
-
-def state_prior_centre(priors) -> np.ndarray:
-    """The a-priori centre of x..vz (NaN where none)."""
-    centre = np.full(6, np.nan)
-    for p in priors:
-        sel = _state_rows(p)
-        centre[np.asarray(p.index, int)[sel]] = np.asarray(p.centre, float)[sel]
-    return centre
-
-
 def apriori_test(priors, sol) -> dict | None:
-    """Do the data contradict the state's a-priori? With a full 6 × 6 state a-priori, the innovation
-    of the a-priori (:func:`~trackproc.methods.quality.prior_innovation_chi2`: the correction
-    against its own covariance ``P − C`` over the directions the data see; refine's test,
-    :func:`trackproc.pipeline.refine.gates.apriori_test`), χ² with that many degrees of freedom
-    when the a-priori is right: it keeps its power when the data are weak against the a-priori
-    (one station's evening), where the a-priori's share of χ² (mean: its redundancy, a fraction
-    of the rows) stays below χ²(rows)'s point whatever the initial error. Otherwise that share
-    against χ²(rows). Returns ``{"chi2", "rows" (the share), "statistic", "dof", "limit",
-    "conflict", "test"}``, or None without a state a-priori."""
-    chi2, rows = state_prior_chi2(priors, sol.values)
-    if not rows:
-        return None
-    pcov = state_prior_covariance(priors)
-    if pcov is None:
-        return qm.apriori_conflict(chi2, rows)
-    return qm.apriori_conflict(chi2, rows, np.asarray(sol.values, float)[:6] - state_prior_centre(priors), pcov,
-                               np.asarray(sol.covariance, float)[:6, :6])
-
-
-def state_prior_covariance(priors):
-    """The 6 × 6 a-priori covariance of x..vz (None unless all six have one)."""
-    cov = np.full((6, 6), np.nan)
-    for p in priors:
-        sel = _state_rows(p)
-        idx = np.asarray(p.index, int)[sel]
-        cov[np.ix_(idx, idx)] = np.asarray(p.covariance, float)[np.ix_(sel, sel)]
-    return None if np.isnan(np.diag(cov)).any() else np.nan_to_num(cov, nan=0.0)
-
-
-def scaled_priors(priors, factor: float) -> list:
-    """``priors`` with the state rows' covariance times ``factor`` (a prior on state and biases,
-    always diagonal here, is split in two)."""
-    out = []
-    for p in priors:
-        idx, cov = np.asarray(p.index, int), np.asarray(p.covariance, float)
-        sel = _state_rows(p)
-        rest = np.setdiff1d(np.arange(idx.size), sel)
-        if sel.size:
-            out.append(Prior(idx[sel], np.asarray(p.centre, float)[sel], cov[np.ix_(sel, sel)] * factor))
-        if rest.size:
-            out.append(Prior(idx[rest], np.asarray(p.centre, float)[rest], cov[np.ix_(rest, rest)]))
-    return out
+    """:func:`trackproc.methods.estimation.prior.apriori_test` of a solution (the innovation of a full
+    state a-priori, else its share of χ²)."""
+    return pr.apriori_test(priors, sol.values, sol.covariance)
 
 
 def refuse(problem: Problem, opt: EstimateOptions, sol, noise, test: dict, doubt: list,

@@ -20,6 +20,7 @@ from trackproc.dynamics import propagator
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError
 from trackproc.io.tle import is_tle_state
+from trackproc.methods.estimation.prior import default_apriori_covariance
 from trackproc.methods.least_squares import Options, Prior, solve, solve_gls
 from trackproc.methods.refinement import CachedModel, geodesic_retraction
 from trackproc.models import modifiers as md
@@ -287,10 +288,7 @@ def bias_modifiers(opt: EstimateOptions, frame, t_s, known, apriori) -> list:
 def default_apriori(rv0) -> np.ndarray:
     """refine's documented a-priori of a state without covariance (a TLE): independent errors of
     the non-singular elements, the along-track phase loose and the period tight
-    (:data:`trackproc.pipeline.refine.DEFAULT_APRIORI_ELEMENTS`), as a GCRF 6 × 6 covariance."""
-    # imported here: refine builds its problem with this package (a module-level import would be a cycle)
-    from trackproc.pipeline.refine import default_apriori_covariance
-
+    (:data:`trackproc.methods.estimation.prior.DEFAULT_APRIORI_ELEMENTS`), as a GCRF 6 × 6 covariance."""
     return default_apriori_covariance(np.asarray(rv0, float), MU_EARTH)
 
 

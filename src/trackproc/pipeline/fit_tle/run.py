@@ -22,7 +22,7 @@ from trackproc.pipeline.fit_tle.observations import default_epoch, mean_elements
 from trackproc.pipeline.fit_tle.options import (APRIORI_MODELS, BSTAR_SIGMA_FLOOR, DOPPLER_BIAS, EDITED_LIMIT,
                                                 MU_WGS72, REFUSAL_PROBABILITY, FitTleOptions, FitTleResult)
 from trackproc.pipeline.identify import integrated_autocorrelation_time
-from trackproc.pipeline.refine import DEFAULT_APRIORI_ELEMENTS
+from trackproc.methods.estimation.prior import DEFAULT_APRIORI_ELEMENTS
 
 
 def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=None,

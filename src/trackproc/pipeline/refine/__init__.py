@@ -52,7 +52,7 @@ model), :mod:`.quality` (the verdict), :mod:`.result` (:func:`finish`), :mod:`.r
 """
 
 from trackproc.pipeline.refine.options import (  # noqa: F401
-    CIRCULAR_TEST_P, COSTS, DEFAULT_APRIORI_ELEMENTS, DOPPLER_BIAS, LINK_MODES, LOW_PASS_DEG, MAX_ADAPT_ITERATIONS,
+    CIRCULAR_TEST_P, COSTS, DOPPLER_BIAS, LINK_MODES, LOW_PASS_DEG, MAX_ADAPT_ITERATIONS,
     MAX_APRIORI_ADAPT, MAX_REWEIGHT, MAX_TRAVERSE_ITERATIONS, NOISE_MODELS, RANGE_RATE_KINDS, REWEIGHT_THRESHOLD,
     TRAVERSE_TOLERANCE_S, RefineOptions, RefineResult, SmoothedCurve)
 from trackproc.pipeline.refine.selection import curve_traverse_epoch, select_pass, smoothed_curve  # noqa: F401
@@ -64,7 +64,8 @@ from trackproc.pipeline.refine.traverse import (  # noqa: F401
     eccentricity, link_range_rate, max_elevation_deg, model_traverse, traverse_station)
 from trackproc.pipeline.refine.gates import (  # noqa: F401
     circular_consistency, may_refuse, scaled_priors, solve_adapted, solve_gated, solve_weighted, stale_improvement,
-    state_prior_chi2, state_prior_indices, with_noise_of)
+    with_noise_of)
+from trackproc.methods.estimation.prior import DEFAULT_APRIORI_ELEMENTS  # noqa: F401
 from trackproc.pipeline.refine.noise import DRIFT_T, noise_model, oscillator_link, solve_noise  # noqa: F401
 from trackproc.pipeline.refine.quality import refine_quality  # noqa: F401
 from trackproc.pipeline.refine.result import (  # noqa: F401

@@ -27,7 +27,8 @@ from trackproc.models import parameters as pm
 from trackproc.pipeline.estimate import EstimateOptions, build_problem
 from trackproc.types import PassTable
 from trackproc.vocabulary import TAYLOR_FORCES
-from trackproc.pipeline.refine.options import (COSTS, DEFAULT_APRIORI_ELEMENTS, DOPPLER_BIAS, NOISE_MODELS,
+from trackproc.methods.estimation.prior import DEFAULT_APRIORI_ELEMENTS
+from trackproc.pipeline.refine.options import (COSTS, DOPPLER_BIAS, NOISE_MODELS,
                                                RefineOptions, SmoothedCurve)
 from trackproc.io.tle import is_tle_state
 from trackproc.pipeline.refine.problem import Refinement, default_apriori_covariance, link_mode

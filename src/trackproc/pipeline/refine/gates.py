@@ -16,10 +16,10 @@ from scipy.special import chdtrc  # chi-square survival without scipy.stats (iss
 
 from trackproc.errors import ProcessingError
 from trackproc.methods import quality as qm
-from trackproc.methods.least_squares import Prior
+from trackproc.methods.estimation import prior as pr
 from trackproc.methods.noise import PassCovariance
 from trackproc.pipeline.refine.options import MAX_ADAPT_ITERATIONS, MAX_APRIORI_ADAPT, MAX_REWEIGHT, REWEIGHT_THRESHOLD
-from trackproc.pipeline.refine.problem import Refinement, state_prior_covariance
+from trackproc.pipeline.refine.problem import Refinement
 from trackproc.pipeline.refine.traverse import eccentricity
 
 
@@ -40,7 +40,7 @@ def may_refuse(ref: Refinement) -> bool:
     """Refusal applies to the pointwise cost with a stale a-priori on the whole state, unconstrained."""
     opt = ref.options
     return (opt.allow_refusal and opt.cost == "pointwise" and not opt.circular
-            and state_prior_covariance([ref.priors[k] for k in state_prior_indices(ref)]) is not None)
+            and pr.state_prior_covariance(ref.priors) is not None)
 
 
 def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
@@ -53,7 +53,7 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
     scale, adaptation, improvement, refusal)``; ``refusal`` None or ``{"reason", "code",
     "state_covariance"}``."""
     may = may_refuse(ref)
-    original = state_prior_covariance([ref.priors[k] for k in state_prior_indices(ref)]) if may else None
+    original = pr.state_prior_covariance(ref.priors) if may else None
     work = scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
     if first is None or start_factor != 1.0:
         first = solve_weighted(work)
@@ -75,7 +75,7 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
             chi2 = test["chi2"]
             # the kept covariance: the a-priori scaled by its variance component with the data's
             # information deflated by the correlation (never below the a-priori as given)
-            pcov = state_prior_covariance([work.priors[k] for k in state_prior_indices(work)])
+            pcov = pr.state_prior_covariance(work.priors)
             red = qm.prior_redundancy(np.asarray(work.covariance(first[0], first[1]), float)[:6, :6], pcov)
             comp = qm.prior_variance_component(chi2 / improvement["inflation"], red) or 1.0
             factor = max(1.0, comp)
@@ -165,55 +165,19 @@ def stale_improvement(ref: Refinement, sol, sigma_scale: float = 1.0, n_seen: in
     return out
 
 
-def state_prior_indices(ref: Refinement) -> list:
-    """Positions in ``ref.priors`` of the a-priori terms on the state alone (indices < 6)."""
-    return [k for k, p in enumerate(ref.priors) if np.all(np.asarray(p.index) < 6)]
-
-
-def state_prior_chi2(ref: Refinement, x) -> tuple[float, int]:
-    """``(chi2, rows)`` of the state a-priori terms at the solution ``x``."""
-    chi2, rows = 0.0, 0
-    for k in state_prior_indices(ref):
-        p = ref.priors[k]
-        idx = np.asarray(p.index, int)
-        d = np.asarray(x, float)[idx] - np.asarray(p.centre, float)
-        chi2 += float(d @ np.linalg.solve(np.asarray(p.covariance, float), d))
-        rows += idx.size
-    return chi2, rows
-
-
 def apriori_test(ref: Refinement, sol, kkt=None) -> Optional[dict]:
-    """Do the data contradict the state's a-priori? Pointwise without ``circular``: the innovation
-    of the a-priori (:func:`~trackproc.methods.quality.prior_innovation_chi2`: the correction
-    ``x̂ − x_p`` against its own covariance ``P − C``, over the directions the pass sees), χ² with
-    that many degrees of freedom when the a-priori is right; it keeps its power when the pass is
-    weak against the a-priori (a short, low or noisy pass, a wandering oscillator), where the
-    a-priori's share of χ² (mean: the redundancy, a fraction of 6) stays below χ²(6)'s point
-    whatever the stale error. Otherwise (integral cost: a sandwich covariance; ``circular``: a
-    covariance singular across the constraints) that share against χ²(rows). Returns
-    ``{"chi2", "rows", "statistic", "dof", "limit", "conflict", "test"}`` (``chi2``/``rows`` the
-    share), or None without a state a-priori."""
-    chi2, rows = state_prior_chi2(ref, sol.values)
-    if not rows:
-        return None
-    pcov = state_prior_covariance([ref.priors[k] for k in state_prior_indices(ref)])
-    if pcov is None or ref.options.cost != "pointwise" or ref.options.circular:
-        return qm.apriori_conflict(chi2, rows)
-    centre = np.zeros(6)
-    for k in state_prior_indices(ref):
-        p = ref.priors[k]
-        centre[np.asarray(p.index, int)] = np.asarray(p.centre, float)
-    return qm.apriori_conflict(chi2, rows, np.asarray(sol.values, float)[:6] - centre, pcov,
-                               np.asarray(ref.covariance(sol, kkt), float)[:6, :6])
+    """:func:`trackproc.methods.estimation.prior.apriori_test` of a refinement: the innovation of the
+    a-priori for the pointwise cost without ``circular``; the a-priori's share of χ² otherwise (the
+    integral cost's covariance is a sandwich, ``circular``'s singular across the constraints)."""
+    innovation = ref.options.cost == "pointwise" and not ref.options.circular
+    if not innovation or pr.state_prior_covariance(ref.priors) is None:
+        return pr.apriori_test(ref.priors, sol.values)
+    return pr.apriori_test(ref.priors, sol.values, ref.covariance(sol, kkt))
 
 
 def scaled_priors(ref: Refinement, factor: float) -> Refinement:
-    """``ref`` with the covariance of its state a-priori terms multiplied by ``factor``."""
-    priors = list(ref.priors)
-    for k in state_prior_indices(ref):
-        p = priors[k]
-        priors[k] = Prior(p.index, p.centre, np.asarray(p.covariance, float) * factor)
-    return replace(ref, priors=priors)
+    """``ref`` with the covariance of its state a-priori multiplied by ``factor``."""
+    return replace(ref, priors=pr.scaled_priors(ref.priors, factor))
 
 
 def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=None):
@@ -231,7 +195,7 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
     else:
         work = scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
         sol, kkt, scale = solve_weighted(work, x0=x0)
-    if not (ref.priors and state_prior_indices(ref)):
+    if not pr.has_state_prior(ref.priors):
         return work, sol, kkt, scale, None
     test = apriori_test(work, sol, kkt)
     chi2, rows = test["chi2"], test["rows"]
@@ -242,7 +206,7 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
     history = []
     kept = (work, sol, kkt, scale)
     for _ in range(MAX_APRIORI_ADAPT):
-        pcov = state_prior_covariance([work.priors[k] for k in state_prior_indices(work)])
+        pcov = pr.state_prior_covariance(work.priors)
         red = (qm.prior_redundancy(np.asarray(work.covariance(sol, kkt), float)[:6, :6], pcov)
                if pcov is not None else math.nan)
         k_hat = qm.prior_variance_component(chi2, red)
@@ -262,29 +226,24 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
             work, sol, kkt, scale = kept
             history.append({"factor": factor, "failed": str(exc)})
             factor = history[-2]["factor"] if len(history) > 1 else start_factor
-            chi2, rows = state_prior_chi2(work, sol.values)
+            chi2, rows = pr.state_prior_chi2(work.priors, sol.values)
             return work, sol, kkt, scale, {
                 "method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
                 "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start["chi2"], "chi2_after": chi2,
                 "rows": rows, "limit": start["limit"], "iterations": history, "resolved": False,
-                "test": _test_report(start["test"]),
+                "test": pr.test_report(start["test"]),
                 "failure": f"with the a-priori scaled by {history[-1]['factor']:.3g} the refinement failed: "
                            f"{str(exc).split(' (')[0]}"}
         kept = (work, sol, kkt, scale)
-        chi2, rows = state_prior_chi2(work, sol.values)
+        chi2, rows = pr.state_prior_chi2(work.priors, sol.values)
     after = apriori_test(work, sol, kkt)
     adaptation = {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
                   "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start["chi2"],
                   "chi2_after": chi2, "rows": rows, "limit": start["limit"], "iterations": history,
-                  "test": _test_report(start["test"]), "test_after": _test_report(after),
+                  "test": pr.test_report(start["test"]), "test_after": pr.test_report(after),
                   "resolved": bool(not after["conflict"] or (history and history[-1].get("component") is not None
                                                              and abs(history[-1]["component"] - 1.0) < 0.1))}
     return work, sol, kkt, scale, adaptation
-
-
-def _test_report(test: dict) -> dict:
-    """The a-priori test (:func:`apriori_test`) as the diagnostics give it."""
-    return {k: test[k] for k in ("test", "statistic", "dof", "limit", "conflict")}
 
 
 def solve_weighted(ref: Refinement, observed=None, prior_centre=None, x0=None):

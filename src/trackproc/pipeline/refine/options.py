@@ -41,7 +41,6 @@ TRAVERSE_TOLERANCE_S = 0.5
 MAX_TRAVERSE_ITERATIONS = 3
 #: A pass whose highest elevation is below this gives a weak refinement (see docs/refine.md).
 LOW_PASS_DEG = 25.0
-DEFAULT_APRIORI_ELEMENTS = {"a_m": 50.0, "ex": 5e-5, "ey": 5e-5, "i_rad": 1e-4, "raan_rad": 1e-4, "u_rad": 4e-4}
 
 NOISE_MODELS = vocabulary.NOISE_MODELS
 

@@ -16,26 +16,8 @@ from trackproc.models import modifiers as md
 from trackproc.methods.refinement import (ELEMENT_NAMES, CachedModel, circular_constraints, constraint_scales,
                                            element_covariance, geodesic_retraction, profile_mixture, solve_kkt,
                                            solve_soft_kkt)
-from trackproc.pipeline.refine.options import DEFAULT_APRIORI_ELEMENTS, RefineOptions, SmoothedCurve
-
-
-def state_prior_covariance(priors) -> Optional[np.ndarray]:
-    """The 6 × 6 a-priori covariance of x..vz from the problem's priors (None unless all six)."""
-    cov = np.full((6, 6), np.nan)
-    for p in priors:
-        idx = np.asarray(p.index, int)
-        pc = np.asarray(p.covariance, float)
-        sel = np.flatnonzero(idx < 6)
-        if sel.size:
-            cov[np.ix_(idx[sel], idx[sel])] = pc[np.ix_(sel, sel)]
-    if np.isnan(np.diag(cov)).any():
-        return None
-    return np.nan_to_num(cov, nan=0.0)
-
-
-def default_apriori_covariance(rv, mu_m3_s2: float) -> np.ndarray:
-    """GCRF covariance (6, 6) of :data:`DEFAULT_APRIORI_ELEMENTS` at the state ``rv``."""
-    return element_covariance(rv, mu_m3_s2, [DEFAULT_APRIORI_ELEMENTS[k] for k in ELEMENT_NAMES])
+from trackproc.methods.estimation.prior import default_apriori_covariance, state_prior_covariance  # noqa: F401
+from trackproc.pipeline.refine.options import RefineOptions, SmoothedCurve
 
 
 def link_mode(ref: Refinement) -> str:

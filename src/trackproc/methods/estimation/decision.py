@@ -1,0 +1,106 @@
+"""Replace the user's orbit, or keep it? One rule for ``refine``, ``estimate``, ``fit-tle`` and
+``filter`` (docs/design.md, "Prior and decision").
+
+A solution replaces the orbit the user already had only when it is expected to predict better:
+
+1. **Declined.** The data contradict a *stated* a-priori (its accuracy is known: a TLE, a state
+   file's covariance, ``--apriori-sigma``; :mod:`trackproc.methods.estimation.prior`): the likely
+   culprit is the data (a time-tag error, an oscillator step, another satellite), not an orbit
+   whose accuracy was measured. The prior is written with its own covariance, verdict ``suspect``
+   (reason ``declined``), never a loosened a-priori that lets the data move the orbit by their own
+   errors. Only a *default* a-priori (no stated accuracy) may be adapted to the data.
+2. **Kept.** The solution does not move the predicted position at the horizon (the next day by
+   default) significantly: the probability that it predicts better than the prior
+   (:func:`probability_better`) is below :data:`REPLACE_PROBABILITY`.
+3. **Replaced** otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+#: A solution replaces the prior only when it predicts the position at the horizon better with at
+#: least this probability (0.5 is a coin toss). fit-tle's refusal rule; chosen on the DopTrack
+#: development days (docs/fit-tle.md, "Refusal").
+REPLACE_PROBABILITY = 0.9
+#: The default horizon of the comparison (days after the solution epoch): the next day's passes.
+HORIZON_DAYS = 1.0
+
+#: The decisions, as the output files and the batch summary name them.
+ACTIONS = ("replaced", "kept", "declined", "adapted")
+
+
+def probability_better(moved, covariance) -> tuple[float, float, float]:
+    """The probability that a solution predicts a position better than the prior did, when the
+    solution's prediction error is ``N(0, covariance)`` and it moves the prediction by ``moved``
+    (``d``, m). The prior's error is then ``e − d``, and ``|e − d|² > |e|²`` exactly when
+    ``e·u < |d|/2`` (``u = d/|d|``): probability ``Φ(|d| / (2 σ_u))``, ``σ_u² = uᵀ C u``. 0.5 when
+    the solution does not move the prediction (a coin toss, not a gain); near 1 when it moves it by
+    several σ. Returns ``(probability, |d|, σ_u)``."""
+    d = np.asarray(moved, float)
+    size = float(np.linalg.norm(d))
+    if size == 0.0:
+        return 0.5, 0.0, 0.0
+    u = d / size
+    sigma = math.sqrt(max(float(u @ np.asarray(covariance, float) @ u), 0.0))
+    if sigma == 0.0:
+        return 1.0, size, 0.0
+    return 0.5 * math.erfc(-size / (2.0 * sigma) / math.sqrt(2.0)), size, sigma
+
+
+@dataclass
+class Decision:
+    """What became of the prior: ``action`` (:data:`ACTIONS`), the ``reason`` in words, the
+    ``probability`` that the solution predicts better at ``horizon_days`` (None when not computed),
+    the prediction's move and its sigma there (m), and the a-priori test that fired (if any)."""
+
+    action: str
+    reason: str
+    source: Optional[str] = None
+    probability: Optional[float] = None
+    horizon_days: Optional[float] = None
+    moved_m: Optional[float] = None
+    moved_sigma_m: Optional[float] = None
+    test: dict = field(default_factory=dict)
+
+    @property
+    def keeps_prior(self) -> bool:
+        return self.action in ("kept", "declined")
+
+    def as_dict(self) -> dict:
+        out = {"action": self.action, "reason": self.reason, "apriori_source": self.source}
+        for key in ("probability", "horizon_days", "moved_m", "moved_sigma_m"):
+            value = getattr(self, key)
+            if value is not None:
+                out[{"probability": "probability_better"}.get(key, key)] = float(value)
+        if self.test:
+            out["apriori_test"] = dict(self.test)
+        return out
+
+
+def declined(source_text: str, test: dict, source: str = "stated") -> Decision:
+    """The data contradict a stated a-priori (``test``: the a-priori test that fired)."""
+    said = f"{test['test']} chi2 {test['statistic']:.4g} over {test['dof']}, limit {test['limit']:.3g}"
+    return Decision("declined", f"declined: the data contradict {source_text} ({said}); its accuracy is stated, "
+                                "so the data are the likely culprit: the prior is kept with its own covariance",
+                    source=source, test={k: test[k] for k in ("test", "statistic", "dof", "limit", "conflict")})
+
+
+def by_prediction(moved, covariance, horizon_days: float, source: Optional[str] = None,
+                  probability: float = REPLACE_PROBABILITY) -> Decision:
+    """Replace or keep by :func:`probability_better` of the solution's move ``moved`` (m) of the
+    predicted position at the horizon, its prediction covariance there ``covariance`` (m²)."""
+    p, size, sigma = probability_better(moved, covariance)
+    if p < probability:
+        return Decision("kept", f"kept: the solution moves the position predicted {horizon_days:g} d ahead by "
+                                f"{size:.4g} m against its own {sigma:.4g} m error there; it predicts better than the "
+                                f"prior with probability {p:.3g} only (< {probability:g})",
+                        source=source, probability=p, horizon_days=horizon_days, moved_m=size, moved_sigma_m=sigma)
+    return Decision("replaced", f"replaced: the solution moves the position predicted {horizon_days:g} d ahead by "
+                                f"{size:.4g} m against its own {sigma:.4g} m error there (probability {p:.3g} that "
+                                "it predicts better)",
+                    source=source, probability=p, horizon_days=horizon_days, moved_m=size, moved_sigma_m=sigma)
