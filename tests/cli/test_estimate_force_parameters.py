@@ -24,7 +24,7 @@ from trackproc.io.statefile import State
 from trackproc.io.stations import Station
 from trackproc.models import parameters as pm
 from trackproc.pipeline.estimate import EstimateOptions, build_problem, estimate
-from trackproc.pipeline.estimate.options import force_parameter_names
+from trackproc.pipeline.od.options import force_parameter_names
 from trackproc.pipeline.simulate import SimulateOptions, simulate
 
 EPOCH = "2026-03-20T09:30:00.000Z"

@@ -98,7 +98,7 @@ def test_cli_fit_of_the_normal_points_against_the_cpf(run_cli, tmp_path):
     from trackproc.io.cpf import read_cpf
     from trackproc.io.eop import earth_orientation
     from trackproc.io.statefile import read_state
-    from trackproc.pipeline.estimate.problem import default_force_model
+    from trackproc.pipeline.od.problem import default_force_model
     from trackproc.pipeline.reference_orbit import compare_with_cpf
 
     passes = tmp_path / "l2.parquet"

@@ -36,21 +36,23 @@ an inertial rotation: the velocity block is rotated, not differentiated); residu
 station and kind; optionally seed 002's comparison (Doppler-only vs extended) and the
 two-stage method.
 
-The package, one responsibility per module: :mod:`.options` (options and their checks),
-:mod:`.samples` (pass tables -> measurement set), :mod:`.problem` (modifiers, drivers, priors,
-:class:`Problem`), :mod:`.gates` (noise model, fit, ``quality`` verdict), :mod:`.seed002` (the
-comparison and the two-stage method), :mod:`.result` (:func:`estimate`), :mod:`.summary`.
+The problem (options, samples, :class:`Problem`, residual tables) is the shared OD core,
+:mod:`trackproc.pipeline.od`; the a-priori and the replace/keep/decline rule are
+:mod:`trackproc.methods.estimation`. This package, one responsibility per module: :mod:`.gates`
+(noise model, fit, the a-priori gate), :mod:`.quality` (the ``quality`` verdict), :mod:`.seed002`
+(the comparison and the two-stage method), :mod:`.result` (:func:`estimate`), :mod:`.summary`.
 """
 
 from __future__ import annotations
 
 from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
-from trackproc.pipeline.estimate.options import (DOPPLER_BIAS, DOPPLER_BIAS_PER, RESIDUAL_COLUMNS, UNITS,
+from trackproc.pipeline.od.options import (DOPPLER_BIAS, DOPPLER_BIAS_PER, RESIDUAL_COLUMNS, UNITS,
                                                  EstimateOptions)
-from trackproc.pipeline.estimate.problem import Problem, build_problem
+from trackproc.pipeline.od.problem import Problem, build_problem
 from trackproc.pipeline.estimate.gates import pass_noise
 from trackproc.pipeline.estimate.quality import estimate_quality
-from trackproc.pipeline.estimate.result import EstimateResult, estimate, residual_frame
+from trackproc.pipeline.estimate.result import EstimateResult, estimate
+from trackproc.pipeline.od import residual_frame
 from trackproc.pipeline.estimate.summary import summary_text
 
 __all__ = ["EstimateOptions", "Problem", "EstimateResult", "build_problem", "estimate", "estimate_quality",

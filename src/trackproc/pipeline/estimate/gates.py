@@ -16,8 +16,8 @@ from trackproc.methods.estimation import prior as pr
 from trackproc.methods.estimation.prior import (scaled_priors, state_prior_centre, state_prior_chi2,  # noqa: F401
                                                state_prior_covariance)
 from trackproc.models import modifiers as md
-from trackproc.pipeline.estimate.options import EstimateOptions
-from trackproc.pipeline.estimate.problem import Problem
+from trackproc.pipeline.od.options import EstimateOptions
+from trackproc.pipeline.od.problem import Problem
 from trackproc.pipeline.estimate.quality import pass_residuals
 
 

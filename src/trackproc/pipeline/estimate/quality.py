@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from trackproc.methods import quality as qm
-from trackproc.pipeline.estimate.problem import Problem
+from trackproc.pipeline.od.problem import Problem
 from trackproc.pipeline.timing import add_timing_reason
 
 

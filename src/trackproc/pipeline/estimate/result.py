@@ -19,8 +19,8 @@ from trackproc.models import observation as ob
 from trackproc.pipeline.estimate import gates
 from trackproc.pipeline.estimate.quality import estimate_quality
 from trackproc.pipeline.estimate import seed002 as s2
-from trackproc.pipeline.estimate.options import UNITS, EstimateOptions
-from trackproc.pipeline.estimate.problem import Problem, build_problem
+from trackproc.pipeline.od import Problem, build_problem, residual_frame, rms_table  # noqa: F401
+from trackproc.pipeline.od.options import EstimateOptions
 from trackproc.pipeline.timing import time_tag_rate, timing_warning, tle_reference, tle_timing
 
 
@@ -46,39 +46,6 @@ class EstimateResult:
     two_stage_solution: Optional[object] = None
     warnings: list = field(default_factory=list)
     quality: Optional[object] = None
-
-
-def rms_table(problem: Problem, sol) -> dict:
-    """Per station and kind: counts, edited, RMS (unit) and WRMS (normalized) of kept samples."""
-    out = {}
-    meas = problem.meas
-    for st in sorted(set(meas.station)):
-        for kind in ob.KINDS:
-            rows = (meas.station == st) & (meas.kind == kind)
-            if not rows.any():
-                continue
-            kept = rows & ~sol.edited
-            r = sol.residual[kept]
-            z = sol.normalized[kept]
-            out.setdefault(st, {})[kind] = {
-                "n": int(rows.sum()), "edited": int((rows & sol.edited).sum()), "unit": UNITS[kind],
-                "rms": float(np.sqrt(np.mean(r * r))) if r.size else None,
-                "mean": float(np.mean(r)) if r.size else None,
-                "wrms": float(np.sqrt(np.mean(z * z))) if z.size else None}
-    return out
-
-
-def residual_frame(problem: Problem, sol) -> pd.DataFrame:
-    """The residual table (:data:`RESIDUAL_COLUMNS`), samples in time order per station."""
-    meas = problem.meas
-    frame = pd.DataFrame({
-        "time": pd.DatetimeIndex(problem.times).tz_localize("UTC"), "station": meas.station.astype(str),
-        "pass_id": meas.pass_id.astype(str), "kind": meas.kind.astype(str),
-        "unit": [UNITS[k] for k in meas.kind], "observed": meas.observed, "computed": sol.computed,
-        "residual": sol.residual, "normalized_residual": sol.normalized, "sigma": meas.sigma,
-        "edited": sol.edited.astype(bool)})
-    order = np.lexsort((frame["kind"].to_numpy(dtype=str), problem.times, frame["station"].to_numpy(dtype=str)))
-    return frame.iloc[order].reset_index(drop=True)
 
 
 #: Passes at most for which a failed estimate looks for the one pass without which it succeeds.

@@ -12,8 +12,8 @@ from trackproc.methods import two_stage as tsm
 from trackproc.methods.least_squares import Prior
 from trackproc.models import modifiers as md
 from trackproc.models import parameters as pm
-from trackproc.pipeline.estimate.options import EstimateOptions
-from trackproc.pipeline.estimate.problem import Problem
+from trackproc.pipeline.od.options import EstimateOptions
+from trackproc.pipeline.od.problem import Problem
 
 
 def range_bias_drivers(problem: Problem) -> list:

@@ -24,7 +24,7 @@ from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Prior
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
-from trackproc.pipeline.estimate import EstimateOptions, build_problem
+from trackproc.pipeline.od import EstimateOptions, build_problem
 from trackproc.types import PassTable
 from trackproc.vocabulary import TAYLOR_FORCES
 from trackproc.methods.estimation.prior import DEFAULT_APRIORI_ELEMENTS

@@ -19,7 +19,7 @@ from trackproc.isotime import iso_utc
 from trackproc.methods import refinement as rf
 from trackproc.methods.quality import chi2_limit
 from trackproc.models import modifiers as md
-from trackproc.pipeline.estimate import UNITS, residual_frame
+from trackproc.pipeline.od import UNITS, residual_frame
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, RefineResult
 from trackproc.types import State
 from trackproc.pipeline.refine.problem import (Refinement, default_apriori_covariance, link_mode,

@@ -12,7 +12,7 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.io import smoothing_record
 from trackproc.methods.smoothing import SmoothingError, closest_approach
 from trackproc.pipeline.refine.options import LINK_MODES, RANGE_RATE_KINDS, RefineOptions, SmoothedCurve
-from trackproc.pipeline.estimate.samples import utc_times
+from trackproc.pipeline.od.samples import utc_times
 from trackproc.pipeline.smooth import SmoothOptions, smooth
 from trackproc.types import PassTable
 

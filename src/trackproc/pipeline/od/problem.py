@@ -26,8 +26,8 @@ from trackproc.methods.refinement import CachedModel, geodesic_retraction
 from trackproc.models import modifiers as md
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
-from trackproc.pipeline.estimate import samples as sm
-from trackproc.pipeline.estimate.options import (GROUPS, LIGHT_TIME_MARGIN_S, EstimateOptions, apriori_for,
+from trackproc.pipeline.od import samples as sm
+from trackproc.pipeline.od.options import (GROUPS, LIGHT_TIME_MARGIN_S, EstimateOptions, apriori_for,
                                                  check_apriori, check_options, force_parameter_names)
 
 
