@@ -82,7 +82,7 @@ def test_readme_tour_and_examples_run(tmp_path):
     run("\n".join(blocks), tmp_path)       # in order: later examples use earlier outputs
 
 
-@pytest.mark.parametrize("command", ["ingest", "info", "simulate", "propagate", "smooth", "estimate", "refine",
+@pytest.mark.parametrize("command", ["ingest", "info", "simulate", "propagate", "smooth", "estimate", "filter", "refine",
                                      "accuracy", "requirements", "detect", "batch", "passes", "compare", "identify",
                                      "fit-tle"])
 def test_help_examples_run(command, tmp_path):

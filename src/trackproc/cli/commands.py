@@ -12,6 +12,7 @@ from trackproc.cli import simulate_cmd  # noqa: F401
 from trackproc.cli import propagate_cmd  # noqa: F401
 from trackproc.cli import smooth_cmd  # noqa: F401
 from trackproc.cli import estimate_cmd  # noqa: F401
+from trackproc.cli import filter_cmd  # noqa: F401
 from trackproc.cli import refine_cmd  # noqa: F401
 from trackproc.cli import accuracy_cmd  # noqa: F401
 from trackproc.cli import requirements_cmd  # noqa: F401
@@ -32,6 +33,7 @@ SUMMARIES = {
     "propagate": "Ephemeris, STM, covariance and pass prediction by the DT (Taylor) engine.",
     "smooth": "Least-squares polynomial per pass; TCA and carrier at closest approach (seed 004).",
     "estimate": "Orbit + biases by weighted least squares with error matrices (seed 002).",
+    "filter": "Sequential orbit determination: Kalman filter + RTS smoother with process noise, carried night to night.",
     "refine": "Refine a stale orbit from one Doppler pass (seed 004).",
     "accuracy": "Sigma and correlation of a predicted orbit by the differential spectrum (seed 000).",
     "requirements": "Sensor requirement g = sigma*sqrt(dt) for elevation-only detection (seed 003).",

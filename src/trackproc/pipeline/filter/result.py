@@ -1,0 +1,318 @@
+"""The result of ``trackproc filter``: :func:`filter_passes` (problem, carried state, run, verdict,
+outputs) and what it returns (:class:`FilterResult`: the state file, the innovation table, the
+history of states)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from trackproc.constants import force_model_constants
+from trackproc.dynamics import propagator
+from trackproc.dynamics import timescales as ts
+from trackproc.dynamics.rtn import rtn_covariance
+from trackproc.errors import InputError, ProcessingError
+from trackproc.io.statefile import State, format_epoch
+from trackproc.methods import quality as qm
+from trackproc.methods import sequential as sq
+from trackproc.pipeline.filter import run as fr
+from trackproc.pipeline.filter.options import FilterOptions, check_filter_options
+from trackproc.pipeline.filter.problem import UNITS, Problem, build_problem
+
+INNOVATION_COLUMNS = ("time", "station", "pass_id", "kind", "unit", "observed", "predicted", "innovation",
+                      "innovation_sigma", "normalized_innovation", "edited", "residual")
+
+
+@dataclass
+class FilterResult:
+    """``state`` (the state file), ``problem``, ``sweep`` (:class:`~trackproc.pipeline.filter.run.Sweep`),
+    ``innovations`` (one row per sample: :data:`INNOVATION_COLUMNS`, plus ``smoothed_residual``
+    with the smoother), ``quality`` (:class:`~trackproc.methods.quality.Quality`), ``warnings``,
+    ``skipped`` (passes older than a carried state's last measurement)."""
+
+    state: State
+    problem: Problem
+    sweep: object
+    innovations: pd.DataFrame
+    quality: object
+    warnings: list = field(default_factory=list)
+    skipped: list = field(default_factory=list)
+    iterations: list = field(default_factory=list)
+
+    def history(self) -> pd.DataFrame:
+        """Every filtered (and smoothed) state with its sigma and covariance (lower triangle), one
+        row per step and solution (:func:`history_frame`)."""
+        return history_frame(self.problem, self.sweep)
+
+
+def carried_last_measurement(initial):
+    """The last measurement time (UTC datetime64) a previous ``filter`` run's state carries, or None."""
+    rec = (getattr(initial, "extra", None) or {}).get("filter")
+    if not isinstance(rec, dict) or not rec.get("last_measurement"):
+        return None
+    from trackproc.io.statefile import parse_epoch
+
+    return parse_epoch(str(rec["last_measurement"]), column="filter.last_measurement")
+
+
+def skip_older(tables, last):
+    """Drop the samples at or before ``last`` (a carried state's last measurement). Returns
+    ``(tables, skipped pass names)``; a pass partly older keeps its newer samples."""
+    from trackproc.io.passfile import PassTable
+
+    out, skipped = [], []
+    stamp = pd.Timestamp(last).tz_localize("UTC")
+    for source, t in tables:
+        f = t.frame
+        keep = (f["time"] > stamp).to_numpy()
+        old = f.loc[~keep, ["station", "pass_id"]].astype(str).drop_duplicates()
+        newer = set(map(tuple, f.loc[keep, ["station", "pass_id"]].astype(str).to_numpy().tolist()))
+        skipped += [f"{s}/{p}" for s, p in old.to_numpy().tolist() if (s, p) not in newer]
+        if keep.any():
+            out.append((source, PassTable(f[keep].reset_index(drop=True), t.meta)))
+    return out, sorted(set(skipped))
+
+
+def _utc_of_step(problem: Problem, sw, k: int):
+    if k == 0 or sw.t_s[k] == 0.0:
+        return problem.epoch
+    i = int(np.flatnonzero(sw.step == k)[0])
+    return problem.times[i]
+
+
+def _extended_stm(traj, dt, n):
+    top = traj.stm(np.array([dt]))[0]
+    if traj.force_parameter_names:
+        top = np.concatenate([top, traj.parameter_partials(np.array([dt]))[0]], -1)
+    out = np.eye(n)
+    out[:6, :top.shape[-1]] = top
+    return out
+
+
+def move(problem: Problem, opt: FilterOptions, x, p, epoch, to_epoch):
+    """A state and its covariance from ``epoch`` to ``to_epoch`` (UTC datetime64) through the
+    problem's force model and transition, with the process noise over the interval when forward
+    (a prediction); a backward move is the deterministic one."""
+    dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(to_epoch), ts.datetime64_to_jd_utc(epoch)))
+    if dt == 0.0:
+        return x, p
+    n = x.size
+    traj = propagator.propagate(x[:3], x[3:6], epoch, [dt], force=problem.force, stm=True, eop=problem.eop,
+                                force_model=problem.force_model_at(x)).raise_for_outcome()
+    psi = _extended_stm(traj, dt, n)
+    x2 = x.copy()
+    x2[:6] = traj.state(dt)
+    p2 = psi @ p @ psi.T
+    scales = problem.params.scales()
+    q = fr.process_noise(problem, opt, dt, x, scales) if dt > 0 else None
+    if q is not None:
+        p2 = p2 + q * np.outer(scales, scales)
+    return x2, 0.5 * (p2 + p2.T)
+
+
+def innovation_frame(problem: Problem, sw) -> pd.DataFrame:
+    """The innovation table (:data:`INNOVATION_COLUMNS`), in time order."""
+    meas = problem.meas
+    sig = np.sqrt(sw.variance)
+    frame = pd.DataFrame({
+        "time": pd.DatetimeIndex(problem.times).tz_localize("UTC"), "station": meas.station.astype(str),
+        "pass_id": meas.pass_id.astype(str), "kind": meas.kind.astype(str), "unit": [UNITS[k] for k in meas.kind],
+        "observed": meas.observed, "predicted": meas.observed - sw.innovation, "innovation": sw.innovation,
+        "innovation_sigma": sig, "normalized_innovation": sw.innovation / sig, "edited": sw.edited,
+        "residual": sw.residuals("f")})
+    if sw.x_s is not None:
+        frame["smoothed_residual"] = sw.residuals("s")
+    order = np.lexsort((np.arange(len(frame)), problem.times))
+    return frame.iloc[order].reset_index(drop=True)
+
+
+def history_frame(problem: Problem, sw) -> pd.DataFrame:
+    """One row per step and solution (``filtered``, ``smoothed``): time, the values, sigmas and
+    the covariance's lower triangle (``cov_I_J``, rows/columns in parameter order)."""
+    names = problem.names
+    n = len(names)
+    low = np.tril_indices(n)
+    rows = []
+    for which, label in (("f", "filtered"), ("s", "smoothed")):
+        if getattr(sw, "x_" + which) is None:
+            continue
+        for k in range(sw.t_s.size):
+            x, p = sw.absolute(which, k)
+            row = {"time": format_epoch(_utc_of_step(problem, sw, k)), "solution": label}
+            row.update({nm: float(v) for nm, v in zip(names, x)})
+            row.update({f"sigma_{nm}": float(math.sqrt(max(p[i, i], 0.0))) for i, nm in enumerate(names)})
+            row.update({f"cov_{i}_{j}": float(p[i, j]) for i, j in zip(*low)})
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def filter_quality(problem: Problem, sw, iterations: list, opt: FilterOptions):
+    """The verdict: the normalised innovations squared over the run against χ²(kept samples)
+    (:func:`~trackproc.methods.sequential.nis_test`, 99.9 % two-sided: above, the filter
+    diverges or its noise models are optimistic; below, its process noise or the samples'
+    sigmas are too large), the share of edited samples, the whiteness of each pass's normalised
+    innovations, McReynolds' filter-smoother test with the smoother, and the iterations'
+    convergence."""
+    q = qm.Quality()
+    kept = ~sw.edited
+    z = sw.innovation / np.sqrt(sw.variance)
+    chi2, dof = float(np.sum(z[kept] ** 2)), int(kept.sum())
+    if dof:
+        lo, hi = sq.nis_test(chi2, dof)
+        said = f"normalised innovations squared {chi2:.5g} over {dof} samples (99.9 % band {lo:.5g}-{hi:.5g})"
+        if chi2 > hi:
+            q.add("innovations", "suspect", f"the filter diverges or its noise models are optimistic: {said}; "
+                  "add process noise (--snc-accel) or check the data's sigmas", value=chi2 / dof, limit=hi / dof)
+        elif chi2 < lo:
+            q.add("innovations", "suspect", f"innovations smaller than their predicted variance: {said}; the "
+                  "process noise or the samples' sigmas are too large", value=chi2 / dof, limit=lo / dof)
+        else:
+            q.add("innovations", "ok", f"innovations consistent: {said}", value=chi2 / dof, limit=hi / dof)
+    n_edit = int(sw.edited.sum())
+    if sw.edited.size and n_edit > 0.5 * sw.edited.size:
+        q.add("edited", "rejected", f"{n_edit} of {sw.edited.size} samples edited beyond {opt.edit_sigma} sigma: "
+              "the filter has diverged", value=n_edit / sw.edited.size, limit=0.5)
+    elif sw.edited.size and n_edit > 0.1 * sw.edited.size:
+        q.add("edited", "suspect", f"{n_edit} of {sw.edited.size} samples edited beyond {opt.edit_sigma} sigma",
+              value=n_edit / sw.edited.size, limit=0.1)
+    meas = problem.meas
+    station, pass_id, kind = meas.station.astype(str), meas.pass_id.astype(str), meas.kind.astype(str)
+    passes = []
+    for key in sorted(set(zip(station, pass_id, kind))):
+        idx = np.flatnonzero(kept & (station == key[0]) & (pass_id == key[1]) & (kind == key[2]))
+        idx = idx[np.argsort(meas.t_s[idx], kind="stable")]
+        if idx.size:
+            passes.append({"pass": f"{key[0]}/{key[1]} {key[2]}", "whiteness": qm.whiteness(z[idx])})
+    qm.add_whiteness_family(q, passes)
+    if sw.x_s is not None and sw.t_s.size > 1:
+        stat = sq.mcreynolds(sw.x_f, sw.p_f, sw.x_s, sw.p_s)
+        finite = np.isfinite(stat)
+        if finite.any():
+            limit = qm.whiteness_family_limit(int(finite.sum()))
+            worst = np.unravel_index(np.nanargmax(np.abs(stat)), stat.shape)
+            value = float(abs(stat[worst]))
+            name = problem.names[worst[1]]
+            when = format_epoch(_utc_of_step(problem, sw, int(worst[0])))
+            said = (f"worst {name} at {when}: |smoothed - filtered| / sqrt(P_f - P_s) = {value:.3g}, limit "
+                    f"{limit:.3g} (99.9 % for the worst of {int(finite.sum())})")
+            q.add("filter_smoother", "suspect" if value > limit else "ok",
+                  (f"the smoother disagrees with the filter beyond their covariances (McReynolds): {said}: "
+                   "unmodelled dynamics or a bias the process noise does not cover") if value > limit else
+                  f"filter and smoother consistent (McReynolds): {said}", value=value, limit=limit)
+    if iterations and opt.iterations > 1 and len(iterations) == opt.iterations - 1 \
+            and iterations[-1]["max_change_sigma"] > 0.01:
+        q.add("iterations", "suspect", f"the iterated filter had not converged after {opt.iterations} sweeps "
+              f"(last change {iterations[-1]['max_change_sigma']:.3g} sigma)",
+              value=iterations[-1]["max_change_sigma"], limit=0.01)
+    return q
+
+
+def filter_passes(tables, initial, stations=None, options: FilterOptions | None = None, eop=None) -> FilterResult:
+    """Filter (and smooth) the passes from the initial state (see :mod:`trackproc.pipeline.filter`).
+
+    Raises :class:`InputError` (exit 2) for invalid input and :class:`ProcessingError` (exit 1)
+    when nothing is left to filter or the reference trajectory fails."""
+    opt = options or FilterOptions()
+    check_filter_options(opt)
+    warnings, skipped = [], []
+    last = carried_last_measurement(initial)
+    carried = None
+    if last is not None:
+        tables, skipped = skip_older(tables, last)
+        if skipped:
+            warnings.append(f"skipped {len(skipped)} pass(es) not newer than the carried state's last measurement "
+                            f"{format_epoch(last)}: {', '.join(skipped)}")
+        if not tables:
+            raise ProcessingError(f"no samples after the carried state's last measurement {format_epoch(last)}")
+        carried = initial
+    first = min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
+    popt = opt.problem
+    epoch = popt.epoch
+    if epoch is None and np.datetime64(initial.epoch, "ns") > np.datetime64(first, "ns"):
+        epoch = "first"                 # the filter starts at the initial state or the first sample
+    apriori_initial = popt.apriori_initial
+    if apriori_initial is None and initial.state_covariance is not None and not any(
+            k in popt.apriori_sigma for k in ("x", "y", "z", "vx", "vy", "vz", "position", "velocity", "state")):
+        apriori_initial = True
+    from dataclasses import replace
+
+    popt = replace(popt, epoch=epoch, apriori_initial=apriori_initial)
+    problem = build_problem(tables, initial, stations, popt, eop)
+    if carried is not None and np.datetime64(problem.epoch, "ns") != np.datetime64(initial.epoch, "ns"):
+        carried = None
+    sw, iterations = fr.run(problem, opt, carried)
+    which = "s" if opt.smooth else "f"
+    last_k = sw.t_s.size - 1
+    if opt.output_epoch is None:
+        k = 0 if opt.smooth else last_k
+        x, p = sw.absolute(which, k)
+        out_epoch = _utc_of_step(problem, sw, k)
+    else:
+        out_epoch = np.datetime64(opt.output_epoch, "ns")
+        t_out = float(ts.seconds_since(ts.datetime64_to_jd_utc(out_epoch), ts.datetime64_to_jd_utc(problem.epoch)))
+        k = max(int(np.searchsorted(sw.t_s, t_out, side="right")) - 1, 0)
+        x, p = sw.absolute(which, k)
+        x, p = move(problem, opt, x, p, _utc_of_step(problem, sw, k), out_epoch)
+    quality = filter_quality(problem, sw, iterations, opt)
+    names = problem.names
+    sigma = np.sqrt(np.clip(np.diag(p), 0.0, None))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = np.nan_to_num(p / np.outer(sigma, sigma))
+    rtn = rtn_covariance(x[:3], x[3:6], p[:6, :6])
+    kept = ~sw.edited
+    z = sw.innovation / np.sqrt(sw.variance)
+    last_time = problem.times.max()
+    record = {
+        "method": "extended Kalman filter (Joseph form, sequential scalar updates), reference trajectory restarted "
+                  "at each tracking segment" + (", Rauch-Tung-Striebel smoother" if opt.smooth else ""),
+        "solution": "smoothed" if opt.smooth else "filtered",
+        "process_noise": {"snc_accel_rtn_m_s2_sqrt_hz": [float(a) for a in opt.snc_accel],
+                          "bias_walk_per_sqrt_s": {k2: float(v) for k2, v in opt.bias_walk.items()}},
+        "edit_sigma": opt.edit_sigma, "segment_gap_s": opt.segment_gap_s,
+        "updates": int(kept.sum()), "edited": int(sw.edited.sum()), "steps": int(sw.t_s.size),
+        "segments": len(sw.segments), "sweeps": len(iterations) + 1, "iterations": iterations,
+        "first_time": format_epoch(problem.epoch), "last_measurement": format_epoch(last_time),
+        "nis": float(np.sum(z[kept] ** 2)), "nis_dof": int(kept.sum()),
+        "skipped_passes": skipped, "carried_state": carried is not None,
+    }
+    diagnostics = {"measurements": int(sw.edited.size), "edited": int(sw.edited.sum()), "correlation": corr,
+                   "covariance_rtn": rtn,
+                   "sigma_rtn": {"radial_m": math.sqrt(rtn[0, 0]), "along_m": math.sqrt(rtn[1, 1]),
+                                 "cross_m": math.sqrt(rtn[2, 2]), "radial_m_s": math.sqrt(rtn[3, 3]),
+                                 "along_m_s": math.sqrt(rtn[4, 4]), "cross_m_s": math.sqrt(rtn[5, 5])},
+                   "units": problem.params.units()}
+    extra = {"estimation": {"method": "sequential: " + record["method"], "range_rate_model": problem.range_rate_model,
+                            "apriori_initial": problem.apriori_initial,
+                            "sources": sorted({str(s) for s in problem.sources})},
+             "filter": record, "quality": quality.as_dict()}
+    state = State.from_vectors(out_epoch, x[:3], x[3:6], parameters=list(names), values=x, sigma=sigma, covariance=p,
+                               force_model=(problem.force_model.label() if problem.force_model is not None
+                                            else popt.force),
+                               constants=(problem.force_model.describe() if problem.force_model is not None
+                                          else force_model_constants(popt.force)),
+                               eop_source=getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
+                               diagnostics=diagnostics, extra=extra)
+    if quality.verdict != "ok":
+        warnings.append(quality.text())
+    return FilterResult(state=state, problem=problem, sweep=sw, innovations=innovation_frame(problem, sw),
+                        quality=quality, warnings=warnings, skipped=skipped, iterations=iterations)
+
+
+
+def summary_text(result: FilterResult) -> str:
+    """The one-screen summary on stderr."""
+    st, rec = result.state, result.state.extra["filter"]
+    lines = [f"filter: {rec['updates']} updates ({rec['edited']} edited) over {rec['steps']} times in "
+             f"{rec['segments']} segment(s), {rec['sweeps']} sweep(s); last measurement {rec['last_measurement']}",
+             f"{rec['solution']} state at {format_epoch(st.epoch)} (GCRF):"]
+    for name, v, s, u in zip(st.parameters, st.values, st.sigma, result.problem.params.units()):
+        lines.append(f"  {name:<24} {v:>20.6f} +- {s:.4g} {u}")
+    srtn = st.diagnostics["sigma_rtn"]
+    lines.append(f"  sigma RTN {srtn['radial_m']:.4g} / {srtn['along_m']:.4g} / {srtn['cross_m']:.4g} m")
+    lines.append(f"  normalised innovations squared {rec['nis']:.5g} over {rec['nis_dof']}")
+    lines.extend(f"warning: {w}" for w in result.warnings)
+    lines.append(result.quality.text())
+    return "\n".join(lines) + "\n"

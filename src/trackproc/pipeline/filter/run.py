@@ -1,0 +1,314 @@
+"""One run of the filter over a :class:`Problem`: the sweep (:func:`sweep`: an extended Kalman
+filter linearised about a reference trajectory that restarts from the filter's state at each
+tracking segment), the smoother (:func:`smooth`) and the iterated run (:func:`run`).
+
+Variables are scaled by the drivers' scales inside (``ξ = x / scale``) so that metres, m/s, Hz
+and force coefficients share one well-conditioned covariance; everything returned is in the
+parameters' own units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from trackproc.dynamics.rtn import rtn_rotation
+from trackproc.errors import InputError
+from trackproc.methods import sequential as sq
+from trackproc.pipeline.filter.options import DIFFUSE_SCALES, FilterOptions
+from trackproc.pipeline.filter.problem import Problem
+
+
+@dataclass
+class Sweep:
+    """One pass of the filter (and, after :func:`smooth`, the smoother) over the steps.
+
+    Per step k (time ``t_s[k]``, s from the problem's epoch): predicted ``x_p``, ``p_p``,
+    filtered ``x_f``, ``p_f``, the transition ``phi[k] = Ψ(t_k, t_{k-1})``, the reference state
+    ``z_ref[k]``; smoothed ``x_s``, ``p_s`` (None before :func:`smooth`). Per sample (the
+    problem's order): ``step``, ``innovation`` (y − predicted, before its update), ``variance``
+    (its innovation variance), ``edited``, and the linearisation (``h_ref``, ``h_row``) for the
+    post-fit residuals. All in scaled variables (``scales``)."""
+
+    t_s: np.ndarray
+    scales: np.ndarray
+    x_p: np.ndarray
+    p_p: np.ndarray
+    x_f: np.ndarray
+    p_f: np.ndarray
+    phi: np.ndarray
+    z_ref: np.ndarray
+    step: np.ndarray
+    innovation: np.ndarray
+    variance: np.ndarray
+    edited: np.ndarray
+    h_ref: np.ndarray
+    h_row: np.ndarray
+    segments: list
+    x_s: np.ndarray | None = None
+    p_s: np.ndarray | None = None
+    evaluations: int = 0
+
+    def absolute(self, which: str, k: int):
+        """``(x, P)`` of step k in the parameters' units; ``which`` is ``f``, ``p`` or ``s``."""
+        x = getattr(self, "x_" + which)[k] * self.scales
+        p = getattr(self, "p_" + which)[k] * np.outer(self.scales, self.scales)
+        return x, p
+
+    def residuals(self, which: str = "f") -> np.ndarray:
+        """Post-fit residuals of every sample on the filtered (``f``, after its step's updates) or
+        smoothed (``s``) states, through the linearisation of its step."""
+        x = getattr(self, "x_" + which)[self.step]
+        dz = x - self.z_ref[self.step]
+        return self.h_obs - self.h_ref - np.einsum("ij,ij->i", self.h_row, dz)
+
+    h_obs: np.ndarray = field(default=None)
+
+
+def initial_covariance(problem: Problem, carried=None):
+    """The filter's start: ``(centre, P0)`` over the problem's parameters from its priors
+    (the initial state's covariance or ``--apriori-sigma``), a diffuse sigma
+    (:data:`DIFFUSE_SCALES` × scale) for a parameter without one; ``carried``: a previous run's
+    state (same epoch) whose values and covariance replace those of the parameters it shares.
+    :class:`InputError` when nothing gives the orbit state an uncertainty."""
+    names = problem.names
+    scales = problem.params.scales()
+    centre = problem.x0.astype(float).copy()
+    p0 = np.diag((DIFFUSE_SCALES * scales) ** 2)
+    has = np.zeros(len(names), bool)
+    for prior in problem.priors:
+        idx = np.asarray(prior.index, int)
+        p0[idx, :] = 0.0
+        p0[:, idx] = 0.0
+        p0[np.ix_(idx, idx)] = np.asarray(prior.covariance, float)
+        centre[idx] = np.asarray(prior.centre, float)
+        has[idx] = True
+    if carried is not None and carried.covariance is not None:
+        shared = [n for n in carried.parameters if n in names]
+        src = [carried.parameters.index(n) for n in shared]
+        dst = [names.index(n) for n in shared]
+        p0[dst, :] = 0.0
+        p0[:, dst] = 0.0
+        p0[np.ix_(dst, dst)] = np.asarray(carried.covariance, float)[np.ix_(src, src)]
+        if carried.values is not None:
+            centre[dst] = np.asarray(carried.values, float)[src]
+        has[dst] = True
+    if not has[:6].all():
+        raise InputError("the filter needs the initial state's uncertainty", column="--initial",
+                         found="a state without covariance",
+                         expected="a state file with a covariance, --apriori-sigma position=M velocity=M/S, "
+                                  "or --apriori-initial")
+    return centre, p0
+
+
+def _sub_problem(problem: Problem, rows) -> Problem:
+    """The problem restricted to ``rows`` (same parameters and epoch; the modifiers bound again,
+    those acting on none of the rows dropped)."""
+    meas = problem.meas.subset(rows)
+    bound = []
+    for b in problem.modifiers:
+        try:
+            bound.append(b.modifier.bind(meas))
+        except ValueError:
+            continue
+    return replace(problem, meas=meas, modifiers=bound, times=problem.times[rows], sources=problem.sources[rows])
+
+
+def _evaluate(sub: Problem, x):
+    """``(h, J, trajectory)`` of the sub-problem at ``x``: the problem's own model, its trajectory kept."""
+    kept = {}
+    own = sub.trajectory
+
+    def recording(xx):
+        kept["traj"] = own(xx)
+        return kept["traj"]
+
+    sub.trajectory = recording
+    try:
+        h, jac = sub.model(x)
+    except ArithmeticError as exc:
+        from trackproc.errors import ProcessingError
+
+        raise ProcessingError(f"the reference trajectory failed: {exc}") from None
+    return h, jac, kept["traj"]
+
+
+def _transition(traj, t, n: int) -> np.ndarray:
+    """Ψ(t, t0) of the extended state (n × n): ``[Φ | ∂s/∂p]`` on the orbit's rows, identity on
+    the parameters' (biases and force coefficients are constants of the reference)."""
+    t = np.atleast_1d(np.asarray(t, float))
+    top = traj.stm(t)                           # (m, 6, 6 + P)
+    out = np.broadcast_to(np.eye(n), (t.size, n, n)).copy()
+    out[:, :6, :top.shape[-1]] = top
+    return out
+
+
+def _segments(t: np.ndarray, gap: float) -> list:
+    """``[(first step, last step), ...]``: runs of steps without a gap longer than ``gap``."""
+    cut = np.flatnonzero(np.diff(t) > gap) + 1
+    starts = np.concatenate([[0], cut])
+    ends = np.concatenate([cut - 1, [t.size - 1]])
+    return list(zip(starts.tolist(), ends.tolist()))
+
+
+def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales) -> np.ndarray | None:
+    """Q over ``dt`` (scaled variables): state noise compensation in RTN (:func:`~trackproc.methods.sequential.snc_noise`,
+    rotated to GCRF at the reference state) and the random walks of the biases (``q² dt``)."""
+    n = scales.size
+    q = np.zeros((n, n))
+    any_noise = False
+    acc = np.asarray(opt.snc_accel, float)
+    if acc.any() and dt > 0:
+        rot = rtn_rotation(z_abs[:3], z_abs[3:6])              # rows R, T, N in GCRF
+        psd = rot.T @ np.diag(acc ** 2) @ rot
+        q[:6, :6] = sq.snc_noise(dt, psd)
+        any_noise = True
+    if opt.bias_walk and dt > 0:
+        for i, d in enumerate(problem.params.selected):
+            rate = opt.bias_walk.get(d.name, opt.bias_walk.get(d.family))
+            if rate:
+                q[i, i] += rate ** 2 * dt
+                any_noise = True
+    if not any_noise:
+        return None
+    return q / np.outer(scales, scales)
+
+
+def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None) -> Sweep:
+    """The filter over every measurement time in order (samples at one reception time as
+    sequential scalar updates, their noise independent). The reference trajectory starts at
+    ``x_ref0`` (the problem's epoch) and restarts at each tracking segment through the filtered
+    state at the segment's previous step, or ``targets[k]`` (a previous sweep's smoothed states,
+    absolute) when given; between references the filter works on deviations, so no information
+    is lost at a restart. Scaled variables inside."""
+    meas = problem.meas
+    scales = problem.params.scales()
+    n = scales.size
+    ss = np.outer(scales, scales)
+    steps_t = np.unique(np.concatenate([[0.0], meas.t_s]))
+    if steps_t[0] < 0:
+        raise InputError("samples before the filter's start", column="PASS", found=f"{-steps_t[0]:.3f} s before",
+                         expected="samples after the initial state's epoch")
+    m = steps_t.size
+    step = np.searchsorted(steps_t, meas.t_s)
+    order = np.lexsort((np.arange(step.size), step))
+    segments = _segments(steps_t, opt.segment_gap_s)
+    x_p, x_f, z_ref = (np.zeros((m, n)) for _ in range(3))
+    p_p, p_f, phi = (np.zeros((m, n, n)) for _ in range(3))
+    nobs = step.size
+    innovation, variance = np.full(nobs, np.nan), np.full(nobs, np.nan)
+    edited = np.zeros(nobs, bool)
+    h_ref, h_row = np.zeros(nobs), np.zeros((nobs, n))
+    y = np.asarray(meas.observed, float)
+    r2 = np.asarray(meas.sigma, float) ** 2
+    periodic = np.asarray(meas.periodic, bool)
+    edit2 = (opt.edit_sigma ** 2) if opt.edit_sigma else np.inf
+    x_ref = np.asarray(x_ref0, float).copy()
+    c0, P0 = np.asarray(centre, float) / scales, np.asarray(p0, float) / ss
+    evaluations = 0
+    chunks = [(ka, kb, seg > 0) for seg, (ka, kb) in enumerate(segments)]
+    last_traj = None
+    while chunks:
+        ka, kb, restart = chunks.pop(0)
+        rows = order[(step[order] >= ka) & (step[order] <= kb)]
+        kprev = ka - 1
+        if restart:
+            target = (x_f[kprev] if targets is None else np.asarray(targets[kprev], float) / scales) * scales
+            old = _transition(last_traj, steps_t[kprev], n)[0]
+            old_z = np.concatenate([last_traj.state(steps_t[kprev]), x_ref[6:]])
+            x_ref = x_ref + np.linalg.solve(old, target - old_z)
+        t_need = steps_t[max(kprev, 0):kb + 1]
+        if rows.size:
+            sub = _sub_problem(problem, np.sort(rows))
+            h, jac, traj = _evaluate(sub, x_ref)
+            evaluations += 1
+            pos = np.searchsorted(np.sort(rows), rows)         # rows (time order) -> sub's order
+            h, jac = h[pos], jac[pos]
+        else:
+            traj = problem.trajectory(x_ref)
+            h, jac = np.zeros(0), np.zeros((0, n))
+        last_traj = traj
+        psi = _transition(traj, t_need, n) * scales[None, None, :] / scales[None, :, None]
+        z_abs = np.concatenate([traj.state(t_need), np.broadcast_to(x_ref[6:], (t_need.size, n - 6))], axis=1)
+        z = z_abs / scales
+        off = 0 if kprev < 0 else 1                            # index of step ka in t_need
+        jac = jac * scales[None, :]
+        cursor = 0
+        for k in range(ka, kb + 1):
+            j = k - ka + off
+            z_ref[k] = z[j]
+            if k == 0:
+                x, p = c0.copy(), P0.copy()
+                phi[k] = np.eye(n)
+            else:
+                phi[k] = np.linalg.solve(psi[j - 1].T, psi[j].T).T       # Ψ(t_k) Ψ(t_{k-1})⁻¹
+                q = process_noise(problem, opt, steps_t[k] - steps_t[k - 1], z_abs[j], scales)
+                x = z[j] + phi[k] @ (x_f[k - 1] - z[j - 1])
+                p = phi[k] @ p_f[k - 1] @ phi[k].T
+                if q is not None:
+                    p = p + q
+                p = 0.5 * (p + p.T)
+            x_p[k], p_p[k] = x, p
+            inv = np.linalg.inv(psi[j])
+            while cursor < rows.size and step[rows[cursor]] == k:
+                i = rows[cursor]
+                row = jac[cursor] @ inv
+                h_ref[i], h_row[i] = h[cursor], row
+                nu = y[i] - h[cursor] - row @ (x - z[j])
+                if periodic[i]:
+                    nu = (nu + np.pi) % (2 * np.pi) - np.pi
+                s = float(row @ p @ row) + r2[i]
+                innovation[i], variance[i] = nu, s
+                if nu * nu > edit2 * s:
+                    edited[i] = True
+                else:
+                    x, p, _ = sq.scalar_update(x, p, row, nu, r2[i])
+                cursor += 1
+            x_f[k], p_f[k] = x, p
+            moved = x if targets is None else np.asarray(targets[k], float) / scales
+            if k < kb and np.linalg.norm((moved[:3] - z[j][:3]) * scales[:3]) > opt.relinearise_m:
+                # the state left the reference by more than its linearisation holds: restart it here
+                chunks.insert(0, (k + 1, kb, True))
+                break
+    out = Sweep(t_s=steps_t, scales=scales, x_p=x_p, p_p=p_p, x_f=x_f, p_f=p_f, phi=phi, z_ref=z_ref, step=step,
+                innovation=innovation, variance=variance, edited=edited, h_ref=h_ref, h_row=h_row,
+                segments=segments, evaluations=evaluations)
+    out.h_obs = y
+    return out
+
+
+def smooth(sw: Sweep) -> Sweep:
+    """The Rauch–Tung–Striebel smoother over the sweep's steps (:func:`~trackproc.methods.sequential.rts_step`)."""
+    m = sw.t_s.size
+    x_s, p_s = sw.x_f.copy(), sw.p_f.copy()
+    for k in range(m - 2, -1, -1):
+        x_s[k], p_s[k] = sq.rts_step(sw.x_f[k], sw.p_f[k], sw.x_p[k + 1], sw.p_p[k + 1], sw.phi[k + 1],
+                                     x_s[k + 1], p_s[k + 1])
+    sw.x_s, sw.p_s = x_s, p_s
+    return sw
+
+
+def run(problem: Problem, opt: FilterOptions, carried=None) -> tuple[Sweep, list]:
+    """The filter (and smoother) over the problem, iterated ``opt.iterations`` times at most: each
+    later sweep linearised about the previous one's smoothed states, the prior kept; stops when
+    the smoothed start moves less than ``opt.tolerance_sigma`` of its sigma. Returns the last
+    sweep and the history of ``{"sweep", "max_change_sigma"}``."""
+    centre, p0 = initial_covariance(problem, carried)
+    x_ref, targets = centre.copy(), None
+    history = []
+    sw = None
+    for it in range(opt.iterations):
+        sw = sweep(problem, x_ref, centre, p0, opt, targets)
+        if opt.smooth:
+            smooth(sw)
+        if it == opt.iterations - 1:
+            break
+        x_new, p_new = sw.absolute("s", 0)
+        change = float(np.max(np.abs(x_new - x_ref) / np.sqrt(np.diag(p_new))))
+        history.append({"sweep": it + 1, "max_change_sigma": change})
+        if change < opt.tolerance_sigma:
+            break
+        x_ref = x_new
+        targets = sw.x_s * sw.scales
+    return sw, history
