@@ -145,7 +145,7 @@ def filter_command(
     from trackproc.io.validate import check_distinct_files, check_no_repeated_samples
     from trackproc.pipeline.orbit_source import initial_state, tle_evaluation_epoch
     from trackproc.pipeline.filter import FilterOptions, filter_passes, summary_text
-    from trackproc.pipeline.filter.problem import EstimateOptions
+    from trackproc.pipeline.od import EstimateOptions
     from trackproc.isotime import iso_utc
 
     def format_epoch_ts(t):

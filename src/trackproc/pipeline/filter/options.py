@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Mapping, Optional
 
 from trackproc.errors import InputError
-from trackproc.pipeline.filter.problem import EstimateOptions
+from trackproc.pipeline.od import EstimateOptions
 
 #: A-priori sigma of a parameter without one, in units of its driver's scale (a diffuse start:
 #: range bias 100 km, Doppler offset 10 kHz, drift 10 Hz/s, angle bias 1 rad, Cr/Cd 1000).

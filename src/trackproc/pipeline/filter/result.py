@@ -20,7 +20,7 @@ from trackproc.methods import quality as qm
 from trackproc.methods import sequential as sq
 from trackproc.pipeline.filter import run as fr
 from trackproc.pipeline.filter.options import FilterOptions, check_filter_options
-from trackproc.pipeline.filter.problem import UNITS, Problem, build_problem
+from trackproc.pipeline.od import UNITS, Problem, build_problem
 
 INNOVATION_COLUMNS = ("time", "station", "pass_id", "kind", "unit", "observed", "predicted", "innovation",
                       "innovation_sigma", "normalized_innovation", "edited", "residual")

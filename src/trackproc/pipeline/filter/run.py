@@ -17,7 +17,7 @@ from trackproc.dynamics.rtn import rtn_rotation
 from trackproc.errors import InputError
 from trackproc.methods import sequential as sq
 from trackproc.pipeline.filter.options import DIFFUSE_SCALES, FilterOptions
-from trackproc.pipeline.filter.problem import Problem
+from trackproc.pipeline.od import Problem
 
 
 @dataclass
