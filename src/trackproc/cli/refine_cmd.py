@@ -96,6 +96,12 @@ def refine_command(
         0.0, "--time-tag-sigma", metavar="S", min=0.0,
         help="1-sigma uncertainty of the station's time tags (s), added to the covariance (pointwise): one pass "
              "cannot see a time-tag offset (it is the orbit shifted along-track). See docs/refine.md."),
+    horizon: float = typer.Option(
+        1.0, "--horizon", metavar="DAYS", min=0.0,
+        help="Replace the stale state only when the refined one predicts the position better with probability "
+             ">= 0.9 somewhere over this many days after the epoch; else keep it (decision 'kept'). A stated "
+             "a-priori (TLE, covariance, --apriori-sigma) the pass contradicts is kept ('declined'). See "
+             "docs/refine.md, 'Replace, keep or decline'."),
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Pointwise: edit samples beyond K x max(1, WRMS) sigmas. 0: off."),
@@ -197,7 +203,7 @@ def refine_command(
         max_iterations=max_iterations, clip=clip if clip > 0 else None, pass_id=pass_id,
         kind=kind.value if kind else None, quadrature_order=quadrature_order, quadrature_panel_s=quadrature_panel,
         max_gap_s=max_gap, reweight=reweight, covariance=covariance.value, noise=noise.value,
-        oscillator_noise=oscillator_noise, time_tag_sigma_s=time_tag_sigma)
+        oscillator_noise=oscillator_noise, time_tag_sigma_s=time_tag_sigma, horizon_days=horizon)
     result = refine(table, state0, station_table, options, orientation, source=source)
 
     state = result.state if output_epoch is OutputEpoch.traverse else result.stale_epoch_state
