@@ -122,6 +122,12 @@ class ForceSettings:
                                      param_hint="--gravity") from None
         if not (0 <= o <= d):
             raise typer.BadParameter(f"expected 0 <= order <= degree, got {self.gravity!r}", param_hint="--gravity")
+        from trackproc.constants import MAX_GRAVITY_DEGREE
+
+        if d > MAX_GRAVITY_DEGREE:
+            raise typer.BadParameter(f"degree {d} is above {MAX_GRAVITY_DEGREE}, the highest this force model "
+                                     "evaluates (terms beyond it are below 1e-13 of the central term at 200 km "
+                                     "altitude, and each costs memory per evaluated point)", param_hint="--gravity")
         return d, o
 
     def bodies(self) -> tuple:
