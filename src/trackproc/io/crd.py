@@ -50,6 +50,9 @@ from trackproc.isotime import iso_utc
 UTC_SCALES = {3, 4, 7, 10}
 RANGE_TYPES = {0: "no ranges", 1: "one-way", 2: "two-way", 3: "receive times only", 4: "mixed"}
 _NS = 1_000_000_000
+#: Record types of CRD v1/v2 (header, configuration and data records); anything else is refused.
+KNOWN_RECORDS = ({f"H{k}" for k in range(1, 10)} | {f"C{k}" for k in range(0, 8)}
+                 | {"00", "10", "11", "12", "20", "21", "30", "40", "41", "42", "50", "60"})
 
 
 def looks_like_crd(head: str) -> bool:
@@ -94,11 +97,33 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
     times, full_rate = [], []             # (reception ns, station, value m, line, pass id) of 11 / 10 records
     wavelengths = {}
     version = None
+    open_session = None                   # row of an H4 not yet closed by its H8
+    ended = None                          # row of the H9 (end of file)
+    last_row = 0
     for row, line in enumerate(text.splitlines(), start=1):
         fields = line.split()
         if not fields:
             continue
+        last_row = row
         rec = fields[0].upper()
+        if rec not in KNOWN_RECORDS:
+            raise InputError("unknown CRD record type", file=source, row=row, column="record type", found=fields[0],
+                             expected="H1-H9, C0-C7, 00, 10-12, 20, 21, 30, 40-42, 50 or 60 (ILRS CRD v1/v2)")
+        if ended is not None and rec != "00":
+            raise InputError(f"record {fields[0]} after the end of file (H9)", file=source, row=row,
+                             column="record type", found=fields[0], expected=f"nothing after the H9 of row {ended}")
+        if rec == "H4" and open_session is not None:
+            raise InputError("a new session (H4) before the previous one ended", file=source, row=row,
+                             column="record type", found=fields[0], expected=f"H8 closing the H4 of row {open_session}")
+        if rec == "H4":
+            open_session = row
+        elif rec == "H8":
+            open_session = None
+        elif rec == "H9":
+            if open_session is not None:
+                raise InputError("end of file (H9) inside a session", file=source, row=row, column="record type",
+                                 found=fields[0], expected=f"H8 closing the H4 of row {open_session} first")
+            ended = row
         if rec == "H1":
             if len(fields) < 3 or fields[1].upper() != "CRD":
                 raise InputError("not a CRD H1 header", file=source, row=row, column="H1", found=line.strip(),
@@ -167,6 +192,11 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
     if version is None:
         raise InputError("not a CRD file", file=source, row=1, found="no H1 header",
                          expected="an ILRS CRD file (H1 CRD ...)")
+    if open_session is not None or ended is None:
+        raise InputError("the file ends without its end records (cut short?)", file=source, row=last_row,
+                         column="record type", found="no H8 after the H4 of row %d" % open_session
+                         if open_session is not None else "no H9",
+                         expected="each session closed by H8 and the file by H9")
     samples = times or full_rate
     if not samples:
         raise InputError("no range records", file=source, row=1, found="no 11 (or 10) records",

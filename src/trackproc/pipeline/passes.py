@@ -70,8 +70,10 @@ def _check(options: PassesOptions) -> None:
     if not -90.0 <= options.min_elevation_deg < 90.0:
         raise InputError("out of range", column="--min-elevation", found=options.min_elevation_deg,
                          expected="degrees in [-90, 90)")
-    if options.carrier_hz is not None and not (np.isfinite(options.carrier_hz) and options.carrier_hz > 0):
-        raise InputError("must be positive", column="--carrier-hz", found=options.carrier_hz, expected="Hz > 0")
+    if options.carrier_hz is not None:
+        from trackproc.io.validate import check_carrier
+
+        check_carrier(options.carrier_hz)
 
 
 def parse_duration(text: str, flag: str = "--span") -> float:
