@@ -320,21 +320,6 @@ def tdm_info(data: bytes, source: str) -> dict:
             "carrier_hz": raw.meta.get("carrier_hz")}
 
 
-def file_kind(data: bytes) -> str:
-    """What a file is, from its first bytes: state, tle, opm, oem, tdm or table (pass file /
-    ephemeris in Parquet, Arrow or CSV)."""
-    head = data.lstrip()[:4096]
-    if head.startswith(b"{"):
-        return "state"
-    for kind in (b"OPM", b"OEM", b"TDM"):
-        if head.startswith(b"CCSDS_" + kind + b"_VERS"):
-            return kind.decode().lower()
-    lines = [l.strip() for l in head.decode("ascii", errors="replace").splitlines() if l.strip()]
-    if 2 <= len(lines) <= 3 and lines[-2].startswith("1 ") and lines[-1].startswith("2 "):
-        return "tle"
-    return "table"
-
-
 def format_number(value: float, digits: int = 7) -> str:
     """A float for people: ``digits`` significant digits (12 from 1e5 up, so that metres of an
     orbit keep their millimetres and hertz of a carrier their hundredths), no trailing noise."""
