@@ -47,8 +47,8 @@ def ingest_command(
         help="Nominal carrier frequency, Hz (required with Doppler samples unless the input gives it)."),
     mode: Optional[DopplerMode] = typer.Option(
         None, "--mode", help="Doppler link: one-way or two-way (required with Doppler samples)."),
-    max_gap: float = typer.Option(300.0, "--max-gap", metavar="S",
-                                  help="Start a new pass after a gap longer than S seconds."),
+    max_gap: str = typer.Option("300", "--max-gap", metavar="S",
+                                help="Start a new pass after a gap longer than S seconds (or 90s, 5m, 1h)."),
     layout: Layout = typer.Option(Layout.auto, "--layout", help="Input layout (auto: detected)."),
     sidecar: Optional[str] = typer.Option(None, "--sidecar", metavar="FILE",
                                           help="DopTrack YAML sidecar (default: ../metadata/<name>.yml)."),
@@ -79,6 +79,9 @@ def ingest_command(
             | trackproc ingest - --stations sample_data/stations.csv --carrier-hz 2.2e9 --mode one-way \\
             | trackproc info -
     """
+    from trackproc.io.validate import parse_duration
+
+    max_gap = parse_duration(max_gap, "--max-gap")
     if inputs.count("-") > 1:
         raise typer.BadParameter("stdin (-) can be read only once", param_hint="INPUT")
     if sidecar is not None and len(inputs) > 1:

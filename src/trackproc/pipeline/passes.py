@@ -74,22 +74,6 @@ def _check(options: PassesOptions) -> None:
         raise InputError("must be positive", column="--carrier-hz", found=options.carrier_hz, expected="Hz > 0")
 
 
-def parse_duration(text: str, flag: str = "--span") -> float:
-    """``3600``, ``90s``, ``45m``, ``6h``, ``2d`` -> seconds."""
-    units = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
-    raw = str(text).strip().lower()
-    scale = units.get(raw[-1:], None)
-    number = raw[:-1] if scale is not None else raw
-    try:
-        value = float(number) * (scale or 1.0)
-    except ValueError:
-        raise InputError("invalid duration", column=flag, found=text,
-                         expected="seconds, or a number with s, m, h or d (e.g. 2d)") from None
-    if not math.isfinite(value):
-        raise InputError("invalid duration", column=flag, found=text, expected="a finite duration")
-    return value
-
-
 def _golden_max(f, lo, hi):
     """Maximise ``f`` (vectorised) on brackets ``[lo, hi]``: golden-section search."""
     a, b = lo.copy(), hi.copy()
