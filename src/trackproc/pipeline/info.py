@@ -21,6 +21,7 @@ from trackproc.io.statefile import format_epoch, parse_state
 from trackproc.io.tdm import read_tdm
 from trackproc.io.tle import parse_tle, tle_epoch
 from trackproc.isotime import iso_utc
+from trackproc.pipeline.numbers import format_number
 
 
 @dataclass
@@ -318,16 +319,6 @@ def tdm_info(data: bytes, source: str) -> dict:
             "start": str(min(times)) if len(times) else None, "end": str(max(times)) if len(times) else None,
             "samples_per_station": per_station, "doppler_mode": raw.meta.get("doppler_mode"),
             "carrier_hz": raw.meta.get("carrier_hz")}
-
-
-def format_number(value: float, digits: int = 7) -> str:
-    """A float for people: ``digits`` significant digits (12 from 1e5 up, so that metres of an
-    orbit keep their millimetres and hertz of a carrier their hundredths), no trailing noise."""
-    if not math.isfinite(value):
-        return "-"
-    if value == 0:
-        return "0"
-    return f"{value:.{digits if abs(value) < 1e5 else 12}g}"
 
 
 def _scalar(value, digits: int = 7) -> str:
