@@ -68,9 +68,9 @@ def propagate_command(
     state: str = typer.Argument(..., metavar="STATE.json|TLE|metadata",
                                 help="Initial state (JSON state file, any supported frame) or a TLE; - for stdin; "
                                      "'metadata' with --at: the TLE stored in that pass file (DopTrack)."),
-    span: Optional[float] = typer.Option(None, "--span", metavar="S",
-                                         help="Span from the start, s (negative: backwards in time)."),
-    step: Optional[float] = typer.Option(None, "--step", metavar="S", help="Output spacing, s (with --span)."),
+    span: Optional[str] = typer.Option(None, "--span", metavar="S",
+                                       help="Span from the start, s, or with a unit: 90s, 45m, 6h, 2d (negative: backwards in time)."),
+    step: Optional[str] = typer.Option(None, "--step", metavar="S", help="Output spacing, s, or with a unit: 90s, 45m, 6h, 2d (with --span)."),
     at: Optional[str] = typer.Option(None, "--at", metavar="PASSFILE",
                                      help="Instead of a grid: the sample times of a pass file."),
     start: Optional[str] = typer.Option(None, "--start", metavar="ISO",
@@ -135,6 +135,10 @@ def propagate_command(
     Exit status: 0 ok; 2 bad options or input; 1 propagation failure (the Taylor run stopped,
     the orbit enters the Earth, or --visible-only found no pass).
     """
+    from trackproc.io.validate import parse_duration
+
+    span = None if span is None else parse_duration(span, "--span")
+    step = None if step is None else parse_duration(step, "--step")
     if at is not None and (span is not None or step is not None):
         raise typer.BadParameter("give either --span S --step S or --at PASSFILE, not both", param_hint="--at")
     if at is None and (span is None or step is None):

@@ -109,8 +109,8 @@ def refine_command(
                                          help="Integral: Gauss-Legendre nodes per panel."),
     quadrature_panel: float = typer.Option(30.0, "--quadrature-panel", metavar="S", min=1e-3,
                                            help="Integral: longest quadrature panel, s."),
-    max_gap: float = typer.Option(30.0, "--max-gap", metavar="S", min=1e-3,
-                                  help="Integral: data gaps longer than S s are left out of the integral."),
+    max_gap: str = typer.Option("30", "--max-gap", metavar="S",
+                                help="Integral: data gaps longer than S s (or 30s, 2m) are left out of the integral."),
     force=ForceOpt,
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
@@ -162,6 +162,11 @@ def refine_command(
         trackproc refine smoothed.parquet --initial sample_data/stale.json --cost integral --circular \\
             -o seed004.json
     """
+    from trackproc.io.validate import parse_duration
+
+    max_gap = parse_duration(max_gap, "--max-gap")
+    if not max_gap >= 1e-3:
+        raise typer.BadParameter(f"{max_gap:g} s is below the minimum 0.001 s", param_hint="--max-gap")
     out = resolve_output(output, "output state file")
     if out == "-" and "-" in (residuals, opm):
         raise typer.BadParameter("stdout already carries the state file; give --residuals/--opm a file",

@@ -183,7 +183,8 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
                                  else "a two-way time of flight in (0, 1) s")
             t_ns = _sod_ns(session, sod) + round({0: 0.0, 1: tof / 2, 2: tof}[event] * _NS)
             target = full_rate if rec == "10" else times
-            target.append((t_ns, session["station"], C_LIGHT * tof / 2, row, _pass_id(session)))
+            sigma = _normal_point_sigma(fields) if rec == "11" else math.nan
+            target.append((t_ns, session["station"], C_LIGHT * tof / 2, row, _pass_id(session), sigma))
         elif rec == "20":
             sod = _number(fields, 1, "seconds of day", source, row)
             values20 = [_number(fields, k, name, source, row) for k, name in
@@ -201,14 +202,14 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
     if not samples:
         raise InputError("no range records", file=source, row=1, found="no 11 (or 10) records",
                          expected="CRD normal points")
-    t_ns, stations, values, rows, pass_ids = (list(x) for x in zip(*samples))
+    t_ns, stations, values, rows, pass_ids, sigmas = (list(x) for x in zip(*samples))
     frame = pd.DataFrame({
         "time": pd.to_datetime(np.array(t_ns, dtype=np.int64), utc=True).as_unit("ns"),
         "station": np.array(stations, dtype=object),
         "pass_id": np.array(pass_ids, dtype=object),
         "kind": "range",
         "value": np.array(values, float),
-        "sigma": np.nan,
+        "sigma": np.array(sigmas, float),
         "row": np.array(rows, dtype=np.int64),
         "unit": "m",
     })
@@ -218,6 +219,24 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
                     "meteo": {st: _meteo_meta(recs) for st, recs in sorted(meteo.items()) if st}}}
     return RawMeasurements(frame=frame, source=source, column={"range": "time of flight", "time": "seconds of day"},
                            meta=meta)
+
+
+def _normal_point_sigma(fields) -> float:
+    """The one-way precision of a normal point (m): ``c/2 · rms / √n`` from its record 11's bin
+    RMS (ps, two-way, of the ``n`` raw ranges about the trend; ILRS CRD v1.01/v2.01 record 11
+    fields 8 and 7), the standard error of the bin's mean; the RMS alone when ``n`` is not given;
+    NaN (ingest's ``--sigma-range-m`` then) when the RMS is missing, ``na`` or not positive."""
+    try:
+        rms_ps = float(fields[7])
+    except (IndexError, ValueError):
+        return math.nan
+    try:
+        n = int(fields[6])
+    except (IndexError, ValueError):
+        n = 1
+    if not (math.isfinite(rms_ps) and rms_ps > 0):
+        return math.nan
+    return C_LIGHT * rms_ps * 1e-12 / 2 / math.sqrt(max(n, 1))
 
 
 def _sod_ns(session, sod: float) -> int:

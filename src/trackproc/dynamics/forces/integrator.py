@@ -150,8 +150,10 @@ def _warn_once(message: str) -> None:
 
 def _run_compiled(env, y0, t_end_s, rt, at, max_step, max_steps, stm, est):
     """The compiled DOP853: accepted steps' times and their dense-output values at the nodes."""
+    from trackproc.dynamics import jit
     from trackproc.dynamics.forces import compiled
 
+    jit.announce_compiling([compiled.integrate], "the force kernels", 30)
     model = env.model
     F = compiled.field_tables(model.field)
     HT = compiled.hessian_tables(compiled.stm_field(env))
