@@ -13,7 +13,8 @@ covariance predicts for it (``z``; its RMS should be about 1).
 
 Development: 1-10 April 2020; hold-out: 11-15 April (never used while developing). Usage:
 ``PYTHONPATH=src python benchmarks/doptrack_never_worse.py [dev|holdout|both] [fresh|stale|both] [HORIZON_DAYS]
-[STALE_DAYS]`` (refine's ``--horizon``, default 1; the stale TLE's minimum age, default 7).
+[STALE_DAYS] [REPLACE_PROBABILITY]`` (refine's ``--horizon``, default 1; the stale TLE's minimum age,
+default 7; the replace rule's probability, default the code's).
 """
 
 from __future__ import annotations
@@ -111,6 +112,10 @@ def table(dev: bool, which: str):
 
 
 HORIZON = float(sys.argv[3]) if len(sys.argv) > 3 else 1.0
+if len(sys.argv) > 5:          # the replace threshold (methods/estimation/decision.py), for studies
+    from trackproc.methods.estimation import decision as _dm
+
+    _dm.REPLACE_PROBABILITY = float(sys.argv[5])
 STALE_DAYS = float(sys.argv[4]) if len(sys.argv) > 4 else STALE_DAYS
 
 if __name__ == "__main__":

@@ -645,7 +645,11 @@ def test_refine_step_writes_refined_states_and_fails_only_the_pass_it_cannot_ref
         n = record["numbers"]
         assert n["converged"] is True and 1 <= n["iterations"] <= 10
         assert n["traverse_utc"][:19] in ("2026-03-20T09:29:59", "2026-03-20T09:30:00")  # the truth's traverse
-        assert 0.1 < n["residual_rms"] < 0.3 and n["residual_rms_unit"] == "Hz"
+        # a refined state replaces the stale one only when it predicts better with probability >= 0.9
+        # (methods/estimation/decision.py); a weak pass keeps the stale state and its covariance
+        assert n["decision"] in ("replaced", "kept"), n
+        if n["decision"] == "replaced":
+            assert 0.1 < n["residual_rms"] < 0.3 and n["residual_rms_unit"] == "Hz"
         assert all(0 < n[k] < 2e4 for k in ("sigma_radial_m", "sigma_along_m", "sigma_cross_m"))
         assert "passes/" + name + ".refined.json" in record["outputs"]
         doc = json.loads((out / "passes" / f"{name}.refined.json").read_text())
@@ -655,7 +659,7 @@ def test_refine_step_writes_refined_states_and_fails_only_the_pass_it_cannot_ref
         assert np.all(np.abs(err) < 3 * np.array(stale["sigma"][:6])), name
         # ... with a sigma the pass supports: the stale covariance is refine's a-priori, and data only add
         # information (a posterior is never wider than its prior): each sigma at most the a-priori's
-        assert np.all(np.array(stale["sigma"][:6]) <= prior_sigma), (name, stale["sigma"][:6])
+        assert np.all(np.array(stale["sigma"][:6]) <= prior_sigma * (1 + 1e-9)), (name, stale["sigma"][:6])
         assert record["details"]["refine"]["traverse"]["epoch"] == n["traverse_utc"]
     assert [records[n]["numbers"]["refined_pass"] for n in REFINED] == list(REFINED_PASSES)
     # an input of two passes: the one with the most samples is refined, and the summary says so

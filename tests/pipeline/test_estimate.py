@@ -214,9 +214,15 @@ def test_apriori_sigma_and_initial_covariance_enter_the_solution():
         assert tight.sigma[i] < 0.5 and tight.sigma[i] < base.sigma[i]
     cov0 = np.diag([10.0] * 3 + [0.01] * 3) ** 2
     init = State.from_vectors(EPOCH, R0, V0, covariance=cov0)
-    with_prior = estimate(tables(sim), init, None, EstimateOptions(range_bias=True, apriori_initial=True), EOP)
+    # the a-priori's arithmetic with the replace/keep rule off (allow_keep=False): the initial state
+    # is the truth, so the solution cannot predict better than it and the rule would keep it
+    with_prior = estimate(tables(sim), init, None,
+                          EstimateOptions(range_bias=True, apriori_initial=True, allow_keep=False), EOP)
     assert np.all(with_prior.solution.sigma[:6] < base.sigma[:6])
     assert with_prior.solution.dof == base.dof + 6
+    kept = estimate(tables(sim), init, None, EstimateOptions(range_bias=True, apriori_initial=True), EOP)
+    assert kept.state.diagnostics["decision"]["action"] == "kept"
+    np.testing.assert_allclose(kept.solution.covariance[:6, :6], cov0, rtol=1e-12)   # the initial state, as given
 
 
 def test_solution_epoch_first_sample():

@@ -102,13 +102,14 @@ def declined(source_text: str, test: dict, source: str = "stated") -> Decision:
 
 
 def by_prediction(maps, times_days, change, covariance, horizon_days: float, source: Optional[str] = None,
-                  probability: float = REPLACE_PROBABILITY) -> Decision:
+                  probability: Optional[float] = None) -> Decision:
     """Replace or keep: the solution replaces the prior when it predicts the position better with at
     least ``probability`` at some time over the ``horizon_days`` after the epoch
     (:func:`probability_better_over` at ``times_days``, the epoch included; ``maps`` (K, 3, n)).
     Under the solution's own covariance it is never expected to predict worse (the probability is
     at least 0.5 everywhere), so a significant gain anywhere in the span is a gain; a move that is
     not significant anywhere leaves the prior, which predicts as well."""
+    probability = REPLACE_PROBABILITY if probability is None else probability
     p, size, sigma = probability_better_over(maps, change, covariance)
     k = int(np.argmax(p))
     at = f"{float(times_days[k]) * 24.0:.3g} h after the epoch"

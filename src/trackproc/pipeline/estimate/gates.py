@@ -12,11 +12,13 @@ import numpy as np
 from trackproc.errors import ProcessingError
 from trackproc.methods import noise as nz
 from trackproc.methods import quality as qm
+from trackproc.methods.estimation import decision as dm
 from trackproc.methods.estimation import prior as pr
 from trackproc.methods.estimation.prior import (scaled_priors, state_prior_centre, state_prior_chi2,  # noqa: F401
                                                state_prior_covariance)
 from trackproc.models import modifiers as md
 from trackproc.pipeline.od.options import EstimateOptions
+from trackproc.pipeline.od import decision as od_decision
 from trackproc.pipeline.od.problem import Problem
 from trackproc.pipeline.estimate.quality import pass_residuals
 
@@ -44,7 +46,7 @@ def solve(problem: Problem, opt: EstimateOptions):
             previous = used = cov
     test = apriori_test(problem.priors, sol)
     if test is None or not test["conflict"] or state_prior_covariance(problem.priors) is None:
-        return sol, None, noise_report
+        return keep_or_replace(problem, opt, sol, used) + (noise_report,)
     # The a-priori is scaled by the data; but a conflict is evidence against the a-priori only if
     # the data's own noise model holds on the adapted solution: residuals still correlated in
     # time, or a variance factor beyond its limit, overstate the data's information just as much,
@@ -61,8 +63,60 @@ def solve(problem: Problem, opt: EstimateOptions):
             adaptation["failure"] = loss
     if doubt or not adaptation["resolved"]:
         problem.priors = original
+        if problem.apriori_source == "stated":
+            # a stated a-priori (a TLE's, a state file's covariance, --apriori-sigma) contradicted by data
+            # that cannot vouch for themselves (their noise model fails, or they do not determine the
+            # state without it) is kept as it is: its accuracy is known, the data are the likely
+            # culprit (methods/estimation/decision.py); it is never loosened to let them move the orbit
+            decision = dm.declined("the initial state's stated a-priori", test)
+            why = "; ".join(doubt) if doubt else adaptation.get("failure") or "the data cannot carry a looser one"
+            decision.reason += f" ({why})"
+            return hold(problem, opt, sol, used, test, "declined", decision.reason,
+                        decision.as_dict()) + (noise_report,)
         return refuse(problem, opt, sol, used, test, doubt, adaptation) + (noise_report,)
+    if problem.apriori_source == "stated":
+        # data that determine the state without the a-priori and pass their own tests contradict a
+        # stated one: the a-priori is the culprit; it is scaled, and the verdict says it was stated
+        adaptation["stated"] = True
+    sol_k, kept = keep_or_replace(problem, opt, sol_a, used)
+    if kept is not None:
+        kept.update({k: v for k, v in adaptation.items() if k not in kept})
+        return sol_k, kept, noise_report
+    adaptation["decision"] = problem.decision
     return sol_a, adaptation, noise_report
+
+
+def keep_or_replace(problem: Problem, opt: EstimateOptions, sol, noise=None):
+    """The replace/keep rule (methods/estimation/decision.py) on a solution with a full state
+    a-priori: the solution replaces the initial state only when it predicts the position better
+    with probability >= 0.9 somewhere over ``opt.horizon_days``. Returns ``(solution, None)`` when
+    it does (``problem.decision`` says why) or there is nothing to decide, else the initial state
+    held (:func:`hold`, code ``kept``) and its record."""
+    problem.decision = None
+    if state_prior_covariance(problem.priors) is None or not opt.allow_keep:
+        return sol, None
+    npb = len(problem.names)
+    made = od_decision.by_prediction(problem, np.asarray(sol.values, float)[:npb],
+                                     np.asarray(sol.covariance, float)[:npb, :npb], problem.priors, opt.horizon_days,
+                                     problem.apriori_source or None)
+    if made is None:
+        return sol, None
+    problem.decision = made.as_dict()
+    if not made.keeps_prior:
+        return sol, None
+    test = apriori_test(problem.priors, sol)
+    return hold(problem, opt, sol, noise, test, "kept", made.reason, made.as_dict())
+
+
+def hold(problem: Problem, opt: EstimateOptions, sol, noise, test: dict, code: str, reason: str, decision: dict):
+    """Keep the initial state with its a-priori covariance as given (``declined`` or ``kept``:
+    methods/estimation/decision.py), the other parameters fitted with the state held there
+    (:func:`refuse`'s way, unscaled). Returns ``(solution, record)``."""
+    kept, out = refuse(problem, opt, sol, noise, test, [], None, scale=False)
+    out["refused"] = {"code": code, "reason": reason, "covariance_factor": 1.0}
+    out["decision"] = decision
+    problem.decision = decision
+    return kept, out
 
 
 def knowledge_lost(priors, sol) -> str | None:
@@ -95,7 +149,7 @@ def apriori_test(priors, sol) -> dict | None:
 
 
 def refuse(problem: Problem, opt: EstimateOptions, sol, noise, test: dict, doubt: list,
-           adaptation: dict | None = None):
+           adaptation: dict | None = None, scale: bool = True):
     """Keep the initial state: the state at the a-priori centre with the a-priori covariance
     scaled by its variance component, one step on ``sol`` (the conflict as the data first show
     it; never below 1, so that it covers the conflict: the iterated component of an adaptation
@@ -108,7 +162,7 @@ def refuse(problem: Problem, opt: EstimateOptions, sol, noise, test: dict, doubt
     said = f"{test['test']} chi2 {test['statistic']:.4g} over {test['dof']}, limit {test['limit']:.3g}"
     pcov = state_prior_covariance(problem.priors)
     red = qm.prior_redundancy(np.asarray(sol.covariance, float)[:6, :6], pcov)
-    factor = max(1.0, qm.prior_variance_component(chi2, red) or 1.0)
+    factor = max(1.0, qm.prior_variance_component(chi2, red) or 1.0) if scale else 1.0
     centre = state_prior_centre(problem.priors)
     x0 = np.asarray(sol.values, float).copy()
     x0[:6] = centre

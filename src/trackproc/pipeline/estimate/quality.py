@@ -12,6 +12,7 @@ import math
 import numpy as np
 
 from trackproc.methods import quality as qm
+from trackproc.methods.estimation import decision as dm
 from trackproc.pipeline.od.problem import Problem
 from trackproc.pipeline.timing import add_timing_reason
 
@@ -209,7 +210,14 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None, clip
     q = qm.Quality()
     if not sol.converged:
         q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
-    if adaptation is not None and adaptation.get("refused"):
+    code = ((adaptation or {}).get("refused") or {}).get("code")
+    if code == "kept":
+        q.add("kept", "ok", f"the initial state is kept: {adaptation['refused']['reason']}",
+              value=(adaptation.get("decision") or {}).get("probability_better"), limit=dm.REPLACE_PROBABILITY)
+    elif code == "declined":
+        a = adaptation
+        q.add("declined", "suspect", a["refused"]["reason"], value=a["chi2_before"], limit=a["limit"])
+    elif adaptation is not None and adaptation.get("refused"):
         a = adaptation
         q.add("refused", "suspect", f"the initial state is kept: {a['refused']['reason']}", value=a["refused"]["code"])
         q.add("apriori_conflict", "suspect", f"{a.get('test', 'a-priori')} chi2 {a['chi2_before']:.4g} over "
@@ -220,7 +228,9 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None, clip
             q.add("apriori_conflict", "ok",
                   f"the data contradicted the state a-priori ({a.get('test', 'a-priori')} chi2 {a['chi2_before']:.4g} "
                   f"over {a['rows']}, limit {a['limit']:.3g}); its covariance was scaled by {a['factor']:.3g} "
-                  f"(sigmas x{a['sigma_factor']:.3g}, maximum-likelihood variance component)",
+                  f"(sigmas x{a['sigma_factor']:.3g}, maximum-likelihood variance component)"
+                  + ("; the a-priori was stated, but the data determine the state without it and pass their own "
+                     "tests: the stated accuracy was wrong" if a.get("stated") else ""),
                   value=a["chi2_before"], limit=a["limit"])
         else:           # (solve refuses such a solution: kept for a caller of adapt_apriori alone)
             q.add("apriori_conflict", "rejected",
@@ -230,6 +240,9 @@ def estimate_quality(problem: Problem, sol, adaptation: dict | None = None, clip
     elif sol.n_prior:
         qm.add_apriori_check(q, sol.chi2_prior, sol.n_prior, "constraints",
                              "the data and the a-priori disagree, the covariance that leans on the a-priori does not hold")
+    if code is None and problem.decision is not None and problem.decision.get("action") == "replaced":
+        q.add("replaced", "ok", problem.decision["reason"], value=problem.decision.get("probability_better"),
+              limit=dm.REPLACE_PROBABILITY)
     vf_limit = qm.variance_factor_limit(sol.dof) if sol.dof > 0 else None
     if sol.dof > 0 and math.isfinite(sol.variance_factor):
         q.add("variance_factor", "ok" if sol.variance_factor <= vf_limit else "suspect",

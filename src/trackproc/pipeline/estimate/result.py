@@ -155,6 +155,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
     if adaptation is not None:
         diagnostics["apriori_adaptation"] = adaptation
     diagnostics["tle_timing"] = timing
+    diagnostics["decision"] = problem.decision
     quality = estimate_quality(problem, fitted, adaptation, clip=opt.clip, noise_report=noise_report, timing=timing)
     comparison = s2.compare(problem, fitted) if opt.compare_doppler_only else None
     two, sol2 = s2.two_stage(problem, fitted, opt) if opt.two_stage else (None, None)
@@ -171,7 +172,8 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         "earth": opt.earth, "doppler_bias": opt.doppler_bias, "doppler_bias_per": opt.doppler_bias_per,
         "fixed_parameters": fixed, "drift_epochs_s": drifts,
         "apriori": {n: s for n, s, m in zip(names, problem.params.apriori()[2], problem.params.apriori()[0]) if m},
-        "apriori_initial": problem.apriori_initial,
+        "apriori_initial": problem.apriori_initial, "apriori_source": problem.apriori_source or None,
+        "apriori_note": problem.apriori_note or None,
         **({"apriori_default": problem.apriori_note} if problem.apriori_note.startswith("the initial state has no")
            else {}),
         "sources": sorted({str(s) for s in problem.sources}),

@@ -68,6 +68,11 @@ class EstimateOptions:
     angle_bias: bool = False
     apriori_sigma: Mapping[str, float] = field(default_factory=dict)
     apriori_initial: Optional[bool] = None
+    #: Days over which the solution must be expected to predict the position better than the initial
+    #: state to replace it (``--horizon``; methods/estimation/decision.py); ``allow_keep`` False: always
+    #: replace (the rule off, as for a problem without a state a-priori).
+    horizon_days: float = 1.0
+    allow_keep: bool = True
     force: str = "j2"
     earth: str = "wgs84"
     range_rate_model: Optional[str] = None

@@ -20,13 +20,14 @@ from trackproc.dynamics import propagator
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError
 from trackproc.io.tle import is_tle_state
-from trackproc.methods.estimation.prior import default_apriori_covariance
+from trackproc.methods.estimation.prior import default_apriori_covariance, tle_along_sigma_m, tle_apriori_covariance
 from trackproc.methods.least_squares import Options, Prior, solve, solve_gls
 from trackproc.methods.refinement import CachedModel, geodesic_retraction
 from trackproc.models import modifiers as md
 from trackproc.models import observation as ob
 from trackproc.models import parameters as pm
 from trackproc.pipeline.od import samples as sm
+from trackproc.pipeline.timing import tle_age_days
 from trackproc.pipeline.od.options import (GROUPS, LIGHT_TIME_MARGIN_S, EstimateOptions, apriori_for,
                                                  check_apriori, check_options, force_parameter_names)
 
@@ -61,6 +62,11 @@ class Problem:
     apriori_initial: bool = False
     #: estimated force-model parameters (``--estimate-force``), columns 6.. of the vector
     force_names: tuple = ()
+    #: where the state's a-priori came from: "stated", "default" or "" (none;
+    #: :data:`trackproc.methods.estimation.prior.SOURCES`)
+    apriori_source: str = ""
+    #: what became of the initial state (methods/estimation/decision.py), set by the estimator
+    decision: Optional[dict] = None
 
     @property
     def names(self) -> list:
@@ -292,33 +298,45 @@ def default_apriori(rv0) -> np.ndarray:
     return default_apriori_covariance(np.asarray(rv0, float), MU_EARTH)
 
 
-def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial) -> tuple[list, str, bool]:
+def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial,
+              epoch=None) -> tuple[list, str, bool, str]:
     """The a-priori constraints: the drivers' own sigmas, and ``--apriori-initial`` (the initial
-    state's 6 × 6 covariance; for a state without one, such as a TLE, refine's default element
-    a-priori, :func:`default_apriori`; by default on for a TLE). Returns ``(priors, note, whether the
-    initial state is one of them)``."""
+    state's 6 × 6 covariance; for a TLE, its accuracy at its age by TLE differencing
+    (:func:`~trackproc.methods.estimation.prior.tle_apriori_covariance`); for another state without
+    one, refine's default element a-priori, :func:`default_apriori`; by default on for a TLE).
+    Returns ``(priors, note, whether the initial state is one of them, source)``: ``source``
+    ``"stated"`` (--apriori-sigma on the state, a state covariance, a TLE), ``"default"`` or ``""``
+    (no state a-priori), :data:`trackproc.methods.estimation.prior.SOURCES`."""
     priors = []
-    note = ""
+    note, source = "", ""
     mask, centre, sigma = params.apriori()
     if mask.any():
         priors.append(Prior.diagonal(np.flatnonzero(mask), centre[mask], sigma[mask]))
         if mask[:6].any():
-            note = "--apriori-sigma on the state"
+            note, source = "--apriori-sigma on the state", "stated"
     apriori_initial = opt.apriori_initial
     if apriori_initial is None:         # auto: a TLE's state, unless the state's a-priori is given otherwise
         apriori_initial = cov0 is None and is_tle_state(initial) and not mask[:6].any()
     if apriori_initial:
         if mask[:6].any():
             raise InputError("give --apriori-initial or state a-priori sigmas, not both", column="--apriori-sigma")
-        if cov0 is None:
+        source = "stated"
+        if cov0 is None and is_tle_state(initial):
+            age = tle_age_days(initial, epoch) if epoch is not None else None
+            age = 0.0 if age is None else age
+            cov0 = tle_apriori_covariance(rv0, MU_EARTH, age)
+            note = (f"the TLE's accuracy {age:.2g} days from its epoch (TLE differencing: along-track "
+                    f"{tle_along_sigma_m(age):.0f} m)" + ("; on by default for a TLE" if opt.apriori_initial is None
+                                                          else ""))
+        elif cov0 is None:
             cov0 = default_apriori(rv0)
+            source = "default"
             note = ("the initial state has no covariance: refine's default element a-priori (a 50 m, e 5e-5, "
-                    "i and RAAN 1e-4 rad, argument of latitude 4e-4 rad)"
-                    + ("; on by default for a TLE" if opt.apriori_initial is None else ""))
+                    "i and RAAN 1e-4 rad, argument of latitude 4e-4 rad)")
         else:
             note = "the initial state's covariance"
         priors.append(Prior(np.arange(6), np.asarray(rv0, float), np.asarray(cov0, float)))
-    return priors, note, bool(apriori_initial)
+    return priors, note, bool(apriori_initial), source
 
 
 def build_problem(tables, initial, stations=None, options: EstimateOptions | None = None, eop=None) -> Problem:
@@ -368,9 +386,9 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
         bound = md.bind_all(modifiers, meas)
     except ValueError as exc:
         raise InputError(str(exc), column="--doppler-bias") from None
-    priors, note, initial_prior = priors_of(params, opt, rv0, cov0, initial)
+    priors, note, initial_prior, source = priors_of(params, opt, rv0, cov0, initial, epoch)
     frame_q = propagator.reference_frame(*(float(a) for a in ts.datetime64_to_jd_utc(epoch)), eop)
     return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force, range_rate_model=model,
                    modifiers=bound, priors=priors, times=t64, sources=frame["_source"].to_numpy(dtype=object),
                    eop=eop, apriori_note=note, force_model=force_model, force_names=force_names,
-                   apriori_initial=initial_prior)
+                   apriori_initial=initial_prior, apriori_source=source)
