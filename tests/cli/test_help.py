@@ -8,7 +8,7 @@ import pytest
 from trackproc.cli.app import main
 
 COMMANDS = ["ingest", "info", "simulate", "propagate", "smooth", "estimate", "refine", "accuracy",
-            "requirements", "detect", "batch", "passes", "compare", "identify", "fit-tle"]
+            "requirements", "detect", "batch", "passes", "compare", "identify", "fit-tle", "filter"]
 
 
 def _help(args, capsys, monkeypatch):
