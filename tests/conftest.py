@@ -124,7 +124,6 @@ SLOW_SUBPROCESS = {
 #: fast-tier run on the shared 2-core machine (load 3-4), before it moved here.
 SLOW_CPU: dict[str, str | dict[str, str]] = {
     "test_taylor_jit.py": "compiles the numba Taylor kernels on a fresh clone (~10 s of CPU)",
-    "test_whitening_jit.py": "compiles the numba Kalman-gain kernel on a fresh clone; batch with compiled kernels",
     "test_batch_hostile.py": {
         "test_a_newline_in_a_file_name_cannot_forge_a_log_line": "batch estimate with the compiled kernels: "
                                                                  "compiles them on a fresh clone, 22-32 s"},
