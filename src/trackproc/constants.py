@@ -22,6 +22,11 @@ R_SPHERE = 6371000.0
 #: Seed 004 eq. 7: ratio of sidereal to solar rate and the rotation rate it uses.
 SEED004_Q = 1.0027379
 SEED004_OMEGA = 0.7292115e-4
+#: Highest gravity-field degree the force model evaluates. A degree-n term at 200 km altitude is
+#: attenuated by (R/r)^n (1.5e-5 at n = 360) on top of a coefficient of ~1e-9, below 1e-13 of the
+#: central term, and the solid harmonics of each evaluated point take 16 (n+2)^2 bytes
+#: (GravityField.solid_harmonics): 360 is EGM96's full degree, beyond what any orbit here sees.
+MAX_GRAVITY_DEGREE = 360
 #: Julian date of J2000.0 (TT) and seconds per day.
 JD_J2000 = 2451545.0
 DAY_S = 86400.0

@@ -46,8 +46,8 @@ class InputError(TrackprocError):
             where.append(str(self.file))
         if self.row is not None:
             where.append(f"row {self.row}")
-        if self.column is not None:
-            where.append(f"column '{self.column}'")
+        if self.column is not None:     # a command-line option ("--span") is not a column of a file
+            where.append(f"{'option' if str(self.column).startswith('-') else 'column'} '{self.column}'")
         parts = [": ".join([", ".join(where)] if where else [])]
         text = self.detail
         if self.found is not None:

@@ -1,8 +1,8 @@
 """``trackproc batch``: every refined or estimated solution's ``quality`` verdict in the summary
 (issue 13: "every solution (state file, OPM comment, batch summary) carries a machine-readable
 quality verdict"), and ``--strict`` for cron. Data: the ISS pass simulated from its TLE, on time
-and with its time tags 1 s late (tests/cli/test_tle_timing.py: the late one is ``suspect``,
-reason ``timing``)."""
+and with its time tags 1 s late (tests/cli/test_tle_timing.py: the late one contradicts the TLE's
+stated accuracy, ``suspect``, reason ``declined``)."""
 
 from __future__ import annotations
 
@@ -32,12 +32,15 @@ def test_the_summary_carries_each_solutions_verdict_and_strict_counts_suspect_as
     records = {r["name"]: r for r in summary["inputs"]}
     assert records["p"]["numbers"]["quality"] == "ok"
     assert records["late"]["numbers"]["quality"] == "suspect"
-    assert records["late"]["numbers"]["quality_reasons"] == "timing"
+    assert records["late"]["numbers"]["quality_reasons"].startswith("declined")
+    assert records["late"]["numbers"]["decision"] == "declined"
+    assert records["p"]["numbers"]["decision"] in ("replaced", "kept")
     assert records["late"]["details"]["refine"]["quality"]["verdict"] == "suspect"
     assert summary["counts"]["quality_suspect"] == 1 and summary["counts"]["quality_counted_as_failed"] == 0
     rows = {r["input"]: r for r in csv.DictReader((out / "summary.csv").open())}
     assert rows["late"]["quality"] == "suspect" and rows["p"]["quality"] == "ok"
-    assert "late: ok" in run.stderr and "quality suspect (timing)" in run.stderr
+    assert "late: ok" in run.stderr and "quality suspect (declined" in run.stderr
+    assert rows["late"]["decision"] == "declined"
     # --strict: the suspect solution counts against the run (exit 3: the other one is ok), its
     # refined state written all the same
     run, summary, out = _batch(run_cli, iss_pass, tmp_path, "strict", "--strict")

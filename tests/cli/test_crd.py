@@ -130,3 +130,23 @@ def test_cli_ingest_of_crd_with_sinex_stations_and_a_bad_record(run_cli, write):
     r = run_cli(["ingest", bad, "--stations", snx, "-o", out])
     assert r.exit_code == 2 and len(r.stderr.strip().splitlines()) == 1
     assert "bad.npt, row 7" in r.stderr and "time of flight" in r.stderr
+
+
+def test_normal_point_sigma_is_its_own_precision():
+    """sigma = c/2 · rms / √n of record 11 (bin RMS 57 ps two-way of 94 raw ranges: 0.88 mm one-way)."""
+    f = read_crd(V1.encode(), "v1.npt").frame
+    assert f["sigma"].iloc[0] == pytest.approx(C_LIGHT / 2 * 57.0e-12 / np.sqrt(94), rel=1e-12)
+    assert f["sigma"].iloc[1] == pytest.approx(C_LIGHT / 2 * 65.0e-12 / np.sqrt(39), rel=1e-12)
+    assert 0.8e-3 < f["sigma"].iloc[0] < 0.9e-3
+
+
+@pytest.mark.parametrize("option, expected", [([], None), (["--sigma-range-m", "0.3"], 0.3)])
+def test_ingest_keeps_the_crd_sigma_unless_told(run_cli, tmp_path, option, expected):
+    npt, stations, out = tmp_path / "v1.npt", tmp_path / "st.csv", tmp_path / "p.parquet"
+    npt.write_text(V1)
+    stations.write_text("station,lat_deg,lon_deg,height_m\n7090,-29.0465,115.3467,244\n")
+    r = run_cli(["ingest", npt, "--stations", stations, "-o", out, *option])
+    assert r.exit_code == 0, r.stderr
+    sigma = pd.read_parquet(out)["sigma"].to_numpy()
+    want = read_crd(V1.encode(), "v1.npt").frame["sigma"].to_numpy() if expected is None else np.full(2, expected)
+    np.testing.assert_allclose(np.sort(sigma), np.sort(want), rtol=1e-12)

@@ -58,7 +58,9 @@ def test_propagate_full_matches_the_python_api_and_names_its_model(run_cli, stat
     (["--force", "full", "--gravity", "abc"], "DEG or DEGxORD"),
     (["--force", "full", "--gravity", "10x20"], "order <= degree"),
     (["--force", "full", "--third-body", "sun,mars"], "sun, moon"),
-    (["--force", "full", "--cd", "-1"], "positive"),
+    (["--force", "full", "--cd", "-1"], "from 0.5 to 5"),
+    (["--force", "full", "--cr", "1e9", "--mass-kg", "1"], "from 0.5 to 3"),
+    (["--force", "full", "--mass-kg", "1", "--srp-area-m2", "1000"], "area-to-mass"),
 ])
 def test_bad_force_options_are_usage_errors(run_cli, state_file, tmp_path, args, words):
     res = run_cli(["propagate", str(state_file), "--span", "60", "--step", "60", "--dut1", "0", "-o",

@@ -2,13 +2,14 @@
 no Python types as metavars, and the shell examples are printed as written (never wrapped)."""
 
 import re
+from pathlib import Path
 
 import pytest
 
 from trackproc.cli.app import main
 
 COMMANDS = ["ingest", "info", "simulate", "propagate", "smooth", "estimate", "refine", "accuracy",
-            "requirements", "detect", "batch", "passes", "compare", "identify", "fit-tle", "filter"]
+            "requirements", "detect", "batch", "passes", "compare", "identify", "fit-tle", "filter", "help"]
 
 
 def _help(args, capsys, monkeypatch):
@@ -65,3 +66,20 @@ def test_manual_page_is_current():
     shipped = (Path(__file__).resolve().parents[2] / "docs" / "trackproc.1").read_text()
     assert manpage() == shipped, "regenerate: python -m trackproc.cli.manpage > docs/trackproc.1"
     assert '.SS "trackproc refine"' in shipped and ".SH EXIT STATUS" in shipped
+
+
+def test_help_command_prints_what_cmd_help_prints(capsys, monkeypatch):
+    """``trackproc help CMD`` is ``trackproc CMD --help``, word for word; ``--man`` the shipped page."""
+    monkeypatch.setenv("COLUMNS", "80")
+    for command in ("estimate", "passes", "info"):
+        assert main(["help", command]) == 0
+        via_help = capsys.readouterr().out
+        assert main([command, "--help"]) == 0
+        assert via_help == capsys.readouterr().out
+    assert main(["help", "--man"]) == 0
+    assert capsys.readouterr().out == (Path(__file__).resolve().parents[2] / "docs" / "trackproc.1").read_text()
+
+
+def test_help_for_an_unknown_command_names_the_nearest(run_cli):
+    result = run_cli(["help", "estmate"])
+    assert result.exit_code == 2 and "did you mean estimate?" in result.stderr and "Traceback" not in result.stderr

@@ -167,3 +167,16 @@ def test_tca_of_doptrack_development_passes_against_the_measured_tca(run_cli, wr
     assert len(diffs) >= 20
     assert np.median(diffs) < 1.5
     assert np.mean(diffs < 3.0) >= 0.85
+
+
+def test_markdown_times_keep_hundredths_of_the_json(run_cli):
+    """The Markdown table's AOS/TCA/LOS are the JSON's times rounded to 0.01 s (not cut to the second)."""
+    args = ["passes", SAMPLE / "iss.tle", "--stations", SAMPLE / "stations.csv", "--span", "6h", "-o", "-"]
+    doc = json.loads(run_cli([*args, "--format", "json"]).stdout)
+    rows = [line.split("|")[1:-1] for line in run_cli([*args, "--format", "md"]).stdout.splitlines()
+            if line.startswith("| ") and not line.startswith("| station")]
+    assert len(rows) == len(doc["passes"]) >= 2
+    for p, row in zip(doc["passes"], rows):
+        for key, cell in (("aos_time", 1), ("tca_time", 3), ("los_time", 6)):
+            shown = pd.Timestamp(row[cell].strip(), tz="UTC")
+            assert abs((shown - pd.Timestamp(p[key])).total_seconds()) <= 0.005 + 1e-9

@@ -270,8 +270,9 @@ def test_a_stated_time_tag_uncertainty_covers_the_offset(geometry, stale, dt):
 
 def test_cli_says_so_for_a_stated_covariance_the_pass_contradicts(run_cli, tmp_path):
     """The VHF pass with a slant-factor ionosphere (3 Hz / sin(el + 10 deg)): the orbit absorbs it
-    (white residuals) and contradicts the stale file's covariance; refine adapts it and says
-    ``suspect`` (``apriori_conflict``): ``--strict`` exits 1, the file written all the same."""
+    (white residuals) and contradicts the stale file's covariance, a stated a-priori: refine declines
+    the pass, keeps the stale state with its covariance and says ``suspect`` (``declined``):
+    ``--strict`` exits 1, the file written all the same."""
     table, _ = mismodelled("V55", "iono")
     write_pass_table(table, str(tmp_path / "pass.parquet"))
     (tmp_path / "stale.json").write_text(json.dumps({
@@ -283,6 +284,8 @@ def test_cli_says_so_for_a_stated_covariance_the_pass_contradicts(run_cli, tmp_p
     doc = json.loads(out.read_text())
     reasons = {x["code"]: x for x in doc["quality"]["reasons"]}
     assert r.exit_code == 1 and doc["quality"]["verdict"] == "suspect", r.stderr
-    assert reasons["apriori_conflict"]["severity"] == "suspect"
-    assert "stated covariance or the pass is wrong" in reasons["apriori_conflict"]["message"]
+    assert reasons["declined"]["severity"] == "suspect"
+    assert "stated a-priori" in reasons["declined"]["message"] and "likely culprit" in reasons["declined"]["message"]
+    assert doc["diagnostics"]["decision"]["action"] == "declined"
+    np.testing.assert_allclose(doc["at_stale_epoch"]["position_m"], STALE_RV[:3], rtol=0, atol=1e-3)
     assert "Traceback" not in r.stderr

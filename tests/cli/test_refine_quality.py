@@ -142,19 +142,22 @@ def test_table1_without_covariance_monte_carlo_within_4_sigma():
 
 # ----------------------------------------------------------------------------- refusal
 
-def test_a_pass_that_cannot_tell_the_states_apart_is_reported_not_refused():
+def test_a_pass_that_cannot_tell_the_states_apart_keeps_the_stale_state():
     """A stale state at the truth (0.1 Hz Doppler): the pass cannot tell the refined state from it
-    (likelihood-ratio delta chi2 below its 99.9 % point). That is no reason to discard the pass:
-    the posterior weighs it by its information; the test is reported (reason ``improvement``) and
-    the refined state stays within 4 sigma of the truth."""
+    (likelihood-ratio delta chi2 below its 99.9 % point), and the refined state would not predict
+    the position better anywhere over the next day (methods/estimation/decision.py): the stale
+    state is kept with its a-priori covariance (decision ``kept``, verdict ok, not a refusal), and
+    it stays within 4 sigma of the truth."""
     _, _, sim = scenario(seed=4)
     truth = truth_at(np.datetime64(EPOCH.rstrip("Z"), "ns"))
     near = State.from_vectors(EPOCH, truth[:3], truth[3:])
     res = refine(table(sim), near, None, RefineOptions(), EOP)
     d = res.state.diagnostics
-    assert d["refused"] is None and not d["improvement"]["significant"]
+    assert d["refused"]["code"] == "kept" and not d["improvement"]["significant"]
+    assert d["decision"]["action"] == "kept" and d["decision"]["probability_better"] < 0.9
     reasons = {r["code"]: r for r in res.state.extra["quality"]["reasons"]}
-    assert "does not significantly tell" in reasons["improvement"]["message"]
+    assert reasons["kept"]["severity"] == "ok" and res.quality.verdict == "ok"
+    np.testing.assert_allclose(res.state.values[:6], res.problem.x0[:6], rtol=0, atol=1e-9)
     assert np.all(np.abs(_z(res)) < 4.0)
 
 

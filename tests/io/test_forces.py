@@ -102,7 +102,7 @@ HEAD = ("begin_of_head\nmodelname TEST\nearth_gravity_constant 3.986004415E+14\n
 
 
 def test_icgem_20_format_and_bad_files(tmp_path):
-    body = ("gfc 0 0 1.0 0.0 0 0\ngfct 2 0 -4.8e-4 0.0 0 0 20000101.0000 20100101.0000\n"
+    body = ("gfc 0 0 1.0 0.0 0 0\ngfc 2 1 0 0 0 0\ngfc 2 2 0 0 0 0\ngfct 2 0 -4.8e-4 0.0 0 0 20000101.0000 20100101.0000\n"
             "gfct 2 0 -4.9e-4 0.0 0 0 20100101.0000 20500101.0000\n"
             "trnd 2 0 1.0e-11 0.0 0 0 20100101.0000 20500101.0000\n"
             "acos 2 0 2.0e-11 0.0 0 0 20100101.0000 20500101.0000 1.0\n")
@@ -115,11 +115,25 @@ def test_icgem_20_format_and_bad_files(tmp_path):
     assert read_icgem(gz, date="2011-01-01").cbar[2, 0] == f.cbar[2, 0]
     cases = [(HEAD + "gfc 2 0 abc 0 0 0\n", "row 9"), (HEAD + "gfc 3 0 1e-6 0 0 0\n", "max_degree"),
              (HEAD + "xyz 2 0 1 0 0 0\n", "unknown line key"), (HEAD.replace("radius 6378136.3\n", ""), "radius"),
-             (HEAD + "acos 2 0 1e-11 0 0 0\n", "period"), ("gfc 0 0 1 0\n", "header")]
+             (HEAD + "acos 2 0 1e-11 0 0 0\n", "period"), ("gfc 0 0 1 0\n", "header"),
+             # the header against the content: missing terms, a term twice, non-Earth constants
+             (HEAD + "gfc 2 0 -4.8e-4 0 0 0\n", "L=2 M=1 missing"),
+             (HEAD + "gfc 2 0 -4.8e-4 0 0 0\ngfc 2 0 -4.9e-4 0 0 0\n", "listed twice"),
+             (HEAD + body + "gfct 2 0 -4.9e-4 0.0 0 0 20100101.0000 20500101.0000\n", "listed twice"),
+             (HEAD.replace("radius 6378136.3", "radius inf"), "radius"),
+             (HEAD.replace("radius 6378136.3", "radius 6378.1363"), "radius"),
+             (HEAD.replace("max_degree 2", "max_degree 100000000"), "max_degree"),
+             (HEAD + "gfc 2 0 nan 0 0 0\ngfc 2 1 0 0 0 0\ngfc 2 2 0 0 0 0\n", "L=2 M=0")]
     for text, words in cases:
         with pytest.raises(InputError, match=words) as info:
             read_icgem(_write(tmp_path, text, "bad.gfc"))
         assert "bad.gfc" in str(info.value) and "\n" not in str(info.value)
+    cut = tmp_path / "cut.gfc.gz"
+    cut.write_bytes(gzip.compress((HEAD + body * 200).encode())[:300])
+    with pytest.raises(InputError, match="cut short"):
+        read_icgem(cut)
+    with pytest.raises(InputError, match="--gravity"):
+        read_icgem(_write(tmp_path, HEAD + body), degree=361)
 
 
 def test_shadow_fraction_closed_forms():

@@ -57,7 +57,7 @@ def read_error(data: bytes, **kwargs) -> InputError:
 def test_one_way_receive_freq_and_doppler_instantaneous():
     raw = load("oneway_doppler.tdm")
     f = raw.frame
-    assert list(f.columns) == ["time", "station", "kind", "value", "sigma", "row"]
+    assert list(f.columns) == ["time", "station", "kind", "value", "sigma", "row", "unit"]
     assert str(f["time"].dtype) == "datetime64[ns, UTC]"
     assert set(f["station"]) == {"DSS-25"}          # PATH 2,1: the receiver, participant 1
     assert f["sigma"].isna().all()

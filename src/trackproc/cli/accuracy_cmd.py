@@ -63,8 +63,8 @@ def accuracy_command(
     state: Optional[str] = typer.Argument(None, metavar="STATE.json",
                                           help="State file with covariance (e.g. from estimate), a TLE, or - "
                                                "for stdin. Not with --seed-example."),
-    span: Optional[float] = typer.Option(None, "--span", metavar="S", help="Prediction span from the epoch, s."),
-    step: Optional[float] = typer.Option(None, "--step", metavar="S", help="Output time step, s."),
+    span: Optional[str] = typer.Option(None, "--span", metavar="S", help="Prediction span from the epoch, s, or with a unit: 90s, 45m, 6h, 2d."),
+    step: Optional[str] = typer.Option(None, "--step", metavar="S", help="Output time step, s, or with a unit: 90s, 45m, 6h, 2d."),
     force=ForceOpt,
     method: Method = typer.Option(Method.spectral, "--method",
                                   help="spectral (seed 000 image domain), stm (Phi P0 Phi^T), monte-carlo, "
@@ -119,6 +119,10 @@ def accuracy_command(
 
         trackproc accuracy --seed-example -o example.csv
     """
+    from trackproc.io.validate import parse_duration
+
+    span = None if span is None else parse_duration(span, "--span")
+    step = None if step is None else parse_duration(step, "--step")
     if plot == "-":
         raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
     if seed_example:

@@ -64,8 +64,27 @@ def _root(
     handler.setFormatter(_OneLineFormatter("trackproc: %(levelname)s: %(message)s"))
     logging.basicConfig(level=level, handlers=[handler], force=True)
     # warnings of the lower layers (e.g. dates beyond the EOP table) as one log line each
-    warnings.showwarning = lambda message, category, *args, **kwargs: log.warning(str(message))
+    _WARNED.clear()
+    warnings.showwarning = _show_warning
     log.debug("%s: started (pid %d)", ctx.invoked_subcommand, os.getpid())
+
+
+_WARNED: set = set()
+#: ERFA's "dubious year" (UTC before 1960 or far beyond the leap-second table), in our words.
+DUBIOUS_YEAR = ("a date before 1960 or far in the future: UTC is not defined there and the leap-second table "
+                "does not reach it (ERFA's 'dubious year'); times are uncertain by seconds")
+
+
+def _show_warning(message, category, *args, **kwargs) -> None:
+    """A lower layer's warning as one log line, each text once per run; ERFA's raw
+    "dubious year" warnings (one per function) become one line in our words."""
+    text = str(message)
+    if "dubious year" in text:
+        text = DUBIOUS_YEAR
+    if text in _WARNED:
+        return
+    _WARNED.add(text)
+    log.warning("%s", text)
 
 
 class _OneLineFormatter(logging.Formatter):

@@ -23,7 +23,7 @@ log = logging.getLogger("trackproc")
 _PANELS = {"batch": "Run", "ingest": "Ingest step", "smooth": "Smooth step", "refine": "Refine step",
            "estimate": "Estimate step"}
 _ANNOTATIONS = {"str": Optional[str], "path": Optional[str], "choice": Optional[str], "degree": Optional[str],
-                "int": Optional[int], "float": Optional[float], "bool": Optional[bool],
+                "int": Optional[int], "float": Optional[float], "duration": Optional[str], "bool": Optional[bool],
                 "list": Optional[List[str]], "paths": Optional[List[str]], "map": Optional[List[str]]}
 
 

@@ -22,13 +22,14 @@ from trackproc.cli import passes_cmd  # noqa: F401
 from trackproc.cli import compare_cmd  # noqa: F401
 from trackproc.cli import identify_cmd  # noqa: F401
 from trackproc.cli import fit_tle_cmd  # noqa: F401
+from trackproc.cli import help_cmd  # noqa: F401
 # isort: on
 
 from trackproc.cli.app import app
 
 SUMMARIES = {
     "ingest": "Raw passes (CSV, Parquet, Arrow, CCSDS TDM, DopTrack, .aer) -> validated pass file.",
-    "info": "What a pass file or ephemeris holds: stations, passes, kinds, spans.",
+    "info": "What any file trackproc reads or writes is and holds: kinds, counts, spans, units.",
     "simulate": "Passes of a known orbit with light time, noise, biases: the test bench.",
     "propagate": "Ephemeris, STM, covariance and pass prediction by the DT (Taylor) engine.",
     "smooth": "Least-squares polynomial per pass; TCA and carrier at closest approach (seed 004).",
@@ -42,6 +43,7 @@ SUMMARIES = {
     "compare": "Residuals of a pass against a state or TLE: RMS after the pass's own offset and drift.",
     "identify": "Which catalogue TLE is this pass? Ranked fits, likelihood ratios, a verdict.",
     "fit-tle": "Fit a TLE (SGP4 mean elements, B*) to passes or an ephemeris, with covariance and a verdict.",
+    "help": "A command's full help (trackproc help CMD), or the manual page (--man).",
     "passes": "Pass schedule of a state or TLE: AOS/TCA/LOS, max elevation, azimuths, Doppler per station.",
 }
 

@@ -84,6 +84,49 @@ def _resolve_path(value, base: Path):
     return value
 
 
+def _annotation(param):
+    """The Python type an option takes (``Optional[X]`` -> X), or None when unknown."""
+    import typing
+
+    ann = getattr(getattr(param, "type_descriptor", None), "annotation", None)
+    args = [a for a in typing.get_args(ann) if a is not type(None)] if typing.get_origin(ann) is typing.Union else None
+    return args[0] if args and len(args) == 1 else ann
+
+
+def _check_type(command, param_name: str, value, path: Path, section: str, key: str) -> None:
+    """A config value the option cannot take (a word for a number, a list for a path, a name
+    outside the choices) is an input error naming the file and the key."""
+    import enum
+    import math
+
+    param = next((p for p in getattr(command, "params", []) if p.name == param_name), None)
+    ann = _annotation(param) if param is not None else None
+    if ann is None:
+        return
+    problem = None
+    if isinstance(ann, type) and issubclass(ann, enum.Enum):
+        choices = [str(m.value) for m in ann]
+        if str(value) not in choices or isinstance(value, (dict, list, bool)):
+            problem = "one of " + ", ".join(choices)
+    elif ann is bool:
+        if not isinstance(value, bool):
+            problem = "true or false"
+    elif ann in (int, float):
+        number = None
+        if not isinstance(value, (bool, dict, list)):
+            try:
+                number = ann(value)
+            except (TypeError, ValueError, OverflowError):
+                number = None
+        if number is None or (ann is float and not math.isfinite(number)):
+            problem = "an integer" if ann is int else "a finite number"
+    elif ann is str and isinstance(value, (dict, list)):
+        problem = "a string"
+    if problem:
+        raise InputError("wrong type of value", file=str(path), column=f"[{section}] {key}", found=value,
+                         expected=f"{problem} (as --{param_name.replace('_', '-')} takes)")
+
+
 def default_map(root) -> dict:
     """The click ``default_map`` of the root command ``root``: per command, its defaults from the
     environment and the config file (empty when neither gives any)."""
@@ -108,10 +151,11 @@ def default_map(root) -> dict:
                                      expected=_nearest(key.replace("-", "_"), valid))
         defaults = doc.get("defaults", {})
         for name in commands:
-            merged = {k.replace("-", "_"): v for k, v in defaults.items()}
-            merged.update({k.replace("-", "_"): v for k, v in doc.get(name, {}).items()})
-            for key, value in merged.items():
+            merged = {k.replace("-", "_"): (v, "defaults", k) for k, v in defaults.items()}
+            merged.update({k.replace("-", "_"): (v, name, k) for k, v in doc.get(name, {}).items()})
+            for key, (value, section, written) in merged.items():
                 if key in options[name]:
+                    _check_type(commands[name], options[name][key], value, path, section, written)
                     out[name][options[name][key]] = _resolve_path(value, path.parent)
     for key in ENV_KEYS:
         value = os.environ.get(f"TRACKPROC_{key.upper()}")

@@ -79,6 +79,9 @@ def estimate_command(
     kinds: Optional[str] = typer.Option(None, "--kinds", metavar="KIND[,KIND]",
                                         help="Kinds to use: range, range_rate, doppler, azimuth, elevation (default all)."),
     max_iterations: int = typer.Option(20, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
+    max_samples: int = typer.Option(200_000, "--max-samples", metavar="N", min=1,
+                                    help="Refuse more samples than this over all pass files (memory grows by "
+                                         "~3.5 kB a sample: 200,000 is ~1 GB; raise it for more)."),
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Edit samples beyond K x max(1, WRMS) sigmas (iterated, flagged). 0: off."),
     troposphere: str = typer.Option(
@@ -179,6 +182,10 @@ def estimate_command(
     check_distinct_files(passes, "PASS")
     tables = [("<stdin>" if is_stdio(p) else p, read_pass_table(p)) for p in passes]
     check_no_repeated_samples([(source, t.frame) for source, t in tables])
+    n_samples = sum(len(t.frame) for _, t in tables)
+    if n_samples > max_samples:
+        raise typer.BadParameter(f"{n_samples} samples in the pass files, more than {max_samples} (memory grows by "
+                                 "~3.5 kB a sample); raise --max-samples, or thin the passes", param_hint="--max-samples")
     # a TLE is evaluated by SGP4 at the solution epoch (default: the first sample)
     state0 = initial_state(initial, tables, orientation, at=tle_evaluation_epoch(epoch, tables))
     station_table = None

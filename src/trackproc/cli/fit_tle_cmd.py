@@ -52,9 +52,9 @@ def fit_tle_command(
                                            "100 m, cross-track 50 m; docs/fit-tle.md) or 'refine' refine's default "
                                            "element sigmas (~10x looser; always for a state and a TLE over 3.2 "
                                            "days from the epoch)."),
-    horizon: float = typer.Option(1.0, "--horizon", metavar="DAYS", min=0.0,
-                                  help="How far after the epoch the TLE must predict better than the initial one "
-                                       "(the refusal test and the summary's prediction)."),
+    horizon: str = typer.Option("1", "--horizon", metavar="DAYS",
+                                help="How far after the epoch the TLE must predict better than the initial one, "
+                                     "days, or with a unit: 12h, 2d (the refusal test and the summary's prediction)."),
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Iterations at most."),
     cross_validate: bool = typer.Option(False, "--cross-validate",
                                         help="Also leave each pass file out in turn, fit the others and predict it: "
@@ -99,6 +99,9 @@ def fit_tle_command(
     Exit status: 0 ok; 1 the fit failed or its verdict is 'rejected' (or 'suspect' with --strict;
     the TLE is written); 2 bad options or input.
     """
+    from trackproc.io.validate import parse_duration
+
+    horizon = parse_duration(horizon, "--horizon", plain_unit_s=86400.0) / 86400.0
     import json
     import sys
 

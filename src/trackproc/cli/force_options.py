@@ -77,7 +77,24 @@ OPTIONS = {
            Optional[float]),
 }
 _SPACECRAFT_KEYS = ("mass_kg", "srp_area_m2", "cr", "drag_area_m2", "cd")
-_SPACE_WEATHER_KEYS = ("f107", "f107a", "ap")   # NRLMSIS's fixed space weather (ForceModel fields)
+_SPACE_WEATHER_KEYS = ("f107", "f107a", "ap")
+#: Plausible spacecraft properties (inclusive): 10 g (a femtosatellite) to 1e6 kg (the ISS is
+#: 4.2e5 kg), areas up to 1e4 m^2; Cr = 1 + reflectivity is 1 to 2 for a sphere (fitted values
+#: stray a little), Cd 1.5 to 3.5 in free molecular flow (fitted values stray further).
+SPACECRAFT_RANGES = {"mass_kg": (0.01, 1.0e6), "srp_area_m2": (1e-4, 1.0e4), "drag_area_m2": (1e-4, 1.0e4),
+                     "cr": (0.5, 3.0), "cd": (0.5, 5.0)}
+#: Largest plausible area-to-mass ratio, m^2/kg (thin blankets of debris and solar sails reach
+#: ~30; a satellite is 0.001 to 0.05).
+MAX_AREA_TO_MASS = 100.0
+
+
+def _spacecraft_problem(key: str, value) -> str | None:
+    """Why ``value`` is not a plausible ``key`` (None when it is)."""
+    low, high = SPACECRAFT_RANGES[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (low <= value <= high):
+        unit = {"mass_kg": " kg", "srp_area_m2": " m^2", "drag_area_m2": " m^2"}.get(key, "")
+        return f"a number from {low:g} to {high:g}{unit}"
+    return None   # NRLMSIS's fixed space weather (ForceModel fields)
 
 
 @dataclass
@@ -122,6 +139,12 @@ class ForceSettings:
                                      param_hint="--gravity") from None
         if not (0 <= o <= d):
             raise typer.BadParameter(f"expected 0 <= order <= degree, got {self.gravity!r}", param_hint="--gravity")
+        from trackproc.constants import MAX_GRAVITY_DEGREE
+
+        if d > MAX_GRAVITY_DEGREE:
+            raise typer.BadParameter(f"degree {d} is above {MAX_GRAVITY_DEGREE}, the highest this force model "
+                                     "evaluates (terms beyond it are below 1e-13 of the central term at 200 km "
+                                     "altitude, and each costs memory per evaluated point)", param_hint="--gravity")
         return d, o
 
     def bodies(self) -> tuple:
@@ -158,10 +181,18 @@ class ForceSettings:
         for key in _SPACECRAFT_KEYS:
             value = getattr(self, key)
             if value is not None:
-                if not (value > 0 and value == value and value != float("inf")):
-                    raise typer.BadParameter(f"expected a positive number, got {value}",
+                problem = _spacecraft_problem(key, value)
+                if problem:
+                    raise typer.BadParameter(f"expected {problem}, got {value}",
                                              param_hint="--" + key.replace("_", "-"))
                 sc[key] = float(value)
+        for area in ("srp_area_m2", "drag_area_m2"):
+            if sc.get(area) is not None and sc.get("mass_kg") is not None \
+                    and sc[area] / sc["mass_kg"] > MAX_AREA_TO_MASS:
+                flag = "--" + area.replace("_", "-")
+                raise typer.BadParameter(f"area-to-mass ratio {sc[area] / sc['mass_kg']:.4g} m^2/kg ({flag} "
+                                         f"{sc[area]:g} over --mass-kg {sc['mass_kg']:g}, command line or state "
+                                         f"file); expected at most {MAX_AREA_TO_MASS:g} m^2/kg", param_hint=flag)
         spacecraft = Spacecraft(**sc)
         srp = spacecraft.srp_known if self.srp is None else self.srp
         drag = spacecraft.drag_known if self.drag is None else self.drag
@@ -218,9 +249,10 @@ def spacecraft_from_state(state) -> dict:
                              expected=", ".join(_SPACECRAFT_KEYS))
         if value is None:
             continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0 < value < float("inf")):
-            raise InputError("bad value", file=source, column=f"spacecraft.{key}", found=value,
-                             expected="a positive number")
+        problem = _spacecraft_problem(key, value)
+        if problem:
+            raise InputError("implausible value", file=source, column=f"spacecraft.{key}", found=value,
+                             expected=problem)
         out[key] = float(value)
     return out
 

@@ -27,6 +27,9 @@ def identify_command(
     eop: Optional[str] = EopOpt,
     dut1: Optional[float] = Dut1Opt,
     output: Optional[str] = typer.Option(None, "-o", "--output", help="JSON ranking (default: stdout)."),
+    max_candidates: int = typer.Option(2000, "--max-candidates", metavar="N", min=1,
+                                       help="Refuse a catalogue of more TLEs than this (each is an SGP4 run and a "
+                                            "fit; raise it for a larger catalogue)."),
 ) -> None:
     """Which catalogue object is this pass? Every candidate TLE (SGP4) is fitted to the pass with
     its own offset and drift, ranked by residual sum of squares, with likelihood ratios against
@@ -58,6 +61,10 @@ def identify_command(
     table = read_pass_table(pass_file)
     catalogue = parse_catalogue(read_input_bytes(tles).decode("utf-8", errors="replace"),
                                 "<stdin>" if tles == "-" else tles)
+    if len(catalogue) > max_candidates:
+        raise typer.BadParameter(f"{tles}: {len(catalogue)} TLEs in the catalogue, more than {max_candidates} "
+                                 "(each is an SGP4 run and a fit against the pass); raise --max-candidates to "
+                                 "evaluate them all", param_hint="--max-candidates")
     result = identify(table, catalogue, orientation, remove=remove.value, range_rate_model=range_rate_model.value,
                       earth=earth.value)
     write_text(output or "-", json.dumps(json_ready(result), indent=2) + "\n")

@@ -47,8 +47,8 @@ def ingest_command(
         help="Nominal carrier frequency, Hz (required with Doppler samples unless the input gives it)."),
     mode: Optional[DopplerMode] = typer.Option(
         None, "--mode", help="Doppler link: one-way or two-way (required with Doppler samples)."),
-    max_gap: float = typer.Option(300.0, "--max-gap", metavar="S",
-                                  help="Start a new pass after a gap longer than S seconds."),
+    max_gap: str = typer.Option("300", "--max-gap", metavar="S",
+                                help="Start a new pass after a gap longer than S seconds (or 90s, 5m, 1h)."),
     layout: Layout = typer.Option(Layout.auto, "--layout", help="Input layout (auto: detected)."),
     sidecar: Optional[str] = typer.Option(None, "--sidecar", metavar="FILE",
                                           help="DopTrack YAML sidecar (default: ../metadata/<name>.yml)."),
@@ -57,7 +57,10 @@ def ingest_command(
         help="How a CCSDS TDM writes two-way RANGE: one-way-equivalent (as the spec's examples) or round-trip (halved)."),
     drop_invalid: bool = typer.Option(False, "--drop-invalid",
                                       help="Drop invalid samples (counts per reason on stderr) instead of failing."),
-    sigma_range_m: float = typer.Option(10.0, "--sigma-range-m", help="Default range sigma, m."),
+    sigma_range_m: Optional[float] = typer.Option(
+        None, "--sigma-range-m",
+        help="Range sigma, m, for samples without one (default 10); given, it also replaces the sigma of ILRS CRD "
+             "normal points (by default their own precision, c/2 rms/sqrt(n) of record 11)."),
     sigma_range_rate_m_s: float = typer.Option(0.1, "--sigma-range-rate-m-s", help="Default range-rate sigma, m/s."),
     sigma_doppler_hz: float = typer.Option(1.0, "--sigma-doppler-hz", help="Default Doppler sigma, Hz."),
     sigma_angle_deg: float = typer.Option(0.01, "--sigma-angle-deg", help="Default azimuth/elevation sigma, deg."),
@@ -79,6 +82,9 @@ def ingest_command(
             | trackproc ingest - --stations sample_data/stations.csv --carrier-hz 2.2e9 --mode one-way \\
             | trackproc info -
     """
+    from trackproc.io.validate import parse_duration
+
+    max_gap = parse_duration(max_gap, "--max-gap")
     if inputs.count("-") > 1:
         raise typer.BadParameter("stdin (-) can be read only once", param_hint="INPUT")
     if sidecar is not None and len(inputs) > 1:
@@ -103,7 +109,8 @@ def ingest_command(
         table = read_stations(stations, epoch=_epoch_of(head), eccentricities=eccentricities)
     options = IngestOptions(
         carrier_hz=carrier_hz, doppler_mode=mode.value if mode is not None else None, max_gap_s=max_gap,
-        drop_invalid=drop_invalid, sigma_range_m=sigma_range_m, sigma_range_rate_m_s=sigma_range_rate_m_s,
+        drop_invalid=drop_invalid, sigma_range_m=10.0 if sigma_range_m is None else sigma_range_m,
+        sigma_range_explicit=sigma_range_m is not None, sigma_range_rate_m_s=sigma_range_rate_m_s,
         sigma_doppler_hz=sigma_doppler_hz, sigma_angle_deg=sigma_angle_deg)
     run = Ingest(table, options)
     for chunks in runs:   # streamed: a chunk of rows at a time (docs/ingest.md)

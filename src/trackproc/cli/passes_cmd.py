@@ -30,8 +30,8 @@ def passes_command(
     stations: str = typer.Option(..., "--stations", metavar="STATIONS.csv",
                                  help="Stations table: station, lat_deg, lon_deg, height_m."),
     span: str = typer.Option(..., "--span", metavar="S", help="Span from the start: seconds, or 90m, 6h, 2d."),
-    step: float = typer.Option(30.0, "--step", metavar="S",
-                               help="Search grid, s (maxima are refined; a pass shorter than the step is found)."),
+    step: str = typer.Option("30", "--step", metavar="S",
+                             help="Search grid, s, or 90s, 1m (maxima are refined; a pass shorter than the step is found)."),
     start: Optional[str] = typer.Option(None, "--start", metavar="ISO",
                                         help="Start, UTC ISO 8601 (default: the state's or TLE's epoch)."),
     min_elevation: float = typer.Option(0.0, "--min-elevation", metavar="DEG",
@@ -64,12 +64,15 @@ def passes_command(
     Exit status: 0 ok (also when no pass is found: an empty table, said on stderr); 2 bad
     options or input; 1 propagation failure.
     """
+    from trackproc.io.validate import parse_duration
+
+    step = parse_duration(step, "--step")
     from trackproc.io.atomic import write_text
     from trackproc.io.eop import earth_orientation
     from trackproc.io.statefile import parse_epoch
     from trackproc.io.stations import read_stations
     from trackproc.pipeline.orbit_source import read_orbit
-    from trackproc.pipeline.passes import PassesOptions, find_passes, parse_duration, render
+    from trackproc.pipeline.passes import PassesOptions, find_passes, render
     from trackproc.cli.common import resolve_output
 
     if orbit == "-" and stations == "-":
@@ -81,7 +84,7 @@ def passes_command(
     orientation, warning = earth_orientation(eop, dut1)
     if warning:
         log.warning(warning)
-    options = PassesOptions(span_s=parse_duration(span), step_s=step,
+    options = PassesOptions(span_s=parse_duration(span, "--span"), step_s=step,
                             start=parse_epoch(start, column="--start") if start is not None else None,
                             min_elevation_deg=min_elevation, carrier_hz=carrier_hz,
                             force=force.value if force is not None else None, earth=earth.value,

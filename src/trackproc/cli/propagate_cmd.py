@@ -68,9 +68,9 @@ def propagate_command(
     state: str = typer.Argument(..., metavar="STATE.json|TLE|metadata",
                                 help="Initial state (JSON state file, any supported frame) or a TLE; - for stdin; "
                                      "'metadata' with --at: the TLE stored in that pass file (DopTrack)."),
-    span: Optional[float] = typer.Option(None, "--span", metavar="S",
-                                         help="Span from the start, s (negative: backwards in time)."),
-    step: Optional[float] = typer.Option(None, "--step", metavar="S", help="Output spacing, s (with --span)."),
+    span: Optional[str] = typer.Option(None, "--span", metavar="S",
+                                       help="Span from the start, s, or with a unit: 90s, 45m, 6h, 2d (negative: backwards in time)."),
+    step: Optional[str] = typer.Option(None, "--step", metavar="S", help="Output spacing, s, or with a unit: 90s, 45m, 6h, 2d (with --span)."),
     at: Optional[str] = typer.Option(None, "--at", metavar="PASSFILE",
                                      help="Instead of a grid: the sample times of a pass file."),
     start: Optional[str] = typer.Option(None, "--start", metavar="ISO",
@@ -135,6 +135,10 @@ def propagate_command(
     Exit status: 0 ok; 2 bad options or input; 1 propagation failure (the Taylor run stopped,
     the orbit enters the Earth, or --visible-only found no pass).
     """
+    from trackproc.io.validate import parse_duration
+
+    span = None if span is None else parse_duration(span, "--span")
+    step = None if step is None else parse_duration(step, "--step")
     if at is not None and (span is not None or step is not None):
         raise typer.BadParameter("give either --span S --step S or --at PASSFILE, not both", param_hint="--at")
     if at is None and (span is None or step is None):
@@ -203,6 +207,17 @@ def propagate_command(
 
         epoch0 = tle_epoch(orbit.tle)
     _check_extent(epoch0, start_t, span, step, at_times, carrier_hz, object_name, object_id)
+    reference = None
+    if compare is not None:                  # checked before anything is computed or written
+        from trackproc.io.cpf import check_reference, read_cpf
+
+        if force_key == "sgp4":
+            from trackproc.errors import InputError
+
+            raise InputError("--compare needs an integrated orbit", column="--compare",
+                             found="a TLE evaluated by SGP4", expected="a state file, or --force j2/two-body")
+        reference = read_cpf(compare)
+        check_reference(reference, epoch0)
     options = PropagateOptions(
         span_s=span, step_s=step, start=start_t, at_times=at_times, force=force_key, earth=earth.value, tol=tol,
         stm=stm, station=station, carrier_hz=carrier_hz, range_rate_model=range_rate_model.value,
@@ -246,7 +261,7 @@ def propagate_command(
         oem_kwargs = {"object_name": name, "object_id": ident, "comments": [comment]}
     write_ephemeris(result.ephemeris, out, out_format.value, **oem_kwargs)
     if compare is not None:
-        _compare_with_cpf(compare, initial, force_key, orientation, options.force_model)
+        _compare_with_cpf(compare, reference, initial, force_key, orientation, options.force_model)
     eph = result.ephemeris
     steps = (f"{result.trajectory.n_steps} {'DOP853' if force_key == 'full' else 'Taylor'} steps"
              if result.trajectory is not None else "SGP4")
@@ -255,20 +270,19 @@ def propagate_command(
              "stdout" if out == "-" else out, out_format.value)
 
 
-def _compare_with_cpf(path, initial, force_key, orientation, force_model=None) -> None:
+def _compare_with_cpf(path, reference, initial, force_key, orientation, force_model=None) -> None:
     """``--compare CPF``: the summary of :func:`trackproc.pipeline.reference_orbit.compare_with_cpf`."""
     import json
     import sys
 
     from trackproc.errors import InputError
-    from trackproc.io.cpf import read_cpf
     from trackproc.pipeline.reference_orbit import compare_with_cpf
 
     if initial is None:
         raise InputError("--compare needs an integrated orbit", column="--compare", found="a TLE evaluated by SGP4",
                          expected="a state file, or --force j2/two-body")
     kwargs = {"force_model": force_model} if force_key == "full" else {}
-    summary = compare_with_cpf(initial, read_cpf(path), force=force_key, eop=orientation, propagate_kwargs=kwargs)
+    summary = compare_with_cpf(initial, reference, force=force_key, eop=orientation, propagate_kwargs=kwargs)
     summary.pop("distance_m")
     summary = {"reference": path, "force": force_key, **summary}
     sys.stderr.write(json.dumps(summary, sort_keys=True) + "\n")

@@ -96,6 +96,12 @@ def refine_command(
         0.0, "--time-tag-sigma", metavar="S", min=0.0,
         help="1-sigma uncertainty of the station's time tags (s), added to the covariance (pointwise): one pass "
              "cannot see a time-tag offset (it is the orbit shifted along-track). See docs/refine.md."),
+    horizon: float = typer.Option(
+        1.0, "--horizon", metavar="DAYS", min=0.0,
+        help="Replace the stale state only when the refined one predicts the position better with probability "
+             ">= 0.9 somewhere over this many days after the epoch; else keep it (decision 'kept'). A stated "
+             "a-priori (TLE, covariance, --apriori-sigma) the pass contradicts is kept ('declined'). See "
+             "docs/refine.md, 'Replace, keep or decline'."),
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Pointwise: edit samples beyond K x max(1, WRMS) sigmas. 0: off."),
@@ -103,8 +109,8 @@ def refine_command(
                                          help="Integral: Gauss-Legendre nodes per panel."),
     quadrature_panel: float = typer.Option(30.0, "--quadrature-panel", metavar="S", min=1e-3,
                                            help="Integral: longest quadrature panel, s."),
-    max_gap: float = typer.Option(30.0, "--max-gap", metavar="S", min=1e-3,
-                                  help="Integral: data gaps longer than S s are left out of the integral."),
+    max_gap: str = typer.Option("30", "--max-gap", metavar="S",
+                                help="Integral: data gaps longer than S s (or 30s, 2m) are left out of the integral."),
     force=ForceOpt,
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
@@ -156,6 +162,11 @@ def refine_command(
         trackproc refine smoothed.parquet --initial sample_data/stale.json --cost integral --circular \\
             -o seed004.json
     """
+    from trackproc.io.validate import parse_duration
+
+    max_gap = parse_duration(max_gap, "--max-gap")
+    if not max_gap >= 1e-3:
+        raise typer.BadParameter(f"{max_gap:g} s is below the minimum 0.001 s", param_hint="--max-gap")
     out = resolve_output(output, "output state file")
     if out == "-" and "-" in (residuals, opm):
         raise typer.BadParameter("stdout already carries the state file; give --residuals/--opm a file",
@@ -197,7 +208,7 @@ def refine_command(
         max_iterations=max_iterations, clip=clip if clip > 0 else None, pass_id=pass_id,
         kind=kind.value if kind else None, quadrature_order=quadrature_order, quadrature_panel_s=quadrature_panel,
         max_gap_s=max_gap, reweight=reweight, covariance=covariance.value, noise=noise.value,
-        oscillator_noise=oscillator_noise, time_tag_sigma_s=time_tag_sigma)
+        oscillator_noise=oscillator_noise, time_tag_sigma_s=time_tag_sigma, horizon_days=horizon)
     result = refine(table, state0, station_table, options, orientation, source=source)
 
     state = result.state if output_epoch is OutputEpoch.traverse else result.stale_epoch_state

@@ -28,9 +28,9 @@ def simulate_command(
                                  help="Stations table: station, lat_deg, lon_deg, height_m."),
     start: Optional[str] = typer.Option(None, "--start", metavar="ISO",
                                         help="First sample time, UTC ISO 8601 (default: the state's epoch)."),
-    duration: Optional[float] = typer.Option(None, "--duration", metavar="S",
-                                             help="Span to simulate, s (required unless --ballistic)."),
-    step: float = typer.Option(10.0, "--step", metavar="S", help="Sample spacing, s."),
+    duration: Optional[str] = typer.Option(None, "--duration", metavar="S",
+                                           help="Span to simulate, s, or with a unit: 90s, 45m, 6h, 2d (required unless --ballistic)."),
+    step: str = typer.Option("10", "--step", metavar="S", help="Sample spacing, s, or with a unit: 90s, 45m, 6h, 2d."),
     elevation_mask_deg: float = typer.Option(10.0, "--elevation-mask-deg",
                                              help="Samples below this elevation are not seen, deg."),
     kinds: str = typer.Option(KIND_NAMES, "--kinds", help="Comma list of measurement kinds to write."),
@@ -91,6 +91,10 @@ def simulate_command(
         trackproc simulate --tle sample_data/iss.tle --stations sample_data/stations.csv --duration 21600 \\
             | trackproc ingest - | trackproc info -
     """
+    from trackproc.io.validate import parse_duration
+
+    duration = None if duration is None else parse_duration(duration, "--duration")
+    step = parse_duration(step, "--step")
     if ballistic is not None:
         return _simulate_ballistic(ballistic, hypothesis, displacement_m, stations, step, elevation_mask_deg, kinds,
                                    sigma_angle_deg, seed, eop, dut1, fmt, output,

@@ -45,11 +45,12 @@ def smooth_command(
     kinds: Optional[List[str]] = typer.Option(
         None, "--kinds", metavar="KIND[,KIND]",
         help="Kinds to fit (range_rate, range, doppler, elevation, azimuth); default: all present."),
-    grid: Optional[float] = typer.Option(
+    grid: Optional[str] = typer.Option(
         None, "--grid", metavar="STEP",
-        help="Write the fitted curve every STEP seconds (value = curve, sigma = its 1-sigma) instead of the samples."),
-    tca_max_gap: float = typer.Option(
-        30.0, "--tca-max-gap", metavar="S",
+        help="Write the fitted curve every STEP seconds (or 0.5s, 1m; value = curve, sigma = its 1-sigma) "
+             "instead of the samples."),
+    tca_max_gap: str = typer.Option(
+        "30", "--tca-max-gap", metavar="S",
         help="A TCA inside a data gap longer than S s, or within S s of either end of the data, is 'not observed'."),
     summary: Optional[str] = typer.Option(None, "--summary", metavar="SUMMARY.json",
                                           help="JSON summary per pass and kind (- for stdout when -o is a file)."),
@@ -77,6 +78,10 @@ def smooth_command(
         trackproc ingest sample_data/doppler_pass.csv --stations sample_data/stations.csv \\
             --carrier-hz 2.2e9 --mode one-way | trackproc smooth - --grid 1 > curve.parquet
     """
+    from trackproc.io.validate import parse_duration
+
+    grid = None if grid is None else parse_duration(grid, "--grid")
+    tca_max_gap = parse_duration(tca_max_gap, "--tca-max-gap")
     degree_value = _degree(degree)
     kind_list = [k.strip() for item in (kinds or []) for k in item.split(",") if k.strip()]
     bad = [k for k in kind_list if k not in KIND_NAMES]

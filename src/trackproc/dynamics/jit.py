@@ -11,7 +11,7 @@ import functools
 import os
 import threading
 
-__all__ = ["default", "enabled", "forced", "mode", "njit"]
+__all__ = ["announce_compiling", "cold", "default", "enabled", "forced", "mode", "njit"]
 
 _LOCAL = threading.local()
 
@@ -63,3 +63,32 @@ def njit(*args, **kwargs):
     kwargs.setdefault("cache", True)
     kwargs.setdefault("error_model", "numpy")
     return numba.njit(*args, **kwargs)
+
+
+_ANNOUNCED: set = set()
+
+
+def cold(kernel) -> bool:
+    """True when the numba dispatcher ``kernel`` has neither been compiled in this process nor
+    has an entry in numba's on-disk cache: calling it now compiles (tens of seconds of CPU for
+    the force and Taylor kernels). Reads one small index file; an internal numba API, so any
+    surprise there counts as "not cold" (no announcement rather than a wrong one)."""
+    try:
+        if kernel.signatures:
+            return False
+        return not kernel._cache._cache_file._load_index()
+    except Exception:                                     # noqa: BLE001 - numba internals moved
+        return False
+
+
+def announce_compiling(kernels, what: str, cpu_s: float) -> None:
+    """Say once per process, on stderr, that ``what`` is being compiled when any of ``kernels``
+    is :func:`cold`, so that a first run's long silence has its reason (later runs load the
+    kernels from numba's cache in a fraction of a second)."""
+    if what in _ANNOUNCED or not any(cold(k) for k in kernels):
+        return
+    _ANNOUNCED.add(what)
+    import logging
+
+    logging.getLogger("trackproc").warning(
+        "compiling %s, once per installation (~%d s of CPU); later runs load them from the cache", what, cpu_s)

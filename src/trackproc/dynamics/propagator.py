@@ -142,6 +142,15 @@ class Trajectory:
     def raise_for_outcome(self) -> Trajectory:
         """Raise :class:`ProcessingError` unless every run reached its end; return self."""
         for run in self.runs:
+            if run.outcome is taylor.Outcome.REENTRY:
+                from trackproc.dynamics.forces.integrator import REENTRY_RADIUS_M
+
+                reached = self.times_utc(run.t_end_s)
+                raise ProcessingError(
+                    f"the orbit re-enters: its geocentric radius fell below {REENTRY_RADIUS_M / 1e3:g} km (about "
+                    f"100 km altitude) at {iso_utc(reached, 3)} (t = {run.t_end_s:.3f} s from the epoch); "
+                    "propagation stopped there",
+                    {"outcome": run.outcome.value, "t_reached_s": run.t_end_s, "steps": run.n_steps})
             if run.outcome is not taylor.Outcome.SUCCESS:
                 reached = self.times_utc(run.t_end_s)
                 raise ProcessingError(

@@ -363,7 +363,11 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
 def _propagate_compiled(s0, t0, t1, p, mu, kj2, tol, stm, mu_sensitivity, max_steps, *, force,
                         j2, re_m, batch) -> Propagation:
     """:func:`propagate` of one trajectory by the compiled loop (:mod:`taylor_jit`)."""
+    from trackproc.dynamics import jit
+
     tj = _jit_module()
+    jit.announce_compiling([tj.propagate_var if stm else tj.propagate_state, tj.dense],
+                           "the Taylor engine's kernels", 10)
     r0 = np.ascontiguousarray(s0[0, :3], dtype=float)
     v0 = np.ascontiguousarray(s0[0, 3:], dtype=float)
     args = (float(t0), float(t1), int(p), float(mu), float(kj2))

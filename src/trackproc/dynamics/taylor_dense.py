@@ -28,6 +28,7 @@ class Outcome(Enum):
     SUCCESS = "success"          #: the requested end time was reached
     STEP_LIMIT = "step_limit"    #: ``max_steps`` steps were taken before the end time
     NON_FINITE = "non_finite"    #: a coefficient became NaN or infinite (e.g. r = 0)
+    REENTRY = "reentry"          #: the orbit came below the re-entry radius (full force model)
 
 
 

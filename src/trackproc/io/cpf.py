@@ -26,6 +26,7 @@ import numpy as np
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
 from trackproc.io.tabular import decode_text
+from trackproc.io.validate import MAX_SPAN_S, ORBIT_RADIUS_RANGE_M
 
 
 @dataclass(frozen=True)
@@ -82,6 +83,12 @@ def parse_cpf(data: bytes, source: str) -> CpfEphemeris:
             if not all(math.isfinite(v) for v in p + [s]):
                 raise InputError("invalid CPF position record", file=source, row=row, column="10",
                                  found=line.strip(), expected="finite numbers")
+            radius = math.sqrt(sum(v * v for v in p))
+            if not ORBIT_RADIUS_RANGE_M[0] <= radius <= ORBIT_RADIUS_RANGE_M[1]:
+                raise InputError(f"implausible CPF position: |r| = {radius:.6g} m", file=source, row=row,
+                                 column="10 (x y z)", found=line.strip(),
+                                 expected=f"a geocentric position in metres, |r| between {ORBIT_RADIUS_RANGE_M[0]:g} "
+                                          f"and {ORBIT_RADIUS_RANGE_M[1]:g} m (kilometres given?)")
             mjd.append(m)
             sod.append(s)
             xyz.append(p)
@@ -97,6 +104,21 @@ def parse_cpf(data: bytes, source: str) -> CpfEphemeris:
     order = np.argsort(times, kind="stable")
     return CpfEphemeris(times=times[order], r_itrf=np.array(xyz, float)[order], target=target, source=source,
                         com_corrected=com)
+
+
+def check_reference(eph: CpfEphemeris, epoch, *, column: str = "--compare") -> None:
+    """A CPF as the reference of an orbit from ``epoch``: at least two positions (a distance at
+    one instant says nothing about an orbit) and every epoch within the propagation bound
+    (:data:`~trackproc.io.validate.MAX_SPAN_S`, 400 days) of the state's epoch."""
+    if len(eph.times) < 2:
+        raise InputError("a single CPF position cannot check an orbit", file=eph.source, column=column,
+                         found=f"{len(eph.times)} position record", expected="two or more 10 records")
+    epoch = np.datetime64(epoch, "ns")
+    far = max(abs((eph.times[0] - epoch) / np.timedelta64(1, "s")), abs((eph.times[-1] - epoch) / np.timedelta64(1, "s")))
+    if far > MAX_SPAN_S:
+        raise InputError("the CPF lies too far from the state's epoch", file=eph.source, column=column,
+                         found=f"{far / 86400:.1f} days from {str(epoch.astype('datetime64[s]'))}Z",
+                         expected=f"CPF epochs within {MAX_SPAN_S / 86400:g} days of the state (the propagation bound)")
 
 
 def read_cpf(path: str) -> CpfEphemeris:

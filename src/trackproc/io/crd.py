@@ -50,6 +50,9 @@ from trackproc.isotime import iso_utc
 UTC_SCALES = {3, 4, 7, 10}
 RANGE_TYPES = {0: "no ranges", 1: "one-way", 2: "two-way", 3: "receive times only", 4: "mixed"}
 _NS = 1_000_000_000
+#: Record types of CRD v1/v2 (header, configuration and data records); anything else is refused.
+KNOWN_RECORDS = ({f"H{k}" for k in range(1, 10)} | {f"C{k}" for k in range(0, 8)}
+                 | {"00", "10", "11", "12", "20", "21", "30", "40", "41", "42", "50", "60"})
 
 
 def looks_like_crd(head: str) -> bool:
@@ -94,11 +97,33 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
     times, full_rate = [], []             # (reception ns, station, value m, line, pass id) of 11 / 10 records
     wavelengths = {}
     version = None
+    open_session = None                   # row of an H4 not yet closed by its H8
+    ended = None                          # row of the H9 (end of file)
+    last_row = 0
     for row, line in enumerate(text.splitlines(), start=1):
         fields = line.split()
         if not fields:
             continue
+        last_row = row
         rec = fields[0].upper()
+        if rec not in KNOWN_RECORDS:
+            raise InputError("unknown CRD record type", file=source, row=row, column="record type", found=fields[0],
+                             expected="H1-H9, C0-C7, 00, 10-12, 20, 21, 30, 40-42, 50 or 60 (ILRS CRD v1/v2)")
+        if ended is not None and rec != "00":
+            raise InputError(f"record {fields[0]} after the end of file (H9)", file=source, row=row,
+                             column="record type", found=fields[0], expected=f"nothing after the H9 of row {ended}")
+        if rec == "H4" and open_session is not None:
+            raise InputError("a new session (H4) before the previous one ended", file=source, row=row,
+                             column="record type", found=fields[0], expected=f"H8 closing the H4 of row {open_session}")
+        if rec == "H4":
+            open_session = row
+        elif rec == "H8":
+            open_session = None
+        elif rec == "H9":
+            if open_session is not None:
+                raise InputError("end of file (H9) inside a session", file=source, row=row, column="record type",
+                                 found=fields[0], expected=f"H8 closing the H4 of row {open_session} first")
+            ended = row
         if rec == "H1":
             if len(fields) < 3 or fields[1].upper() != "CRD":
                 raise InputError("not a CRD H1 header", file=source, row=row, column="H1", found=line.strip(),
@@ -158,7 +183,8 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
                                  else "a two-way time of flight in (0, 1) s")
             t_ns = _sod_ns(session, sod) + round({0: 0.0, 1: tof / 2, 2: tof}[event] * _NS)
             target = full_rate if rec == "10" else times
-            target.append((t_ns, session["station"], C_LIGHT * tof / 2, row, _pass_id(session)))
+            sigma = _normal_point_sigma(fields) if rec == "11" else math.nan
+            target.append((t_ns, session["station"], C_LIGHT * tof / 2, row, _pass_id(session), sigma))
         elif rec == "20":
             sod = _number(fields, 1, "seconds of day", source, row)
             values20 = [_number(fields, k, name, source, row) for k, name in
@@ -167,18 +193,23 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
     if version is None:
         raise InputError("not a CRD file", file=source, row=1, found="no H1 header",
                          expected="an ILRS CRD file (H1 CRD ...)")
+    if open_session is not None or ended is None:
+        raise InputError("the file ends without its end records (cut short?)", file=source, row=last_row,
+                         column="record type", found="no H8 after the H4 of row %d" % open_session
+                         if open_session is not None else "no H9",
+                         expected="each session closed by H8 and the file by H9")
     samples = times or full_rate
     if not samples:
         raise InputError("no range records", file=source, row=1, found="no 11 (or 10) records",
                          expected="CRD normal points")
-    t_ns, stations, values, rows, pass_ids = (list(x) for x in zip(*samples))
+    t_ns, stations, values, rows, pass_ids, sigmas = (list(x) for x in zip(*samples))
     frame = pd.DataFrame({
         "time": pd.to_datetime(np.array(t_ns, dtype=np.int64), utc=True).as_unit("ns"),
         "station": np.array(stations, dtype=object),
         "pass_id": np.array(pass_ids, dtype=object),
         "kind": "range",
         "value": np.array(values, float),
-        "sigma": np.nan,
+        "sigma": np.array(sigmas, float),
         "row": np.array(rows, dtype=np.int64),
         "unit": "m",
     })
@@ -188,6 +219,24 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
                     "meteo": {st: _meteo_meta(recs) for st, recs in sorted(meteo.items()) if st}}}
     return RawMeasurements(frame=frame, source=source, column={"range": "time of flight", "time": "seconds of day"},
                            meta=meta)
+
+
+def _normal_point_sigma(fields) -> float:
+    """The one-way precision of a normal point (m): ``c/2 · rms / √n`` from its record 11's bin
+    RMS (ps, two-way, of the ``n`` raw ranges about the trend; ILRS CRD v1.01/v2.01 record 11
+    fields 8 and 7), the standard error of the bin's mean; the RMS alone when ``n`` is not given;
+    NaN (ingest's ``--sigma-range-m`` then) when the RMS is missing, ``na`` or not positive."""
+    try:
+        rms_ps = float(fields[7])
+    except (IndexError, ValueError):
+        return math.nan
+    try:
+        n = int(fields[6])
+    except (IndexError, ValueError):
+        n = 1
+    if not (math.isfinite(rms_ps) and rms_ps > 0):
+        return math.nan
+    return C_LIGHT * rms_ps * 1e-12 / 2 / math.sqrt(max(n, 1))
 
 
 def _sod_ns(session, sod: float) -> int:

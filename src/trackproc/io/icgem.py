@@ -26,11 +26,14 @@ the file, the line and what was expected. ``.gz`` files are read transparently.
 from __future__ import annotations
 
 import gzip
+import math
+import zlib
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
+from trackproc.constants import MAX_GRAVITY_DEGREE
 from trackproc.dynamics.forces.gravity_field import GravityField
 from trackproc.errors import InputError
 
@@ -53,6 +56,72 @@ def _open(path: Path):
     if path.suffix == ".gz":
         return gzip.open(path, "rt", encoding="latin-1")
     return open(path, encoding="latin-1")
+
+
+#: A header's max_degree above this is refused before anything is allocated: the highest-degree
+#: model ICGEM serves (Earth2014, degree 10800).
+MAX_HEADER_DEGREE = 10800
+#: An Earth field's constants (refusing km for m, km^3/s^2 for m^3/s^2 or another body's field):
+#: GM within 0.1 % of 3.986004418e14 m^3/s^2, the reference radius 6.3e6 to 6.4e6 m.
+_EARTH_GM = (3.982e14, 3.990e14)
+_EARTH_RADIUS_M = (6.3e6, 6.4e6)
+
+
+def _lines(fh, fname: str):
+    """``enumerate(fh, 1)`` with a damaged file (a compressed stream that ends early, a corrupt
+    block) an :class:`InputError` naming the file and the last line read."""
+    lineno = 0
+    try:
+        for lineno, line in enumerate(fh, 1):
+            yield lineno, line
+    except (EOFError, zlib.error, gzip.BadGzipFile, OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"the file is damaged or cut short ({type(exc).__name__}: {exc})", file=fname,
+                         row=lineno + 1, expected="a complete ICGEM file (a .gz file decompressed to its end)") from None
+
+
+def check_request(degree, order, fname: str) -> None:
+    """The requested degree and order: at most :data:`~trackproc.constants.MAX_GRAVITY_DEGREE`."""
+    if degree is not None and not 0 <= degree <= MAX_GRAVITY_DEGREE:
+        raise InputError(f"gravity degree {degree} requested", file=fname, column="--gravity", found=degree,
+                         expected=f"a degree from 0 to {MAX_GRAVITY_DEGREE} (terms beyond it are below 1e-13 of "
+                                  "the central term at 200 km altitude)")
+    if order is not None and degree is not None and not 0 <= order <= degree:
+        raise InputError(f"gravity order {order} requested", file=fname, column="--gravity", found=order,
+                         expected=f"0 <= order <= degree {degree}")
+
+
+def check_field(static: dict, terms: list, nmax: int, order, lmax: int, fname: str, rows: dict) -> None:
+    """The parsed coefficients against the header and the degree used: each finite and below 1
+    in magnitude (fully normalised coefficients of degree >= 1 are), and every coefficient of
+    degree 2 to ``nmax`` (orders up to ``order``) present as a ``gfc`` or ``gfct`` line -- a
+    missing one would silently count as zero (a file cut short, a header promising more than it
+    holds). Degrees 0 and 1 may be omitted (C00 = 1; no degree-1 terms in a geocentric frame)."""
+    for (n, m), (c, s) in static.items():
+        if not (math.isfinite(c) and math.isfinite(s)) or (n >= 1 and (abs(c) >= 1 or abs(s) >= 1)):
+            raise InputError("implausible coefficient", file=fname, row=rows.get((n, m)), column=f"L={n} M={m}",
+                             found=f"C {c!r}, S {s!r}", expected="finite fully normalised values, |C|, |S| < 1")
+    seen = set()
+    for kind, n, m, c, s, t0, t1, period in terms:
+        if not (math.isfinite(c) and math.isfinite(s)):
+            raise InputError(f"non-finite {kind} coefficient", file=fname, column=f"L={n} M={m}",
+                             found=f"C {c!r}, S {s!r}", expected="finite values")
+        key = (kind, n, m, t0, t1, period)      # ICGEM 2.0 repeats a term only for another interval
+        if key in seen:
+            raise InputError(f"{kind} term of L={n} M={m} listed twice (it would be added twice)", file=fname,
+                             column=f"L={n} M={m}", found=f"two {kind} lines for the same interval"
+                             + (f" and period {period:g} y" if period else ""),
+                             expected=f"one {kind} line per L, M and validity interval")
+        seen.add(key)
+    present = set(static) | {(n, m) for kind, n, m, *_ in terms if kind == "gfct"}
+    mmax = nmax if order is None else order
+    for n in range(2, nmax + 1):
+        for m in range(min(n, mmax) + 1):
+            if (n, m) not in present:
+                held = max((k[0] for k in present), default=0)
+                raise InputError(f"coefficient L={n} M={m} missing", file=fname, column=f"L={n} M={m}",
+                                 found=f"coefficients up to degree {held} (header max_degree {lmax})",
+                                 expected=f"every coefficient up to the degree used ({nmax}): lower --gravity "
+                                          "or give a complete file")
 
 
 def _date_days(text: str, where) -> float:
@@ -81,6 +150,7 @@ def read_icgem(path, degree: int | None = None, order: int | None = None, date=N
     fname = str(path)
     if not path.is_file():
         raise InputError("gravity field file not found", file=fname, expected="an ICGEM .gfc file")
+    check_request(degree, order, fname)
     when = None
     if date is not None:
         d = np.datetime64(str(date).rstrip("Zz") if isinstance(date, str) else date, "s")
@@ -89,9 +159,10 @@ def read_icgem(path, degree: int | None = None, order: int | None = None, date=N
     in_header = False
     static: dict = {}
     terms: list = []                     # (kind, n, m, c, s, t0, t1, period)
+    rows: dict = {}
     lmax = None
     with _open(path) as fh:
-        for lineno, line in enumerate(fh, 1):
+        for lineno, line in _lines(fh, fname):
             words = line.split()
             if not words:
                 continue
@@ -127,8 +198,12 @@ def read_icgem(path, degree: int | None = None, order: int | None = None, date=N
                 continue
             rest = words[5 + header["_nsig"]:]
             if key == "gfc":
-                static[(n, m)] = static.get((n, m), (0.0, 0.0))
-                static[(n, m)] = (static[(n, m)][0] + c, static[(n, m)][1] + s)
+                if (n, m) in static and static[(n, m)] != (c, s):
+                    raise InputError(f"coefficient L={n} M={m} listed twice with different values", **where,
+                                     found=f"C {c!r}, S {s!r} (row {rows[(n, m)]}: C {static[(n, m)][0]!r}, "
+                                           f"S {static[(n, m)][1]!r})", expected="one gfc line per L, M")
+                static[(n, m)] = (c, s)
+                rows.setdefault((n, m), lineno)
                 continue
             if key == "gfct":
                 if not rest:
@@ -155,6 +230,8 @@ def read_icgem(path, degree: int | None = None, order: int | None = None, date=N
     if lmax is None:
         raise InputError("no ICGEM header", file=fname, expected="a header ending in end_of_head")
     nmax = lmax if degree is None else degree
+    check_request(nmax, order, fname)
+    check_field(static, terms, nmax, order, lmax, fname, rows)
     cbar = np.zeros((nmax + 1, nmax + 1))
     sbar = np.zeros((nmax + 1, nmax + 1))
     for (n, m), (c, s) in static.items():
@@ -186,6 +263,17 @@ def _check_header(header: dict, fname: str, lineno: int) -> int:
     if not (gm > 0 and radius > 0 and lmax >= 0):
         raise InputError("bad header value", file=fname, row=lineno, found=f"GM {gm}, radius {radius}, max_degree {lmax}",
                          expected="positive GM and radius, max_degree >= 0")
+    if not _EARTH_GM[0] <= gm <= _EARTH_GM[1]:
+        raise InputError("implausible earth_gravity_constant", file=fname, row=lineno, column="earth_gravity_constant",
+                         found=header["earth_gravity_constant"],
+                         expected=f"the Earth's GM in m^3/s^2, {_EARTH_GM[0]:.4g} to {_EARTH_GM[1]:.4g}")
+    if not _EARTH_RADIUS_M[0] <= radius <= _EARTH_RADIUS_M[1]:
+        raise InputError("implausible radius", file=fname, row=lineno, column="radius", found=header["radius"],
+                         expected=f"the Earth's reference radius in metres, {_EARTH_RADIUS_M[0]:.3g} to "
+                                  f"{_EARTH_RADIUS_M[1]:.3g}")
+    if lmax > MAX_HEADER_DEGREE:
+        raise InputError("implausible max_degree", file=fname, row=lineno, column="max_degree", found=lmax,
+                         expected=f"at most {MAX_HEADER_DEGREE} (the highest-degree model published, Earth2014)")
     norm = header.get("norm", "fully_normalized").lower()
     if norm not in ("fully_normalized", "fully_normalised"):
         raise InputError("unsupported normalisation", file=fname, row=lineno, found=norm, expected="fully_normalized")

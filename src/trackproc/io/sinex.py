@@ -28,6 +28,11 @@ from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
 
 _YEAR_S = 365.25 * 86400.0
+#: Largest plausible station velocity, m/yr: plates move at most ~0.2 m/yr (ITRF2020); a larger
+#: value is a unit mistake (mm/yr given as m/yr) or a damaged file.
+MAX_STATION_SPEED_M_YR = 1.0
+#: A station position must lie near the Earth's surface: |X| within 6.3e6 to 6.4e6 m.
+_STATION_RADIUS_M = (6.3e6, 6.4e6)
 
 
 def looks_like_sinex(data: bytes) -> bool:
@@ -111,6 +116,8 @@ def sinex_stations(data: bytes, source: str, epoch, eccentricities: tuple[bytes,
                              expected="a finite number")
         entry = values.setdefault((f[2], f[3], f[4]), {"row": row})
         entry[ptype] = value
+        if ptype.startswith("VEL"):
+            entry.setdefault("vrow", row)
         if ptype.startswith("STA"):
             entry["t0"] = parse_sinex_epoch(f[5], source, row, "reference epoch")
     chosen: dict = {}
@@ -132,6 +139,18 @@ def sinex_stations(data: bytes, source: str, epoch, eccentricities: tuple[bytes,
     stations = {}
     for code, (key, entry) in sorted(chosen.items()):
         r = np.array([entry["STAX"], entry["STAY"], entry["STAZ"]])
+        if not _STATION_RADIUS_M[0] <= float(np.linalg.norm(r)) <= _STATION_RADIUS_M[1]:
+            raise InputError(f"implausible station position: |X| = {np.linalg.norm(r):.6g} m", file=source,
+                             row=entry["row"], column="STAX/STAY/STAZ", found=f"site {code}",
+                             expected=f"a geocentric position in metres, |X| between {_STATION_RADIUS_M[0]:g} and "
+                                      f"{_STATION_RADIUS_M[1]:g} m")
+        vel = [entry.get(k) for k in ("VELX", "VELY", "VELZ")]
+        speed = math.sqrt(sum(v * v for v in vel if v is not None))
+        if speed > MAX_STATION_SPEED_M_YR:
+            raise InputError(f"implausible station velocity: |V| = {speed:.6g} m/yr", file=source,
+                             row=entry.get("vrow", entry["row"]), column="VELX/VELY/VELZ", found=f"site {code}",
+                             expected=f"|V| below {MAX_STATION_SPEED_M_YR:g} m/yr (plates move at most ~0.2 m/yr; "
+                                      "mm/yr given as m/yr?)")
         if all(k in entry for k in ("VELX", "VELY", "VELZ")):
             dt_y = (epoch - entry["t0"]) / np.timedelta64(1, "s") / _YEAR_S
             r = r + dt_y * np.array([entry["VELX"], entry["VELY"], entry["VELZ"]])

@@ -75,7 +75,102 @@ def parse_tle(text: str, source: str = "<tle>") -> Tle:
         raise InputError("the two TLE lines are for different satellites", file=source, row=numbered[1][0],
                          column="satellite number (columns 3-7)", found=lines[1][2:7].strip(),
                          expected=lines[0][2:7].strip())
+    check_elements(lines[0], lines[1], source, numbered[0][0], numbered[1][0])
     return Tle(name=name, line1=lines[0], line2=lines[1], source=source)
+
+
+#: Plausible Kozai mean motion, rev/day: above 0.005 (a semi-major axis inside the Earth's Hill
+#: sphere, ~1.5e6 km) and below 17.04 (a semi-major axis above the Earth's equatorial radius).
+MEAN_MOTION_RANGE_REV_DAY = (0.005, 17.04)
+#: Plausible |B*| (1/earth radii): catalogue values are 1e-5 to 1e-2; 1 would decay in a revolution.
+BSTAR_MAX = 1.0
+
+# Columns (1-based, inclusive) of the fields SGP4 uses (CelesTrak "NORAD Two-Line Element Set Format").
+_LINE1_FIELDS = {"epoch year": (19, 20), "epoch day": (21, 32), "B*": (54, 61)}
+_LINE2_FIELDS = {"inclination": (9, 16), "right ascension of the node": (18, 25), "eccentricity": (27, 33),
+                 "argument of perigee": (35, 42), "mean anomaly": (44, 51), "mean motion": (53, 63)}
+
+
+def _field(line: str, name: str, columns: tuple, source: str, row: int) -> tuple[str, str]:
+    text = line[columns[0] - 1:columns[1]]
+    return text, f"{name} (columns {columns[0]}-{columns[1]})"
+
+
+def _number(line, name, columns, source, row, expected) -> float:
+    import math
+
+    text, column = _field(line, name, columns, source, row)
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise InputError("invalid TLE field", file=source, row=row, column=column, found=text.strip(),
+                         expected=expected)
+    return value
+
+
+def exp_field_value(text: str) -> float:
+    """The value of a ``±MMMMM±E`` field (an assumed leading decimal point), e.g. ``-11606-4``
+    = -0.11606e-4; ValueError when it is not one."""
+    t = text.strip()
+    if not t:
+        raise ValueError("empty")
+    sign = -1.0 if t[0] == "-" else 1.0
+    t = t.lstrip("+-")
+    m = __import__("re").fullmatch(r"(\d{1,5})([+-])(\d)", t)
+    if m is None:
+        if t.strip("0") == "":
+            return 0.0
+        raise ValueError(text)
+    return sign * float("0." + m.group(1).rjust(5, "0")) * 10.0 ** (int(m.group(3)) * (-1 if m.group(2) == "-" else 1))
+
+
+def check_elements(line1: str, line2: str, source: str, row1: int, row2: int) -> None:
+    """Refuse element fields that are not numbers or not physically possible, naming the file,
+    the row and the field: the epoch (day 1 to 365, or 366 in a leap year), the angles
+    (inclination 0-180 deg, the others 0-360 deg), the eccentricity digits, the mean motion
+    (:data:`MEAN_MOTION_RANGE_REV_DAY`) and B* (finite, below :data:`BSTAR_MAX`)."""
+    year_text, year_col = _field(line1, "epoch year", _LINE1_FIELDS["epoch year"], source, row1)
+    if not year_text.isdigit():
+        raise InputError("invalid TLE field", file=source, row=row1, column=year_col, found=year_text,
+                         expected="two digits (57-99: 19YY, 00-56: 20YY)")
+    yy = int(year_text)
+    year = 1900 + yy if yy >= 57 else 2000 + yy
+    leap = year % 4 == 0 and (year % 100 != 0 or year % 400 == 0)
+    day = _number(line1, "epoch day", _LINE1_FIELDS["epoch day"], source, row1, "a day of the year DDD.DDDDDDDD")
+    last = 367.0 if leap else 366.0
+    if not 1.0 <= day < last:
+        raise InputError(f"TLE epoch day outside the year {year}", file=source, row=row1,
+                         column="epoch day (columns 21-32)", found=day,
+                         expected=f"1 <= day < {last:.0f} ({'a leap year' if leap else 'not a leap year'})")
+    text, column = _field(line1, "B*", _LINE1_FIELDS["B*"], source, row1)
+    try:
+        bstar = exp_field_value(text)
+    except ValueError:
+        raise InputError("invalid TLE field", file=source, row=row1, column=column, found=text,
+                         expected="an exponent field like ' 12345-4' (0.12345e-4)") from None
+    if not abs(bstar) < BSTAR_MAX:
+        raise InputError("implausible B* drag term", file=source, row=row1, column=column, found=text,
+                         expected=f"|B*| < {BSTAR_MAX:g} per earth radius (catalogue values are 1e-5 to 1e-2)")
+    ranges = {"inclination": (0.0, 180.0, True), "right ascension of the node": (0.0, 360.0, False),
+              "argument of perigee": (0.0, 360.0, False), "mean anomaly": (0.0, 360.0, False)}
+    for name, (lo, hi, closed) in ranges.items():
+        value = _number(line2, name, _LINE2_FIELDS[name], source, row2, f"an angle in degrees, {lo:g} to {hi:g}")
+        if not (lo <= value <= hi if closed else lo <= value < hi + 1e-9):
+            raise InputError(f"TLE {name} out of range", file=source, row=row2,
+                             column=_field(line2, name, _LINE2_FIELDS[name], source, row2)[1], found=value,
+                             expected=f"{lo:g} to {hi:g} degrees")
+    text, column = _field(line2, "eccentricity", _LINE2_FIELDS["eccentricity"], source, row2)
+    if not text.replace(" ", "0").isdigit():
+        raise InputError("invalid TLE field", file=source, row=row2, column=column, found=text,
+                         expected="7 digits after an assumed decimal point (0 <= e < 1)")
+    lo, hi = MEAN_MOTION_RANGE_REV_DAY
+    n = _number(line2, "mean motion", _LINE2_FIELDS["mean motion"], source, row2, "revolutions per day")
+    if not lo < n < hi:
+        raise InputError("implausible TLE mean motion", file=source, row=row2, column="mean motion (columns 53-63)",
+                         found=n, expected=f"{lo:g} < n < {hi:g} revolutions per day (an orbit above the Earth's "
+                                           "surface and inside its Hill sphere)")
 
 
 def read_tle(path: str) -> Tle:
@@ -90,9 +185,29 @@ def satrec(tle: Tle):
 
     sat = Satrec.twoline2rv(tle.line1, tle.line2)
     if sat.error:
-        raise InputError(f"SGP4 rejects the elements (error {sat.error})", file=tle.source,
-                         expected="valid mean elements")
+        raise InputError(f"SGP4 rejects the elements: {sgp4_error_text(sat.error)}", file=tle.source,
+                         column=_SGP4_ERROR_FIELD.get(int(sat.error), "elements"), expected="valid mean elements")
     return sat
+
+
+#: SGP4's error codes (Vallado et al. 2006, AIAA 2006-6753, sgp4 ``SGP4_ERRORS``) in words, and
+#: the TLE field each points at.
+_SGP4_ERROR_TEXT = {
+    1: "mean eccentricity outside 0 to 1",
+    2: "mean motion below zero",
+    3: "perturbed eccentricity outside 0 to 1 (the drag or the eccentricity is too large)",
+    4: "semi-latus rectum below zero",
+    5: "the orbit is below the Earth's surface",
+    6: "the satellite has decayed (its orbit radius fell below the Earth's radius)",
+}
+_SGP4_ERROR_FIELD = {1: "eccentricity (columns 27-33)", 2: "mean motion (columns 53-63)",
+                     3: "eccentricity (columns 27-33) / B* (columns 54-61)", 4: "eccentricity (columns 27-33)",
+                     5: "mean motion (columns 53-63)", 6: "mean motion (columns 53-63) / B* (columns 54-61)"}
+
+
+def sgp4_error_text(code: int) -> str:
+    """SGP4's error ``code`` in words (with the code)."""
+    return f"{_SGP4_ERROR_TEXT.get(int(code), 'unknown SGP4 error')} (SGP4 error {int(code)})"
 
 
 def tle_epoch(tle: Tle) -> np.datetime64:
@@ -111,9 +226,13 @@ def sgp4_teme(tle, jd1, jd2):
     jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
     err, r, v = sat.sgp4_array(jd1, jd2)
     if np.any(err):
-        code = int(np.asarray(err)[np.flatnonzero(err)[0]])
-        raise ProcessingError(f"SGP4 failed for {getattr(tle, 'source', 'the elements')} (error {code}: decayed or invalid elements "
-                              "at the requested time)")
+        first = int(np.flatnonzero(err)[0])
+        code = int(np.asarray(err)[first])
+        from trackproc.dynamics.timescales import jd_utc_to_datetime64
+
+        when = str(np.datetime64(jd_utc_to_datetime64(jd1[first], jd2[first]), "s")) + "Z"
+        raise ProcessingError(f"SGP4 failed for {getattr(tle, 'source', 'the elements')} at {when}: "
+                              f"{sgp4_error_text(code)}")
     return np.asarray(r) * 1e3, np.asarray(v) * 1e3
 
 
@@ -241,7 +360,10 @@ def format_tle(elements: MeanElements, template: Tle | None = None, *, satnum: s
     line2 += str(checksum(line2))
     if name is None and template is not None:
         name = template.name
-    return parse_tle("\n".join(([name] if name else []) + [line1, line2]), "<fitted TLE>")
+    try:
+        return parse_tle("\n".join(([name] if name else []) + [line1, line2]), "<fitted TLE>")
+    except InputError as exc:
+        raise ValueError(str(exc)) from None
 
 
 def tle_text(tle: Tle) -> str:

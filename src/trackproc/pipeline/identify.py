@@ -24,11 +24,14 @@ by any pass, and the best-fitting prediction need not carry the right label.
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
 
 from trackproc.errors import InputError
+
+log = logging.getLogger("trackproc")
 
 #: Likelihood ratio below which a runner-up is excluded (Jeffreys: odds above 100:1 are decisive).
 DECISIVE_LR = 0.01
@@ -42,6 +45,8 @@ def parse_catalogue(text: str, source: str = "<catalogue>") -> list:
 
     lines = text.splitlines()
     tles, i, n = [], 0, len(lines)
+    seen: dict = {}
+    repeats: list = []
 
     def element(k, number):
         return k < n and lines[k].startswith(number + " ") and len(lines[k].rstrip()) == 69
@@ -55,18 +60,32 @@ def parse_catalogue(text: str, source: str = "<catalogue>") -> list:
         if not element(i, "1"):
             name, i = lines[i], i + 1
         if not (element(i, "1") and element(i + 1, "2")):
+            bad = i + 1 if element(i, "1") else i      # the line that is not what it should be
             raise InputError("not a TLE (expected an optional name line, then lines 1 and 2 of 69 characters)",
-                             file=source, row=i + 1, found=(lines[i][:30] if i < n else "end of file"),
-                             expected="a line '1 ...' followed by a line '2 ...'")
+                             file=source, row=bad + 1, found=(lines[bad][:30] if bad < n else "end of file"),
+                             expected=f"a line '{'2' if bad > i else '1'} ...' of 69 characters")
         block = ([name] if name is not None else []) + [lines[i], lines[i + 1]]
         try:
-            tles.append(parse_tle("\n".join(block), source))
+            tle = parse_tle("\n".join(block), source)
         except InputError as exc:
-            raise InputError(f"{exc.args[0] if exc.args else exc} (the TLE starting on line {start + 1})",
-                             file=source, row=start + 1) from None
+            # parse_tle counts the block's rows from 1: give the catalogue's row
+            raise InputError(exc.detail, file=source, row=start + (exc.row or 1), column=exc.column,
+                             found=exc.found, expected=exc.expected) from None
+        previous = seen.get(tle.satnum)
+        if previous is None:
+            seen[tle.satnum] = (start + 1, tle)
+        else:
+            same = (previous[1].line1[18:68], previous[1].line2[8:68]) == (tle.line1[18:68], tle.line2[8:68])
+            repeats.append((tle.satnum, previous[0], start + 1, same))
+        tles.append(tle)
         i += 2
     if not tles:
         raise InputError("no TLE in the catalogue", file=source, expected="one or more TLEs")
+    if repeats:
+        satnum, first, again, same = repeats[0]
+        log.warning("%s: %d element set(s) repeat a catalogue number already listed (first: %s at rows %d and %d%s); "
+                    "each is ranked as a candidate of its own", source, len(repeats), satnum, first, again,
+                    ", the same elements" if same else ", different elements")
     return tles
 
 

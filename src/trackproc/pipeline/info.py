@@ -21,6 +21,7 @@ from trackproc.io.statefile import format_epoch, parse_state
 from trackproc.io.tdm import read_tdm
 from trackproc.io.tle import parse_tle, tle_epoch
 from trackproc.isotime import iso_utc
+from trackproc.pipeline.numbers import format_number
 
 
 @dataclass
@@ -197,6 +198,19 @@ def _state_summary(r_m, v_m_s, mu: float | None = None) -> dict:
             "speed_m_s": round(float(np.linalg.norm(v_m_s)), 3), "elements": rounded}
 
 
+def parameter_unit(name: str) -> str:
+    """The unit of an estimated parameter from its name (``x`` m, ``vx`` m/s, ``range_bias:CPH`` m, ...)."""
+    from trackproc.vocabulary import BIAS_UNITS, CONSTRAINT_PARAMETERS, FORCE_PARAMETERS
+
+    if name in ("x", "y", "z"):
+        return "m"
+    if name in ("vx", "vy", "vz"):
+        return "m/s"
+    family = name.split(":", 1)[0]
+    unit = BIAS_UNITS.get(family) or FORCE_PARAMETERS.get(name) or CONSTRAINT_PARAMETERS.get(name)
+    return unit if isinstance(unit, str) else ""
+
+
 def state_info(data: bytes, source: str) -> dict:
     """A state file (JSON): epoch, frame, the state, its osculating elements, the estimated
     parameters with their sigmas, the force model and the solution's quality when recorded."""
@@ -210,6 +224,11 @@ def state_info(data: bytes, source: str) -> dict:
         sigma = np.sqrt(np.clip(np.diag(state.covariance), 0.0, None))
     if sigma is not None:
         out["sigma"] = {p: float(s) for p, s in zip(state.parameters, sigma)}
+        recorded = (doc.get("diagnostics") or {}).get("units")
+        names = list(state.parameters)
+        units = recorded if isinstance(recorded, list) and len(recorded) == len(names) else [
+            parameter_unit(p) for p in names]
+        out["units"] = dict(zip(names, units))
     out["covariance"] = state.covariance is not None
     out["force_model"] = doc.get("force_model")
     for key in ("quality", "earth_orientation"):
@@ -229,7 +248,17 @@ def tle_info(data: bytes, source: str) -> dict:
             "epoch": format_epoch(tle_epoch(tle)), "inclination_deg": float(l2[8:16]), "raan_deg": float(l2[17:25]),
             "eccentricity": float("0." + l2[26:33].strip()), "argp_deg": float(l2[34:42]),
             "mean_anomaly_deg": float(l2[43:51]), "mean_motion_rev_per_day": float(l2[52:63]),
-            "bstar": tle.line1[53:61].strip()}
+            "bstar": bstar(tle.line1)}
+
+
+def bstar(line1: str) -> float:
+    """B* of a TLE line 1 (columns 54-61, an assumed leading decimal point and an exponent:
+    ``-11606-4`` is -0.11606e-4 = -1.1606e-5 per Earth radius; Hoots & Roehrich, Spacetrack
+    Report No. 3, 1980, the element set format)."""
+    field = line1[53:61].strip()
+    mantissa, exponent = field[:-2].strip(), field[-2:]
+    sign = -1.0 if mantissa.startswith("-") else 1.0
+    return sign * float("0." + mantissa.lstrip("+-").strip()) * 10.0 ** int(exponent)
 
 
 def opm_info(data: bytes, source: str) -> dict:
@@ -244,6 +273,7 @@ def opm_info(data: bytes, source: str) -> dict:
     if cov is not None:
         names = ("x", "y", "z", "vx", "vy", "vz")
         out["sigma"] = {n: float(s) for n, s in zip(names, np.sqrt(np.clip(np.diag(cov), 0, None)))}
+        out["units"] = {n: parameter_unit(n) for n in names}
     return out
 
 
@@ -291,31 +321,54 @@ def tdm_info(data: bytes, source: str) -> dict:
             "carrier_hz": raw.meta.get("carrier_hz")}
 
 
-def file_kind(data: bytes) -> str:
-    """What a file is, from its first bytes: state, tle, opm, oem, tdm or table (pass file /
-    ephemeris in Parquet, Arrow or CSV)."""
-    head = data.lstrip()[:4096]
-    if head.startswith(b"{"):
-        return "state"
-    for kind in (b"OPM", b"OEM", b"TDM"):
-        if head.startswith(b"CCSDS_" + kind + b"_VERS"):
-            return kind.decode().lower()
-    lines = [l.strip() for l in head.decode("ascii", errors="replace").splitlines() if l.strip()]
-    if 2 <= len(lines) <= 3 and lines[-2].startswith("1 ") and lines[-1].startswith("2 "):
-        return "tle"
-    return "table"
+def _scalar(value, digits: int = 7) -> str:
+    if value is None:
+        return "-"
+    if isinstance(value, (float, np.floating)) and not isinstance(value, bool):
+        return format_number(float(value), digits)
+    return str(value)
+
+
+def _inline(value) -> str:
+    """A list or small mapping on one line."""
+    if isinstance(value, dict):
+        if "message" in value:
+            return f"{value.get('code', '')} {value.get('severity', '')}: {value['message']}".strip()
+        return ", ".join(f"{k} {_inline(v)}" for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return ", ".join(_inline(v) for v in value)
+    return _scalar(value)
+
+
+def _lines(key: str, value, indent: int, units: dict | None = None) -> list[str]:
+    pad = " " * indent
+    width = max(28 - indent, len(key) + 2)
+    if isinstance(value, dict) and set(value) >= {"verdict", "reasons"}:      # a quality verdict
+        out = [f"{pad}{key:<{width}}{value['verdict']}"]
+        return out + [f"{pad}  {_inline(r)}" for r in value.get("reasons") or []]
+    if isinstance(value, dict) and value:
+        out = [f"{pad}{key}"]
+        for k, v in value.items():
+            if units is not None and not isinstance(v, (dict, list)):
+                unit = units.get(k, "")
+                out.append(f"{pad}  {k:<{max(width - 2, len(str(k)) + 2)}}{_scalar(v, 4)} {unit}".rstrip())
+            else:
+                out.extend(_lines(str(k), v, indent + 2))
+        return out
+    if isinstance(value, (list, tuple)) and any(isinstance(v, dict) for v in value):
+        return [f"{pad}{key}"] + [f"{pad}  {_inline(v)}" for v in value]
+    if isinstance(value, (list, tuple)):
+        return [f"{pad}{key:<{width}}{_inline(value) if value else '-'}"]
+    return [f"{pad}{key:<{width}}{_scalar(value)}"]
 
 
 def format_mapping(summary: dict) -> str:
-    """A flat ``key  value`` listing for people (nested mappings one level deep)."""
+    """The summary for people, one ``key  value`` a line: nested mappings indented, floats to
+    significant digits, sigmas with their units (``units``), a quality verdict with its reasons."""
+    units = summary.get("units") if isinstance(summary.get("units"), dict) else None
     out = []
     for key, value in summary.items():
-        if isinstance(value, dict) and value and all(not isinstance(v, (dict, list)) for v in value.values()):
-            out.append(f"{key}")
-            out.extend(f"  {k:<26}{v}" for k, v in value.items())
-        elif isinstance(value, dict) and value and all(isinstance(v, dict) for v in value.values()):
-            out.append(f"{key}")
-            out.extend(f"  {k:<26}" + ", ".join(f"{a} {b}" for a, b in v.items()) for k, v in value.items())
-        else:
-            out.append(f"{key:<28}{value}")
+        if key == "units" and units is not None and "sigma" in summary:
+            continue
+        out.extend(_lines(key, value, 0, units if key == "sigma" else None))
     return "\n".join(out) + "\n"

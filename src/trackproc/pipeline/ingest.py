@@ -63,6 +63,8 @@ class IngestOptions:
     max_gap_s: float = 300.0              # pass split where samples are further apart, s
     drop_invalid: bool = False
     sigma_range_m: float = 10.0
+    #: --sigma-range-m given: it also replaces the precision CRD normal points carry as their sigma
+    sigma_range_explicit: bool = False
     sigma_range_rate_m_s: float = 0.1
     sigma_doppler_hz: float = 1.0
     sigma_angle_deg: float = 0.01
@@ -252,6 +254,8 @@ def _chunk_frame(raw: RawMeasurements, index: int, options: IngestOptions) -> pd
         return np.array(values + [None], dtype=object)[codes] if len(codes) else np.zeros(0, object)
 
     sigma = frame["sigma"].to_numpy(dtype=np.float64).copy()
+    if options.sigma_range_explicit and raw.meta.get("crd"):
+        sigma[kind == "range"] = math.nan
     default = per_kind([defaults.get(k, math.nan) for k in kinds]).astype(np.float64)
     sigma = np.where(np.isnan(sigma), default, sigma)
     return pd.DataFrame({

@@ -14,6 +14,7 @@ import pandas as pd
 from trackproc.errors import InputError
 from trackproc.io.layouts import UNIT_SPELLINGS
 from trackproc.io.passfile import KINDS
+from trackproc.io.raw import KIND_UNITS
 from trackproc.io.problems import NONFINITE_SIGMA, NONFINITE_VALUE, UNKNOWN_KIND, Problems
 from trackproc.io.raw import RawMeasurements
 from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_carrier, check_los_speed
@@ -23,6 +24,12 @@ if TYPE_CHECKING:
     from trackproc.pipeline.ingest import IngestOptions
 
 NONPOSITIVE_SIGMA = "non-positive sigma"
+TINY_SIGMA = "sigma below the floor"
+#: Smallest sigma accepted per kind (SI): far below any tracking system (laser normal points reach
+#: ~1 mm, deep-space Doppler ~0.05 mm/s and 0.1 mHz, optical angles ~0.05 arcsec = 2.4e-7 rad); a
+#: smaller one is a unit mistake or a placeholder, and its weight 1/sigma^2 would swamp every
+#: other sample (1e-300 overflows to inf).
+SIGMA_FLOOR = {"range": 1e-6, "range_rate": 1e-8, "doppler": 1e-6, "elevation": 1e-10, "azimuth": 1e-10}
 ELEVATION_RANGE = "elevation out of range"
 NEGATIVE_RANGE = "negative range"
 AZIMUTH_RANGE = "azimuth out of range"
@@ -56,6 +63,10 @@ def sample_problems(frame: pd.DataFrame) -> Problems:
                  expected="a finite sigma > 0")
     problems.add(NONPOSITIVE_SIGMA, sigma <= 0, column=sigma_col, found=sigma_written,
                  expected="sigma > 0")
+    floor = pd.Series(kind, dtype=object).map(SIGMA_FLOOR).fillna(0.0).to_numpy(dtype=np.float64)
+    problems.add(TINY_SIGMA, (sigma > 0) & (sigma < floor), column=sigma_col, found=sigma_written,
+                 expected=lambda i: (f"sigma >= {floor[i]:g} {KIND_UNITS.get(kind[i], '')} (SI) for {kind[i]}; "
+                                     "smaller is no tracking system's precision"))
     elevation = (kind == "elevation") & np.isfinite(value)
     in_deg = units == "deg"
     problems.add(ELEVATION_RANGE, elevation & (np.abs(value) > math.pi / 2 + 1e-12), column=value_col,

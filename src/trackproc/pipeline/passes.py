@@ -34,6 +34,7 @@ from trackproc.errors import InputError
 from trackproc.io.jsonutil import json_ready
 from trackproc.io.statefile import format_epoch
 from trackproc.io.tle import tle_epoch
+from trackproc.isotime import iso_utc
 from trackproc.pipeline.orbit_source import SGP4_LABEL, Satellite, observe, resolve_force
 
 DEG = np.pi / 180.0
@@ -70,24 +71,10 @@ def _check(options: PassesOptions) -> None:
     if not -90.0 <= options.min_elevation_deg < 90.0:
         raise InputError("out of range", column="--min-elevation", found=options.min_elevation_deg,
                          expected="degrees in [-90, 90)")
-    if options.carrier_hz is not None and not (np.isfinite(options.carrier_hz) and options.carrier_hz > 0):
-        raise InputError("must be positive", column="--carrier-hz", found=options.carrier_hz, expected="Hz > 0")
+    if options.carrier_hz is not None:
+        from trackproc.io.validate import check_carrier
 
-
-def parse_duration(text: str, flag: str = "--span") -> float:
-    """``3600``, ``90s``, ``45m``, ``6h``, ``2d`` -> seconds."""
-    units = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
-    raw = str(text).strip().lower()
-    scale = units.get(raw[-1:], None)
-    number = raw[:-1] if scale is not None else raw
-    try:
-        value = float(number) * (scale or 1.0)
-    except ValueError:
-        raise InputError("invalid duration", column=flag, found=text,
-                         expected="seconds, or a number with s, m, h or d (e.g. 2d)") from None
-    if not math.isfinite(value):
-        raise InputError("invalid duration", column=flag, found=text, expected="a finite duration")
-    return value
+        check_carrier(options.carrier_hz)
 
 
 def _golden_max(f, lo, hi):
@@ -266,8 +253,7 @@ def _cell(value, digits: int = 3) -> str:
 
 def render(frame: pd.DataFrame, meta: dict, fmt: str) -> str:
     """The schedule as CSV (a header, one row per pass, ISO 8601 UTC times), JSON
-    (``{"meta": ..., "passes": [...]}``) or a Markdown table (one line per pass, the times to the
-    second)."""
+    (``{"meta": ..., "passes": [...]}``) or a Markdown table (one line per pass, the times to 0.01 s)."""
     records = frame.to_dict("records")
     if fmt == "json":
         def value(v):
@@ -289,8 +275,12 @@ def render(frame: pd.DataFrame, meta: dict, fmt: str) -> str:
             head += ["Doppler AOS/TCA/LOS (Hz)"]
         lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
 
-        def hms(t):
-            return "" if t is None or pd.isna(t) else _cell(t)[:19].replace("T", " ")
+        def hms(t):     # rounded to 0.01 s, as the JSON's times read to a person
+            if t is None or pd.isna(t):
+                return ""
+            stamp = pd.Timestamp(t)
+            stamp = stamp.tz_convert(None) if stamp.tzinfo is not None else stamp
+            return iso_utc(stamp.round("10ms"), 2, suffix="").replace("T", " ")
 
         for r in records:
             cells = [r["station"], hms(r["aos_time"]), _cell(r["aos_azimuth_deg"], 1), hms(r["tca_time"]),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from trackproc.pipeline.numbers import value_sigma
 from trackproc.pipeline.refine import RefineResult
 
 
@@ -15,7 +16,7 @@ def summary_text(result: RefineResult) -> str:
              f"{sol.iterations} iterations ({sol.message}); traverse epoch {d['traverse']['epoch']} "
              f"({m['station']}/{m['pass_id']}, {m['kind']}); a-priori: {m['apriori']}"]
     for name, value, sigma, unit in zip(st.parameters, st.values, st.sigma, d["units"]):
-        lines.append(f"  {name:<28s}{value:>18.6f} ± {sigma:<12.4g} {unit}")
+        lines.append(f"  {name:<28s}{value_sigma(value, sigma, unit, width=18)}")
     s = d["sigma_rtn"]
     lines.append(f"  sigma RTN: radial {s['radial_m']:.3g} m, along {s['along_m']:.3g} m, cross {s['cross_m']:.3g} m; "
                  f"{s['radial_m_s']:.3g}, {s['along_m_s']:.3g}, {s['cross_m_s']:.3g} m/s")

@@ -284,3 +284,27 @@ def _float(value) -> float:
         return float(value)
     except (TypeError, ValueError, OverflowError):
         return math.nan
+
+
+#: Units a duration may carry (``90s``, ``45m``, ``6h``, ``2d``); a plain number is in the option's
+#: own unit (seconds, except where the option says otherwise, e.g. ``fit-tle --horizon`` days).
+DURATION_UNITS_S = {"s": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
+_DURATION = re.compile(r"([+-]?(?:\d+\.?\d*|\.\d+)(?:e[+-]?\d+)?)\s*(s|min|m|h|d)?")
+
+
+def parse_duration(text, option: str, *, plain_unit_s: float = 1.0) -> float:
+    """``3600``, ``90s``, ``45m``, ``1.5h``, ``2d``, ``-1d`` -> seconds (a plain number counts in
+    ``plain_unit_s``). Every option that takes a duration is read by this one function."""
+    if isinstance(text, (int, float)) and not isinstance(text, bool):
+        value = float(text) * plain_unit_s
+    else:
+        match = _DURATION.fullmatch(str(text).strip().lower())
+        if match is None:
+            plain = {1.0: "seconds", 86400.0: "days"}.get(plain_unit_s, f"{plain_unit_s:g} s")
+            raise InputError("invalid duration", column=option, found=str(text),
+                             expected=f"a number of {plain}, or one with a unit s, m, h or d (90s, 45m, 1.5h, 2d)")
+        unit = match.group(2)
+        value = float(match.group(1)) * (DURATION_UNITS_S[unit] if unit else plain_unit_s)
+    if not math.isfinite(value):
+        raise InputError("invalid duration", column=option, found=str(text), expected="a finite duration")
+    return value

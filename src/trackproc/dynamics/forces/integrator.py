@@ -105,6 +105,18 @@ def _rhs(env, stm: bool, n_par: int):
     return f
 
 
+#: Geocentric radius at which a full-force propagation stops as re-entered: 100 km above the mean
+#: Earth radius (6371 km), i.e. 93 to 114 km geodetic altitude; below it drag grows by orders of
+#: magnitude within minutes, the steps shrink without bound and no force model here holds.
+REENTRY_RADIUS_M = 6_471_000.0
+
+
+def _reentry_step(radii) -> int | None:
+    """Index of the first step ending below :data:`REENTRY_RADIUS_M`, or None."""
+    below = np.flatnonzero(np.asarray(radii) < REENTRY_RADIUS_M)
+    return int(below[0]) if below.size else None
+
+
 def use_compiled(model, t_end_s: float, stm: bool = False) -> bool:
     """Whether a run of ``t_end_s`` seconds goes to the compiled integrator: numba usable
     (:func:`trackproc.dynamics.jit.enabled`), the model covered (not NRLMSIS), and the numpy
@@ -138,8 +150,10 @@ def _warn_once(message: str) -> None:
 
 def _run_compiled(env, y0, t_end_s, rt, at, max_step, max_steps, stm, est):
     """The compiled DOP853: accepted steps' times and their dense-output values at the nodes."""
+    from trackproc.dynamics import jit
     from trackproc.dynamics.forces import compiled
 
+    jit.announce_compiling([compiled.integrate], "the force kernels", 30)
     model = env.model
     F = compiled.field_tables(model.field)
     HT = compiled.hessian_tables(compiled.stm_field(env))
@@ -185,6 +199,9 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
     if compiled:
         outcome, t_new, h, vals = _run_compiled(env, y0, t_end_s, rt, at, max_step_s(model, y0[:6]), max_steps,
                                                 stm, est)
+        k = _reentry_step(np.linalg.norm(vals[:, -1, :3], axis=1)) if len(vals) else None
+        if k is not None:                        # the steps up to the first one that ends below
+            outcome, t_new, h, vals = Outcome.REENTRY, t_new[:k + 1], h[:k + 1], vals[:k + 1]
         c = np.swapaxes(np.matmul(_VINV, vals), 1, 2) / h[:, None, None] ** np.arange(_DEGREE + 1)
         coefs = list(c[:, None, 0:3])
         senss = []
@@ -243,6 +260,9 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
             sens = phi if not npar else np.concatenate([phi, c[42:].reshape(6, npar, -1)[:3]], 1)
             senss.append(sens[None])
         times.append(solver.t)
+        if _reentry_step([np.linalg.norm(solver.y[:3])]) is not None:
+            outcome = Outcome.REENTRY
+            break
         if solver.status == "finished" and t_seg != t_end:       # landed past a boundary: go on
             t_seg = t_end
             solver = solver_from(solver.t, solver.y, t_end, min(resume_h, abs(t_end - solver.t)))

@@ -66,6 +66,8 @@ class Converter:
             "value": np.array([r[3] for r in self.rows], dtype="float64"),
             "sigma": np.full(len(self.rows), np.nan),
             "row": np.array([r[4] for r in self.rows], dtype="int64"),
+            # the unit the file wrote (ANGLE_1/2 in degrees), so that messages quote its values
+            "unit": ["deg" if r[2] in ("azimuth", "elevation") else "" for r in self.rows],
         })
 
         self.warnings.extend(f"non-standard TDM keyword {key} skipped ({n} lines)"

@@ -40,7 +40,8 @@ def probability_better(moved, covariance) -> tuple[float, float, float]:
     (``d``, m). The prior's error is then ``e − d``, and ``|e − d|² > |e|²`` exactly when
     ``e·u < |d|/2`` (``u = d/|d|``): probability ``Φ(|d| / (2 σ_u))``, ``σ_u² = uᵀ C u``. 0.5 when
     the solution does not move the prediction (a coin toss, not a gain); near 1 when it moves it by
-    several σ. Returns ``(probability, |d|, σ_u)``."""
+    several σ. Returns ``(probability, |d|, σ_u)``. (fit-tle's rule; :func:`probability_better_over`
+    over a span of times.)"""
     d = np.asarray(moved, float)
     size = float(np.linalg.norm(d))
     if size == 0.0:
@@ -50,6 +51,16 @@ def probability_better(moved, covariance) -> tuple[float, float, float]:
     if sigma == 0.0:
         return 1.0, size, 0.0
     return 0.5 * math.erfc(-size / (2.0 * sigma) / math.sqrt(2.0)), size, sigma
+
+
+def probability_better_over(maps, change, covariance) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`probability_better` at each of K times: ``maps`` (K, 3, n) the position at time ``k``
+    per state at the epoch, ``change`` the solution's change of that state, ``covariance`` its
+    covariance. Returns ``(probability, |move| (m), σ_u (m))``, each (K,)."""
+    g = np.asarray(maps, float)
+    c = np.asarray(covariance, float)
+    out = [probability_better(gk @ np.asarray(change, float), gk @ c @ gk.T) for gk in g]
+    return tuple(np.array(col, float) for col in zip(*out))
 
 
 @dataclass
@@ -90,17 +101,24 @@ def declined(source_text: str, test: dict, source: str = "stated") -> Decision:
                     source=source, test={k: test[k] for k in ("test", "statistic", "dof", "limit", "conflict")})
 
 
-def by_prediction(moved, covariance, horizon_days: float, source: Optional[str] = None,
+def by_prediction(maps, times_days, change, covariance, horizon_days: float, source: Optional[str] = None,
                   probability: float = REPLACE_PROBABILITY) -> Decision:
-    """Replace or keep by :func:`probability_better` of the solution's move ``moved`` (m) of the
-    predicted position at the horizon, its prediction covariance there ``covariance`` (m²)."""
-    p, size, sigma = probability_better(moved, covariance)
-    if p < probability:
-        return Decision("kept", f"kept: the solution moves the position predicted {horizon_days:g} d ahead by "
-                                f"{size:.4g} m against its own {sigma:.4g} m error there; it predicts better than the "
-                                f"prior with probability {p:.3g} only (< {probability:g})",
-                        source=source, probability=p, horizon_days=horizon_days, moved_m=size, moved_sigma_m=sigma)
-    return Decision("replaced", f"replaced: the solution moves the position predicted {horizon_days:g} d ahead by "
-                                f"{size:.4g} m against its own {sigma:.4g} m error there (probability {p:.3g} that "
-                                "it predicts better)",
-                    source=source, probability=p, horizon_days=horizon_days, moved_m=size, moved_sigma_m=sigma)
+    """Replace or keep: the solution replaces the prior when it predicts the position better with at
+    least ``probability`` at some time over the ``horizon_days`` after the epoch
+    (:func:`probability_better_over` at ``times_days``, the epoch included; ``maps`` (K, 3, n)).
+    Under the solution's own covariance it is never expected to predict worse (the probability is
+    at least 0.5 everywhere), so a significant gain anywhere in the span is a gain; a move that is
+    not significant anywhere leaves the prior, which predicts as well."""
+    p, size, sigma = probability_better_over(maps, change, covariance)
+    k = int(np.argmax(p))
+    at = f"{float(times_days[k]) * 24.0:.3g} h after the epoch"
+    said = (f"it moves the predicted position by {size[k]:.4g} m {at}, against its own {sigma[k]:.4g} m error "
+            f"there: it predicts better than the prior with probability {p[k]:.3g} there ({p[-1]:.3g} "
+            f"{horizon_days:g} d after the epoch)")
+    kept = bool(p[k] < probability)
+    return Decision("kept" if kept else "replaced",
+                    (f"kept: the solution predicts no better over the {horizon_days:g} d after the epoch; "
+                     f"at best {said.replace('it predicts better', 'better')} (< {probability:g})") if kept else
+                    f"replaced: {said}",
+                    source=source, probability=float(p[k]), horizon_days=horizon_days, moved_m=float(size[k]),
+                    moved_sigma_m=float(sigma[k]))

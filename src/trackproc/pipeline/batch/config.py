@@ -57,6 +57,7 @@ def _expected(opt: Opt) -> str:
     return {
         "str": "a string", "path": "a path", "paths": "a list of directories or globs",
         "list": "a list of strings", "int": "an integer", "float": "a number", "bool": "true or false",
+        "duration": "seconds, or a number with s, m, h or d (90s, 6h, 1d)",
         "choice": " or ".join(opt.choices), "degree": "an integer >= 0 or auto",
         "map": "NAME=VALUE pairs with numeric values",
     }[opt.kind]
@@ -131,6 +132,15 @@ def convert(opt: Opt, value, origin: str, config_file: Optional[str] = None, bas
         if not isinstance(value, int):
             raise bad()
         return _checked(opt, value, bad)
+    if kind == "duration":
+        from trackproc.types.checks import parse_duration
+
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            raise bad()
+        try:
+            return _checked(opt, parse_duration(value, opt.name), bad)
+        except InputError:
+            raise bad() from None
     if kind == "float":
         if isinstance(value, bool):
             raise bad()

@@ -21,6 +21,17 @@ class InputFile:
 
     name: str
     path: str
+    problem: str | None = None       # why this input cannot be processed (found before reading it)
+
+
+def utf8_name(text: str) -> str | None:
+    """``text`` written so that UTF-8 can hold it (bytes that are not UTF-8, which the file system
+    gave as surrogates, as ``\\xNN``); None when it already can."""
+    try:
+        text.encode("utf-8")
+        return None
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
 
 
 _MAGIC = set("*?[")
@@ -66,6 +77,12 @@ def discover(entries: Sequence[str], patterns: Sequence[str], exclude: Sequence[
             rel = os.path.relpath(path, base)
             name = os.path.splitext(rel)[0].replace(os.sep, "/")
             if real in found:
+                continue
+            escaped = utf8_name(name)
+            if escaped is not None:      # isolated: this input fails, the others run
+                found[real] = InputFile(escaped, utf8_name(path) or path,
+                                        problem="the file name is not valid UTF-8 (its bytes are shown as \\xNN); "
+                                                "expected a UTF-8 file name: rename the file")
                 continue
             found[real] = InputFile(name, path)
     by_name: dict = {}

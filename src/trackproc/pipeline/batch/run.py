@@ -9,6 +9,7 @@ import calendar
 import contextlib
 import logging
 import math
+import os
 import time
 from pathlib import Path
 from typing import Callable, Optional
@@ -61,8 +62,13 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None) -> BatchR
     out = Path(output)
     try:
         out.mkdir(parents=True, exist_ok=True)
+        probe = out / f".write-test-{os.getpid()}.tmp"      # a read-only file system or a full disk: now
+        probe.write_bytes(b"")
+        probe.unlink()
     except OSError as exc:
-        raise InputError(f"cannot create the output directory: {exc.strerror}", file=output) from None
+        from trackproc.errors import OutputError
+
+        raise OutputError(output, exc) from None
     try:
         with interruptible(), batch_lock(out, settings.get("batch.wait"), settings.get("batch.wait_timeout_s")):
             remove_leftovers(out)
@@ -143,6 +149,25 @@ def _input_keys(settings, chain, hashes) -> Callable:
     return keys
 
 
+def _read_input(item):
+    """``(bytes, None, None)`` of an input, or ``(None, error, error_type)``: a name that is not
+    UTF-8 or a file above the input bound (``TRACKPROC_MAX_INPUT_MB``, checked on its size
+    before reading) is an input error of that input alone; an unreadable file an internal one."""
+    from trackproc.io.atomic import max_input_bytes
+
+    if item.problem:
+        return None, f"{item.path}: {item.problem}", "input"
+    try:
+        size, limit = os.stat(item.path).st_size, max_input_bytes()
+        if size > limit:
+            return None, (f"{item.path}: input larger than the limit of {limit / (1 << 20):g} MiB "
+                          f"({size} bytes); expected a smaller input, or a larger "
+                          "TRACKPROC_MAX_INPUT_MB"), "input"
+        return Path(item.path).read_bytes(), None, None
+    except OSError as exc:
+        return None, f"{item.path}: cannot read: {exc.strerror}", "internal"
+
+
 def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, progress):
     input_files = {k: hashes[k] for k in chain.files("input")}
     options_doc = step_options(settings, chain.input_steps, input_files)
@@ -152,13 +177,11 @@ def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, p
     todo = []
     manifests = {}
     for item in inputs:
-        try:
-            data = Path(item.path).read_bytes()
-        except OSError as exc:
+        data, error, error_type = _read_input(item)
+        if data is None:
             records[item.name] = Record(task="pass", name=item.name, status="failed", skipped=False, key="",
-                                        path=item.path, error=f"{item.path}: cannot read: {exc.strerror}",
-                                        error_type="internal")
-            log.error("%s: failed: cannot read: %s", item.path, exc.strerror)
+                                        path=item.path, error=error, error_type=error_type)
+            log.error("%s: failed: %s", item.path, error)
             continue
         key, table_key = keys(data)
         manifest = read_manifest(manifest_path(out, PASSES_DIR, item.name))
@@ -171,9 +194,11 @@ def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, p
     total = len(inputs)
     n_skipped = len(records)
     n_side = sum(stage is not None for *_, stage in todo)
-    log.info("%d input(s): %d up to date, %d to do (steps %s%s)", total, n_skipped, len(todo),
+    n_unread = sum(r.status == "failed" and not r.key for r in records.values())
+    log.info("%d input(s): %d up to date, %d to do (steps %s%s)%s", total, n_skipped - n_unread, len(todo),
              " -> ".join(chain.names), f"; {n_side} of them {', '.join(chain.side_steps)} only, from their stored "
-                                        f"{' and '.join(chain.table_steps) or 'pass'} results" if n_side else "")
+                                        f"{' and '.join(chain.table_steps) or 'pass'} results" if n_side else "",
+             f"; {n_unread} refused before reading" if n_unread else "")
     done = [n_skipped, sum(r.status == "failed" for r in records.values())]
     if progress:
         progress(done[0], total, done[1])
@@ -191,12 +216,10 @@ def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, p
                     return Task(kind="input", name=item.name, key=key, steps=(), options=options, files=task_files,
                                 paths=task_paths, source=item.path, data=table, reads_raw=False,
                                 side_steps=chain.side_steps, stage=stage, table_key=table_key, jit=executors.jit)
-        try:
-            data = Path(item.path).read_bytes()
-        except OSError as exc:
+        data, error, error_type = _read_input(item)
+        if data is None:
             records[item.name] = Record(task="pass", name=item.name, status="failed", skipped=False, key=key,
-                                        path=item.path, error=f"{item.path}: cannot read: {exc.strerror}",
-                                        error_type="internal")
+                                        path=item.path, error=error, error_type=error_type)
             log_record(records[item.name])
             done[0] += 1
             done[1] += 1

@@ -51,7 +51,8 @@ def _non_negative(value) -> bool:
 class Opt:
     """One setting: TOML ``section.key``, its flag, its environment variable, type and default.
 
-    ``kind``: str | path | paths (list of paths or globs) | list (of str) | int | float | bool |
+    ``kind``: str | path | paths (list of paths or globs) | list (of str) | int | float | duration
+    (seconds, or a number with s, m, h, d) | bool |
     choice | degree (``auto`` or an int >= 0) | map (name -> float). ``affects``: part of the
     content hash of the results (step options). ``check``: (predicate, expected text).
     """
@@ -113,7 +114,7 @@ SCHEMA: tuple[Opt, ...] = (
         "Retry inputs whose recorded failure is up to date (data errors are otherwise not retried)."),
     Opt("batch", "wait", "bool", False, ("--wait/--no-wait",),
         "When another run holds the output directory's lock, wait for it instead of exiting."),
-    Opt("batch", "wait_timeout_s", "float", 0.0, ("--wait-timeout",),
+    Opt("batch", "wait_timeout_s", "duration", 0.0, ("--wait-timeout",),
         "Give up waiting for the lock after S seconds (0: wait as long as it takes).", check=_NONNEG,
         metavar="S"),
     Opt("batch", "strict", "bool", False, ("--strict/--no-strict",),
@@ -129,7 +130,7 @@ SCHEMA: tuple[Opt, ...] = (
         "Nominal carrier frequency, Hz (Doppler inputs).", affects=True, check=_POS, metavar="F"),
     Opt("ingest", "mode", "choice", None, ("--mode",), "Doppler link: one-way or two-way.",
         choices=("one-way", "two-way"), affects=True),
-    Opt("ingest", "max_gap_s", "float", 300.0, ("--max-gap",),
+    Opt("ingest", "max_gap_s", "duration", 300.0, ("--max-gap",),
         "Start a new pass after a gap longer than S seconds.", affects=True, check=_POS, metavar="S"),
     Opt("ingest", "layout", "choice", "auto", ("--layout",), "Input layout (auto: detected).",
         choices=("auto", "wide", "long", "doptrack", "aer", "tdm"), affects=True),
@@ -156,7 +157,7 @@ SCHEMA: tuple[Opt, ...] = (
         "Reject samples beyond K robust sigmas (0: off).", affects=True, check=_NONNEG, metavar="K"),
     Opt("smooth", "kinds", "list", (), ("--kinds",), "Kinds to fit (default: all present).", affects=True,
         metavar="KIND[,KIND]"),
-    Opt("smooth", "tca_max_gap_s", "float", 30.0, ("--tca-max-gap",),
+    Opt("smooth", "tca_max_gap_s", "duration", 30.0, ("--tca-max-gap",),
         "A TCA in a data gap longer than S s, or closer than S s to an end, is not observed.", affects=True,
         check=_POS, metavar="S"),
     # ------------------------------------------------------------------ [refine]
@@ -208,7 +209,7 @@ SCHEMA: tuple[Opt, ...] = (
     Opt("estimate", "initial", "path", None, ("--initial",),
         "Initial state (JSON state file or TLE) of every window's estimate.", affects=True,
         metavar="STATE.json|TLE"),
-    Opt("estimate", "window_s", "float", 0.0, ("--window",),
+    Opt("estimate", "window_s", "duration", 0.0, ("--window",),
         "Estimate over windows of S seconds aligned on UTC (86400: one per UTC day); 0: one over all inputs.",
         affects=True, check=_NONNEG, metavar="S"),
     Opt("estimate", "min_inputs", "int", 1, ("--min-inputs",),

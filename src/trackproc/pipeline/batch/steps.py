@@ -175,10 +175,13 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
 
 
 def quality_numbers(quality) -> dict:
-    """A solution's ``quality`` in the summary's numbers: the verdict and the codes of the reasons
-    that made it (the whole reasons are in the details)."""
+    """A solution's ``quality`` in the summary's numbers: the verdict, the codes of the reasons
+    that made it (the whole reasons are in the details) and the decision on the initial orbit."""
+    codes = [r["code"] for r in quality.reasons]
     return {"quality": quality.verdict,
-            "quality_reasons": ",".join(r["code"] for r in quality.reasons if r["severity"] != "ok")}
+            "quality_reasons": ",".join(r["code"] for r in quality.reasons if r["severity"] != "ok"),
+            # what became of the initial orbit (methods/estimation/decision.py), when it was decided
+            "decision": next((c for c in ("declined", "kept", "replaced", "refused") if c in codes), None)}
 
 
 def initial_state(data: bytes, path: str, orientation):

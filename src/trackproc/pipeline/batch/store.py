@@ -36,7 +36,7 @@ CSV_COLUMNS = ("task", "input", "status", "skipped", "samples", "passes", "stati
                "fits_ok", "fits_suspect", "fits_failed", "kind", "rms", "rms_unit", "tca_utc", "tca_sigma_s",
                "fca_hz", "refined_pass", "traverse_utc", "converged", "iterations", "wrms", "residual_rms",
                "residual_rms_unit", "sigma_radial_m", "sigma_along_m", "sigma_cross_m", "quality", "quality_reasons",
-               "output", "error")
+               "decision", "output", "error")
 
 
 def utc_now() -> str:

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from trackproc.isotime import iso_utc
+from trackproc.pipeline.numbers import value_sigma
 from trackproc.pipeline.estimate.result import EstimateResult
 
 
@@ -20,7 +21,7 @@ def _for_people(value, unit) -> str:
 def _fmt(value, sigma, unit):
     if unit == "rad":     # angle biases: degrees for people
         value, sigma, unit = math.degrees(value), math.degrees(sigma), "deg"
-    return f"{value:>18.6f} ± {sigma:<12.4g} {unit}"
+    return value_sigma(value, sigma, unit, width=18)
 
 
 def summary_text(result: EstimateResult) -> str:

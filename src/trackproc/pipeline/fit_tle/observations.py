@@ -14,6 +14,7 @@ from trackproc.dynamics import kepler
 from trackproc.dynamics.timescales import datetime64_to_jd_utc
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.tle import MeanElements, satrec
+from trackproc.io.validate import ORBIT_RADIUS_RANGE_M
 from trackproc.methods import tle_fit as tf
 from trackproc.models.measurements import station_gcrf
 from trackproc.pipeline.fit_tle.options import KINDS, MU_WGS72, REEPOCH_HALF_SPAN_REV, REEPOCH_STEP_S
@@ -93,6 +94,14 @@ def observations(tables, ephemerides, options, eop, stations):
         if not np.all(np.isfinite(sig) & (sig > 0)):
             raise InputError("ephemeris sigmas must be positive", file=source, column="sigma_x_m",
                              expected="positive numbers, or no sigma columns (--ephemeris-sigma is used)")
+        radius = np.linalg.norm(xyz, axis=1)
+        low, high = ORBIT_RADIUS_RANGE_M
+        bad = np.flatnonzero(~(np.isfinite(xyz).all(axis=1) & (radius >= low) & (radius <= high)))
+        if bad.size:
+            k = int(bad[0])
+            column = next((c for c, v in zip(("x_m", "y_m", "z_m"), xyz[k]) if not np.isfinite(v)), "x_m/y_m/z_m")
+            raise InputError("invalid ephemeris position", file=source, column=column,
+                             found=f"record {k + 1}: {xyz[k].tolist()}", expected=f"finite positions in metres, |r| between {low:g} and {high:g} m")
         track = Sgp4Track(times, eop, derivatives=False)
 
         def predict(sat, track=track):

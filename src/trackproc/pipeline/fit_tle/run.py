@@ -170,6 +170,9 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
               limit=tf.TLE_APRIORI_MAX_AGE_DAYS)
     if not sol.converged:
         q.add("not_converged", "rejected", f"the solver did not converge ({sol.message})")
+    if conflict is not None and not conflict["directions"]:
+        q.add("undetermined", "rejected", "the data determine none of the elements' directions (0 directions seen): "
+              "the fit says nothing about the orbit", value=0)
     if conflict is not None:
         # the score test of the a-priori under the fit's own error model (the theory error at each
         # pass included): methods/tle_theory_error.apriori_conflict_chi2; its limit the 99.9 % point of
@@ -222,6 +225,15 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
     if shifts:
         v = np.array([t for t, _ in shifts.values()])
         along_s = math.sqrt(prior_cov[5, 5]) / (360.0 * float(x_init[0])) * 86400.0
+        half_rev_s = 86400.0 / float(x_init[0]) / 2.0
+        worst_shift = float(np.max(np.abs(v))) if np.all(np.isfinite(v)) else math.inf
+        if worst_shift > half_rev_s:
+            # beyond half a revolution a time shift has no meaning: not this orbit's passes (another
+            # object's TLE, wrong station or time tags)
+            q.add("timing_mismatch", "rejected", f"a pass's apparent time shift against the initial orbit is "
+                  f"{worst_shift:.4g} s, beyond half a revolution ({half_rev_s:.4g} s): the passes do not belong to "
+                  "this orbit (another object's TLE? wrong station or time tags?)", value=worst_shift,
+                  limit=half_rev_s)
         q.add("timing", "ok", f"the passes' apparent time shifts against the initial orbit (Doppler and range-rate; "
               f"an along-track error of the orbit and the station's time tags look alike): mean {v.mean():.3g} s, "
               f"RMS {np.sqrt(np.mean(v ** 2)):.3g} s over {v.size}; the initial orbit's along-track sigma at the epoch "

@@ -27,7 +27,9 @@ from trackproc.models import parameters as pm
 from trackproc.pipeline.od import EstimateOptions, build_problem
 from trackproc.types import PassTable
 from trackproc.vocabulary import TAYLOR_FORCES
-from trackproc.methods.estimation.prior import DEFAULT_APRIORI_ELEMENTS
+from trackproc.methods.estimation.prior import (DEFAULT_APRIORI_ELEMENTS, default_apriori_text,  # noqa: F401
+                                               tle_along_sigma_m, tle_apriori_covariance)
+from trackproc.pipeline.timing import tle_age_days
 from trackproc.pipeline.refine.options import (COSTS, DOPPLER_BIAS, NOISE_MODELS,
                                                RefineOptions, SmoothedCurve)
 from trackproc.io.tle import is_tle_state
@@ -59,25 +61,31 @@ def check_options(opt: RefineOptions) -> None:
                          expected="order >= 2, panel > 0 s, gap > 0 s")
 
 
-def apriori_choice(opt: RefineOptions, initial) -> tuple[dict, bool, str, bool]:
-    """Which a-priori the refinement takes: ``(apriori_sigma, apriori_initial, note, default_prior)``:
-    ``--apriori-sigma``, else the stale state's covariance, else the default element sigmas
-    (:data:`DEFAULT_APRIORI_ELEMENTS`); none for ``--no-apriori`` (the integral cost's default)."""
+def apriori_choice(opt: RefineOptions, initial) -> tuple[dict, bool, str, str]:
+    """Which a-priori the refinement takes: ``(apriori_sigma, apriori_initial, note, source)``:
+    ``--apriori-sigma``, else the stale state's covariance, else a TLE's accuracy at its age
+    (:func:`~trackproc.methods.estimation.prior.tle_apriori_covariance`; these three are *stated*),
+    else the documented default element sigmas (:data:`DEFAULT_APRIORI_ELEMENTS`, source
+    ``default``); none for ``--no-apriori`` (the integral cost's default; source ``""``).
+    ``source`` ``"tle"`` asks :func:`prepare` for the TLE's a-priori (a stated one)."""
     use_apriori = opt.apriori if opt.apriori is not None else (opt.cost == "pointwise")
-    apriori_sigma, apriori_initial, note, default_prior = {}, False, "none (the pass alone)", False
+    apriori_sigma, apriori_initial, note, source = {}, False, "none (the pass alone)", ""
     if use_apriori:
         if opt.apriori_sigma:
-            apriori_sigma, note = dict(opt.apriori_sigma), "--apriori-sigma"
+            apriori_sigma, note, source = dict(opt.apriori_sigma), "--apriori-sigma", "stated"
         elif initial.state_covariance is not None:
-            apriori_initial, note = True, "the stale state's covariance, moved to the traverse epoch by the STM"
+            apriori_initial, source = True, "stated"
+            note = "the stale state's covariance, moved to the traverse epoch by the STM"
+        elif is_tle_state(initial):
+            source = "tle"
+            note = "the TLE's accuracy at its age (TLE differencing)"
         else:
-            default_prior = True
-            note = ("default (the stale state has no covariance): orbital-element sigmas " +
-                    ", ".join(f"{k} {v:g}" for k, v in DEFAULT_APRIORI_ELEMENTS.items()))
+            source = "default"
+            note = "default (the stale state has no covariance): " + default_apriori_text()
     elif opt.apriori_sigma:
         raise InputError("--apriori-sigma with --no-apriori", column="--apriori-sigma",
                          expected="one of the two")
-    return apriori_sigma, apriori_initial, note, default_prior
+    return apriori_sigma, apriori_initial, note, source
 
 
 def prepare(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
@@ -127,7 +135,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
         warnings.append("the TLE is evaluated by SGP4 at the traverse epoch: the stale epoch is the traverse epoch")
     stale_epoch = np.datetime64(initial.epoch, "ns")
 
-    apriori_sigma, apriori_initial, note, default_prior = apriori_choice(opt, initial)
+    apriori_sigma, apriori_initial, note, source = apriori_choice(opt, initial)
     est = EstimateOptions(doppler_bias=None if bias == "none" else bias, doppler_bias_per="pass",
                           apriori_sigma=apriori_sigma, apriori_initial=apriori_initial, force=opt.force,
                           earth=opt.earth, range_rate_model=opt.range_rate_model, max_iterations=opt.max_iterations,
@@ -135,9 +143,17 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
                           oscillator_noise=opt.oscillator_noise)
     problem = build_problem([(source, PassTable(frame, meta))], initial, stations, est, eop)
     mu = propagator.force_parameters(opt.force)[0]
-    if default_prior:
+    if source == "default":
         rv0 = problem.x0[:6]
         problem.priors.append(Prior(np.arange(6), rv0.copy(), default_apriori_covariance(rv0, mu)))
+    elif source == "tle":
+        # a TLE's accuracy is known (TLE differencing): a stated a-priori, looser with the TLE's age
+        rv0 = problem.x0[:6]
+        age = tle_age_days(initial, t_traverse) or 0.0
+        problem.priors.append(Prior(np.arange(6), rv0.copy(), tle_apriori_covariance(rv0, mu, age)))
+        note = (f"the TLE's accuracy {age:.2g} days from its epoch (TLE differencing: along-track "
+                f"{tle_along_sigma_m(age):.0f} m)")
+        source = "stated"
 
     names = list(problem.names)
     x0 = problem.x0.copy()
@@ -164,7 +180,8 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     axis = problem.frame.q.T @ r_st0[0]
     ref = Refinement(options=opt, problem=problem, curve=curve, kind=kind, station_name=station, pass_id=pass_id,
                      initial=initial, stale_epoch=stale_epoch, traverse_how=how, names=names, x0=x0, scales=scales,
-                     priors=list(problem.priors), apriori_note=note, station_model=station_model, mu=mu,
+                     priors=list(problem.priors), apriori_note=note, apriori_source=source,
+                     station_model=station_model, mu=mu,
                      carrier_hz=carrier, station_axis=axis / np.linalg.norm(axis), warnings=warnings)
     if opt.cost == "integral":
         ref.integral = integral_setup(ref, frame)

@@ -16,6 +16,7 @@ from scipy.special import chdtrc  # chi-square survival without scipy.stats (iss
 
 from trackproc.errors import ProcessingError
 from trackproc.methods import quality as qm
+from trackproc.methods.estimation import decision as dm
 from trackproc.methods.estimation import prior as pr
 from trackproc.methods.noise import PassCovariance
 from trackproc.pipeline.refine.options import MAX_ADAPT_ITERATIONS, MAX_APRIORI_ADAPT, MAX_REWEIGHT, REWEIGHT_THRESHOLD
@@ -58,6 +59,16 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
     if first is None or start_factor != 1.0:
         first = solve_weighted(work)
     improvement = stale_improvement(work, first[0], first[2]) if work.priors else None
+    if may and ref.apriori_source == "stated" and start_factor == 1.0:
+        # a stated a-priori (a TLE's, a state file's covariance, --apriori-sigma) that the pass
+        # contradicts is kept as it is: its accuracy is known, so the pass is the likely culprit
+        # (methods/estimation/decision.py); it is never loosened to let the pass move the orbit
+        test = apriori_test(work, first[0], first[1])
+        if test is not None and test["conflict"]:
+            decision = dm.declined("the stale state's stated a-priori", test)
+            return work, first[0], first[1], first[2], None, improvement, {
+                "code": "declined", "state_covariance": original, "reason": decision.reason,
+                "decision": decision.as_dict()}
     # A pass that does not significantly tell the refined state from the stale one is no reason to
     # keep the stale state: the posterior already weighs the pass by its information (measured on
     # the DopTrack development pairs: refusing those kept 4 of 7 states whose refinement predicted
@@ -148,12 +159,20 @@ def stale_improvement(ref: Refinement, sol, sigma_scale: float = 1.0, n_seen: in
     x[:6] = ref.x0[:6]
     h, jac = ref.problem.model(x)
     r = white(np.asarray(y, float) - h)
-    bias, bias_cov = np.zeros(0), np.zeros((0, 0))
+    bias, bias_cov, cross = np.zeros(0), np.zeros((0, 0)), np.zeros((0, 6))
     if npb > 6:
         a = white(np.asarray(jac, float)[:, 6:npb])
         db = np.linalg.lstsq(a, r, rcond=None)[0]
         r = r - a @ db
         bias, bias_cov = x[6:npb] + db, np.linalg.pinv(a.T @ a)
+        pcov = pr.state_prior_covariance(ref.priors)
+        if pcov is not None:
+            # the offsets fitted with the state held at the stale one inherit its error e: they move by
+            # -A⁺ J_x e (A, J_x the whitened columns of the offsets and of the state), so their
+            # covariance adds A⁺ J_x P J_xᵀ A⁺ᵀ and they correlate with the state by -A⁺ J_x P
+            k = np.linalg.pinv(a) @ white(np.asarray(jac, float)[:, :6])
+            bias_cov = bias_cov + k @ pcov @ k.T
+            cross = -k @ pcov
     chi2_stale = float(r @ r)
     computed = np.asarray(sol.computed, float)
     rr = white(np.asarray(y, float) - computed) if ref.correlated() else np.asarray(sol.residual, float)[keep] / s
@@ -161,7 +180,7 @@ def stale_improvement(ref: Refinement, sol, sigma_scale: float = 1.0, n_seen: in
     out = qm.improvement_test(chi2_stale, float(rr @ rr), max(n_seen, 1), qm.correlation_inflation(
         w["lag1_autocorrelation"]))
     out["whiteness"] = w
-    out["stale_nuisance"] = {"values": bias.tolist(), "covariance": bias_cov.tolist()}
+    out["stale_nuisance"] = {"values": bias.tolist(), "covariance": bias_cov.tolist(), "state_cross": cross.tolist()}
     return out
 
 

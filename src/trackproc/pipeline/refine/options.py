@@ -109,6 +109,9 @@ class RefineOptions:
     #: covariance (:func:`~trackproc.pipeline.refine.traverse.time_tag_covariance`); 0 = exact tags.
     time_tag_sigma_s: float = 0.0
     modifiers: tuple = ()
+    #: Days after the solution epoch at which the refined state must be expected to predict the
+    #: position better than the stale one to replace it (``--horizon``; methods/estimation/decision.py).
+    horizon_days: float = 1.0
 
 
 @dataclass

@@ -57,6 +57,8 @@ class Refinement:
     noise_edited: Optional[np.ndarray] = None
     #: what :func:`noise_model` found (written to the diagnostics)
     noise_report: Optional[dict] = None
+    #: where the state's a-priori came from (:data:`trackproc.methods.estimation.prior.SOURCES`; "" = none)
+    apriori_source: str = ""
 
     @property
     def n_problem(self) -> int:

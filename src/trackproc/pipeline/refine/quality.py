@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from trackproc.methods import quality as qm
+from trackproc.methods.estimation import decision as dm
 from trackproc.pipeline.refine.gates import apriori_test
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, TRAVERSE_TOLERANCE_S
 from trackproc.pipeline.refine.problem import Refinement
@@ -17,19 +18,36 @@ from trackproc.pipeline.timing import add_timing_reason
 
 def default_apriori(ref: Refinement) -> bool:
     """The state's a-priori is the default one (a stale state without covariance), not stated."""
-    return str(ref.apriori_note).startswith("default")
+    return ref.apriori_source == "default"
+
+
+def add_decision(q, refusal: dict | None, decision: dict | None) -> None:
+    """What became of the stale state (methods/estimation/decision.py): ``declined`` (the pass
+    contradicts a stated a-priori: suspect), ``kept`` (the refined state would not predict better:
+    ok, the stale state is the answer), ``replaced`` (ok), or ``refused`` (suspect: the pass's own
+    noise model is in doubt, or it cannot carry a looser default a-priori)."""
+    if refusal is not None and refusal.get("code") == "declined":
+        q.add("declined", "suspect", refusal["reason"], value=(decision or {}).get("apriori_test", {}).get("statistic"),
+              limit=(decision or {}).get("apriori_test", {}).get("limit"))
+    elif refusal is not None and refusal.get("code") == "kept":
+        q.add("kept", "ok", f"the stale state is kept: {refusal['reason']}",
+              value=(decision or {}).get("probability_better"), limit=dm.REPLACE_PROBABILITY)
+    elif refusal is not None:
+        q.add("refused", "suspect", f"the stale state is kept: {refusal['reason']}", value=refusal.get("code"))
+    elif decision is not None:
+        q.add("replaced", "ok", decision["reason"], value=decision.get("probability_better"),
+              limit=dm.REPLACE_PROBABILITY)
 
 
 def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, improvement=None, refusal=None,
-                   t_model=None, max_el=None, consistency=None, timing=None):
+                   t_model=None, max_el=None, consistency=None, timing=None, decision=None):
     """The :class:`~trackproc.methods.quality.Quality` of a refinement: a-priori conflict (and
     its adaptation), variance factor of the nominal sigmas, residual whiteness, traverse-epoch
     mismatch, low pass, circular-constraint conflict, edited samples, refusal, and the along-track
     move from a stale TLE against its accuracy (:func:`~trackproc.pipeline.timing.tle_timing`)."""
     q = qm.Quality()
     opt = ref.options
-    if refusal is not None:
-        q.add("refused", "suspect", f"the stale state is kept: {refusal['reason']}", value=refusal.get("code"))
+    add_decision(q, refusal, decision)
     # a-priori conflict
     if adaptation is not None:
         a = adaptation

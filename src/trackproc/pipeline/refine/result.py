@@ -32,10 +32,13 @@ from trackproc.pipeline.timing import timing_warning, tle_timing
 
 def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None,
            prior_centre=None, adaptation: dict | None = None, traverse_moves: list | None = None,
-           improvement: dict | None = None, refusal: dict | None = None) -> RefineResult:
+           improvement: dict | None = None, refusal: dict | None = None,
+           decision: dict | None = None) -> RefineResult:
     """Outputs of a solved :class:`Refinement` (states, covariance, report, residuals);
     ``consistency`` the :func:`circular_consistency` of a ``--circular`` solution;
-    ``prior_centre`` the a-priori centre the solution was solved with (:meth:`Refinement.solve`)."""
+    ``prior_centre`` the a-priori centre the solution was solved with (:meth:`Refinement.solve`);
+    ``decision`` what became of the stale state (methods/estimation/decision.py: replaced, kept,
+    declined), written to the diagnostics and the verdict."""
     opt = ref.options
     problem = ref.problem
     warnings = list(ref.warnings)
@@ -54,6 +57,10 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         if len(nuisance.get("values", [])) == npb - 6 and npb > 6:
             x[6:npb] = nuisance["values"]
             cov[6:npb, 6:npb] = np.asarray(nuisance["covariance"], float)
+            cross = np.asarray(nuisance.get("state_cross", []), float)
+            if cross.shape == (npb - 6, 6):
+                cov[6:npb, :6] = cross
+                cov[:6, 6:npb] = cross.T
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     units = problem.params.units() + (["m"] if opt.circular else [])
 
@@ -147,6 +154,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     if refusal is not None:
         refusal = dict(refusal)
         refusal.pop("state_covariance", None)
+        refusal.pop("decision", None)
         refusal["refused_correction_rtn"] = {
             part: dict(zip(rf.RTN_NAMES, (big @ d).tolist()))
             for part, d in zip(("seen", "unseen"), obs.split(np.asarray(sol.values, float)[:6] - ref.x0[:6]))}
@@ -170,7 +178,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
 
     quality = refine_quality(ref, sol, sigma_scale=sigma_scale, adaptation=adaptation, improvement=improvement,
                              refusal=refusal, t_model=t_model, max_el=max_el, consistency=consistency,
-                             timing=timing)
+                             timing=timing, decision=decision)
     if refusal is not None:
         warnings.append(f"the stale state is kept: {refusal['reason']}")
     apriori_note = ref.apriori_note
@@ -191,6 +199,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         "sigma_scale": sigma_scale, "max_elevation_deg": max_el,
         "residual_rms": {"value": rms, "unit": UNITS[ref.kind], "range_rate_m_s": rms * rr_factor},
         "apriori_adaptation": adaptation, "improvement": without_nuisance(improvement), "refused": refusal,
+        "decision": decision,
         "tle_timing": timing,
         "traverse": traverse, "constraints": constraints, "observability": obs.as_dict(),
         "covariance_rtn": rtn,

@@ -11,7 +11,10 @@ import numpy as np
 from trackproc.errors import ProcessingError
 from trackproc.models import modifiers as md
 from trackproc.pipeline.refine.assemble import prepare
-from trackproc.pipeline.refine.gates import circular_consistency, solve_gated, solve_weighted, with_noise_of
+from trackproc.methods.estimation import prior as pr
+from trackproc.pipeline.od import decision as od_decision
+from trackproc.pipeline.refine.gates import (circular_consistency, may_refuse, solve_gated, solve_weighted,
+                                            with_noise_of)
 from trackproc.pipeline.refine.noise import solve_noise
 from trackproc.pipeline.refine.options import MAX_TRAVERSE_ITERATIONS, TRAVERSE_TOLERANCE_S, RefineOptions, RefineResult
 from trackproc.pipeline.refine.result import finish
@@ -61,6 +64,20 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
         ref, sol, kkt, scale, adaptation, improvement, refusal = moved_out
         if refusal is not None:
             break
+    decision = None
+    if refusal is None and may_refuse(ref):
+        # replace the stale state only when the refined one is expected to predict better
+        npb = ref.n_problem
+        made = od_decision.by_prediction(ref.problem, np.asarray(sol.values, float)[:npb],
+                                         np.asarray(ref.covariance(sol, kkt), float)[:npb, :npb], ref.priors,
+                                         opt.horizon_days, ref.apriori_source or None)
+        if made is not None:
+            decision = made.as_dict()
+            if adaptation is not None and adaptation.get("factor", 1.0) > 1.0:
+                decision["apriori_adapted"] = True       # the default a-priori, loosened to the pass
+            if made.keeps_prior:
+                refusal = {"code": "kept", "reason": made.reason, "decision": decision,
+                           "state_covariance": pr.state_prior_covariance(ref.priors)}
     consistency = None
     if ref.options.circular:
         # the same assembled problem without the constraints and r_ka (always the last parameter)
@@ -68,4 +85,5 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
                        scales=ref.scales[:-1])
         consistency = circular_consistency(free, sol, scale)
     return finish(ref, sol, kkt, scale, consistency=consistency, adaptation=adaptation, traverse_moves=moves,
-                  improvement=improvement, refusal=refusal)
+                  improvement=improvement, refusal=refusal,
+                  decision=decision if refusal is None else refusal.get("decision"))
