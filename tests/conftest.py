@@ -132,6 +132,9 @@ SLOW_CPU: dict[str, str | dict[str, str]] = {
             "batch refine with the compiled kernels (compiles them on a fresh clone), 2.2 s warm"},
     "test_forces_cli.py": {
         "test_passes_and_compare_take_full": "a full-force day: compiles the force kernels on a fresh clone, 35 s"},
+    "test_hostile_formats.py": {
+        "test_reentry_stops_with_its_time": "a full-force propagation to re-entry: compiles the force kernels on a "
+                                            "fresh clone, 28 s"},
     "test_estimate_mismodel.py": {
         "test_unmodelled_drag_and_another_satellite_cover_or_say_so[drag_1]":
             "a day of full-force simulation: compiles the force kernels on a fresh clone, 37 s",
