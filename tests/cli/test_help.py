@@ -9,7 +9,7 @@ import pytest
 from trackproc.cli.app import main
 
 COMMANDS = ["ingest", "info", "simulate", "propagate", "smooth", "estimate", "refine", "accuracy",
-            "requirements", "detect", "batch", "passes", "compare", "identify", "fit-tle", "help"]
+            "requirements", "detect", "batch", "passes", "compare", "identify", "fit-tle", "filter", "help"]
 
 
 def _help(args, capsys, monkeypatch):

@@ -55,9 +55,10 @@ def _table(extra: list[pd.DataFrame] | None = None, outliers=(40, 300, 555)) -> 
     return table
 
 
-@pytest.fixture
-def pass_file(tmp_path) -> Path:
-    path = tmp_path / "pass.parquet"
+@pytest.fixture(scope="module")
+def pass_file(tmp_path_factory) -> Path:
+    """The pass table of :func:`_table`, written once per module (the tests only read it)."""
+    path = tmp_path_factory.mktemp("smooth") / "pass.parquet"
     write_pass_table(_table(), str(path), "parquet")
     return path
 

@@ -180,3 +180,39 @@ def test_simulator_equals_the_independent_oracle(mode, model):
     # and the two implementations really differ from a geometric (no light time) model
     geometric = np.linalg.norm(r - st.r, axis=-1)
     assert np.max(np.abs(ref.range_m - geometric)) > 1.0
+
+
+#: An Earth-orientation table with UT1-UTC, xp and yp all moving (length of day 1.5 ms, polar motion
+#: 2 and 1 mas a day), as IERS columns: (MJD, UT1-UTC s, xp arcsec, yp arcsec).
+EOP_MOVING = (np.arange(61117.0, 61124.0), 0.1 - 0.0015 * np.arange(7), 0.15 + 0.002 * np.arange(7),
+              0.3 - 0.001 * np.arange(7))
+
+
+def test_stations_equal_the_independent_oracle():
+    """Geodetic -> ITRF -> GCRF stations with their velocity, acceleration and rotation against the
+    oracle's own (Vallado's closed-form site vector, ``erfa.c2t06a`` at every date, rates by
+    seven-point differences), for five stations (both hemispheres, the equator at the date line,
+    near the pole, 3 km up) over 12 h."""
+    lat = np.radians([48.0, 67.8, -33.9, 0.0, 89.5])
+    lon = np.radians([35.0, 20.9, -70.7, 179.9, -120.0])
+    h = np.array([150.0, 400.0, 2500.0, 0.0, 3000.0])
+    j1, j2 = ts.add_seconds_utc(EPOCH, np.linspace(-6 * 3600.0, 6 * 3600.0, 13))
+    r_itrf = geodesy.geodetic_to_itrf(lat, lon, h)
+    np.testing.assert_allclose(r_itrf, oracle.geodetic_to_ecef(lat, lon, h), rtol=0, atol=1e-8)
+    ours = mm.station_gcrf(r_itrf, j1, j2, ts.eop_from_table(*EOP_MOVING, "test"))
+    ref = oracle.station_gcrf(lat, lon, h, j1, j2, EOP_MOVING)
+    np.testing.assert_allclose(ours.gcrf_to_itrf, ref.gcrf_to_itrf, rtol=0, atol=1e-15)
+    # measured: 3e-9 m (rounding), 1e-9 m/s (the oracle's differences, DIFF_STEP_S)
+    np.testing.assert_allclose(ours.r, ref.r, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(ours.v, ref.v, rtol=0, atol=5e-9)
+    # trackproc's acceleration is the centripetal ω × v about the mid-span axis (nominal ω): 2.5e-9
+    # m/s² from the exact one, i.e. 1e-11 m over a 0.1 s round trip
+    np.testing.assert_allclose(ours.a, ref.a, rtol=0, atol=1e-8)
+    # what the tolerances can see: the length of day's share of the velocity (UT1-UTC held at its
+    # value at the middle date, where the positions then agree) and polar motion's of the position
+    mjd_mid = j1[6] - 2400000.5 + j2[6]
+    held = (EOP_MOVING[0], np.full(7, np.interp(mjd_mid, EOP_MOVING[0], EOP_MOVING[1])), *EOP_MOVING[2:])
+    no_lod = oracle.station_gcrf(lat, lon, h, j1[6:7], j2[6:7], held)
+    assert np.abs(no_lod.r[:, 0] - ref.r[:, 6]).max() < 1e-6 and np.abs(no_lod.v[:, 0] - ref.v[:, 6]).max() > 5e-6
+    no_pm = oracle.station_gcrf(lat, lon, h, j1, j2, (*EOP_MOVING[:2], np.zeros(7), np.zeros(7)))
+    assert np.abs(no_pm.r - ref.r).max() > 1.0

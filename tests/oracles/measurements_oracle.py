@@ -5,7 +5,10 @@ satellite about the reception time, its own Newton iterations, its own range-rat
 az/el formulas), kept when the production code was unified into
 ``trackproc.models.light_time`` and ``trackproc.models.observables``. The tests compare the
 simulator (``trackproc.models.measurements``) and the estimator
-(``trackproc.models.observation``) against it; do not make it import those modules.
+(``trackproc.models.observation``) against it; do not make it import those modules, nor
+``trackproc.dynamics``: its stations (geodetic -> ITRF -> GCRF, with their rates) and its
+azimuth/elevation are written from Vallado and ERFA's top-level routines, so that they check
+``trackproc.dynamics.geodesy`` and ``frames`` rather than repeat them.
 
 Measurement models of ground-station tracking: range, range-rate, Doppler, azimuth, elevation.
 
@@ -60,6 +63,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import erfa
 import numpy as np
 
 from trackproc.constants import C_LIGHT
@@ -71,6 +75,40 @@ MODES = ("one-way", "two-way")
 
 
 # --------------------------------------------------------------------------- stations
+# Written from the textbooks and ERFA's own top-level routines, not from trackproc.dynamics: the
+# closed-form geodetic -> ECEF of Vallado, the whole celestial-to-terrestrial matrix from
+# ``erfa.c2t06a`` at every date (no interpolation grid, no factor-by-factor assembly), linear
+# interpolation of the raw EOP columns, and velocity and acceleration by central differences of
+# the rotated position (no analytic rates).
+
+#: WGS-84 defining parameters (NIMA TR8350.2, Table 3.1): semi-major axis (m), inverse flattening.
+WGS84_A_M = 6378137.0
+WGS84_INV_F = 298.257223563
+#: Step (s) of the central differences. A date's rotated position carries ~1e-8 m of rounding (the
+#: Earth Rotation Angle is rounded to ~3e-15 rad), which the seven-point formulas below divide by the
+#: step: ~8e-9 m/s at 30 s, ~1e-9 m/s at 120 s; their truncation (h⁶ ω⁷ r / 140, h⁶ ω⁸ r / 560) is
+#: below 2e-12 at 120 s.
+DIFF_STEP_S = 120.0
+#: Arcseconds to radians.
+ARCSEC = np.pi / (180.0 * 3600.0)
+
+
+def geodetic_to_ecef(lat_rad, lon_rad, height_m, a_m: float = WGS84_A_M, inv_f: float = WGS84_INV_F):
+    """WGS-84 geodetic latitude, longitude (rad) and ellipsoidal height (m) -> ECEF (ITRF) position
+    (m), shape (..., 3).
+
+    Implements Vallado, *Fundamentals of Astrodynamics and Applications* (4th ed., 2013), eqs. 3-13
+    and 3-14: ``C = a / sqrt(1 - e² sin²φ)``, ``S = C (1 - e²)``, and the site at
+    ``((C + h) cos φ cos λ, (C + h) cos φ sin λ, (S + h) sin φ)``.
+    """
+    lat, lon, h = np.broadcast_arrays(*(np.asarray(x, float) for x in (lat_rad, lon_rad, height_m)))
+    f = 1.0 / inv_f
+    e2 = f * (2.0 - f)
+    c = a_m / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+    s = c * (1.0 - e2)
+    return np.stack([(c + h) * np.cos(lat) * np.cos(lon), (c + h) * np.cos(lat) * np.sin(lon),
+                     (s + h) * np.sin(lat)], -1)
+
 
 @dataclass(frozen=True)
 class StationTrack:
@@ -83,48 +121,53 @@ class StationTrack:
     gcrf_to_itrf: np.ndarray
 
 
-def station_gcrf(r_itrf, jd1, jd2, eop=None) -> StationTrack:
-    """Station position, velocity and acceleration in GCRF at UTC dates.
+def _eop_at(mjd_utc, eop_columns):
+    """UT1-UTC (s), xp, yp (rad) at UTC MJDs, linear between the table's daily rows.
 
-    Parameters
-    ----------
-    r_itrf : (3,) or (S, 3) ITRF positions (m) of S stations fixed on the Earth.
-    jd1, jd2 : (N,) UTC two-part Julian dates (reception times).
-    eop : :class:`~trackproc.dynamics.timescales.EarthOrientation` or None.
+    ``eop_columns``: ``(mjd, ut1_minus_utc_s, xp_arcsec, yp_arcsec)`` as IERS tabulates them, or
+    None (all zero). UT1-UTC is interpolated as it is tabulated, so the table must not straddle a
+    leap second (checked)."""
+    mjd_utc = np.asarray(mjd_utc, float)
+    if eop_columns is None:
+        z = np.zeros(mjd_utc.shape)
+        return z, z, z
+    mjd, dut1, xp, yp = (np.asarray(c, float) for c in eop_columns)
+    if np.any(np.abs(np.diff(dut1)) > 0.5):
+        raise ValueError("the oracle's EOP table straddles a leap second")
+    return (np.interp(mjd_utc, mjd, dut1), np.interp(mjd_utc, mjd, xp) * ARCSEC,
+            np.interp(mjd_utc, mjd, yp) * ARCSEC)
 
-    Position and velocity are the exact IAU 2006/2000A transform
-    (:func:`~trackproc.dynamics.frames.itrf_to_gcrf`, one Earth-orientation evaluation shared
-    by all stations); the acceleration is the centripetal ``ω × v`` about the rotation axis
-    (used only to move the station over a round-trip light time). Repeated dates (a range
-    and a range-rate sample share their reception time) are evaluated once: the Earth
-    orientation (``erfa.c2i06a`` per date) is the cost here.
-    """
-    from trackproc.dynamics import frames
 
-    r_itrf = np.asarray(r_itrf, float)
+def celestial_to_terrestrial(jd1, jd2, eop_columns=None) -> np.ndarray:
+    """The GCRS -> ITRS matrix (N, 3, 3) at UTC two-part JDs: ``erfa.c2t06a`` (IAU 2006/2000A,
+    CIO based, with polar motion and the TIO locator s') at TT and UT1 from ERFA's own UTC ->
+    TAI -> TT and UTC -> UT1."""
     jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
-    jd1, jd2 = jd1.reshape(-1), jd2.reshape(-1)
-    n = jd1.size
-    inverse = None
-    if n > 1:
-        dates, inverse = np.unique(np.stack([jd1, jd2], -1), axis=0, return_inverse=True)
-        inverse = inverse.reshape(-1)
-        if dates.shape[0] == n:
-            inverse = None
-        else:
-            jd1, jd2 = dates[:, 0], dates[:, 1]
-    m = jd1.size
-    shape = (m, 3) if r_itrf.ndim == 1 else (r_itrf.shape[0], m, 3)
-    r_src = np.broadcast_to(r_itrf if r_itrf.ndim == 1 else r_itrf[:, None, :], shape)
-    rot = frames.earth_rotation(jd1, jd2, eop)
-    r, v = frames.itrf_to_gcrf(r_src, np.zeros(shape), jd1, jd2, eop, rotation=rot)
-    matrix = rot.matrix
-    mid = n // 2 if inverse is None else inverse[n // 2]
-    axis = rot.q[mid][2]  # the CIP (rotation axis) in GCRF, mid-span
-    if inverse is not None:
-        r, v, matrix = r[..., inverse, :], v[..., inverse, :], matrix[inverse]
-    a = np.cross(frames.OMEGA_ERA * axis, v)
-    return StationTrack(r=r, v=v, a=a, gcrf_to_itrf=matrix)
+    dut1, xp, yp = _eop_at((jd1 - 2400000.5) + jd2, eop_columns)
+    tt1, tt2 = erfa.taitt(*erfa.utctai(jd1, jd2))
+    ut1, ut2 = erfa.utcut1(jd1, jd2, dut1)
+    return np.asarray(erfa.c2t06a(tt1, tt2, ut1, ut2, xp, yp))
+
+
+def station_gcrf(lat_rad, lon_rad, height_m, jd1, jd2, eop_columns=None) -> StationTrack:
+    """Stations given by WGS-84 geodetic coordinates (scalars, or (S,) arrays) in GCRF at UTC
+    dates ``jd1 + jd2`` (N,): position ``M(t)ᵀ r_ecef``, and its first and second time derivatives
+    (per SI second; no leap second within 3 :data:`DIFF_STEP_S`) by the seven-point central
+    differences ``(p₃ - 9p₂ + 45p₁ - 45p₋₁ + 9p₋₂ - p₋₃) / 60h`` and
+    ``(2p₃ - 27p₂ + 270p₁ - 490p₀ + 270p₋₁ - 27p₋₂ + 2p₋₃) / 180h²`` (Fornberg 1988, Table 1)."""
+    r_ecef = geodetic_to_ecef(lat_rad, lon_rad, height_m)
+    jd1, jd2 = np.broadcast_arrays(np.atleast_1d(np.asarray(jd1, float)), np.atleast_1d(np.asarray(jd2, float)))
+    h = DIFF_STEP_S
+
+    def position(k):
+        m = celestial_to_terrestrial(jd1, jd2 + k * h / 86400.0, eop_columns)   # (N, 3, 3)
+        return np.einsum("nji,...j->...ni", m, r_ecef), m                        # Mᵀ r: (N, 3) or (S, N, 3)
+
+    p = {k: position(k)[0] for k in (-3, -2, -1, 1, 2, 3)}
+    p0, m0 = position(0)
+    v = (p[3] - 9.0 * p[2] + 45.0 * p[1] - 45.0 * p[-1] + 9.0 * p[-2] - p[-3]) / (60.0 * h)
+    a = (2.0 * (p[3] + p[-3]) - 27.0 * (p[2] + p[-2]) + 270.0 * (p[1] + p[-1]) - 490.0 * p0) / (180.0 * h * h)
+    return StationTrack(r=p0, v=v, a=a, gcrf_to_itrf=m0)
 
 
 # --------------------------------------------------------------------------- light time
@@ -265,15 +308,23 @@ def azel(direction_gcrf, gcrf_to_itrf_matrix, lat_rad, lon_rad):
     """Azimuth (rad, from north through east, [0, 2π)) and elevation (rad) of a GCRF direction.
 
     ``direction_gcrf`` (..., 3): e.g. ``r_sat(t_e) - r_st(t_r)``; ``gcrf_to_itrf_matrix``
-    (..., 3, 3) the rotation at ``t_r``; the station's geodetic latitude/longitude define the
-    local east-north-up frame (:func:`~trackproc.dynamics.geodesy.enu_matrix`).
+    (..., 3, 3) the rotation at ``t_r``. The ITRF direction is turned into the station's
+    south-east-zenith frame, ``ρ_SEZ = ROT2(90° - φ) ROT3(λ) ρ_ECEF``, and
+    ``el = asin(ρ_Z / ρ)``, ``az = atan2(ρ_E, -ρ_S)``: Vallado (4th ed., 2013), algorithm 27 (RAZEL).
     """
-    from trackproc.dynamics import geodesy
-
-    d_itrf = np.einsum("...ij,...j->...i", gcrf_to_itrf_matrix, direction_gcrf)
-    enu = np.einsum("...ij,...j->...i", geodesy.enu_matrix(lat_rad, lon_rad), d_itrf)
-    az, el, _ = geodesy.enu_to_azel(enu)
-    return wrap_2pi(az), el
+    d = np.einsum("...ij,...j->...i", gcrf_to_itrf_matrix, direction_gcrf)
+    lat, lon = np.asarray(lat_rad, float), np.asarray(lon_rad, float)
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    # ROT3(λ): into the frame whose x axis is in the station's meridian
+    x1 = np.cos(lon) * x + np.sin(lon) * y
+    y1 = -np.sin(lon) * x + np.cos(lon) * y
+    # ROT2(90° - φ): tilt that frame's z axis onto the local vertical (the ellipsoid's normal)
+    colat = np.pi / 2 - lat
+    south = np.cos(colat) * x1 - np.sin(colat) * z
+    east = y1
+    zenith = np.sin(colat) * x1 + np.cos(colat) * z
+    rho = np.sqrt(south * south + east * east + zenith * zenith)
+    return wrap_2pi(np.arctan2(east, -south)), np.arcsin(zenith / rho)
 
 
 def wrap_2pi(angle_rad):

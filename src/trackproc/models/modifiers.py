@@ -53,6 +53,7 @@ import numpy as np
 from trackproc.constants import C_LIGHT
 from trackproc.dynamics import geodesy
 from trackproc.models import parameters as pm
+from trackproc.models.observables import range_rate_per_hz
 
 __all__ = ["Modifier", "BoundModifier", "RangeBias", "DopplerOffset", "DopplerDrift", "AzimuthBias",
            "ElevationBias", "RangeCorrection", "OscillatorWander", "elevation", "collect_drivers", "bind_all",
@@ -204,7 +205,7 @@ def _frequency_rows(meas, key) -> np.ndarray:
 
 def _hz_to_samples(meas, rows, coef, name, c=C_LIGHT) -> np.ndarray:
     """``coef`` (Hz per unit of the driver) on Doppler rows; ``-c/f`` (one-way) or ``-c/(2f)``
-    (two-way) times it on range-rate rows (ρ̇ = -c Δf / f, resp. / (2f))."""
+    (two-way) times it on range-rate rows (ρ̇ = -c Δf / f, resp. / (2f): :func:`range_rate_per_hz`)."""
     rr = meas.kind[rows] == "range_rate"
     if rr.any():
         f = meas.carrier_hz[rows][rr]
@@ -212,8 +213,7 @@ def _hz_to_samples(meas, rows, coef, name, c=C_LIGHT) -> np.ndarray:
             raise ValueError(f"{name}: range-rate samples without a carrier frequency cannot take a "
                              "Doppler offset/drift")
         coef = coef.copy()
-        coef[rr] *= -c / f
-        coef[rr] = np.where(meas.two_way[rows][rr], 0.5 * coef[rr], coef[rr])
+        coef[rr] *= range_rate_per_hz(f, meas.two_way[rows][rr], c)
     return coef
 
 

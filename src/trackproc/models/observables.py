@@ -54,7 +54,7 @@ from trackproc.vocabulary import check_mode, check_range_rate_model  # noqa: F40
 
 __all__ = ["check_range_rate_model", "check_mode", "range_partials", "range_rate_value", "range_rate_partials",
            "two_way_range_partials", "up_rate_partials", "two_way_range_rate_partials", "doppler_factor",
-           "doppler_hz", "range_rate_from_doppler", "azel", "azel_value", "azel_partials", "wrap_2pi", "wrap_pi"]
+           "doppler_hz", "range_rate_per_hz", "range_rate_from_doppler", "azel", "azel_value", "azel_partials", "wrap_2pi", "wrap_pi"]
 
 
 def _dot(a, b):
@@ -196,10 +196,21 @@ def doppler_hz(range_rate_m_s, carrier_hz: float, mode: str = "one-way", offset_
     return -k * carrier_hz * np.asarray(range_rate_m_s, float) / c + offset_hz + drift_hz_s * np.asarray(t_s, float)
 
 
+def range_rate_per_hz(carrier_hz, two_way=False, c: float = C_LIGHT):
+    """Range-rate per Hz of Doppler, ``-c / (k f)`` (m/s per Hz; ``k`` 2 where ``two_way``, else 1):
+    eq. (4) inverted, the one conversion between Doppler and range-rate. ``carrier_hz`` and
+    ``two_way`` (bool) are scalars or arrays of one shape; a float for scalars.
+
+    Implements seed 004 item 1 (``Vr = c/(2 f0) f_D`` two-way; ``c/f0`` one-way).
+    """
+    k = np.where(two_way, 2.0, 1.0) if np.ndim(two_way) else (2.0 if two_way else 1.0)
+    out = -c / (k * np.asarray(carrier_hz, float))
+    return out if np.ndim(out) else float(out)
+
+
 def range_rate_from_doppler(doppler_hz_, carrier_hz: float, mode: str = "one-way", c: float = C_LIGHT) -> np.ndarray:
     """Inverse of :func:`doppler_hz` without offset or drift: ``ρ̇ = -c Δf / (k f)`` (seed 004 item 1)."""
-    k = doppler_factor(mode)
-    return -c * np.asarray(doppler_hz_, float) / (k * carrier_hz)
+    return np.asarray(doppler_hz_, float) * range_rate_per_hz(carrier_hz, doppler_factor(mode) == 2.0, c)
 
 
 # ----------------------------------------------------------------------------- azimuth, elevation

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from trackproc import vocabulary
-from trackproc.constants import C_LIGHT, force_model_constants
+from trackproc.constants import force_model_constants
 from trackproc.errors import InputError, ProcessingError
 from trackproc import __version__
 from trackproc.dynamics import geodesy, propagator
@@ -40,6 +40,7 @@ from trackproc.io.passfile import SIGN_CONVENTION
 from trackproc.io.statefile import FORCE_LABELS
 from trackproc.io.tle import tle_epoch
 from trackproc.isotime import iso_utc
+from trackproc.models.observables import doppler_hz
 from trackproc.pipeline.orbit_source import SGP4_LABEL, OrbitInput, Satellite, observe, sgp4_states
 
 DEG = np.pi / 180.0
@@ -254,7 +255,8 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
             columns["sigma_range_m"] = np.sqrt(np.einsum("ni,ij,nj->n", h_r, cov0, h_r))
             columns["sigma_range_rate_m_s"] = np.sqrt(np.einsum("ni,ij,nj->n", h_rr, cov0, h_rr))
             if options.carrier_hz is not None:
-                columns["sigma_doppler_hz"] = options.carrier_hz * columns["sigma_range_rate_m_s"] / C_LIGHT
+                # the one-way Doppler shift that sigma m/s of range-rate makes (its size)
+                columns["sigma_doppler_hz"] = np.abs(doppler_hz(columns["sigma_range_rate_m_s"], options.carrier_hz))
     frame = pd.DataFrame(columns)
     if options.visible_only:
         keep = visible_rows(prediction, options, times)
@@ -364,7 +366,7 @@ def station_columns(prediction, carrier_hz) -> dict:
     Doppler at ``carrier_hz`` (none without), azimuth, elevation in degrees, light time."""
     out = {"range_m": prediction.range_m, "range_rate_m_s": prediction.range_rate_m_s}
     if carrier_hz is not None:
-        out["doppler_hz"] = -carrier_hz * prediction.range_rate_m_s / C_LIGHT
+        out["doppler_hz"] = doppler_hz(prediction.range_rate_m_s, carrier_hz)
     out.update(azimuth_deg=prediction.azimuth_rad / DEG, elevation_deg=prediction.elevation_rad / DEG,
                light_time_s=prediction.light_time_s)
     return out

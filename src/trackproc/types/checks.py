@@ -18,8 +18,9 @@ import re
 import numpy as np
 import pandas as pd
 
-from trackproc.constants import C_LIGHT, MU_EARTH
+from trackproc.constants import MU_EARTH
 from trackproc.errors import InputError
+from trackproc.models.observables import range_rate_per_hz
 
 #: Earliest and latest time a datetime64[ns] holds (1677-09-21 .. 2262-04-11); inputs are
 #: accepted in whole years within it.
@@ -95,7 +96,7 @@ def check_carrier(carrier_hz, *, file: str | None = None, column: str = "--carri
 
 def doppler_speed_factor(carrier_hz: float, mode: str | None) -> float:
     """|line-of-sight speed| per Hz of Doppler: c / carrier one-way, c / (2 carrier) two-way."""
-    return C_LIGHT / ((2.0 if mode == "two-way" else 1.0) * carrier_hz)
+    return abs(range_rate_per_hz(carrier_hz, mode == "two-way"))
 
 
 def check_los_speed(values, kind: str, *, carrier_hz: float | None = None, mode: str | None = None,
