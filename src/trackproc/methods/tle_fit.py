@@ -29,6 +29,9 @@ from typing import Callable
 
 import numpy as np
 
+# a TLE's measured accuracy (TLE differencing) has one home, the a-priori shared by every command
+from trackproc.methods.estimation.prior import TLE_APRIORI, TLE_APRIORI_MAX_AGE_DAYS  # noqa: F401
+
 from trackproc.errors import ProcessingError
 
 DEG = math.pi / 180.0
@@ -92,20 +95,6 @@ def element_sigmas(a_m: float, ex: float, ey: float, i_rad: float, raan_rad: flo
     m, angles in rad): ``σ_n = 1.5 n σ_a / a`` (n ∝ a^-3/2), angles in degrees."""
     return np.array([1.5 * n_rev_day * a_m / semi_major_m, ex, ey, i_rad / DEG, raan_rad / DEG, u_rad / DEG, bstar])
 
-
-#: The a-priori of an initial TLE's mean elements, as 1-σ position errors of its SGP4 prediction:
-#: radial, along-track and cross-track (m) at its epoch, and the along-track error's growth per
-#: day (a mean-motion error). Calibrated by TLE differencing (each older TLE's SGP4 prediction
-#: against a newer one's, over 1.6 h about the newer epoch, RMS over the pairs; ages 0.4-3.2 days)
-#: on the 10 Delfi-C3 TLEs of the DopTrack development days (1-10 April 2020), no Doppler data:
-#: along-track 250 m at 0.4-0.8 d, 680 m at 0.8-1.7 d, 1300 m at 1.7-3.2 d (drift ~520 m/day),
-#: radial 30-125 m, cross-track 17-52 m (``benchmarks/fit_tle_doptrack.py tle-apriori``).
-#: Refine's default element sigmas (``--apriori-model refine``) are ~10x looser along-track.
-TLE_APRIORI = {"radial_m": 100.0, "along_m": 200.0, "cross_m": 50.0, "along_m_per_day": 550.0}
-#: The ages (days) TLE_APRIORI was measured at. Older TLEs drift faster than linearly (drag):
-#: along-track 2.6 km at 3.2-5 d, 5.3 km at 5-7 d, 17 km at 7-10 d against the model's 2.2, 3.3
-#: and 4.7 km, radial and cross-track growing too; fit-tle then uses refine's looser a-priori.
-TLE_APRIORI_MAX_AGE_DAYS = 3.2
 
 
 def tle_element_sigmas(radial_m: float, along_m: float, cross_m: float, along_m_per_day: float, bstar: float,
@@ -312,18 +301,10 @@ def probability_better(change, covariance, n_rev_day: float, semi_major_m: float
                        dt_days: float) -> tuple:
     """The probability that elements ``x_fit`` predict the position ``dt_days`` after the epoch
     better than ``x_init`` when ``x_fit``'s prediction error is ``N(0, covariance)`` (7, 7) and
-    ``change = x_fit − x_init``. With ``d = G change`` (:func:`position_map`) and the fit's error
-    ``e``, the initial's is ``e − d``, so ``|e − d|² > |e|²`` exactly when ``e·u < |d|/2`` (``u =
-    d/|d|``): probability ``Φ(|d| / (2 σ_u))``, ``σ_u² = uᵀ G C Gᵀ u``. 0.5 when the fit does not
-    move the prediction (a coin toss, not a gain); near 1 when it moves it by several σ. Returns
-    ``(probability, |d| in m, σ_u in m)``."""
+    ``change = x_fit − x_init``: :func:`trackproc.methods.estimation.decision.probability_better` of
+    the move ``G change`` with covariance ``G C Gᵀ`` (``G`` :func:`position_map`), the rule every
+    command shares. Returns ``(probability, |d| in m, σ_u in m)``."""
+    from trackproc.methods.estimation.decision import probability_better as better
+
     g = position_map(n_rev_day, semi_major_m, inclination_deg, dt_days)
-    d = g @ np.asarray(change, float)
-    size = float(np.linalg.norm(d))
-    if size == 0.0:
-        return 0.5, 0.0, 0.0
-    u = d / size
-    sigma = math.sqrt(max(float(u @ g @ np.asarray(covariance, float) @ g.T @ u), 0.0))
-    if sigma == 0.0:
-        return 1.0, size, 0.0
-    return 0.5 * math.erfc(-size / (2.0 * sigma) / math.sqrt(2.0)), size, sigma
+    return better(g @ np.asarray(change, float), g @ np.asarray(covariance, float) @ g.T)

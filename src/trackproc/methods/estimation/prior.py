@@ -34,7 +34,12 @@ SOURCES = ("stated", "default")
 DEFAULT_APRIORI_ELEMENTS = {"a_m": 50.0, "ex": 5e-5, "ey": 5e-5, "i_rad": 1e-4, "raan_rad": 1e-4, "u_rad": 4e-4}
 
 #: A TLE's position error at its epoch (1σ, m, radial / along-track / cross-track) and the growth of
-#: the along-track error per day of age: TLE differencing (docs/fit-tle.md, "A TLE's accuracy").
+#: the along-track error per day of age (a mean-motion error). Calibrated by TLE differencing (each
+#: older TLE's SGP4 prediction against a newer one's, over 1.6 h about the newer epoch, RMS over the
+#: pairs; ages 0.4-3.2 days) on the 10 Delfi-C3 TLEs of the DopTrack development days (1-10 April
+#: 2020), no Doppler data: along-track 250 m at 0.4-0.8 d, 680 m at 0.8-1.7 d, 1300 m at 1.7-3.2 d
+#: (drift ~520 m/day), radial 30-125 m, cross-track 17-52 m (``benchmarks/fit_tle_doptrack.py
+#: tle-apriori``). Refine's default element sigmas are ~10x looser along-track.
 TLE_APRIORI = {"radial_m": 100.0, "along_m": 200.0, "cross_m": 50.0, "along_m_per_day": 550.0}
 #: The ages (days) :data:`TLE_APRIORI` was measured at. Older TLEs drift faster than linearly (drag):
 #: along-track 2.6 km at 3.2-5 d, 5.3 km at 5-7 d, 17 km at 7-10 d against the linear model's 2.2,

@@ -105,7 +105,9 @@ def keep_or_replace(problem: Problem, opt: EstimateOptions, sol, noise=None):
     if not made.keeps_prior:
         return sol, None
     test = apriori_test(problem.priors, sol)
-    return hold(problem, opt, sol, noise, test, "kept", made.reason, made.as_dict())
+    kept, out = hold(problem, opt, sol, noise, test, "kept", made.reason, made.as_dict())
+    out["fitted_solution"] = sol        # the data's checks are the fit's (the kept state is not a fit)
+    return kept, out
 
 
 def hold(problem: Problem, opt: EstimateOptions, sol, noise, test: dict, code: str, reason: str, decision: dict):

@@ -123,7 +123,9 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         sol, adaptation, noise_report = gates.solve(problem, opt)
     except ProcessingError as exc:
         raise failure_culprit(exc, tables, initial, stations, opt, eop) from None
-    fitted = sol                    # the estimator's own covariance: what the quality tests take
+    # the estimator's own solution and covariance: what the quality tests take (for an initial state
+    # kept by the replace/keep rule, the fit that was not taken)
+    fitted = (adaptation or {}).pop("fitted_solution", None) or sol
     sol, timing = tle_timing_gate(problem, opt, initial, sol, adaptation)
     problem.params.set_values(sol.values)
     x = sol.values

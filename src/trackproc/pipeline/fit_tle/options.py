@@ -8,6 +8,8 @@ from typing import Optional
 import numpy as np
 import pandas as pd
 
+from trackproc.methods.estimation.decision import REPLACE_PROBABILITY
+
 
 KINDS = ("doppler", "range_rate", "range", "azimuth", "elevation")
 DOPPLER_BIAS = ("none", "offset", "offset+drift")
@@ -22,8 +24,8 @@ EDITED_LIMIT = 0.10
 MU_WGS72 = 398600.8e9
 #: The fit is written only when it predicts the position at the horizon better than the initial
 #: orbit with at least this probability (``no_predictive_gain``; tle_fit.probability_better: 0.5
-#: is a coin toss). Chosen on the DopTrack development days (docs/fit-tle.md "Refusal").
-REFUSAL_PROBABILITY = 0.9
+#: is a coin toss): the rule every command shares (methods/estimation/decision.py).
+REFUSAL_PROBABILITY = REPLACE_PROBABILITY
 
 
 @dataclass

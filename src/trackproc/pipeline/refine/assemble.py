@@ -13,7 +13,6 @@ from typing import Optional
 import numpy as np
 import pandas as pd
 
-from trackproc.constants import C_LIGHT
 from trackproc.dynamics import geodesy, propagator
 from trackproc.dynamics import measurement_spectra as ms
 from trackproc.dynamics import timescales as ts
@@ -23,6 +22,7 @@ from trackproc.io.tle import parse_tle, tle_state
 from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Prior
 from trackproc.models import observation as ob
+from trackproc.models.observables import range_rate_per_hz
 from trackproc.models import parameters as pm
 from trackproc.pipeline.od import EstimateOptions, build_problem
 from trackproc.types import PassTable
@@ -205,8 +205,7 @@ def integral_setup(ref: Refinement, frame) -> dict:
     t_nodes = t_poly + offset
     # Doppler -> range-rate: -c Δf/f one-way, -c Δf/(2f) two-way (seed 004: Vr = c/(2 f0) f_D)
     mode = link_mode(ref)
-    k_link = 2.0 if mode == "two-way" else 1.0
-    to_rr = -C_LIGHT / (k_link * ref.carrier_hz) if ref.kind == "doppler" else 1.0
+    to_rr = range_rate_per_hz(ref.carrier_hz, mode == "two-way") if ref.kind == "doppler" else 1.0
     observed = to_rr * curve.fit(t_poly)
     design = to_rr * curve.fit.design(t_poly)
     sig = frame["sigma"].to_numpy(float) * abs(to_rr)

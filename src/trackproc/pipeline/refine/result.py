@@ -10,7 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from trackproc.constants import C_LIGHT, force_model_constants
+from trackproc.constants import force_model_constants
 from trackproc.dynamics import propagator
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.rtn import rtn_covariance, rtn_jacobian
@@ -19,6 +19,7 @@ from trackproc.isotime import iso_utc
 from trackproc.methods import refinement as rf
 from trackproc.methods.quality import chi2_limit
 from trackproc.models import modifiers as md
+from trackproc.models.observables import range_rate_per_hz
 from trackproc.pipeline.od import UNITS, residual_frame
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, RefineResult
 from trackproc.types import State
@@ -80,8 +81,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     residuals = residual_frame(problem, samples)
     kept = ~samples.edited
     # Doppler residual (Hz) -> m/s: c/f one-way, c/(2f) two-way
-    rr_factor = (C_LIGHT / ((2.0 if link_mode(ref) == "two-way" else 1.0) * ref.carrier_hz)
-                 if ref.kind == "doppler" else 1.0)
+    rr_factor = abs(range_rate_per_hz(ref.carrier_hz, link_mode(ref) == "two-way")) if ref.kind == "doppler" else 1.0
     res_kept = samples.residual[kept]
     rms = float(np.sqrt(np.mean(res_kept ** 2))) if res_kept.size else math.nan
 
