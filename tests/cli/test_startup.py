@@ -130,3 +130,81 @@ def test_commands_leave_numpys_unused_modules_unloaded_and_usable(tmp_path):
     last = [line for line in res.stdout.splitlines() if line.startswith("RESULT")]
     assert last and last[-1].split()[1:] == ["0", "False", "0", "True", "True", "True", "module"], \
         res.stdout[-2000:] + res.stderr[-2000:]
+
+
+#: The command words whose help is checked from the cache (the top level and every command).
+_HELP_PROBE = ("import io, sys, json; from trackproc.cli import app as a; out = sys.stdout; "
+               "sys.stdout = io.StringIO(); code = a._main(json.loads(sys.argv[1])); "
+               "text = sys.stdout.getvalue(); sys.stdout = out; "
+               "print(json.dumps([code, text, sorted(m for m in ('typer', 'logging', 'trackproc.cli.root', "
+               "'trackproc.cli.commands', 'numpy') if m in sys.modules)]))")
+
+
+def _help(argv, cache):
+    import json
+    import os
+
+    env = {**os.environ, "TRACKPROC_CACHE_DIR": str(cache)}
+    res = subprocess.run([sys.executable, "-c", _HELP_PROBE, json.dumps(argv)], capture_output=True, text=True,
+                         check=True, env=env)
+    return json.loads(res.stdout)
+
+
+@pytest.mark.subprocess
+def test_help_from_the_cache_is_typers_without_typer(tmp_path):
+    """``--help`` renders by typer once; the next run prints the same text without importing typer,
+    logging or any command module (cli/help_cache.py); with the cache off it is typer's every time."""
+    from trackproc.cli.commands import SUMMARIES
+
+    for argv in [["--help"], ["-h"]] + [[name, "--help"] for name in SUMMARIES]:
+        code, rendered, loaded = _help(argv, tmp_path / "cache")
+        assert code == 0 and rendered.startswith("Usage: trackproc") and "typer" in loaded, argv
+        code, cached, loaded = _help(argv, tmp_path / "cache")
+        assert (code, cached, loaded) == (0, rendered, []), argv
+        assert _help(argv, "off")[1:] == [rendered, ["logging", "trackproc.cli.commands", "trackproc.cli.root",
+                                                     "typer"]], argv
+    assert not (tmp_path / "off").exists()
+
+
+@pytest.mark.subprocess
+def test_a_stale_help_entry_is_rendered_again(tmp_path):
+    """An entry whose inputs changed (a module file's stamp, a config file that appeared) or that
+    is damaged is not used: typer renders the help again, and the text follows the change."""
+    cache = tmp_path / "cache"
+    first = _help(["refine", "--help"], cache)
+    (entry,) = (cache / "help").glob("*.txt")
+    head, _, text = entry.read_text().partition("\n\n")
+    lines = head.split("\n")
+    stamp = next(i for i, line in enumerate(lines) if line.endswith("/cli/refine_cmd.py"))
+    mtime, size, path = lines[stamp].split(" ", 2)
+    lines[stamp] = f"{int(mtime) + 1} {size} {path}"              # as if refine_cmd.py had been edited
+    entry.write_text("\n".join(lines) + "\n\n" + "stale help\n")
+    again = _help(["refine", "--help"], cache)
+    assert again == first and "typer" in again[2]
+    assert _help(["refine", "--help"], cache) == [0, first[1], []]    # rewritten, used again
+    entry.write_text("damaged")
+    assert _help(["refine", "--help"], cache) == first
+    # a config file's defaults show in the help (click's default_map): its appearance is a change
+    config = tmp_path / "config.toml"
+    config.write_text('[refine]\ndoppler_bias = "offset"\n')
+    import os
+
+    os.environ["TRACKPROC_CONFIG"] = str(config)
+    try:
+        with_config = _help(["refine", "--help"], cache)
+    finally:
+        del os.environ["TRACKPROC_CONFIG"]
+    assert with_config[0] == 0 and "typer" in with_config[2]
+
+
+@pytest.mark.subprocess
+def test_other_requests_go_to_typer(tmp_path):
+    """Only plain help requests are cached: an option before the flag, an unknown command (exit 2)
+    and ``--version`` (answered without typer) leave no help entry."""
+    cache = tmp_path / "cache"
+    assert _help(["refine", "x.csv", "--initial", "s.json", "--help"], cache)[0] == 0
+    code, _, loaded = _help(["no-such-command", "--help"], cache)
+    assert code == 2 and "typer" in loaded
+    code, text, loaded = _help(["--version"], cache)
+    assert code == 0 and text.startswith("trackproc ") and loaded == []
+    assert not list(cache.glob("help/*.txt"))
