@@ -56,8 +56,13 @@ def _open(path: Path):
     return open(path, encoding="latin-1")
 
 
+_DATES: dict = {}     # date text -> days: a file repeats a few dates on thousands of lines
+
+
 def _date_days(text: str, where) -> float:
     """``yyyymmdd`` or ``yyyymmdd.hhmm`` -> days since 1970-01-01 (UTC, as float)."""
+    if text in _DATES:
+        return _DATES[text]
     try:
         whole, _, frac = text.partition(".")
         day = np.datetime64(f"{whole[:4]}-{whole[4:6]}-{whole[6:8]}", "D")
@@ -65,7 +70,8 @@ def _date_days(text: str, where) -> float:
         minutes = int(frac[2:4]) if frac[2:4] else 0
     except (ValueError, IndexError):
         raise InputError("bad date", **where, found=text, expected="yyyymmdd or yyyymmdd.hhmm") from None
-    return float(day.astype("int64")) + (hours * 60 + minutes) / 1440.0
+    _DATES[text] = float(day.astype("int64")) + (hours * 60 + minutes) / 1440.0
+    return _DATES[text]
 
 
 def read_icgem(path, degree: int | None = None, order: int | None = None, date=None) -> GravityField:
