@@ -161,8 +161,9 @@ def test_help_from_the_cache_is_typers_without_typer(tmp_path):
         assert code == 0 and rendered.startswith("Usage: trackproc") and "typer" in loaded, argv
         code, cached, loaded = _help(argv, tmp_path / "cache")
         assert (code, cached, loaded) == (0, rendered, []), argv
-        assert _help(argv, "off")[1:] == [rendered, ["logging", "trackproc.cli.commands", "trackproc.cli.root",
-                                                     "typer"]], argv
+        # typer renders it; a command's help imports that command's module alone (cli/root.py _register)
+        every = ["trackproc.cli.commands"] if len(argv) == 1 else []
+        assert _help(argv, "off")[1:] == [rendered, sorted(["logging", "trackproc.cli.root", "typer", *every])], argv
     assert not (tmp_path / "off").exists()
 
 
@@ -208,3 +209,43 @@ def test_other_requests_go_to_typer(tmp_path):
     code, text, loaded = _help(["--version"], cache)
     assert code == 0 and text.startswith("trackproc ") and loaded == []
     assert not list(cache.glob("help/*.txt"))
+
+
+@pytest.mark.subprocess
+def test_a_command_registers_its_own_module_only():
+    """``trackproc COMMAND ...`` imports that command's module, not the fourteen others (cli/root.py
+    ``COMMAND_MODULES``, which names the module of every command cli/commands.py registers); the
+    top-level help, an unknown name and a config file in force register them all."""
+    from trackproc.cli import root
+
+    probe = ("import sys, json; from trackproc.cli import root; names = {}\n"
+             "for name, module in root.COMMAND_MODULES.items():\n"
+             "    before = {c.name for c in root.app.registered_commands}\n"
+             "    root._register(name)\n"
+             "    names[name] = sorted({c.name for c in root.app.registered_commands} - before)\n"
+             "print(json.dumps([names, 'trackproc.cli.commands' in sys.modules]))")
+    import json
+
+    res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    names, all_loaded = json.loads(res.stdout)
+    assert names == {name: [name] for name in root.COMMAND_MODULES} and not all_loaded
+    from trackproc.cli.commands import SUMMARIES
+
+    registered = {c.name for c in root.app.registered_commands}     # cli/commands.py imported above
+    assert set(root.COMMAND_MODULES) == set(SUMMARIES) == registered   # every command has its module
+    probe = ("import io, sys, contextlib; from trackproc.cli import app as a\n"
+             "with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):\n"
+             "    codes = [a._main(['refine', '--help']), a._main(['-q', 'info', 'sample_data/stations.csv'])]\n"
+             "print(codes, 'trackproc.cli.commands' in sys.modules, "
+             "sorted(m for m in sys.modules if m.startswith('trackproc.cli.') and m.endswith('_cmd')))")
+    root_dir = __import__("pathlib").Path(__file__).resolve().parents[2]
+    env = {**__import__("os").environ, "TRACKPROC_CACHE_DIR": "off"}
+    res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=root_dir,
+                         env=env)
+    assert res.stdout.split("]", 1)[1].split()[:1] == ["False"], res.stdout + res.stderr
+    assert "'trackproc.cli.info_cmd', 'trackproc.cli.refine_cmd']" in res.stdout, res.stdout
+    env["TRACKPROC_CONFIG"] = str(root_dir / "no-such-config.toml")
+    res = subprocess.run([sys.executable, "-c", "from trackproc.cli import app as a; import sys; "
+                          "code = a._main(['refine', '--help']); print(code)"],
+                         capture_output=True, text=True, cwd=root_dir, env=env)
+    assert res.stdout.strip() == "2" and "config file not found" in res.stderr     # one line, as before

@@ -146,7 +146,6 @@ def _run(argv: list[str]) -> int:
     from trackproc.cli import guard
     from trackproc.cli.root import _click_group, _register, plain_help
 
-    _register()
     argv = _hoist_global_flags(list(argv))
     command = _command_name(argv)
     if command is not None and not any(a in ("--help", "-h") for a in argv):
@@ -161,7 +160,9 @@ def _run(argv: list[str]) -> int:
             from trackproc.cli.progress import ticker
 
             # a config file is checked against every command's options: then all of them
-            root = plain_help(_click_group(command if config_path() is None else None))
+            one = command if config_path() is None else None
+            _register(one)
+            root = plain_help(_click_group(one))
             with ticker(command, enabled=not any(a in ("-q", "--quiet") for a in argv)):
                 result = root(args=argv, prog_name="trackproc", standalone_mode=False,
                               default_map=default_map(root))
