@@ -130,3 +130,132 @@ def test_commands_leave_numpys_unused_modules_unloaded_and_usable(tmp_path):
     last = [line for line in res.stdout.splitlines() if line.startswith("RESULT")]
     assert last and last[-1].split()[1:] == ["0", "False", "0", "True", "True", "True", "module"], \
         res.stdout[-2000:] + res.stderr[-2000:]
+
+
+#: The command words whose help is checked from the cache (the top level and every command).
+_HELP_PROBE = ("import io, sys, json; from trackproc.cli import app as a; out = sys.stdout; "
+               "sys.stdout = io.StringIO(); code = a._main(json.loads(sys.argv[1])); "
+               "text = sys.stdout.getvalue(); sys.stdout = out; "
+               "print(json.dumps([code, text, sorted(m for m in ('typer', 'logging', 'trackproc.cli.root', "
+               "'trackproc.cli.commands', 'numpy') if m in sys.modules)]))")
+
+
+def _help(argv, cache):
+    import json
+    import os
+
+    env = {**os.environ, "TRACKPROC_CACHE_DIR": str(cache)}
+    res = subprocess.run([sys.executable, "-c", _HELP_PROBE, json.dumps(argv)], capture_output=True, text=True,
+                         check=True, env=env)
+    return json.loads(res.stdout)
+
+
+@pytest.mark.subprocess
+def test_help_from_the_cache_is_typers_without_typer(tmp_path):
+    """``--help`` renders by typer once; the next run prints the same text without importing typer,
+    logging or any command module (cli/help_cache.py); with the cache off it is typer's every time."""
+    from trackproc.cli.commands import SUMMARIES
+
+    for argv in [["--help"], ["-h"]] + [[name, "--help"] for name in SUMMARIES]:
+        code, rendered, loaded = _help(argv, tmp_path / "cache")
+        assert code == 0 and rendered.startswith("Usage: trackproc") and "typer" in loaded, argv
+        code, cached, loaded = _help(argv, tmp_path / "cache")
+        assert (code, cached, loaded) == (0, rendered, []), argv
+        # typer renders it; a command's help imports that command's module alone (cli/root.py _register)
+        every = ["trackproc.cli.commands"] if len(argv) == 1 else []
+        assert _help(argv, "off")[1:] == [rendered, sorted(["logging", "trackproc.cli.root", "typer", *every])], argv
+    assert not (tmp_path / "off").exists()
+
+
+@pytest.mark.subprocess
+def test_a_stale_help_entry_is_rendered_again(tmp_path):
+    """An entry whose inputs changed (a module file's stamp, a config file that appeared) or that
+    is damaged is not used: typer renders the help again, and the text follows the change."""
+    cache = tmp_path / "cache"
+    first = _help(["refine", "--help"], cache)
+    (entry,) = (cache / "help").glob("*.txt")
+    head, _, text = entry.read_text().partition("\n\n")
+    lines = head.split("\n")
+    stamp = next(i for i, line in enumerate(lines) if line.endswith("/cli/refine_cmd.py"))
+    mtime, size, path = lines[stamp].split(" ", 2)
+    lines[stamp] = f"{int(mtime) + 1} {size} {path}"              # as if refine_cmd.py had been edited
+    entry.write_text("\n".join(lines) + "\n\n" + "stale help\n")
+    again = _help(["refine", "--help"], cache)
+    assert again == first and "typer" in again[2]
+    assert _help(["refine", "--help"], cache) == [0, first[1], []]    # rewritten, used again
+    entry.write_text("damaged")
+    assert _help(["refine", "--help"], cache) == first
+    # a config file's defaults show in the help (click's default_map): its appearance is a change
+    config = tmp_path / "config.toml"
+    config.write_text('[refine]\ndoppler_bias = "offset"\n')
+    import os
+
+    os.environ["TRACKPROC_CONFIG"] = str(config)
+    try:
+        with_config = _help(["refine", "--help"], cache)
+    finally:
+        del os.environ["TRACKPROC_CONFIG"]
+    assert with_config[0] == 0 and "typer" in with_config[2]
+
+
+@pytest.mark.subprocess
+def test_other_requests_go_to_typer(tmp_path):
+    """Only plain help requests are cached: an option before the flag, an unknown command (exit 2)
+    and ``--version`` (answered without typer) leave no help entry."""
+    cache = tmp_path / "cache"
+    assert _help(["refine", "x.csv", "--initial", "s.json", "--help"], cache)[0] == 0
+    code, _, loaded = _help(["no-such-command", "--help"], cache)
+    assert code == 2 and "typer" in loaded
+    code, text, loaded = _help(["--version"], cache)
+    assert code == 0 and text.startswith("trackproc ") and loaded == []
+    assert not list(cache.glob("help/*.txt"))
+
+
+@pytest.mark.subprocess
+def test_a_command_registers_its_own_module_only():
+    """``trackproc COMMAND ...`` imports that command's module, not the fourteen others (cli/root.py
+    ``COMMAND_MODULES``, which names the module of every command cli/commands.py registers); the
+    top-level help, an unknown name and a config file in force register them all."""
+    from trackproc.cli import root
+
+    probe = ("import sys, json; from trackproc.cli import root; names = {}\n"
+             "for name, module in root.COMMAND_MODULES.items():\n"
+             "    before = {c.name for c in root.app.registered_commands}\n"
+             "    root._register(name)\n"
+             "    names[name] = sorted({c.name for c in root.app.registered_commands} - before)\n"
+             "print(json.dumps([names, 'trackproc.cli.commands' in sys.modules]))")
+    import json
+
+    res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True)
+    names, all_loaded = json.loads(res.stdout)
+    assert names == {name: [name] for name in root.COMMAND_MODULES} and not all_loaded
+    from trackproc.cli.commands import SUMMARIES
+
+    registered = {c.name for c in root.app.registered_commands}     # cli/commands.py imported above
+    assert set(root.COMMAND_MODULES) == set(SUMMARIES) == registered   # every command has its module
+    probe = ("import io, sys, contextlib; from trackproc.cli import app as a\n"
+             "with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):\n"
+             "    codes = [a._main(['refine', '--help']), a._main(['-q', 'info', 'sample_data/stations.csv'])]\n"
+             "print(codes, 'trackproc.cli.commands' in sys.modules, "
+             "sorted(m for m in sys.modules if m.startswith('trackproc.cli.') and m.endswith('_cmd')))")
+    root_dir = __import__("pathlib").Path(__file__).resolve().parents[2]
+    env = {**__import__("os").environ, "TRACKPROC_CACHE_DIR": "off"}
+    res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=root_dir,
+                         env=env)
+    assert res.stdout.split("]", 1)[1].split()[:1] == ["False"], res.stdout + res.stderr
+    assert "'trackproc.cli.info_cmd', 'trackproc.cli.refine_cmd']" in res.stdout, res.stdout
+    env["TRACKPROC_CONFIG"] = str(root_dir / "no-such-config.toml")
+    res = subprocess.run([sys.executable, "-c", "from trackproc.cli import app as a; import sys; "
+                          "code = a._main(['refine', '--help']); print(code)"],
+                         capture_output=True, text=True, cwd=root_dir, env=env)
+    assert res.stdout.strip() == "2" and "config file not found" in res.stderr     # one line, as before
+
+
+def test_every_command_has_its_module_for_the_one_command_start_up():
+    """cli/root.COMMAND_MODULES names each registered command's module (a command missing there
+    would be imported with all the others, or not at all)."""
+    import trackproc.cli.commands  # noqa: F401  (registers every command)
+    from trackproc.cli import root
+
+    names = {c.name for c in root.app.registered_commands}
+    assert names == set(root.COMMAND_MODULES), names ^ set(root.COMMAND_MODULES)

@@ -1,106 +1,32 @@
-"""The ``trackproc`` command: a Typer app whose commands live in sibling modules.
+"""The ``trackproc`` command: the entry point of a Typer app (cli/root.py) whose commands live in
+sibling modules.
 
-Only typer and the standard library are imported here and in the command modules at import
-time; numpy, pandas, scipy and pyarrow are imported inside the commands, so that
-``trackproc --help`` stays instant (see ``benchmarks/startup.py``).
+Only the standard library is imported here: ``trackproc --version`` and a ``--help`` already
+rendered once (cli/help_cache.py) are answered without typer; the command modules import only
+typer and the standard library at import time, and numpy, pandas, scipy and pyarrow inside the
+commands (see ``benchmarks/startup.py``). The names of cli/root.py (``app``, ``plain_help``, ...)
+are also reachable here, imported when first used.
 """
 
 from __future__ import annotations
 
-import logging
 import os
 import sys
-import warnings
-
-import typer
 
 from trackproc import __version__
 from trackproc.errors import EXIT_INPUT
 
-app = typer.Typer(
-    name="trackproc",
-    help="Satellite tracking passes in, orbits with honest error matrices out.",
-    pretty_exceptions_enable=False,
-    rich_markup_mode=None,
-    add_completion=True,
-    no_args_is_help=True,
-    context_settings={"help_option_names": ["-h", "--help"]},
-)
 
-log = logging.getLogger("trackproc")
+def __getattr__(name: str):
+    # ``from trackproc.cli.app import app`` (the command modules, the tests): typer on first use
+    if name.startswith("__"):
+        raise AttributeError(name)
+    from trackproc.cli import root
 
-
-def _version(value: bool) -> None:
-    if value:
-        typer.echo(f"trackproc {__version__}")
-        raise typer.Exit()
-
-
-@app.callback()
-def _root(
-    ctx: typer.Context,
-    version: bool = typer.Option(False, "--version", "-V", callback=_version, is_eager=True,
-                                 help="Print the version and exit."),
-    quiet: bool = typer.Option(False, "--quiet", "-q", help="Only errors on stderr."),
-    verbose: bool = typer.Option(False, "--verbose", "-v", help="Progress and debug messages on stderr."),
-    no_metadata: bool = typer.Option(False, "--no-metadata",
-                                     help="CSV outputs without the '# trackproc: {...}' first line (plain "
-                                          "CSV for spreadsheets; also TRACKPROC_CSV_METADATA=0)."),
-) -> None:
-    """Satellite tracking passes in, orbits with honest error matrices out.
-
-    Exit codes: 0 ok, 1 processing failure, 2 usage or invalid input,
-    3 partial failure in batch.
-    """
-    if no_metadata:
-        os.environ["TRACKPROC_CSV_METADATA"] = "0"   # read by the CSV writers (io.tabular.csv_metadata_line)
-    # Quiet by default: warnings, errors and the commands' own summaries. batch keeps its per-input
-    # INFO lines (the cron log is its record of what was done).
-    default = logging.INFO if ctx.invoked_subcommand == "batch" else logging.WARNING
-    level = logging.ERROR if quiet else logging.DEBUG if verbose else default
-    if os.environ.get("TRACKPROC_LOG_LEVEL"):
-        level = os.environ["TRACKPROC_LOG_LEVEL"].upper()
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(_OneLineFormatter("trackproc: %(levelname)s: %(message)s"))
-    logging.basicConfig(level=level, handlers=[handler], force=True)
-    # warnings of the lower layers (e.g. dates beyond the EOP table) as one log line each
-    _WARNED.clear()
-    warnings.showwarning = _show_warning
-    log.debug("%s: started (pid %d)", ctx.invoked_subcommand, os.getpid())
-
-
-_WARNED: set = set()
-#: ERFA's "dubious year" (UTC before 1960 or far beyond the leap-second table), in our words.
-DUBIOUS_YEAR = ("a date before 1960 or far in the future: UTC is not defined there and the leap-second table "
-                "does not reach it (ERFA's 'dubious year'); times are uncertain by seconds")
-
-
-def _show_warning(message, category, *args, **kwargs) -> None:
-    """A lower layer's warning as one log line, each text once per run; ERFA's raw
-    "dubious year" warnings (one per function) become one line in our words."""
-    text = str(message)
-    if "dubious year" in text:
-        text = DUBIOUS_YEAR
-    if text in _WARNED:
-        return
-    _WARNED.add(text)
-    log.warning("%s", text)
-
-
-class _OneLineFormatter(logging.Formatter):
-    """One record, one line: control characters from file names, station names or options are
-    escaped, so that no input can forge a log line."""
-
-    def format(self, record: logging.LogRecord) -> str:
-        from trackproc.cli.guard import one_line
-
-        return one_line(super().format(record), limit=10_000)
-
-
-def _register() -> None:
-    # Each module adds its command(s) to ``app``; keep their top-level imports light.
-    from trackproc.cli import coercion, commands  # noqa: F401
-    coercion.install()
+    try:
+        return getattr(root, name)
+    except AttributeError:
+        raise AttributeError(f"module 'trackproc.cli.app' has no attribute {name!r}") from None
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -181,14 +107,45 @@ def _hard_exit(code: int) -> None:
             stream.flush()
         except (OSError, ValueError):
             pass
-    logging.shutdown()
+    if "logging" in sys.modules:
+        sys.modules["logging"].shutdown()
     os._exit(code)
 
 
 def _main(argv: list[str]) -> int:
-    from trackproc.cli import guard
+    if argv in (["--version"], ["-V"]):
+        return _write(f"trackproc {__version__}\n")
+    from trackproc.cli import help_cache
 
-    _register()
+    request = help_cache.request(argv)
+    if request is None:
+        return _run(argv)
+    text = request.lookup()
+    if text is not None:
+        return _write(text)
+    # rendered by typer into a buffer, then printed and kept for the next time
+    stdout, sys.stdout = sys.stdout, help_cache.Capture()
+    try:
+        code = _run(argv)
+    finally:
+        text, sys.stdout = sys.stdout.getvalue(), stdout
+    if code == 0 and text:
+        request.store(text)
+    return _write(text) or code
+
+
+def _write(text: str) -> int:
+    try:
+        sys.stdout.write(text)
+    except BrokenPipeError:
+        return _broken_pipe()
+    return _flush_stdout()
+
+
+def _run(argv: list[str]) -> int:
+    from trackproc.cli import guard
+    from trackproc.cli.root import _click_group, _register, plain_help
+
     argv = _hoist_global_flags(list(argv))
     command = _command_name(argv)
     if command is not None and not any(a in ("--help", "-h") for a in argv):
@@ -203,7 +160,9 @@ def _main(argv: list[str]) -> int:
             from trackproc.cli.progress import ticker
 
             # a config file is checked against every command's options: then all of them
-            root = plain_help(_click_group(command if config_path() is None else None))
+            one = command if config_path() is None else None
+            _register(one)
+            root = plain_help(_click_group(one))
             with ticker(command, enabled=not any(a in ("-q", "--quiet") for a in argv)):
                 result = root(args=argv, prog_name="trackproc", standalone_mode=False,
                               default_map=default_map(root))
@@ -228,19 +187,6 @@ def _main(argv: list[str]) -> int:
     return _flush_stdout() or code
 
 
-def _click_group(command: str | None):
-    """The click group of the app; with only ``command`` in it when that names a command (typer
-    builds every command's parameters, ~12 ms of each run, for one of them)."""
-    registered = app.registered_commands
-    if command not in {c.name for c in registered}:
-        return typer.main.get_command(app)     # the top-level help, completion, an unknown name
-    app.registered_commands = [c for c in registered if c.name == command]
-    try:
-        return typer.main.get_command(app)
-    finally:
-        app.registered_commands = registered
-
-
 def _command_name(argv: list[str]) -> str | None:
     """The subcommand named in ``argv`` (after the hoisted global flags), or None."""
     for arg in argv:
@@ -249,47 +195,6 @@ def _command_name(argv: list[str]) -> str | None:
         if not arg.startswith("-"):
             return arg
     return None
-
-
-#: Typer's own type labels (``<float>``) -> the metavars a Unix reader expects.
-_METAVARS = {"str": "TEXT", "float": "FLOAT", "int": "INTEGER", "bool": "BOOLEAN", "path": "PATH",
-             "float range": "FLOAT", "int range": "INTEGER", "datetime": "TIME",
-             "list[str]": "TEXT", "list[float]": "FLOAT", "list[int]": "INTEGER"}
-
-
-def plain_help(command):
-    """Help that reads in a pipe and at any width (issue 16): readable metavars (``FLOAT``,
-    ``[a|b]`` for choices, never a Python type), arguments shown by name alone, and the indented
-    shell examples of a docstring kept verbatim (click's ``\\b`` paragraphs) instead of rewrapped
-    mid-command. Plain click formatting (no boxes) is set on the app itself."""
-    for param in getattr(command, "params", []):
-        kind = getattr(param, "param_type_name", "")
-        if kind == "argument":
-            param.display_type_rich = lambda ctx: None
-        elif (kind == "option" and not getattr(param, "is_flag", False) and param.metavar is None
-              and hasattr(param, "display_type")):
-            # the command's own context class: typer vendors click (no click import here)
-            label = param.display_type(command.context_class(command)).strip("<>")
-            param.metavar = _METAVARS.get(label) or (f"[{label}]" if "|" in label else label.upper() or None)
-    if getattr(command, "help", None):
-        command.help = _keep_examples(command.help)
-    for sub in getattr(command, "commands", {}).values():
-        plain_help(sub)
-    return command
-
-
-def _keep_examples(text: str) -> str:
-    """Mark each indented paragraph of a docstring (a shell example) with click's ``\\b`` so it is
-    printed as written."""
-    import inspect
-
-    out = []
-    for para in inspect.cleandoc(text).split("\n\n"):
-        lines = para.split("\n")
-        if lines[0] != "\b" and all(l.startswith("    ") for l in lines if l.strip()):
-            para = "\b\n" + para
-        out.append(para)
-    return "\n\n".join(out)
 
 
 _GLOBAL_FLAGS = ("--quiet", "-q", "--verbose", "-v", "--no-metadata")

@@ -28,6 +28,7 @@ def help_command(
     import difflib
     import sys
 
+    from trackproc.cli import commands  # noqa: F401  (every command: the start-up registers only this one)
     from trackproc.cli.app import plain_help
 
     if man:

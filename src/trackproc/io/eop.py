@@ -11,6 +11,7 @@ import numpy as np
 
 from trackproc.dynamics.timescales import EarthOrientation, eop_from_table
 from trackproc.errors import InputError
+from trackproc.io import table_cache
 
 NO_EOP_WARNING = ("no --eop file or --dut1 given and no EOP package (astropy-iers-data) installed: "
                   "UT1-UTC and polar motion taken as zero "
@@ -49,6 +50,15 @@ def read_finals2000a(path: str | Path):
         key = None
     if key in _PARSED:
         return _PARSED[key]
+    rows = table_cache.cached_arrays("finals2000a", path, lambda: _parse_rows(path), parser=__file__)
+    mjd, dut1, xp, yp = (rows[name].tolist() for name in ("mjd", "dut1", "xp", "yp"))
+    table = eop_from_table(mjd, dut1, xp, yp, source=f"IERS finals2000A {Path(path).name}")
+    return table if key is None else _remember(key, table)
+
+
+def _parse_rows(path) -> dict:
+    """The rows of a finals2000A file as arrays (``mjd``, ``dut1``, ``xp``, ``yp``): the line-by-line
+    parse that :func:`read_finals2000a` caches (io/table_cache.py)."""
     try:
         lines = Path(path).read_text(encoding="ascii", errors="replace").splitlines()
     except FileNotFoundError:
@@ -77,8 +87,7 @@ def read_finals2000a(path: str | Path):
                              "PM-y 38-46, UT1-UTC 59-68") from None
     if len(mjd) < 2:
         raise InputError("no usable rows", file=str(path), expected="an IERS finals2000A file with UT1-UTC")
-    table = eop_from_table(mjd, dut1, xp, yp, source=f"IERS finals2000A {Path(path).name}")
-    return table if key is None else _remember(key, table)
+    return {"mjd": mjd, "dut1": dut1, "xp": xp, "yp": yp}
 
 
 def bundled_earth_orientation():
@@ -86,7 +95,7 @@ def bundled_earth_orientation():
     with its year of predictions, refreshed with each release), or None when it is not installed.
 
     Parsing its 20,000 rows takes ~0.1 s, so the parsed table is cached as ``.npz`` under
-    ``$XDG_CACHE_HOME/trackproc`` (``~/.cache/trackproc``), keyed by the package version; a cache
+    the user cache directory (io/table_cache.py), keyed by the package version; a cache
     that cannot be written is simply not used."""
     try:
         import astropy_iers_data
@@ -94,7 +103,7 @@ def bundled_earth_orientation():
         return None
     version = astropy_iers_data.__version__
     source = f"IERS finals2000A from astropy-iers-data {version}"
-    cache_dir = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "trackproc"
+    cache_dir = Path(table_cache.cache_dir() or os.devnull)      # os.devnull: caching off
     cache = cache_dir / f"eop-astropy-iers-data-{version}.npz"
     key = ("astropy-iers-data", str(cache))
     if key in _PARSED:

@@ -26,6 +26,7 @@ the file, the line and what was expected. ``.gz`` files are read transparently.
 from __future__ import annotations
 
 import gzip
+import json
 import math
 import zlib
 from importlib import resources
@@ -33,8 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from trackproc.constants import MAX_GRAVITY_DEGREE
 from trackproc.dynamics.forces.gravity_field import GravityField
+from trackproc.constants import MAX_GRAVITY_DEGREE
 from trackproc.errors import InputError
 
 __all__ = ["read_icgem", "default_field_path", "load_field", "DEFAULT_FIELD_NAME"]
@@ -124,8 +125,13 @@ def check_field(static: dict, terms: list, nmax: int, order, lmax: int, fname: s
                                           "or give a complete file")
 
 
+_DATES: dict = {}     # date text -> days: a file repeats a few dates on thousands of lines
+
+
 def _date_days(text: str, where) -> float:
     """``yyyymmdd`` or ``yyyymmdd.hhmm`` -> days since 1970-01-01 (UTC, as float)."""
+    if text in _DATES:
+        return _DATES[text]
     try:
         whole, _, frac = text.partition(".")
         day = np.datetime64(f"{whole[:4]}-{whole[4:6]}-{whole[6:8]}", "D")
@@ -133,7 +139,8 @@ def _date_days(text: str, where) -> float:
         minutes = int(frac[2:4]) if frac[2:4] else 0
     except (ValueError, IndexError):
         raise InputError("bad date", **where, found=text, expected="yyyymmdd or yyyymmdd.hhmm") from None
-    return float(day.astype("int64")) + (hours * 60 + minutes) / 1440.0
+    _DATES[text] = float(day.astype("int64")) + (hours * 60 + minutes) / 1440.0
+    return _DATES[text]
 
 
 def read_icgem(path, degree: int | None = None, order: int | None = None, date=None) -> GravityField:
@@ -150,17 +157,41 @@ def read_icgem(path, degree: int | None = None, order: int | None = None, date=N
     fname = str(path)
     if not path.is_file():
         raise InputError("gravity field file not found", file=fname, expected="an ICGEM .gfc file")
-    check_request(degree, order, fname)
     when = None
     if date is not None:
         d = np.datetime64(str(date).rstrip("Zz") if isinstance(date, str) else date, "s")
         when = float(d.astype("int64")) / 86400.0
+    check_request(degree, order, fname)
+    header, static, terms, lmax = _parsed(path, fname, degree, order)
+    nmax = lmax if degree is None else degree
+    check_request(nmax, order, fname)
+    check_field(static, terms, nmax, order, lmax, fname, {})
+    cbar = np.zeros((nmax + 1, nmax + 1))
+    sbar = np.zeros((nmax + 1, nmax + 1))
+    for (n, m), (c, s) in static.items():
+        cbar[n, m] += c
+        sbar[n, m] += s
+    epoch_text = _add_time_variable(terms, cbar, sbar, when, fname)
+    if order is not None:
+        cbar[:, order + 1:] = 0.0
+        sbar[:, order + 1:] = 0.0
+    if nmax >= 0 and cbar[0, 0] == 0.0:
+        cbar[0, 0] = 1.0                 # C00 = 1 by definition (some files omit the line)
+    name = header.get("modelname", path.name)
+    return GravityField(gm_m3_s2=float(header["earth_gravity_constant"]), radius_m=float(header["radius"]),
+                        cbar=cbar, sbar=sbar, name=name, tide_system=header.get("tide_system", "unknown"),
+                        source=path.name, epoch=epoch_text)
+
+
+def _parse(path: Path, fname: str, degree: int | None = None, order: int | None = None):
+    """The header, the static coefficients ``{(L, M): (C, S)}``, the time-variable terms
+    ``[(kind, L, M, C, S, t0, t1, period)]`` and ``max_degree`` of an ICGEM file, line by line."""
     header: dict[str, str] = {}
     in_header = False
     static: dict = {}
     terms: list = []                     # (kind, n, m, c, s, t0, t1, period)
-    rows: dict = {}
     lmax = None
+    rows: dict = {}
     with _open(path) as fh:
         for lineno, line in _lines(fh, fname):
             words = line.split()
@@ -229,24 +260,50 @@ def read_icgem(path, degree: int | None = None, order: int | None = None, date=N
                 terms.append((key, n, m, c, s, t0, t1, period))
     if lmax is None:
         raise InputError("no ICGEM header", file=fname, expected="a header ending in end_of_head")
-    nmax = lmax if degree is None else degree
-    check_request(nmax, order, fname)
-    check_field(static, terms, nmax, order, lmax, fname, rows)
-    cbar = np.zeros((nmax + 1, nmax + 1))
-    sbar = np.zeros((nmax + 1, nmax + 1))
-    for (n, m), (c, s) in static.items():
-        cbar[n, m] += c
-        sbar[n, m] += s
-    epoch_text = _add_time_variable(terms, cbar, sbar, when, fname)
-    if order is not None:
-        cbar[:, order + 1:] = 0.0
-        sbar[:, order + 1:] = 0.0
-    if nmax >= 0 and cbar[0, 0] == 0.0:
-        cbar[0, 0] = 1.0                 # C00 = 1 by definition (some files omit the line)
-    name = header.get("modelname", path.name)
-    return GravityField(gm_m3_s2=float(header["earth_gravity_constant"]), radius_m=float(header["radius"]),
-                        cbar=cbar, sbar=sbar, name=name, tide_system=header.get("tide_system", "unknown"),
-                        source=path.name, epoch=epoch_text)
+    return header, static, terms, lmax
+
+
+def _parsed(path: Path, fname: str, degree: int | None, order: int | None):
+    """:func:`_parse` through the user cache (io/table_cache.py): the whole file parsed once per
+    content, then truncated to ``degree`` x ``order`` as reading it with them would have."""
+    from trackproc.io import table_cache
+
+    arrays = table_cache.cached_arrays("icgem", path, lambda: _to_arrays(*_parse(path, fname)), parser=__file__)
+    lmax = int(arrays["lmax"])
+    if degree is not None and degree > lmax:
+        raise InputError(f"degree {degree} requested", file=fname, found=f"max_degree {lmax}",
+                         expected=f"a degree <= {lmax}")
+    kept = {}
+    for part in ("static", "term"):
+        nm = arrays[f"{part}_nm"]
+        keep = (nm[:, 0] <= (lmax if degree is None else degree)) & (nm[:, 1] <= (lmax if order is None else order))
+        kept.update({name: value[keep] for name, value in arrays.items() if name.startswith(part)})
+    return _from_arrays(json.loads(str(arrays["header"])), lmax, **kept)
+
+
+_TERM_KINDS = ("gfct", "trnd", "acos", "asin")
+
+
+def _to_arrays(header, static, terms, lmax) -> dict:
+    nan = float("nan")
+    return {"header": np.array(json.dumps(header)), "lmax": np.array(lmax),
+              "static_nm": np.array(list(static.keys()), dtype=np.int64).reshape(-1, 2),
+              "static_cs": np.array(list(static.values()), dtype=np.float64).reshape(-1, 2),
+              "term_kind": np.array([_TERM_KINDS.index(t[0]) for t in terms], dtype=np.int8),
+              "term_nm": np.array([t[1:3] for t in terms], dtype=np.int64).reshape(-1, 2),
+              "term_values": np.array([[nan if v is None else v for v in t[3:]] for t in terms],
+                                      dtype=np.float64).reshape(-1, 5)}
+
+
+def _from_arrays(header, lmax, static_nm, static_cs, term_kind, term_nm, term_values):
+    """Back to :func:`_parse`'s Python values (floats, ints, None), bit for bit."""
+    static = {(n, m): (c, s) for (n, m), (c, s) in zip(static_nm.tolist(), static_cs.tolist())}
+    terms = []
+    for kind, (n, m), values in zip(term_kind.tolist(), term_nm.tolist(), term_values.tolist()):
+        c, s = values[:2]
+        t0, t1, period = (None if v != v else v for v in values[2:])      # NaN stored for None
+        terms.append((_TERM_KINDS[kind], n, m, c, s, t0, t1, period))
+    return header, static, terms, lmax
 
 
 def _check_header(header: dict, fname: str, lineno: int) -> int:

@@ -37,4 +37,76 @@ def json_ready(value):
 
 def dumps(value, indent: int | None = 2) -> str:
     """Deterministic JSON text (keys sorted) of :func:`json_ready` of ``value``, newline-terminated."""
-    return json.dumps(json_ready(value), indent=indent, sort_keys=True, allow_nan=False) + "\n"
+    if indent is None:
+        return json.dumps(json_ready(value), sort_keys=True, allow_nan=False) + "\n"
+    return dumps_indented(json_ready(value), indent, sort_keys=True) + "\n"
+
+
+class _NotPlain(Exception):
+    """A value :func:`dumps_indented` leaves to ``json.dumps`` (another type, a non-finite float)."""
+
+
+#: The C encoder of the standard library: compact, the shortest float text (``float.__repr__``).
+_COMPACT = json.JSONEncoder(allow_nan=False, separators=(",", ":"))
+_STRING = json.encoder.encode_basestring_ascii
+
+
+def dumps_indented(value, indent: int = 2, sort_keys: bool = False) -> str:
+    """``json.dumps(value, indent=indent, sort_keys=sort_keys, allow_nan=False)``, the same text,
+    several times faster on the outputs of :func:`json_ready`: with an indent the standard library
+    encodes in Python, element by element (9 % of a batch's CPU went there), whereas here every
+    list of numbers (residuals, covariance rows) is encoded by its C encoder at once. Any other
+    value (a non-finite float, a type ``json_ready`` does not give) goes to ``json.dumps``, which
+    gives its text or its error."""
+    out: list = []
+    try:
+        _emit(value, out, "\n", " " * indent, sort_keys)
+    except (_NotPlain, ValueError):
+        return json.dumps(value, indent=indent, sort_keys=sort_keys, allow_nan=False)
+    return "".join(out)
+
+
+def _emit(value, out: list, newline: str, step: str, sort_keys: bool) -> None:
+    kind = type(value)
+    if kind is str:
+        out.append(_STRING(value))
+    elif value is None:
+        out.append("null")
+    elif value is True:
+        out.append("true")
+    elif value is False:
+        out.append("false")
+    elif kind is float:
+        if not math.isfinite(value):
+            raise _NotPlain                                 # json.dumps raises its ValueError
+        out.append(float.__repr__(value))
+    elif kind is int:
+        out.append(int.__repr__(value))
+    elif kind is list or kind is tuple:
+        if not value:
+            out.append("[]")
+            return
+        inner = newline + step
+        if all(type(v) is float or type(v) is int for v in value):
+            items = _COMPACT.encode(value)[1:-1].split(",")  # numbers only: no comma inside an item
+            out.append("[" + inner + ("," + inner).join(items) + newline + "]")
+            return
+        out.append("[")
+        for i, item in enumerate(value):
+            out.append("," + inner if i else inner)
+            _emit(item, out, inner, step, sort_keys)
+        out.append(newline + "]")
+    elif kind is dict:
+        if not value:
+            out.append("{}")
+            return
+        inner = newline + step
+        out.append("{")
+        for i, (key, item) in enumerate(sorted(value.items()) if sort_keys else value.items()):
+            if type(key) is not str:
+                raise _NotPlain
+            out.append(("," + inner if i else inner) + _STRING(key) + ": ")
+            _emit(item, out, inner, step, sort_keys)
+        out.append(newline + "}")
+    else:
+        raise _NotPlain

@@ -32,7 +32,7 @@ from typing import Optional
 
 import numpy as np
 
-from trackproc.io.jsonutil import json_ready
+from trackproc.io.jsonutil import dumps_indented, json_ready
 from trackproc.constants import MU_EARTH, force_model_constants
 from trackproc.dynamics import frames
 from trackproc.dynamics.kepler import classical_elements
@@ -372,7 +372,7 @@ def state_json(state: State, force: str | None = None, eop_source: str | None = 
         if key == "covariance":
             body = "[\n" + ",\n".join("    " + json.dumps(row, allow_nan=False) for row in value) + "\n  ]"
         elif isinstance(value, dict) and value:
-            body = json.dumps(value, indent=2, allow_nan=False).replace("\n", "\n  ")
+            body = dumps_indented(value, 2).replace("\n", "\n  ")
         else:
             body = json.dumps(value, allow_nan=False)
         lines.append(f"  {json.dumps(key)}: {body}")

@@ -42,9 +42,9 @@ GRID_NOTE = ("value = fitted curve, sigma = its 1-sigma from the scaled coeffici
 
 def summary_json(summary: dict) -> str:
     """The summary as strict JSON text (NaN and infinities as null), indented, newline-terminated."""
-    import json
+    from trackproc.io.jsonutil import dumps_indented
 
-    return json.dumps(json_ready(summary), indent=2, allow_nan=False) + "\n"
+    return dumps_indented(json_ready(summary), 2) + "\n"
 
 
 def iso(ts: pd.Timestamp) -> str:
