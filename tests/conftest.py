@@ -15,6 +15,12 @@ from pathlib import Path
 # is first imported; the results are unchanged (tests/test_golden.py passes either way).
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+# The user cache (parsed EOP/ICGEM tables, rendered --help) in a directory of this test process, not
+# the user's ~/.cache: tests neither leave entries behind nor read a developer's.
+if "TRACKPROC_CACHE_DIR" not in os.environ:
+    import tempfile
+
+    os.environ["TRACKPROC_CACHE_DIR"] = tempfile.mkdtemp(prefix="trackproc-test-cache-")
 
 import pytest  # noqa: E402
 from typer.testing import CliRunner  # noqa: E402
