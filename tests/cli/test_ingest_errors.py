@@ -72,7 +72,8 @@ def test_bad_input_exit_2_names_file_row_column(run_cli, write, stations_csv, tm
     message = result.stderr.strip().splitlines()[-1]
     assert message.startswith(f"trackproc: error: {raw}, row {row}")
     if column is not None:
-        assert f"column '{column}'" in message
+        label = "option" if column.startswith("-") else "column"     # errors.py: an option is called one
+        assert f"{label} '{column}'" in message
     for word in words:
         assert word in message
     assert "Traceback" not in result.stderr

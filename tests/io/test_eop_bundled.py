@@ -14,6 +14,7 @@ from realdata import W3B
 
 def test_default_is_the_bundled_iers_table_without_warning(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.delenv("TRACKPROC_CACHE_DIR", raising=False)      # (tests/conftest.py sets one)
     eop, warning = earth_orientation()
     assert warning is None and eop.tabulated and "astropy-iers-data" in eop.source
     again, _ = earth_orientation()             # from the cache written by the first call
