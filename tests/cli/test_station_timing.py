@@ -104,3 +104,35 @@ def test_cli_refine_reads_time_sigma_from_the_stations_table(run_cli, tmp_path):
     r = run_cli(args[:-4] + ["--stations", tmp_path / "bad.csv", "-o", out])
     assert r.exit_code == 2 and "bad.csv" in r.stderr and "time_sigma_s" in r.stderr and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1, r.stderr
+
+
+def test_cli_estimate_station_time_bias(run_cli, tmp_path):
+    """``estimate --station-time-bias-station KIR`` on a day of 3 stations whose KIR tags are 0.5 s
+    late (tests/pipeline/test_station_time_bias.py): the state file carries ``time_bias:KIR`` within
+    3 sigma of 0.5 s; ``--station-time-bias`` for every station without an a-priori is a one-line
+    input error (exit 2); with the stations table's ``time_sigma_s`` it runs."""
+    from test_estimate import GUESS, STATIONS
+    from test_station_time_bias import _day, _late
+
+    table = _late(_day(), "KIR", 0.5)
+    write_pass_table(table, str(tmp_path / "day.parquet"))
+    (tmp_path / "guess.json").write_text(json.dumps({
+        "epoch": "2026-03-20T09:30:00Z", "frame": "GCRF", "position_m": GUESS.r_m.tolist(),
+        "velocity_m_s": GUESS.v_m_s.tolist()}))
+    out = tmp_path / "est.json"
+    base = ["estimate", tmp_path / "day.parquet", "--initial", tmp_path / "guess.json", "--dut1", "0.1", "-o", out]
+    r = run_cli(base + ["--station-time-bias-station", "KIR"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(out.read_text())
+    i = doc["parameters"].index("time_bias:KIR")
+    assert abs(doc["values"][i] - 0.5) < 3 * doc["sigma"][i] and doc["sigma"][i] < 0.01, (doc["values"][i], doc["sigma"][i])
+    out.unlink()
+    r = run_cli(base + ["--station-time-bias"])
+    assert r.exit_code == 2 and "common to every station" in r.stderr and not out.exists()
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    rows = "".join(f"{k},{v.lat_deg},{v.lon_deg},{v.height_m},1.0\n" for k, v in STATIONS.items())
+    (tmp_path / "st.csv").write_text("station,lat_deg,lon_deg,height_m,time_sigma_s\n" + rows)
+    r = run_cli(base + ["--station-time-bias", "--stations", tmp_path / "st.csv"])
+    assert r.exit_code == 0, r.stderr
+    assert [p for p in json.loads(out.read_text())["parameters"] if p.startswith("time_bias:")] == [
+        "time_bias:KIR", "time_bias:MAD", "time_bias:ZHY"]
