@@ -36,8 +36,8 @@ def estimate_command(
                                      "the TLE stored in the pass files (DopTrack; the newest)."),
     stations: Optional[str] = typer.Option(
         None, "--stations", metavar="STATIONS.csv",
-        help="Stations table (station, lat_deg, lon_deg, height_m[, range_bias_m]) or SINEX file (positions + "
-             "velocities at the data's mid epoch); default: the pass files' metadata."),
+        help="Stations table (station, lat_deg, lon_deg, height_m[, range_bias_m][, time_sigma_s]) or SINEX file "
+             "(positions + velocities at the data's mid epoch); default: the pass files' metadata."),
     range_bias: bool = typer.Option(False, "--range-bias", help="Estimate a range bias for every station with ranges."),
     range_bias_station: List[str] = typer.Option(
         [], "--range-bias-station", metavar="STATION", help="Estimate a range bias for this station only (repeatable)."),
@@ -49,6 +49,14 @@ def estimate_command(
     doppler_bias_per: BiasPer = typer.Option(BiasPer.pass_, "--doppler-bias-per",
                                              help="One Doppler offset (drift) per pass or per station."),
     angle_bias: bool = typer.Option(False, "--angle-bias", help="Estimate azimuth and elevation biases per station."),
+    station_time_bias: bool = typer.Option(
+        False, "--station-time-bias",
+        help="Estimate a time-tag offset per station (time_bias:STATION, s; tags late by it). A-priori sigma: the "
+             "stations table's time_sigma_s or --apriori-sigma time_bias=S; one offset common to every station is "
+             "the orbit moved along-track, so at least one station needs one. See docs/estimate.md."),
+    station_time_bias_station: List[str] = typer.Option(
+        [], "--station-time-bias-station", metavar="STATION",
+        help="Estimate a time-tag offset for this station only (repeatable)."),
     estimate_force: List[str] = typer.Option(
         [], "--estimate-force", metavar="cr,cd,empirical-rtn",
         help="With --force full: estimate these force-model parameters (cr, cd, empirical-rtn = a constant "
@@ -164,6 +172,9 @@ def estimate_command(
     if range_bias and range_bias_station:
         raise typer.BadParameter("give --range-bias (every station) or --range-bias-station, not both",
                                  param_hint="--range-bias")
+    if station_time_bias and station_time_bias_station:
+        raise typer.BadParameter("give --station-time-bias (every station) or --station-time-bias-station, not both",
+                                 param_hint="--station-time-bias")
     sigmas = named_values(apriori_sigma, "--apriori-sigma")
     kind_list = [k.strip() for k in kinds.split(",") if k.strip()] if kinds else None
 
@@ -203,6 +214,7 @@ def estimate_command(
     options = EstimateOptions(
         range_bias=True if range_bias else list(range_bias_station), doppler_bias=doppler_bias.value,
         doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,
+        station_time_bias=True if station_time_bias else list(station_time_bias_station),
         apriori_initial=apriori_initial, force=force.value, earth=earth.value,
         range_rate_model=range_rate_model.value if range_rate_model else None, max_iterations=max_iterations, horizon_days=horizon,
         clip=clip if clip > 0 else None, epoch=epoch, kinds=kind_list, compare_doppler_only=compare_doppler_only,

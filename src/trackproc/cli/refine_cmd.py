@@ -92,10 +92,12 @@ def refine_command(
              "(exponentially correlated), random walk of the transmitter frequency (one-way) and both, then GLS; "
              "white = independent samples (the plain weighted fit); or that model. See docs/refine.md."),
     oscillator_noise: Optional[float] = OscillatorNoiseOpt,
-    time_tag_sigma: float = typer.Option(
-        0.0, "--time-tag-sigma", metavar="S", min=0.0,
+    time_tag_sigma: Optional[float] = typer.Option(
+        None, "--time-tag-sigma", metavar="S", min=0.0,
         help="1-sigma uncertainty of the station's time tags (s), added to the covariance (pointwise): one pass "
-             "cannot see a time-tag offset (it is the orbit shifted along-track). See docs/refine.md."),
+             "cannot see a time-tag offset (it is the orbit shifted along-track). Default: the station's "
+             "time_sigma_s in the stations table (none: exact tags); given, it wins (0 = exact). "
+             "See docs/refine.md."),
     horizon: float = typer.Option(
         1.0, "--horizon", metavar="DAYS", min=0.0,
         help="Replace the stale state only when the refined one predicts the position better with probability "

@@ -1,7 +1,8 @@
-"""Stations table: ``station, lat_deg, lon_deg, height_m [, range_bias_m]`` (WGS-84 geodetic).
+"""Stations table: ``station, lat_deg, lon_deg, height_m [, range_bias_m] [, time_sigma_s]`` (WGS-84 geodetic).
 
 Latitude in degrees in [-90, 90], longitude in degrees in [-180, 360), height in metres above the
-WGS-84 ellipsoid, optional range bias prior in metres. Lines starting with ``#`` and blank lines
+WGS-84 ellipsoid, optional range bias prior in metres, optional 1-sigma uncertainty of the
+station's time tags in seconds (finite, >= 0; an empty cell = not given). Lines starting with ``#`` and blank lines
 are skipped; other columns are ignored. Row numbers in errors are the file's line numbers (the
 header is row 1 when it is the first line).
 """
@@ -24,7 +25,11 @@ _LIMITS = {
     "lon_deg": (lambda v: -180.0 <= v < 360.0, "degrees in [-180, 360)"),
     "height_m": (math.isfinite, "a finite height in metres"),
     "range_bias_m": (math.isfinite, "a finite bias in metres, or an empty cell"),
+    "time_sigma_s": (lambda v: math.isfinite(v) and v >= 0.0, "a finite time-tag sigma in seconds >= 0, or an empty cell"),
 }
+
+#: Optional columns: an empty cell means "not given".
+OPTIONAL = ("range_bias_m", "time_sigma_s")
 
 
 def parse_stations(data: bytes, source: str) -> dict[str, Station]:
@@ -50,8 +55,8 @@ def parse_stations(data: bytes, source: str) -> dict[str, Station]:
             raise InputError(f"duplicate station (first on row {first_row[name]})", file=source, row=row,
                              column=by_key["station"], found=name, expected="each station once")
         numbers = {}
-        for key in ("lat_deg", "lon_deg", "height_m", "range_bias_m"):
-            if key not in by_key or (key == "range_bias_m" and not cell[key]):
+        for key in ("lat_deg", "lon_deg", "height_m") + OPTIONAL:
+            if key not in by_key or (key in OPTIONAL and not cell[key]):
                 continue
             ok, expected = _LIMITS[key]
             try:
@@ -59,13 +64,14 @@ def parse_stations(data: bytes, source: str) -> dict[str, Station]:
             except ValueError:
                 value = math.nan
             if not (math.isfinite(value) and ok(value)):
-                raise InputError("invalid station coordinate", file=source, row=row, column=by_key[key],
+                raise InputError("invalid station time-tag sigma" if key == "time_sigma_s"
+                                 else "invalid station coordinate", file=source, row=row, column=by_key[key],
                                  found=cell[key], expected=expected)
             numbers[key] = value
         check_name(name, "station name", file=source, row=row, column=by_key["station"])
         check_station(name, numbers["lat_deg"], numbers["lon_deg"], numbers["height_m"], file=source, row=row)
         stations[name] = Station(name, numbers["lat_deg"], numbers["lon_deg"], numbers["height_m"],
-                                 numbers.get("range_bias_m"))
+                                 numbers.get("range_bias_m"), numbers.get("time_sigma_s"))
         first_row[name] = row
     return stations
 

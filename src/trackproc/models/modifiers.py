@@ -29,6 +29,16 @@ the coefficients (seed 002 eq. 10: the E block of the extended state's offsets):
     Doppler drift       the offset's coefficient × (t_r - t0)
     azimuth, elevation  1 on the station's azimuths / elevations (rad)
 
+A :class:`StationTimeBias` (``time_bias:STATION``, s) is not additive: the station's time tags
+are late by ``τ``, so a sample tagged ``t`` is the measurement of the true reception time
+``t - τ``, ``h_obs(t) = h(t - τ)``, and ``∂h/∂τ = -ḣ(t - τ)`` for every kind (range: the
+range-rate; range-rate and Doppler: the range acceleration; angles: their rates). The model
+(:func:`trackproc.models.observation.evaluate`) moves the samples' reception times by ``-τ``
+before the light time (:meth:`~trackproc.models.observation.MeasurementSet.shifted`, the station
+turned with the Earth) — exact, not linearised — and takes ``ḣ`` by a central difference of the
+model in the reception time (:data:`TIME_STEP_S`). The additive modifiers stay on the tags (a
+transmitter drift runs on the satellite's clock, not the station's).
+
 A :class:`RangeCorrection` adds a known delay (m) with no estimated driver (troposphere,
 centre-of-mass offset: subclasses give :meth:`RangeCorrection.delay`, evaluated on each model
 evaluation's geometry, :func:`elevation`); its dependence on the orbit is left out of the
@@ -56,7 +66,7 @@ from trackproc.models import parameters as pm
 from trackproc.models.observables import range_rate_per_hz
 
 __all__ = ["Modifier", "BoundModifier", "RangeBias", "DopplerOffset", "DopplerDrift", "AzimuthBias",
-           "ElevationBias", "RangeCorrection", "OscillatorWander", "elevation", "collect_drivers", "bind_all",
+           "ElevationBias", "StationTimeBias", "RangeCorrection", "OscillatorWander", "elevation", "collect_drivers", "bind_all",
            "from_name", "FAMILIES"]
 
 
@@ -91,8 +101,8 @@ class BoundModifier:
         (driver name -> column; a driver not in ``columns`` is held fixed at ``values[name]``).
         ``geometry``: the evaluation's :class:`~trackproc.models.observation.EmissionGeometry`,
         for corrections that depend on where the satellite is (a troposphere delay)."""
-        if self.rows.size == 0:
-            return
+        if self.rows.size == 0 or self.modifier.shifts_time:
+            return                                  # a time offset acts in the model itself (evaluate)
         corr = self.modifier.correction(self.meas, self.rows, geometry)
         if corr is not None:
             value[self.rows] += corr
@@ -116,6 +126,11 @@ class Modifier:
     family: Optional[str] = None
     scale: float = 1.0
     description: str = ""
+    #: True for a modifier whose driver is an offset (s) of the rows' reception times, applied
+    #: by :func:`trackproc.models.observation.evaluate` before the light time (not additive).
+    shifts_time: bool = False
+    #: the driver's bounds (a time offset must stay inside the propagated span's margin)
+    bounds: tuple = (-np.inf, np.inf)
 
     def __init__(self, key: str, reference: float = 0.0, *, apriori_sigma: Optional[float] = None,
                  selected: bool = True, scale: Optional[float] = None, epoch_s: Optional[float] = None) -> None:
@@ -123,7 +138,7 @@ class Modifier:
         self._drivers: list = []
         if self.family is not None:
             d = pm.family_driver(self.family, key, reference, self.scale if scale is None else scale, apriori_sigma,
-                                 epoch_s=epoch_s, description=self.description)
+                                 epoch_s=epoch_s, description=self.description, bounds=self.bounds)
             d.selected = bool(selected)
             self._drivers.append(d)
 
@@ -193,6 +208,26 @@ class ElevationBias(_StationBias):
     """``el_bias:STATION`` (rad), added to the modelled elevation."""
 
     family, kind, scale, description = "el_bias", "elevation", 1e-4, "elevation bias"
+
+
+#: Largest |time_bias| (s): the propagated span reaches this far beyond the samples
+#: (``pipeline.od.problem.Problem.trajectory``).
+TIME_BIAS_LIMIT_S = 30.0
+#: Half step (s) of the central difference giving a sample's time derivative (truncation
+#: the third derivative times δ²/6: below 1e-6 of ``ḣ`` on a LEO pass).
+TIME_STEP_S = 0.05
+
+
+class StationTimeBias(Modifier):
+    """``time_bias:STATION`` (s): every sample of the station is tagged ``τ`` late (``h_obs(t) =
+    h(t - τ)``); applied in the model (:attr:`Modifier.shifts_time`), partial ``-ḣ(t - τ)``."""
+
+    family, scale, shifts_time = "time_bias", 0.01, True
+    bounds = (-TIME_BIAS_LIMIT_S, TIME_BIAS_LIMIT_S)
+    description = "time-tag offset of the station's samples (tags late by this; h_obs(t) = h(t - tau))"
+
+    def rows(self, meas) -> np.ndarray:
+        return np.flatnonzero(meas.station == self.key)
 
 
 # ----------------------------------------------------------------------------- transmitter frequency
@@ -299,7 +334,8 @@ def elevation(meas, rows, geometry) -> np.ndarray:
 # ----------------------------------------------------------------------------- registry
 
 #: Modifier class of each driver family (for names given as text: files, tests, ``--apriori-sigma``).
-FAMILIES = {cls.family: cls for cls in (RangeBias, DopplerOffset, DopplerDrift, AzimuthBias, ElevationBias)}
+FAMILIES = {cls.family: cls for cls in (RangeBias, DopplerOffset, DopplerDrift, AzimuthBias, ElevationBias,
+                                        StationTimeBias)}
 
 
 def from_name(name: str, epoch_s: Optional[float] = None, **kw) -> Modifier:

@@ -101,7 +101,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from trackproc.constants import C_LIGHT
+from trackproc.constants import C_LIGHT, OMEGA_EARTH
 from trackproc.models import light_time as lt
 from trackproc.models import modifiers as md
 from trackproc.models.light_time import LIGHT_TIME_TOL_S, UpLeg, solve_up_leg  # noqa: F401  (re-exported)
@@ -237,6 +237,35 @@ class MeasurementSet:
         """True for two-way range, range-rate and Doppler samples (the round-trip model)."""
         return (self.mode == "two-way") & np.isin(self.kind, LINK_KINDS)
 
+    def shifted(self, dt_s) -> "MeasurementSet":
+        """The samples as if received ``dt_s`` (s, scalar or per row) later: ``t_s + dt`` and the
+        station (position, velocity, acceleration, ENU axes) turned with the Earth by ``|ω| dt``
+        about its rotation axis ``ω = (v_st × a_st) / |v_st|²`` (a fixed site: ``v = ω × r``,
+        ``a = ω × v``; Rodrigues' rotation formula), the axis along GCRF z at
+        :data:`~trackproc.constants.OMEGA_EARTH` without ``a_st``. Precession-nutation over
+        seconds is left out (below 1e-10 rad)."""
+        dt = np.broadcast_to(np.asarray(dt_s, float), (len(self),))
+        if self.a_st is not None:
+            w = np.cross(self.v_st, self.a_st) / np.einsum("ij,ij->i", self.v_st, self.v_st)[:, None]
+        else:
+            w = np.tile([0.0, 0.0, OMEGA_EARTH], (len(self), 1))
+        rate = np.linalg.norm(w, axis=1)
+        k = w / rate[:, None]
+        angle = rate * dt
+        cos, sin = np.cos(angle)[:, None], np.sin(angle)[:, None]
+
+        def turn(x):                                 # (n, 3) vectors or (n, m, 3) rows of matrices
+            kk = k if x.ndim == 2 else k[:, None, :]
+            c, s_ = (cos, sin) if x.ndim == 2 else (cos[:, None], sin[:, None])
+            kx = np.cross(kk, x)
+            return x * c + kx * s_ + kk * (np.sum(kk * x, axis=-1, keepdims=True)) * (1.0 - c)
+
+        return MeasurementSet(t_s=self.t_s + dt, kind=self.kind, station=self.station, pass_id=self.pass_id,
+                              observed=self.observed, sigma=self.sigma, r_st=turn(self.r_st), v_st=turn(self.v_st),
+                              gcrf_to_enu=None if self.gcrf_to_enu is None else turn(self.gcrf_to_enu),
+                              carrier_hz=self.carrier_hz, a_st=None if self.a_st is None else turn(self.a_st),
+                              mode=self.mode)
+
     def subset(self, rows) -> "MeasurementSet":
         rows = np.asarray(rows)
         pick = (lambda a: None if a is None else a[rows])
@@ -288,12 +317,23 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
     ``meas.a_st``. Returns ``(computed (N,), jacobian (N, n_columns), geometry)``, the geometry
     being the down leg's (:class:`EmissionGeometry`; for two-way samples ``t_e`` is the bounce).
 
+    A modifier that shifts time (:class:`~trackproc.models.modifiers.StationTimeBias`, ``τ``)
+    moves its rows' reception times to ``t - τ`` before everything else, and its column is
+    ``-ḣ(t - τ)``, by a central difference of the model (:func:`_time_partials`).
+
     Implements seed 002 eq. 17 (with light time, station motion and the offsets) and its Jacobian (eq. 10).
     """
     _check_model(range_rate_model)
     n = len(meas)
     bias_values = bias_values or {}
     bias_columns = bias_columns or {}
+    timed = [m for m in modifiers if m.modifier.shifts_time and m.rows.size]
+    if timed:
+        dt = np.zeros(n)
+        for m in timed:
+            dt[m.rows] -= float(bias_values.get(m.name, 0.0))
+        if np.any(dt):
+            meas = meas.shifted(dt)
     ncol = n_columns if n_columns is not None else n_state_params + len(bias_columns)
     geo = solve_light_time(trajectory, meas.t_s, meas.r_st, c=c)
     r_e, v_e = geo.state[:, :3], geo.state[:, 3:]
@@ -357,7 +397,25 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         jac[two, :n_state_params] += g_t[two, None] * d_big_t
     for mod in modifiers:
         mod.apply(value, jac, bias_values, bias_columns, geo)
+    for mod in timed:
+        col = bias_columns.get(mod.name)
+        if col is not None:
+            jac[mod.rows, col] += _time_partials(meas, mod.rows, trajectory, n_state_params, range_rate_model, c)
     return value, jac, geo
+
+
+def _time_partials(meas: MeasurementSet, rows, trajectory, n_state_params: int, range_rate_model: str,
+                   c: float) -> np.ndarray:
+    """``∂h/∂τ = -ḣ`` of ``rows`` of ``meas`` (already at their true times ``t - τ``): a central
+    difference of the model (without modifiers) in the reception time, half step
+    :data:`~trackproc.models.modifiers.TIME_STEP_S` (azimuth differences wrapped)."""
+    sub = meas.subset(rows)
+    h = md.TIME_STEP_S
+    later, earlier = (evaluate(sub.shifted(s), trajectory, n_state_params=n_state_params, n_columns=n_state_params,
+                               range_rate_model=range_rate_model, c=c)[0] for s in (h, -h))
+    diff = later - earlier
+    diff = np.where(sub.periodic, wrap_pi(diff), diff)
+    return -diff / (2.0 * h)
 
 
 # ----------------------------------------------------------------------------- two-way (eqs. 7-13)

@@ -189,7 +189,8 @@ def stations_info(data: bytes, source: str) -> dict:
     stations = parse_stations(data, source)
     return {"file": source, "kind": "stations table (WGS-84 geodetic)", "stations": len(stations),
             "positions": {name: {"lat_deg": s.lat_deg, "lon_deg": s.lon_deg, "height_m": s.height_m,
-                                 **({"range_bias_m": s.range_bias_m} if s.range_bias_m is not None else {})}
+                                 **({"range_bias_m": s.range_bias_m} if s.range_bias_m is not None else {}),
+                                 **({"time_sigma_s": s.time_sigma_s} if s.time_sigma_s is not None else {})}
                           for name, s in stations.items()}}
 
 

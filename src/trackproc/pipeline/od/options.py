@@ -57,6 +57,10 @@ class EstimateOptions:
     ``empirical_r``/``_t``/``_n`` or ``empirical-rtn`` for the three, ``empirical_x``/``_y``/``_z``
     or ``empirical-xyz`` along the GCRF axes), started from the force
     model's values (:func:`force_parameter_names`).
+    ``station_time_bias``: estimate a time-tag offset (:class:`~trackproc.models.modifiers.StationTimeBias`)
+    for every station (True), for the listed stations, or none (False); its a-priori sigma is
+    ``--apriori-sigma time_bias[:STATION]``, else the station's ``time_sigma_s`` (a station whose
+    ``time_sigma_s`` is 0 has exact tags: no offset is estimated for it).
     ``modifiers``: further :class:`~trackproc.models.modifiers.Modifier` instances (a bias kind
     without an option of its own), applied and their drivers estimated like the ones above
     (copied per problem: their drivers' values do not leak between problems).
@@ -66,6 +70,7 @@ class EstimateOptions:
     doppler_bias: Optional[str] = "auto"
     doppler_bias_per: str = "pass"
     angle_bias: bool = False
+    station_time_bias: bool | Sequence[str] = False
     apriori_sigma: Mapping[str, float] = field(default_factory=dict)
     apriori_initial: Optional[bool] = None
     #: Days over which the solution must be expected to predict the position better than the initial

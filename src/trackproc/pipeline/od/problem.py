@@ -91,7 +91,9 @@ class Problem:
     def trajectory(self, x):
         """The propagated trajectory (with STM, and the force parameters' partials) of ``x``."""
         t = self.meas.t_s
-        span = [float(t.min()) - LIGHT_TIME_MARGIN_S, float(t.max())]
+        # a time-tag offset moves samples up to its bound (and the derivative's step) either way
+        margin = (md.TIME_BIAS_LIMIT_S + 1.0) if any(b.modifier.shifts_time for b in self.modifiers) else 0.0
+        span = [float(t.min()) - LIGHT_TIME_MARGIN_S - margin, float(t.max()) + margin]
         traj = propagator.propagate(x[:3], x[3:6], self.epoch, span, force=self.force, stm=True, frame=self.frame,
                                     eop=self.eop, force_model=self.force_model_at(x))
         traj = traj.raise_for_outcome()
@@ -284,11 +286,51 @@ def angle_modifiers(opt: EstimateOptions, kinds_by_station: dict, apriori) -> li
     return out
 
 
+def time_bias_modifiers(opt: EstimateOptions, stations_here, known: dict, apriori) -> list:
+    """``--station-time-bias``: a :class:`~trackproc.models.modifiers.StationTimeBias` per station
+    asked for; a-priori sigma from ``--apriori-sigma``, else the station's ``time_sigma_s`` (none
+    given: no a-priori); a station with ``time_sigma_s`` 0 (exact tags) gets none."""
+    stations_here = sorted(stations_here)
+    if opt.station_time_bias is True:
+        wanted = stations_here
+    elif opt.station_time_bias:
+        wanted = list(opt.station_time_bias)
+        dup = sorted({s for s in wanted if wanted.count(s) > 1})
+        if dup:
+            raise InputError("duplicate parameter", column="--station-time-bias-station", found=f"time_bias:{dup[0]}",
+                             expected="each station once")
+        for s in wanted:
+            if s not in stations_here:
+                raise InputError("time bias for a station without samples", column="--station-time-bias-station",
+                                 found=s, expected="one of " + ", ".join(stations_here))
+    else:
+        return []
+    out = []
+    for s in wanted:
+        sigma = apriori_for(f"time_bias:{s}", "time_bias", apriori)
+        stated = getattr(known.get(s), "time_sigma_s", None)
+        if sigma is None and stated is not None:
+            if stated == 0.0:
+                continue                                          # exact time tags
+            sigma = stated
+        out.append(md.StationTimeBias(s, apriori_sigma=sigma))
+    # tags of every station late by the same amount are the orbit moved along its track and turned
+    # with the Earth (an axisymmetric field cannot tell): one offset must be fixed or constrained
+    free = {m.key for m in out if m.driver.apriori_sigma is None}
+    if free and free == set(stations_here):
+        raise InputError("a time offset common to every station cannot be estimated (it is the orbit moved along "
+                         "its track)", column="--station-time-bias", found=", ".join(sorted(free)),
+                         expected="--station-time-bias-station for the stations in doubt, or an a-priori sigma "
+                                  "(the stations table's time_sigma_s, or --apriori-sigma time_bias=S)")
+    return out
+
+
 def bias_modifiers(opt: EstimateOptions, frame, t_s, known, apriori) -> list:
     """Every modifier the options ask for, in the order of their drivers in the extended state."""
     kinds_by_station = frame.groupby("station")["kind"].agg(lambda k: set(k.astype(str).unique())).to_dict()
     return (range_bias_modifiers(opt, kinds_by_station, known, apriori) + frequency_modifiers(opt, frame, t_s, apriori)
-            + angle_modifiers(opt, kinds_by_station, apriori))
+            + angle_modifiers(opt, kinds_by_station, apriori)
+            + time_bias_modifiers(opt, kinds_by_station, known, apriori))
 
 
 def default_apriori(rv0) -> np.ndarray:

@@ -182,7 +182,8 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
                      initial=initial, stale_epoch=stale_epoch, traverse_how=how, names=names, x0=x0, scales=scales,
                      priors=list(problem.priors), apriori_note=note, apriori_source=source,
                      station_model=station_model, mu=mu,
-                     carrier_hz=carrier, station_axis=axis / np.linalg.norm(axis), warnings=warnings)
+                     carrier_hz=carrier, station_axis=axis / np.linalg.norm(axis), warnings=warnings,
+                     station_time_sigma_s=getattr(st, "time_sigma_s", None))
     if opt.cost == "integral":
         ref.integral = integral_setup(ref, frame)
     return ref

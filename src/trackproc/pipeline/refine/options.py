@@ -106,8 +106,9 @@ class RefineOptions:
     allow_refusal: bool = True
     #: 1-sigma uncertainty (s) of the station's time tags, a consider parameter: one pass cannot
     #: see a time-tag offset (docs/refine.md, "Mis-modelled passes"), so its effect is added to the
-    #: covariance (:func:`~trackproc.pipeline.refine.traverse.time_tag_covariance`); 0 = exact tags.
-    time_tag_sigma_s: float = 0.0
+    #: covariance (:func:`~trackproc.pipeline.refine.traverse.time_tag_covariance`); 0 = exact tags;
+    #: None = the station's ``time_sigma_s`` from the stations table or the pass metadata (exact tags without).
+    time_tag_sigma_s: Optional[float] = None
     modifiers: tuple = ()
     #: Days after the solution epoch at which the refined state must be expected to predict the
     #: position better than the stale one to replace it (``--horizon``; methods/estimation/decision.py).

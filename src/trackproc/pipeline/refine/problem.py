@@ -59,6 +59,17 @@ class Refinement:
     noise_report: Optional[dict] = None
     #: where the state's a-priori came from (:data:`trackproc.methods.estimation.prior.SOURCES`; "" = none)
     apriori_source: str = ""
+    #: the station's ``time_sigma_s`` (stations table or pass metadata; None = not given)
+    station_time_sigma_s: Optional[float] = None
+
+    def time_tag_sigma(self) -> tuple:
+        """``(sigma_s, source)`` of the time-tag consider parameter: ``--time-tag-sigma`` when
+        given (0 included), else the station's ``time_sigma_s``; ``(0.0, "")`` without either."""
+        if self.options.time_tag_sigma_s is not None:
+            return float(self.options.time_tag_sigma_s), "--time-tag-sigma"
+        if self.station_time_sigma_s is not None:
+            return float(self.station_time_sigma_s), "station table"
+        return 0.0, ""
 
     @property
     def n_problem(self) -> int:

@@ -123,17 +123,20 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         except ProcessingError as exc:
             warnings.append(f"the profile covariance could not be computed ({exc}); the linear one is reported")
     time_tags = None
-    if opt.time_tag_sigma_s > 0 and opt.cost == "pointwise" and not opt.circular and refusal is None:
+    tt_sigma, tt_source = ref.time_tag_sigma()
+    if tt_sigma > 0 and opt.cost == "pointwise" and not opt.circular and refusal is None:
         # a time-tag offset the pass cannot see (docs/refine.md, "Mis-modelled passes"): a consider term
-        extra_cov = time_tag_covariance(ref, x, ref.covariance(sol, kkt), opt.time_tag_sigma_s)
+        extra_cov = time_tag_covariance(ref, x, ref.covariance(sol, kkt), tt_sigma)
         if extra_cov is None:
             warnings.append("the time-tag uncertainty could not be added to the covariance (propagation failed)")
         else:
             cov = cov + extra_cov
             sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
             obs.posterior_sigma_rtn = np.sqrt(np.clip(np.diag(big @ cov[:6, :6] @ big.T), 0.0, None))
-            covariance_note += f"; plus a time-tag uncertainty of {opt.time_tag_sigma_s:g} s (consider parameter)"
-            time_tags = {"sigma_s": opt.time_tag_sigma_s,
+            covariance_note += (f"; plus a time-tag uncertainty of {tt_sigma:g} s (consider parameter, "
+                                f"from the {tt_source})" if tt_source == "station table" else
+                                f"; plus a time-tag uncertainty of {tt_sigma:g} s (consider parameter)")
+            time_tags = {"sigma_s": tt_sigma, "source": tt_source,
                          "position_sigma_m": float(np.sqrt(np.trace(extra_cov[:3, :3]))),
                          "velocity_sigma_m_s": float(np.sqrt(np.trace(extra_cov[3:6, 3:6])))}
     # a pass whose timing contradicts its TLE: the covariance takes the shift as a possible
@@ -206,7 +209,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         "sigma_rtn": dict(zip(rf.RTN_NAMES, np.sqrt(np.clip(np.diag(rtn), 0.0, None)).tolist())),
         "units": units, "warnings": warnings,
     }
-    if time_tags is not None:                         # --time-tag-sigma: the consider term
+    if time_tags is not None:                         # the time-tag consider term
         diagnostics["time_tag_consider"] = time_tags
     if ref.noise_report is not None:                  # the noise model of the pass (methods/noise.py)
         diagnostics["noise"] = ref.noise_report
