@@ -18,7 +18,7 @@ from trackproc.pipeline.refine.gates import (circular_consistency, may_refuse, s
 from trackproc.pipeline.refine.noise import solve_noise
 from trackproc.pipeline.refine.options import MAX_TRAVERSE_ITERATIONS, TRAVERSE_TOLERANCE_S, RefineOptions, RefineResult
 from trackproc.pipeline.refine.result import finish
-from trackproc.pipeline.refine.traverse import model_traverse
+from trackproc.pipeline.refine.traverse import model_traverse, time_tag_covariance
 from trackproc.types import PassTable
 
 
@@ -68,9 +68,14 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     if refusal is None and may_refuse(ref):
         # replace the stale state only when the refined one is expected to predict better
         npb = ref.n_problem
-        made = od_decision.by_prediction(ref.problem, np.asarray(sol.values, float)[:npb],
-                                         np.asarray(ref.covariance(sol, kkt), float)[:npb, :npb], ref.priors,
-                                         opt.horizon_days, ref.apriori_source or None)
+        cov = np.asarray(ref.covariance(sol, kkt), float)
+        tt_sigma, _ = ref.time_tag_sigma()
+        if tt_sigma > 0:
+            # the station's time-tag uncertainty (consider) is in the covariance written: judge with it
+            extra = time_tag_covariance(ref, sol.values, cov, tt_sigma)
+            cov = cov + extra if extra is not None else cov
+        made = od_decision.by_prediction(ref.problem, np.asarray(sol.values, float)[:npb], cov[:npb, :npb],
+                                         ref.priors, opt.horizon_days, ref.apriori_source or None)
         if made is not None:
             decision = made.as_dict()
             if adaptation is not None and adaptation.get("factor", 1.0) > 1.0:
