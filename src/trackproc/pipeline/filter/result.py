@@ -77,7 +77,7 @@ def skip_older(tables, last):
 
 
 def _utc_of_step(problem: Problem, sw, k: int):
-    if k == 0 or sw.t_s[k] == 0.0:
+    if sw.t_s[k] == 0.0:
         return problem.epoch
     i = int(np.flatnonzero(sw.step == k)[0])
     return problem.times[i]
@@ -228,11 +228,8 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
         if not tables:
             raise ProcessingError(f"no samples after the carried state's last measurement {format_epoch(last)}")
         carried = initial
-    first = min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
     popt = opt.problem
     epoch = popt.epoch
-    if epoch is None and np.datetime64(initial.epoch, "ns") > np.datetime64(first, "ns"):
-        epoch = "first"                 # the filter starts at the initial state or the first sample
     apriori_initial = popt.apriori_initial
     if apriori_initial is None and initial.state_covariance is not None and not any(
             k in popt.apriori_sigma for k in ("x", "y", "z", "vx", "vy", "vz", "position", "velocity", "state")):
@@ -247,7 +244,7 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
     which = "s" if opt.smooth else "f"
     last_k = sw.t_s.size - 1
     if opt.output_epoch is None:
-        k = 0 if opt.smooth else last_k
+        k = sw.epoch_step if opt.smooth else last_k
         x, p = sw.absolute(which, k)
         out_epoch = _utc_of_step(problem, sw, k)
     else:
@@ -274,7 +271,8 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
         "edit_sigma": opt.edit_sigma, "segment_gap_s": opt.segment_gap_s,
         "updates": int(kept.sum()), "edited": int(sw.edited.sum()), "steps": int(sw.t_s.size),
         "segments": len(sw.segments), "sweeps": len(iterations) + 1, "iterations": iterations,
-        "first_time": format_epoch(problem.epoch), "last_measurement": format_epoch(last_time),
+        "first_time": format_epoch(_utc_of_step(problem, sw, 0)),
+        "apriori_epoch": format_epoch(problem.epoch), "last_measurement": format_epoch(last_time),
         "nis": float(np.sum(z[kept] ** 2)), "nis_dof": int(kept.sum()),
         "skipped_passes": skipped, "carried_state": carried is not None,
     }

@@ -88,9 +88,10 @@ class Problem:
             return self.force_model
         return self.force_model.with_parameters(**{n: float(x[6 + i]) for i, n in enumerate(self.force_names)})
 
-    def trajectory(self, x):
-        """The propagated trajectory (with STM, and the force parameters' partials) of ``x``."""
-        t = self.meas.t_s
+    def trajectory(self, x, cover=()):
+        """The propagated trajectory (with STM, and the force parameters' partials) of ``x``, over
+        the samples' times and ``cover`` (further times, s from the epoch)."""
+        t = np.concatenate([self.meas.t_s, np.asarray(cover, float).ravel()])
         span = [float(t.min()) - LIGHT_TIME_MARGIN_S, float(t.max())]
         traj = propagator.propagate(x[:3], x[3:6], self.epoch, span, force=self.force, stm=True, frame=self.frame,
                                     eop=self.eop, force_model=self.force_model_at(x))
