@@ -110,8 +110,13 @@ def filter_command(
     dut1: Optional[float] = Dut1Opt,
     range_rate_model: Optional[RangeRateModel] = typer.Option(
         None, "--range-rate-model", help="doppler or instantaneous; default: the pass files' metadata, else doppler."),
-    history: Optional[str] = typer.Option(None, "--history", metavar="FILE.csv",
-                                          help="Every filtered (and smoothed) state with sigmas and covariance."),
+    history: Optional[str] = typer.Option(None, "--history", metavar="FILE.csv|FILE.oem",
+                                          help="Every filtered (and smoothed) state with sigmas and covariance: CSV "
+                                               "(every parameter), or CCSDS OEM with covariance blocks by the suffix "
+                                               ".oem (the orbit; one segment per solution)."),
+    object_name: str = typer.Option("UNKNOWN", "--object-name", metavar="NAME",
+                                    help="OBJECT_NAME of an OEM --history."),
+    object_id: str = typer.Option("UNKNOWN", "--object-id", metavar="ID", help="OBJECT_ID of an OEM --history."),
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Innovations and residuals per sample (Parquet, or CSV by suffix)."),
     as_json: bool = JsonSummaryOpt,
@@ -193,7 +198,10 @@ def filter_command(
     result = filter_passes(tables, state0, station_table, options, orientation)
     write_state(result.state, out, force=force.value, eop_source=orientation.source)
     if history is not None:
-        write_text(history, result.history().to_csv(index=False, float_format="%.17g"))
+        if history.lower().endswith(".oem"):
+            write_text(history, result.history_oem(object_name=object_name, object_id=object_id))
+        else:
+            write_text(history, result.history().to_csv(index=False, float_format="%.17g"))
     if residuals is not None:
         frame = result.innovations.assign(time=result.innovations["time"].map(format_epoch_ts))
         if residuals.lower().endswith(".csv"):

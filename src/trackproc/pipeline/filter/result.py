@@ -47,6 +47,10 @@ class FilterResult:
         row per step and solution (:func:`history_frame`)."""
         return history_frame(self.problem, self.sweep)
 
+    def history_oem(self, **oem_kwargs) -> str:
+        """The history as CCSDS OEM KVN (:func:`history_oem`)."""
+        return history_oem(self.problem, self.sweep, self.state, **oem_kwargs)
+
 
 def carried_last_measurement(initial):
     """The last measurement time (UTC datetime64) a previous ``filter`` run's state carries, or None."""
@@ -147,6 +151,43 @@ def history_frame(problem: Problem, sw) -> pd.DataFrame:
             row.update({f"cov_{i}_{j}": float(p[i, j]) for i, j in zip(*low)})
             rows.append(row)
     return pd.DataFrame(rows)
+
+
+def history_ephemerides(problem: Problem, sw, state=None) -> list:
+    """``[(label, Ephemeris), ...]`` per solution (``filtered``, ``smoothed``): every step's
+    position, velocity (GCRF, m, m/s) and the orbit's 6 × 6 block of the filter's covariance
+    (``cov_I_J``, I, J = 1..6)."""
+    from trackproc.io.ephemeris import COLUMNS, Ephemeris
+
+    out = []
+    meta = {}
+    if state is not None:
+        meta = {"force_model": state.force_model, "constants": state.constants}
+    for which, label in (("f", "filtered"), ("s", "smoothed")):
+        if getattr(sw, "x_" + which) is None:
+            continue
+        xs, ps = [], []
+        for k in range(sw.t_s.size):
+            x, p = sw.absolute(which, k)
+            xs.append(x[:6])
+            ps.append(p[:6, :6])
+        times = pd.DatetimeIndex([_utc_of_step(problem, sw, k) for k in range(sw.t_s.size)]).tz_localize("UTC")
+        frame = pd.DataFrame({"time": times, **{c: np.array(xs)[:, i] for i, c in enumerate(COLUMNS[1:])}})
+        cov = np.array(ps)
+        for i in range(6):
+            for j in range(6):
+                frame[f"cov_{i + 1}_{j + 1}"] = cov[:, i, j]
+        out.append((label, Ephemeris(frame, dict(meta))))
+    return out
+
+
+def history_oem(problem: Problem, sw, state=None, **oem_kwargs) -> str:
+    """The history as CCSDS OEM KVN (CCSDS 502.0-B-3): one segment per solution (filtered, then
+    smoothed), each with its covariance section (the filter's orbit covariance at every step)."""
+    from trackproc.io.ephemeris import oem_segments_text
+
+    segments = [(eph, f"{label} states of trackproc filter") for label, eph in history_ephemerides(problem, sw, state)]
+    return oem_segments_text(segments, **oem_kwargs)
 
 
 def filter_quality(problem: Problem, sw, iterations: list, opt: FilterOptions):
