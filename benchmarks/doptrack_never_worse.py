@@ -13,8 +13,9 @@ covariance predicts for it (``z``; its RMS should be about 1).
 
 Development: 1-10 April 2020; hold-out: 11-15 April (never used while developing). Usage:
 ``PYTHONPATH=src python benchmarks/doptrack_never_worse.py [dev|holdout|both] [fresh|stale|both] [HORIZON_DAYS]
-[STALE_DAYS] [REPLACE_PROBABILITY]`` (refine's ``--horizon``, default 1; the stale TLE's minimum age,
-default 7; the replace rule's probability, default the code's).
+[STALE_DAYS] [REPLACE_PROBABILITY|-] [TIME_SIGMA_S]`` (refine's ``--horizon``, default 1; the stale TLE's
+minimum age, default 7; the replace rule's probability, default the code's; the station's time-tag
+sigma, default none).
 """
 
 from __future__ import annotations
@@ -85,7 +86,8 @@ def table(dev: bool, which: str):
             continue
         t0 = time.process_time()
         try:
-            res = refine(ta, tle_state(tle, eop=EOP), None, RefineOptions(horizon_days=HORIZON), EOP, source=a)
+            res = refine(ta, tle_state(tle, eop=EOP), None,
+                         RefineOptions(horizon_days=HORIZON, time_tag_sigma_s=TIME_SIGMA), EOP, source=a)
         except Exception as exc:      # a failure keeps the TLE as well: say it
             rows.append((a, b, math.nan, math.nan, 1.0, f"failed: {type(exc).__name__}", math.nan, 0.0))
             continue
@@ -112,7 +114,9 @@ def table(dev: bool, which: str):
 
 
 HORIZON = float(sys.argv[3]) if len(sys.argv) > 3 else 1.0
-if len(sys.argv) > 5:          # the replace threshold (methods/estimation/decision.py), for studies
+#: the station's time-tag sigma (s; refine's --time-tag-sigma, a stations table's time_sigma_s): None = none
+TIME_SIGMA = float(sys.argv[6]) if len(sys.argv) > 6 else None
+if len(sys.argv) > 5 and sys.argv[5] != "-":          # the replace threshold (methods/estimation/decision.py), for studies
     from trackproc.methods.estimation import decision as _dm
 
     _dm.REPLACE_PROBABILITY = float(sys.argv[5])

@@ -16,10 +16,11 @@ BIASES = {"range_bias:CPH": 120.0, "range_bias:KIR": 45.0, "range_bias:ZHY": -80
 
 
 def test_smoothed_state_and_biases_cover_the_simulated_truth(run_cli, tmp_path):
-    out = tmp_path / "smoothed.json"
+    out, oem_path = tmp_path / "smoothed.json", tmp_path / "history.oem"
     result = run_cli(["filter", SAMPLE / "multistation.parquet", "--initial", SAMPLE / "stale.json",
                       "--range-bias", "--apriori-sigma", "range_bias=1000", "--kinds", "range,range_rate",
-                      "--smooth", "--iterations", "5", "-q", "-o", out])
+                      "--smooth", "--iterations", "5", "--history", oem_path, "--object-name", "SEED",
+                      "-q", "-o", out])
     assert result.exit_code == 0, result.stderr
     state = json.loads(out.read_text())
     truth = json.loads((SAMPLE / "truth_at_start.json").read_text())
@@ -31,3 +32,59 @@ def test_smoothed_state_and_biases_cover_the_simulated_truth(run_cli, tmp_path):
     # the stale first guess was 10 km away: the data moved it
     stale = json.loads((SAMPLE / "stale.json").read_text())
     assert np.linalg.norm(np.subtract(stale["position_m"], truth["position_m"])) > 1000.0
+    # --history as CCSDS OEM: a filtered and a smoothed segment, a covariance block per step; the
+    # smoothed block at the epoch is the state file's covariance (km**2 ...), its line the state
+    oem = parse_oem(oem_path.read_text())
+    assert oem["header"]["CCSDS_OEM_VERS"] == "2.0" and len(oem["segments"]) == 2
+    filtered, smoothed = oem["segments"]
+    assert filtered["meta"]["OBJECT_NAME"] == "SEED" and filtered["meta"]["REF_FRAME"] == "GCRF"
+    assert len(filtered["lines"]) == len(smoothed["lines"]) == len(smoothed["covariances"]) > 100
+    assert [t for t, _ in filtered["lines"]] == [c["epoch"] for c in filtered["covariances"]]
+    first_t, first = smoothed["lines"][0]
+    assert first_t == np.datetime64(state["epoch"].rstrip("Z"), "ns")
+    np.testing.assert_allclose(np.multiply(first, 1000.0), state["position_m"] + state["velocity_m_s"], rtol=1e-12)
+    cov6 = np.asarray(state["covariance"])[:6, :6]
+    np.testing.assert_allclose(smoothed["covariances"][0]["matrix"] * 1e6, cov6, rtol=1e-9,
+                               atol=1e-12 * np.abs(cov6).max())
+    # the filter's last covariance is smaller than its first (the data reduced it)
+    assert np.trace(filtered["covariances"][-1]["matrix"][:3, :3]) < np.trace(filtered["covariances"][0]["matrix"][:3, :3])
+
+
+def parse_oem(text: str) -> dict:
+    """A small CCSDS OEM KVN reader (CCSDS 502.0-B-3 5.2): header, then segments of a META block,
+    data lines ``epoch x y z vx vy vz`` and an optional covariance section of lower triangles."""
+    header, segments = {}, []
+    section, seg, cov = "header", None, None
+    for raw in text.splitlines():
+        line = raw.strip()
+        if not line or line.startswith("COMMENT"):
+            continue
+        if line == "META_START":
+            seg = {"meta": {}, "lines": [], "covariances": []}
+            segments.append(seg)
+            section = "meta"
+        elif line in ("META_STOP", "COVARIANCE_START", "COVARIANCE_STOP"):
+            section = {"META_STOP": "data", "COVARIANCE_START": "cov", "COVARIANCE_STOP": "after"}[line]
+        elif section in ("header", "meta"):
+            key, _, value = line.partition("=")
+            (header if section == "header" else seg["meta"])[key.strip()] = value.strip()
+        elif section == "data":
+            parts = line.split()
+            assert len(parts) == 7, line
+            seg["lines"].append((np.datetime64(parts[0], "ns"), [float(p) for p in parts[1:]]))
+        elif section == "cov":
+            if line.startswith("EPOCH"):
+                cov = {"epoch": np.datetime64(line.split("=")[1].strip(), "ns"), "rows": []}
+                seg["covariances"].append(cov)
+            elif line.startswith("COV_REF_FRAME"):
+                cov["frame"] = line.split("=")[1].strip()
+            else:
+                cov["rows"].append([float(p) for p in line.split()])
+    for seg in segments:
+        for c in seg["covariances"]:
+            m = np.zeros((6, 6))
+            for i, row in enumerate(c["rows"]):
+                assert len(row) == i + 1
+                m[i, :i + 1] = row
+            c["matrix"] = m + np.tril(m, -1).T
+    return {"header": header, "segments": segments}

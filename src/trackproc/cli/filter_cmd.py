@@ -89,6 +89,20 @@ def filter_command(
     epoch: Optional[str] = typer.Option(None, "--epoch", metavar="ISO",
                                         help="Epoch of the written state (default: the last measurement; with "
                                              "--smooth the filter's first time)."),
+    troposphere: str = typer.Option(
+        "auto", "--troposphere", metavar="auto|mendes-pavlis|none",
+        help="Tropospheric delay of range samples, as estimate's (auto: laser sessions not already corrected)."),
+    com_offset: float = typer.Option(0.0, "--com-offset", metavar="M",
+                                     help="Target centre-of-mass offset subtracted from modelled ranges, m "
+                                          "(LAGEOS 0.251)."),
+    wavelength_nm: Optional[float] = typer.Option(
+        None, "--wavelength-nm", metavar="NM", help="Laser wavelength for --troposphere mendes-pavlis on ranges "
+                                                    "without a CRD configuration record."),
+    solid_tides: Optional[bool] = typer.Option(
+        None, "--solid-tides/--no-solid-tides", show_default=False,
+        help="Solid-Earth tide displacement of the stations on range samples (default: on for CRD laser data)."),
+    eccentricities: Optional[str] = typer.Option(
+        None, "--eccentricities", metavar="ECC.snx", help="SINEX eccentricities applied to --stations FILE.snx."),
     kinds: Optional[str] = typer.Option(None, "--kinds", metavar="KIND[,KIND]", help="Kinds to use (default all)."),
     force=ForceOpt,
     earth=EarthOpt,
@@ -96,8 +110,13 @@ def filter_command(
     dut1: Optional[float] = Dut1Opt,
     range_rate_model: Optional[RangeRateModel] = typer.Option(
         None, "--range-rate-model", help="doppler or instantaneous; default: the pass files' metadata, else doppler."),
-    history: Optional[str] = typer.Option(None, "--history", metavar="FILE.csv",
-                                          help="Every filtered (and smoothed) state with sigmas and covariance."),
+    history: Optional[str] = typer.Option(None, "--history", metavar="FILE.csv|FILE.oem",
+                                          help="Every filtered (and smoothed) state with sigmas and covariance: CSV "
+                                               "(every parameter), or CCSDS OEM with covariance blocks by the suffix "
+                                               ".oem (the orbit; one segment per solution)."),
+    object_name: str = typer.Option("UNKNOWN", "--object-name", metavar="NAME",
+                                    help="OBJECT_NAME of an OEM --history."),
+    object_id: str = typer.Option("UNKNOWN", "--object-id", metavar="ID", help="OBJECT_ID of an OEM --history."),
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Innovations and residuals per sample (Parquet, or CSV by suffix)."),
     as_json: bool = JsonSummaryOpt,
@@ -164,13 +183,14 @@ def filter_command(
         lo = min(t.frame["time"].min() for _, t in tables)
         hi = max(t.frame["time"].max() for _, t in tables)
         mid = (lo + (hi - lo) / 2).tz_convert("UTC").tz_localize(None).to_datetime64()
-        station_table = read_stations(stations, epoch=mid)
+        station_table = read_stations(stations, epoch=mid, eccentricities=eccentricities)
     problem = EstimateOptions(
         range_bias=True if range_bias else list(range_bias_station), doppler_bias=doppler_bias.value,
         doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,
         apriori_initial=apriori_initial, force=force.value, earth=earth.value,
         range_rate_model=range_rate_model.value if range_rate_model else None, kinds=kind_list, noise="white",
-        estimate_force=list(estimate_force),
+        estimate_force=list(estimate_force), troposphere=troposphere, com_offset_m=com_offset,
+        wavelength_nm=wavelength_nm, solid_tides=solid_tides,
         force_model=force_settings.model(force.value, state0.epoch, orientation, state0))
     options = FilterOptions(problem=problem, snc_accel=accel, bias_walk=walks,
                             edit_sigma=edit_sigma if edit_sigma > 0 else None, smooth=smooth, iterations=iterations,
@@ -178,7 +198,10 @@ def filter_command(
     result = filter_passes(tables, state0, station_table, options, orientation)
     write_state(result.state, out, force=force.value, eop_source=orientation.source)
     if history is not None:
-        write_text(history, result.history().to_csv(index=False, float_format="%.17g"))
+        if history.lower().endswith(".oem"):
+            write_text(history, result.history_oem(object_name=object_name, object_id=object_id))
+        else:
+            write_text(history, result.history().to_csv(index=False, float_format="%.17g"))
     if residuals is not None:
         frame = result.innovations.assign(time=result.innovations["time"].map(format_epoch_ts))
         if residuals.lower().endswith(".csv"):

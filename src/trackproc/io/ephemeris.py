@@ -56,7 +56,7 @@ from trackproc.io.validate import check_name
 from trackproc.isotime import iso_utc
 
 __all__ = ["COLUMNS", "STATE_NAMES", "STM_COLUMNS", "SIGMA_COLUMNS", "COV_COLUMNS", "MEASUREMENT_COLUMNS",
-           "FORMATS", "Ephemeris", "ephemeris_bytes", "write_ephemeris", "read_ephemeris", "oem_text",
+           "FORMATS", "Ephemeris", "ephemeris_bytes", "write_ephemeris", "read_ephemeris", "oem_text", "oem_segments_text",
            "international_designator"]
 
 SCHEMA_VERSION = 1
@@ -246,6 +246,46 @@ def oem_text(eph: Ephemeris, *, object_name: str = "UNKNOWN", object_id: str = "
     """
     for key, text in (("OBJECT_NAME", object_name), ("OBJECT_ID", object_id), ("ORIGINATOR", originator)):
         check_name(str(text), "OEM " + key, column=key)   # a newline would forge a KVN line
+    t64 = _oem_times(eph)
+    covariance_comment = "propagated P(t) = Phi P0 Phi^T; km**2, km**2/s, km**2/s**2"
+    stamp = np.datetime64(created or creation_date(), "ms")
+    lines = [f"CCSDS_OEM_VERS = {OEM_VERSION}"]
+    for c in comments:
+        lines.extend(f"COMMENT {part}" for part in str(c).splitlines())
+    lines += [f"CREATION_DATE = {iso_utc(stamp, 3, suffix='')}", f"ORIGINATOR = {originator}", ""]
+    lines += _oem_segment(eph, t64, object_name, object_id, covariance_comment)
+    return "\n".join(lines) + "\n"
+
+
+def oem_segments_text(segments, *, object_name: str = "UNKNOWN", object_id: str = "UNKNOWN",
+                      originator: str = "TRACKPROC", created: datetime | None = None, comments=()) -> str:
+    """CCSDS OEM KVN of several ephemerides of one object, one segment each (META block, data
+    lines, covariance section: CCSDS 502.0-B-3 5.2.1, an OEM holds one or more segments).
+    ``segments``: ``[(Ephemeris, comment), ...]``; the comment (may be empty) opens the segment's
+    data section. Layout and units per segment as :func:`oem_text`."""
+    for key, text in (("OBJECT_NAME", object_name), ("OBJECT_ID", object_id), ("ORIGINATOR", originator)):
+        check_name(str(text), "OEM " + key, column=key)
+    segments = list(segments)
+    if not segments:
+        raise ValueError("an OEM needs at least one segment")
+    stamp = np.datetime64(created or creation_date(), "ms")
+    lines = [f"CCSDS_OEM_VERS = {OEM_VERSION}"]
+    for c in comments:
+        lines.extend(f"COMMENT {part}" for part in str(c).splitlines())
+    lines += [f"CREATION_DATE = {iso_utc(stamp, 3, suffix='')}", f"ORIGINATOR = {originator}", ""]
+    for k, (eph, comment) in enumerate(segments):
+        if k:
+            lines.append("")
+        t64 = _oem_times(eph)
+        seg = _oem_segment(eph, t64, object_name, object_id, "covariance; km**2, km**2/s, km**2/s**2")
+        if comment:
+            at = seg.index("META_STOP") + 2
+            seg[at:at] = [f"COMMENT {part}" for part in str(comment).splitlines()]
+        lines += seg
+    return "\n".join(lines) + "\n"
+
+
+def _oem_times(eph: Ephemeris) -> np.ndarray:
     frame = eph.frame
     if len(frame) == 0:
         raise ValueError("an OEM needs at least one ephemeris line")
@@ -255,14 +295,14 @@ def oem_text(eph: Ephemeris, *, object_name: str = "UNKNOWN", object_id: str = "
     t64 = times.as_unit("ns").to_numpy()
     if np.any(np.diff(t64.astype(np.int64)) <= 0):
         raise ValueError("OEM ephemeris lines must be in increasing time order")
-    stamp = np.datetime64(created or creation_date(), "ms")
-    lines = [f"CCSDS_OEM_VERS = {OEM_VERSION}"]
-    for c in comments:
-        lines.extend(f"COMMENT {part}" for part in str(c).splitlines())
-    lines += [f"CREATION_DATE = {iso_utc(stamp, 3, suffix='')}", f"ORIGINATOR = {originator}", "",
-              "META_START", f"OBJECT_NAME = {object_name}", f"OBJECT_ID = {object_id}", "CENTER_NAME = EARTH",
-              "REF_FRAME = GCRF", "TIME_SYSTEM = UTC", f"START_TIME = {_oem_epoch(t64[0])}",
-              f"STOP_TIME = {_oem_epoch(t64[-1])}", "META_STOP", ""]
+    return t64
+
+
+def _oem_segment(eph: Ephemeris, t64, object_name: str, object_id: str, covariance_comment: str) -> list:
+    """One OEM segment's lines: META block, data lines (km, km/s), covariance section."""
+    lines = ["META_START", f"OBJECT_NAME = {object_name}", f"OBJECT_ID = {object_id}", "CENTER_NAME = EARTH",
+             "REF_FRAME = GCRF", "TIME_SYSTEM = UTC", f"START_TIME = {_oem_epoch(t64[0])}",
+             f"STOP_TIME = {_oem_epoch(t64[-1])}", "META_STOP", ""]
     force = eph.meta.get("force_model")
     if force:
         constants = ", ".join(f"{k} = {v!r}" for k, v in sorted((eph.meta.get("constants") or {}).items()))
@@ -275,7 +315,7 @@ def oem_text(eph: Ephemeris, *, object_name: str = "UNKNOWN", object_id: str = "
         lines.append(" ".join([_oem_epoch(t)] + [_num(v) for v in row]))
     cov = eph.matrix("cov")
     if cov is not None:
-        lines += ["", "COVARIANCE_START", "COMMENT propagated P(t) = Phi P0 Phi^T; km**2, km**2/s, km**2/s**2"]
+        lines += ["", "COVARIANCE_START", f"COMMENT {covariance_comment}"]
         ckm = cov / 1.0e6
         for k, (t, m) in enumerate(zip(t64, ckm)):
             if k:
@@ -283,4 +323,4 @@ def oem_text(eph: Ephemeris, *, object_name: str = "UNKNOWN", object_id: str = "
             lines += [f"EPOCH = {_oem_epoch(t)}", "COV_REF_FRAME = GCRF"]
             lines += [" ".join(_num(m[i, j]) for j in range(i + 1)) for i in range(6)]
         lines.append("COVARIANCE_STOP")
-    return "\n".join(lines) + "\n"
+    return lines

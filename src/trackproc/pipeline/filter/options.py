@@ -30,7 +30,9 @@ class FilterOptions:
     tracking segment, where the reference trajectory is restarted from the filter's state;
     ``relinearise_m``: the reference is also restarted after a step that leaves the filter's
     position further than this from it (a range's second-order term is δ²/2ρ: 100 m at 500 km
-    is 1 cm);
+    is 1 cm); ``ekf_sigma_m``: the reference restarts through the filter's state (at a segment
+    or after such a step) only once the filter's position sigma (root of the trace) plus its velocity
+    sigma times 1000 s is below this, metres; before, the filter is linearised about the current reference (None: always);
     ``output_epoch``: UTC datetime64 of the written state (None: the last measurement, with
     ``smooth`` the first filter time)."""
 
@@ -42,6 +44,7 @@ class FilterOptions:
     iterations: int = 1
     segment_gap_s: float = 300.0
     relinearise_m: float = 100.0
+    ekf_sigma_m: Optional[float] = 1000.0
     output_epoch: object = None
     tolerance_sigma: float = 1e-4
 

@@ -47,6 +47,10 @@ class FilterResult:
         row per step and solution (:func:`history_frame`)."""
         return history_frame(self.problem, self.sweep)
 
+    def history_oem(self, **oem_kwargs) -> str:
+        """The history as CCSDS OEM KVN (:func:`history_oem`)."""
+        return history_oem(self.problem, self.sweep, self.state, **oem_kwargs)
+
 
 def carried_last_measurement(initial):
     """The last measurement time (UTC datetime64) a previous ``filter`` run's state carries, or None."""
@@ -77,7 +81,7 @@ def skip_older(tables, last):
 
 
 def _utc_of_step(problem: Problem, sw, k: int):
-    if k == 0 or sw.t_s[k] == 0.0:
+    if sw.t_s[k] == 0.0:
         return problem.epoch
     i = int(np.flatnonzero(sw.step == k)[0])
     return problem.times[i]
@@ -147,6 +151,43 @@ def history_frame(problem: Problem, sw) -> pd.DataFrame:
             row.update({f"cov_{i}_{j}": float(p[i, j]) for i, j in zip(*low)})
             rows.append(row)
     return pd.DataFrame(rows)
+
+
+def history_ephemerides(problem: Problem, sw, state=None) -> list:
+    """``[(label, Ephemeris), ...]`` per solution (``filtered``, ``smoothed``): every step's
+    position, velocity (GCRF, m, m/s) and the orbit's 6 × 6 block of the filter's covariance
+    (``cov_I_J``, I, J = 1..6)."""
+    from trackproc.io.ephemeris import COLUMNS, Ephemeris
+
+    out = []
+    meta = {}
+    if state is not None:
+        meta = {"force_model": state.force_model, "constants": state.constants}
+    for which, label in (("f", "filtered"), ("s", "smoothed")):
+        if getattr(sw, "x_" + which) is None:
+            continue
+        xs, ps = [], []
+        for k in range(sw.t_s.size):
+            x, p = sw.absolute(which, k)
+            xs.append(x[:6])
+            ps.append(p[:6, :6])
+        times = pd.DatetimeIndex([_utc_of_step(problem, sw, k) for k in range(sw.t_s.size)]).tz_localize("UTC")
+        frame = pd.DataFrame({"time": times, **{c: np.array(xs)[:, i] for i, c in enumerate(COLUMNS[1:])}})
+        cov = np.array(ps)
+        for i in range(6):
+            for j in range(6):
+                frame[f"cov_{i + 1}_{j + 1}"] = cov[:, i, j]
+        out.append((label, Ephemeris(frame, dict(meta))))
+    return out
+
+
+def history_oem(problem: Problem, sw, state=None, **oem_kwargs) -> str:
+    """The history as CCSDS OEM KVN (CCSDS 502.0-B-3): one segment per solution (filtered, then
+    smoothed), each with its covariance section (the filter's orbit covariance at every step)."""
+    from trackproc.io.ephemeris import oem_segments_text
+
+    segments = [(eph, f"{label} states of trackproc filter") for label, eph in history_ephemerides(problem, sw, state)]
+    return oem_segments_text(segments, **oem_kwargs)
 
 
 def filter_quality(problem: Problem, sw, iterations: list, opt: FilterOptions):
@@ -228,11 +269,8 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
         if not tables:
             raise ProcessingError(f"no samples after the carried state's last measurement {format_epoch(last)}")
         carried = initial
-    first = min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
     popt = opt.problem
     epoch = popt.epoch
-    if epoch is None and np.datetime64(initial.epoch, "ns") > np.datetime64(first, "ns"):
-        epoch = "first"                 # the filter starts at the initial state or the first sample
     apriori_initial = popt.apriori_initial
     if apriori_initial is None and initial.state_covariance is not None and not any(
             k in popt.apriori_sigma for k in ("x", "y", "z", "vx", "vy", "vz", "position", "velocity", "state")):
@@ -247,7 +285,7 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
     which = "s" if opt.smooth else "f"
     last_k = sw.t_s.size - 1
     if opt.output_epoch is None:
-        k = 0 if opt.smooth else last_k
+        k = sw.epoch_step if opt.smooth else last_k
         x, p = sw.absolute(which, k)
         out_epoch = _utc_of_step(problem, sw, k)
     else:
@@ -274,7 +312,8 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
         "edit_sigma": opt.edit_sigma, "segment_gap_s": opt.segment_gap_s,
         "updates": int(kept.sum()), "edited": int(sw.edited.sum()), "steps": int(sw.t_s.size),
         "segments": len(sw.segments), "sweeps": len(iterations) + 1, "iterations": iterations,
-        "first_time": format_epoch(problem.epoch), "last_measurement": format_epoch(last_time),
+        "first_time": format_epoch(_utc_of_step(problem, sw, 0)),
+        "apriori_epoch": format_epoch(problem.epoch), "last_measurement": format_epoch(last_time),
         "nis": float(np.sum(z[kept] ** 2)), "nis_dof": int(kept.sum()),
         "skipped_passes": skipped, "carried_state": carried is not None,
     }

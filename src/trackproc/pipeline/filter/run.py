@@ -20,6 +20,11 @@ from trackproc.pipeline.filter.options import DIFFUSE_SCALES, FilterOptions
 from trackproc.pipeline.od import Problem
 
 
+#: the velocity's share of the "settled" test: its sigma over this many seconds (a quarter of a
+#: LEO revolution) counts as position
+EKF_HORIZON_S = 1000.0
+
+
 @dataclass
 class Sweep:
     """One pass of the filter (and, after :func:`smooth`, the smoother) over the steps.
@@ -49,6 +54,12 @@ class Sweep:
     x_s: np.ndarray | None = None
     p_s: np.ndarray | None = None
     evaluations: int = 0
+
+    @property
+    def epoch_step(self) -> int:
+        """The step at the problem's epoch (t = 0, where the a-priori applies); steps before it
+        are the samples older than the epoch."""
+        return int(np.flatnonzero(self.t_s == 0.0)[0])
 
     def absolute(self, which: str, k: int):
         """``(x, P)`` of step k in the parameters' units; ``which`` is ``f``, ``p`` or ``s``."""
@@ -115,13 +126,14 @@ def _sub_problem(problem: Problem, rows) -> Problem:
     return replace(problem, meas=meas, modifiers=bound, times=problem.times[rows], sources=problem.sources[rows])
 
 
-def _evaluate(sub: Problem, x):
-    """``(h, J, trajectory)`` of the sub-problem at ``x``: the problem's own model, its trajectory kept."""
+def _evaluate(sub: Problem, x, cover=()):
+    """``(h, J, trajectory)`` of the sub-problem at ``x``: the problem's own model, its trajectory
+    (over the samples and the times ``cover``) kept."""
     kept = {}
     own = sub.trajectory
 
     def recording(xx):
-        kept["traj"] = own(xx)
+        kept["traj"] = own(xx, cover)
         return kept["traj"]
 
     sub.trajectory = recording
@@ -175,7 +187,7 @@ def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales
     return q / np.outer(scales, scales)
 
 
-def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None) -> Sweep:
+def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None, restarts: bool = True) -> Sweep:
     """The filter over every measurement time in order (samples at one reception time as
     sequential scalar updates, their noise independent). The reference trajectory starts at
     ``x_ref0`` (the problem's epoch) and restarts at each tracking segment through the filtered
@@ -187,9 +199,6 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     n = scales.size
     ss = np.outer(scales, scales)
     steps_t = np.unique(np.concatenate([[0.0], meas.t_s]))
-    if steps_t[0] < 0:
-        raise InputError("samples before the filter's start", column="PASS", found=f"{-steps_t[0]:.3f} s before",
-                         expected="samples after the initial state's epoch")
     m = steps_t.size
     step = np.searchsorted(steps_t, meas.t_s)
     order = np.lexsort((np.arange(step.size), step))
@@ -209,11 +218,23 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     evaluations = 0
     chunks = [(ka, kb, seg > 0) for seg, (ka, kb) in enumerate(segments)]
     last_traj = None
+    limit = np.inf if opt.ekf_sigma_m is None else float(opt.ekf_sigma_m)
+
+    def settled(pk):
+        if not restarts:
+            return False
+        # the filter's state is trusted as a reference once its position sigma is below the limit;
+        # before, it is a linearised filter about the current reference (Tapley et al. 2004 4.7.3:
+        # the extended filter from a poor first guess diverges, so start it once the covariance has
+        # converged)
+        var = np.diag(pk)[:6] * scales[:6] ** 2
+        return float(np.sqrt(var[:3].sum()) + EKF_HORIZON_S * np.sqrt(var[3:].sum())) < limit
+
     while chunks:
         ka, kb, restart = chunks.pop(0)
         rows = order[(step[order] >= ka) & (step[order] <= kb)]
         kprev = ka - 1
-        if restart:
+        if restart and settled(p_f[kprev]):
             target = (x_f[kprev] if targets is None else np.asarray(targets[kprev], float) / scales) * scales
             old = _transition(last_traj, steps_t[kprev], n)[0]
             old_z = np.concatenate([last_traj.state(steps_t[kprev]), x_ref[6:]])
@@ -221,12 +242,12 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
         t_need = steps_t[max(kprev, 0):kb + 1]
         if rows.size:
             sub = _sub_problem(problem, np.sort(rows))
-            h, jac, traj = _evaluate(sub, x_ref)
+            h, jac, traj = _evaluate(sub, x_ref, cover=t_need)
             evaluations += 1
             pos = np.searchsorted(np.sort(rows), rows)         # rows (time order) -> sub's order
             h, jac = h[pos], jac[pos]
         else:
-            traj = problem.trajectory(x_ref)
+            traj = problem.trajectory(x_ref, cover=t_need)
             h, jac = np.zeros(0), np.zeros((0, n))
         last_traj = traj
         psi = _transition(traj, t_need, n) * scales[None, None, :] / scales[None, :, None]
@@ -239,7 +260,12 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
             j = k - ka + off
             z_ref[k] = z[j]
             if k == 0:
-                x, p = c0.copy(), P0.copy()
+                # the a-priori belongs to the epoch (t = 0); samples before it start the filter
+                # earlier, with the prior mapped back through the reference's transition (exact
+                # without process noise: the same information at the epoch)
+                x = z[j] + psi[j] @ (c0 - x_ref / scales)
+                p = psi[j] @ P0 @ psi[j].T
+                p = 0.5 * (p + p.T)
                 phi[k] = np.eye(n)
             else:
                 phi[k] = np.linalg.solve(psi[j - 1].T, psi[j].T).T       # Ψ(t_k) Ψ(t_{k-1})⁻¹
@@ -267,7 +293,7 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                 cursor += 1
             x_f[k], p_f[k] = x, p
             moved = x if targets is None else np.asarray(targets[k], float) / scales
-            if k < kb and np.linalg.norm((moved[:3] - z[j][:3]) * scales[:3]) > opt.relinearise_m:
+            if k < kb and np.linalg.norm((moved[:3] - z[j][:3]) * scales[:3]) > opt.relinearise_m and settled(p):
                 # the state left the reference by more than its linearisation holds: restart it here
                 chunks.insert(0, (k + 1, kb, True))
                 break
@@ -295,16 +321,20 @@ def run(problem: Problem, opt: FilterOptions, carried=None) -> tuple[Sweep, list
     the smoothed start moves less than ``opt.tolerance_sigma`` of its sigma. Returns the last
     sweep and the history of ``{"sweep", "max_change_sigma"}``."""
     centre, p0 = initial_covariance(problem, carried)
+    # without process noise the smoothed states are one trajectory, the smoothed epoch state's:
+    # later sweeps are linearised about it alone (Gauss-Newton on the batch problem), which does
+    # not lean on the first sweep's states where its linearisation was poor
+    noisy = any(opt.snc_accel) or any(opt.bias_walk.values())
     x_ref, targets = centre.copy(), None
     history = []
     sw = None
     for it in range(opt.iterations):
-        sw = sweep(problem, x_ref, centre, p0, opt, targets)
+        sw = sweep(problem, x_ref, centre, p0, opt, targets, restarts=it == 0 or noisy)
         if opt.smooth:
             smooth(sw)
         if it == opt.iterations - 1:
             break
-        x_new, p_new = sw.absolute("s", 0)
+        x_new, p_new = sw.absolute("s", sw.epoch_step)
         change = float(np.max(np.abs(x_new - x_ref) / np.sqrt(np.diag(p_new))))
         history.append({"sweep": it + 1, "max_change_sigma": change})
         if change < opt.tolerance_sigma:

@@ -88,9 +88,10 @@ class Problem:
             return self.force_model
         return self.force_model.with_parameters(**{n: float(x[6 + i]) for i, n in enumerate(self.force_names)})
 
-    def trajectory(self, x):
-        """The propagated trajectory (with STM, and the force parameters' partials) of ``x``."""
-        t = self.meas.t_s
+    def trajectory(self, x, cover=()):
+        """The propagated trajectory (with STM, and the force parameters' partials) of ``x``, over
+        the samples' times and ``cover`` (further times, s from the epoch)."""
+        t = np.concatenate([self.meas.t_s, np.asarray(cover, float).ravel()])
         # a time-tag offset moves samples up to its bound (and the derivative's step) either way
         margin = (md.TIME_BIAS_LIMIT_S + 1.0) if any(b.modifier.shifts_time for b in self.modifiers) else 0.0
         span = [float(t.min()) - LIGHT_TIME_MARGIN_S - margin, float(t.max()) + margin]
