@@ -124,11 +124,19 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
             warnings.append(f"the profile covariance could not be computed ({exc}); the linear one is reported")
     time_tags = None
     tt_sigma, tt_source = ref.time_tag_sigma()
-    if tt_sigma > 0 and opt.cost == "pointwise" and not opt.circular and refusal is None:
+    if tt_sigma > 0 and opt.cost == "pointwise" and not opt.circular:
         # a time-tag offset the pass cannot see (docs/refine.md, "Mis-modelled passes"): a consider term
-        extra_cov = time_tag_covariance(ref, x, ref.covariance(sol, kkt), tt_sigma)
+        # of the refined state (a kept or declined stale state is written with its own covariance:
+        # the term then only entered the decision, run.refine)
+        extra_cov = time_tag_covariance(ref, np.asarray(sol.values, float) if refusal is not None else x,
+                                        ref.covariance(sol, kkt), tt_sigma)
         if extra_cov is None:
             warnings.append("the time-tag uncertainty could not be added to the covariance (propagation failed)")
+        elif refusal is not None:
+            time_tags = {"sigma_s": tt_sigma, "source": tt_source, "applied": "in the decision only (the stale "
+                         "state is written with its own covariance)",
+                         "position_sigma_m": float(np.sqrt(np.trace(extra_cov[:3, :3]))),
+                         "velocity_sigma_m_s": float(np.sqrt(np.trace(extra_cov[3:6, 3:6])))}
         else:
             cov = cov + extra_cov
             sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
