@@ -30,10 +30,12 @@ def pyplot():
     return plt
 
 
-def encode(fig, fmt: str = "png") -> bytes:
+def encode(fig, fmt: str = "png", dpi: int = 100, tight: bool = True) -> bytes:
+    """The figure as ``fmt`` bytes; ``tight``: the saved area grows to every artist (legends placed
+    outside the axes, rotated tick labels), so nothing is clipped."""
     plt = pyplot()
     buffer = io.BytesIO()
-    fig.savefig(buffer, format=fmt, dpi=90)
+    fig.savefig(buffer, format=fmt, dpi=dpi, **({"bbox_inches": "tight", "pad_inches": 0.1} if tight else {}))
     plt.close(fig)
     return buffer.getvalue()
 
