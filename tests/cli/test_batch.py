@@ -113,10 +113,10 @@ def by_name(out: Path) -> dict:
 
 
 def digest(out: Path) -> dict:
-    """SHA-256 of every result file (not the manifests and summaries, which hold run times)."""
+    """SHA-256 of every result file (not the manifests, summaries and report, which hold run times)."""
     return {str(p.relative_to(out)): hashlib.sha256(p.read_bytes()).hexdigest()
             for p in sorted(out.rglob("*")) if p.is_file() and not p.name.endswith(".batch.json")
-            and not p.name.startswith(("summary.", "."))}
+            and not p.name.startswith(("summary.", "report.", "."))}
 
 
 def comparable(record: dict) -> dict:

@@ -28,3 +28,21 @@ def test_pipe_quiet_short_and_batch_see_nothing():
         with ticker(command, stream=stream, after_s=0.2, **kw):
             time.sleep(wait)
         assert stream.getvalue() == ""
+
+
+def test_the_line_is_erased_before_the_summary(monkeypatch):
+    """What the command writes to stderr (its summary, a warning) starts on a clean line: the
+    progress line is blanked out first, and redrawn only after a complete line."""
+    import sys
+
+    out = _Tty()
+    monkeypatch.setattr(sys, "stderr", out)
+    with ticker("accuracy", after_s=0.05):
+        time.sleep(0.3)
+        print("summary: 3 passes", file=sys.stderr)
+    text = out.getvalue()
+    before, after = text.split("summary: 3 passes", 1)
+    assert "working" in before
+    # what is on screen when the summary starts: the last \r-delimited segment before it is blank
+    assert before.endswith("\r") and before.rsplit("\r", 2)[-2].strip() == ""
+    assert sys.stderr is out     # the wrapper is gone with the ticker

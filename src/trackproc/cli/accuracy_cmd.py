@@ -202,6 +202,8 @@ def accuracy_command(
                         "over this span", text)
         elif not as_json:
             summary(text)
+    if plot is not None:
+        _warn_aliasing(initial, result.frame["elapsed_s"].to_numpy())
     png = plot_bytes(result) if plot is not None else None
     write_bytes(out, table_bytes(result.frame, result.meta, out_format))
     if correlation is not None:
@@ -210,6 +212,32 @@ def accuracy_command(
         write_bytes(plot, png)
     log.info("%d times, %s -> %s (%s)", len(result.frame), "+".join(result.meta["methods"]),
              "stdout" if out == "-" else out, out_format)
+
+
+def _warn_aliasing(initial, elapsed_s) -> None:
+    """Warn when the output step exceeds a quarter of the orbital period (semi-major axis by the
+    vis-viva equation, period 2 pi sqrt(a^3/mu) by Kepler's third law; Vallado, Fundamentals of
+    Astrodynamics and Applications, ch. 1-2): the plotted sigma then
+    samples the once-per-revolution oscillation of the along-track error too coarsely to show it
+    (it zigzags, aliased), so the figure would mislead; the table is right at its own times."""
+    import numpy as np
+
+    from trackproc.constants import MU_EARTH
+
+    if len(elapsed_s) < 2:
+        return
+    r = float(np.linalg.norm(initial.r_m))
+    v2 = float(np.dot(initial.v_m_s, initial.v_m_s))
+    inverse_a = 2.0 / r - v2 / MU_EARTH
+    if inverse_a <= 0:  # not a closed orbit: no period to alias
+        return
+    period = 2 * np.pi * np.sqrt((1.0 / inverse_a) ** 3 / MU_EARTH)
+    step = float(np.median(np.diff(elapsed_s)))
+    if step > period / 4:
+        suggest = max(1, int(period / 20))
+        log.warning("--plot: the step of %.0f s is more than a quarter of the orbital period (%.0f s): the curves "
+                    "alias the orbit (the along-track sigma zigzags); give --step %ds or less for a smooth figure",
+                    step, period, suggest)
 
 
 def _seed_example(span, step, sigma_position_m, sigma_velocity_m_s, radius_m, discretes, plot, fmt, output):

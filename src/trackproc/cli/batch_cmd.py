@@ -38,7 +38,8 @@ def batch_command(**kwargs) -> None:
 
     Settings come from flags, TRACKPROC_BATCH_* environment variables and the TOML config file,
     in that order of precedence. Results go to OUTPUT/passes/ (one per input), OUTPUT/estimates/
-    (one per window), OUTPUT/summary.json and OUTPUT/summary.csv.
+    (one per window), OUTPUT/summary.json, OUTPUT/summary.csv and
+    OUTPUT/report.html (the results as a sortable table with figures, self-contained).
 
     Exit status: 0 all inputs (and windows) done, 3 some failed (each reported with its reason),
     1 all failed or another run holds the output directory, 2 usage error, 128 + N stopped by
@@ -68,7 +69,10 @@ def batch_command(**kwargs) -> None:
             single_thread_blas()
 
         try:
-            exit_code = run_batch(settings, progress=progress.update if progress else None).exit_code
+            from trackproc.report.batch_html import write_report
+
+            exit_code = run_batch(settings, progress=progress.update if progress else None,
+                                  reporter=write_report).exit_code
         except Interrupted as exc:  # logged by run_batch; the shell's code for a death by that signal
             exit_code = exc.exit_code
     finally:

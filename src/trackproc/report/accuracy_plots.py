@@ -3,23 +3,18 @@ worked example with its truncation study."""
 
 from __future__ import annotations
 
-import io
 import math
 
 import numpy as np
 
 from trackproc.methods import accuracy as ac
 from trackproc.pipeline.accuracy import AccuracyResult, SeedExampleResult
-from trackproc.report.plots import pyplot
+from trackproc.report.plots import encode, legend_outside, pyplot
 
 
 def _png(fig) -> bytes:
     """PNG at 110 dpi (the accuracy figures' resolution since they were written)."""
-    plt = pyplot()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
-    plt.close(fig)
-    return buf.getvalue()
+    return encode(fig, dpi=110)
 
 
 def plot_bytes(result: AccuracyResult) -> bytes:
@@ -56,7 +51,7 @@ def plot_bytes(result: AccuracyResult) -> bytes:
         ax.set_ylabel(ylabel)
         ax.set_title(f"{title}: 1-sigma of the predicted state", fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7, ncol=len(methods))
+        legend_outside(ax)
     axes[-1, 0].set_xlabel(f"hours since {result.meta['epoch']}")
     fig.suptitle(f"trackproc accuracy: {result.meta['force_model']}, {result.meta['initial_covariance']['source']}",
                  fontsize=9)
@@ -87,7 +82,7 @@ def seed_example_plot_bytes(result: SeedExampleResult) -> bytes:
         ax.set_xlabel("extrapolation time t, s")
         ax.set_ylabel("sigma_x(t), m")
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=8)
+        legend_outside(ax, fontsize=8)
     ax = axes[1, 0]
     ax.plot(t, f["sigma_x_m"], "k-", lw=2, label="exact")
     ax.plot(t, f["sigma_x_spectral_m"], ls=":", color="gold", lw=2,
@@ -108,7 +103,7 @@ def seed_example_plot_bytes(result: SeedExampleResult) -> bytes:
     for ax in axes[1]:
         ax.set_xlabel("extrapolation time t, s")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+        legend_outside(ax, fontsize=8)
     axes[1, 0].set_ylabel("sigma_x(t), m")
     fig.suptitle(f"seed 000 example: r = {o.radius_m / 1e3:g} km, n = {n:.4e} rad/s, "
                  f"period {2 * math.pi / n:.0f} s", fontsize=10)

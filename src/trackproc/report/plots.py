@@ -30,12 +30,47 @@ def pyplot():
     return plt
 
 
-def encode(fig, fmt: str = "png") -> bytes:
+#: Called with every figure just before it is saved (the tests check its layout here).
+FIGURE_CHECKS: list = []
+
+
+def encode(fig, fmt: str = "png", dpi: int = 100, tight: bool = True) -> bytes:
+    """The figure as ``fmt`` bytes; ``tight``: the saved area grows to every artist (legends placed
+    outside the axes, rotated tick labels), so nothing is clipped."""
     plt = pyplot()
+    for check in FIGURE_CHECKS:
+        check(fig)
     buffer = io.BytesIO()
-    fig.savefig(buffer, format=fmt, dpi=90)
+    fig.savefig(buffer, format=fmt, dpi=dpi, **({"bbox_inches": "tight", "pad_inches": 0.1} if tight else {}))
     plt.close(fig)
     return buffer.getvalue()
+
+
+def legend_outside(ax, handles=None, **kw):
+    """The legend of ``ax`` to the right of its axes, off the data (``tight_layout`` and the tight
+    save make room for it); nothing when there is nothing to label."""
+    handles, labels = (ax.get_legend_handles_labels() if handles is None
+                       else (handles, [h.get_label() for h in handles]))
+    if not handles:
+        return None
+    kw.setdefault("fontsize", 7)
+    return ax.legend(handles, labels, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0, **kw)
+
+
+def break_gaps(t, *series, factor: float = 4.0):
+    """``t`` and ``series`` with a NaN inserted wherever consecutive samples are more than
+    ``factor`` times the median step apart, so a line drawn through them breaks at the data
+    gaps instead of bridging them."""
+    t = np.asarray(t, dtype=float)
+    series = [np.asarray(y, dtype=float) for y in series]
+    if t.size < 3:
+        return (t, *series)
+    step = np.diff(t)
+    positive = step[step > 0]
+    if not positive.size:
+        return (t, *series)
+    cut = np.nonzero(step > factor * np.median(positive))[0] + 1
+    return (np.insert(t, cut, np.nan), *(np.insert(y, cut, np.nan) for y in series))
 
 
 def rms_by_pass(frame) -> dict:
@@ -76,7 +111,7 @@ def residuals_png(frame) -> bytes:
         ax.axhline(0.0, color="0.3", lw=0.6)
         ax.set_ylim(-span, span)
         ax.set_ylabel(f"{label} residual [{unit}]")
-        ax.legend(fontsize=7, loc="upper right", markerscale=3)
+        legend_outside(ax, markerscale=3)
     axes[-1, 0].set_xlabel(f"hours since {t0.isoformat()}")
     fig.suptitle("residuals, observed - computed (RMS per pass in the legend)", fontsize=10)
     fig.tight_layout()
@@ -109,7 +144,7 @@ def refine_png(residuals, diagnostics: dict) -> bytes:
     ax.plot(t[~edited], observed[~edited], ".", ms=2, color="0.4", label="data")
     if edited.any():
         ax.plot(t[edited], observed[edited], "x", ms=4, color="red", label=f"edited ({int(edited.sum())})")
-    ax.plot(t, computed, "-", lw=1.2, color="C0", label="refined orbit (model)")
+    ax.plot(*break_gaps(t, computed), "-", lw=1.2, color="C0", label="refined orbit (model)")
     traverse = (diagnostics.get("traverse") or {}).get("epoch")
     if traverse:
         import pandas as pd
@@ -118,7 +153,7 @@ def refine_png(residuals, diagnostics: dict) -> bytes:
         ax.axvline(tt, color="green", lw=0.8, label="traverse point")
     ax.set_ylabel(f"{label} [{unit}]")
     ax.set_title(f"{label} of the pass and the refined orbit", fontsize=10)
-    ax.legend(fontsize=7)
+    legend_outside(ax)
     ax = fig.add_subplot(grid[1, :], sharex=ax)
     rms = float(np.sqrt(np.mean(residual[~edited] ** 2))) if (~edited).any() else float("nan")
     span = 5 * rms if np.isfinite(rms) and rms > 0 else 1.0
@@ -145,10 +180,12 @@ def refine_png(residuals, diagnostics: dict) -> bytes:
         ax.set_xticks(x, [f"{name} [{unit_rtn}]" for _, name, _ in keys])
         ax.set_yscale("log")
         ax.set_title(("position" if col == 0 else "velocity") + ": refined - stale", fontsize=10)
-        if col == 0:
-            ax.legend(fontsize=7)
+        if col == 1:  # the same four entries for both panels: once, right of the velocity panel
+            legend_outside(ax)
+    import textwrap
+
     unseen_text = "; ".join(obs.get("unobservable") or []) or "none"
-    fig.suptitle(f"trackproc refine - not seen by the pass: {unseen_text}", fontsize=10)
+    fig.suptitle(textwrap.fill(f"trackproc refine - not seen by the pass: {unseen_text}", 110), fontsize=10)
     fig.tight_layout()
     return encode(fig)
 
@@ -171,7 +208,7 @@ def detect_png(samples: dict, document: dict) -> bytes:
         ax.axhline(0.0, color="0.3", lw=0.6)
         ax.set_ylabel(f"{kind} [deg]")
         ax.set_xlabel("s from the nominal impact time")
-        ax.legend(fontsize=7)
+        legend_outside(ax)
     ax = axes[-1, 0]
     st = document["statistic"]
     std = st["std"]
@@ -184,9 +221,10 @@ def detect_png(samples: dict, document: dict) -> bytes:
     ax.axvline(document["threshold"], color="k", ls="--", lw=1, label="threshold")
     ax.axvline(st["S"], color="green", lw=2, label=f"S observed -> {document['decision']}")
     ax.set_xlabel("S [rad^2]")
+    ax.set_ylabel("probability density [1/rad^2]")
     ax.set_title(f"false alarm {document['false_alarm_probability']:.3g}, miss {document['miss_probability']:.3g}, "
                  f"gamma {document['gamma']:.3g}", fontsize=10)
-    ax.legend(fontsize=7)
+    legend_outside(ax)
     fig.suptitle(f"trackproc detect: {document['station']} {document['pass_id']}", fontsize=10)
     fig.tight_layout()
     return encode(fig)
@@ -218,7 +256,8 @@ def smooth_figure(fit_item, values):
         if f.tca is not None:
             ax_data.axvline(f.tca.t_s, color="green", lw=0.8, label=f"TCA ±{f.tca.sigma_s:.3g} s")
         ax_data.set_title(title + (f"  {', '.join(f.warnings)}" if f.warnings else ""), fontsize=9)
-        ax_data.legend(fontsize=7, loc="best")
+        # right of the residual panel, off both panels' data
+        legend_outside(ax_res, handles=ax_data.get_legend_handles_labels()[0])
         residual = f.fit.residual * factor
         ax_res.plot(f.t_s[used], residual[used], ".", ms=2)
         if (~used).any():

@@ -108,8 +108,9 @@ def log_record(record: Record, result: Optional[TaskResult] = None) -> None:
                 log.debug("%s", line)
 
 
-def finish(settings, chain, records, windows, out, started, t0, label) -> BatchResult:
-    """The exit status and counts of the run; writes summary.json and summary.csv."""
+def finish(settings, chain, records, windows, out, started, t0, label, reporter=None) -> BatchResult:
+    """The exit status and counts of the run; writes summary.json and summary.csv, then calls
+    ``reporter(out, summary)`` (report.html); a reporter's failure is logged, the run's status stands."""
     units = records + windows
     failed = sum(r.status == "failed" for r in units)
     # a solution its own checks reject (or, with --strict, call suspect) counts against the run as
@@ -136,6 +137,11 @@ def finish(settings, chain, records, windows, out, started, t0, label) -> BatchR
                "inputs": [r.as_dict() for r in records], "estimates": [r.as_dict() for r in windows]}
     write_text(out / SUMMARY_JSON, dumps(summary))
     write_text(out / SUMMARY_CSV, summary_csv(units))
+    if reporter is not None:
+        try:
+            reporter(out, summary)
+        except Exception as exc:  # the summaries are written: the report is the extra
+            log.error("report not written: %s: %s", type(exc).__name__, exc)
     log.info("done in %.1f s: %d input(s) ok, %d failed, %d up to date%s%s -> %s (exit %d)", seconds,
              counts["inputs_ok"], counts["inputs_failed"], counts["inputs_skipped"],
              (f"; {counts['windows_ok']} estimate window(s) ok, {counts['windows_failed']} failed"

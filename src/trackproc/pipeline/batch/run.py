@@ -31,9 +31,11 @@ from trackproc.pipeline.batch.tasks import Task, TaskResult
 log = logging.getLogger("trackproc.batch")
 
 
-def run_batch(settings: Settings, progress: Optional[Callable] = None) -> BatchResult:
+def run_batch(settings: Settings, progress: Optional[Callable] = None,
+              reporter: Optional[Callable] = None) -> BatchResult:
     """Run the configured batch (see the module docstring); ``progress(done, total, failed)``
-    is called as tasks finish. Raises :class:`InputError` for usage errors before any work,
+    is called as tasks finish; ``reporter(out, summary)`` writes further pages from the summary
+    (the CLI's report.html), under the lock, after the summary files. Raises :class:`InputError` for usage errors before any work,
     :class:`LockedError` when another run holds the output directory and
     :class:`~trackproc.pipeline.batch.executors.Interrupted` when a signal (SIGTERM, SIGHUP,
     SIGINT) stopped the run, after stopping its workers."""
@@ -83,7 +85,7 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None) -> BatchR
                 executors.abort()
                 raise
             executors.close()
-            return finish(settings, chain, records, windows, out, started, t0, executors.label)
+            return finish(settings, chain, records, windows, out, started, t0, executors.label, reporter)
     except Interrupted as exc:
         log.error("%s: no worker left running; the results finished so far are kept and the next run resumes "
                   "from them (exit %d)", exc, exc.exit_code)
