@@ -46,15 +46,20 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     # the pass's noise model (REML) and transmitter drift first, then the gates on that solution
     ref, sol, kkt, scale = solve_noise(table, initial, ref, stations, eop, source)
     epoch0 = ref.problem.epoch                          # the epoch a modelled step's time is counted from
-    # a gross error inside the pass (an oscillator step, a time-tag jump): modelled or declined
+    first = (ref, sol, kkt, scale)
+    ref, sol, kkt, scale, adaptation, improvement, refusal = solve_gated(ref, first=(sol, kkt, scale))
+    # a gross error inside the pass (an oscillator step, a time-tag jump): modelled or declined. The
+    # scan reads the gated solution (a default a-priori the pass contradicts is adapted first, so
+    # that its conflict is not taken for a step), or the first one when the gates kept the stale state
     step, declined = None, None
-    scan = scan_steps(ref, sol, kkt, scale) if opt.cost == "pointwise" and not opt.circular else None
+    scanned = (ref, sol, kkt, scale) if refusal is None else first
+    scan = scan_steps(*scanned) if opt.cost == "pointwise" and not opt.circular else None
     if _modelled_step is not None:
         step = {"action": "modelled", "modelled": _modelled_step,
                 "parameter": ref.modifier_drivers(md.DopplerStep)[0].name, "scan": scan}
-        if scan is not None and scan["significant"] and may_refuse(ref):
+        if scan is not None and scan["significant"] and may_refuse(first[0]):
             step["action"] = "declined"
-            declined = declined_step(ref, scan, modelled=_modelled_step)
+            declined = declined_step(first[0], scan, modelled=_modelled_step)
     elif scan is not None and scan["significant"]:
         step = {"action": "said", "scan": scan}
         freq = as_kind(scan, "frequency")
@@ -67,14 +72,14 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
                               source, _modelled_step=freq)
             except ProcessingError:
                 pass                                     # the step model does not converge: decline below
-        if may_refuse(ref):
+        if may_refuse(first[0]):
             step["action"] = "declined"
-            declined = declined_step(ref, scan)
+            declined = declined_step(first[0], scan)
     if declined is not None:
+        ref, sol, kkt, scale = first
         improvement = stale_improvement(ref, sol, scale) if ref.priors else None
         return finish(ref, sol, kkt, scale, improvement=improvement, refusal=declined,
                       decision=declined["decision"], step=step)
-    ref, sol, kkt, scale, adaptation, improvement, refusal = solve_gated(ref, first=(sol, kkt, scale))
     # the solution epoch is the refined orbit's own traverse point: re-solve there until it stays
     moves = []
     for _ in range(MAX_TRAVERSE_ITERATIONS if refusal is None else 0):
