@@ -53,7 +53,12 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     # that its conflict is not taken for a step), or the first one when the gates kept the stale state
     step, declined = None, None
     scanned = (ref, sol, kkt, scale) if refusal is None else first
-    scan = scan_steps(*scanned) if opt.cost == "pointwise" and not opt.circular else None
+    # a one-way link's transmitter (an offset to step); the gates' own refusal stands unless a
+    # frequency step explains it
+    scan = (scan_steps(*scanned) if opt.cost == "pointwise" and not opt.circular
+            and first[0].modifier_drivers(md.DopplerOffset) else None)
+    if scan is not None and refusal is not None and _modelled_step is None and scan["kind"] != "frequency":
+        scan = None
     if _modelled_step is not None:
         step = {"action": "modelled", "modelled": _modelled_step,
                 "parameter": ref.modifier_drivers(md.DopplerStep)[0].name, "scan": scan}
@@ -63,16 +68,20 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     elif scan is not None and scan["significant"]:
         step = {"action": "said", "scan": scan}
         freq = as_kind(scan, "frequency")
-        if freq is not None and ref.modifier_drivers(md.DopplerOffset):
+        if scan["kind"] == "frequency" and ref.modifier_drivers(md.DopplerOffset):
             # an offset change is exactly a step of the offset: model it, and let the scan of the
-            # re-solved pass say whether that explains it (a time-tag jump leaves its signature)
+            # re-solved pass say whether that explains it; a shift that fits a jump of the time tags
+            # better is declined (either side may be the wrongly tagged one)
             try:
-                return refine(table, initial, stations,
-                              replace(opt, modifiers=tuple(opt.modifiers) + (step_modifier(ref, freq),)), eop,
-                              source, _modelled_step=freq)
+                stepped = refine(table, initial, stations,
+                                 replace(opt, modifiers=tuple(opt.modifiers) + (step_modifier(ref, freq),)), eop,
+                                 source, _modelled_step=freq)
+                if refusal is None or (stepped.state.diagnostics.get("step") or {}).get("action") != "declined":
+                    return stepped
+                step = None                              # the gates' own refusal stands
             except ProcessingError:
                 pass                                     # the step model does not converge: decline below
-        if may_refuse(first[0]):
+        if step is not None and refusal is None and may_refuse(first[0]):
             step["action"] = "declined"
             declined = declined_step(first[0], scan)
     if declined is not None:
