@@ -45,8 +45,8 @@ EARTHS = ("wgs84", "sphere")
 #: Names of the six state components, in order (parameter names, covariance rows).
 STATE_NAMES = ("x", "y", "z", "vx", "vy", "vz")
 #: Bias parameter families (``family:KEY``) and their SI units.
-BIAS_UNITS = {"range_bias": "m", "doppler_offset": "Hz", "doppler_drift": "Hz/s", "az_bias": "rad",
-              "el_bias": "rad", "time_bias": "s"}
+BIAS_UNITS = {"range_bias": "m", "doppler_offset": "Hz", "doppler_drift": "Hz/s", "doppler_step": "Hz",
+              "az_bias": "rad", "el_bias": "rad", "time_bias": "s"}
 #: Parameters of constraints rather than of a measurement, and their SI units: refine's
 #: circular-orbit radius (seed 004 eq. 5).
 CONSTRAINT_PARAMETERS = {"r_ka": "m"}

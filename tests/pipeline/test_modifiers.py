@@ -54,7 +54,7 @@ def _meas(kinds, t, mode="one-way"):
 def test_every_bias_family_of_the_vocabulary_has_its_modifier_with_the_vocabulary_unit():
     assert set(md.FAMILIES) == set(vocabulary.BIAS_UNITS)
     for family, cls in md.FAMILIES.items():
-        mod = cls("K", 1.0) if cls is md.DopplerDrift else cls("K")
+        mod = cls("K", 1.0) if cls in (md.DopplerDrift, md.DopplerStep) else cls("K")
         (driver,) = mod.parameter_drivers()
         assert driver.name == f"{family}:K" and driver.unit == vocabulary.BIAS_UNITS[family]
         assert pm.split_name(driver.name) == (family, "K")

@@ -284,7 +284,7 @@ def add_whiteness_family(q: Quality, passes: list) -> None:
           value=w["lag1_autocorrelation"], limit=limit / math.sqrt(w["n"]))
 
 
-def step_scan(jac_w, z, covariance, rows, weights, margin: int = 3) -> dict:
+def step_scan(jac_w, z, covariance, rows, weights, margin: int = 3, whiten=None) -> dict:
     """The largest score statistic of "a level shift from sample s on" in one block of white
     samples (time order), over every s with ``margin`` samples either side: the step column
     ``e_s = weights · 1[i ≥ s]`` (``weights`` = 1/σ of the block's samples, so that ``e_s`` is
@@ -292,26 +292,37 @@ def step_scan(jac_w, z, covariance, rows, weights, margin: int = 3) -> dict:
     ``T_s = (e_sᵀz)² / (e_sᵀe_s − u_sᵀ C u_s)``, ``u_s = J_Bᵀ e_s``: χ²(1) for each s when the
     model holds (Koch 1999 sec. 4.3). A frequency step of the transmitter inside a pass, a bias
     or time-tag jump: what the orbit, an offset and a drift can absorb is not counted, the rest
-    is. Returns ``{"statistic", "index" (position in ``rows``), "candidates"}``."""
+    is. ``weights`` may be any per-sample coefficient of the shift (the samples' partials of a
+    time-tag jump, ``ḣ/σ``, scan for a jump of the time tags). With correlated samples ``whiten``
+    maps the raw step columns (``weights · 1[i ≥ s]``, one per candidate s, rows in the order of
+    ``rows``) to whitened ones like the rows (``L⁻¹``; ``weights`` then unwhitened coefficients).
+    Returns ``{"statistic", "index" (position in ``rows``), "candidates", "estimate"}``, the
+    estimate being the one-step size of the shift, ``e_sᵀz / (e_sᵀe_s − u_sᵀ C u_s)``, in the
+    unit of the coefficients."""
     rows = np.asarray(rows, int)
     n = rows.size
     if n < 2 * margin + 1:
-        return {"statistic": 0.0, "index": -1, "candidates": 0}
+        return {"statistic": 0.0, "index": -1, "candidates": 0, "estimate": 0.0}
     jb = np.asarray(jac_w, float)[rows]
     w = np.asarray(weights, float)
     zb = np.asarray(z, float)[rows]
-    # suffix sums: g_s = Σ_{i≥s} w_i z_i, ee_s = Σ w_i², u_s = Σ w_i J_B[i]
-    g = np.cumsum((w * zb)[::-1])[::-1]
-    ee = np.cumsum((w * w)[::-1])[::-1]
-    u = np.cumsum((w[:, None] * jb)[::-1], axis=0)[::-1]
     s = np.arange(margin, n - margin + 1)
-    m = ee[s] - np.einsum("ij,jk,ik->i", u[s], np.asarray(covariance, float), u[s])
-    ok = m > 1e-9 * ee[s]
+    cov = np.asarray(covariance, float)
+    if whiten is None:
+        # suffix sums: g_s = Σ_{i≥s} w_i z_i, ee_s = Σ w_i², u_s = Σ w_i J_B[i]
+        g = np.cumsum((w * zb)[::-1])[::-1][s]
+        ee = np.cumsum((w * w)[::-1])[::-1][s]
+        u = np.cumsum((w[:, None] * jb)[::-1], axis=0)[::-1][s]
+    else:
+        e = whiten(w[:, None] * (np.arange(n)[:, None] >= s[None, :]))
+        g, ee, u = e.T @ zb, np.einsum("ij,ij->j", e, e), e.T @ jb
+    m = ee - np.einsum("ij,jk,ik->i", u, cov, u)
+    ok = m > 1e-9 * ee
     if not ok.any():
-        return {"statistic": 0.0, "index": -1, "candidates": 0}
-    t = np.where(ok, g[s] ** 2 / np.where(ok, m, 1.0), 0.0)
+        return {"statistic": 0.0, "index": -1, "candidates": 0, "estimate": 0.0}
+    t = np.where(ok, g ** 2 / np.where(ok, m, 1.0), 0.0)
     k = int(np.argmax(t))
-    return {"statistic": float(t[k]), "index": int(s[k]), "candidates": int(ok.sum())}
+    return {"statistic": float(t[k]), "index": int(s[k]), "candidates": int(ok.sum()), "estimate": float(g[k] / m[k])}
 
 
 #: :func:`prior_innovation_chi2` uses the directions where the data's information is at least this

@@ -27,6 +27,7 @@ the coefficients (seed 002 eq. 10: the E block of the extended state's offsets):
     Doppler offset      1 on Doppler (Hz); -c/f on range-rate from one-way Doppler
                         (ρ̇ = -c Δf / f), -c/(2f) from two-way Doppler (ρ̇ = -c Δf / (2f))
     Doppler drift       the offset's coefficient × (t_r - t0)
+    Doppler step        the offset's coefficient on the samples from t0 on (an oscillator step)
     azimuth, elevation  1 on the station's azimuths / elevations (rad)
 
 A :class:`StationTimeBias` (``time_bias:STATION``, s) is not additive: the station's time tags
@@ -65,8 +66,9 @@ from trackproc.dynamics import geodesy
 from trackproc.models import parameters as pm
 from trackproc.models.observables import range_rate_per_hz
 
-__all__ = ["Modifier", "BoundModifier", "RangeBias", "DopplerOffset", "DopplerDrift", "AzimuthBias",
-           "ElevationBias", "StationTimeBias", "RangeCorrection", "OscillatorWander", "elevation", "collect_drivers", "bind_all",
+__all__ = ["Modifier", "BoundModifier", "RangeBias", "DopplerOffset", "DopplerDrift", "DopplerStep", "AzimuthBias",
+           "ElevationBias", "StationTimeBias", "RangeCorrection", "OscillatorWander", "elevation", "collect_drivers",
+           "bind_all",
            "from_name", "FAMILIES"]
 
 
@@ -283,6 +285,25 @@ class DopplerDrift(Modifier):
         return _hz_to_samples(meas, rows, meas.t_s[rows] - self.driver.epoch_s, self.driver.name)
 
 
+class DopplerStep(Modifier):
+    """``doppler_step:KEY`` (Hz): a change of the transmitter's frequency offset from ``t0`` on
+    (an oscillator's level shift inside a pass), ``t0`` the driver's epoch (s from the solution
+    epoch): the offset's coefficient on the samples received at or after ``t0``, 0 before."""
+
+    family, scale = "doppler_step", 1.0
+    description = "one-way Doppler frequency step (offset change from the driver's epoch on)"
+
+    def __init__(self, key: str, epoch_s: float, reference: float = 0.0, **kw) -> None:
+        super().__init__(key, reference, epoch_s=float(epoch_s), **kw)
+
+    def rows(self, meas) -> np.ndarray:
+        rows = _frequency_rows(meas, self.key)
+        return rows[meas.t_s[rows] >= self.driver.epoch_s]
+
+    def partials(self, meas, rows) -> np.ndarray:
+        return _hz_to_samples(meas, rows, np.ones(rows.size), self.driver.name)
+
+
 class OscillatorWander(Modifier):
     """The random walk of a one-way transmitter's frequency (pass or station ``KEY``), of
     intensity ``walk`` (Hz/√s; None = estimated from the data by REML). No driver and no
@@ -334,8 +355,8 @@ def elevation(meas, rows, geometry) -> np.ndarray:
 # ----------------------------------------------------------------------------- registry
 
 #: Modifier class of each driver family (for names given as text: files, tests, ``--apriori-sigma``).
-FAMILIES = {cls.family: cls for cls in (RangeBias, DopplerOffset, DopplerDrift, AzimuthBias, ElevationBias,
-                                        StationTimeBias)}
+FAMILIES = {cls.family: cls for cls in (RangeBias, DopplerOffset, DopplerDrift, DopplerStep, AzimuthBias,
+                                        ElevationBias, StationTimeBias)}
 
 
 def from_name(name: str, epoch_s: Optional[float] = None, **kw) -> Modifier:
@@ -344,9 +365,9 @@ def from_name(name: str, epoch_s: Optional[float] = None, **kw) -> Modifier:
     cls = FAMILIES.get(family)
     if cls is None:
         raise ValueError(f"{name!r} is not a measurement modifier's parameter")
-    if cls is DopplerDrift:
+    if cls in (DopplerDrift, DopplerStep):
         if epoch_s is None:
-            raise ValueError(f"{name}: no reference epoch for the drift")
+            raise ValueError(f"{name}: no reference epoch for the {'drift' if cls is DopplerDrift else 'step'}")
         return cls(key, epoch_s, **kw)
     return cls(key, **kw)
 

@@ -54,7 +54,8 @@ CONSTRAINT_NAMES = vocabulary.CONSTRAINT_PARAMETERS
 FORCE_NAMES = vocabulary.FORCE_PARAMETERS
 #: Default scales (about one expected sigma): state m and m/s, then by family.
 DEFAULT_SCALES = {"position": 100.0, "velocity": 0.1, "range_bias": 10.0, "doppler_offset": 1.0,
-                  "doppler_drift": 1e-3, "az_bias": 1e-4, "el_bias": 1e-4, "time_bias": 0.01, "cr": 0.1, "cd": 0.1,
+                  "doppler_drift": 1e-3, "doppler_step": 1.0, "az_bias": 1e-4, "el_bias": 1e-4, "time_bias": 0.01,
+                  "cr": 0.1, "cd": 0.1,
                   "empirical_r": 1e-9, "empirical_t": 1e-9, "empirical_n": 1e-9, "empirical_x": 1e-9,
                   "empirical_y": 1e-9, "empirical_z": 1e-9, "empirical_x_rate": 1e-13, "empirical_y_rate": 1e-13,
                   "empirical_z_rate": 1e-13}

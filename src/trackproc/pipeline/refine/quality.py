@@ -13,6 +13,7 @@ from trackproc.methods.estimation import decision as dm
 from trackproc.pipeline.refine.gates import apriori_test
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, TRAVERSE_TOLERANCE_S
 from trackproc.pipeline.refine.problem import Refinement
+from trackproc.pipeline.refine.steps import add_step_reason
 from trackproc.pipeline.timing import add_timing_reason
 
 
@@ -26,7 +27,10 @@ def add_decision(q, refusal: dict | None, decision: dict | None) -> None:
     contradicts a stated a-priori: suspect), ``kept`` (the refined state would not predict better:
     ok, the stale state is the answer), ``replaced`` (ok), or ``refused`` (suspect: the pass's own
     noise model is in doubt, or it cannot carry a looser default a-priori)."""
-    if refusal is not None and refusal.get("code") == "declined":
+    if refusal is not None and refusal.get("code") == "step":
+        q.add("declined", "suspect", refusal["reason"], value=refusal["step"]["statistic"],
+              limit=refusal["step"]["limit"])
+    elif refusal is not None and refusal.get("code") == "declined":
         q.add("declined", "suspect", refusal["reason"], value=(decision or {}).get("apriori_test", {}).get("statistic"),
               limit=(decision or {}).get("apriori_test", {}).get("limit"))
     elif refusal is not None and refusal.get("code") == "kept":
@@ -40,7 +44,7 @@ def add_decision(q, refusal: dict | None, decision: dict | None) -> None:
 
 
 def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, improvement=None, refusal=None,
-                   t_model=None, max_el=None, consistency=None, timing=None, decision=None):
+                   t_model=None, max_el=None, consistency=None, timing=None, decision=None, step=None):
     """The :class:`~trackproc.methods.quality.Quality` of a refinement: a-priori conflict (and
     its adaptation), variance factor of the nominal sigmas, residual whiteness, traverse-epoch
     mismatch, low pass, circular-constraint conflict, edited samples, refusal, and the along-track
@@ -48,6 +52,7 @@ def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, im
     q = qm.Quality()
     opt = ref.options
     add_decision(q, refusal, decision)
+    add_step_reason(q, step)
     # a-priori conflict
     if adaptation is not None:
         a = adaptation

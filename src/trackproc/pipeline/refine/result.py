@@ -26,6 +26,7 @@ from trackproc.types import State
 from trackproc.pipeline.refine.problem import (Refinement, default_apriori_covariance, link_mode,
                                                state_prior_covariance)
 from trackproc.pipeline.refine.quality import refine_quality
+from trackproc.pipeline.refine.steps import refined_step
 from trackproc.pipeline.refine.traverse import (eccentricity, max_elevation_deg, model_traverse, time_tag_covariance,
                                                 time_tag_direction)
 from trackproc.pipeline.timing import timing_warning, tle_timing
@@ -34,12 +35,13 @@ from trackproc.pipeline.timing import timing_warning, tle_timing
 def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency: dict | None = None,
            prior_centre=None, adaptation: dict | None = None, traverse_moves: list | None = None,
            improvement: dict | None = None, refusal: dict | None = None,
-           decision: dict | None = None) -> RefineResult:
+           decision: dict | None = None, step: dict | None = None) -> RefineResult:
     """Outputs of a solved :class:`Refinement` (states, covariance, report, residuals);
     ``consistency`` the :func:`circular_consistency` of a ``--circular`` solution;
     ``prior_centre`` the a-priori centre the solution was solved with (:meth:`Refinement.solve`);
     ``decision`` what became of the stale state (methods/estimation/decision.py: replaced, kept,
-    declined), written to the diagnostics and the verdict."""
+    declined), written to the diagnostics and the verdict; ``step`` a level shift found inside the
+    pass (:mod:`trackproc.pipeline.refine.steps`: modelled, declined or said)."""
     opt = ref.options
     problem = ref.problem
     warnings = list(ref.warnings)
@@ -187,9 +189,11 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     max_el = max_elevation_deg(ref, x)
     warnings += refine_warnings(ref, sol, obs, kkt, sigma_scale, consistency, max_el)
 
+    if step is not None and step.get("action") == "modelled":
+        step = dict(step, fitted=refined_step(ref, sol, cov))
     quality = refine_quality(ref, sol, sigma_scale=sigma_scale, adaptation=adaptation, improvement=improvement,
                              refusal=refusal, t_model=t_model, max_el=max_el, consistency=consistency,
-                             timing=timing, decision=decision)
+                             timing=timing, decision=decision, step=step)
     if refusal is not None:
         warnings.append(f"the stale state is kept: {refusal['reason']}")
     apriori_note = ref.apriori_note
@@ -217,6 +221,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         "sigma_rtn": dict(zip(rf.RTN_NAMES, np.sqrt(np.clip(np.diag(rtn), 0.0, None)).tolist())),
         "units": units, "warnings": warnings,
     }
+    if step is not None:                              # a level shift inside the pass: modelled, declined or said
+        diagnostics["step"] = step
     if time_tags is not None:                         # the time-tag consider term
         diagnostics["time_tag_consider"] = time_tags
     if ref.noise_report is not None:                  # the noise model of the pass (methods/noise.py)

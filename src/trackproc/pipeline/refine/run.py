@@ -14,16 +14,17 @@ from trackproc.pipeline.refine.assemble import prepare
 from trackproc.methods.estimation import prior as pr
 from trackproc.pipeline.od import decision as od_decision
 from trackproc.pipeline.refine.gates import (circular_consistency, may_refuse, solve_gated, solve_weighted,
-                                            with_noise_of)
+                                            stale_improvement, with_noise_of)
 from trackproc.pipeline.refine.noise import solve_noise
 from trackproc.pipeline.refine.options import MAX_TRAVERSE_ITERATIONS, TRAVERSE_TOLERANCE_S, RefineOptions, RefineResult
 from trackproc.pipeline.refine.result import finish
+from trackproc.pipeline.refine.steps import as_kind, declined_step, scan_steps, shifted, step_modifier
 from trackproc.pipeline.refine.traverse import model_traverse, time_tag_covariance
 from trackproc.types import PassTable
 
 
 def refine(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
-           source: str = "<pass>") -> RefineResult:
+           source: str = "<pass>", _modelled_step: dict | None = None) -> RefineResult:
     """Refine ``initial`` (a GCRF :class:`~trackproc.io.statefile.State`, or a TLE's) from one pass.
 
     The consistency gates (docs/refine.md, "Quality"): the a-priori is scaled by its variance
@@ -31,7 +32,11 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     refined orbit's own zero range-rate; and when the pass cannot improve the stale state
     (an a-priori conflict the pass cannot carry, or one on residuals correlated beyond the pass's noise model), the
     stale state is kept with its covariance (``refused`` in the diagnostics and the quality).
-    The result's ``quality`` (:func:`refine_quality`) says what was found.
+    The result's ``quality`` (:func:`refine_quality`) says what was found. A level shift inside the
+    pass (:func:`~trackproc.pipeline.refine.steps.scan_steps`) is modelled from the detected sample
+    on when it is one of the transmitter's frequency (the pass refined again with a ``doppler_step``;
+    ``_modelled_step`` is that detection), and declines the pass when it is a jump of the time tags
+    or the step model does not remove it (``step`` in the diagnostics and the quality).
 
     Returns :class:`RefineResult`; raises :class:`InputError` (exit 2) for invalid input and
     :class:`ProcessingError` (exit 1) when the refinement fails (no convergence, rank deficiency).
@@ -40,7 +45,50 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     ref = prepare(table, initial, stations, opt, eop, source)
     # the pass's noise model (REML) and transmitter drift first, then the gates on that solution
     ref, sol, kkt, scale = solve_noise(table, initial, ref, stations, eop, source)
+    epoch0 = ref.problem.epoch                          # the epoch a modelled step's time is counted from
+    first = (ref, sol, kkt, scale)
     ref, sol, kkt, scale, adaptation, improvement, refusal = solve_gated(ref, first=(sol, kkt, scale))
+    # a gross error inside the pass (an oscillator step, a time-tag jump): modelled or declined. The
+    # scan reads the gated solution (a default a-priori the pass contradicts is adapted first, so
+    # that its conflict is not taken for a step), or the first one when the gates kept the stale state
+    step, declined = None, None
+    scanned = (ref, sol, kkt, scale) if refusal is None else first
+    # a one-way link's transmitter (an offset to step); the gates' own refusal stands unless a
+    # frequency step explains it
+    scan = (scan_steps(*scanned) if opt.cost == "pointwise" and not opt.circular
+            and first[0].modifier_drivers(md.DopplerOffset) else None)
+    if scan is not None and refusal is not None and _modelled_step is None and scan["kind"] != "frequency":
+        scan = None
+    if _modelled_step is not None:
+        step = {"action": "modelled", "modelled": _modelled_step,
+                "parameter": ref.modifier_drivers(md.DopplerStep)[0].name, "scan": scan}
+        if scan is not None and scan["significant"] and may_refuse(first[0]):
+            step["action"] = "declined"
+            declined = declined_step(first[0], scan, modelled=_modelled_step)
+    elif scan is not None and scan["significant"]:
+        step = {"action": "said", "scan": scan}
+        freq = as_kind(scan, "frequency")
+        if scan["kind"] == "frequency" and ref.modifier_drivers(md.DopplerOffset):
+            # an offset change is exactly a step of the offset: model it, and let the scan of the
+            # re-solved pass say whether that explains it; a shift that fits a jump of the time tags
+            # better is declined (either side may be the wrongly tagged one)
+            try:
+                stepped = refine(table, initial, stations,
+                                 replace(opt, modifiers=tuple(opt.modifiers) + (step_modifier(ref, freq),)), eop,
+                                 source, _modelled_step=freq)
+                if refusal is None or (stepped.state.diagnostics.get("step") or {}).get("action") != "declined":
+                    return stepped
+                step = None                              # the gates' own refusal stands
+            except ProcessingError:
+                pass                                     # the step model does not converge: decline below
+        if step is not None and refusal is None and may_refuse(first[0]):
+            step["action"] = "declined"
+            declined = declined_step(first[0], scan)
+    if declined is not None:
+        ref, sol, kkt, scale = first
+        improvement = stale_improvement(ref, sol, scale) if ref.priors else None
+        return finish(ref, sol, kkt, scale, improvement=improvement, refusal=declined,
+                      decision=declined["decision"], step=step)
     # the solution epoch is the refined orbit's own traverse point: re-solve there until it stays
     moves = []
     for _ in range(MAX_TRAVERSE_ITERATIONS if refusal is None else 0):
@@ -51,7 +99,9 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
         try:
             # the same transmitter model (a drift the pass wanted) and a noise model refitted there
             bias = "offset+drift" if ref.modifier_drivers(md.DopplerDrift) else opt.doppler_bias
-            moved = prepare(table, initial, stations, replace(opt, traverse_epoch=epoch, doppler_bias=bias), eop,
+            later = float((epoch - epoch0) / np.timedelta64(1, "ns")) * 1e-9
+            moved = prepare(table, initial, stations, replace(opt, traverse_epoch=epoch, doppler_bias=bias,
+                                                              modifiers=shifted(opt.modifiers, later)), eop,
                             source, curve=ref.curve)
             moved.warnings[:] = list(ref.warnings)
             moved = with_noise_of(moved, ref)
@@ -91,4 +141,4 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
         consistency = circular_consistency(free, sol, scale)
     return finish(ref, sol, kkt, scale, consistency=consistency, adaptation=adaptation, traverse_moves=moves,
                   improvement=improvement, refusal=refusal,
-                  decision=decision if refusal is None else refusal.get("decision"))
+                  decision=decision if refusal is None else refusal.get("decision"), step=step)
