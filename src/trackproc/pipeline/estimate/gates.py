@@ -44,7 +44,7 @@ def solve(problem: Problem, opt: EstimateOptions):
             sol = problem.solve(max_iterations=opt.max_iterations, clip=opt.clip, rank_rtol=opt.rank_rtol,
                                 noise=cov, edited=sol.edited, x0=sol.values)
             previous = used = cov
-    test = apriori_test(problem.priors, sol)
+    test = pr.apriori_test(problem.priors, sol.values, sol.covariance)
     if test is None or not test["conflict"] or state_prior_covariance(problem.priors) is None:
         return keep_or_replace(problem, opt, sol, used) + (noise_report,)
     # The a-priori is scaled by the data; but a conflict is evidence against the a-priori only if
@@ -104,7 +104,7 @@ def keep_or_replace(problem: Problem, opt: EstimateOptions, sol, noise=None):
     problem.decision = made.as_dict()
     if not made.keeps_prior:
         return sol, None
-    test = apriori_test(problem.priors, sol)
+    test = pr.apriori_test(problem.priors, sol.values, sol.covariance)
     kept, out = hold(problem, opt, sol, noise, test, "kept", made.reason, made.as_dict())
     out["fitted_solution"] = sol        # the data's checks are the fit's (the kept state is not a fit)
     return kept, out
@@ -144,12 +144,6 @@ def knowledge_lost(priors, sol) -> str | None:
             f"(posterior/a-priori variance {worst:.2f} > 0.5): the solution there is the loosened a-priori's")
 
 
-def apriori_test(priors, sol) -> dict | None:
-    """:func:`trackproc.methods.estimation.prior.apriori_test` of a solution (the innovation of a full
-    state a-priori, else its share of χ²)."""
-    return pr.apriori_test(priors, sol.values, sol.covariance)
-
-
 def refuse(problem: Problem, opt: EstimateOptions, sol, noise, test: dict, doubt: list,
            adaptation: dict | None = None, scale: bool = True):
     """Keep the initial state: the state at the a-priori centre with the a-priori covariance
@@ -159,7 +153,8 @@ def refuse(problem: Problem, opt: EstimateOptions, sol, noise, test: dict, doubt
     34 000 on a DopTrack hold-out pass, a 500 km sigma for a kept TLE),
     the other parameters (biases) fitted with the state held there (their covariance is
     conditional on it: no cross-covariance with the state is written). Returns ``(solution,
-    adaptation)`` with ``adaptation["refused"]`` saying why; ``test``: the conflict (:func:`apriori_test`)."""
+    adaptation)`` with ``adaptation["refused"]`` saying why; ``test``: the conflict
+    (:func:`trackproc.methods.estimation.prior.apriori_test`)."""
     chi2 = test["chi2"]
     said = f"{test['test']} chi2 {test['statistic']:.4g} over {test['dof']}, limit {test['limit']:.3g}"
     pcov = state_prior_covariance(problem.priors)
@@ -206,7 +201,7 @@ def adapt_apriori(problem: Problem, opt: EstimateOptions, sol, noise=None):
     to be, and the covariance covers that (refine's gate, :func:`trackproc.pipeline.refine.solve_adapted`).
     ``problem.priors`` become the scaled ones. Returns ``(solution, adaptation dict or None)``;
     the adaptation is ``resolved`` False when the data cannot carry a looser a-priori."""
-    test = apriori_test(problem.priors, sol)
+    test = pr.apriori_test(problem.priors, sol.values, sol.covariance)
     if test is None or not test["conflict"] or state_prior_covariance(problem.priors) is None:
         return sol, None
     chi2 = test["chi2"]             # the a-priori's share of chi2: the variance component's input
@@ -231,7 +226,7 @@ def adapt_apriori(problem: Problem, opt: EstimateOptions, sol, noise=None):
         chi2, _ = state_prior_chi2(priors, sol.values)
     problem.priors = priors
     last = history[-1].get("component")
-    after = apriori_test(priors, sol)
+    after = pr.apriori_test(priors, sol.values, sol.covariance)
     resolved = failure is None and (not after["conflict"] or (last is not None and abs(last - 1.0) < 0.1))
     # chi2_before/rows/limit: the test that fired (chi2_after: the same test with the scaled a-priori)
     return sol, {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",

@@ -55,7 +55,7 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
     "state_covariance"}``."""
     may = may_refuse(ref)
     original = pr.state_prior_covariance(ref.priors) if may else None
-    work = scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
+    work = with_scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
     if first is None or start_factor != 1.0:
         first = solve_weighted(work)
     improvement = stale_improvement(work, first[0], first[2]) if work.priors else None
@@ -63,7 +63,7 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
         # a stated a-priori (a TLE's, a state file's covariance, --apriori-sigma) that the pass
         # contradicts is kept as it is: its accuracy is known, so the pass is the likely culprit
         # (methods/estimation/decision.py); it is never loosened to let the pass move the orbit
-        test = apriori_test(work, first[0], first[1])
+        test = refinement_apriori_test(work, first[0], first[1])
         if test is not None and test["conflict"]:
             decision = dm.declined("the stale state's stated a-priori", test)
             return work, first[0], first[1], first[2], None, improvement, {
@@ -78,7 +78,7 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
         # holds: time-correlated residuals overstate the data's information just as much, and
         # loosening the a-priori would then let the pass move the state by its own systematic
         # errors (docs/refine.md, "Quality")
-        test = apriori_test(work, first[0], first[1])
+        test = refinement_apriori_test(work, first[0], first[1])
         w = improvement["whiteness"]
         correlated = (w["lag1_autocorrelation"] > qm.WHITENESS_RHO
                       or (np.isfinite(w["runs_z"]) and abs(w["runs_z"]) > qm.RUNS_Z))
@@ -184,7 +184,7 @@ def stale_improvement(ref: Refinement, sol, sigma_scale: float = 1.0, n_seen: in
     return out
 
 
-def apriori_test(ref: Refinement, sol, kkt=None) -> Optional[dict]:
+def refinement_apriori_test(ref: Refinement, sol, kkt=None) -> Optional[dict]:
     """:func:`trackproc.methods.estimation.prior.apriori_test` of a refinement: the innovation of the
     a-priori for the pointwise cost without ``circular``; the a-priori's share of χ² otherwise (the
     integral cost's covariance is a sandwich, ``circular``'s singular across the constraints)."""
@@ -194,7 +194,7 @@ def apriori_test(ref: Refinement, sol, kkt=None) -> Optional[dict]:
     return pr.apriori_test(ref.priors, sol.values, ref.covariance(sol, kkt))
 
 
-def scaled_priors(ref: Refinement, factor: float) -> Refinement:
+def with_scaled_priors(ref: Refinement, factor: float) -> Refinement:
     """``ref`` with the covariance of its state a-priori multiplied by ``factor``."""
     return replace(ref, priors=pr.scaled_priors(ref.priors, factor))
 
@@ -212,11 +212,11 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
     if first is not None:
         work, sol, kkt, scale = first
     else:
-        work = scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
+        work = with_scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
         sol, kkt, scale = solve_weighted(work, x0=x0)
     if not pr.has_state_prior(ref.priors):
         return work, sol, kkt, scale, None
-    test = apriori_test(work, sol, kkt)
+    test = refinement_apriori_test(work, sol, kkt)
     chi2, rows = test["chi2"], test["rows"]
     if not test["conflict"] and start_factor == 1.0:
         return work, sol, kkt, scale, None
@@ -234,7 +234,7 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
             break
         factor = max(1.0, factor * k_hat)
         try:
-            trial = scaled_priors(ref, factor)
+            trial = with_scaled_priors(ref, factor)
             # from the previous solution a consistent scale converges in a few iterations
             quick = replace(trial, options=replace(ref.options, max_iterations=min(ref.options.max_iterations,
                                                                                      MAX_ADAPT_ITERATIONS)))
@@ -255,7 +255,7 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
                            f"{str(exc).split(' (')[0]}"}
         kept = (work, sol, kkt, scale)
         chi2, rows = pr.state_prior_chi2(work.priors, sol.values)
-    after = apriori_test(work, sol, kkt)
+    after = refinement_apriori_test(work, sol, kkt)
     adaptation = {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
                   "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start["chi2"],
                   "chi2_after": chi2, "rows": rows, "limit": start["limit"], "iterations": history,

@@ -10,7 +10,7 @@ import numpy as np
 
 from trackproc.methods import quality as qm
 from trackproc.methods.estimation import decision as dm
-from trackproc.pipeline.refine.gates import apriori_test
+from trackproc.pipeline.refine.gates import refinement_apriori_test
 from trackproc.pipeline.refine.options import CIRCULAR_TEST_P, LOW_PASS_DEG, TRAVERSE_TOLERANCE_S
 from trackproc.pipeline.refine.problem import Refinement
 from trackproc.pipeline.refine.steps import add_step_reason
@@ -78,7 +78,7 @@ def refine_quality(ref: Refinement, sol, *, sigma_scale=1.0, adaptation=None, im
                   f"({a.get('failure', 'the variance component did not settle')})",
                   value=t["statistic"], limit=t["limit"])
     elif sol.n_prior:
-        t = apriori_test(ref, sol)
+        t = refinement_apriori_test(ref, sol)
         if t is not None:
             # a refused refinement writes the stale state: the conflict is the rejected solution's
             q.add("apriori_conflict", "ok" if not t["conflict"] else "suspect" if refusal is not None else "rejected",

@@ -22,6 +22,10 @@ from trackproc.pipeline.refine.problem import Refinement
 
 #: Fewest kept samples of a pass the scan looks at (estimate's per-pass minimum).
 MIN_SAMPLES = 20
+#: A step needs at least this share of the pass's samples on each side: fewer at one end are a
+#: handful of edge samples (the first seconds of lock, low-elevation multipath), which the editing
+#: handles, and which the orbit's own curvature and the drift mimic at the ends.
+MIN_SIDE_FRACTION = 0.1
 
 
 def _white(ref: Refinement, keep: np.ndarray, sigma_scale: float):
@@ -89,10 +93,12 @@ def scan_steps(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0) -> Opti
     for name, coef in (("frequency", coef_f), ("time", coef_t)):
         if not np.any(coef):
             continue
+        margin = max(3, int(np.ceil(MIN_SIDE_FRACTION * rows.size)))
         if ref.correlated():
-            r = qm.step_scan(jw, z, cov, rows, coef[rows], whiten=whiten_block)
+            r = qm.step_scan(jw, z, cov, rows, coef[rows], margin=margin, whiten=whiten_block)
         else:
-            r = qm.step_scan(jw, z, cov, rows, coef[rows] / (np.asarray(meas.sigma, float)[idx][rows] * sigma_scale))
+            r = qm.step_scan(jw, z, cov, rows, coef[rows] / (np.asarray(meas.sigma, float)[idx][rows] * sigma_scale),
+                             margin=margin)
         if r["candidates"]:
             scans[name] = r
     if not scans:
