@@ -185,6 +185,13 @@ OscillatorNoiseOpt = typer.Option(
     help="Random-walk intensity of the transmitter frequency (Hz/sqrt(s)) instead of estimating it.")
 
 
+HorizonOpt = typer.Option(
+    1.0, "--horizon", metavar="DAYS", min=0.0,
+    help="Replace the initial orbit only when the solution predicts the position better with probability >= 0.9 "
+         "somewhere over this many days; else keep it ('kept'). A stated a-priori (TLE, covariance, "
+         "--apriori-sigma) the data contradict is kept ('declined'). See docs/design.md, 'Prior and decision'.")
+
+
 def report_solution(result, command: str, as_json: bool, strict: bool, summary_text) -> None:
     """The end of ``refine`` and ``estimate``: the summary on stderr (``summary_text(result)``, or ``--json``; off
     under ``-q``), then the verdict's exit: ``rejected`` (or ``suspect`` with ``--strict``) exits 1

@@ -11,8 +11,9 @@ import typer
 from trackproc.cli.app import app
 from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc import vocabulary
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, Noise, OscillatorNoiseOpt,
-                                  OutputOpt, StrictOpt, RangeRateModel, choices, named_values, resolve_output)
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, HorizonOpt, JsonSummaryOpt, Noise,
+                                  OscillatorNoiseOpt, OutputOpt, StrictOpt, RangeRateModel, choices, named_values,
+                                  resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -86,12 +87,7 @@ def estimate_command(
                                              "sample; first = first sample; initial = the TLE's epoch)."),
     kinds: Optional[str] = typer.Option(None, "--kinds", metavar="KIND[,KIND]",
                                         help="Kinds to use: range, range_rate, doppler, azimuth, elevation (default all)."),
-    horizon: float = typer.Option(
-        1.0, "--horizon", metavar="DAYS", min=0.0,
-        help="With a state a-priori: replace the initial state only when the solution predicts the position "
-             "better with probability >= 0.9 somewhere over this many days; else keep it ('kept'). A stated "
-             "a-priori (TLE, covariance, --apriori-sigma) the data contradict is kept ('declined'). See "
-             "docs/estimate.md."),
+    horizon: float = HorizonOpt,
     max_iterations: int = typer.Option(20, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
     max_samples: int = typer.Option(200_000, "--max-samples", metavar="N", min=1,
                                     help="Refuse more samples than this over all pass files (memory grows by "
@@ -216,7 +212,8 @@ def estimate_command(
         doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,
         station_time_bias=True if station_time_bias else list(station_time_bias_station),
         apriori_initial=apriori_initial, force=force.value, earth=earth.value,
-        range_rate_model=range_rate_model.value if range_rate_model else None, max_iterations=max_iterations, horizon_days=horizon,
+        range_rate_model=range_rate_model.value if range_rate_model else None, max_iterations=max_iterations,
+        horizon_days=horizon,
         clip=clip if clip > 0 else None, epoch=epoch, kinds=kind_list, compare_doppler_only=compare_doppler_only,
         two_stage=two_stage, noise=noise.value, oscillator_noise=oscillator_noise,
         troposphere=troposphere, com_offset_m=com_offset, wavelength_nm=wavelength_nm, solid_tides=solid_tides,

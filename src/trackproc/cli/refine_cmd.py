@@ -10,8 +10,8 @@ import typer
 
 from trackproc.cli.app import app
 from trackproc import vocabulary
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, Noise, OscillatorNoiseOpt,
-                                  OutputOpt, StrictOpt, RangeRateModel, choices, named_values, resolve_output)
+from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, HorizonOpt, JsonSummaryOpt, Noise,
+                                  OscillatorNoiseOpt, OutputOpt, StrictOpt, RangeRateModel, choices, named_values, resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -98,12 +98,7 @@ def refine_command(
              "cannot see a time-tag offset (it is the orbit shifted along-track). Default: the station's "
              "time_sigma_s in the stations table (none: exact tags); given, it wins (0 = exact). "
              "See docs/refine.md."),
-    horizon: float = typer.Option(
-        1.0, "--horizon", metavar="DAYS", min=0.0,
-        help="Replace the stale state only when the refined one predicts the position better with probability "
-             ">= 0.9 somewhere over this many days after the epoch; else keep it (decision 'kept'). A stated "
-             "a-priori (TLE, covariance, --apriori-sigma) the pass contradicts is kept ('declined'). See "
-             "docs/refine.md, 'Replace, keep or decline'."),
+    horizon: float = HorizonOpt,
     max_iterations: int = typer.Option(30, "--max-iterations", min=1, help="Gauss-Newton iterations at most."),
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Pointwise: edit samples beyond K x max(1, WRMS) sigmas. 0: off."),
