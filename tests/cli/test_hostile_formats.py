@@ -185,6 +185,24 @@ def test_sinex_plausibility(run_cli, write, tmp_path, edit, needles):
     assert_rejected(result, 2, "bad.snx", *needles, outputs=[out], folder=tmp_path)
 
 
+# -- SINEX: block structure (a cut transfer, an edited file) ----------------------------------
+
+@pytest.mark.parametrize("edit, needles", [
+    (lambda t: t[:t.index("-SOLUTION/ESTIMATE")], ["SOLUTION/ESTIMATE not closed", "cut short"]),
+    (lambda t: t.replace("-SOLUTION/ESTIMATE", "-SOLUTION/EPOCHS", 1), ["closed as SOLUTION/EPOCHS"]),
+    (lambda t: t.replace("-SOLUTION/ESTIMATE\n", "", 1), ["not closed before the next one opens"]),
+])
+def test_sinex_block_structure(run_cli, write, tmp_path, edit, needles):
+    from test_crd import V1
+    from test_sinex import SNX
+
+    bad = edit(SNX)
+    assert bad != SNX
+    out = tmp_path / "o.parquet"
+    result = run_cli(["ingest", write("v1.npt", V1), "--stations", write("bad.snx", bad), "-q", "-o", out])
+    assert_rejected(result, 2, "bad.snx", *needles, outputs=[out], folder=tmp_path)
+
+
 # -- CPF: units, records, span (propagate --compare) ------------------------------------------
 
 def _cpf(days_from_state: float = 0.0, records: int = 3, scale: float = 1.0) -> str:

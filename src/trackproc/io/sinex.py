@@ -55,16 +55,28 @@ def parse_sinex_epoch(text: str, source: str = "", row: int | None = None, colum
 
 
 def _blocks(text: str, source: str):
-    """Block name -> list of (line number, fields) of its data lines (comments skipped)."""
-    blocks, name = {}, None
+    """Block name -> list of (line number, fields) of its data lines (comments skipped). The block
+    structure is checked: every ``+NAME`` closed by its ``-NAME`` before the next block opens or the
+    file ends (a cut transfer, an edited file), else an :class:`InputError` naming the row."""
+    blocks, name, opened = {}, None, 0
     for row, line in enumerate(text.splitlines(), start=1):
         if line.startswith("+"):
-            name = line[1:].split()[0] if line[1:].split() else ""
+            if name is not None:
+                raise InputError(f"SINEX block {name} not closed before the next one opens", file=source, row=row,
+                                 found=line.strip()[:40], expected=f"-{name} (the block opened at row {opened})")
+            name, opened = (line[1:].split()[0] if line[1:].split() else ""), row
             blocks.setdefault(name, [])
         elif line.startswith("-"):
+            closing = line[1:].split()[0] if line[1:].split() else ""
+            if name is not None and closing != name:
+                raise InputError(f"SINEX block {name} closed as {closing}", file=source, row=row,
+                                 found=line.strip()[:40], expected=f"-{name} (the block opened at row {opened})")
             name = None
         elif name is not None and line.strip() and not line.startswith("*"):
             blocks[name].append((row, line))
+    if name is not None:
+        raise InputError(f"SINEX block {name} not closed: the file ends inside it (cut short?)", file=source,
+                         row=opened, expected=f"-{name} before the end of the file")
     return blocks
 
 
