@@ -357,3 +357,19 @@ def test_old_epoch_warns_once_in_our_words(run_cli, write, tmp_path):
     assert result.exit_code == 0, result.stderr
     assert "ERFA function" not in result.stderr
     assert result.stderr.count("dubious year") == 1, result.stderr
+
+
+# -- epochs against the data's own span -------------------------------------------------------
+
+def test_a_solution_epoch_years_from_the_samples_is_refused(run_cli, tmp_path):
+    """``estimate --epoch`` (or an initial state) decades from the passes would only propagate to the
+    step limit: one line naming the option and the span, exit 2, no output."""
+    from pathlib import Path
+
+    data = Path(__file__).resolve().parents[2] / "sample_data"
+    out = tmp_path / "e.json"
+    result = run_cli(["estimate", data / "multistation.parquet", "--initial", data / "truth_at_start.json",
+                      "--range-bias", "--epoch", "1990-01-01T00:00:00Z", "-o", out])
+    assert result.exit_code == 2, result.stderr
+    assert "option '--epoch'" in result.stderr and "days from the samples" in result.stderr
+    assert result.stderr.count("\n") == 1 and not out.exists()

@@ -13,6 +13,7 @@ from trackproc.dynamics import geodesy
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError
 from trackproc.io.statefile import parse_epoch
+from trackproc.io.validate import MAX_SPAN_S
 from trackproc.models import observation as ob
 
 
@@ -82,13 +83,26 @@ def resolve_stations(frame, tables, stations):
 
 
 def solution_epoch(option, initial, times):
+    """The solution epoch (``--epoch``: ``initial``, ``first`` or a UTC time), at most
+    :data:`~trackproc.io.validate.MAX_SPAN_S` (the propagation bound) from the samples' span: an
+    epoch years away would only propagate to the step limit and fail."""
     if option is None or (isinstance(option, str) and option.lower() == "initial"):
-        return np.datetime64(initial.epoch, "ns")
-    if isinstance(option, str) and option.lower() == "first":
+        epoch = np.datetime64(initial.epoch, "ns")
+        column = "--initial"
+    elif isinstance(option, str) and option.lower() == "first":
         return np.datetime64(times.min(), "ns")
-    if isinstance(option, str):
-        return parse_epoch(option, column="--epoch")
-    return np.datetime64(option, "ns")
+    else:
+        epoch = parse_epoch(option, column="--epoch") if isinstance(option, str) else np.datetime64(option, "ns")
+        column = "--epoch"
+    lo, hi = np.datetime64(times.min(), "ns"), np.datetime64(times.max(), "ns")
+    far = max(float((lo - epoch) / np.timedelta64(1, "s")), float((epoch - hi) / np.timedelta64(1, "s")), 0.0)
+    if far > MAX_SPAN_S:
+        raise InputError("the solution epoch is far from the samples", column=column,
+                         found=f"{str(epoch.astype('datetime64[s]'))}Z, {far / 86400:.1f} days from the samples "
+                               f"({str(lo.astype('datetime64[s]'))}Z to {str(hi.astype('datetime64[s]'))}Z)",
+                         expected=f"an epoch within {MAX_SPAN_S / 86400:g} days of the samples (the propagation "
+                                  "bound; --epoch first takes the first sample)")
+    return epoch
 
 
 def range_rate_model(option, file_models) -> str:
