@@ -8,10 +8,11 @@ A solution replaces the orbit the user already had only when it is expected to p
    culprit is the data (a time-tag error, an oscillator step, another satellite), not an orbit
    whose accuracy was measured. The prior is written with its own covariance, verdict ``suspect``
    (reason ``declined``), never a loosened a-priori that lets the data move the orbit by their own
-   errors. Only a *default* a-priori (no stated accuracy) may be adapted to the data.
-2. **Kept.** The solution does not move the predicted position at the horizon (the next day by
-   default) significantly: the probability that it predicts better than the prior
-   (:func:`probability_better`) is below :data:`REPLACE_PROBABILITY`.
+   errors. Only a *default* a-priori (no stated accuracy) may be adapted to the data (``estimate``:
+   also a stated one that data determining the state without it overrule; docs/estimate.md).
+2. **Kept.** The solution predicts the position better than the prior with probability below
+   :data:`REPLACE_PROBABILITY` at every time over the horizon (the next day by default):
+   :func:`probability_better_over`, :func:`by_prediction`.
 3. **Replaced** otherwise.
 """
 
@@ -23,15 +24,17 @@ from typing import Optional
 
 import numpy as np
 
-#: A solution replaces the prior only when it predicts the position at the horizon better with at
-#: least this probability (0.5 is a coin toss). fit-tle's refusal rule; chosen on the DopTrack
-#: development days (docs/fit-tle.md, "Refusal").
+#: A solution replaces the prior only when it predicts the position better with at least this
+#: probability (0.5 is a coin toss). fit-tle's refusal rule, chosen on the DopTrack development days
+#: (docs/fit-tle.md, "Refusal"); at 0.5 single passes would replace TLEs with covariances 4-10x too
+#: small at the next pass (docs/refine.md, "Replace, keep or decline").
 REPLACE_PROBABILITY = 0.9
 #: The default horizon of the comparison (days after the solution epoch): the next day's passes.
 HORIZON_DAYS = 1.0
 
-#: The decisions, as the output files and the batch summary name them.
-ACTIONS = ("replaced", "kept", "declined", "adapted")
+#: The decisions, as the output files and the batch summary name them (an adapted a-priori is said
+#: by the ``apriori_conflict`` reason and ``apriori_adapted`` beside the decision).
+ACTIONS = ("replaced", "kept", "declined")
 
 
 def probability_better(moved, covariance) -> tuple[float, float, float]:
