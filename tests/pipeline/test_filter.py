@@ -51,10 +51,9 @@ def test_zero_process_noise_iterated_smoother_equals_estimate(case):
     assert res.quality.verdict == "ok", res.quality.text()
 
 
-def _manoeuvre_case(case, seed, dv=1e-3, at_s=4 * 3600.0):
-    """Range + range-rate at the multistation samples' times and sigmas of an orbit given an
-    along-track 1 mm/s impulse 4 h into the arc (after the truth's model: the problem's own, J2),
-    the filter starting 100 m / 0.1 m/s off with that a-priori."""
+def _manoeuvre_truth(case, dv=1e-3, at_s=4 * 3600.0):
+    """The noiseless part of :func:`_manoeuvre_case`, the same for every seed: the manoeuvred
+    initial state, the model values before and after the impulse, the manoeuvred trajectory."""
     eop, tables, stations = case
     truth = read_state(str(DATA / "truth_at_start.json"), eop)
     eo = EstimateOptions(apriori_sigma={"position": 100.0, "velocity": 0.1}, noise="white",
@@ -65,14 +64,25 @@ def _manoeuvre_case(case, seed, dv=1e-3, at_s=4 * 3600.0):
     s_m = traj.state(np.array([at_s]))[0]
     x1 = x0 + np.linalg.solve(traj.stm(np.array([at_s]))[0],
                               np.concatenate([np.zeros(3), dv * s_m[3:] / np.linalg.norm(s_m[3:])]))
-    h0, h1 = pb.model(x0)[0], pb.model(x1)[0]
+    return truth, eo, at_s, pb.model(x0)[0], pb.model(x1)[0], pb.trajectory(x1)
+
+
+def _manoeuvre_case(case, seed, dv=1e-3, at_s=4 * 3600.0, noiseless=None):
+    """Range + range-rate at the multistation samples' times and sigmas of an orbit given an
+    along-track 1 mm/s impulse 4 h into the arc (after the truth's model: the problem's own, J2),
+    the filter starting 100 m / 0.1 m/s off with that a-priori. ``noiseless``: the draw-independent
+    part from :func:`_manoeuvre_truth` (a Monte Carlo computes it once, not once per draw)."""
+    eop, tables, stations = case
+    truth, eo, at_s, h0, h1, truth1 = noiseless or _manoeuvre_truth(case, dv, at_s)
+    pb = build_problem(tables, truth, stations, eo, eop)
+    x0 = truth.rv
     rng = np.random.default_rng(seed)
     t = pb.meas.t_s
     pb.meas.observed = np.where(t < at_s, h0, h1) + pb.meas.sigma * rng.standard_normal(t.size)
     start = x0 + rng.standard_normal(6) * np.array([100.0, 100.0, 100.0, 0.1, 0.1, 0.1])
     pb.priors[0].centre[:] = start
     pb.params.set_values(start)
-    return pb, eo, pb.trajectory(x1)
+    return pb, eo, truth1
 
 
 def _nees(pb, eo, truth1, snc, smooth=True):
@@ -105,8 +115,9 @@ def test_manoeuvre_nees_monte_carlo():
     tables = [("multistation", read_pass_table(str(DATA / "multistation.parquet")))]
     c = (eop, tables, read_stations(str(DATA / "stations.csv")))
     nees, ok = [], 0
+    noiseless = _manoeuvre_truth(c)
     for seed in range(100):
-        pb, eo, truth1 = _manoeuvre_case(c, seed=seed)
+        pb, eo, truth1 = _manoeuvre_case(c, seed=seed, noiseless=noiseless)
         _, q, v = _nees(pb, eo, truth1, 3e-6, smooth=False)
         nees.append(v)
         ok += q.verdict == "ok"
