@@ -211,24 +211,29 @@ def initial_at_epoch(initial, epoch, force, eop, force_model=None):
     return rv, cov
 
 
+def wanted_stations(option, available: list, column: str, family: str, what: str, none: str = "") -> list:
+    """The stations a per-station bias option asks for: ``True`` all of ``available``, a list those
+    (each once, each one of ``available``: else :class:`InputError` naming ``column``), else none."""
+    if option is True:
+        return list(available)
+    if not option:
+        return []
+    wanted = list(option)
+    dup = sorted({s for s in wanted if wanted.count(s) > 1})
+    if dup:
+        raise InputError("duplicate parameter", column=column, found=f"{family}:{dup[0]}", expected="each station once")
+    for s in wanted:
+        if s not in available:
+            raise InputError(what, column=column, found=s, expected="one of " + (", ".join(available) or none))
+    return wanted
+
+
 def range_bias_modifiers(opt: EstimateOptions, kinds_by_station: dict, known: dict, apriori) -> list:
     """A :class:`~trackproc.models.modifiers.RangeBias` per station with ranges: estimated for the
     stations ``--range-bias`` asks for, held at the stations table's known bias for the others."""
     range_stations = sorted(s for s, k in kinds_by_station.items() if "range" in k)
-    if opt.range_bias is True:
-        wanted = range_stations
-    elif opt.range_bias:
-        wanted = list(opt.range_bias)
-        dup = sorted({s for s in wanted if wanted.count(s) > 1})
-        if dup:
-            raise InputError("duplicate parameter", column="--range-bias", found=f"range_bias:{dup[0]}",
-                             expected="each station once")
-        for s in wanted:
-            if s not in range_stations:
-                raise InputError("range bias for a station without ranges", column="--range-bias", found=s,
-                                 expected="one of " + (", ".join(range_stations) or "(no station has ranges)"))
-    else:
-        wanted = []
+    wanted = wanted_stations(opt.range_bias, range_stations, "--range-bias", "range_bias",
+                             "range bias for a station without ranges", "(no station has ranges)")
     out = []
     for s in range_stations:
         prior_value = getattr(known[s], "range_bias_m", None)
@@ -291,21 +296,8 @@ def time_bias_modifiers(opt: EstimateOptions, stations_here, known: dict, aprior
     """``--station-time-bias``: a :class:`~trackproc.models.modifiers.StationTimeBias` per station
     asked for; a-priori sigma from ``--apriori-sigma``, else the station's ``time_sigma_s`` (none
     given: no a-priori); a station with ``time_sigma_s`` 0 (exact tags) gets none."""
-    stations_here = sorted(stations_here)
-    if opt.station_time_bias is True:
-        wanted = stations_here
-    elif opt.station_time_bias:
-        wanted = list(opt.station_time_bias)
-        dup = sorted({s for s in wanted if wanted.count(s) > 1})
-        if dup:
-            raise InputError("duplicate parameter", column="--station-time-bias-station", found=f"time_bias:{dup[0]}",
-                             expected="each station once")
-        for s in wanted:
-            if s not in stations_here:
-                raise InputError("time bias for a station without samples", column="--station-time-bias-station",
-                                 found=s, expected="one of " + ", ".join(stations_here))
-    else:
-        return []
+    wanted = wanted_stations(opt.station_time_bias, sorted(stations_here), "--station-time-bias-station",
+                             "time_bias", "time bias for a station without samples")
     out = []
     for s in wanted:
         sigma = apriori_for(f"time_bias:{s}", "time_bias", apriori)
