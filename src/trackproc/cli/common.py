@@ -192,6 +192,26 @@ HorizonOpt = typer.Option(
          "--apriori-sigma) the data contradict is kept ('declined'). See docs/design.md, 'Prior and decision'.")
 
 
+def read_passes_and_stations(passes: list, stations: Optional[str], eccentricities: Optional[str] = None):
+    """The pass files of ``estimate`` and ``filter`` (``-`` is stdin; each file once, no sample
+    twice) and, with ``--stations``, the stations at the middle of their span (a SINEX file's
+    positions move with time). Returns ``(tables [(source, PassTable)], stations or None)``."""
+    from trackproc.io.atomic import is_stdio
+    from trackproc.io.passfile import read_pass_table
+    from trackproc.io.stations import read_stations
+    from trackproc.io.validate import check_distinct_files, check_no_repeated_samples
+
+    check_distinct_files(passes, "PASS")
+    tables = [("<stdin>" if is_stdio(p) else p, read_pass_table(p)) for p in passes]
+    check_no_repeated_samples([(source, t.frame) for source, t in tables])
+    if stations is None:
+        return tables, None
+    lo = min(t.frame["time"].min() for _, t in tables)
+    hi = max(t.frame["time"].max() for _, t in tables)
+    mid = (lo + (hi - lo) / 2).tz_convert("UTC").tz_localize(None).to_datetime64()
+    return tables, read_stations(stations, epoch=mid, eccentricities=eccentricities)
+
+
 def report_solution(result, command: str, as_json: bool, strict: bool, summary_text) -> None:
     """The end of ``refine`` and ``estimate``: the summary on stderr (``summary_text(result)``, or ``--json``; off
     under ``-q``), then the verdict's exit: ``rejected`` (or ``suspect`` with ``--strict``) exits 1

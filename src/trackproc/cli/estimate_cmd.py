@@ -13,7 +13,7 @@ from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc import vocabulary
 from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, HorizonOpt, JsonSummaryOpt, Noise,
                                   OscillatorNoiseOpt, OutputOpt, StrictOpt, RangeRateModel, choices, named_values,
-                                  resolve_output)
+                                  read_passes_and_stations, resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -174,12 +174,10 @@ def estimate_command(
     sigmas = named_values(apriori_sigma, "--apriori-sigma")
     kind_list = [k.strip() for k in kinds.split(",") if k.strip()] if kinds else None
 
-    from trackproc.io.atomic import is_stdio, write_bytes
+    from trackproc.io.atomic import write_bytes
     from trackproc.io.eop import earth_orientation
     from trackproc.io.opm import write_opm
-    from trackproc.io.passfile import read_pass_table
     from trackproc.io.residuals import write_residuals
-    from trackproc.io.stations import read_stations
     from trackproc.io.statefile import format_epoch, write_state
     from trackproc.pipeline.orbit_source import initial_state, tle_evaluation_epoch
     from trackproc.pipeline.estimate import EstimateOptions, estimate, require_matplotlib, summary_text
@@ -190,23 +188,13 @@ def estimate_command(
     orientation, warning = earth_orientation(eop, dut1)
     if warning:
         log.warning(warning)
-    from trackproc.io.validate import check_distinct_files, check_no_repeated_samples
-
-    check_distinct_files(passes, "PASS")
-    tables = [("<stdin>" if is_stdio(p) else p, read_pass_table(p)) for p in passes]
-    check_no_repeated_samples([(source, t.frame) for source, t in tables])
+    tables, station_table = read_passes_and_stations(passes, stations, eccentricities)
     n_samples = sum(len(t.frame) for _, t in tables)
     if n_samples > max_samples:
         raise typer.BadParameter(f"{n_samples} samples in the pass files, more than {max_samples} (memory grows by "
                                  "~3.5 kB a sample); raise --max-samples, or thin the passes", param_hint="--max-samples")
     # a TLE is evaluated by SGP4 at the solution epoch (default: the first sample)
     state0 = initial_state(initial, tables, orientation, at=tle_evaluation_epoch(epoch, tables))
-    station_table = None
-    if stations is not None:
-        lo = min(t.frame["time"].min() for _, t in tables)
-        hi = max(t.frame["time"].max() for _, t in tables)
-        mid = (lo + (hi - lo) / 2).tz_convert("UTC").tz_localize(None).to_datetime64()
-        station_table = read_stations(stations, epoch=mid, eccentricities=eccentricities)
     options = EstimateOptions(
         range_bias=True if range_bias else list(range_bias_station), doppler_bias=doppler_bias.value,
         doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,

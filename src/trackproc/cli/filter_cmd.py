@@ -11,7 +11,7 @@ from trackproc.cli.app import app
 from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc import vocabulary
 from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, OutputOpt, StrictOpt,
-                                  RangeRateModel, choices, named_values, resolve_output)
+                                  RangeRateModel, choices, named_values, read_passes_and_stations, resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -63,7 +63,8 @@ def filter_command(
              "parameters without one start diffuse (1e4 x their scale: range bias 100 km)."),
     apriori_initial: Optional[bool] = typer.Option(
         None, "--apriori-initial/--no-apriori-initial", show_default=False,
-        help="Start from the initial state's covariance (default when it has one; a TLE: refine's element a-priori)."),
+        help="Start from the initial state's covariance (default when it has one; a TLE: its accuracy at its age, "
+             "TLE differencing)."),
     snc_accel: Optional[str] = typer.Option(
         None, "--snc-accel", metavar="Q|R,T,N",
         help="State noise compensation: 1-sigma density of a white acceleration along radial, along-track, "
@@ -156,12 +157,9 @@ def filter_command(
     accel = _snc(snc_accel)
     kind_list = [k.strip() for k in kinds.split(",") if k.strip()] if kinds else None
 
-    from trackproc.io.atomic import is_stdio, write_bytes, write_text
+    from trackproc.io.atomic import write_bytes, write_text
     from trackproc.io.eop import earth_orientation
-    from trackproc.io.passfile import read_pass_table
-    from trackproc.io.stations import read_stations
     from trackproc.io.statefile import parse_epoch, write_state
-    from trackproc.io.validate import check_distinct_files, check_no_repeated_samples
     from trackproc.pipeline.orbit_source import initial_state, tle_evaluation_epoch
     from trackproc.pipeline.filter import FilterOptions, filter_passes, summary_text
     from trackproc.pipeline.od import EstimateOptions
@@ -174,16 +172,8 @@ def filter_command(
     orientation, warning = earth_orientation(eop, dut1)
     if warning:
         log.warning(warning)
-    check_distinct_files(passes, "PASS")
-    tables = [("<stdin>" if is_stdio(p) else p, read_pass_table(p)) for p in passes]
-    check_no_repeated_samples([(source, t.frame) for source, t in tables])
+    tables, station_table = read_passes_and_stations(passes, stations, eccentricities)
     state0 = initial_state(initial, tables, orientation, at=tle_evaluation_epoch(None, tables))
-    station_table = None
-    if stations is not None:
-        lo = min(t.frame["time"].min() for _, t in tables)
-        hi = max(t.frame["time"].max() for _, t in tables)
-        mid = (lo + (hi - lo) / 2).tz_convert("UTC").tz_localize(None).to_datetime64()
-        station_table = read_stations(stations, epoch=mid, eccentricities=eccentricities)
     problem = EstimateOptions(
         range_bias=True if range_bias else list(range_bias_station), doppler_bias=doppler_bias.value,
         doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,
