@@ -18,7 +18,7 @@ of its integral cost. Adding a bias kind is one subclass here (and its family na
 :data:`trackproc.vocabulary.BIAS_UNITS`); it is then estimated by both when given in
 ``EstimateOptions.modifiers`` / ``RefineOptions.modifiers`` (tests/pipeline/test_refine_modifiers.py
 does that with a toy kind), and a command-line option that creates it is the one further
-edit (``pipeline.od.problem.bias_modifiers``, as ``--range-bias`` does).
+edit (``pipeline.od.modifiers.bias_modifiers``, as ``--range-bias`` does).
 
 Linear modifiers add ``Σ_k coefficient_k × value_k`` of their drivers, so their partials are
 the coefficients (seed 002 eq. 10: the E block of the extended state's offsets):

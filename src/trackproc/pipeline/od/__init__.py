@@ -1,8 +1,9 @@
 """The orbit-determination core shared by the commands that fit an orbit to passes (``estimate``,
 ``refine``, ``filter``): the options of the problem (:mod:`.options`), the pass tables turned into a
-measurement set (:mod:`.samples`), the problem itself with its parameters, modifiers and a-priori
-(:mod:`.problem`: :class:`Problem`, :func:`build_problem`) and its residual tables
-(:mod:`.residuals`). The a-priori's policy (its source, conflict test and the decision to replace
+measurement set (:mod:`.samples`), the modifiers the options ask for (:mod:`.modifiers`), the
+problem with its parameters and a-priori (:mod:`.problem`: :class:`Problem`, :func:`build_problem`),
+its residual tables (:mod:`.residuals`) and the horizon maps of the replace/keep rule
+(:mod:`.decision`). The a-priori's policy (its source, conflict test and the decision to replace
 or keep the user's orbit) is one layer down, :mod:`trackproc.methods.estimation`.
 
 Command packages import this core, never one another (pyproject.toml's independence contract).
