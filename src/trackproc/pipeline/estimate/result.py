@@ -3,17 +3,15 @@ what it returns (:class:`EstimateResult`, with the residual table and the state 
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 from typing import Optional
 
 import numpy as np
 import pandas as pd
 
-from trackproc.constants import MU_EARTH, force_model_constants
+from trackproc.constants import MU_EARTH
 from trackproc.dynamics.rtn import rtn_covariance
 from trackproc.errors import ProcessingError, TrackprocError
-from trackproc.io.statefile import State
 from trackproc.methods import quality as qm
 from trackproc.models import observation as ob
 from trackproc.pipeline.estimate import gates
@@ -21,6 +19,7 @@ from trackproc.pipeline.estimate.quality import estimate_quality
 from trackproc.pipeline.estimate import seed002 as s2
 from trackproc.pipeline.od import Problem, build_problem, residual_frame, rms_table  # noqa: F401
 from trackproc.pipeline.od.options import EstimateOptions
+from trackproc.pipeline.od.state import sigma_rtn, solution_state
 from trackproc.pipeline.timing import time_tag_rate, timing_warning, tle_reference, tle_timing
 
 
@@ -147,9 +146,7 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         "measurements": sol.n_measurements, "edited": sol.n_edited, "clip_sigma": opt.clip,
         "rms": rms_table(problem, sol),
         "correlation": sol.correlation,
-        "covariance_rtn": rtn, "sigma_rtn": {"radial_m": math.sqrt(rtn[0, 0]), "along_m": math.sqrt(rtn[1, 1]),
-                                             "cross_m": math.sqrt(rtn[2, 2]), "radial_m_s": math.sqrt(rtn[3, 3]),
-                                             "along_m_s": math.sqrt(rtn[4, 4]), "cross_m_s": math.sqrt(rtn[5, 5])},
+        "covariance_rtn": rtn, "sigma_rtn": sigma_rtn(rtn),
         "units": problem.params.units(),
     }
     if noise_report is not None:
@@ -184,14 +181,8 @@ def estimate(tables, initial, stations=None, options: EstimateOptions | None = N
         # the spacecraft (with the estimated Cr/Cd) where --force full commands read it back, so that
         # the solution propagates with the forces it was fitted with
         extra["spacecraft"] = problem.force_model.spacecraft.as_dict()
-    state = State.from_vectors(problem.epoch, x[:3], x[3:6], parameters=list(names), values=x, sigma=sol.sigma,
-                               covariance=sol.covariance,
-                               force_model=(problem.force_model.label() if problem.force_model is not None
-                                            else opt.force),
-                               constants=(problem.force_model.describe() if problem.force_model is not None
-                                          else force_model_constants(opt.force)),
-                               eop_source=getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
-                               diagnostics=diagnostics, extra=extra)
+    state = solution_state(problem, problem.epoch, x, names, sol.sigma, sol.covariance, opt.force, eop, diagnostics,
+                           extra)
     return EstimateResult(state=state, solution=sol, problem=problem, residuals=residual_frame(problem, sol),
                           rtn_covariance=rtn, comparison=comparison, two_stage=two, two_stage_solution=sol2,
                           warnings=warnings, quality=quality)

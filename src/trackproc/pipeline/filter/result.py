@@ -10,7 +10,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from trackproc.constants import force_model_constants
 from trackproc.dynamics import propagator
 from trackproc.dynamics import timescales as ts
 from trackproc.dynamics.rtn import rtn_covariance
@@ -21,6 +20,7 @@ from trackproc.methods import sequential as sq
 from trackproc.pipeline.filter import run as fr
 from trackproc.pipeline.filter.options import FilterOptions, check_filter_options
 from trackproc.pipeline.od import UNITS, Problem, build_problem
+from trackproc.pipeline.od.state import sigma_rtn, solution_state
 
 INNOVATION_COLUMNS = ("time", "station", "pass_id", "kind", "unit", "observed", "predicted", "innovation",
                       "innovation_sigma", "normalized_innovation", "edited", "residual")
@@ -319,21 +319,13 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
     }
     diagnostics = {"measurements": int(sw.edited.size), "edited": int(sw.edited.sum()), "correlation": corr,
                    "covariance_rtn": rtn,
-                   "sigma_rtn": {"radial_m": math.sqrt(rtn[0, 0]), "along_m": math.sqrt(rtn[1, 1]),
-                                 "cross_m": math.sqrt(rtn[2, 2]), "radial_m_s": math.sqrt(rtn[3, 3]),
-                                 "along_m_s": math.sqrt(rtn[4, 4]), "cross_m_s": math.sqrt(rtn[5, 5])},
+                   "sigma_rtn": sigma_rtn(rtn),
                    "units": problem.params.units()}
     extra = {"estimation": {"method": "sequential: " + record["method"], "range_rate_model": problem.range_rate_model,
                             "apriori_initial": problem.apriori_initial,
                             "sources": sorted({str(s) for s in problem.sources})},
              "filter": record, "quality": quality.as_dict()}
-    state = State.from_vectors(out_epoch, x[:3], x[3:6], parameters=list(names), values=x, sigma=sigma, covariance=p,
-                               force_model=(problem.force_model.label() if problem.force_model is not None
-                                            else popt.force),
-                               constants=(problem.force_model.describe() if problem.force_model is not None
-                                          else force_model_constants(popt.force)),
-                               eop_source=getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)",
-                               diagnostics=diagnostics, extra=extra)
+    state = solution_state(problem, out_epoch, x, names, sigma, p, popt.force, eop, diagnostics, extra)
     if quality.verdict != "ok":
         warnings.append(quality.text())
     return FilterResult(state=state, problem=problem, sweep=sw, innovations=innovation_frame(problem, sw),
