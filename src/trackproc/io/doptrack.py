@@ -45,6 +45,15 @@ DELFI_C3_CARRIER_HZ = 145.870e6
 #: Nominal carriers by ``satellite.name`` (lower case) used when ``--carrier-hz`` is not given.
 NOMINAL_CARRIERS_HZ = {"delfi-c3": DELFI_C3_CARRIER_HZ}
 
+#: Time-tag sigma (s) of known stations by ``station.name`` (lower case), kept as the station's
+#: ``time_sigma_s`` (refine's time-tag consider term; docs/refine.md, "Station timing"). DopTrack's
+#: tags lag or lead the satellite by 0.1-2 s from pass to pass (a fresh TLE is good to ~0.05 s):
+#: 1.2 s RMS about zero (maximum likelihood with each pass's own formal shift sigma; one pass
+#: of 24 beyond 3 sigma left out), measured on the development passes of 1-10 April 2020
+#: against each pass's own TLE (``benchmarks/doptrack_timing.py``). A stations table or
+#: ``--time-tag-sigma`` overrides it.
+KNOWN_STATION_TIME_SIGMA_S = {"doptrack": 1.2}
+
 _HEADER = re.compile(r"#\s*time\s*,\s*frequency\s*,\s*rangerate\s*$", re.IGNORECASE)
 
 
@@ -200,6 +209,9 @@ def read_doptrack(data: bytes, source: str, *, data_path: Path | None = None,
     check_station(station, position["lat_deg"], position["lon_deg"], position["height_m"], file=side,
                   columns={"lat_deg": "station.position.latitude", "lon_deg": "station.position.longitude",
                            "height_m": "station.position.altitude"})
+    timing = KNOWN_STATION_TIME_SIGMA_S.get(station.lower())
+    if timing is not None:
+        position["time_sigma_s"] = timing
     satellite_doc = doc.get("satellite") or {}
     if not isinstance(satellite_doc, dict):
         raise InputError("wrong type in the DopTrack sidecar", file=side, column="satellite", found=satellite_doc,

@@ -334,7 +334,8 @@ def step_scan(jac_w, z, covariance, rows, weights, margin: int = 3, whiten=None)
 PRIOR_INNOVATION_FLOOR = 0.1
 
 
-def prior_innovation_chi2(delta, prior_cov, posterior_cov, floor: float = PRIOR_INNOVATION_FLOOR) -> tuple:
+def prior_innovation_chi2(delta, prior_cov, posterior_cov, floor: float = PRIOR_INNOVATION_FLOOR,
+                          consider_cov=None) -> tuple:
     """Do the data contradict an a-priori ``x_p ~ N(x_true, P)``? The innovation of the a-priori,
     ``T = δᵀ (P − C)⁺ δ`` with ``δ = x̂ − x_p`` the correction made by a (generalised)
     least-squares solution with the a-priori and ``C`` its covariance (nuisance parameters
@@ -347,7 +348,10 @@ def prior_innovation_chi2(delta, prior_cov, posterior_cov, floor: float = PRIOR_
     that many degrees of freedom under the a-priori. Unlike the a-priori's share of the cost
     ``δᵀ P⁻¹ δ`` (distributed as ``Σ λ/(1+λ) χ²₁``, mean the redundancy, tested against χ²(6)),
     it keeps its power where the pass is weak against the a-priori (a low, short or noisy pass; a
-    wandering oscillator). Returns ``(T, degrees of freedom)``."""
+    wandering oscillator). ``consider_cov`` (``E``): the covariance an error the solution does not
+    estimate adds to it (a consider parameter, e.g. a station's time-tag offset; Tapley, Schutz &
+    Born 2004, section 6.3): ``δ`` then has covariance ``P − C + E``, and ``T = δᵀ (P − C + E)⁻¹ δ``
+    over the same directions. Returns ``(T, degrees of freedom)``."""
     p = np.asarray(prior_cov, float)
     low = np.linalg.cholesky(0.5 * (p + p.T))
     li = np.linalg.inv(low)
@@ -357,10 +361,15 @@ def prior_innovation_chi2(delta, prior_cov, posterior_cov, floor: float = PRIOR_
     lam = 1.0 / c - 1.0
     u = vec.T @ (li @ np.asarray(delta, float))
     use = lam >= floor
-    return float(np.sum(u[use] ** 2 * (1.0 + lam[use]) / lam[use])), int(use.sum())
+    if consider_cov is None:
+        return float(np.sum(u[use] ** 2 * (1.0 + lam[use]) / lam[use])), int(use.sum())
+    # (1 + λ)/λ = 1/(1 − c): P − C is diag(1 − c) in these coordinates; E is added there
+    vs = vec[:, use]
+    m = np.diag(1.0 - c[use]) + vs.T @ li @ np.asarray(consider_cov, float) @ li.T @ vs
+    return float(u[use] @ np.linalg.solve(0.5 * (m + m.T), u[use])), int(use.sum())
 
 
-def apriori_conflict(chi2: float, rows: int, delta=None, prior_cov=None, posterior_cov=None) -> dict:
+def apriori_conflict(chi2: float, rows: int, delta=None, prior_cov=None, posterior_cov=None, consider_cov=None) -> dict:
     """Do the data contradict a state a-priori? :func:`prior_innovation_chi2` of the correction
     ``delta`` when the full a-priori and posterior covariances are given (it keeps its power when
     the data are weak against the a-priori), else the a-priori's share of χ² ``chi2`` over its
@@ -369,7 +378,7 @@ def apriori_conflict(chi2: float, rows: int, delta=None, prior_cov=None, posteri
     out = {"chi2": chi2, "rows": rows, "statistic": chi2, "dof": rows, "test": "a-priori share of chi2"}
     if delta is not None and prior_cov is not None and posterior_cov is not None:
         try:
-            stat, dof = prior_innovation_chi2(delta, prior_cov, posterior_cov)
+            stat, dof = prior_innovation_chi2(delta, prior_cov, posterior_cov, consider_cov=consider_cov)
             out.update(statistic=stat, dof=dof, test="innovation of the a-priori")
         except np.linalg.LinAlgError:
             pass

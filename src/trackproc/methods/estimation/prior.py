@@ -162,7 +162,7 @@ def scaled_priors(priors, factor: float) -> list:
     return out
 
 
-def apriori_test(priors, x, posterior_cov=None, innovation: bool = True):
+def apriori_test(priors, x, posterior_cov=None, innovation: bool = True, consider_cov=None):
     """Do the data contradict the state's a-priori? With a full 6 × 6 state a-priori and the
     solution's covariance ``posterior_cov`` (state first), the innovation of the a-priori
     (:func:`~trackproc.methods.quality.prior_innovation_chi2`: the correction against its own
@@ -171,8 +171,10 @@ def apriori_test(priors, x, posterior_cov=None, innovation: bool = True):
     short pass, one station's evening), where the a-priori's share of χ² (mean: its redundancy, a
     fraction of the rows) stays below χ²(rows)'s point whatever the initial error. Otherwise (no full
     a-priori, no covariance, or ``innovation`` False: a sandwich or constrained covariance) that
-    share against χ²(rows). Returns ``{"chi2", "rows" (the share), "statistic", "dof", "limit",
-    "conflict", "test"}``, or None without a state a-priori."""
+    share against χ²(rows). ``consider_cov`` (6 × 6): what errors the solution does not estimate add
+    to its covariance (a station's time-tag offset): the correction is judged with them. Returns
+    ``{"chi2", "rows" (the share), "statistic", "dof", "limit", "conflict", "test"}``, or None
+    without a state a-priori."""
     chi2, rows = state_prior_chi2(priors, x)
     if not rows:
         return None
@@ -180,7 +182,8 @@ def apriori_test(priors, x, posterior_cov=None, innovation: bool = True):
     if pcov is None or posterior_cov is None or not innovation:
         return qm.apriori_conflict(chi2, rows)
     return qm.apriori_conflict(chi2, rows, np.asarray(x, float)[:6] - state_prior_centre(priors), pcov,
-                               np.asarray(posterior_cov, float)[:6, :6])
+                               np.asarray(posterior_cov, float)[:6, :6],
+                               None if consider_cov is None else np.asarray(consider_cov, float)[:6, :6])
 
 
 def test_report(test: dict) -> dict:

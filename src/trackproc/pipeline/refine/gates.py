@@ -21,7 +21,7 @@ from trackproc.methods.estimation import prior as pr
 from trackproc.methods.noise import PassCovariance
 from trackproc.pipeline.refine.options import MAX_ADAPT_ITERATIONS, MAX_APRIORI_ADAPT, MAX_REWEIGHT, REWEIGHT_THRESHOLD
 from trackproc.pipeline.refine.problem import Refinement
-from trackproc.pipeline.refine.traverse import eccentricity
+from trackproc.pipeline.refine.traverse import eccentricity, time_tag_covariance
 
 
 def with_noise_of(moved: Refinement, ref: Refinement) -> Refinement:
@@ -187,11 +187,17 @@ def stale_improvement(ref: Refinement, sol, sigma_scale: float = 1.0, n_seen: in
 def refinement_apriori_test(ref: Refinement, sol, kkt=None) -> Optional[dict]:
     """:func:`trackproc.methods.estimation.prior.apriori_test` of a refinement: the innovation of the
     a-priori for the pointwise cost without ``circular``; the a-priori's share of χ² otherwise (the
-    integral cost's covariance is a sandwich, ``circular``'s singular across the constraints)."""
+    integral cost's covariance is a sandwich, ``circular``'s singular across the constraints). The
+    station's time-tag uncertainty (a consider term, :func:`time_tag_covariance`) is part of what
+    the correction may be: a pass whose tags are off by their stated sigma does not contradict the
+    a-priori."""
     innovation = ref.options.cost == "pointwise" and not ref.options.circular
     if not innovation or pr.state_prior_covariance(ref.priors) is None:
         return pr.apriori_test(ref.priors, sol.values)
-    return pr.apriori_test(ref.priors, sol.values, ref.covariance(sol, kkt))
+    cov = ref.covariance(sol, kkt)
+    tt_sigma, _ = ref.time_tag_sigma()
+    consider = time_tag_covariance(ref, sol.values, cov, tt_sigma) if tt_sigma > 0 else None
+    return pr.apriori_test(ref.priors, sol.values, cov, consider_cov=consider)
 
 
 def with_scaled_priors(ref: Refinement, factor: float) -> Refinement:
