@@ -34,7 +34,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "pipeline
 
 import numpy as np  # noqa: E402
 
+_argv, sys.argv = sys.argv, sys.argv[:1]          # doptrack_never_worse reads its own arguments on import
 from doptrack_never_worse import STALE_DAYS  # noqa: E402
+
+sys.argv = _argv
 from fit_tle_doptrack import _rms, _tle  # noqa: E402
 from test_refine_realdata import BAD_PASSES, DOPTRACK, EOP, MAX_PAIR_GAP_S, _load, evenings, is_dev  # noqa: E402
 from trackproc.io.tle import tle_epoch  # noqa: E402
@@ -90,12 +93,13 @@ def cases(dev: bool, fresh: bool = False):
     return out
 
 
-def run(dev: bool, fresh: bool = False, options=None, quiet: bool = False):
-    """Every case fitted (``options``, default the CLI's) and its next-day passes scored. Rows:
+def run(dev: bool, fresh: bool = False, options=None, quiet: bool = False, cases_=None):
+    """Every case (``cases_``, default :func:`cases`) fitted (``options``, default the CLI's) and its
+    next-day passes scored. Rows:
     evening, predicted pass, age of the old TLE at the evening (days), RMS of old / written /
     fitted (Hz), ratios, decision and probability."""
     rows = []
-    for ev, tle, later in cases(dev, fresh):
+    for ev, tle, later in (cases(dev, fresh) if cases_ is None else cases_):
         tables = [(s, _load(s)[0]) for s in ev]
         t0 = time.process_time()
         res = fit_tle(tables, [], OrbitInput(tle=tle, source="old"), options or FitTleOptions(), EOP)
