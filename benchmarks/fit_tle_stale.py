@@ -13,7 +13,8 @@ the evening) over an evening's passes predict the NEXT DAY's passes better than 
 Development: evening and predicted passes all within 1-10 April; the hold-out is every other pair
 (a predicted pass on 11-15 April), evaluated once at the end. Usage:
 ``PYTHONPATH=src python benchmarks/fit_tle_stale.py [dev|holdout|both] [fresh]`` (``fresh``: the
-newest metadata TLE of the evening instead, the refusal check).
+newest metadata TLE of the evening instead, the refusal check; ``every``: every catalogue TLE 7-10
+days older than the evening, one case each).
 """
 
 from __future__ import annotations
@@ -75,8 +76,9 @@ def old_tle(evening, tles):
     return older[-1] if older else None
 
 
-def cases(dev: bool, fresh: bool = False):
-    """``(evening, old TLE, [next-day passes])`` of the development set (or the hold-out)."""
+def cases(dev: bool, fresh: bool = False, every: bool = False):
+    """``(evening, old TLE, [next-day passes])`` of the development set (or the hold-out); ``every``:
+    one case per catalogue TLE 7 to 10 days older than the evening (more pairs to study on)."""
     stamps = [s for s in _stamps() if s not in BAD_PASSES]
     tles = catalogue()
     out = []
@@ -87,19 +89,26 @@ def cases(dev: bool, fresh: bool = False):
             continue
         if (all(is_dev(s) for s in ev + later)) != dev:
             continue
+        if every:
+            start = np.datetime64(_time(ev[0]), "ns")
+            for t in tles:
+                age = (start - np.datetime64(tle_epoch(t), "ns")) / np.timedelta64(1, "D")
+                if STALE_DAYS <= age <= STALE_DAYS + 3:
+                    out.append((ev, t, later))
+            continue
         tle = metadata_tle([(s, _load(s)[0]) for s in ev]) if fresh else old_tle(ev, tles)
         if tle is not None:
             out.append((ev, tle, later))
     return out
 
 
-def run(dev: bool, fresh: bool = False, options=None, quiet: bool = False, cases_=None):
+def run(dev: bool, fresh: bool = False, options=None, quiet: bool = False, cases_=None, every: bool = False):
     """Every case (``cases_``, default :func:`cases`) fitted (``options``, default the CLI's) and its
     next-day passes scored. Rows:
     evening, predicted pass, age of the old TLE at the evening (days), RMS of old / written /
     fitted (Hz), ratios, decision and probability."""
     rows = []
-    for ev, tle, later in (cases(dev, fresh) if cases_ is None else cases_):
+    for ev, tle, later in (cases(dev, fresh, every) if cases_ is None else cases_):
         tables = [(s, _load(s)[0]) for s in ev]
         t0 = time.process_time()
         res = fit_tle(tables, [], OrbitInput(tle=tle, source="old"), options or FitTleOptions(), EOP)
@@ -132,14 +141,15 @@ def run(dev: bool, fresh: bool = False, options=None, quiet: bool = False, cases
             print(f"  written better than the old TLE in {int((ratio < 1).sum())} of {ratio.size} pairs, median ratio "
                   f"{np.median(ratio):.3f}, worse by > 10 %: {int((ratio > 1.1).sum())}, worst {ratio.max():.2f}; "
                   f"fits (written or not) median {np.median(fitted):.3f}; replaced in "
-                  f"{len({r['evening'] + r['day'] for r in rows if not r['refused']})} of "
-                  f"{len({r['evening'] + r['day'] for r in rows})} evenings", flush=True)
+                  f"{len({(r['day'], r['evening'], r['age_days']) for r in rows if not r['refused']})} of "
+                  f"{len({(r['day'], r['evening'], r['age_days']) for r in rows})} fits", flush=True)
     return rows
 
 
 if __name__ == "__main__":
     which = sys.argv[1] if len(sys.argv) > 1 else "dev"
     fresh = len(sys.argv) > 2 and sys.argv[2] == "fresh"
+    every = len(sys.argv) > 2 and sys.argv[2] == "every"
     for dev in {"dev": [True], "holdout": [False], "both": [True, False]}[which]:
-        run(dev, fresh)
+        run(dev, fresh, every=every)
         print()
