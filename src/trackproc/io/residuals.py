@@ -4,7 +4,7 @@ Columns: ``time`` (UTC), ``station``, ``pass_id``, ``kind``, ``unit`` (of the va
 ``observed``, ``computed``, ``residual`` (observed - computed; azimuth wrapped to [-π, π)),
 ``normalized_residual`` (residual / sigma), ``sigma``, ``edited`` (true = excluded by the
 k-sigma editing, still reported). Values in SI (m, m/s, Hz, rad). The JSON metadata (under the
-key ``trackproc`` of the schema metadata, or the first ``# trackproc:`` line of a CSV) names the
+key ``trackproc`` of the schema metadata, or the ``# trackproc: {`` block opening a CSV) names the
 solution: epoch, parameters, force model, range-rate model.
 """
 
