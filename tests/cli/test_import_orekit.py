@@ -87,6 +87,15 @@ def test_a_small_configuration(run_cli, write, tmp_path):
     assert res.exit_code == 0, res.stderr
 
 
+def test_info_knows_an_orekit_configuration(run_cli, write):
+    res = run_cli(["info", "--json", write("small.in", SMALL)])
+    assert res.exit_code == 0, res.stderr
+    doc = json.loads(res.stdout)
+    assert doc["kind"] == "Orekit orbit-determination configuration (.in)"
+    assert doc["stations"] == 2 and doc["station_names"] == "AAA, BBB"
+    assert doc["initial_orbit"] == "2020-01-01T00:00:00.000Z EME2000" and doc["range_sigma"] == "5 m"
+
+
 @pytest.mark.parametrize("edit, message", [
     (lambda s: s.replace("orbit.cartesian.px = 7000000.0", "orbit.cartesian.px = seven"),
      "row 3, column 'orbit.cartesian.px': not a number; found 'seven'"),

@@ -100,6 +100,14 @@ def parse_orekit_config(data: bytes, source: str) -> OrekitConfig:
     return OrekitConfig(plain, indexed, lines, source)
 
 
+_SIGNATURE = re.compile(r"^\s*(orbit\.date|ground\.station\.name\s*\[\s*\d+\s*\])\s*=", re.M)
+
+
+def looks_like_orekit_config(text: str) -> bool:
+    """An Orekit orbit-determination configuration: ``orbit.date =`` or ``ground.station.name [i] =``."""
+    return _SIGNATURE.search(text) is not None
+
+
 def read_orekit_config(path: str) -> OrekitConfig:
     source = "<stdin>" if is_stdio(path) else str(path)
     return parse_orekit_config(read_input_bytes(path), source)
