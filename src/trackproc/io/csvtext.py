@@ -63,6 +63,8 @@ def _json_lines(value, key: str, indent: str) -> list[str]:
     if len(indent) + len(flat) <= META_WIDTH or not value or not isinstance(value, (dict, list)):
         return [indent + flat]
     opening, closing = ("{", "}") if isinstance(value, dict) else ("[", "]")
+    if isinstance(value, list) and not any(isinstance(v, (dict, list)) for v in value):
+        return _packed(value, key, indent)      # numbers and words: as many a line as fit
     items = list(value.items()) if isinstance(value, dict) else [(None, v) for v in value]
     out = [indent + key + opening]
     for i, (k, v) in enumerate(items):
@@ -71,6 +73,22 @@ def _json_lines(value, key: str, indent: str) -> list[str]:
             member[-1] += ","
         out.extend(member)
     out.append(indent + closing)
+    return out
+
+
+def _packed(values: list, key: str, indent: str) -> list[str]:
+    """A list of scalars over as few lines of :data:`META_WIDTH` as its items allow, the first
+    items on the key's line and the closing bracket after the last."""
+    import json
+
+    out, line = [], indent + key + "["
+    for i, v in enumerate(values):
+        item = json.dumps(v, ensure_ascii=False) + ("," if i < len(values) - 1 else "]")
+        if len(line) + len(item) > META_WIDTH and line.strip() not in ("", key.strip() + "["):
+            out.append(line.rstrip())
+            line = indent + "  "
+        line += item + " "
+    out.append(line.rstrip())
     return out
 
 

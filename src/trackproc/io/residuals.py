@@ -20,6 +20,7 @@ import pandas as pd
 import pyarrow as pa
 
 from trackproc.io.atomic import open_atomic
+from trackproc.io.csvtext import csv_metadata_line
 from trackproc.io.passfile import iso_times
 from trackproc.io.tables import arrow_table_bytes
 
@@ -63,7 +64,7 @@ def residuals_bytes(frame: pd.DataFrame, meta: dict | None = None, fmt: str = "p
     meta = meta or {}
     if fmt == "csv":
         out = io.StringIO()
-        out.write(f"# {META_KEY}: {json.dumps(meta, sort_keys=True, default=str)}\n")
+        out.write(csv_metadata_line(json.dumps(meta, sort_keys=True, default=str)))
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(COLUMNS)
         cells = [iso_times(frame["time"])] + [frame[c].to_numpy(dtype=object) for c in COLUMNS[1:]]
