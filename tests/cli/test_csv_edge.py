@@ -73,3 +73,15 @@ def test_csv_metadata_is_a_readable_block_read_back_whole(tmp_path):
     old = tmp_path / "old.csv"
     old.write_text("\n".join([one_line] + lines[len(block):]) + "\n")
     assert read_pass_table(str(old)).meta["stations"] == read_pass_table(str(tmp_path / "s.csv")).meta["stations"]
+
+
+def test_no_metadata_gives_plain_residual_csv(tmp_path, monkeypatch):
+    """Residual CSVs (compare -o, estimate --residuals) honour --no-metadata as every CSV output does."""
+    monkeypatch.setenv("TRACKPROC_CSV_METADATA", "1")
+    args = ["compare", str(SAMPLE / "multistation.parquet"), str(SAMPLE / "truth_at_start.json"), "--remove", "none"]
+    assert main(["-q", *args, "-o", str(tmp_path / "meta.csv")]) == 0
+    assert main(["-q", "--no-metadata", *args, "-o", str(tmp_path / "plain.csv")]) == 0
+    assert (tmp_path / "meta.csv").read_text().startswith("# trackproc: {\n")
+    plain = (tmp_path / "plain.csv").read_text()
+    assert plain.startswith("time,station,pass_id,kind,unit,observed,computed,residual")
+    assert pd.read_csv(tmp_path / "plain.csv").equals(pd.read_csv(tmp_path / "meta.csv", comment="#"))
