@@ -86,6 +86,9 @@ def read_stations(path: str, epoch=None, eccentricities: str | None = None) -> d
     ``metadata:PASS`` the same)."""
     if str(path).startswith(PASS_PREFIX):
         path = str(path)[len(PASS_PREFIX):]
+        if not path:
+            raise InputError("no pass file after 'metadata:'", found=PASS_PREFIX,
+                             expected="metadata:PASS.parquet (the pass file whose metadata holds the stations)")
     source = "<stdin>" if is_stdio(path) else str(path)
     data = read_input_bytes(path)
     from trackproc.io.columns import sniff_container
