@@ -8,7 +8,6 @@ shipped real data, and land where the docs say."""
 from __future__ import annotations
 
 import json
-import os
 import re
 import shlex
 from pathlib import Path
