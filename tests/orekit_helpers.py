@@ -172,10 +172,10 @@ def _file_meta(path) -> dict:
     """trackproc's metadata of a pass file: the JSON under the ``trackproc`` key of the Parquet
     schema metadata, or of the first line ``# trackproc: {...}`` of a CSV."""
     if str(path).endswith(".csv"):
+        from trackproc.io.csvtext import parse_csv_metadata
+
         with open(path, encoding="utf-8") as f:
-            first = f.readline().strip()
-        prefix = "# trackproc:"
-        return json.loads(first[len(prefix):]) if first.startswith(prefix) else {}
+            return parse_csv_metadata(line[1:] for line in f if line.startswith("#"))
     import pyarrow.parquet as pq
 
     meta = pq.read_schema(path).metadata or {}

@@ -45,10 +45,12 @@ def _csv(path):
 
 
 def _csv_meta(path):
+    from trackproc.io.csvtext import parse_csv_metadata
+
     with open(path) as handle:
         first = handle.readline()
-    assert first.startswith("# trackproc: ")
-    return json.loads(first[len("# trackproc: "):])
+        assert first.startswith("# trackproc: ")
+        return parse_csv_metadata([first[1:]] + [line[1:] for line in handle if line.startswith("#")])
 
 
 # ----------------------------------------------------------------------------- seed example

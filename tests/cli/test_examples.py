@@ -84,6 +84,6 @@ def test_readme_tour_and_examples_run(tmp_path):
 
 @pytest.mark.parametrize("command", ["ingest", "info", "simulate", "propagate", "smooth", "estimate", "filter", "refine",
                                      "accuracy", "requirements", "detect", "batch", "passes", "compare", "identify",
-                                     "fit-tle", "help"])
+                                     "fit-tle", "import-orekit", "help"])
 def test_help_examples_run(command, tmp_path):
     run(help_blocks()[command], tmp_path)

@@ -195,7 +195,7 @@ def test_gzipped_gravity_field_by_path_and_stdin(run_cli):
     assert piped["degree"] == out["degree"] and piped["file"] == "<stdin>"
 
 
-@pytest.mark.parametrize("content", [b"orbit.date = 2010-11-02T02:56:15.690\n", b"<?xml version='1.0'?><a/>",
+@pytest.mark.parametrize("content", [b"[section]\nkey = 1\n", b"<?xml version='1.0'?><a/>",
                                      b'{"hello": 1}', b"a,b\n1,2\n"])
 def test_unknown_file_lists_the_kinds(run_cli, write, content):
     from hostile import assert_rejected

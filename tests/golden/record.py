@@ -299,12 +299,29 @@ def _cell(s: str):
 
 
 def _csv(text: str) -> dict:
-    comments = [line for line in text.splitlines() if line.startswith("#")]
+    comments = _joined_metadata([line for line in text.splitlines() if line.startswith("#")])
     body = "\n".join(line for line in text.splitlines() if not line.startswith("#"))
     rows = list(csv.reader(io.StringIO(body)))
     header, rows = rows[0], rows[1:]
     columns = {h: [_cell(r[j]) for r in rows] for j, h in enumerate(header)}
     return {"comments": [_comment(c) for c in comments], **_columns(columns)}
+
+
+def _joined_metadata(comments: list) -> list:
+    """The comment lines with trackproc's metadata block (``# trackproc: {`` ... ``# }``, one key
+    a line) joined back into the one line ``# trackproc: {json}`` the recordings hold."""
+    from trackproc.io.csvtext import parse_csv_metadata
+
+    starts = [i for i, c in enumerate(comments) if c.startswith("# trackproc:")]
+    if not starts:
+        return comments
+    i = end = starts[0]
+    if comments[i].rstrip().endswith("{"):     # the block's own closing brace is the one at no indent
+        end = next((j for j in range(i, len(comments)) if comments[j].rstrip() == "# }"), i)
+    meta = parse_csv_metadata(c[1:] for c in comments[i:end + 1])
+    if not meta:
+        return comments
+    return comments[:i] + ["# trackproc: " + json.dumps(meta)] + comments[end + 1:]
 
 
 def _comment(line: str):

@@ -22,6 +22,7 @@ from trackproc.cli import passes_cmd  # noqa: F401
 from trackproc.cli import compare_cmd  # noqa: F401
 from trackproc.cli import identify_cmd  # noqa: F401
 from trackproc.cli import fit_tle_cmd  # noqa: F401
+from trackproc.cli import import_orekit_cmd  # noqa: F401
 from trackproc.cli import help_cmd  # noqa: F401
 # isort: on
 
@@ -43,6 +44,7 @@ SUMMARIES = {
     "compare": "Residuals of a pass against a state or TLE: RMS after the pass's own offset and drift.",
     "identify": "Which catalogue TLE is this pass? Ranked fits, likelihood ratios, a verdict.",
     "fit-tle": "Fit a TLE (SGP4 mean elements, B*) to passes or an ephemeris, with covariance and a verdict.",
+    "import-orekit": "Orekit orbit-determination configuration (.in) -> stations table, initial state, defaults.",
     "help": "A command's full help (trackproc help CMD), or the manual page (--man).",
     "passes": "Pass schedule of a state or TLE: AOS/TCA/LOS, max elevation, azimuths, Doppler per station.",
 }

@@ -26,9 +26,12 @@ class ScheduleFormat(str, Enum):
 @app.command("passes")
 @force_options
 def passes_command(
-    orbit: str = typer.Argument(..., metavar="STATE.json|TLE", help="Orbit state file or TLE; - for stdin."),
-    stations: str = typer.Option(..., "--stations", metavar="STATIONS.csv",
-                                 help="Stations table: station, lat_deg, lon_deg, height_m."),
+    orbit: str = typer.Argument(..., metavar="STATE.json|TLE|PASS",
+                                help="Orbit state file or TLE; - for stdin; a pass file (or metadata:PASS): the TLE "
+                                     "stored in its metadata (DopTrack)."),
+    stations: Optional[str] = typer.Option(None, "--stations", metavar="STATIONS.csv|PASS",
+                                           help="Stations table: station, lat_deg, lon_deg, height_m; or a pass "
+                                                "file: its stations (default: the stations of the orbit's pass file)."),
     span: str = typer.Option(..., "--span", metavar="S", help="Span from the start: seconds, or 90m, 6h, 2d."),
     step: str = typer.Option("30", "--step", metavar="S",
                              help="Search grid, s, or 90s, 1m (maxima are refined; a pass shorter than the step is found)."),
@@ -51,7 +54,8 @@ def passes_command(
 ) -> None:
     """Pass schedule per station: AOS, TCA (closest approach), LOS times, maximum elevation,
     azimuth, elevation and range at AOS/TCA/LOS, and Doppler there with --carrier-hz. A TLE is
-    evaluated by SGP4 (default), a state integrated with J2.
+    evaluated by SGP4 (default), a state integrated with J2. A pass file as the orbit (e.g. one
+    ingested from DopTrack) gives the TLE and the stations its metadata holds.
 
     Examples (run from the repository root, on the shipped sample_data/):
 
@@ -61,9 +65,12 @@ def passes_command(
         trackproc passes sample_data/iss.tle --stations sample_data/stations.csv --span 2d \\
             --carrier-hz 145.87e6 -o passes.csv
 
+        trackproc passes sample_data/iss.tle --stations sample_data/multistation.parquet --span 6h -o -
+
     Exit status: 0 ok (also when no pass is found: an empty table, said on stderr); 2 bad
     options or input; 1 propagation failure.
     """
+    from trackproc.errors import InputError
     from trackproc.io.validate import parse_duration
 
     step = parse_duration(step, "--step")
@@ -89,8 +96,17 @@ def passes_command(
                             min_elevation_deg=min_elevation, carrier_hz=carrier_hz,
                             force=force.value if force is not None else None, earth=earth.value,
                             range_rate_model=range_rate_model.value)
-    table = read_stations(stations)
     source = read_orbit(orbit, orientation)
+    if stations is not None:
+        table = read_stations(stations)
+    elif source.pass_table is not None:
+        table = source.pass_table.stations()
+        if not table:
+            raise InputError("no stations in the pass file's metadata", file=source.source, column="--stations",
+                             expected="--stations STATIONS.csv, or a pass file ingested with its stations")
+    else:
+        raise InputError("no stations given", column="--stations", found=orbit,
+                         expected="--stations STATIONS.csv (or a pass file), or a pass file as the orbit")
     options.force_model = full_force_model(force_settings, source, force, orientation)
     frame, meta = find_passes(source, table, options, orientation)
     if "note" in meta:

@@ -65,9 +65,10 @@ def _format(output: str, requested: Optional[EphemerisFormat]) -> EphemerisForma
 @app.command("propagate")
 @force_options
 def propagate_command(
-    state: str = typer.Argument(..., metavar="STATE.json|TLE|metadata",
+    state: str = typer.Argument(..., metavar="STATE.json|TLE|metadata[:PASS]",
                                 help="Initial state (JSON state file, any supported frame) or a TLE; - for stdin; "
-                                     "'metadata' with --at: the TLE stored in that pass file (DopTrack)."),
+                                     "'metadata' with --at: the TLE stored in that pass file (DopTrack); "
+                                     "'metadata:PASS': the TLE stored in PASS (its stations serve --at-station)."),
     span: Optional[str] = typer.Option(None, "--span", metavar="S",
                                        help="Span from the start, s, or with a unit: 90s, 45m, 6h, 2d (negative: backwards in time)."),
     step: Optional[str] = typer.Option(None, "--step", metavar="S", help="Output spacing, s, or with a unit: 90s, 45m, 6h, 2d (with --span)."),
@@ -132,6 +133,9 @@ def propagate_command(
         trackproc propagate sample_data/iss.tle --span 86400 --step 10 --at-station CPH \\
             --stations sample_data/stations.csv --carrier-hz 145.87e6 --visible-only -o predicted.csv
 
+        trackproc propagate sample_data/truth.json --at sample_data/multistation.parquet --at-station KIR \\
+            --stations sample_data/multistation.parquet -o kir_predicted.csv
+
     Exit status: 0 ok; 2 bad options or input; 1 propagation failure (the Taylor run stopped,
     the orbit enters the Earth, or --visible-only found no pass).
     """
@@ -143,8 +147,10 @@ def propagate_command(
         raise typer.BadParameter("give either --span S --step S or --at PASSFILE, not both", param_hint="--at")
     if at is None and (span is None or step is None):
         raise typer.BadParameter("give --span S and --step S, or --at PASSFILE", param_hint="--span/--step")
-    if at is None and at_station is not None and stations is None:
-        raise typer.BadParameter("--at-station needs --stations STATIONS.csv (or --at PASSFILE with stations)",
+    from trackproc.pipeline.orbit_source import metadata_path
+
+    if at is None and at_station is not None and stations is None and metadata_path(state) is None:
+        raise typer.BadParameter("--at-station needs --stations STATIONS.csv (or --at PASSFILE or metadata:PASS with stations)",
                                  param_hint="--stations")
     for flag, given in (("--carrier-hz", carrier_hz is not None), ("--visible-only", visible_only)):
         if given and at_station is None:
@@ -199,7 +205,7 @@ def propagate_command(
             from trackproc.io.stations import read_stations
 
             table = read_stations(stations)
-        station = resolve_station(at_station, table, pass_table)
+        station = resolve_station(at_station, table, pass_table if pass_table is not None else orbit.pass_table)
     if orbit.state is not None:
         epoch0 = orbit.state.epoch
     else:

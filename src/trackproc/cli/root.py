@@ -40,7 +40,7 @@ def _root(
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Only errors on stderr."),
     verbose: bool = typer.Option(False, "--verbose", "-v", help="Progress and debug messages on stderr."),
     no_metadata: bool = typer.Option(False, "--no-metadata",
-                                     help="CSV outputs without the '# trackproc: {...}' first line (plain "
+                                     help="CSV outputs without the '# trackproc: {...}' metadata block (plain "
                                           "CSV for spreadsheets; also TRACKPROC_CSV_METADATA=0)."),
 ) -> None:
     """Satellite tracking passes in, orbits with honest error matrices out.

@@ -15,7 +15,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 
 from trackproc.errors import InputError
-from trackproc.io.csvtext import CSV_META_PREFIX, TextTable, chunk_rows, iter_text_tables, parse_text_table
+from trackproc.io.csvtext import TextTable, chunk_rows, iter_text_tables, parse_csv_metadata, parse_text_table
 from trackproc.io.problems import TIME_EXPECTED, UNPARSEABLE_TIME, WRONG_TYPE, Problems
 from trackproc.io.validate import FIRST_YEAR, LAST_YEAR, check_input_rows
 
@@ -134,14 +134,7 @@ def _chain(head: bytes, blocks: Iterator[bytes]) -> Iterator[bytes]:
 
 
 def _csv_meta(comments: list[str]) -> dict:
-    meta = {}
-    for comment in comments:
-        if comment.startswith(CSV_META_PREFIX):
-            try:
-                meta = json.loads(comment[len(CSV_META_PREFIX):])
-            except (ValueError, RecursionError):
-                meta = {}
-    return meta
+    return parse_csv_metadata(comments)
 
 
 def _text_source(text: TextTable, source: str) -> SourceTable:

@@ -35,13 +35,86 @@ def chunk_rows() -> int:
         return DEFAULT_CHUNK_ROWS
 
 
+#: Width beyond which a metadata value is spread over lines (one key or item a line).
+META_WIDTH = 96
+
+
 def csv_metadata_line(meta_text: str) -> str:
-    """The ``# trackproc: {...}`` first line of a CSV output, or nothing when the run asked for
-    plain CSV (``--no-metadata`` / ``TRACKPROC_CSV_METADATA=0``: spreadsheets and pandas read it
-    without options; the metadata then lives only in Parquet/Arrow outputs)."""
+    """The ``# trackproc: {`` ... ``# }`` comment block that opens a CSV output (its JSON spread
+    over lines of about :data:`META_WIDTH` characters, one key a line, so that a person reads
+    it; :func:`parse_csv_metadata` reads it back, and pandas ``comment="#"`` skips it), or nothing
+    when the run asked for plain CSV (``--no-metadata`` / ``TRACKPROC_CSV_METADATA=0``:
+    spreadsheets and pandas read it without options; the metadata then lives only in
+    Parquet/Arrow outputs)."""
     if os.environ.get("TRACKPROC_CSV_METADATA", "1").strip().lower() in ("0", "false", "no", "off"):
         return ""
-    return f"# {CSV_META_PREFIX} {meta_text}\n"
+    import json
+
+    lines = _json_lines(json.loads(meta_text), "", "")
+    return f"# {CSV_META_PREFIX} " + "\n# ".join(lines) + "\n"
+
+
+def _json_lines(value, key: str, indent: str) -> list[str]:
+    """``key`` + ``value`` as JSON lines: on one line when it fits in :data:`META_WIDTH`, else
+    an object one member a line (a list one item a line), indented by two spaces a level."""
+    import json
+
+    flat = key + json.dumps(value, ensure_ascii=False, separators=(", ", ": "))
+    if len(indent) + len(flat) <= META_WIDTH or not value or not isinstance(value, (dict, list)):
+        return [indent + flat]
+    opening, closing = ("{", "}") if isinstance(value, dict) else ("[", "]")
+    if isinstance(value, list) and not any(isinstance(v, (dict, list)) for v in value):
+        return _packed(value, key, indent)      # numbers and words: as many a line as fit
+    items = list(value.items()) if isinstance(value, dict) else [(None, v) for v in value]
+    out = [indent + key + opening]
+    for i, (k, v) in enumerate(items):
+        member = _json_lines(v, "" if k is None else json.dumps(str(k), ensure_ascii=False) + ": ", indent + "  ")
+        if i < len(items) - 1:
+            member[-1] += ","
+        out.extend(member)
+    out.append(indent + closing)
+    return out
+
+
+def _packed(values: list, key: str, indent: str) -> list[str]:
+    """A list of scalars over as few lines of :data:`META_WIDTH` as its items allow, the first
+    items on the key's line and the closing bracket after the last."""
+    import json
+
+    out, line = [], indent + key + "["
+    for i, v in enumerate(values):
+        item = json.dumps(v, ensure_ascii=False) + ("," if i < len(values) - 1 else "]")
+        if len(line) + len(item) > META_WIDTH and line.strip() not in ("", key.strip() + "["):
+            out.append(line.rstrip())
+            line = indent + "  "
+        line += item + " "
+    out.append(line.rstrip())
+    return out
+
+
+def parse_csv_metadata(comments: Iterable[str]) -> dict:
+    """The trackproc metadata of a CSV from its comment lines (``#`` removed): the block
+    :func:`csv_metadata_line` writes, or the one-line ``trackproc: {...}`` of earlier versions;
+    {} when there is none or it is not valid JSON."""
+    import json
+
+    text = None
+    for comment in comments:
+        comment = comment.strip()
+        if text is None:
+            if comment.startswith(CSV_META_PREFIX):
+                text = comment[len(CSV_META_PREFIX):]
+            else:
+                continue
+        else:
+            text += "\n" + comment
+        if text.rstrip().endswith("}"):
+            try:
+                meta = json.loads(text)
+            except (ValueError, RecursionError):
+                continue
+            return meta if isinstance(meta, dict) else {}
+    return {}
 
 
 @dataclass

@@ -22,7 +22,7 @@ sigma_range_m, sigma_range_rate_m_s (, sigma_doppler_hz)    ``--at-station`` wit
 State components are numbered 1..6 = x, y, z, vx, vy, vz, so ``stm_1_4 = d x(t) / d vx(epoch)``
 (unit s) and ``cov_1_4`` the x-vx covariance (m^2/s). Rows are in time order. The metadata (a
 JSON object under the key ``trackproc`` of the Arrow/Parquet schema metadata; the first line
-``# trackproc: {...}`` of a CSV) names the force model and its constants, the Earth
+``# trackproc: {`` block opening a CSV) names the force model and its constants, the Earth
 orientation, the propagator and its tolerance, the station and the range-rate model.
 
 CCSDS OEM: :func:`oem_text` writes Orbit Ephemeris Message KVN (CCSDS 502.0-B-2/B-3

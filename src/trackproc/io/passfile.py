@@ -14,7 +14,7 @@ sigma    float64                1-sigma, same unit as value, > 0
 =======  =====================  =================================================
 
 Rows are sorted by station, then time, then kind. The metadata (a JSON object under the key
-``trackproc`` of the Arrow/Parquet schema metadata; the first line ``# trackproc: {...}`` of a
+``trackproc`` of the Arrow/Parquet schema metadata; the ``# trackproc: {`` comment block opening a
 CSV) holds ``schema_version``, ``units``, ``time_scale`` ("UTC"), ``carrier_hz``,
 ``doppler_mode`` (one-way | two-way), ``doppler_sign_convention``, ``sources``, ``stations``
 (name -> {lat_deg, lon_deg, height_m[, range_bias_m]}) and ``trackproc_version``.

@@ -4,7 +4,7 @@ Columns: ``time`` (UTC), ``station``, ``pass_id``, ``kind``, ``unit`` (of the va
 ``observed``, ``computed``, ``residual`` (observed - computed; azimuth wrapped to [-π, π)),
 ``normalized_residual`` (residual / sigma), ``sigma``, ``edited`` (true = excluded by the
 k-sigma editing, still reported). Values in SI (m, m/s, Hz, rad). The JSON metadata (under the
-key ``trackproc`` of the schema metadata, or the first ``# trackproc:`` line of a CSV) names the
+key ``trackproc`` of the schema metadata, or the ``# trackproc: {`` block opening a CSV) names the
 solution: epoch, parameters, force model, range-rate model.
 """
 
@@ -20,6 +20,7 @@ import pandas as pd
 import pyarrow as pa
 
 from trackproc.io.atomic import open_atomic
+from trackproc.io.csvtext import csv_metadata_line
 from trackproc.io.passfile import iso_times
 from trackproc.io.tables import arrow_table_bytes
 
@@ -63,7 +64,7 @@ def residuals_bytes(frame: pd.DataFrame, meta: dict | None = None, fmt: str = "p
     meta = meta or {}
     if fmt == "csv":
         out = io.StringIO()
-        out.write(f"# {META_KEY}: {json.dumps(meta, sort_keys=True, default=str)}\n")
+        out.write(csv_metadata_line(json.dumps(meta, sort_keys=True, default=str)))
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(COLUMNS)
         cells = [iso_times(frame["time"])] + [frame[c].to_numpy(dtype=object) for c in COLUMNS[1:]]

@@ -13,11 +13,14 @@ import math
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
+from trackproc.io.csvtext import CSV_META_PREFIX
 from trackproc.io.tabular import parse_text_table
 from trackproc.io.validate import check_name, check_station
 from trackproc.types.station import Station  # noqa: F401  (re-exported)
 
 REQUIRED = ("station", "lat_deg", "lon_deg", "height_m")
+#: ``metadata:PASS`` (the spelling of ``--initial``) names the pass file's stations, as PASS does.
+PASS_PREFIX = "metadata:"
 
 
 _LIMITS = {
@@ -77,11 +80,21 @@ def parse_stations(data: bytes, source: str) -> dict[str, Station]:
 
 
 def read_stations(path: str, epoch=None, eccentricities: str | None = None) -> dict[str, Station]:
-    """Stations by name from a stations CSV file (or ``-`` for stdin), or from a SINEX file
+    """Stations by name from a stations CSV file (or ``-`` for stdin), from a SINEX file
     (positions and velocities at ``epoch``, datetime64 UTC, with ``eccentricities``: see
-    :mod:`trackproc.io.sinex`)."""
+    :mod:`trackproc.io.sinex`), or from a pass file's metadata (Parquet, Arrow or trackproc CSV;
+    ``metadata:PASS`` the same)."""
+    if str(path).startswith(PASS_PREFIX):
+        path = str(path)[len(PASS_PREFIX):]
+        if not path:
+            raise InputError("no pass file after 'metadata:'", found=PASS_PREFIX,
+                             expected="metadata:PASS.parquet (the pass file whose metadata holds the stations)")
     source = "<stdin>" if is_stdio(path) else str(path)
     data = read_input_bytes(path)
+    from trackproc.io.columns import sniff_container
+
+    if sniff_container(data) != "text":
+        return pass_file_stations(data, source)
     if not data.strip():
         raise InputError("empty stations table", file=source, row=1, found="no data",
                          expected="a header station, lat_deg, lon_deg, height_m and one row per station")
@@ -98,4 +111,26 @@ def read_stations(path: str, epoch=None, eccentricities: str | None = None) -> d
     if eccentricities is not None:
         raise InputError("eccentricities apply to SINEX station files", file=source, column="--eccentricities",
                          expected="--stations FILE.snx")
-    return parse_stations(data, source)
+    try:
+        return parse_stations(data, source)
+    except InputError as exc:
+        if not data.lstrip().startswith(b"# " + CSV_META_PREFIX.encode()):
+            raise
+        error = exc
+    try:                                    # a trackproc CSV: a pass file's stations?
+        return pass_file_stations(data, source)
+    except InputError:
+        raise error from None
+
+
+def pass_file_stations(data: bytes, source: str) -> dict[str, Station]:
+    """The stations a pass file records in its metadata (as ``ingest`` wrote them), so that a
+    pass file can stand for its stations table."""
+    from trackproc.io.passfile import parse_pass_table
+
+    stations = parse_pass_table(data, source).stations()
+    if not stations:
+        raise InputError("no stations in the pass file's metadata", file=source, column="stations",
+                         found="a pass file without station coordinates",
+                         expected="a stations CSV, a SINEX file, or a pass file ingested with --stations (or from DopTrack)")
+    return stations

@@ -22,7 +22,7 @@ def table_bytes(frame: pd.DataFrame, meta: dict, fmt: str) -> bytes:
     """The one-row-per-time table as ``parquet``, ``arrow`` (IPC stream), ``csv`` or ``json``.
 
     Parquet/Arrow carry ``meta`` under the ``trackproc`` key of the schema metadata, CSV on a
-    first ``# trackproc: {...}`` line (as pass files do); JSON is
+    ``# trackproc: {`` comment block (as pass files do); JSON is
     ``{"columns": [...], "metadata": {...}, "rows": [{column: value}, ...]}`` with ISO 8601
     times and null for NaN.
     """

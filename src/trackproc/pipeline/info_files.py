@@ -27,7 +27,7 @@ from trackproc.isotime import iso_utc
 #: The kinds :func:`describe` recognises (named in the error for anything else).
 KINDS = ("canonical pass file", "raw pass table (CSV, Parquet, Arrow)", "stations table", "ephemeris",
          "state JSON", "TLE / TLE catalogue", "CCSDS OPM", "CCSDS OEM", "CCSDS TDM", "ILRS CRD", "ILRS CPF",
-         "SINEX", "ICGEM gravity field (.gfc, .gfc.gz)", "DopTrack CSV", "DopTrack YAML", "Orekit .aer",
+         "SINEX", "ICGEM gravity field (.gfc, .gfc.gz)", "DopTrack CSV", "DopTrack YAML", "Orekit .aer", "Orekit OD configuration (.in)",
          "detect nominal JSON", "smooth summary", "batch summary (JSON, CSV)", "residuals table",
          "requirements table (CSV, Markdown)", "pass schedule (CSV, JSON)", "trackproc JSON or CSV output")
 
@@ -83,6 +83,10 @@ def describe(data: bytes, path: str) -> tuple[dict, str | None]:
         return raw_info(data, path, source, "DopTrack pass (received frequency, one-way Doppler)"), None
     if orekit_aer.looks_like_aer(text) or source.lower().endswith(".aer"):
         return raw_info(data, path, source, "Orekit .aer measurements (azimuth, elevation, range)"), None
+    from trackproc.io import orekit_config
+
+    if orekit_config.looks_like_orekit_config(text):
+        return orekit_config_info(data, source), None
     if first.startswith("|") or (first and "\n|" in text[:2000] and not first.startswith("#")):
         return markdown_info(data, source), None
     header = next((line for line in text.splitlines() if line.strip() and not line.startswith("#")), "")
@@ -421,6 +425,23 @@ def cpf_info(data: bytes, source: str) -> dict:
             "above_equatorial_radius_km": [float(r.min() - WGS84_A) / 1e3, float(r.max() - WGS84_A) / 1e3]
             if r.size else None,
             "centre_of_mass_corrected": eph.com_corrected}
+
+
+def orekit_config_info(data: bytes, source: str) -> dict:
+    """Orekit's orbit-determination configuration: the initial orbit, the stations and the range
+    sigma, through the reader ``import-orekit`` uses (so a file it would refuse is refused here)."""
+    from trackproc.io import orekit_config as oc
+
+    cfg = oc.parse_orekit_config(data, source)
+    rows = oc.stations(cfg)
+    state = oc.initial_state(cfg)
+    sigmas = sorted({r["range_sigma_m"] for r in rows if math.isfinite(r["range_sigma_m"])})
+    return {"file": source, "kind": "Orekit orbit-determination configuration (.in)",
+            "initial_orbit": f"{state['epoch']} {state['frame']}", "stations": len(rows),
+            "station_names": ", ".join(r["station"] for r in rows),
+            "range_sigma": "/".join(f"{s:g}" for s in sigmas) + " m" if sigmas else None,
+            "measurements": cfg.text("measurements.files"),
+            "use": "trackproc import-orekit FILE.in -o DIR (stations.csv, initial.json, defaults.toml)"}
 
 
 def sinex_info(data: bytes, source: str) -> dict:

@@ -42,18 +42,50 @@ SGP4_LABEL = "SGP4 (TLE mean elements, WGS-72; Vallado's sgp4 package), TEME -> 
 
 @dataclass
 class OrbitInput:
-    """A read ``STATE|TLE`` argument: exactly one of ``state`` (GCRF) or ``tle``."""
+    """A read ``STATE|TLE`` argument: exactly one of ``state`` (GCRF) or ``tle``; ``pass_table``
+    is the pass file the TLE came from (``metadata:PASS``, or a pass file given as the orbit),
+    whose stations a command may use."""
 
     state: Optional[object] = None
     tle: Optional[object] = None
     source: str = "<orbit>"
+    pass_table: Optional[object] = None
+
+
+#: ``metadata:PASS`` names the TLE stored in the pass file PASS (DopTrack), wherever an orbit is read.
+METADATA_PREFIX = "metadata:"
+
+
+def metadata_path(spec: str) -> Optional[str]:
+    """The pass file of a ``metadata:PASS`` argument, else None."""
+    spec = str(spec)
+    if spec.startswith(METADATA_PREFIX):
+        path = spec[len(METADATA_PREFIX):]
+        if not path:
+            raise InputError("no pass file after 'metadata:'", found=spec,
+                             expected="metadata:PASS.parquet (the pass file whose metadata holds the TLE)")
+        return path
+    return None
+
+
+def orbit_from_pass(table, source: str) -> OrbitInput:
+    """The TLE of a pass file's metadata as an :class:`OrbitInput` (its stations kept)."""
+    tle = tle_from_pass_metadata(table, source)
+    return OrbitInput(tle=tle, source=tle.source, pass_table=table)
 
 
 def read_orbit(path: str, eop=None) -> OrbitInput:
-    """A JSON state file or a 2/3-line TLE (``-`` = stdin), told apart by the first character."""
+    """A JSON state file or a 2/3-line TLE (``-`` = stdin), told apart by the first character; or
+    the TLE a pass file's metadata holds, for ``metadata:PASS`` or a Parquet/Arrow pass file."""
 
-    source = "<stdin>" if is_stdio(path) else str(path)
-    data = read_input_bytes(path)
+    from trackproc.io.columns import sniff_container
+    from trackproc.io.passfile import parse_pass_table
+
+    spec = metadata_path(path)
+    source = "<stdin>" if is_stdio(spec or path) else str(spec or path)
+    data = read_input_bytes(spec or path)
+    if spec is not None or sniff_container(data) != "text":
+        return orbit_from_pass(parse_pass_table(data, source), source)
     if is_state_json(data):
         return OrbitInput(state=parse_state(data, source, eop), source=source)
     return OrbitInput(tle=parse_tle(data.decode("utf-8", errors="replace"), source), source=source)
@@ -108,11 +140,13 @@ def initial_orbit(initial: str, tables: list, eop=None) -> OrbitInput:
 
 
 def initial_state(initial: str, tables: list, eop=None, at=None):
-    """``--initial STATE.json|TLE|metadata`` of ``refine`` and ``estimate``: a GCRF state (a TLE,
-    given or from the pass files' metadata, by SGP4 at its epoch or at ``at``)."""
+    """``--initial STATE.json|TLE|metadata[:PASS]`` of ``refine`` and ``estimate``: a GCRF state (a
+    TLE, given or from the pass files' metadata, by SGP4 at its epoch or at ``at``)."""
 
     if initial == "metadata":
         return tle_state(metadata_tle(tables), at=at, eop=eop)
+    if metadata_path(initial) is not None:
+        return tle_state(read_orbit(initial, eop).tle, at=at, eop=eop)
     return read_state_or_tle(initial, eop, at=at)
 
 
