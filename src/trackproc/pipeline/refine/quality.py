@@ -30,6 +30,9 @@ def add_decision(q, refusal: dict | None, decision: dict | None) -> None:
     if refusal is not None and refusal.get("code") == "step":
         q.add("declined", "suspect", refusal["reason"], value=refusal["step"]["statistic"],
               limit=refusal["step"]["limit"])
+    elif refusal is not None and refusal.get("code") == "second_signal":
+        t = (decision or {}).get("apriori_test", {})
+        q.add("declined", "suspect", refusal["reason"], value=t.get("statistic"), limit=t.get("limit"))
     elif refusal is not None and refusal.get("code") == "declined":
         q.add("declined", "suspect", refusal["reason"], value=(decision or {}).get("apriori_test", {}).get("statistic"),
               limit=(decision or {}).get("apriori_test", {}).get("limit"))

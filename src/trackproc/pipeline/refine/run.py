@@ -18,13 +18,16 @@ from trackproc.pipeline.refine.gates import (circular_consistency, may_refuse, s
 from trackproc.pipeline.refine.noise import solve_noise
 from trackproc.pipeline.refine.options import MAX_TRAVERSE_ITERATIONS, TRAVERSE_TOLERANCE_S, RefineOptions, RefineResult
 from trackproc.pipeline.refine.result import finish
+from trackproc.pipeline.refine.second_signal import (annotate, declined_signal, find_second_signal, carry_noise,
+                                                    public, refine_edited)
 from trackproc.pipeline.refine.steps import as_kind, declined_step, scan_steps, shifted, step_modifier
 from trackproc.pipeline.refine.traverse import model_traverse, time_tag_covariance
 from trackproc.types import PassTable
 
 
 def refine(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
-           source: str = "<pass>", _modelled_step: dict | None = None) -> RefineResult:
+           source: str = "<pass>", _modelled_step: dict | None = None, _second_signal: dict | None = None,
+           _noise_of=None) -> RefineResult:
     """Refine ``initial`` (a GCRF :class:`~trackproc.io.statefile.State`, or a TLE's) from one pass.
 
     The consistency gates (docs/refine.md, "Quality"): the a-priori is scaled by its variance
@@ -36,7 +39,10 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     pass (:func:`~trackproc.pipeline.refine.steps.scan_steps`) is modelled from the detected sample
     on when it is one of the transmitter's frequency (the pass refined again with a ``doppler_step``;
     ``_modelled_step`` is that detection), and declines the pass when it is a jump of the time tags
-    or the step model does not remove it (``step`` in the diagnostics and the quality).
+    or the step model does not remove it (``step`` in the diagnostics and the quality). Samples of a
+    second signal (:mod:`~trackproc.pipeline.refine.second_signal`) are edited out and the pass refined
+    again with the same noise model (``_second_signal`` those samples, ``_noise_of`` the first
+    refinement), or the pass declined when that does not free it (``second_signal``).
 
     Returns :class:`RefineResult`; raises :class:`InputError` (exit 2) for invalid input and
     :class:`ProcessingError` (exit 1) when the refinement fails (no convergence, rank deficiency).
@@ -44,7 +50,11 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     opt = options or RefineOptions()
     ref = prepare(table, initial, stations, opt, eop, source)
     # the pass's noise model (REML) and transmitter drift first, then the gates on that solution
-    ref, sol, kkt, scale = solve_noise(table, initial, ref, stations, eop, source)
+    if _noise_of is not None:                           # a second signal edited out: the noise model stands
+        ref = carry_noise(ref, _noise_of)
+        sol, kkt, scale = solve_weighted(ref)
+    else:
+        ref, sol, kkt, scale = solve_noise(table, initial, ref, stations, eop, source)
     epoch0 = ref.problem.epoch                          # the epoch a modelled step's time is counted from
     first = (ref, sol, kkt, scale)
     ref, sol, kkt, scale, adaptation, improvement, refusal = solve_gated(ref, first=(sol, kkt, scale))
@@ -59,6 +69,23 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
             and first[0].modifier_drivers(md.DopplerOffset) else None)
     if scan is not None and refusal is not None and _modelled_step is None and scan["kind"] != "frequency":
         scan = None
+    # another emitter tracked for part of the pass: edit its samples out and refine again, or decline.
+    # A level shift the scan finds goes first: a trimmed white refit reads a frequency step as runs
+    signal = (find_second_signal(*scanned[:2]) if _modelled_step is None and not (scan or {}).get("significant")
+              else None)
+    if signal is not None and signal["found"]:
+        if _second_signal is None:
+            edited = refine_edited(refine, table, initial, stations, opt, eop, source, ref, signal)
+            if edited is not None:
+                return edited
+        if may_refuse(first[0]):
+            declined = declined_signal(first[0], signal, _second_signal)
+            ref, sol, kkt, scale = first
+            improvement = stale_improvement(ref, sol, scale) if ref.priors else None
+            return annotate(finish(ref, sol, kkt, scale, improvement=improvement, refusal=declined,
+                                   decision=declined["decision"]),
+                            {"action": "declined", "check": public(signal), "edited": public(_second_signal)})
+    said = None if signal is None else {"action": "said" if signal["found"] else "none", "check": public(signal)}
     if _modelled_step is not None:
         step = {"action": "modelled", "modelled": _modelled_step,
                 "parameter": ref.modifier_drivers(md.DopplerStep)[0].name, "scan": scan}
@@ -75,9 +102,9 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
             try:
                 stepped = refine(table, initial, stations,
                                  replace(opt, modifiers=tuple(opt.modifiers) + (step_modifier(ref, freq),)), eop,
-                                 source, _modelled_step=freq)
+                                 source, _modelled_step=freq, _second_signal=_second_signal, _noise_of=_noise_of)
                 if refusal is None or (stepped.state.diagnostics.get("step") or {}).get("action") != "declined":
-                    return stepped
+                    return annotate(stepped, said)
                 step = None                              # the gates' own refusal stands
             except ProcessingError:
                 pass                                     # the step model does not converge: decline below
@@ -87,8 +114,8 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     if declined is not None:
         ref, sol, kkt, scale = first
         improvement = stale_improvement(ref, sol, scale) if ref.priors else None
-        return finish(ref, sol, kkt, scale, improvement=improvement, refusal=declined,
-                      decision=declined["decision"], step=step)
+        return annotate(finish(ref, sol, kkt, scale, improvement=improvement, refusal=declined,
+                               decision=declined["decision"], step=step), said)
     # the solution epoch is the refined orbit's own traverse point: re-solve there until it stays
     moves = []
     for _ in range(MAX_TRAVERSE_ITERATIONS if refusal is None else 0):
@@ -139,6 +166,6 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
         free = replace(ref, options=replace(ref.options, circular=False), names=ref.names[:-1], x0=ref.x0[:-1],
                        scales=ref.scales[:-1])
         consistency = circular_consistency(free, sol, scale)
-    return finish(ref, sol, kkt, scale, consistency=consistency, adaptation=adaptation, traverse_moves=moves,
-                  improvement=improvement, refusal=refusal,
-                  decision=decision if refusal is None else refusal.get("decision"), step=step)
+    return annotate(finish(ref, sol, kkt, scale, consistency=consistency, adaptation=adaptation,
+                           traverse_moves=moves, improvement=improvement, refusal=refusal,
+                           decision=decision if refusal is None else refusal.get("decision"), step=step), said)
