@@ -21,7 +21,7 @@ from trackproc.pipeline.batch.schema import CONFIG_ENV, SCHEMA
 log = logging.getLogger("trackproc")
 
 _PANELS = {"batch": "Run", "ingest": "Ingest step", "smooth": "Smooth step", "refine": "Refine step",
-           "estimate": "Estimate step"}
+           "estimate": "Estimate step", "filter": "Filter step"}
 _ANNOTATIONS = {"str": Optional[str], "path": Optional[str], "choice": Optional[str], "degree": Optional[str],
                 "int": Optional[int], "float": Optional[float], "duration": Optional[str], "bool": Optional[bool],
                 "list": Optional[List[str]], "paths": Optional[List[str]], "map": Optional[List[str]]}
