@@ -88,3 +88,20 @@ def test_failed_filter_step_exits_1_and_keeps_no_state(tmp_path, run_cli):
     assert res.exit_code == 3, res.stderr
     assert "filter: failed" in res.stderr
     assert not (out / "filter" / "state.json").exists()
+
+
+def test_report_lists_the_filter_run_without_a_figure_error(tmp_path, run_cli):
+    """report.html has the filter's row (its state file linked) and no "figures left out"."""
+    inbox, out = tmp_path / "in", tmp_path / "out"
+    inbox.mkdir()
+    _split(inbox)
+    res = run_cli(["batch", "-i", inbox, "-o", out, *SETTINGS])
+    assert res.exit_code == 0, res.stderr
+    html = (out / "report.html").read_text()
+    assert "filter over 14 input(s), state carried" in html
+    assert "Figures left out" not in html and "figures left out" not in res.stderr
+    (record,) = json.loads((out / "summary.json").read_text())["estimates"]
+    assert record["task"] == "filter" and record["status"] == "ok"
+    # one sweep from the 10 km first guess: suspect by its innovations (docs/filter.md), not rejected
+    assert record["numbers"]["quality"] == "suspect" and "innovations" in record["numbers"]["quality_reasons"]
+    assert record["numbers"]["sigma_along_m"] > 0
