@@ -105,3 +105,19 @@ def test_report_lists_the_filter_run_without_a_figure_error(tmp_path, run_cli):
     # one sweep from the 10 km first guess: suspect by its innovations (docs/filter.md), not rejected
     assert record["numbers"]["quality"] == "suspect" and "innovations" in record["numbers"]["quality_reasons"]
     assert record["numbers"]["sigma_along_m"] > 0
+
+
+def test_a_corrupt_carried_state_fails_the_filter_alone_and_is_left_as_it_was(tmp_path, run_cli):
+    """A carried state that is not a state file: the filter step fails with the file named, the
+    inputs stay ok (exit 3), and the file is not replaced."""
+    inbox, out = tmp_path / "in", tmp_path / "out"
+    inbox.mkdir()
+    _split(inbox)
+    (out / "filter").mkdir(parents=True)
+    (out / "filter" / "state.json").write_text("{not json")
+    res = run_cli(["batch", "-i", inbox, "-o", out, *SETTINGS])
+    assert res.exit_code == 3, res.stderr
+    (line,) = [ln for ln in res.stderr.splitlines() if "filter: failed" in ln]
+    assert "state.json" in line and "Traceback" not in res.stderr
+    assert (out / "filter" / "state.json").read_text() == "{not json"
+    assert not [p for p in (out / "filter").glob("*.json") if p.name != "state.json"]

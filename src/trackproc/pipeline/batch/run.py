@@ -61,6 +61,9 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None,
     if "filter" in chain.names and not settings.get("filter.initial"):
         raise InputError("the filter step needs an initial state", column="--filter-initial",
                          expected="--filter-initial STATE.json|TLE, or initial = \"...\" in [filter]")
+    if "filter" in chain.names and settings.get("filter.eop") is not None and settings.get("filter.dut1") is not None:
+        raise InputError("give either an EOP file or UT1-UTC, not both", column="filter.eop / filter.dut1",
+                         expected="one of --filter-eop, --filter-dut1")
     files, paths, hashes = _read_files(settings, chain)
     if "refine" in chain.names:  # a state file every input would fail on: a usage error, now
         initial_state(files["refine.initial"], paths["refine.initial"], None)

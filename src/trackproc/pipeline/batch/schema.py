@@ -280,7 +280,13 @@ SCHEMA: tuple[Opt, ...] = (
         choices=("two-body", "j2"), affects=True),
     Opt("filter", "kinds", "list", (), ("--filter-kinds",), "Kinds the filter uses (default all).",
         affects=True, metavar="KIND[,KIND]"),
-    Opt("filter", "dut1", "float", None, ("--filter-dut1",), "UT1-UTC, s.", affects=True, metavar="S"),
+    Opt("filter", "range_rate_model", "choice", None, ("--filter-range-rate-model",),
+        "doppler or instantaneous (default: the pass files' metadata, else doppler).",
+        choices=RANGE_RATE_MODELS, affects=True),
+    Opt("filter", "eop", "path", None, ("--filter-eop",), "IERS finals2000A file (UT1-UTC, polar motion).",
+        affects=True, metavar="FILE"),
+    Opt("filter", "dut1", "float", None, ("--filter-dut1",), "UT1-UTC, s, when no EOP file is given.",
+        affects=True, check=(lambda v: abs(v) <= 0.9, "|UT1-UTC| <= 0.9 s"), metavar="S"),
 )
 
 BY_NAME: dict[str, Opt] = {o.name: o for o in SCHEMA}

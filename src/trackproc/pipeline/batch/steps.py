@@ -191,7 +191,7 @@ def filter_step(ctx: WindowContext, opt: dict) -> None:
     from trackproc.pipeline.od import EstimateOptions
     from trackproc.pipeline.orbit_source import tle_evaluation_epoch
 
-    orientation, warning = earth_orientation(None, opt["dut1"])
+    orientation, warning = earth_orientation(opt["eop"], opt["dut1"])
     if warning:
         ctx.warnings.append(warning)
     tables = []
@@ -212,6 +212,7 @@ def filter_step(ctx: WindowContext, opt: dict) -> None:
     walks = {"doppler_offset": opt["oscillator_noise"]} if opt["oscillator_noise"] else {}
     problem = EstimateOptions(range_bias=opt["range_bias"], doppler_bias=opt["doppler_bias"],
                               apriori_sigma=dict(opt["apriori_sigma"]), force=opt["force"], noise="white",
+                              range_rate_model=opt["range_rate_model"],
                               kinds=list(opt["kinds"]) or None)
     options = FilterOptions(problem=problem, snc_accel=(opt["snc_accel"],) * 3, bias_walk=walks,
                             edit_sigma=opt["edit_sigma"] if opt["edit_sigma"] > 0 else None)
@@ -339,5 +340,5 @@ register(Step("ingest", "input", ingest_step, files=("ingest.stations",)))
 register(Step("smooth", "input", smooth_step))
 register(Step("refine", "input", refine_step, files=("refine.initial", "refine.eop", "ingest.stations"), table=False))
 register(Step("estimate", "window", estimate_step, files=("estimate.initial", "estimate.eop", "ingest.stations")))
-register(Step("filter", "sequence", filter_step, files=("filter.initial", "ingest.stations")))
+register(Step("filter", "sequence", filter_step, files=("filter.initial", "filter.eop", "ingest.stations")))
 
