@@ -9,7 +9,6 @@ held-back test). Issue 27's criterion: no worse than 1.2x the TLE."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from realdata import DOPTRACK, requires
 from test_refine_realdata import EOP, _load, _predicted_rms, evenings, is_dev
@@ -52,7 +51,6 @@ def dev_evenings(n=None):
     return groups if n is None else groups[:n]
 
 
-@pytest.mark.slow
 def test_doptrack_filter_predicts_a_held_back_pass_within_1_2x_the_tle():
     """Two development evenings (1-10 April): the held-back pass within 1.2x the TLE."""
     rows = []
