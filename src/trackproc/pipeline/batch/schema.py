@@ -98,7 +98,7 @@ SCHEMA: tuple[Opt, ...] = (
         "Input directory (its files with a known suffix) or glob (quote it; ** recurses); repeatable.",
         metavar="DIR|GLOB"),
     Opt("batch", "output", "path", None, ("--output", "-o"),
-        "Output directory: passes/, estimates/, summary.json, summary.csv, report.html, the lock file.", metavar="DIR"),
+        "Output directory: passes/, estimates/, filter/, summary.json, summary.csv, report.html, the lock file.", metavar="DIR"),
     Opt("batch", "steps", "list", ("ingest", "smooth"), ("--steps",),
         "The chain, comma separated, in order: ingest, smooth, refine, estimate, filter.",
         metavar="STEP[,STEP]"),
