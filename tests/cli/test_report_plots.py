@@ -256,3 +256,34 @@ def test_batch_report_overview_figure(laid_out):
                             "residual_rms_unit": "Hz", "sigma_radial_m": 10.0 * (i + 1), "sigma_along_m": 300.0,
                             "sigma_cross_m": 5000.0}} for i in range(12)]
     assert_report_ready(laid_out, overview_png(records))
+
+
+def test_filter_figure_bands_and_sigmas(tmp_path, laid_out):
+    """``filter --plot`` on the shipped three-station set: a panel per kind whose ±3σ band is three
+    times the innovation sigma of ``--residuals`` (its √S), angles in degrees, and a sigma panel
+    whose last filtered R/T/N points are the state file's ``sigma_rtn`` (the filtered state at the
+    last measurement)."""
+    import json
+
+    from trackproc.cli.app import main
+
+    out, res, png = tmp_path / "f.json", tmp_path / "r.csv", tmp_path / "f.png"
+    assert main(["-q", "filter", str(SAMPLE / "multistation.parquet"), "--initial", str(SAMPLE / "stale.json"),
+                 "--range-bias", "--apriori-sigma", "range_bias=1000", "--kinds", "range,elevation",
+                 "--residuals", str(res), "--plot", str(png), "-o", str(out)]) == 0
+    assert_report_ready(laid_out, png.read_bytes())
+    fig = laid_out[0]["fig"]
+    labels = [ax.get_ylabel() for ax in fig.axes]
+    assert labels == ["range innovation [m]", "elevation innovation [deg]", "position 1σ [m]"]
+    table = pd.read_csv(res)
+    for ax, kind, factor in ((fig.axes[0], "range", 1.0), (fig.axes[1], "elevation", np.degrees(1.0))):
+        band = [line for line in ax.get_lines() if line.get_label() == "±3σ (3 √S)"][0]
+        y = np.asarray(band.get_ydata(), float)
+        expected = 3.0 * table.loc[table["kind"] == kind, "innovation_sigma"].to_numpy() * factor
+        np.testing.assert_allclose(y[~np.isnan(y)], expected, rtol=1e-12)
+    state = json.loads(out.read_text())
+    lines = {line.get_label(): np.asarray(line.get_ydata(), float) for line in fig.axes[2].get_lines()}
+    for key, name in (("radial_m", "R"), ("along_m", "T"), ("cross_m", "N")):
+        assert lines[f"{name} (filtered)"][-1] == pytest.approx(state["diagnostics"]["sigma_rtn"][key], rel=1e-9)
+    # the data shrank the position sigma from its first step to its last
+    assert lines["T (filtered)"][-1] < 0.1 * lines["T (filtered)"][0]

@@ -21,7 +21,7 @@ from trackproc.pipeline.batch.schema import CONFIG_ENV, SCHEMA
 log = logging.getLogger("trackproc")
 
 _PANELS = {"batch": "Run", "ingest": "Ingest step", "smooth": "Smooth step", "refine": "Refine step",
-           "estimate": "Estimate step"}
+           "estimate": "Estimate step", "filter": "Filter step"}
 _ANNOTATIONS = {"str": Optional[str], "path": Optional[str], "choice": Optional[str], "degree": Optional[str],
                 "int": Optional[int], "float": Optional[float], "duration": Optional[str], "bool": Optional[bool],
                 "list": Optional[List[str]], "paths": Optional[List[str]], "map": Optional[List[str]]}
@@ -34,11 +34,13 @@ def _help(opt) -> str:
 
 def batch_command(**kwargs) -> None:
     """Process many raw pass files through a chain of steps (ingest -> smooth, optionally refine of
-    each pass and a multi-pass estimate per window), in parallel, skipping results already up to date.
+    each pass, a multi-pass estimate per window and a sequential filter whose state is carried from
+    run to run), in parallel, skipping results already up to date.
 
     Settings come from flags, TRACKPROC_BATCH_* environment variables and the TOML config file,
     in that order of precedence. Results go to OUTPUT/passes/ (one per input), OUTPUT/estimates/
-    (one per window), OUTPUT/summary.json, OUTPUT/summary.csv and
+    (one per window), OUTPUT/filter/ (state.json, the carried state, and one state per run),
+    OUTPUT/summary.json, OUTPUT/summary.csv and
     OUTPUT/report.html (the results as a sortable table with figures, self-contained).
 
     Exit status: 0 all inputs (and windows) done, 3 some failed (each reported with its reason),

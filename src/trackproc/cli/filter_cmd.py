@@ -120,6 +120,10 @@ def filter_command(
     object_id: str = typer.Option("UNKNOWN", "--object-id", metavar="ID", help="OBJECT_ID of an OEM --history."),
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Innovations and residuals per sample (Parquet, or CSV by suffix)."),
+    plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
+                                       help="Plot the innovations per kind with their +-3 sigma bands and the "
+                                            "position sigmas (R, T, N) over time (needs matplotlib: "
+                                            "pip install 'trackproc[plot]')."),
     as_json: bool = JsonSummaryOpt,
     strict: bool = StrictOpt,
     output: Optional[str] = OutputOpt,
@@ -147,6 +151,8 @@ def filter_command(
     if out == "-" and "-" in (history, residuals):
         raise typer.BadParameter("stdout already carries the state file; give --history/--residuals a file",
                                  param_hint="--history/--residuals")
+    if plot == "-":
+        raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")
     if range_bias and range_bias_station:
         raise typer.BadParameter("give --range-bias (every station) or --range-bias-station, not both",
                                  param_hint="--range-bias")
@@ -168,6 +174,10 @@ def filter_command(
     def format_epoch_ts(t):
         return iso_utc(t.tz_convert("UTC").tz_localize(None).to_datetime64())
 
+    if plot is not None:
+        from trackproc.pipeline.plotting import require_matplotlib
+
+        require_matplotlib()
     out_epoch = parse_epoch(epoch, column="--epoch") if epoch else None
     orientation, warning = earth_orientation(eop, dut1)
     if warning:
@@ -186,6 +196,11 @@ def filter_command(
                             edit_sigma=edit_sigma if edit_sigma > 0 else None, smooth=smooth, iterations=iterations,
                             segment_gap_s=segment_gap, output_epoch=out_epoch)
     result = filter_passes(tables, state0, station_table, options, orientation)
+    png = None
+    if plot is not None:
+        from trackproc.report.plots import filter_png
+
+        png = filter_png(result.innovations, result.sigma_history())
     write_state(result.state, out, force=force.value, eop_source=orientation.source)
     if history is not None:
         if history.lower().endswith(".oem"):
@@ -202,6 +217,8 @@ def filter_command(
             buf = io.BytesIO()
             result.innovations.to_parquet(buf, index=False)
             write_bytes(residuals, buf.getvalue())
+    if png is not None:
+        write_bytes(plot, png)
     from trackproc.cli.common import report_solution
 
     report_solution(result, "filter", as_json, strict, summary_text)

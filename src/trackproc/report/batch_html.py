@@ -101,8 +101,9 @@ def _row(record: dict) -> str:
     quality = n.get("quality") if status == "ok" else None
     classes = " ".join(dict.fromkeys(c for c in (status, quality or "") if c))
     fit = (f"{_e(n.get('kind'))} {_num(n.get('rms'))} {_e(n.get('rms_unit'))}" if n.get("rms") is not None else "")
-    if record.get("task") == "estimate":
-        solved = f"window of {len(record.get('members') or [])} input(s)"
+    if record.get("task") in ("estimate", "filter"):
+        solved = (f"window of {len(record.get('members') or [])} input(s)" if record.get("task") == "estimate"
+                  else f"filter over {len(record.get('members') or [])} input(s), state carried")
         if n.get("epoch_utc"):
             solved += f", epoch {_e(n['epoch_utc'])}"
         residual = f"WRMS {_num(n.get('wrms'))}" if n.get("wrms") is not None else ""
@@ -255,7 +256,8 @@ def report_html(summary: dict, out: Path, plots: Optional[bool] = None) -> str:
             overview = overview_png(inputs)
             if overview:
                 figures.append("<h2>Per input</h2>" + _png_img(overview, "fit and residual RMS, sigma per input"))
-            for record in [w for w in windows if w.get("status") == "ok"][-MAX_WINDOW_PLOTS:]:
+            for record in [w for w in windows if w.get("status") == "ok"
+                           and w.get("task", "estimate") == "estimate"][-MAX_WINDOW_PLOTS:]:
                 image = window_png(out, record)
                 if image:
                     figures.append(f"<h2>Estimate window {_e(record.get('name'))}: residuals</h2>"

@@ -300,3 +300,61 @@ def smooth_plots(result, path: str) -> dict:
         out[str(target.with_name(name + (target.suffix or ".png")))] = encode(
             smooth_figure(f, frame["value"].to_numpy()[f.rows]))
     return out
+
+
+def filter_png(innovations, sigmas) -> bytes:
+    """``filter --plot``: per measurement kind, the innovations (observed - predicted before the
+    update) in its own unit (degrees for angles) with their ±3σ band, ±3 √S with
+    ``S = h P hᵀ + r`` the innovation variance (Tapley, Schutz & Born 2004 eq. 4.7.7's denominator),
+    edited samples as red crosses; then the 1σ position uncertainty along radial, along-track and
+    cross-track over time (filtered, and smoothed when present), on a log scale.
+
+    ``innovations``: the filter's innovation table; ``sigmas``: one row per step and solution with
+    ``time`` (UTC), ``solution``, ``radial_m``, ``along_m``, ``cross_m``."""
+    import pandas as pd
+
+    plt = pyplot()
+    frame = innovations
+    kinds = [k for k in DISPLAY if (frame["kind"] == k).any()] + sorted(set(frame["kind"]) - set(DISPLAY))
+    fig, axes = plt.subplots(len(kinds) + 1, 1, figsize=(11, 2.9 * (len(kinds) + 1)), squeeze=False, sharex=True)
+    times = pd.DatetimeIndex(pd.to_datetime(sigmas["time"], utc=True)) if len(sigmas) else frame["time"]
+    t0 = min(frame["time"].min(), times.min())
+    for ax, kind in zip(axes[:-1, 0], kinds):
+        label, unit, factor = DISPLAY.get(kind, (kind, "", 1.0))
+        sub = frame[frame["kind"] == kind]
+        hours = (sub["time"] - t0).dt.total_seconds().to_numpy() / 3600.0
+        nu = sub["innovation"].to_numpy(dtype=float) * factor
+        band = 3.0 * sub["innovation_sigma"].to_numpy(dtype=float) * factor
+        edited = sub["edited"].to_numpy(dtype=bool)
+        for station in sorted(sub["station"].unique()):
+            m = (sub["station"] == station).to_numpy() & ~edited
+            ax.plot(hours[m], nu[m], ".", ms=2, label=f"{station} ({int(m.sum())})")
+        h, b = break_gaps(hours, band)
+        ax.plot(h, b, "-", lw=0.8, color="k", label="±3σ (3 √S)")
+        ax.plot(h, -b, "-", lw=0.8, color="k")
+        kept_band = band[~edited] if (~edited).any() else band
+        span = 1.5 * max(np.nanpercentile(kept_band, 95) if kept_band.size else 1.0, 1e-300)
+        if edited.any():
+            ax.plot(hours[edited], np.clip(nu[edited], -span, span), "x", ms=4, color="red",
+                    label=f"edited ({int(edited.sum())})")
+        ax.axhline(0.0, color="0.3", lw=0.6)
+        ax.set_ylim(-span, span)
+        ax.set_ylabel(f"{label} innovation [{unit}]")
+        legend_outside(ax, markerscale=3)
+    ax = axes[-1, 0]
+    hours = (times - t0).total_seconds().to_numpy() / 3600.0
+    for solution, style in (("filtered", "-"), ("smoothed", "--")):
+        m = (sigmas["solution"] == solution).to_numpy() if len(sigmas) else np.zeros(0, bool)
+        if not m.any():
+            continue
+        for (column, name, _), colour in zip(RTN[:3], ("C0", "C1", "C2")):
+            ax.plot(*break_gaps(hours[m], sigmas[column].to_numpy(dtype=float)[m]), style, lw=1.0, color=colour,
+                    label=f"{name} ({solution})")
+    ax.set_yscale("log")
+    ax.set_ylabel("position 1σ [m]")
+    legend_outside(ax)
+    axes[-1, 0].set_xlabel(f"hours since {t0.isoformat()}")
+    fig.suptitle("trackproc filter: innovations with their ±3σ bands; position sigmas radial (R), "
+                 "along-track (T), cross-track (N)", fontsize=10)
+    fig.tight_layout()
+    return encode(fig)

@@ -1,6 +1,6 @@
 """``trackproc batch``: many passes through a chain of steps, in parallel, resumable, cron-grade.
 
-The chain is a list of named steps (:data:`CHAIN`: ingest, smooth, refine, estimate). Each step
+The chain is a list of named steps (:data:`CHAIN`: ingest, smooth, refine, estimate, filter). Each step
 is a small adapter (:class:`Step`) around one pipeline function:
 
 - ``scope="input"`` steps run once per input file, in order, on an :class:`InputContext`
@@ -25,6 +25,9 @@ Work and results (``OUTPUT`` is the output directory):
   is the input's path relative to its directory (or to the fixed part of its glob), without
   the suffix, so sub-directories are mirrored.
 - ``OUTPUT/estimates/<window>.json`` (state file), ``<window>.residuals.parquet``, manifest.
+- ``OUTPUT/filter/state.json``: the ``filter`` step's carried state (``scope="sequence"``: one
+  run over every processed input in the driver, continuing the previous run's state), and
+  ``OUTPUT/filter/<last measurement>.json`` per run.
 - ``OUTPUT/summary.json`` and ``OUTPUT/summary.csv``: one record per input and per window.
 
 The content key of a result is the SHA-256 of the input's bytes, the settings of the steps that
@@ -78,7 +81,8 @@ import importlib
 #: module -> the public names this package re-exports from it
 EXPORTS = {
     "chain": ("CHAIN", "STEPS", "Step", "register", "make_chain", "Chain", "InputContext", "WindowContext"),
-    "steps": ("refine_pass", "REFINE_PASS_RULE", "ingest_step", "smooth_step", "refine_step", "estimate_step"),
+    "steps": ("refine_pass", "REFINE_PASS_RULE", "ingest_step", "smooth_step", "refine_step", "estimate_step",
+              "filter_step"),
     "tasks": ("Task", "TaskResult", "run_task"),
     "executors": ("Interrupted", "interruptible", "SerialExecutor", "PoolExecutor", "DaskExecutor", "execute",
                   "single_thread_blas", "BLAS_THREAD_VARIABLES"),

@@ -13,7 +13,7 @@ from typing import Callable, Sequence
 from trackproc.errors import InputError
 
 #: The canonical order of the chain; a configured chain is a subsequence of it.
-CHAIN = ("ingest", "smooth", "refine", "estimate")
+CHAIN = ("ingest", "smooth", "refine", "estimate", "filter")
 
 
 @dataclass
@@ -78,22 +78,25 @@ def register(step: Step) -> Step:
     """Make ``step`` available to chains (its name must be in :data:`CHAIN`)."""
     if step.name not in CHAIN:
         raise ValueError(f"step {step.name!r} has no place in CHAIN {CHAIN}")
-    if step.scope not in ("input", "window"):
-        raise ValueError(f"step scope must be 'input' or 'window', not {step.scope!r}")
+    if step.scope not in ("input", "window", "sequence"):
+        raise ValueError(f"step scope must be 'input', 'window' or 'sequence', not {step.scope!r}")
     STEPS[step.name] = step
     return step
 
 
 @dataclass(frozen=True)
 class Chain:
-    """The configured chain: input steps, then window steps (names, in :data:`CHAIN` order)."""
+    """The configured chain: input steps, then window steps, then sequence steps (one run over
+    every processed input in time order, carried from run to run: ``filter``); names in
+    :data:`CHAIN` order."""
 
     input_steps: tuple
     window_steps: tuple
+    sequence_steps: tuple = ()
 
     @property
     def names(self) -> tuple:
-        return self.input_steps + self.window_steps
+        return self.input_steps + self.window_steps + self.sequence_steps
 
     @property
     def table_steps(self) -> tuple:
@@ -114,7 +117,7 @@ class Chain:
         """Settings naming files the steps of ``scope`` read: "input", "window", or the two stages
         of the input steps, "table" and "side"."""
         names = {"input": self.input_steps, "window": self.window_steps, "table": self.table_steps,
-                 "side": self.side_steps}[scope]
+                 "side": self.side_steps, "sequence": self.sequence_steps}[scope]
         return tuple(sorted({f for n in names for f in STEPS[n].files}))
 
 
@@ -132,8 +135,9 @@ def make_chain(names: Sequence[str]) -> Chain:
                          expected="each step at most once, in the order " + " -> ".join(CHAIN))
     input_steps = tuple(n for n in names if STEPS[n].scope == "input")
     window_steps = tuple(n for n in names if STEPS[n].scope == "window")
+    sequence_steps = tuple(n for n in names if STEPS[n].scope == "sequence")
     tables = [STEPS[n].table for n in input_steps]
     if tables != sorted(tables, reverse=True):  # the registry's promise, not the user's error
         raise ValueError(f"input steps that only read the pass table must follow those that make it: {input_steps}")
-    return Chain(input_steps, window_steps)
+    return Chain(input_steps, window_steps, sequence_steps)
 

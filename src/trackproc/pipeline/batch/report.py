@@ -144,8 +144,9 @@ def finish(settings, chain, records, windows, out, started, t0, label, reporter=
             log.error("report not written: %s: %s", type(exc).__name__, exc)
     log.info("done in %.1f s: %d input(s) ok, %d failed, %d up to date%s%s -> %s (exit %d)", seconds,
              counts["inputs_ok"], counts["inputs_failed"], counts["inputs_skipped"],
-             (f"; {counts['windows_ok']} estimate window(s) ok, {counts['windows_failed']} failed"
-              if windows else ""),
+             (f"; {counts['windows_ok']} estimate window(s) and filter run(s) ok, {counts['windows_failed']} failed"
+              if any(r.task == "filter" for r in windows) else
+              f"; {counts['windows_ok']} estimate window(s) ok, {counts['windows_failed']} failed" if windows else ""),
              (f"; {flagged} solution(s) counted as failed by their quality verdict ({'/'.join(refused_verdicts)})"
               if flagged else ""), out / SUMMARY_JSON, exit_code)
     return BatchResult(inputs=records, windows=windows, exit_code=exit_code, counts=counts, summary=summary,

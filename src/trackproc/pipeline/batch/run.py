@@ -58,6 +58,12 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None,
                          expected="--initial STATE.json|TLE, or initial = \"...\" in [estimate]")
     if "refine" in chain.names:
         _check_refine_settings(settings)
+    if "filter" in chain.names and not settings.get("filter.initial"):
+        raise InputError("the filter step needs an initial state", column="--filter-initial",
+                         expected="--filter-initial STATE.json|TLE, or initial = \"...\" in [filter]")
+    if "filter" in chain.names and settings.get("filter.eop") is not None and settings.get("filter.dut1") is not None:
+        raise InputError("give either an EOP file or UT1-UTC, not both", column="filter.eop / filter.dut1",
+                         expected="one of --filter-eop, --filter-dut1")
     files, paths, hashes = _read_files(settings, chain)
     if "refine" in chain.names:  # a state file every input would fail on: a usage error, now
         initial_state(files["refine.initial"], paths["refine.initial"], None)
@@ -81,6 +87,8 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None,
                 records = _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, progress)
                 windows = (_run_windows(settings, chain, records, files, paths, hashes, out, executors)
                            if chain.window_steps else [])
+                if chain.sequence_steps:
+                    windows = windows + _run_filter(settings, records, files, paths, out)
             except BaseException:  # a signal, a bug: no worker may outlive the run
                 executors.abort()
                 raise
@@ -109,7 +117,7 @@ def _check_refine_settings(settings: Settings) -> None:
 def _read_files(settings: Settings, chain: Chain):
     """Bytes, paths and hashes of the files the chain's settings name (read once, here)."""
     files, paths, hashes = {}, {}, {}
-    for name in sorted(set(chain.files("input")) | set(chain.files("window"))):
+    for name in sorted(set(chain.files("input")) | set(chain.files("window")) | set(chain.files("sequence"))):
         path = settings.get(name)
         paths[name] = path
         if path is None:
@@ -314,3 +322,87 @@ def _run_windows(settings, chain, records, files, paths, hashes, out, executors)
 
     execute(executors.get(len(todo)), todo, make_task, on_result)
     return [results[n] for n in sorted(results)]
+
+
+FILTER_DIR = "filter"
+
+
+def filter_state_path(settings: Settings, out: Path) -> Path:
+    """Where the filter step keeps its carried state: ``filter.state``, else ``OUTPUT/filter/state.json``."""
+    return Path(settings.get("filter.state") or out / FILTER_DIR / "state.json")
+
+
+def _run_filter(settings, records, files, paths, out) -> list:
+    """The filter step, in this process (each run continues the previous one's state): every
+    processed input's pass table, from the carried state when it exists (else ``filter.initial``).
+    Writes ``OUTPUT/filter/<last measurement>.json`` then the carried state (each atomically);
+    nothing newer than the carried state: nothing done, the record says up to date."""
+    import time as _time
+
+    from trackproc.errors import TrackprocError
+    from trackproc.io.atomic import write_bytes
+    from trackproc.pipeline.batch.chain import STEPS, WindowContext
+    from trackproc.pipeline.batch.store import Record
+
+    state_path = filter_state_path(settings, out)
+    members = [r for r in records if r.status == "ok"]
+    run_files, run_paths = dict(files), dict(paths)
+    carried = None
+    if state_path.exists():
+        carried = state_path.read_bytes()
+        run_files["filter.carried"], run_paths["filter.carried"] = carried, str(state_path)
+        last = (json_loads(carried).get("filter") or {}).get("last_measurement")
+        ends = [_utc(r.numbers.get("end_utc")) for r in members]
+        newest = max((e for e in ends if e is not None), default=None)
+        if last and newest is not None and _utc(last) is not None and newest <= _utc(last):
+            record = Record(task="filter", name="filter", status="ok", skipped=True, key="", path=str(state_path),
+                            numbers={"end_utc": last},
+                            warnings=[f"no pass newer than the carried state's last measurement {last}"])
+            log.info("filter: no pass newer than the carried state's last measurement %s: %s kept", last, state_path)
+            return [record]
+    data = [(f"{PASSES_DIR}/{r.name}.parquet", (out / PASSES_DIR / f"{r.name}.parquet").read_bytes())
+            for r in members]
+    ctx = WindowContext(name="filter", members=data, files=run_files, paths=run_paths)
+    t0 = _time.perf_counter()
+    try:
+        if not data:
+            from trackproc.errors import ProcessingError
+
+            raise ProcessingError("no processed input to filter")
+        STEPS["filter"].run(ctx, settings.section("filter"))
+    except TrackprocError as exc:
+        record = Record(task="filter", name="filter", status="failed", skipped=False, key="", path=str(state_path),
+                        error=f"filter: {exc}", error_type="processing", members=[r.name for r in members])
+        log.error("filter: failed: %s (the carried state %s is unchanged)", exc, state_path)
+        return [record]
+    name = ctx.numbers["end_utc"].replace(":", "").replace("-", "")
+    dated = out / FILTER_DIR / f"{name}.json"
+    write_bytes(dated, ctx.outputs[".json"])
+    write_bytes(state_path, ctx.outputs[".json"])
+    log.info("filter: %d samples (%d edited) up to %s, %s -> %s and %s", ctx.numbers["samples"],
+             ctx.numbers["edited"], ctx.numbers["end_utc"], "from the carried state" if carried else
+             "from " + str(paths.get("filter.initial")), dated, state_path)
+    return [Record(task="filter", name=name, status="ok", skipped=False, key="", path=str(state_path),
+                   numbers=ctx.numbers, details=ctx.details, warnings=ctx.warnings,
+                   outputs=[str(dated.relative_to(out)) if dated.is_relative_to(out) else str(dated), str(state_path)],
+                   seconds=round(_time.perf_counter() - t0, 3), members=[r.name for r in members])]
+
+
+def _utc(text):
+    """An ISO UTC time as numpy datetime64 (ns), or None."""
+    import numpy as np
+
+    try:
+        return np.datetime64(str(text).rstrip("Z"), "ns") if text else None
+    except ValueError:
+        return None
+
+
+def json_loads(data: bytes) -> dict:
+    import json
+
+    try:
+        doc = json.loads(data)
+    except ValueError:
+        return {}
+    return doc if isinstance(doc, dict) else {}

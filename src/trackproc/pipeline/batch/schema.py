@@ -1,7 +1,7 @@
 """The settings of ``trackproc batch``: one schema for the TOML file, the flags and the environment.
 
 Every setting is a key of a TOML section (``[batch]``, ``[ingest]``, ``[smooth]``,
-``[refine]``, ``[estimate]``), a command-line flag and an environment variable, resolved in this order:
+``[refine]``, ``[estimate]``, ``[filter]``), a command-line flag and an environment variable, resolved in this order:
 
     flag  >  environment variable  >  config file  >  default
 
@@ -30,7 +30,7 @@ from typing import Any, Optional
 from trackproc.vocabulary import RANGE_RATE_MODELS
 
 #: Sections in the order they are documented; ``batch`` holds the run options.
-SECTIONS = ("batch", "ingest", "smooth", "refine", "estimate")
+SECTIONS = ("batch", "ingest", "smooth", "refine", "estimate", "filter")
 ENV_PREFIX = "TRACKPROC_BATCH_"
 CONFIG_ENV = "TRACKPROC_BATCH_CONFIG"
 
@@ -98,9 +98,9 @@ SCHEMA: tuple[Opt, ...] = (
         "Input directory (its files with a known suffix) or glob (quote it; ** recurses); repeatable.",
         metavar="DIR|GLOB"),
     Opt("batch", "output", "path", None, ("--output", "-o"),
-        "Output directory: passes/, estimates/, summary.json, summary.csv, report.html, the lock file.", metavar="DIR"),
+        "Output directory: passes/, estimates/, filter/, summary.json, summary.csv, report.html, the lock file.", metavar="DIR"),
     Opt("batch", "steps", "list", ("ingest", "smooth"), ("--steps",),
-        "The chain, comma separated, in order: ingest, smooth, refine, estimate.",
+        "The chain, comma separated, in order: ingest, smooth, refine, estimate, filter.",
         metavar="STEP[,STEP]"),
     Opt("batch", "patterns", "list", DEFAULT_PATTERNS, ("--patterns",),
         "File patterns taken from an input directory (not from a glob).", metavar="GLOB[,GLOB]"),
@@ -251,6 +251,42 @@ SCHEMA: tuple[Opt, ...] = (
         affects=True, metavar="FILE"),
     Opt("estimate", "dut1", "float", None, ("--dut1",), "UT1-UTC, s, when no EOP file is given.", affects=True,
         metavar="S"),
+    # ------------------------------------------------------------------ [filter]
+    Opt("filter", "initial", "path", None, ("--filter-initial",),
+        "Initial state (JSON state file with a covariance, or TLE) of the filter's first run; later runs start "
+        "from the carried state (filter.state).", affects=True, metavar="STATE.json|TLE"),
+    Opt("filter", "state", "path", None, ("--filter-state",),
+        "The carried state: read as the initial state when it exists, replaced by each run's output "
+        "(default OUTPUT/filter/state.json).", metavar="STATE.json"),
+    Opt("filter", "drop_flagged", "bool", True, ("--filter-drop-flagged/--filter-keep-flagged",),
+        "Leave out the samples the smoother rejected (flag = true).", affects=True),
+    Opt("filter", "range_bias", "bool", False, ("--filter-range-bias/--no-filter-range-bias",),
+        "A range bias state per station with ranges.", affects=True),
+    Opt("filter", "doppler_bias", "choice", "auto", ("--filter-doppler-bias",),
+        "Transmitter frequency states, as estimate's.", choices=("auto", "none", "offset", "offset+drift"),
+        affects=True),
+    Opt("filter", "apriori_sigma", "map", {}, ("--filter-apriori-sigma",),
+        "Initial 1-sigma of a parameter or family (SI), NAME=SIGMA; repeatable.", affects=True,
+        metavar="NAME=SIGMA"),
+    Opt("filter", "snc_accel", "float", 0.0, ("--filter-snc-accel",),
+        "State noise compensation: 1-sigma density of a white acceleration on each RTN axis, m/s^2/sqrt(Hz).",
+        affects=True, check=_NONNEG, metavar="Q"),
+    Opt("filter", "oscillator_noise", "float", 0.0, ("--filter-oscillator-noise",),
+        "Random walk of the transmitter frequency offset, Hz/sqrt(s).", affects=True, check=_NONNEG,
+        metavar="HZ_PER_SQRT_S"),
+    Opt("filter", "edit_sigma", "float", 5.0, ("--filter-edit-sigma",),
+        "Edit a sample whose innovation is beyond K sigmas (0: off).", affects=True, check=_NONNEG, metavar="K"),
+    Opt("filter", "force", "choice", "j2", ("--filter-force-model",), "Force model.",
+        choices=("two-body", "j2"), affects=True),
+    Opt("filter", "kinds", "list", (), ("--filter-kinds",), "Kinds the filter uses (default all).",
+        affects=True, metavar="KIND[,KIND]"),
+    Opt("filter", "range_rate_model", "choice", None, ("--filter-range-rate-model",),
+        "doppler or instantaneous (default: the pass files' metadata, else doppler).",
+        choices=RANGE_RATE_MODELS, affects=True),
+    Opt("filter", "eop", "path", None, ("--filter-eop",), "IERS finals2000A file (UT1-UTC, polar motion).",
+        affects=True, metavar="FILE"),
+    Opt("filter", "dut1", "float", None, ("--filter-dut1",), "UT1-UTC, s, when no EOP file is given.",
+        affects=True, check=(lambda v: abs(v) <= 0.9, "|UT1-UTC| <= 0.9 s"), metavar="S"),
 )
 
 BY_NAME: dict[str, Opt] = {o.name: o for o in SCHEMA}

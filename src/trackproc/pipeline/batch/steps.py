@@ -1,4 +1,5 @@
-"""The steps of ``trackproc batch``: one adapter per pipeline function (ingest, smooth, refine, estimate).
+"""The steps of ``trackproc batch``: one adapter per pipeline function (ingest, smooth, refine, estimate,
+filter).
 
 Adding a step is an adapter and one :func:`~trackproc.pipeline.batch.chain.register` call (see
 :func:`refine_step`)::
@@ -174,6 +175,63 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
     ctx.warnings.extend(result.warnings)
 
 
+def filter_step(ctx: WindowContext, opt: dict) -> None:
+    """filter: every processed input's passes in time order through the sequential filter
+    (:func:`trackproc.pipeline.filter.filter_passes`), from the carried state (``ctx.files
+    ["filter.carried"]``, the previous run's output) when there is one, else ``filter.initial``;
+    the passes not newer than the carried state's last measurement are skipped by the filter.
+    Output ``.json``: the filtered state at the last measurement (the next run's start)."""
+    import numpy as np
+
+    from trackproc.io.eop import earth_orientation
+    from trackproc.io.passfile import PassTable, parse_pass_table
+    from trackproc.io.stations import parse_stations
+    from trackproc.io.statefile import format_epoch, parse_state_or_tle, state_json
+    from trackproc.pipeline.filter import FilterOptions, filter_passes
+    from trackproc.pipeline.od import EstimateOptions
+    from trackproc.pipeline.orbit_source import tle_evaluation_epoch
+
+    orientation, warning = earth_orientation(opt["eop"], opt["dut1"])
+    if warning:
+        ctx.warnings.append(warning)
+    tables = []
+    for source, data in ctx.members:
+        table = parse_pass_table(data, source)
+        frame = table.frame
+        if opt["drop_flagged"] and "flag" in frame.columns:
+            frame = frame[~frame["flag"].astype(bool)].reset_index(drop=True)
+        if len(frame):
+            tables.append((source, PassTable(frame, table.meta)))
+    if not tables:
+        raise ProcessingError("no samples to filter (all flagged by the smoother)")
+    key = "filter.carried" if ctx.files.get("filter.carried") is not None else "filter.initial"
+    at = tle_evaluation_epoch(None, tables)
+    state0 = parse_state_or_tle(ctx.files[key], ctx.paths[key], orientation, at=at)
+    stations = (None if ctx.files.get("ingest.stations") is None
+                else parse_stations(ctx.files["ingest.stations"], ctx.paths["ingest.stations"]))
+    walks = {"doppler_offset": opt["oscillator_noise"]} if opt["oscillator_noise"] else {}
+    problem = EstimateOptions(range_bias=opt["range_bias"], doppler_bias=opt["doppler_bias"],
+                              apriori_sigma=dict(opt["apriori_sigma"]), force=opt["force"], noise="white",
+                              range_rate_model=opt["range_rate_model"],
+                              kinds=list(opt["kinds"]) or None)
+    options = FilterOptions(problem=problem, snc_accel=(opt["snc_accel"],) * 3, bias_walk=walks,
+                            edit_sigma=opt["edit_sigma"] if opt["edit_sigma"] > 0 else None)
+    result = filter_passes(tables, state0, stations, options, orientation)
+    state = result.state
+    ctx.outputs[".json"] = state_json(state, force=opt["force"], eop_source=orientation.source).encode("utf-8")
+    rec = state.extra["filter"]
+    sig = state.diagnostics.get("sigma_rtn") or {}
+    ctx.numbers.update(
+        samples=int(rec["updates"] + rec["edited"]), edited=int(rec["edited"]), epoch_utc=format_epoch(state.epoch),
+        start_utc=rec["first_time"], end_utc=rec["last_measurement"], sigma_radial_m=sig.get("radial_m"),
+        sigma_along_m=sig.get("along_m"), sigma_cross_m=sig.get("cross_m"), **quality_numbers(result.quality))
+    ctx.details["filter"] = {"initial": ctx.paths[key], "carried_state": rec["carried_state"],
+                             "skipped_passes": rec["skipped_passes"], "quality": result.quality.as_dict(),
+                             "parameters": {n: {"value": float(v), "sigma": float(e)} for n, v, e in
+                                            zip(state.parameters, np.asarray(state.values), np.asarray(state.sigma))}}
+    ctx.warnings.extend(w for w in result.warnings if not w.startswith("skipped "))
+
+
 def quality_numbers(quality) -> dict:
     """A solution's ``quality`` in the summary's numbers: the verdict, the codes of the reasons
     that made it (the whole reasons are in the details) and the decision on the initial orbit."""
@@ -282,4 +340,5 @@ register(Step("ingest", "input", ingest_step, files=("ingest.stations",)))
 register(Step("smooth", "input", smooth_step))
 register(Step("refine", "input", refine_step, files=("refine.initial", "refine.eop", "ingest.stations"), table=False))
 register(Step("estimate", "window", estimate_step, files=("estimate.initial", "estimate.eop", "ingest.stations")))
+register(Step("filter", "sequence", filter_step, files=("filter.initial", "filter.eop", "ingest.stations")))
 

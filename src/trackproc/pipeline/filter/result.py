@@ -47,6 +47,11 @@ class FilterResult:
         row per step and solution (:func:`history_frame`)."""
         return history_frame(self.problem, self.sweep)
 
+    def sigma_history(self) -> pd.DataFrame:
+        """The 1-sigma position and velocity along radial, along-track, cross-track at every step
+        and solution (:func:`sigma_rtn_frame`): the data of ``--plot``'s sigma panel."""
+        return sigma_rtn_frame(self.problem, self.sweep)
+
     def history_oem(self, **oem_kwargs) -> str:
         """The history as CCSDS OEM KVN (:func:`history_oem`)."""
         return history_oem(self.problem, self.sweep, self.state, **oem_kwargs)
@@ -150,6 +155,20 @@ def history_frame(problem: Problem, sw) -> pd.DataFrame:
             row.update({f"sigma_{nm}": float(math.sqrt(max(p[i, i], 0.0))) for i, nm in enumerate(names)})
             row.update({f"cov_{i}_{j}": float(p[i, j]) for i, j in zip(*low)})
             rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def sigma_rtn_frame(problem: Problem, sw) -> pd.DataFrame:
+    """One row per step and solution (``filtered``, ``smoothed``): ``time`` (UTC), ``solution``
+    and the RTN sigmas of the state file's ``sigma_rtn`` (``radial_m`` ... ``cross_m_s``)."""
+    rows = []
+    for which, label in (("f", "filtered"), ("s", "smoothed")):
+        if getattr(sw, "x_" + which) is None:
+            continue
+        for k in range(sw.t_s.size):
+            x, p = sw.absolute(which, k)
+            rows.append({"time": pd.Timestamp(_utc_of_step(problem, sw, k)).tz_localize("UTC"), "solution": label,
+                         **sigma_rtn(rtn_covariance(x[:3], x[3:6], p[:6, :6]))})
     return pd.DataFrame(rows)
 
 
