@@ -123,7 +123,6 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
     import numpy as np
 
     from trackproc.io.eop import earth_orientation
-    from trackproc.io.passfile import PassTable, parse_pass_table
     from trackproc.io.residuals import residuals_bytes
     from trackproc.io.stations import parse_stations
     from trackproc.io.statefile import format_epoch, parse_state_or_tle, state_json
@@ -133,16 +132,7 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
     orientation, warning = earth_orientation(opt["eop"], opt["dut1"])
     if warning:
         ctx.warnings.append(warning)
-    tables = []
-    for source, data in ctx.members:
-        table = parse_pass_table(data, source)
-        frame = table.frame
-        if opt["drop_flagged"] and "flag" in frame.columns:
-            frame = frame[~frame["flag"].astype(bool)].reset_index(drop=True)
-        if len(frame):
-            tables.append((source, PassTable(frame, table.meta)))
-    if not tables:
-        raise ProcessingError("no samples left in the window (all flagged by the smoother)")
+    tables = _member_tables(ctx, opt, "no samples left in the window (all flagged by the smoother)")
     initial_bytes, initial_path = ctx.files["estimate.initial"], ctx.paths["estimate.initial"]
     # a TLE: by SGP4 at the solution epoch (default: the first sample)
     at = tle_evaluation_epoch(opt["epoch"], tables, column="estimate.epoch")
@@ -175,25 +165,11 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
     ctx.warnings.extend(result.warnings)
 
 
-def filter_step(ctx: WindowContext, opt: dict) -> None:
-    """filter: every processed input's passes in time order through the sequential filter
-    (:func:`trackproc.pipeline.filter.filter_passes`), from the carried state (``ctx.files
-    ["filter.carried"]``, the previous run's output) when there is one, else ``filter.initial``;
-    the passes not newer than the carried state's last measurement are skipped by the filter.
-    Output ``.json``: the filtered state at the last measurement (the next run's start)."""
-    import numpy as np
-
-    from trackproc.io.eop import earth_orientation
+def _member_tables(ctx: WindowContext, opt: dict, empty: str) -> list:
+    """``[(source, PassTable)]`` of the step's processed inputs, the smoother's flagged samples
+    dropped when ``opt["drop_flagged"]``; ``ProcessingError(empty)`` when no sample is left."""
     from trackproc.io.passfile import PassTable, parse_pass_table
-    from trackproc.io.stations import parse_stations
-    from trackproc.io.statefile import format_epoch, parse_state_or_tle, state_json
-    from trackproc.pipeline.filter import FilterOptions, filter_passes
-    from trackproc.pipeline.od import EstimateOptions
-    from trackproc.pipeline.orbit_source import tle_evaluation_epoch
 
-    orientation, warning = earth_orientation(opt["eop"], opt["dut1"])
-    if warning:
-        ctx.warnings.append(warning)
     tables = []
     for source, data in ctx.members:
         table = parse_pass_table(data, source)
@@ -203,7 +179,29 @@ def filter_step(ctx: WindowContext, opt: dict) -> None:
         if len(frame):
             tables.append((source, PassTable(frame, table.meta)))
     if not tables:
-        raise ProcessingError("no samples to filter (all flagged by the smoother)")
+        raise ProcessingError(empty)
+    return tables
+
+
+def filter_step(ctx: WindowContext, opt: dict) -> None:
+    """filter: every processed input's passes in time order through the sequential filter
+    (:func:`trackproc.pipeline.filter.filter_passes`), from the carried state (``ctx.files
+    ["filter.carried"]``, the previous run's output) when there is one, else ``filter.initial``;
+    the passes not newer than the carried state's last measurement are skipped by the filter.
+    Output ``.json``: the filtered state at the last measurement (the next run's start)."""
+    import numpy as np
+
+    from trackproc.io.eop import earth_orientation
+    from trackproc.io.stations import parse_stations
+    from trackproc.io.statefile import format_epoch, parse_state_or_tle, state_json
+    from trackproc.pipeline.filter import FilterOptions, filter_passes
+    from trackproc.pipeline.od import EstimateOptions
+    from trackproc.pipeline.orbit_source import tle_evaluation_epoch
+
+    orientation, warning = earth_orientation(opt["eop"], opt["dut1"])
+    if warning:
+        ctx.warnings.append(warning)
+    tables = _member_tables(ctx, opt, "no samples to filter (all flagged by the smoother)")
     key = "filter.carried" if ctx.files.get("filter.carried") is not None else "filter.initial"
     at = tle_evaluation_epoch(None, tables)
     state0 = parse_state_or_tle(ctx.files[key], ctx.paths[key], orientation, at=at)
