@@ -47,7 +47,9 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     ref, sol, kkt, scale = solve_noise(table, initial, ref, stations, eop, source)
     epoch0 = ref.problem.epoch                          # the epoch a modelled step's time is counted from
     first = (ref, sol, kkt, scale)
-    ref, sol, kkt, scale, adaptation, improvement, refusal = solve_gated(ref, first=(sol, kkt, scale))
+    gated = solve_gated(ref, first=(sol, kkt, scale))
+    ref, sol, kkt, scale = gated.solved
+    adaptation, improvement, refusal = gated.adaptation, gated.improvement, gated.refusal
     # a gross error inside the pass (an oscillator step, a time-tag jump): modelled or declined. The
     # scan reads the gated solution (a default a-priori the pass contradicts is adapted first, so
     # that its conflict is not taken for a step), or the first one when the gates kept the stale state
@@ -107,11 +109,12 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
             moved = with_noise_of(moved, ref)
             first = solve_weighted(moved)
             factor = adaptation["factor"] if adaptation else 1.0
-            moved_out = solve_gated(moved, factor, first=tuple(first) if factor == 1.0 else None)
+            moved_gated = solve_gated(moved, factor, first=tuple(first) if factor == 1.0 else None)
         except ProcessingError:
             break                                        # the quality reports the mismatch left
         moves.append(float(t_model))
-        ref, sol, kkt, scale, adaptation, improvement, refusal = moved_out
+        ref, sol, kkt, scale = moved_gated.solved
+        adaptation, improvement, refusal = moved_gated.adaptation, moved_gated.improvement, moved_gated.refusal
         if refusal is not None:
             break
     decision = None
