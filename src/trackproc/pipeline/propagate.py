@@ -39,6 +39,7 @@ from trackproc.io.ephemeris import (COV_COLUMNS, SCHEMA_VERSION, SIGMA_COLUMNS, 
 from trackproc.io.passfile import SIGN_CONVENTION
 from trackproc.io.statefile import FORCE_LABELS
 from trackproc.io.tle import tle_epoch
+from trackproc.io.validate import check_carrier
 from trackproc.isotime import iso_utc
 from trackproc.models.observables import doppler_hz
 from trackproc.pipeline.orbit_source import SGP4_LABEL, OrbitInput, Satellite, observe, sgp4_states
@@ -128,8 +129,8 @@ def _check_options(options: PropagateOptions) -> None:
         for flag, given in (("--carrier-hz", options.carrier_hz is not None), ("--visible-only", options.visible_only)):
             if given:
                 raise InputError("needs a station", column=flag, expected="--at-station ID (and --stations)")
-    if options.carrier_hz is not None and not (np.isfinite(options.carrier_hz) and options.carrier_hz > 0):
-        raise InputError("must be positive", column="--carrier-hz", found=options.carrier_hz, expected="Hz > 0")
+    if options.carrier_hz is not None:
+        check_carrier(options.carrier_hz)
     if not -90.0 <= options.elevation_mask_deg <= 90.0:
         raise InputError("out of range", column="--elevation-mask-deg", found=options.elevation_mask_deg,
                          expected="degrees in [-90, 90]")
