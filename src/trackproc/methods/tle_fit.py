@@ -33,6 +33,7 @@ import numpy as np
 from trackproc.methods.estimation.prior import TLE_APRIORI, TLE_APRIORI_MAX_AGE_DAYS  # noqa: F401
 
 from trackproc.errors import ProcessingError
+from trackproc.methods.estimation.decision import probability_better as better
 
 DEG = math.pi / 180.0
 #: rev/day per rad/min.
@@ -307,7 +308,5 @@ def probability_better(change, covariance, n_rev_day: float, semi_major_m: float
     ``change = x_fit − x_init``: :func:`trackproc.methods.estimation.decision.probability_better` of
     the move ``G change`` with covariance ``G C Gᵀ`` (``G`` :func:`position_map`), the rule every
     command shares. Returns ``(probability, |d| in m, σ_u in m)``."""
-    from trackproc.methods.estimation.decision import probability_better as better
-
     g = position_map(n_rev_day, semi_major_m, inclination_deg, dt_days)
     return better(g @ np.asarray(change, float), g @ np.asarray(covariance, float) @ g.T)

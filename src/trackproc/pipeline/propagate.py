@@ -43,6 +43,7 @@ from trackproc.io.validate import check_carrier
 from trackproc.isotime import iso_utc
 from trackproc.models.observables import doppler_hz
 from trackproc.pipeline.orbit_source import SGP4_LABEL, OrbitInput, Satellite, observe, sgp4_states
+from trackproc.dynamics.forces import integrator
 
 DEG = np.pi / 180.0
 #: Below this geocentric distance (m) the orbit is taken to have entered the Earth.
@@ -299,8 +300,6 @@ def _meta(initial, options, traj, eop, has_cov, times, tle=None) -> dict:
                                  f"({iso_utc(traj.epoch)}); J2 about that rotation axis",
         }
         if traj.force_model is not None:
-            from trackproc.dynamics.forces import integrator
-
             meta["force_model"] = traj.force_model.label()
             meta["constants"] = traj.force_model.describe()
             meta["propagator"] = {
