@@ -40,6 +40,10 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
 
     Returns :class:`RefineResult`; raises :class:`InputError` (exit 2) for invalid input and
     :class:`ProcessingError` (exit 1) when the refinement fails (no convergence, rank deficiency).
+
+    Over 100 lines: its steps are functions (prepare, solve_noise, solve_gated, scan_steps,
+    model_traverse, the decision, finish); what stays is their order and what each hands the next
+    (a refusal stops the traverse re-solves, a modelled step re-runs the whole refinement).
     """
     opt = options or RefineOptions()
     ref = prepare(table, initial, stations, opt, eop, source)
