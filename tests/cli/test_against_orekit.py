@@ -42,6 +42,7 @@ import numpy as np
 import orekit_helpers as oh  # tests/ is on sys.path (pytest rootdir-relative import, no __init__.py)
 import pandas as pd
 import pytest
+from once_per_run import once_per_run  # tests/ is on sys.path
 
 pytestmark = pytest.mark.validation
 
@@ -69,7 +70,10 @@ def case(tmp_path_factory):
     """Both tools on the same files: trackproc in-process, Orekit in a child process."""
     if not _OK:
         pytest.skip(_WHY)
-    d = tmp_path_factory.mktemp("orekit")
+    return once_per_run(tmp_path_factory, "orekit", _build_case)
+
+
+def _build_case(d):
     eop, biased = oh.write_case_inputs(d)
     sim = ["simulate", "--state", d / "truth.json", "--stations", d / "stations.csv", "--duration", "43200",
            "--step", "30", "--eop", eop, "--kinds", "range,range_rate", "-q"]
@@ -173,7 +177,10 @@ def two_way_case(tmp_path_factory):
     ``twoWay = true`` from that metadata."""
     if not _OK:
         pytest.skip(_WHY)
-    d = tmp_path_factory.mktemp("orekit_two_way")
+    return once_per_run(tmp_path_factory, "orekit_two_way", _build_two_way_case)
+
+
+def _build_two_way_case(d):
     eop, biased = oh.write_case_inputs(d)
     sim = ["simulate", "--state", d / "truth.json", "--stations", d / "stations.csv", "--duration", "43200",
            "--step", "30", "--eop", eop, "--kinds", "range,range_rate", "--mode", "two-way", "-q"]

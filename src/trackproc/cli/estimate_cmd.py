@@ -155,6 +155,10 @@ def estimate_command(
         trackproc simulate --state sample_data/truth.json --stations sample_data/stations.csv \\
             --duration 21600 --range-bias KIR=100 --seed 1 \\
             | trackproc estimate - --initial sample_data/truth.json --range-bias -o -
+
+    \f
+    Over 100 lines because it declares the options (each with its help); the work is in
+    pipeline/estimate/, with the reading and writing around it here.
     """
     if plot == "-":
         raise typer.BadParameter("the plot cannot go to stdout; give a file name", param_hint="--plot")

@@ -98,6 +98,10 @@ def fit_tle_command(
 
     Exit status: 0 ok; 1 the fit failed or its verdict is 'rejected' (or 'suspect' with --strict;
     the TLE is written); 2 bad options or input.
+
+    \f
+    Over 100 lines because it declares the options (each with its help); the work is in
+    pipeline/fit_tle/ (run), with the reading and writing around it here.
     """
     from trackproc.io.validate import parse_duration
 

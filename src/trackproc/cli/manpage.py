@@ -62,7 +62,7 @@ def manpage() -> str:
         sub = cmd.context_class(cmd, info_name=name, parent=ctx)
         usage = " ".join(cmd.collect_usage_pieces(sub))
         parts += [f'.SS "trackproc {name}"', ".PP", f"\\fBtrackproc {name}\\fR {_roff(usage)}",
-                  _paragraphs(cmd.help or ""), *_options(cmd, sub)]
+                  _paragraphs((cmd.help or "").partition("\f")[0]), *_options(cmd, sub)]
     parts += [".SH EXIT STATUS",
               "0 success; 1 processing failure (or a solution whose quality verdict is rejected, or suspect "
               "with \\-\\-strict); 2 usage error or invalid input; 3 partial failure in batch; 128+N ended by "

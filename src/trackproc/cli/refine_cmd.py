@@ -158,6 +158,10 @@ def refine_command(
 
         trackproc refine smoothed.parquet --initial sample_data/stale.json --cost integral --circular \\
             -o seed004.json
+
+    \f
+    Over 100 lines because it declares the options (each with its help); the work is in
+    pipeline/refine/ (run), with the reading and writing around it here.
     """
     from trackproc.io.validate import parse_duration
 

@@ -90,6 +90,10 @@ def simulate_command(
 
         trackproc simulate --tle sample_data/iss.tle --stations sample_data/stations.csv --duration 21600 \\
             | trackproc ingest - | trackproc info -
+
+    \f
+    Over 100 lines because it declares the options (each with its help); the work is in
+    pipeline/simulate, with the reading and writing around it here.
     """
     from trackproc.io.validate import parse_duration
 

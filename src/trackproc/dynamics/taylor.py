@@ -240,27 +240,17 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
 
     Implements seed 000 eq. 14 (P-model) with seed 004 eq. 6 in general form (power rule for
     r^-3, r^-5, r^-7), and seed 004 eqs. 19-21 (first order) for the sensitivities.
+
+    Over 100 lines: the argument checks are functions of their own; what stays is the numpy
+    engine's step loop (series, step size, the switch to the compiled engine after the first
+    step, the update), one loop body over shared arrays as in the compiled engine.
     """
     s0 = np.asarray(state0, dtype=float)
     batch = s0.ndim == 2
-    if s0.shape[-1] != 6 or s0.ndim not in (1, 2) or (batch and s0.shape[0] == 0):
-        raise ValueError(f"state0 must have shape (6,) or (B, 6); found {s0.shape}")
-    if not np.all(np.isfinite(s0)):
-        raise ValueError("state0 must be finite; found NaN or infinity")
-    if force not in FORCES:
-        raise ValueError(f"unknown force model {force!r}; expected one of {FORCES}")
-    if not (0.0 < tol < 1.0):
-        raise ValueError(f"tol must lie in (0, 1); found {tol}")
+    _check_state_and_model(s0, force, tol)
     t0, t1 = float(t0_s), float(t_end_s)
-    if not (math.isfinite(t0) and math.isfinite(t1)):
-        raise ValueError(f"t0_s and t_end_s must be finite; found {t0_s}, {t_end_s}")
     p = default_order(tol) if order is None else int(order)
-    if p < 3:
-        raise ValueError(f"order must be >= 3; found {p}")
-    if mu_sensitivity and not stm:
-        raise ValueError("mu_sensitivity needs stm=True")
-    if engine not in ENGINES:
-        raise ValueError(f"unknown engine {engine!r}; expected one of {ENGINES}")
+    _check_span_and_options(t0, t1, p, stm, mu_sensitivity, engine)
     max_steps = int(max_steps)
     s0 = s0.reshape(-1, 6)
     nb = s0.shape[0]
@@ -358,6 +348,32 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
                        sensitivities=sens_arr, parameters=params if stm else (),
                        order=p, tol=tol, force=force, mu_m3_s2=mu_m3_s2,
                        j2=j2 if force == "j2" else 0.0, re_m=re_m, batch=batch)
+
+
+def _check_state_and_model(s0: np.ndarray, force: str, tol: float) -> None:
+    """ValueError for an initial state :func:`propagate` cannot take, an unknown force model or a
+    tolerance outside (0, 1)."""
+    if s0.shape[-1] != 6 or s0.ndim not in (1, 2) or (s0.ndim == 2 and s0.shape[0] == 0):
+        raise ValueError(f"state0 must have shape (6,) or (B, 6); found {s0.shape}")
+    if not np.all(np.isfinite(s0)):
+        raise ValueError("state0 must be finite; found NaN or infinity")
+    if force not in FORCES:
+        raise ValueError(f"unknown force model {force!r}; expected one of {FORCES}")
+    if not (0.0 < tol < 1.0):
+        raise ValueError(f"tol must lie in (0, 1); found {tol}")
+
+
+def _check_span_and_options(t0: float, t1: float, p: int, stm: bool, mu_sensitivity: bool, engine: str) -> None:
+    """ValueError for a non-finite span, an order below 3, μ sensitivities without the STM or an
+    unknown engine."""
+    if not (math.isfinite(t0) and math.isfinite(t1)):
+        raise ValueError(f"t0_s and t_end_s must be finite; found {t0}, {t1}")
+    if p < 3:
+        raise ValueError(f"order must be >= 3; found {p}")
+    if mu_sensitivity and not stm:
+        raise ValueError("mu_sensitivity needs stm=True")
+    if engine not in ENGINES:
+        raise ValueError(f"unknown engine {engine!r}; expected one of {ENGINES}")
 
 
 def _propagate_compiled(s0, t0, t1, p, mu, kj2, tol, stm, mu_sensitivity, max_steps, *, force,

@@ -186,6 +186,9 @@ def _series_var(x, ph, p, mu, kj2, mu_col, wk):
     ``q = 3 mu w5 - 5 k w7 + 35 k z^2 w9``. ``mu_col`` < 0: no mu column.
 
     Implements seed 004 eqs. 19-21 (first order) on seed 004 eq. 6 with J2.
+
+    One numba kernel on purpose: the recurrence above, order by order, on the work arrays ``wk`` that every
+    part of it reads and writes; split, the parts would pass them at every order of every step.
     """
     npar = ph.shape[1]
     k = kj2

@@ -27,6 +27,7 @@ from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
 from trackproc.io.tabular import decode_text
 from trackproc.io.validate import MAX_SPAN_S, ORBIT_RADIUS_RANGE_M
+from trackproc.dynamics import frames, timescales as ts
 
 
 @dataclass(frozen=True)
@@ -128,9 +129,6 @@ def read_cpf(path: str) -> CpfEphemeris:
 
 def cpf_gcrf(eph: CpfEphemeris, eop=None) -> np.ndarray:
     """The CPF positions in GCRF (N, 3), m."""
-    from trackproc.dynamics import frames
-    from trackproc.dynamics import timescales as ts
-
     jd1, jd2 = ts.datetime64_to_jd_utc(eph.times)
     r, _ = frames.itrf_to_gcrf(eph.r_itrf, np.zeros_like(eph.r_itrf), jd1, jd2, eop)
     return r

@@ -90,7 +90,10 @@ def _date_ns(fields, start, name, source, row) -> int:
 
 
 def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeasurements:
-    """Parse a CRD file's normal points into two-way range samples (see the module docstring)."""
+    """Parse a CRD file's normal points into two-way range samples (see the module docstring).
+
+    Over 100 lines: one pass over the records, a few lines per record type, so that the rules of
+    their order (H4 ... H8 per session, nothing after H9) read in one loop."""
     text = decode_text(data, source)
     session = None
     sessions, meteo = [], {}

@@ -177,6 +177,8 @@ def read_doptrack(data: bytes, source: str, *, data_path: Path | None = None,
 
     ``data_path`` locates the sidecar (see :func:`find_sidecar`) unless ``sidecar`` is given;
     ``carrier_hz`` is the nominal carrier in Hz (default: from the satellite name).
+
+    Over 100 lines with this docstring; its code is under 100.
     """
     side_path = Path(sidecar) if sidecar is not None else (find_sidecar(data_path) if data_path else None)
     if side_path is None:

@@ -30,6 +30,7 @@ Written bytes depend only on the table and the metadata: the same input gives th
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import json
 from pathlib import Path
@@ -46,6 +47,10 @@ from trackproc.io.raw import KIND_UNITS
 from trackproc.types.passes import PassTable  # noqa: F401  (re-exported)
 from trackproc.io.tabular import (META_KEY, csv_metadata_line, Problems, column_numbers, column_strings,
                                   column_times, source_table)
+from trackproc import __version__
+from trackproc.io import smoothing_record
+from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_carrier, check_los_speed, check_name
+from trackproc.io.stations import Station
 
 SCHEMA_VERSION = 1
 COLUMNS = ("time", "station", "pass_id", "kind", "value", "sigma")
@@ -60,8 +65,6 @@ SIGN_CONVENTION = (
 
 def base_meta(**extra) -> dict:
     """Metadata fields every pass file carries, updated with ``extra``."""
-    from trackproc import __version__
-
     meta = {
         "schema_version": SCHEMA_VERSION,
         "time_scale": "UTC",
@@ -156,8 +159,6 @@ def pass_table_bytes(table: PassTable, fmt: str = "parquet") -> bytes:
     :mod:`trackproc.io.smoothing_record`) follow an Arrow table as a second stream, and stay inline
     in the metadata of a Parquet or CSV that has no file of its own (:func:`write_pass_table` puts
     them in a sidecar)."""
-    from trackproc.io import smoothing_record
-
     fmt = getattr(fmt, "value", fmt)
     if fmt not in FORMATS:
         raise ValueError(f"unknown pass-table format {fmt!r}; expected one of {FORMATS}")
@@ -190,15 +191,11 @@ def write_pass_table(table: PassTable, path: str, fmt: str = "parquet") -> None:
     """Write ``table`` atomically to ``path`` (``-`` = stdout) as parquet, arrow or csv; the
     smoothing records of a Parquet or CSV file go to its sidecar (``x.passes.parquet``, written
     first) with their checksum in the pointer."""
-    from trackproc.io import smoothing_record
-
     fmt = getattr(fmt, "value", fmt)
     target = None if is_stdio(path) else Path(path)
     if fmt != "arrow" and target is not None and not (target.exists() and not target.is_file()):
         meta, records = smoothing_record.split_records(table.meta, "sidecar")
         if records is not None:
-            import hashlib
-
             side = smoothing_record.sidecar_path(target)
             side_bytes = arrow_table_bytes(records, "parquet")
             meta[smoothing_record.META_KEY]["records"].update(
@@ -275,8 +272,6 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
 
 def _attach_records(meta: dict, data: bytes, source: str) -> None:
     """Layout-2 smoothing records, loaded when first used: in a sidecar, or after an Arrow stream."""
-    from trackproc.io import smoothing_record
-
     pointer = smoothing_record.smoothing_of(meta).get("records")
     rest = None
     if isinstance(pointer, dict) and pointer.get("in") == "stream" and data[:4] == b"\xff\xff\xff\xff":
@@ -292,8 +287,6 @@ def _attach_records(meta: dict, data: bytes, source: str) -> None:
 def _check_samples(problems, columns: dict, table, source: str) -> None:
     """Values a pass file can hold: finite, sigma > 0, ranges >= 0, angles in their domains,
     |range-rate| <= 12 km/s; station names printable."""
-    from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_name
-
     codes, names = pd.factorize(columns["kind"])
     names = [str(k) for k in names]
 
@@ -323,9 +316,6 @@ def _check_samples(problems, columns: dict, table, source: str) -> None:
 def _check_meta(meta: dict, frame: pd.DataFrame, rows, source: str) -> None:
     """Metadata types and plausibility: stations (coordinates near the ellipsoid), the carrier
     (a radio carrier in Hz) and the Doppler it implies (a line-of-sight speed <= 12 km/s)."""
-    from trackproc.io.stations import Station
-    from trackproc.io.validate import check_carrier, check_los_speed
-
     stations = meta.get("stations")
     if stations is not None:
         if not isinstance(stations, dict):

@@ -96,7 +96,7 @@ def sinex_stations(data: bytes, source: str, epoch, eccentricities: tuple[bytes,
     (datetime64, UTC) from the bytes of a SINEX file, with the eccentricities of the same file
     or of ``eccentricities = (bytes, source)`` applied (see the module docstring)."""
     from trackproc.dynamics.geodesy import enu_matrix, itrf_to_geodetic
-    from trackproc.io.stations import Station
+    from trackproc.io.stations import Station   # here: io/stations reads SINEX through this module (a cycle)
 
     epoch = np.datetime64(epoch, "ns")
     blocks = _blocks(_decode(data, source), source)

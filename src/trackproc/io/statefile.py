@@ -109,20 +109,7 @@ def force_key(label) -> Optional[str]:
 def parse_state(data: bytes | str, source: str = "<state>", eop=None) -> State:
     """The :class:`State` in the JSON text ``data``; see the module docstring."""
     file = source
-    try:
-        doc = json.loads(data)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        row = getattr(exc, "lineno", None)
-        raise InputError(f"not valid JSON ({getattr(exc, 'msg', exc)})", file=file, row=row,
-                         expected="a JSON state file") from None
-    except RecursionError:
-        raise InputError("JSON nested too deeply", file=file, expected="a JSON state file (a few levels of nesting)") from None
-    if not isinstance(doc, dict):
-        raise InputError("not a state file", file=file, found=type(doc).__name__, expected="a JSON object")
-    version = doc.get("schema_version", SCHEMA_VERSION)
-    if not isinstance(version, int) or isinstance(version, bool) or version > SCHEMA_VERSION:
-        raise InputError("unsupported state file version", file=file, column="schema_version", found=version,
-                         expected=f"an integer <= {SCHEMA_VERSION}")
+    doc = _state_document(data, file)
     if "epoch" not in doc:
         raise InputError("missing field", file=file, column="epoch", expected="an ISO 8601 UTC time")
     epoch = parse_epoch(doc["epoch"], file=file)
@@ -139,13 +126,7 @@ def parse_state(data: bytes | str, source: str = "<state>", eop=None) -> State:
 
     params = doc.get("parameters")
     if params is not None:
-        if (not isinstance(params, list) or not all(isinstance(p, str) and p for p in params)):
-            raise InputError("wrong type", file=file, column="parameters", found=_short(params),
-                             expected="a list of parameter names")
-        dup = sorted({p for p in params if params.count(p) > 1})
-        if dup:
-            raise InputError("duplicate parameter", file=file, column="parameters", found=dup[0],
-                             expected="each name once")
+        _check_parameter_names(params, file)
     n = len(params) if params is not None else None
     values = _vector(doc, "values", n, file, required=False)
     sigma = _vector(doc, "sigma", n, file, required=False)
@@ -182,13 +163,8 @@ def parse_state(data: bytes | str, source: str = "<state>", eop=None) -> State:
 
     jd1, jd2 = datetime64_to_jd_utc(epoch)
     jd1, jd2 = float(jd1), float(jd2)
-    constants = doc.get("constants") or {}
-    if not isinstance(constants, dict):
-        raise InputError("wrong type", file=file, column="constants", found=_short(constants), expected="an object")
-    diagnostics = doc.get("diagnostics") or {}
-    if not isinstance(diagnostics, dict):
-        raise InputError("wrong type", file=file, column="diagnostics", found=_short(diagnostics),
-                         expected="an object")
+    constants = _object_field(doc, "constants", file)
+    diagnostics = _object_field(doc, "diagnostics", file)
     force = doc.get("force_model")
     if force is not None and not isinstance(force, str):
         raise InputError("wrong type", file=file, column="force_model", found=_short(force),
@@ -226,6 +202,44 @@ def parse_state(data: bytes | str, source: str = "<state>", eop=None) -> State:
                  sigma=sigma, covariance=cov, force_model=force_key(force) or force, constants=dict(constants),
                  eop_source=eop_source if isinstance(eop_source, str) else None,
                  diagnostics=dict(diagnostics), extra=extra, source=source)
+
+
+def _state_document(data: bytes | str, file: str) -> dict:
+    """The JSON object of a state file, of a schema version this reader knows."""
+    try:
+        doc = json.loads(data)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        row = getattr(exc, "lineno", None)
+        raise InputError(f"not valid JSON ({getattr(exc, 'msg', exc)})", file=file, row=row,
+                         expected="a JSON state file") from None
+    except RecursionError:
+        raise InputError("JSON nested too deeply", file=file, expected="a JSON state file (a few levels of nesting)") from None
+    if not isinstance(doc, dict):
+        raise InputError("not a state file", file=file, found=type(doc).__name__, expected="a JSON object")
+    version = doc.get("schema_version", SCHEMA_VERSION)
+    if not isinstance(version, int) or isinstance(version, bool) or version > SCHEMA_VERSION:
+        raise InputError("unsupported state file version", file=file, column="schema_version", found=version,
+                         expected=f"an integer <= {SCHEMA_VERSION}")
+    return doc
+
+
+def _object_field(doc: dict, key: str, file: str) -> dict:
+    """An optional field that must be a JSON object ({} when absent or empty)."""
+    value = doc.get(key) or {}
+    if not isinstance(value, dict):
+        raise InputError("wrong type", file=file, column=key, found=_short(value), expected="an object")
+    return value
+
+
+def _check_parameter_names(params, file: str) -> None:
+    """``parameters``: a list of distinct, non-empty names."""
+    if not isinstance(params, list) or not all(isinstance(p, str) and p for p in params):
+        raise InputError("wrong type", file=file, column="parameters", found=_short(params),
+                         expected="a list of parameter names")
+    dup = sorted({p for p in params if params.count(p) > 1})
+    if dup:
+        raise InputError("duplicate parameter", file=file, column="parameters", found=dup[0],
+                         expected="each name once")
 
 
 def _covariance(doc: dict, n: int | None, file: str) -> Optional[np.ndarray]:

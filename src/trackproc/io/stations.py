@@ -98,7 +98,7 @@ def read_stations(path: str, epoch=None, eccentricities: str | None = None) -> d
     if not data.strip():
         raise InputError("empty stations table", file=source, row=1, found="no data",
                          expected="a header station, lat_deg, lon_deg, height_m and one row per station")
-    from trackproc.io import sinex
+    from trackproc.io import sinex   # here, not at the top: sinex builds this module's Station (a cycle)
 
     if sinex.looks_like_sinex(data):
         if epoch is None:

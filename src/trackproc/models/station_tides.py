@@ -25,6 +25,8 @@ from __future__ import annotations
 import numpy as np
 
 from trackproc.models import modifiers as md
+from trackproc.dynamics import timescales as ts
+from trackproc.dynamics.forces.third_body import sun_moon_gcrf
 
 GM_EARTH = 3.986004418e14
 R_EARTH = 6378136.6                         # IERS 2010 (TN36 table 1.1)
@@ -78,9 +80,6 @@ class SolidTideDisplacement(md.RangeCorrection):
         return "solid-Earth tide displacement (IERS 2010 step 1)"
 
     def delay(self, meas, rows, geometry) -> np.ndarray:
-        from trackproc.dynamics import timescales as ts
-        from trackproc.dynamics.forces.third_body import sun_moon_gcrf
-
         if geometry is None:
             raise ValueError("the station tide correction needs the evaluation's geometry")
         jd1, jd2 = ts.add_seconds_utc(self.epoch_jd_utc, meas.t_s[rows])

@@ -29,6 +29,7 @@ import pandas as pd
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError
 from trackproc.io.statefile import format_epoch
+from trackproc.io.validate import stated_carrier
 from trackproc.models.observation import wrap_pi
 from trackproc.pipeline.orbit_source import SGP4_LABEL, Satellite, observe, resolve_force
 
@@ -89,11 +90,8 @@ def compare(table, orbit, options: CompareOptions, eop=None, stations: Optional[
         raise InputError("station coordinates unknown", column="station", found=", ".join(missing),
                          expected="stations in the pass file's metadata or --stations STATIONS.csv")
     kinds = set(frame["kind"])
-    carrier = table.meta.get("carrier_hz")
+    carrier = stated_carrier(table.meta, needed="doppler" in kinds, missing=None)
     mode = table.meta.get("doppler_mode") or "one-way"
-    if "doppler" in kinds and not carrier:
-        raise InputError("Doppler samples without a carrier frequency", column="carrier_hz",
-                         expected="a pass file ingested with --carrier-hz")
     times = pd.DatetimeIndex(frame["time"]).tz_convert("UTC").tz_localize(None).as_unit("ns").to_numpy()
     t0 = times.min()
     jd0 = ts.datetime64_to_jd_utc(t0)

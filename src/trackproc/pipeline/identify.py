@@ -29,7 +29,10 @@ import math
 
 import numpy as np
 
-from trackproc.errors import InputError
+from trackproc.errors import InputError, ProcessingError
+from trackproc.io.tle import parse_tle
+from trackproc.pipeline.compare import CompareOptions, compare, fit_trend
+from trackproc.pipeline.orbit_source import OrbitInput
 
 log = logging.getLogger("trackproc")
 
@@ -41,8 +44,6 @@ def parse_catalogue(text: str, source: str = "<catalogue>") -> list:
     """TLEs of a catalogue file: element-line pairs, each optionally after a name line (as
     CelesTrak and Space-Track serve them). Each TLE is checked by :func:`trackproc.io.tle.parse_tle`
     (errors name the file and its line)."""
-    from trackproc.io.tle import parse_tle
-
     lines = text.splitlines()
     tles, i, n = [], 0, len(lines)
     seen: dict = {}
@@ -119,10 +120,6 @@ def integrated_autocorrelation_time(series, max_lag: int = 1000) -> float:
 def identify(table, tles: list, eop=None, remove: str = "offset+drift", range_rate_model: str = "doppler",
              earth: str = "wgs84") -> dict:
     """Rank ``tles`` by their fit to ``table``; the result dict (candidates best first, verdict)."""
-    from trackproc.errors import ProcessingError
-    from trackproc.pipeline.compare import CompareOptions, compare, fit_trend
-    from trackproc.pipeline.orbit_source import OrbitInput
-
     options = CompareOptions(remove=remove, force="sgp4", earth=earth, range_rate_model=range_rate_model)
     rows = []
     series = {}

@@ -22,6 +22,7 @@ from trackproc.io.tdm import read_tdm
 from trackproc.io.tle import parse_tle, tle_epoch
 from trackproc.isotime import iso_utc
 from trackproc.pipeline.numbers import format_number
+from trackproc.vocabulary import BIAS_UNITS, CONSTRAINT_PARAMETERS, FORCE_PARAMETERS
 
 
 @dataclass
@@ -200,8 +201,6 @@ def _state_summary(r_m, v_m_s, mu: float | None = None) -> dict:
 
 def parameter_unit(name: str) -> str:
     """The unit of an estimated parameter from its name (``x`` m, ``vx`` m/s, ``range_bias:CPH`` m, ...)."""
-    from trackproc.vocabulary import BIAS_UNITS, CONSTRAINT_PARAMETERS, FORCE_PARAMETERS
-
     if name in ("x", "y", "z"):
         return "m"
     if name in ("vx", "vy", "vz"):

@@ -31,6 +31,7 @@ from trackproc.io.atomic import is_stdio, read_input_bytes
 from trackproc.io.statefile import is_state_json, parse_state, read_state_or_tle
 from trackproc.io.tle import parse_tle, sgp4_teme, tle_epoch, tle_state
 from trackproc.models.measurements import observables, station_gcrf
+from trackproc.io.statefile import parse_epoch
 
 DEG = np.pi / 180.0
 #: Step of the central differences giving SGP4's acceleration and jerk, s.
@@ -158,8 +159,6 @@ def tle_evaluation_epoch(epoch: Optional[str], tables: list, column: str = "--ep
     if epoch is not None and epoch.lower() == "initial":
         return None
     if epoch is not None and epoch.lower() != "first":
-        from trackproc.io.statefile import parse_epoch
-
         return parse_epoch(epoch, column=column)
     return min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
 

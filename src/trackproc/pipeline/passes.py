@@ -36,6 +36,7 @@ from trackproc.io.statefile import format_epoch
 from trackproc.io.tle import tle_epoch
 from trackproc.isotime import iso_utc
 from trackproc.pipeline.orbit_source import SGP4_LABEL, Satellite, observe, resolve_force
+from trackproc.io.validate import check_carrier
 
 DEG = np.pi / 180.0
 GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
@@ -72,8 +73,6 @@ def _check(options: PassesOptions) -> None:
         raise InputError("out of range", column="--min-elevation", found=options.min_elevation_deg,
                          expected="degrees in [-90, 90)")
     if options.carrier_hz is not None:
-        from trackproc.io.validate import check_carrier
-
         check_carrier(options.carrier_hz)
 
 

@@ -39,9 +39,11 @@ from trackproc.io.ephemeris import (COV_COLUMNS, SCHEMA_VERSION, SIGMA_COLUMNS, 
 from trackproc.io.passfile import SIGN_CONVENTION
 from trackproc.io.statefile import FORCE_LABELS
 from trackproc.io.tle import tle_epoch
+from trackproc.io.validate import check_carrier
 from trackproc.isotime import iso_utc
 from trackproc.models.observables import doppler_hz
 from trackproc.pipeline.orbit_source import SGP4_LABEL, OrbitInput, Satellite, observe, sgp4_states
+from trackproc.dynamics.forces import integrator
 
 DEG = np.pi / 180.0
 #: Below this geocentric distance (m) the orbit is taken to have entered the Earth.
@@ -128,8 +130,8 @@ def _check_options(options: PropagateOptions) -> None:
         for flag, given in (("--carrier-hz", options.carrier_hz is not None), ("--visible-only", options.visible_only)):
             if given:
                 raise InputError("needs a station", column=flag, expected="--at-station ID (and --stations)")
-    if options.carrier_hz is not None and not (np.isfinite(options.carrier_hz) and options.carrier_hz > 0):
-        raise InputError("must be positive", column="--carrier-hz", found=options.carrier_hz, expected="Hz > 0")
+    if options.carrier_hz is not None:
+        check_carrier(options.carrier_hz)
     if not -90.0 <= options.elevation_mask_deg <= 90.0:
         raise InputError("out of range", column="--elevation-mask-deg", found=options.elevation_mask_deg,
                          expected="degrees in [-90, 90]")
@@ -298,8 +300,6 @@ def _meta(initial, options, traj, eop, has_cov, times, tle=None) -> dict:
                                  f"({iso_utc(traj.epoch)}); J2 about that rotation axis",
         }
         if traj.force_model is not None:
-            from trackproc.dynamics.forces import integrator
-
             meta["force_model"] = traj.force_model.label()
             meta["constants"] = traj.force_model.describe()
             meta["propagator"] = {

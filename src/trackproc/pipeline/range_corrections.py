@@ -21,6 +21,10 @@ import numpy as np
 import pandas as pd
 
 from trackproc.errors import InputError
+from trackproc.models import troposphere as tp
+from trackproc.dynamics import timescales as ts
+from trackproc.dynamics.geodesy import DEG
+from trackproc.models.station_tides import SolidTideDisplacement
 
 TROPOSPHERE_MODELS = ("auto", "mendes-pavlis", "none")
 #: A session's samples are matched to it within this margin of its H4 span, s.
@@ -38,8 +42,6 @@ def _crd_meta(meta: dict) -> list[dict]:
 
 def check(troposphere: str, com_offset_m: float, wavelength_nm) -> None:
     """The options' values (one-line errors)."""
-    from trackproc.models import troposphere as tp
-
     if troposphere not in TROPOSPHERE_MODELS:
         raise InputError("unknown troposphere model", column="--troposphere", found=troposphere,
                          expected=", ".join(TROPOSPHERE_MODELS))
@@ -60,10 +62,6 @@ def range_correction_modifiers(frame: pd.DataFrame, tables, stations: dict, epoc
     ``epoch``: the solution epoch (UTC datetime64) the samples' seconds count from;
     ``solid_tides``: the stations' solid-Earth tide displacement on every range (None: on when
     the ranges come from CRD files, whose SINEX coordinates are tide-free)."""
-    from trackproc.dynamics import timescales as ts
-    from trackproc.dynamics.geodesy import DEG
-    from trackproc.models import troposphere as tp
-
     check(troposphere, com_offset_m, wavelength_nm)
     is_range = frame["kind"].astype(str).to_numpy() == "range"
     if not is_range.any():
@@ -76,8 +74,6 @@ def range_correction_modifiers(frame: pd.DataFrame, tables, stations: dict, epoc
     if solid_tides is None:
         solid_tides = any(_crd_meta(table.meta or {}) for source, table in tables if source in range_sources)
     if solid_tides:
-        from trackproc.models.station_tides import SolidTideDisplacement
-
         out.append(SolidTideDisplacement(tuple(float(a) for a in ref)))
     if troposphere == "none":
         return out

@@ -10,16 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from trackproc.dynamics import propagator
+from trackproc.dynamics import timescales as ts
+from trackproc.io.cpf import cpf_gcrf
+from trackproc.isotime import iso_utc
+
 
 def compare_with_cpf(state, cpf, *, force: str = "j2", eop=None, propagate_kwargs: dict | None = None) -> dict:
     """Distances (m) between ``state`` (GCRF, :class:`~trackproc.io.statefile.State`) propagated
     with ``force`` and the CPF positions: ``{"n", "max_m", "rms_m", "rms_radial_m",
     "rms_along_m", "rms_cross_m", "start", "end", "distance_m" (N,)}``."""
-    from trackproc.dynamics import propagator
-    from trackproc.dynamics import timescales as ts
-    from trackproc.io.cpf import cpf_gcrf
-    from trackproc.isotime import iso_utc
-
     times = np.asarray(cpf.times, dtype="datetime64[ns]")
     jd = ts.datetime64_to_jd_utc(times)
     t_s = np.asarray(ts.seconds_since(jd, ts.datetime64_to_jd_utc(np.datetime64(state.epoch, "ns"))), float)
@@ -54,9 +54,6 @@ class CpfTrajectory:
     ORDER = 10
 
     def __init__(self, cpf, epoch, eop=None):
-        from trackproc.dynamics import timescales as ts
-        from trackproc.io.cpf import cpf_gcrf
-
         ref = ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns"))
         self.t_nodes = np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(cpf.times), ref), float)
         self.r_nodes = cpf_gcrf(cpf, eop)

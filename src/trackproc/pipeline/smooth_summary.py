@@ -16,6 +16,8 @@ from trackproc.io.passfile import COLUMNS
 from trackproc.io.raw import KIND_UNITS
 from trackproc.isotime import iso_utc
 from trackproc.methods.smoothing import DEFAULT_MAX_DEGREE, TCA_SPREAD_RATIO, PolynomialFit
+from trackproc.io.jsonutil import dumps_indented
+from trackproc import __version__
 
 if TYPE_CHECKING:
     from trackproc.pipeline.smooth import PassFit, SmoothOptions
@@ -42,8 +44,6 @@ GRID_NOTE = ("value = fitted curve, sigma = its 1-sigma from the scaled coeffici
 
 def summary_json(summary: dict) -> str:
     """The summary as strict JSON text (NaN and infinities as null), indented, newline-terminated."""
-    from trackproc.io.jsonutil import dumps_indented
-
     return dumps_indented(json_ready(summary), 2) + "\n"
 
 
@@ -141,8 +141,6 @@ def fit_record(f: PassFit, carrier_hz, doppler_mode, max_degree: int = DEFAULT_M
 
 
 def summary_of(fits, options: SmoothOptions, meta, source, doppler_mode, carrier_hz) -> dict:
-    from trackproc import __version__
-
     counts = {s: sum(f.status == s for f in fits) for s in ("ok", "suspect", "failed")}
     return {
         "trackproc_version": __version__,

@@ -27,7 +27,8 @@ from trackproc.constants import OMEGA_EARTH
 from trackproc.dynamics import propagator
 from trackproc.dynamics.rtn import rtn_jacobian
 from trackproc.errors import InputError, ProcessingError
-from trackproc.io.tle import is_tle_state
+from trackproc.io.tle import is_tle_state, parse_tle, tle_epoch, tle_state
+from trackproc.methods.estimation.prior import TLE_APRIORI, TLE_APRIORI_MAX_AGE_DAYS
 from trackproc.methods.quality import chi2_limit
 
 
@@ -54,8 +55,6 @@ def initial_tle(initial):
     lines), or None."""
     if not is_tle_state(initial):
         return None
-    from trackproc.io.tle import parse_tle
-
     try:            # the lines were parsed once already (tle_state); a hand-made state may hold others
         return parse_tle("\n".join(initial.extra["tle"]))
     except (InputError, KeyError, TypeError, ValueError):
@@ -67,8 +66,6 @@ def tle_age_days(initial, epoch) -> Optional[float]:
     tle = initial_tle(initial)
     if tle is None:
         return None
-    from trackproc.io.tle import tle_epoch
-
     return abs(float((np.datetime64(epoch, "ns") - tle_epoch(tle)) / np.timedelta64(1, "s"))) / 86400.0
 
 
@@ -77,8 +74,6 @@ def tle_reference(initial, epoch, eop=None) -> Optional[np.ndarray]:
     tle = initial_tle(initial)
     if tle is None:
         return None
-    from trackproc.io.tle import tle_state
-
     st = tle_state(tle, at=np.datetime64(epoch, "ns"), eop=eop)
     return np.r_[st.r_m, st.v_m_s]
 
@@ -90,8 +85,6 @@ def tle_timing(initial, epoch, x0, x, cov, rate: Callable[[], Optional[np.ndarra
     (``covariance``: ``cov`` with the time-shift term when the test fires, else ``cov``; ``rate``
     gives :func:`time_tag_rate` at ``x``, two-body ``ẋ`` when it cannot). None unless the
     initial state is a TLE within the ages its accuracy was measured at."""
-    from trackproc.methods.tle_fit import TLE_APRIORI, TLE_APRIORI_MAX_AGE_DAYS
-
     age = tle_age_days(initial, epoch)
     if age is None or age > TLE_APRIORI_MAX_AGE_DAYS:
         return None

@@ -94,6 +94,21 @@ def check_carrier(carrier_hz, *, file: str | None = None, column: str = "--carri
     return value
 
 
+def stated_carrier(meta, *, file: str | None = None, needed: bool = False, missing: float | None = math.nan):
+    """The carrier a pass file's metadata states, in Hz; ``missing`` when it states none.
+
+    The value was checked where it entered (:func:`check_carrier`: ingest's ``--carrier-hz`` or an
+    input's own carrier, a pass file's metadata when it is read), so it is trusted here;
+    ``needed`` (Doppler samples to convert) makes a missing carrier the input error."""
+    carrier = (meta or {}).get("carrier_hz")
+    if carrier is None:
+        if needed:
+            raise InputError("Doppler samples need the carrier frequency", file=file, column="carrier_hz",
+                             found=None, expected="carrier_hz in the file metadata (trackproc ingest --carrier-hz)")
+        return missing
+    return float(carrier)
+
+
 def doppler_speed_factor(carrier_hz: float, mode: str | None) -> float:
     """|line-of-sight speed| per Hz of Doppler: c / carrier one-way, c / (2 carrier) two-way."""
     return abs(range_rate_per_hz(carrier_hz, mode == "two-way"))

@@ -621,7 +621,11 @@ def _rms(x):
 def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
     """DOP853 from t = 0 to ``t_end`` as scipy's (same tableau, error norm, controller and
     first step). Returns ``(outcome, nfev, t_old (S,), y_old (S, n), dense (S, 7, n), t)``:
-    outcome 0 success, 1 step limit, 2 non-finite or too small a step; ``t`` where it stopped."""
+    outcome 0 success, 1 step limit, 2 non-finite or too small a step; ``t`` where it stopped.
+
+    One numba kernel on purpose: it follows scipy's DOP853 loop step for step (first step, stages, error
+    norm, controller, dense output) so that it can be read against it, and its parts share the step's arrays.
+    """
     n = y0.size
     direction = 1.0 if t_end >= 0.0 else -1.0
     t = 0.0

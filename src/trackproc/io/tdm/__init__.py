@@ -75,10 +75,9 @@ and the keyword (column).
 
 from __future__ import annotations
 
-import math
-
 from trackproc.errors import InputError
 from trackproc.io.raw import RawMeasurements
+from trackproc.io.validate import check_carrier
 from trackproc.io.tdm.convert import Converter
 from trackproc.io.tdm.kvn import Parser
 
@@ -95,9 +94,9 @@ def read_tdm(data: bytes, source: str, *, carrier_hz: float | None = None,
     ``"round-trip"`` (halved here to the one-way equivalent) or ``"one-way-equivalent"``.
     See the module docstring for every convention.
     """
-    if carrier_hz is not None and not (math.isfinite(carrier_hz) and carrier_hz > 0):
-        raise InputError("the carrier frequency must be a positive number of Hz",
-                         column="--carrier-hz", found=carrier_hz, expected="> 0")
+    if carrier_hz is not None:
+        # read before ingest checks its options (a reader's error comes first): the same check here
+        check_carrier(carrier_hz)
     if two_way_range not in ("round-trip", "one-way-equivalent"):
         raise InputError("unknown two-way range convention", found=two_way_range,
                          expected="'round-trip' or 'one-way-equivalent'")

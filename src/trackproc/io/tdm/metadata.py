@@ -32,7 +32,10 @@ class SegmentConfig:
 
 def segment_config(seg: Segment, source: str, warnings: list) -> tuple[SegmentConfig, dict]:
     """The :class:`SegmentConfig` of a segment and its summary for ``meta["tdm_segment_info"]``;
-    warnings are appended to ``warnings``; :class:`InputError` for metadata that cannot be read."""
+    warnings are appended to ``warnings``; :class:`InputError` for metadata that cannot be read.
+
+    Over 100 lines: each keyword of the segment's META block is read in turn through the local
+    ``error``/``text``/``number`` over that block; split, every part would take them along."""
     def error(message, row=None, column=None, found=None, expected=None):
         return InputError(message, file=source, row=row, column=column, found=found, expected=expected)
 

@@ -107,6 +107,8 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
     making ``f`` relative (feasible when every ``|f| / scale < 1e-14``); ``retract`` as in
     :func:`~trackproc.methods.least_squares.solve` (applied before the restoration).
     Raises :class:`ProcessingError` on failure.
+
+    Over 100 lines with this docstring; its code is under 100.
     """
     opt = options or Options()
     x = np.asarray(x0, float).copy()

@@ -21,6 +21,7 @@ from trackproc.pipeline.od import Problem, build_problem, residual_frame, rms_ta
 from trackproc.pipeline.od.options import EstimateOptions
 from trackproc.pipeline.od.state import sigma_rtn, solution_state
 from trackproc.pipeline.timing import time_tag_rate, timing_warning, tle_reference, tle_timing
+from trackproc.io.passfile import PassTable
 
 
 @dataclass
@@ -61,8 +62,6 @@ def failure_culprit(exc: ProcessingError, tables, initial, stations, opt: Estima
                    for s, p in zip(t.frame["station"].astype(str), t.frame["pass_id"].astype(str))})
     if not 2 <= len(keys) <= MAX_CULPRIT_PASSES:
         return exc
-    from trackproc.io.passfile import PassTable
-
     fine = []
     for station, pass_id in keys:
         rest = []

@@ -14,7 +14,7 @@ from trackproc.dynamics import kepler
 from trackproc.dynamics.timescales import datetime64_to_jd_utc
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.tle import MeanElements, satrec
-from trackproc.io.validate import ORBIT_RADIUS_RANGE_M
+from trackproc.io.validate import ORBIT_RADIUS_RANGE_M, stated_carrier
 from trackproc.methods import tle_fit as tf
 from trackproc.models.measurements import station_gcrf
 from trackproc.pipeline.fit_tle.options import KINDS, MU_WGS72, REEPOCH_HALF_SPAN_REV, REEPOCH_STEP_S
@@ -53,11 +53,9 @@ def observations(tables, ephemerides, options, eop, stations):
         if missing:
             raise InputError("station coordinates unknown", file=source, column="station", found=", ".join(missing),
                              expected="stations in the pass file's metadata or --stations STATIONS.csv")
-        carrier = table.meta.get("carrier_hz")
+        carrier = stated_carrier(table.meta, file=source, needed=bool((frame["kind"] == "doppler").any()),
+                                 missing=None)
         mode = table.meta.get("doppler_mode") or "one-way"
-        if (frame["kind"] == "doppler").any() and not carrier:
-            raise InputError("Doppler samples without a carrier frequency", file=source, column="carrier_hz",
-                             expected="a pass file ingested with --carrier-hz")
         times = utc_times(frame["time"])
         for name in sorted(set(frame["station"])):
             sel = np.flatnonzero(frame["station"].to_numpy() == name)

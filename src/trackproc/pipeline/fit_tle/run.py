@@ -28,16 +28,13 @@ from trackproc.methods.estimation.prior import DEFAULT_APRIORI_ELEMENTS
 def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=None,
             stations: Optional[dict] = None) -> FitTleResult:
     """Fit a TLE to ``tables`` (``(source, PassTable)``) and ``ephemerides`` (``(source,
-    Ephemeris)``) from ``orbit`` (:class:`~trackproc.pipeline.orbit_source.OrbitInput`)."""
-    if options.doppler_bias not in DOPPLER_BIAS:
-        raise InputError("unknown Doppler bias model", column="--doppler-bias", found=options.doppler_bias,
-                         expected=", ".join(DOPPLER_BIAS))
-    if options.apriori_model not in APRIORI_MODELS:
-        raise InputError("unknown a-priori model", column="--apriori-model", found=options.apriori_model,
-                         expected=", ".join(APRIORI_MODELS))
-    if not options.prediction_span_days > 0:
-        raise InputError("the prediction horizon must be positive", column="--horizon",
-                         found=f"{options.prediction_span_days:g}", expected="days > 0")
+    Ephemeris)``) from ``orbit`` (:class:`~trackproc.pipeline.orbit_source.OrbitInput`).
+
+    Over 100 lines: the option checks, the per-group summaries and the residual table are steps of
+    their own; the rest (a-priori, fit, theory error, verdict, refusal, summary) reads and extends
+    one set of some thirty values and the closures ``model``/``run`` over them, which further
+    functions would only pass around."""
+    _check_options(options)
     template = orbit.tle
     epoch = round_epoch(options.epoch if options.epoch is not None else default_epoch(tables, ephemerides))
     obs, blocks = observations(tables, ephemerides, options, eop, stations)
@@ -239,23 +236,7 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
               f"RMS {np.sqrt(np.mean(v ** 2)):.3g} s over {v.size}; the initial orbit's along-track sigma at the epoch "
               f"is {along_s:.3g} s (docs/fit-tle.md 'A-priori')", value=float(np.sqrt(np.mean(v ** 2))), limit=along_s)
     # per group summaries (the RMS the users quote: after the nuisance terms)
-    per_group = []
-    for g in sorted(set(groups)):
-        m = groups == g
-        mk = m & keep
-        entry = {"group": g, "kind": str(obs["kind"][m].iloc[0]), "samples": int(m.sum()),
-                 "edited": int((m & ~keep).sum()),
-                 "rms_initial": float(np.sqrt(np.mean(r_initial[mk] ** 2))) if mk.any() else None,
-                 "rms": float(np.sqrt(np.mean(resid[mk] ** 2))) if mk.any() else None}
-        for k, name in enumerate(nuisance_names):
-            if name.startswith(g + " "):
-                entry[name.rsplit(" ", 1)[1]] = float(sol.nuisance[k])
-                entry[name.rsplit(" ", 1)[1] + "_sigma"] = float(math.sqrt(sol.covariance[int(free.sum()) + k,
-                                                                                          int(free.sum()) + k]))
-        if g in shifts:
-            entry["time_shift_initial_s"], entry["time_shift_initial_sigma_s"] = shifts[g]
-        entry.update(noise.get(g, {}))
-        per_group.append(entry)
+    per_group = _group_summaries(obs, keep, r_initial, resid, nuisance_names, sol, int(free.sum()), shifts, noise)
     cov = model_error.pop("prediction_covariance")
     # does the fit predict better than the initial TLE, both with SGP4's theory error? (refusal)
     a_fit = (MU_WGS72 / (2 * math.pi * float(x_fit[0]) / 86400.0) ** 2) ** (1 / 3)
@@ -365,12 +346,54 @@ def fit_tle(tables: list, ephemerides: list, orbit, options: FitTleOptions, eop=
     }
     if cross is not None:
         summary["cross_validation"] = cross
+    return FitTleResult(tle=tle, summary=summary, quality=q,
+                        residuals=_residual_table(obs, observed, resid, sigma_eff, keep))
+
+
+def _check_options(options: FitTleOptions) -> None:
+    """The options fit_tle checks itself (the CLI's choices reach it as text)."""
+    if options.doppler_bias not in DOPPLER_BIAS:
+        raise InputError("unknown Doppler bias model", column="--doppler-bias", found=options.doppler_bias,
+                         expected=", ".join(DOPPLER_BIAS))
+    if options.apriori_model not in APRIORI_MODELS:
+        raise InputError("unknown a-priori model", column="--apriori-model", found=options.apriori_model,
+                         expected=", ".join(APRIORI_MODELS))
+    if not options.prediction_span_days > 0:
+        raise InputError("the prediction horizon must be positive", column="--horizon",
+                         found=f"{options.prediction_span_days:g}", expected="days > 0")
+
+
+def _group_summaries(obs, keep, r_initial, resid, nuisance_names, sol, n_free: int, shifts: dict,
+                     noise: dict) -> list:
+    """Per group of samples: counts, the RMS before and after the fit (after the nuisance terms:
+    the RMS users quote), the group's nuisance terms and their sigmas, its apparent time shift
+    against the initial orbit and its noise scaling."""
+    groups = obs["group"].to_numpy()
+    per_group = []
+    for g in sorted(set(groups)):
+        m = groups == g
+        mk = m & keep
+        entry = {"group": g, "kind": str(obs["kind"][m].iloc[0]), "samples": int(m.sum()),
+                 "edited": int((m & ~keep).sum()),
+                 "rms_initial": float(np.sqrt(np.mean(r_initial[mk] ** 2))) if mk.any() else None,
+                 "rms": float(np.sqrt(np.mean(resid[mk] ** 2))) if mk.any() else None}
+        for k, name in enumerate(nuisance_names):
+            if name.startswith(g + " "):
+                entry[name.rsplit(" ", 1)[1]] = float(sol.nuisance[k])
+                entry[name.rsplit(" ", 1)[1] + "_sigma"] = float(math.sqrt(sol.covariance[n_free + k, n_free + k]))
+        if g in shifts:
+            entry["time_shift_initial_s"], entry["time_shift_initial_sigma_s"] = shifts[g]
+        entry.update(noise.get(g, {}))
+        per_group.append(entry)
+    return per_group
+
+
+def _residual_table(obs, observed, resid, sigma_eff, keep) -> pd.DataFrame:
+    """The residual table of estimate and refine (io.residuals): computed = SGP4 + the nuisance
+    terms, sigma = the file's scaled as in the fit."""
     units = {"range": "m", "range_rate": "m/s", "doppler": "Hz", "elevation": "rad", "azimuth": "rad"}
-    # the residual table of estimate/refine (io.residuals): computed = SGP4 + the nuisance terms,
-    # sigma = the file's scaled as in the fit
-    residuals = pd.DataFrame({"time": pd.to_datetime(obs["time"]).dt.tz_localize("UTC"), "station": obs["station"],
-                              "pass_id": obs["pass_id"],
-                              "kind": obs["kind"], "unit": obs["kind"].map(units).fillna("m"), "observed": observed,
-                              "computed": observed - resid, "residual": resid,
-                              "normalized_residual": resid / sigma_eff, "sigma": sigma_eff, "edited": ~keep})
-    return FitTleResult(tle=tle, summary=summary, quality=q, residuals=residuals)
+    return pd.DataFrame({"time": pd.to_datetime(obs["time"]).dt.tz_localize("UTC"), "station": obs["station"],
+                         "pass_id": obs["pass_id"],
+                         "kind": obs["kind"], "unit": obs["kind"].map(units).fillna("m"), "observed": observed,
+                         "computed": observed - resid, "residual": resid,
+                         "normalized_residual": resid / sigma_eff, "sigma": sigma_eff, "edited": ~keep})

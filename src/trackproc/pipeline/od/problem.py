@@ -32,6 +32,10 @@ from trackproc.pipeline.od.modifiers import bias_modifiers
 from trackproc.pipeline.timing import tle_age_days
 from trackproc.pipeline.od.options import (GROUPS, LIGHT_TIME_MARGIN_S, EstimateOptions, apriori_for,
                                                  check_apriori, check_options, force_parameter_names)
+from dataclasses import replace
+from trackproc.dynamics.forces import ForceModel
+from trackproc.io.icgem import load_field
+from trackproc.pipeline.range_corrections import range_correction_modifiers
 
 
 @dataclass
@@ -175,8 +179,6 @@ def force_drivers(force_model, names, apriori) -> list:
 def with_estimated(force_model, names):
     """``force_model`` carrying the partials of ``names``; an :class:`InputError` when the model
     cannot (Cr without radiation pressure, Cd without drag)."""
-    from dataclasses import replace
-
     if force_model is None:
         raise InputError("force parameters need the full force model", column="--estimate-force",
                          found=",".join(names), expected="--force full")
@@ -192,9 +194,6 @@ def with_estimated(force_model, names):
 def default_force_model(epoch, eop, degree: int = 20):
     """Force ``full`` without a given model: the shipped field to ``degree`` x ``degree`` at ``epoch``,
     Sun and Moon, relativity (no SRP or drag: they need the spacecraft's properties)."""
-    from trackproc.dynamics.forces import ForceModel
-    from trackproc.io.icgem import load_field
-
     return ForceModel(field=load_field(degree=degree, date=np.datetime64(epoch, "s")), third_bodies=("sun", "moon"),
                       relativity=True, eop=eop)
 
@@ -293,8 +292,6 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     for d in force_drivers(force_model, force_names, apriori):     # columns 6..: after the state, as in the STM
         params.add(d)
     modifiers = bias_modifiers(opt, frame, meas.t_s, known, apriori) + [copy.deepcopy(m) for m in opt.modifiers]
-    from trackproc.pipeline.range_corrections import range_correction_modifiers
-
     modifiers += range_correction_modifiers(frame, tables, known, epoch, troposphere=opt.troposphere,
                                             com_offset_m=opt.com_offset_m, wavelength_nm=opt.wavelength_nm)
     for d in md.collect_drivers(modifiers):

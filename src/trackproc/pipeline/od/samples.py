@@ -4,8 +4,6 @@ reception times in SI seconds from the solution epoch, stations in GCRF (steps 1
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pandas as pd
 
@@ -13,7 +11,7 @@ from trackproc.dynamics import geodesy
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError
 from trackproc.io.statefile import parse_epoch
-from trackproc.io.validate import MAX_SPAN_S
+from trackproc.io.validate import MAX_SPAN_S, stated_carrier
 from trackproc.models import observation as ob
 
 
@@ -30,13 +28,8 @@ def merge_tables(tables, kinds):
         if mode not in ob.MODES and kinds_here & set(ob.LINK_KINDS):
             raise InputError("unknown link mode", file=source, column="doppler_mode", found=mode,
                              expected="one-way or two-way (a round trip through a transponder of ratio 1)")
-        carrier = meta.get("carrier_hz")
-        if "doppler" in kinds_here and (kinds is None or "doppler" in kinds):
-            if not isinstance(carrier, (int, float)) or not (carrier > 0):
-                raise InputError("Doppler samples need the carrier frequency", file=source, column="carrier_hz",
-                                 found=carrier, expected="carrier_hz > 0 in the file metadata (trackproc ingest "
-                                                         "--carrier-hz)")
-        carriers.append(float(carrier) if isinstance(carrier, (int, float)) and carrier > 0 else math.nan)
+        carriers.append(stated_carrier(meta, file=source,
+                                       needed="doppler" in kinds_here and (kinds is None or "doppler" in kinds)))
         models.append(meta.get("range_rate_model"))
         sub = frame[["time", "station", "pass_id", "kind", "value", "sigma"]].copy()
         sub["_source"] = source

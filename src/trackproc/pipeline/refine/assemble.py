@@ -19,6 +19,7 @@ from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io import smoothing_record
 from trackproc.io.tle import parse_tle, tle_state
+from trackproc.io.validate import stated_carrier
 from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Prior
 from trackproc.models import observation as ob
@@ -101,12 +102,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
         raise InputError("a smoothed grid is a curve, not samples", file=source, column="smoothing",
                          found="output = grid",
                          expected="the samples (smooth without --grid), or --cost integral")
-    carrier = meta.get("carrier_hz")
-    carrier = float(carrier) if isinstance(carrier, (int, float)) and carrier > 0 else math.nan
-    if kind == "doppler" and not carrier > 0:
-        raise InputError("Doppler samples need the carrier frequency", file=source, column="carrier_hz",
-                         found=meta.get("carrier_hz"), expected="carrier_hz > 0 in the file metadata "
-                                                                "(trackproc ingest --carrier-hz)")
+    carrier = stated_carrier(meta, file=source, needed=kind == "doppler")
     # a coherent two-way link returns the ground station's own frequency: no transmitter offset
     one_way = (meta.get("doppler_mode") or "one-way") == "one-way"
     bias = opt.doppler_bias if opt.doppler_bias is not None else ("offset" if kind == "doppler" and one_way else "none")

@@ -1,15 +1,16 @@
 """The consistency gates of a refinement (docs/refine.md, "Quality"): the data reweighted by their
 scatter (:func:`solve_weighted`), the a-priori scaled by its variance component when the pass
 contradicts it (:func:`solve_adapted`), the improvement test against the stale state
-(:func:`stale_improvement`), the refusal of a pass that cannot improve it (:func:`solve_gated`)
+(:func:`stale_improvement`), the refusal of a pass that cannot improve it (:func:`solve_gated`, its
+result a :class:`Gated`)
 and the likelihood-ratio test of the circular-orbit constraints (:func:`circular_consistency`).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import replace
-from typing import Optional
+from dataclasses import dataclass, replace
+from typing import Any, Optional
 
 import numpy as np
 from scipy.special import chdtrc  # chi-square survival without scipy.stats (issue 19)
@@ -44,15 +45,46 @@ def may_refuse(ref: Refinement) -> bool:
             and pr.state_prior_covariance(ref.priors) is not None)
 
 
-def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
+@dataclass(frozen=True)
+class Gated:
+    """What the gates made of a pass (:func:`solve_gated`): the refinement with the a-priori used,
+    its solution, KKT result (or None) and sigma scale; the a-priori's adaptation
+    (:func:`solve_adapted`, or None), the improvement test (:func:`stale_improvement`, or None);
+    ``refusal`` None, or ``{"reason", "code", "state_covariance", ...}`` when the stale state is kept."""
+
+    ref: Refinement
+    sol: Any
+    kkt: Any
+    scale: float
+    adaptation: Optional[dict]
+    improvement: Optional[dict]
+    refusal: Optional[dict]
+
+    @property
+    def solved(self) -> tuple:
+        """``(ref, sol, kkt, scale)``: the solution in the form the solvers take as ``first``."""
+        return self.ref, self.sol, self.kkt, self.scale
+
+
+def correlated_conflict_reason(test: dict, whiteness: dict, factor: float, inflation: float) -> str:
+    """The reason given when a pass contradicts the a-priori on residuals correlated in time."""
+    return (f"the pass contradicts the stale state's a-priori ({test['test']} chi2 "
+            f"{test['statistic']:.4g} over {test['dof']}, limit {test['limit']:.3g}) but its residuals "
+            "are correlated in time (lag-1 "
+            f"{whiteness['lag1_autocorrelation']:.2f}, runs-test z {whiteness['runs_z']:.1f}): the data's noise model "
+            "is as doubtful as the a-priori, so neither the refined state nor a loosened a-priori "
+            "can be trusted; the stale covariance is scaled by "
+            f"{factor:.3g} (its variance component with the data's information deflated by "
+            f"{inflation:.3g})")
+
+
+def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None) -> Gated:
     """Solve with the gates: the improvement test (reported), then the a-priori: a conflict on
     residuals still correlated after the pass's noise model is refused (the data's noise model is
     as doubtful as the a-priori), otherwise the a-priori is adapted (a conflict the pass cannot
     carry is refused). ``ref`` carries the pass's noise
     model (:func:`solve_noise`; the solves are then GLS and the tests read whitened residuals);
-    ``first`` ``(sol, kkt, scale)`` a solution of ``ref`` already made. Returns ``(ref, sol, kkt,
-    scale, adaptation, improvement, refusal)``; ``refusal`` None or ``{"reason", "code",
-    "state_covariance"}``."""
+    ``first`` ``(sol, kkt, scale)`` a solution of ``ref`` already made. Returns :class:`Gated`."""
     may = may_refuse(ref)
     original = pr.state_prior_covariance(ref.priors) if may else None
     work = with_scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
@@ -66,9 +98,9 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
         test = refinement_apriori_test(work, first[0], first[1])
         if test is not None and test["conflict"]:
             decision = dm.declined("the stale state's stated a-priori", test)
-            return work, first[0], first[1], first[2], None, improvement, {
+            return Gated(work, first[0], first[1], first[2], None, improvement, {
                 "code": "declined", "state_covariance": original, "reason": decision.reason,
-                "decision": decision.as_dict()}
+                "decision": decision.as_dict()})
     # A pass that does not significantly tell the refined state from the stale one is no reason to
     # keep the stale state: the posterior already weighs the pass by its information (measured on
     # the DopTrack development pairs: refusing those kept 4 of 7 states whose refinement predicted
@@ -90,26 +122,19 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None):
             red = qm.prior_redundancy(np.asarray(work.covariance(first[0], first[1]), float)[:6, :6], pcov)
             comp = qm.prior_variance_component(chi2 / improvement["inflation"], red) or 1.0
             factor = max(1.0, comp)
-            return work, first[0], first[1], first[2], None, improvement, {
+            return Gated(work, first[0], first[1], first[2], None, improvement, {
                 "code": "apriori_conflict_correlated", "state_covariance": original * factor,
                 "covariance_factor": factor,
-                "reason": (f"the pass contradicts the stale state's a-priori ({test['test']} chi2 "
-                           f"{test['statistic']:.4g} over {test['dof']}, limit {test['limit']:.3g}) but its residuals "
-                           "are correlated in time (lag-1 "
-                           f"{w['lag1_autocorrelation']:.2f}, runs-test z {w['runs_z']:.1f}): the data's noise model "
-                           "is as doubtful as the a-priori, so neither the refined state nor a loosened a-priori "
-                           "can be trusted; the stale covariance is scaled by "
-                           f"{factor:.3g} (its variance component with the data's information deflated by "
-                           f"{improvement['inflation']:.3g})")}
+                "reason": correlated_conflict_reason(test, w, factor, improvement["inflation"])})
     work, sol, kkt, scale, adaptation = solve_adapted(ref, start_factor, first=(work,) + tuple(first))
     if adaptation is not None:
         improvement = stale_improvement(work, sol, scale) if work.priors else improvement
         if may and not adaptation.get("resolved", True):
-            return work, sol, kkt, scale, adaptation, improvement, {
+            return Gated(work, sol, kkt, scale, adaptation, improvement, {
                 "code": "apriori_conflict", "state_covariance": original,
                 "reason": "the pass contradicts the stale state's a-priori and cannot carry a looser one "
-                          "(apriori_conflict); the stale covariance is kept as given"}
-    return work, sol, kkt, scale, adaptation, improvement, None
+                          "(apriori_conflict); the stale covariance is kept as given"})
+    return Gated(work, sol, kkt, scale, adaptation, improvement, None)
 
 
 def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0) -> dict:

@@ -41,7 +41,13 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     ``prior_centre`` the a-priori centre the solution was solved with (:meth:`Refinement.solve`);
     ``decision`` what became of the stale state (methods/estimation/decision.py: replaced, kept,
     declined), written to the diagnostics and the verdict; ``step`` a level shift found inside the
-    pass (:mod:`trackproc.pipeline.refine.steps`: modelled, declined or said)."""
+    pass (:mod:`trackproc.pipeline.refine.steps`: modelled, declined or said).
+
+    Over 100 lines: the kept stale state, the residuals, the observability, the traverse report,
+    the method and the states are steps of their own; what stays is the covariance written, which
+    grows in order (profile, time-tag consider term, a TLE's timing), each step updating the
+    sigmas, the observability's RTN sigmas, the note and the warnings, and the diagnostics built
+    from all of it."""
     opt = ref.options
     problem = ref.problem
     warnings = list(ref.warnings)
@@ -50,36 +56,11 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     npb = ref.n_problem
     cov = ref.covariance(sol, kkt)
     if refusal is not None:
-        # the pass cannot improve the stale state: keep it with its a-priori covariance, the
-        # Doppler offset/drift fitted at it
-        x = np.asarray(sol.values, float).copy()
-        x[:6] = ref.x0[:6]
-        cov = np.zeros_like(np.asarray(cov, float))
-        cov[:6, :6] = refusal["state_covariance"]
-        nuisance = (improvement or {}).get("stale_nuisance") or {}
-        if len(nuisance.get("values", [])) == npb - 6 and npb > 6:
-            x[6:npb] = nuisance["values"]
-            cov[6:npb, 6:npb] = np.asarray(nuisance["covariance"], float)
-            cross = np.asarray(nuisance.get("state_cross", []), float)
-            if cross.shape == (npb - 6, 6):
-                cov[6:npb, :6] = cross
-                cov[:6, 6:npb] = cross.T
+        x, cov = _kept_stale_state(ref, sol, cov, refusal, improvement)
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     units = problem.params.units() + (["m"] if opt.circular else [])
 
-    # residuals at the samples (both costs)
-    if refusal is not None:
-        h, _ = problem.model(x[:npb])
-        r = problem.meas.observed - h
-        samples = SimpleNamespace(computed=h, residual=r, normalized=r / (problem.meas.sigma * sigma_scale),
-                                  edited=np.asarray(sol.edited, bool))
-    elif opt.cost == "pointwise":
-        samples = sol
-    else:
-        h, _ = problem.model(x[:npb])
-        r = problem.meas.observed - h
-        samples = SimpleNamespace(computed=h, residual=r, normalized=r / problem.meas.sigma,
-                                  edited=np.zeros(r.size, bool))
+    samples = _sample_residuals(ref, sol, x, sigma_scale, refusal is not None)
     residuals = residual_frame(problem, samples)
     kept = ~samples.edited
     # Doppler residual (Hz) -> m/s: c/f one-way, c/(2f) two-way
@@ -90,26 +71,7 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     # constraints (eq. 5) at the solution
     constraints = constraint_report(ref, x, cov, sigma, kkt, consistency)
 
-    # observability of the state from this pass
-    reference = state_prior_covariance(ref.priors)
-    ref_name = "the a-priori covariance at the traverse epoch"
-    if reference is None:
-        reference = default_apriori_covariance(x[:6], ref.mu)
-        ref_name = "the default a-priori covariance (not used in the fit)"
-    _, _, sig_data, _, _ = ref.data()
-    keep = ~sol.edited
-    obs = rf.observability(sol.jacobian[keep][:, :npb], np.asarray(sig_data)[keep] * sigma_scale, problem.names,
-                           rtn_jacobian(x[:3], x[3:6], rotating=False), reference, cov[:6, :6],
-                           other_scales=problem.params.scales()[6:], reference=ref_name,
-                           station_axis=ref.station_axis, state=x[:6])
-    if opt.circular and ref.tolerance() > 0:
-        obs.notes.append(f"--circular with --circular-tolerance {ref.tolerance():g}: the constraints of eq. 5 hold "
-                         "to the spread of an orbit circular to that eccentricity (soft), estimated with the state")
-    elif opt.circular:
-        obs.notes.append("--circular: the three constraints of eq. 5 fix three combinations of the state; "
-                         "the covariance is zero across them (it is conditional on a circular orbit)")
-    if ref.priors and opt.cost == "pointwise" and obs.unobservable:
-        obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
+    obs = _observability(ref, sol, x, cov, sigma_scale)
     big = rtn_jacobian(x[:3], x[3:6], rotating=False)             # GCRF -> RTN for (r, v)
     covariance_note = "linear (the inverse of the whitened normal matrix at the solution)"
     if (opt.covariance == "profile" and opt.cost == "pointwise" and not opt.circular and obs.unobservable and ref.priors
@@ -175,15 +137,8 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
     # the state at the stale epoch
     rv_s, cov_s = at_stale_epoch(ref, x, cov)
 
-    # traverse-point diagnostics
     t_model = model_traverse(ref, x)
-    traverse = {"epoch": iso_utc(problem.epoch), "definition": ref.traverse_how,
-                "sigma_s": float(ref.curve.tca.sigma_s) if ref.curve.tca is not None else None,
-                "curve": ref.curve.source,
-                "refined_orbit_zero_range_rate_s": t_model,
-                "moved_s": list(traverse_moves or []),
-                "refined_orbit_zero_range_rate_utc": (iso_utc(problem.epoch + np.timedelta64(
-                    int(round(t_model * 1e9)), "ns")) if t_model is not None else None)}
+    traverse = _traverse_report(ref, t_model, traverse_moves)
 
     # warnings
     max_el = max_elevation_deg(ref, x)
@@ -227,17 +182,43 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
         diagnostics["time_tag_consider"] = time_tags
     if ref.noise_report is not None:                  # the noise model of the pass (methods/noise.py)
         diagnostics["noise"] = ref.noise_report
-    method = {"cost": opt.cost, "circular": bool(opt.circular),
-              "solver": ("Gauss-Newton with equality constraints, KKT by the null-space method (seed 004 eqs. 15-17)"
-                         if opt.circular else "Gauss-Newton by QR/SVD with Levenberg-Marquardt damping"),
-              "apriori": apriori_note, "covariance": covariance_note,
-              "kind": ref.kind, "station": ref.station_name, "pass_id": ref.pass_id,
-              "range_rate_model": problem.range_rate_model, "force_model": opt.force, "earth": opt.earth,
-              "doppler_bias": [d.name for d in ref.modifier_drivers(md.DopplerOffset, md.DopplerDrift)],
-              "propagator": "Taylor (DT) with first-order sensitivity spectra, quasi-inertial frame of the traverse "
-                            "epoch"}
-    if opt.cost == "integral":
-        method.update(integral_method(ref, sol))
+    method = _method_report(ref, sol, apriori_note, covariance_note)
+    state, stale_state = _states(ref, names, x, sigma, cov, rv_s, cov_s, method, diagnostics, quality)
+    return RefineResult(state=state, stale_epoch_state=stale_state, solution=sol, problem=problem, curve=ref.curve,
+                        residuals=residuals, observability=obs, constraints=constraints, covariance=cov, names=names,
+                        warnings=warnings, quality=quality)
+
+
+def _observability(ref: Refinement, sol, x, cov, sigma_scale: float):
+    """What this pass sees of the state (:func:`~trackproc.methods.refinement.observability`), against
+    the a-priori covariance (or the default one when the fit had none), with the notes on what
+    ``--circular`` and the a-priori do to the unseen directions."""
+    opt, problem = ref.options, ref.problem
+    reference = state_prior_covariance(ref.priors)
+    ref_name = "the a-priori covariance at the traverse epoch"
+    if reference is None:
+        reference = default_apriori_covariance(x[:6], ref.mu)
+        ref_name = "the default a-priori covariance (not used in the fit)"
+    _, _, sig_data, _, _ = ref.data()
+    keep = ~sol.edited
+    obs = rf.observability(sol.jacobian[keep][:, :ref.n_problem], np.asarray(sig_data)[keep] * sigma_scale,
+                           problem.names, rtn_jacobian(x[:3], x[3:6], rotating=False), reference, cov[:6, :6],
+                           other_scales=problem.params.scales()[6:], reference=ref_name,
+                           station_axis=ref.station_axis, state=x[:6])
+    if opt.circular and ref.tolerance() > 0:
+        obs.notes.append(f"--circular with --circular-tolerance {ref.tolerance():g}: the constraints of eq. 5 hold "
+                         "to the spread of an orbit circular to that eccentricity (soft), estimated with the state")
+    elif opt.circular:
+        obs.notes.append("--circular: the three constraints of eq. 5 fix three combinations of the state; "
+                         "the covariance is zero across them (it is conditional on a circular orbit)")
+    if ref.priors and opt.cost == "pointwise" and obs.unobservable:
+        obs.notes.append("directions the pass cannot see keep the a-priori (stale) uncertainty")
+    return obs
+
+
+def _states(ref: Refinement, names, x, sigma, cov, rv_s, cov_s, method: dict, diagnostics: dict, quality):
+    """The refined state at the traverse epoch and the same solution at the stale state's epoch."""
+    opt, problem = ref.options, ref.problem
     stale_doc = {"epoch": iso_utc(ref.stale_epoch), "frame": "GCRF", "position_m": rv_s[:3].tolist(),
                  "velocity_m_s": rv_s[3:].tolist(), "parameters": names, "values": np.r_[rv_s, x[6:]].tolist(),
                  "sigma": np.sqrt(np.clip(np.diag(cov_s), 0.0, None)).tolist(), "covariance": cov_s.tolist()}
@@ -258,9 +239,70 @@ def finish(ref: Refinement, sol, kkt=None, sigma_scale: float = 1.0, consistency
                                      diagnostics=diagnostics,
                                      extra={"refinement": method, "at_traverse_epoch": iso_utc(problem.epoch),
                                             "quality": quality.as_dict()})
-    return RefineResult(state=state, stale_epoch_state=stale_state, solution=sol, problem=problem, curve=ref.curve,
-                        residuals=residuals, observability=obs, constraints=constraints, covariance=cov, names=names,
-                        warnings=warnings, quality=quality)
+    return state, stale_state
+
+
+def _kept_stale_state(ref: Refinement, sol, cov, refusal: dict, improvement: dict | None):
+    """``(x, cov)`` when the pass cannot improve the stale state: the stale state with its a-priori
+    covariance, the Doppler offset/drift fitted at it (:func:`stale_improvement`'s nuisance)."""
+    npb = ref.n_problem
+    x = np.asarray(sol.values, float).copy()
+    x[:6] = ref.x0[:6]
+    cov = np.zeros_like(np.asarray(cov, float))
+    cov[:6, :6] = refusal["state_covariance"]
+    nuisance = (improvement or {}).get("stale_nuisance") or {}
+    if len(nuisance.get("values", [])) == npb - 6 and npb > 6:
+        x[6:npb] = nuisance["values"]
+        cov[6:npb, 6:npb] = np.asarray(nuisance["covariance"], float)
+        cross = np.asarray(nuisance.get("state_cross", []), float)
+        if cross.shape == (npb - 6, 6):
+            cov[6:npb, :6] = cross
+            cov[:6, 6:npb] = cross.T
+    return x, cov
+
+
+def _sample_residuals(ref: Refinement, sol, x, sigma_scale: float, refused: bool):
+    """The residuals at the samples (both costs): the solution's own for the pointwise cost, else
+    the model at ``x`` (the kept stale state, or the integral cost's solution)."""
+    problem = ref.problem
+    if not refused and ref.options.cost == "pointwise":
+        return sol
+    h, _ = problem.model(x[:ref.n_problem])
+    r = problem.meas.observed - h
+    if refused:
+        return SimpleNamespace(computed=h, residual=r, normalized=r / (problem.meas.sigma * sigma_scale),
+                               edited=np.asarray(sol.edited, bool))
+    return SimpleNamespace(computed=h, residual=r, normalized=r / problem.meas.sigma, edited=np.zeros(r.size, bool))
+
+
+def _traverse_report(ref: Refinement, t_model, traverse_moves) -> dict:
+    """The traverse-point diagnostics: the solution epoch, how it was defined, and where the
+    refined orbit's own zero range-rate falls (``t_model`` s from it)."""
+    epoch = ref.problem.epoch
+    return {"epoch": iso_utc(epoch), "definition": ref.traverse_how,
+            "sigma_s": float(ref.curve.tca.sigma_s) if ref.curve.tca is not None else None,
+            "curve": ref.curve.source,
+            "refined_orbit_zero_range_rate_s": t_model,
+            "moved_s": list(traverse_moves or []),
+            "refined_orbit_zero_range_rate_utc": (iso_utc(epoch + np.timedelta64(int(round(t_model * 1e9)), "ns"))
+                                                  if t_model is not None else None)}
+
+
+def _method_report(ref: Refinement, sol, apriori_note: str, covariance_note: str) -> dict:
+    """How the pass was refined (the ``refinement`` block of the state file)."""
+    opt = ref.options
+    method = {"cost": opt.cost, "circular": bool(opt.circular),
+              "solver": ("Gauss-Newton with equality constraints, KKT by the null-space method (seed 004 eqs. 15-17)"
+                         if opt.circular else "Gauss-Newton by QR/SVD with Levenberg-Marquardt damping"),
+              "apriori": apriori_note, "covariance": covariance_note,
+              "kind": ref.kind, "station": ref.station_name, "pass_id": ref.pass_id,
+              "range_rate_model": ref.problem.range_rate_model, "force_model": opt.force, "earth": opt.earth,
+              "doppler_bias": [d.name for d in ref.modifier_drivers(md.DopplerOffset, md.DopplerDrift)],
+              "propagator": "Taylor (DT) with first-order sensitivity spectra, quasi-inertial frame of the traverse "
+                            "epoch"}
+    if opt.cost == "integral":
+        method.update(integral_method(ref, sol))
+    return method
 
 
 def constraint_report(ref: Refinement, x, cov, sigma, kkt=None, consistency: dict | None = None) -> dict:

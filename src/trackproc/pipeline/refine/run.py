@@ -46,6 +46,10 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
 
     Returns :class:`RefineResult`; raises :class:`InputError` (exit 2) for invalid input and
     :class:`ProcessingError` (exit 1) when the refinement fails (no convergence, rank deficiency).
+
+    Over 100 lines: its steps are functions (prepare, solve_noise, solve_gated, scan_steps,
+    model_traverse, the decision, finish); what stays is their order and what each hands the next
+    (a refusal stops the traverse re-solves, a modelled step re-runs the whole refinement).
     """
     opt = options or RefineOptions()
     ref = prepare(table, initial, stations, opt, eop, source)
@@ -57,7 +61,9 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
         ref, sol, kkt, scale = solve_noise(table, initial, ref, stations, eop, source)
     epoch0 = ref.problem.epoch                          # the epoch a modelled step's time is counted from
     first = (ref, sol, kkt, scale)
-    ref, sol, kkt, scale, adaptation, improvement, refusal = solve_gated(ref, first=(sol, kkt, scale))
+    gated = solve_gated(ref, first=(sol, kkt, scale))
+    ref, sol, kkt, scale = gated.solved
+    adaptation, improvement, refusal = gated.adaptation, gated.improvement, gated.refusal
     # a gross error inside the pass (an oscillator step, a time-tag jump): modelled or declined. The
     # scan reads the gated solution (a default a-priori the pass contradicts is adapted first, so
     # that its conflict is not taken for a step), or the first one when the gates kept the stale state
@@ -134,11 +140,12 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
             moved = with_noise_of(moved, ref)
             first = solve_weighted(moved)
             factor = adaptation["factor"] if adaptation else 1.0
-            moved_out = solve_gated(moved, factor, first=tuple(first) if factor == 1.0 else None)
+            moved_gated = solve_gated(moved, factor, first=tuple(first) if factor == 1.0 else None)
         except ProcessingError:
             break                                        # the quality reports the mismatch left
         moves.append(float(t_model))
-        ref, sol, kkt, scale, adaptation, improvement, refusal = moved_out
+        ref, sol, kkt, scale = moved_gated.solved
+        adaptation, improvement, refusal = moved_gated.adaptation, moved_gated.improvement, moved_gated.refusal
         if refusal is not None:
             break
     decision = None
