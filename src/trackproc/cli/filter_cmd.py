@@ -117,6 +117,11 @@ def filter_command(
         [], "--bias-gm", metavar="NAME=SIGMA,TAU",
         help="First-order Gauss-Markov bias: steady-state 1-sigma SIGMA in the bias's unit and time constant TAU s "
              "(range_bias=0.5,86400; doppler_offset=20,3600 for the oscillator); repeatable."),
+    bias_reset_per_pass: List[str] = typer.Option(
+        [], "--bias-reset-per-pass", metavar="NAME",
+        help="Restart a per-station bias (range_bias, az_bias, el_bias, or one parameter range_bias:KIR) from its "
+             "a-priori at each new pass of its station; repeatable. Doppler offsets are per pass already "
+             "(--doppler-bias-per pass)."),
     dmc: Optional[str] = typer.Option(
         None, "--dmc", metavar="SIGMA[,TAU]|R,T,N,TAU",
         help="Dynamic model compensation: empirical radial, along-track, cross-track accelerations estimated as "
@@ -243,6 +248,7 @@ def filter_command(
         wavelength_nm=wavelength_nm, solid_tides=solid_tides,
         force_model=force_settings.model(force.value, state0.epoch, orientation, state0))
     options = FilterOptions(problem=problem, snc_accel=accel, bias_walk=walks, dmc=dmc_values, bias_gm=gm_biases,
+                            bias_reset=tuple(bias_reset_per_pass),
                             edit_sigma=edit_sigma if edit_sigma > 0 else None, smooth=smooth, iterations=iterations,
                             segment_gap_s=segment_gap, output_epoch=out_epoch)
     result = filter_passes(tables, state0, station_table, options, orientation)

@@ -37,7 +37,9 @@ class FilterOptions:
     empirical RTN accelerations (``--estimate-force empirical-rtn``) as first-order Gauss–Markov
     processes of steady-state sigma m/s² and time constant tau s (None: constants);
     ``bias_gm``: bias family or parameter name -> ``(sigma, tau)``, a first-order Gauss–Markov
-    bias (driver unit, s) instead of a constant or random walk;
+    bias (driver unit, s) instead of a constant or random walk; ``bias_reset``: per-station bias
+    families or parameters (``range_bias``, ``range_bias:KIR``, ``az_bias``, ``el_bias``) that
+    restart from their a-priori at each new pass of their station;
     ``output_epoch``: UTC datetime64 of the written state (None: the last measurement, with
     ``smooth`` the first filter time)."""
 
@@ -52,6 +54,7 @@ class FilterOptions:
     ekf_sigma_m: Optional[float] = 1000.0
     dmc: Optional[tuple] = None
     bias_gm: Mapping[str, tuple] = field(default_factory=dict)
+    bias_reset: tuple = ()
     output_epoch: object = None
     tolerance_sigma: float = 1e-4
 

@@ -319,7 +319,8 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
                           **({"dmc_sigma_rtn_m_s2": [float(a) for a in opt.dmc[:3]], "dmc_tau_s": float(opt.dmc[3])}
                              if opt.dmc is not None else {}),
                           **({"bias_gauss_markov": {k2: {"sigma": float(v[0]), "tau_s": float(v[1])}
-                                                    for k2, v in opt.bias_gm.items()}} if opt.bias_gm else {})},
+                                                    for k2, v in opt.bias_gm.items()}} if opt.bias_gm else {}),
+                          **({"bias_reset_per_pass": list(opt.bias_reset)} if opt.bias_reset else {})},
         "edit_sigma": opt.edit_sigma, "segment_gap_s": opt.segment_gap_s,
         "updates": int(kept.sum()), "edited": int(sw.edited.sum()), "steps": int(sw.t_s.size),
         "segments": len(sw.segments), "sweeps": len(iterations) + 1, "iterations": iterations,

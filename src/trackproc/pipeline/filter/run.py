@@ -209,6 +209,43 @@ def gauss_markov(problem: Problem, opt: FilterOptions) -> dict:
     return out
 
 
+#: Bias families ``--bias-reset-per-pass`` may name (per-station biases).
+RESET_FAMILIES = ("range_bias", "az_bias", "el_bias")
+
+
+def pass_resets(problem: Problem, opt: FilterOptions) -> dict:
+    """``{time s: [parameter index, ...]}``: the per-station biases named in ``opt.bias_reset``
+    restart from their a-priori at the first sample of each of their station's passes after its
+    first. :class:`InputError` for a name that is not such a bias."""
+    from trackproc.errors import InputError
+
+    if not opt.bias_reset:
+        return {}
+    by_station, used = {}, set()
+    for i, d in enumerate(problem.params.selected):
+        key = d.name if d.name in opt.bias_reset else d.family if d.family in opt.bias_reset else None
+        if key is None:
+            continue
+        if d.family not in RESET_FAMILIES:
+            raise InputError("only a per-station bias can be reset per pass", column="--bias-reset-per-pass",
+                             found=key, expected="one of " + ", ".join(RESET_FAMILIES) + " or such a parameter")
+        by_station.setdefault(d.name.split(":", 1)[1], []).append(i)
+        used.add(key)
+    unused = sorted(set(opt.bias_reset) - used)
+    if unused:
+        raise InputError("no estimated per-station bias of that name", column="--bias-reset-per-pass",
+                         found=", ".join(unused), expected="range_bias, az_bias, el_bias or one such parameter")
+    meas = problem.meas
+    station, pass_id, t = np.asarray(meas.station).astype(str), np.asarray(meas.pass_id).astype(str), meas.t_s
+    out = {}
+    for st, idx in by_station.items():
+        rows = station == st
+        starts = sorted({float(t[rows & (pass_id == pid)].min()) for pid in set(pass_id[rows])})
+        for t0 in starts[1:]:
+            out.setdefault(t0, []).extend(idx)
+    return out
+
+
 def gm_transition(phi: np.ndarray, dt: float, gm: dict) -> np.ndarray:
     """``phi`` (Ψ over a forward step ``dt``, the parameters constants of the reference) with the
     Gauss–Markov states' transition: ``e^{−dt/τ}`` on their diagonal and, for an acceleration,
@@ -298,6 +335,7 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     edit2 = (opt.edit_sigma ** 2) if opt.edit_sigma else np.inf
     gm = gauss_markov(problem, opt)
     gm_idx = np.array(sorted(gm), int)
+    resets = {int(np.searchsorted(steps_t, t0)): idx for t0, idx in pass_resets(problem, opt).items()}
     x_ref = np.asarray(x_ref0, float).copy()
     # a Gauss-Markov state's reference is its zero mean: the filter's value is then the deviation
     # the transition e^{-dt/tau} decays (a constant reference would make it decay to that value)
@@ -367,6 +405,14 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                 if q is not None:
                     p = p + q
                 p = 0.5 * (p + p.T)
+                for i in resets.get(k, ()):
+                    # a new pass: the bias forgets its past (a zero row of the transition) and
+                    # restarts from its a-priori, as if drawn anew
+                    phi[k][i, :] = 0.0
+                    x[i] = c0[i]
+                    p[i, :] = 0.0
+                    p[:, i] = 0.0
+                    p[i, i] = P0[i, i]
             x_p[k], p_p[k] = x, p
             inv = np.linalg.inv(psi[j])
             while cursor < rows.size and step[rows[cursor]] == k:
@@ -417,7 +463,7 @@ def run(problem: Problem, opt: FilterOptions, carried=None) -> tuple[Sweep, list
     # without process noise the smoothed states are one trajectory, the smoothed epoch state's:
     # later sweeps are linearised about it alone (Gauss-Newton on the batch problem), which does
     # not lean on the first sweep's states where its linearisation was poor
-    noisy = any(opt.snc_accel) or any(opt.bias_walk.values()) or bool(gm)
+    noisy = any(opt.snc_accel) or any(opt.bias_walk.values()) or bool(gm) or bool(opt.bias_reset)
     x_ref, targets = centre.copy(), None
     history = []
     sw = None
