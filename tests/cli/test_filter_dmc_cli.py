@@ -46,6 +46,7 @@ def test_dmc_accelerations_are_estimated_states_with_sigmas(run_cli, tmp_path):
     (["--bias-gm", "range_bias=1"], "--bias-gm"),
     (["--bias-gm", "nosuch=1,300"], "--bias-gm"),
     (["--bias-gm", "range_bias=1,300", "--bias-walk", "range_bias=0.01"], "--bias-gm"),
+    (["--bias-reset-per-pass", "nosuch"], "--bias-reset-per-pass"),
 ])
 def test_bad_process_noise_options_are_one_line_usage_errors(run_cli, tmp_path, extra, needle):
     out = tmp_path / "x.json"
