@@ -76,6 +76,7 @@ def _run(d, eo, seed, dmc=None):
     return out
 
 
+@pytest.mark.slow           # two full-force filter runs and the truth's, ~3 s of CPU
 def test_mismodelled_drag_diverges_without_process_noise_and_not_with_dmc(drag):
     q, nees_f, nees_s = _run(drag, drag["plain"], seed=0)
     codes = {r["code"] for r in q.reasons if r["severity"] != "ok"}
