@@ -24,7 +24,7 @@ from trackproc.pipeline.filter.result import filter_quality
 DATA = Path(__file__).resolve().parents[2] / "sample_data"
 CD = 2.2
 #: DMC of the drag case: steady-state sigma (m/s², each RTN axis) and time constant (s)
-DMC = (1e-7, 1e-7, 1e-7, 3600.0)
+DMC = (8e-8, 8e-8, 8e-8, 3600.0)
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +91,7 @@ def test_mismodelled_drag_diverges_without_process_noise_and_not_with_dmc(drag):
 @pytest.mark.slow
 @pytest.mark.statistical
 def test_mismodelled_drag_dmc_nees_monte_carlo(drag):
-    """100 draws of noise and first guess, drag 30 % above the model, DMC 1e-7 m/s², 3600 s: the
+    """100 draws of noise and first guess, drag 30 % above the model, DMC 8e-8 m/s², 3600 s: the
     mean NEES (6 states) of the last filtered and of the smoothed epoch state inside the 95 % band
     of chi2(600)/100, and the verdict ok in at least 95 draws."""
     from scipy.stats import chi2
