@@ -139,6 +139,18 @@ def test_gauss_markov_range_bias_variance_over_a_gap_is_its_steady_state():
             assert const.p_p[k][i, i] * const.scales[i] ** 2 < 0.25 * sigma ** 2
             checked += 1
     assert checked >= 6
+    # a forward move (to --epoch) decays the Gauss-Markov bias and its variance tends to σ²
+    from trackproc.pipeline.filter.result import _utc_of_step, move
+
+    k = sw.t_s.size - 1
+    x, p = sw.absolute("f", k)
+    t = _utc_of_step(pb, sw, k)
+    x2, p2 = move(pb, FilterOptions(problem=eo, bias_gm={"range_bias": (sigma, tau)}), x, p, t,
+                  t + np.timedelta64(600, "s"))
+    i = names.index("range_bias:KIR")
+    e = np.exp(-600.0 / tau)
+    assert x2[i] == pytest.approx(e * x[i], rel=1e-12)
+    assert p2[i, i] == pytest.approx(e * e * p[i, i] + sigma ** 2 * (1 - e * e), rel=1e-9)
 
 
 def _per_pass_bias_case(seed=3):
