@@ -3,6 +3,7 @@ filter-smoother over a linear problem equals the batch least squares with the sa
 (Tapley, Schutz & Born 2004, 4.7), and SNC's Q equals the integral it stands for."""
 
 import numpy as np
+import pytest
 from scipy.integrate import quad
 
 from trackproc.methods import sequential as sq
@@ -81,3 +82,56 @@ def test_nis_band_is_the_chi2_band():
     w = np.sqrt(2.0 / 900.0)
     assert abs(lo - 100 * (1 - 2 / 900 - 3.2905 * w) ** 3) < 0.5
     assert abs(hi - 100 * (1 - 2 / 900 + 3.2905 * w) ** 3) < 0.5
+
+
+def _gm_integrand(tau):
+    """g(u) of a Gauss–Markov acceleration on (r, v, a) after u seconds (cancellation-free)."""
+    b = 1.0 / tau
+    return lambda u: np.array([(np.expm1(-b * u) + b * u) / b ** 2, -np.expm1(-b * u) / b, np.exp(-b * u)])
+
+
+@pytest.mark.parametrize("dt,tau", [(10.0, 1e4), (59.0, 600.0), (60.0, 600.0), (61.0, 600.0), (100.0, 600.0),
+                                    (5400.0, 600.0), (5400.0, 7200.0), (1.0, 1e6)])
+def test_dmc_noise_is_the_integral_of_the_gauss_markov_response(dt, tau):
+    """Q of DMC against adaptive quadrature of q g gᵀ (q = 2σ²/τ), on both sides of the switch
+    between closed form and Gauss–Legendre (dt/τ = 0.1)."""
+    from scipy.integrate import quad
+
+    sigma = 2e-7
+    q = 2 * sigma ** 2 / tau
+    g = _gm_integrand(tau)
+    ref = np.array([[quad(lambda u: q * g(u)[i] * g(u)[j], 0.0, dt, epsabs=0.0, epsrel=1e-12, limit=200)[0]
+                     for j in range(3)] for i in range(3)])
+    got = sq.dmc_noise(dt, tau, sigma)
+    scale = np.sqrt(np.outer(np.diag(ref), np.diag(ref)))
+    assert np.max(np.abs(got - ref) / scale) < 1e-9
+    assert np.all(np.linalg.eigvalsh(got / scale) > -1e-12)
+
+
+@pytest.mark.parametrize("dt,tau", [(1e-3, 3600.0), (10.0, 3600.0), (3600.0, 3600.0), (5400.0, 600.0)])
+def test_gm_transition_factors_are_the_decaying_acceleration_response(dt, tau):
+    """A unit Gauss–Markov acceleration's velocity and position after dt (the mean response
+    ∫g), over a constant one's (dt, dt²/2), by quadrature; and its decay e^{-dt/τ}."""
+    from scipy.integrate import quad
+
+    b = 1.0 / tau
+    dv = quad(lambda u: np.exp(-b * u), 0.0, dt, epsrel=1e-13)[0]
+    dr = quad(lambda u: -np.expm1(-b * u) / b, 0.0, dt, epsrel=1e-13)[0]
+    f_r, f_v, e = sq.gm_transition(dt, tau)
+    assert f_v == pytest.approx(dv / dt, rel=1e-10)
+    assert f_r == pytest.approx(dr / (dt * dt / 2.0), rel=1e-8)
+    assert e == pytest.approx(np.exp(-dt / tau), rel=1e-15)
+
+
+def test_gauss_markov_variance_tends_to_its_steady_state():
+    """Without updates a Gauss–Markov state's variance P ← e²P + Q tends to σ² (the process's
+    steady state, Gelb 1974 table 3.3-1) from any start, over irregular steps; the DMC noise's
+    acceleration entry is that of the bias."""
+    rng = np.random.default_rng(1)
+    sigma, tau = 0.7, 300.0
+    for p in (0.0, 25.0):
+        for dt in rng.uniform(1.0, 200.0, 200):
+            e = sq.gm_transition(dt, tau)[2]
+            p = e * e * p + sq.gm_bias_noise(dt, tau, sigma)
+        assert p == pytest.approx(sigma ** 2, rel=1e-9)
+    assert sq.dmc_noise(123.0, tau, sigma)[2, 2] == pytest.approx(sq.gm_bias_noise(123.0, tau, sigma), rel=1e-12)

@@ -35,6 +35,46 @@ def _snc(text: Optional[str]) -> tuple:
     return tuple(values)
 
 
+#: The time constant of ``--dmc SIGMA`` without one, s.
+DMC_DEFAULT_TAU_S = 3600.0
+
+
+def _dmc(text: Optional[str]):
+    """``SIGMA[,TAU]`` or ``R,T,N,TAU`` -> ``(sigma_r, sigma_t, sigma_n, tau)``; None without it."""
+    if not text:
+        return None
+    parts = [p.strip() for p in text.split(",") if p.strip()]
+    try:
+        values = [float(p) for p in parts]
+    except ValueError:
+        values = []
+    if len(values) not in (1, 2, 4):
+        raise typer.BadParameter(f"found {text!r}; expected SIGMA[,TAU] or R,T,N,TAU (m/s^2, s)", param_hint="--dmc")
+    if len(values) == 1:
+        values.append(DMC_DEFAULT_TAU_S)
+    if len(values) == 2:
+        values = [values[0]] * 3 + [values[1]]
+    return tuple(values)
+
+
+def _bias_gm(items: List[str]) -> dict:
+    """``NAME=SIGMA,TAU`` options -> ``{NAME: (sigma, tau)}``; a usage error otherwise."""
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            pair = tuple(float(v) for v in value.split(","))
+        except ValueError:
+            pair = ()
+        if not sep or not name.strip() or len(pair) != 2:
+            raise typer.BadParameter(f"found {item!r}; expected NAME=SIGMA,TAU (the bias's unit, s)",
+                                     param_hint="--bias-gm")
+        if name.strip() in out:
+            raise typer.BadParameter(f"{name.strip()} given twice", param_hint="--bias-gm")
+        out[name.strip()] = pair
+    return out
+
+
 @app.command("filter")
 @force_options
 def filter_command(
@@ -73,6 +113,20 @@ def filter_command(
         [], "--bias-walk", metavar="NAME=DENSITY",
         help="Random walk of a bias family or parameter (range_bias=1e-3 m/sqrt(s), doppler_offset=0.01 Hz/sqrt(s)); "
              "repeatable."),
+    bias_gm: List[str] = typer.Option(
+        [], "--bias-gm", metavar="NAME=SIGMA,TAU",
+        help="First-order Gauss-Markov bias: steady-state 1-sigma SIGMA in the bias's unit and time constant TAU s "
+             "(range_bias=0.5,86400; doppler_offset=20,3600 for the oscillator); repeatable."),
+    bias_reset_per_pass: List[str] = typer.Option(
+        [], "--bias-reset-per-pass", metavar="NAME",
+        help="Restart a per-station bias (range_bias, az_bias, el_bias, or one parameter range_bias:KIR) from its "
+             "a-priori at each new pass of its station; repeatable. Doppler offsets are per pass already "
+             "(--doppler-bias-per pass)."),
+    dmc: Optional[str] = typer.Option(
+        None, "--dmc", metavar="SIGMA[,TAU]|R,T,N,TAU",
+        help="Dynamic model compensation: empirical radial, along-track, cross-track accelerations estimated as "
+             "first-order Gauss-Markov states, steady-state 1-sigma in m/s^2 and time constant in s (default "
+             "3600). Needs --force full; adds --estimate-force empirical-rtn."),
     oscillator_noise: Optional[float] = typer.Option(
         None, "--oscillator-noise", metavar="HZ_PER_SQRT_S",
         help="Random walk of the transmitter frequency offset (Hz/sqrt(s)): --bias-walk doppler_offset=VALUE."),
@@ -161,6 +215,17 @@ def filter_command(
     if oscillator_noise is not None:
         walks.setdefault("doppler_offset", oscillator_noise)
     accel = _snc(snc_accel)
+    dmc_values = _dmc(dmc)
+    gm_biases = _bias_gm(bias_gm)
+    forces_estimated = list(estimate_force)
+    if dmc_values is not None:
+        if force.value != "full":
+            raise typer.BadParameter(f"found --force {force.value}; dynamic model compensation needs --force full "
+                                     "(its accelerations are the full model's empirical-rtn)", param_hint="--dmc")
+        from trackproc.pipeline.od.options import force_parameter_names
+
+        have = force_parameter_names(forces_estimated)
+        forces_estimated += [n for n in ("empirical_r", "empirical_t", "empirical_n") if n not in have]
     kind_list = [k.strip() for k in kinds.split(",") if k.strip()] if kinds else None
 
     from trackproc.io.atomic import write_bytes, write_text
@@ -189,10 +254,11 @@ def filter_command(
         doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,
         apriori_initial=apriori_initial, force=force.value, earth=earth.value,
         range_rate_model=range_rate_model.value if range_rate_model else None, kinds=kind_list, noise="white",
-        estimate_force=list(estimate_force), troposphere=troposphere, com_offset_m=com_offset,
+        estimate_force=forces_estimated, troposphere=troposphere, com_offset_m=com_offset,
         wavelength_nm=wavelength_nm, solid_tides=solid_tides,
         force_model=force_settings.model(force.value, state0.epoch, orientation, state0))
-    options = FilterOptions(problem=problem, snc_accel=accel, bias_walk=walks,
+    options = FilterOptions(problem=problem, snc_accel=accel, bias_walk=walks, dmc=dmc_values, bias_gm=gm_biases,
+                            bias_reset=tuple(bias_reset_per_pass),
                             edit_sigma=edit_sigma if edit_sigma > 0 else None, smooth=smooth, iterations=iterations,
                             segment_gap_s=segment_gap, output_epoch=out_epoch)
     result = filter_passes(tables, state0, station_table, options, orientation)

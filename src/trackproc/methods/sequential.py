@@ -83,3 +83,67 @@ def mcreynolds(x_f, p_f, x_s, p_s, floor: float = 1e-12):
     out = np.full(d.shape, np.nan)
     out[ok] = d[ok] / np.sqrt(var[ok])
     return out
+
+
+def gm_transition(dt: float, tau: float) -> tuple[float, float, float]:
+    """``(f_r, f_v, e)`` of a first-order Gauss–Markov acceleration ``ȧ = −a/τ + w`` over ``dt``:
+    ``e = exp(−dt/τ)`` its own transition, and the factors by which its effect on position and
+    velocity differs from a constant acceleration's (``dt²/2``, ``dt``) in the kinematics
+    ``ṙ = v, v̇ = a``: ``f_v = τ(1 − e)/dt``, ``f_r = 2(τ dt − τ²(1 − e))/dt²``
+    (Tapley, Schutz & Born 2004 eqs. 4.9.47-4.9.49; Myers & Tapley, AIAA J. 13(3) 1975).
+    A constant acceleration's columns of the orbit's transition, scaled by these, are the GM
+    state's (exact for a step short against the orbital period)."""
+    dt = abs(float(dt))
+    x = dt / float(tau)
+    if x == 0.0:
+        return 1.0, 1.0, 1.0
+    e = np.exp(-x)
+    f_v = -np.expm1(-x) / x
+    # x + expm1(-x) cancels for small x: its series x²/2 − x³/6 + x⁴/24
+    f_r = 1.0 - x / 3.0 + x * x / 12.0 if x < 1e-3 else 2.0 * (x + np.expm1(-x)) / (x * x)
+    return float(f_r), float(f_v), float(e)
+
+
+_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(16)
+
+
+def dmc_noise(dt: float, tau: float, sigma: float) -> np.ndarray:
+    """Exact discrete process noise (3 × 3, over ``(r, v, a)`` of one axis) of dynamic model
+    compensation: a first-order Gauss–Markov acceleration of steady-state sigma ``sigma``
+    (m/s²) and time constant ``tau`` (s), driving noise of PSD ``q = 2σ²/τ``, integrated
+    through ``ṙ = v, v̇ = a``: ``Q = ∫₀^dt q g(u) g(u)ᵀ du`` with
+    ``g = ((e^{−βu} − 1 + βu)/β², (1 − e^{−βu})/β, e^{−βu})``, β = 1/τ (Tapley, Schutz & Born
+    2004 eqs. 4.9.51-4.9.56; Myers & Tapley 1975). Closed form for dt/τ ≥ 0.1; below, where the
+    closed form cancels, 16-point Gauss–Legendre of the same integrand (smooth: exact to
+    rounding)."""
+    dt = abs(float(dt))
+    tau = float(tau)
+    q = 2.0 * sigma * sigma / tau
+    if dt == 0.0 or q == 0.0:
+        return np.zeros((3, 3))
+    b = 1.0 / tau
+    x = b * dt
+    if x < 0.1:
+        u = 0.5 * dt * (_GL_NODES + 1.0)
+        w = 0.5 * dt * _GL_WEIGHTS
+        em = np.exp(-b * u)
+        g = np.stack([(np.expm1(-b * u) + b * u) / b ** 2, -np.expm1(-b * u) / b, em])
+        return q * (g * w) @ g.T
+    e, e2 = np.exp(-x), np.exp(-2.0 * x)
+    i1 = (1.0 - e) / b                       # ∫ e^{−βu}
+    i2 = (1.0 - e2) / (2.0 * b)              # ∫ e^{−2βu}
+    iu = (1.0 - e - x * e) / b ** 2          # ∫ u e^{−βu}
+    qaa = i2
+    qva = (i1 - i2) / b
+    qvv = (dt - 2.0 * i1 + i2) / b ** 2
+    qra = (i2 - dt * e) / b ** 2
+    qrv = (2.0 * i1 - dt + b * dt * dt / 2.0 - i2 - b * iu) / b ** 3
+    qrr = (i2 + dt + b * b * dt ** 3 / 3.0 - 2.0 * i1 + 2.0 * b * iu - b * dt * dt) / b ** 4
+    return q * np.array([[qrr, qrv, qra], [qrv, qvv, qva], [qra, qva, qaa]])
+
+
+def gm_bias_noise(dt: float, tau: float, sigma: float) -> float:
+    """Process noise of a first-order Gauss–Markov bias over ``dt`` (transition ``e^{−dt/τ}``):
+    ``σ²(1 − e^{−2dt/τ})``, which keeps its variance at ``σ²`` in steady state (Tapley, Schutz &
+    Born 2004 eq. 4.9.52; Gelb 1974 table 3.3-1)."""
+    return float(-sigma * sigma * np.expm1(-2.0 * abs(float(dt)) / float(tau)))

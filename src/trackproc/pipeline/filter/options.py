@@ -33,6 +33,13 @@ class FilterOptions:
     is 1 cm); ``ekf_sigma_m``: the reference restarts through the filter's state (at a segment
     or after such a step) only once the filter's position sigma (root of the trace) plus its velocity
     sigma times 1000 s is below this, metres; before, the filter is linearised about the current reference (None: always);
+    ``dmc``: dynamic model compensation, ``(sigma_r, sigma_t, sigma_n, tau)``: the estimated
+    empirical RTN accelerations (``--estimate-force empirical-rtn``) as first-order Gauss–Markov
+    processes of steady-state sigma m/s² and time constant tau s (None: constants);
+    ``bias_gm``: bias family or parameter name -> ``(sigma, tau)``, a first-order Gauss–Markov
+    bias (driver unit, s) instead of a constant or random walk; ``bias_reset``: per-station bias
+    families or parameters (``range_bias``, ``range_bias:KIR``, ``az_bias``, ``el_bias``) that
+    restart from their a-priori at each new pass of their station;
     ``output_epoch``: UTC datetime64 of the written state (None: the last measurement, with
     ``smooth`` the first filter time)."""
 
@@ -45,6 +52,9 @@ class FilterOptions:
     segment_gap_s: float = 300.0
     relinearise_m: float = 100.0
     ekf_sigma_m: Optional[float] = 1000.0
+    dmc: Optional[tuple] = None
+    bias_gm: Mapping[str, tuple] = field(default_factory=dict)
+    bias_reset: tuple = ()
     output_epoch: object = None
     tolerance_sigma: float = 1e-4
 
@@ -58,6 +68,19 @@ def check_filter_options(opt: FilterOptions) -> None:
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
             raise InputError("a random-walk density must be >= 0", column="--bias-walk", found=f"{key}={v}",
                              expected="NAME=DENSITY in the parameter's unit per sqrt(s)")
+    if opt.dmc is not None:
+        vals = tuple(opt.dmc)
+        if len(vals) != 4 or not all(math.isfinite(v) and v > 0 for v in vals):
+            raise InputError("dynamic model compensation needs sigmas > 0 and a time constant > 0", column="--dmc",
+                             found=",".join(str(v) for v in vals), expected="SIGMA[,TAU] or R,T,N,TAU in m/s^2 and s")
+    for key, v in opt.bias_gm.items():
+        ok = len(tuple(v)) == 2 and all(isinstance(a, (int, float)) and math.isfinite(a) for a in v)
+        if not ok or v[0] <= 0 or v[1] <= 0:
+            raise InputError("a Gauss-Markov bias needs a sigma > 0 and a time constant > 0", column="--bias-gm",
+                             found=f"{key}={v}", expected="NAME=SIGMA,TAU (the parameter's unit, s)")
+        if key in opt.bias_walk:
+            raise InputError("a bias is a random walk or a Gauss-Markov process, not both", column="--bias-gm",
+                             found=key, expected="NAME in --bias-walk or --bias-gm")
     if opt.iterations < 1:
         raise InputError("at least one sweep", column="--iterations", found=opt.iterations, expected=">= 1")
     if opt.iterations > 1 and not opt.smooth:

@@ -104,19 +104,26 @@ def _extended_stm(traj, dt, n):
 def move(problem: Problem, opt: FilterOptions, x, p, epoch, to_epoch):
     """A state and its covariance from ``epoch`` to ``to_epoch`` (UTC datetime64) through the
     problem's force model and transition, with the process noise over the interval when forward
-    (a prediction); a backward move is the deterministic one."""
+    (a prediction; the Gauss–Markov states decaying, :func:`~trackproc.pipeline.filter.run.gm_transition`);
+    a backward move is the deterministic one (Gauss–Markov states held)."""
     dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(to_epoch), ts.datetime64_to_jd_utc(epoch)))
     if dt == 0.0:
         return x, p
     n = x.size
+    gm = fr.gauss_markov(problem, opt) if dt > 0 else {}
+    xz = np.array(x, float)
+    xz[sorted(gm)] = 0.0                  # propagated about the Gauss-Markov states' zero mean
     traj = propagator.propagate(x[:3], x[3:6], epoch, [dt], force=problem.force, stm=True, eop=problem.eop,
-                                force_model=problem.force_model_at(x)).raise_for_outcome()
+                                force_model=problem.force_model_at(xz)).raise_for_outcome()
     psi = _extended_stm(traj, dt, n)
-    x2 = x.copy()
+    if gm:
+        fr.gm_transition(psi, dt, gm)
+    x2 = xz.copy()
     x2[:6] = traj.state(dt)
+    x2 = x2 + psi @ (x - xz)
     p2 = psi @ p @ psi.T
     scales = problem.params.scales()
-    q = fr.process_noise(problem, opt, dt, x, scales) if dt > 0 else None
+    q = fr.process_noise(problem, opt, dt, x, scales, gm) if dt > 0 else None
     if q is not None:
         p2 = p2 + q * np.outer(scales, scales)
     return x2, 0.5 * (p2 + p2.T)
@@ -327,7 +334,12 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
                   "at each tracking segment" + (", Rauch-Tung-Striebel smoother" if opt.smooth else ""),
         "solution": "smoothed" if opt.smooth else "filtered",
         "process_noise": {"snc_accel_rtn_m_s2_sqrt_hz": [float(a) for a in opt.snc_accel],
-                          "bias_walk_per_sqrt_s": {k2: float(v) for k2, v in opt.bias_walk.items()}},
+                          "bias_walk_per_sqrt_s": {k2: float(v) for k2, v in opt.bias_walk.items()},
+                          **({"dmc_sigma_rtn_m_s2": [float(a) for a in opt.dmc[:3]], "dmc_tau_s": float(opt.dmc[3])}
+                             if opt.dmc is not None else {}),
+                          **({"bias_gauss_markov": {k2: {"sigma": float(v[0]), "tau_s": float(v[1])}
+                                                    for k2, v in opt.bias_gm.items()}} if opt.bias_gm else {}),
+                          **({"bias_reset_per_pass": list(opt.bias_reset)} if opt.bias_reset else {})},
         "edit_sigma": opt.edit_sigma, "segment_gap_s": opt.segment_gap_s,
         "updates": int(kept.sum()), "edited": int(sw.edited.sum()), "steps": int(sw.t_s.size),
         "segments": len(sw.segments), "sweeps": len(iterations) + 1, "iterations": iterations,

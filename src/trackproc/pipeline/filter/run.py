@@ -77,11 +77,13 @@ class Sweep:
     h_obs: np.ndarray = field(default=None)
 
 
-def initial_covariance(problem: Problem, carried=None):
+def initial_covariance(problem: Problem, carried=None, gm=None):
     """The filter's start: ``(centre, P0)`` over the problem's parameters from its priors
     (the initial state's covariance or ``--apriori-sigma``), a diffuse sigma
     (:data:`DIFFUSE_SCALES` × scale) for a parameter without one; ``carried``: a previous run's
-    state (same epoch) whose values and covariance replace those of the parameters it shares.
+    state (same epoch) whose values and covariance replace those of the parameters it shares;
+    ``gm`` (:func:`gauss_markov`): a Gauss–Markov state without a prior starts at its
+    steady-state sigma.
     :class:`InputError` when nothing gives the orbit state an uncertainty."""
     names = problem.names
     scales = problem.params.scales()
@@ -95,6 +97,9 @@ def initial_covariance(problem: Problem, carried=None):
         p0[np.ix_(idx, idx)] = np.asarray(prior.covariance, float)
         centre[idx] = np.asarray(prior.centre, float)
         has[idx] = True
+    for i, (sigma, _, _) in (gm or {}).items():
+        if not has[i]:
+            p0[i, i] = sigma * sigma
     if carried is not None and carried.covariance is not None:
         shared = [n for n in carried.parameters if n in names]
         src = [carried.parameters.index(n) for n in shared]
@@ -164,13 +169,109 @@ def _segments(t: np.ndarray, gap: float) -> list:
     return list(zip(starts.tolist(), ends.tolist()))
 
 
-def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales) -> np.ndarray | None:
+#: The force parameters dynamic model compensation turns into Gauss–Markov states (R, T, N).
+DMC_NAMES = ("empirical_r", "empirical_t", "empirical_n")
+
+
+def gauss_markov(problem: Problem, opt: FilterOptions) -> dict:
+    """``{index: (sigma, tau, is_acceleration)}`` of the parameters that are first-order
+    Gauss–Markov processes: the empirical RTN accelerations under ``opt.dmc`` and the biases
+    named in ``opt.bias_gm``. :class:`InputError` when ``--dmc`` has no empirical acceleration
+    to act on, or a ``--bias-gm`` name matches no bias."""
+    from trackproc.errors import InputError
+    from trackproc.pipeline.filter.options import WALK_FAMILIES
+
+    out = {}
+    names = problem.names
+    if opt.dmc is not None:
+        missing = [n for n in DMC_NAMES if n not in names]
+        if missing:
+            raise InputError("dynamic model compensation needs the empirical RTN acceleration as a state",
+                             column="--dmc", found="no " + ", ".join(missing),
+                             expected="--force full with --estimate-force empirical-rtn")
+        for axis, n in enumerate(DMC_NAMES):
+            out[names.index(n)] = (float(opt.dmc[axis]), float(opt.dmc[3]), True)
+    used = set()
+    for i, d in enumerate(problem.params.selected):
+        key = d.name if d.name in opt.bias_gm else d.family if d.family in opt.bias_gm else None
+        if key is None:
+            continue
+        if d.family not in WALK_FAMILIES:
+            raise InputError("only a bias can be a Gauss-Markov bias", column="--bias-gm", found=key,
+                             expected="a family of " + ", ".join(WALK_FAMILIES) + " or one such parameter")
+        sigma, tau = opt.bias_gm[key]
+        out[i] = (float(sigma), float(tau), False)
+        used.add(key)
+    unused = sorted(set(opt.bias_gm) - used)
+    if unused:
+        raise InputError("no estimated bias of that name", column="--bias-gm", found=", ".join(unused),
+                         expected="a bias family (range_bias, doppler_offset, ...) or parameter the problem estimates")
+    return out
+
+
+#: Bias families ``--bias-reset-per-pass`` may name (per-station biases).
+RESET_FAMILIES = ("range_bias", "az_bias", "el_bias")
+
+
+def pass_resets(problem: Problem, opt: FilterOptions) -> dict:
+    """``{time s: [parameter index, ...]}``: the per-station biases named in ``opt.bias_reset``
+    restart from their a-priori at the first sample of each of their station's passes after its
+    first. :class:`InputError` for a name that is not such a bias."""
+    from trackproc.errors import InputError
+
+    if not opt.bias_reset:
+        return {}
+    by_station, used = {}, set()
+    for i, d in enumerate(problem.params.selected):
+        key = d.name if d.name in opt.bias_reset else d.family if d.family in opt.bias_reset else None
+        if key is None:
+            continue
+        if d.family not in RESET_FAMILIES:
+            raise InputError("only a per-station bias can be reset per pass", column="--bias-reset-per-pass",
+                             found=key, expected="one of " + ", ".join(RESET_FAMILIES) + " or such a parameter")
+        by_station.setdefault(d.name.split(":", 1)[1], []).append(i)
+        used.add(key)
+    unused = sorted(set(opt.bias_reset) - used)
+    if unused:
+        raise InputError("no estimated per-station bias of that name", column="--bias-reset-per-pass",
+                         found=", ".join(unused), expected="range_bias, az_bias, el_bias or one such parameter")
+    meas = problem.meas
+    station, pass_id, t = np.asarray(meas.station).astype(str), np.asarray(meas.pass_id).astype(str), meas.t_s
+    out = {}
+    for st, idx in by_station.items():
+        rows = station == st
+        starts = sorted({float(t[rows & (pass_id == pid)].min()) for pid in set(pass_id[rows])})
+        for t0 in starts[1:]:
+            out.setdefault(t0, []).extend(idx)
+    return out
+
+
+def gm_transition(phi: np.ndarray, dt: float, gm: dict) -> np.ndarray:
+    """``phi`` (Ψ over a forward step ``dt``, the parameters constants of the reference) with the
+    Gauss–Markov states' transition: ``e^{−dt/τ}`` on their diagonal and, for an acceleration,
+    its columns of the orbit's rows (a constant acceleration's effect over the step, from the
+    problem's own partials) scaled to a decaying one's (:func:`~trackproc.methods.sequential.gm_transition`).
+    In place; scaling of the variables leaves both unchanged."""
+    for i, (_, tau, accel) in gm.items():
+        f_r, f_v, e = sq.gm_transition(dt, tau)
+        if accel:
+            phi[:3, i] *= f_r
+            phi[3:6, i] *= f_v
+        phi[i, i] = e
+    return phi
+
+
+def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales, gm=None) -> np.ndarray | None:
     """Q over ``dt`` (scaled variables): state noise compensation in RTN (:func:`~trackproc.methods.sequential.snc_noise`,
-    rotated to GCRF at the reference state) and the random walks of the biases (``q² dt``)."""
+    rotated to GCRF at the reference state), the random walks of the biases (``q² dt``), and the
+    Gauss–Markov states ``gm`` (:func:`gauss_markov`): a bias ``σ²(1 − e^{−2dt/τ})``, an
+    empirical acceleration DMC's exact noise on (position, velocity, acceleration) per RTN axis
+    (:func:`~trackproc.methods.sequential.dmc_noise`), its position and velocity rotated to GCRF."""
     n = scales.size
     q = np.zeros((n, n))
     any_noise = False
     acc = np.asarray(opt.snc_accel, float)
+    rot = None
     if acc.any() and dt > 0:
         rot = rtn_rotation(z_abs[:3], z_abs[3:6])              # rows R, T, N in GCRF
         psd = rot.T @ np.diag(acc ** 2) @ rot
@@ -182,6 +283,25 @@ def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales
             if rate:
                 q[i, i] += rate ** 2 * dt
                 any_noise = True
+    if gm and dt > 0:
+        for i, (sigma, tau, accel) in gm.items():
+            if not accel:
+                q[i, i] += sq.gm_bias_noise(dt, tau, sigma)
+                continue
+            if rot is None:
+                rot = rtn_rotation(z_abs[:3], z_abs[3:6])
+            u = rot[DMC_NAMES.index(problem.names[i])]        # this axis in GCRF
+            b = sq.dmc_noise(dt, tau, sigma)
+            q[:3, :3] += b[0, 0] * np.outer(u, u)
+            q[:3, 3:6] += b[0, 1] * np.outer(u, u)
+            q[3:6, :3] += b[0, 1] * np.outer(u, u)
+            q[3:6, 3:6] += b[1, 1] * np.outer(u, u)
+            q[:3, i] += b[0, 2] * u
+            q[i, :3] += b[0, 2] * u
+            q[3:6, i] += b[1, 2] * u
+            q[i, 3:6] += b[1, 2] * u
+            q[i, i] += b[2, 2]
+        any_noise = True
     if not any_noise:
         return None
     return q / np.outer(scales, scales)
@@ -213,7 +333,13 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     r2 = np.asarray(meas.sigma, float) ** 2
     periodic = np.asarray(meas.periodic, bool)
     edit2 = (opt.edit_sigma ** 2) if opt.edit_sigma else np.inf
+    gm = gauss_markov(problem, opt)
+    gm_idx = np.array(sorted(gm), int)
+    resets = {int(np.searchsorted(steps_t, t0)): idx for t0, idx in pass_resets(problem, opt).items()}
     x_ref = np.asarray(x_ref0, float).copy()
+    # a Gauss-Markov state's reference is its zero mean: the filter's value is then the deviation
+    # the transition e^{-dt/tau} decays (a constant reference would make it decay to that value)
+    x_ref[gm_idx] = 0.0
     c0, P0 = np.asarray(centre, float) / scales, np.asarray(p0, float) / ss
     evaluations = 0
     chunks = [(ka, kb, seg > 0) for seg, (ka, kb) in enumerate(segments)]
@@ -238,7 +364,9 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
             target = (x_f[kprev] if targets is None else np.asarray(targets[kprev], float) / scales) * scales
             old = _transition(last_traj, steps_t[kprev], n)[0]
             old_z = np.concatenate([last_traj.state(steps_t[kprev]), x_ref[6:]])
-            x_ref = x_ref + np.linalg.solve(old, target - old_z)
+            delta = target - old_z
+            delta[gm_idx] = 0.0
+            x_ref = x_ref + np.linalg.solve(old, delta)
         t_need = steps_t[max(kprev, 0):kb + 1]
         if rows.size:
             sub = _sub_problem(problem, np.sort(rows))
@@ -269,12 +397,22 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                 phi[k] = np.eye(n)
             else:
                 phi[k] = np.linalg.solve(psi[j - 1].T, psi[j].T).T       # Ψ(t_k) Ψ(t_{k-1})⁻¹
-                q = process_noise(problem, opt, steps_t[k] - steps_t[k - 1], z_abs[j], scales)
+                if gm:
+                    gm_transition(phi[k], steps_t[k] - steps_t[k - 1], gm)
+                q = process_noise(problem, opt, steps_t[k] - steps_t[k - 1], z_abs[j], scales, gm)
                 x = z[j] + phi[k] @ (x_f[k - 1] - z[j - 1])
                 p = phi[k] @ p_f[k - 1] @ phi[k].T
                 if q is not None:
                     p = p + q
                 p = 0.5 * (p + p.T)
+                for i in resets.get(k, ()):
+                    # a new pass: the bias forgets its past (a zero row of the transition) and
+                    # restarts from its a-priori, as if drawn anew
+                    phi[k][i, :] = 0.0
+                    x[i] = c0[i]
+                    p[i, :] = 0.0
+                    p[:, i] = 0.0
+                    p[i, i] = P0[i, i]
             x_p[k], p_p[k] = x, p
             inv = np.linalg.inv(psi[j])
             while cursor < rows.size and step[rows[cursor]] == k:
@@ -320,11 +458,12 @@ def run(problem: Problem, opt: FilterOptions, carried=None) -> tuple[Sweep, list
     later sweep linearised about the previous one's smoothed states, the prior kept; stops when
     the smoothed start moves less than ``opt.tolerance_sigma`` of its sigma. Returns the last
     sweep and the history of ``{"sweep", "max_change_sigma"}``."""
-    centre, p0 = initial_covariance(problem, carried)
+    gm = gauss_markov(problem, opt)
+    centre, p0 = initial_covariance(problem, carried, gm)
     # without process noise the smoothed states are one trajectory, the smoothed epoch state's:
     # later sweeps are linearised about it alone (Gauss-Newton on the batch problem), which does
     # not lean on the first sweep's states where its linearisation was poor
-    noisy = any(opt.snc_accel) or any(opt.bias_walk.values())
+    noisy = any(opt.snc_accel) or any(opt.bias_walk.values()) or bool(gm) or bool(opt.bias_reset)
     x_ref, targets = centre.copy(), None
     history = []
     sw = None
