@@ -40,6 +40,30 @@ Dut1Opt = typer.Option(None, "--dut1", help="UT1-UTC in seconds, when no EOP fil
 RangeRateModelOpt = typer.Option(
     RangeRateModel.doppler, "--range-rate-model",
     help="doppler: derivative of the light-time range (default); instantaneous: Orekit's one-way RangeRate.")
+#: ``--range-rate-model`` of the commands that read pass files (their metadata says which, by default).
+PassRangeRateModelOpt = typer.Option(
+    None, "--range-rate-model",
+    help="doppler (derivative of the light-time range) or instantaneous (Orekit's RangeRate); "
+         "default: the pass files' metadata, else doppler.")
+# The corrections of range samples (estimate, filter): docs/slr.md.
+TroposphereOpt = typer.Option(
+    "auto", "--troposphere", metavar="auto|mendes-pavlis|none",
+    help="Tropospheric delay of range samples: Mendes-Pavlis + FCULa from the CRD meteo records (auto: laser "
+         "sessions not already corrected; mendes-pavlis: every range, needs a wavelength; none).")
+ComOffsetOpt = typer.Option(0.0, "--com-offset", metavar="M",
+                            help="Target centre-of-mass offset subtracted from modelled ranges, m (LAGEOS 0.251).")
+WavelengthOpt = typer.Option(None, "--wavelength-nm", metavar="NM",
+                             help="Laser wavelength for --troposphere mendes-pavlis on ranges without a CRD "
+                                  "configuration record.")
+SolidTidesOpt = typer.Option(
+    None, "--solid-tides/--no-solid-tides", show_default=False,
+    help="Solid-Earth tide displacement of the stations on range samples (IERS 2010 step 1; default: on for "
+         "CRD laser data).")
+EccentricitiesOpt = typer.Option(None, "--eccentricities", metavar="ECC.snx",
+                                 help="SINEX eccentricities applied to --stations FILE.snx.")
+#: The OPM's object (estimate, refine).
+OpmObjectNameOpt = typer.Option("UNKNOWN", "--object-name", help="OBJECT_NAME of the OPM.")
+OpmObjectIdOpt = typer.Option("UNKNOWN", "--object-id", help="OBJECT_ID of the OPM.")
 StationsOpt = typer.Option(..., "--stations", help="Stations table CSV: station, lat_deg, lon_deg, height_m.")
 OutputOpt = typer.Option(None, "-o", "--output",
                          help="Output file, or - for stdout (default: stdout when it is a pipe).")

@@ -11,9 +11,11 @@ import typer
 from trackproc.cli.app import app
 from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc import vocabulary
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, HorizonOpt, JsonSummaryOpt, Noise,
-                                  OscillatorNoiseOpt, OutputOpt, StrictOpt, RangeRateModel, choices, named_values,
-                                  read_passes_and_stations, resolve_output)
+from trackproc.cli.common import (ComOffsetOpt, Dut1Opt, EarthOpt, EccentricitiesOpt, EopOpt, ForceOpt, HorizonOpt,
+                                  JsonSummaryOpt, Noise, OpmObjectIdOpt, OpmObjectNameOpt, OscillatorNoiseOpt,
+                                  OutputOpt, PassRangeRateModelOpt, RangeRateModel, SolidTidesOpt, StrictOpt,
+                                  TroposphereOpt, WavelengthOpt, choices, named_values, read_passes_and_stations,
+                                  resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -94,37 +96,23 @@ def estimate_command(
                                          "~3.5 kB a sample: 200,000 is ~1 GB; raise it for more)."),
     clip: float = typer.Option(4.0, "--clip", metavar="K", min=0.0,
                                help="Edit samples beyond K x max(1, WRMS) sigmas (iterated, flagged). 0: off."),
-    troposphere: str = typer.Option(
-        "auto", "--troposphere", metavar="auto|mendes-pavlis|none",
-        help="Tropospheric delay of range samples: Mendes-Pavlis + FCULa from the CRD meteo records (auto: laser "
-             "sessions not already corrected; mendes-pavlis: every range, needs a wavelength; none)."),
-    com_offset: float = typer.Option(0.0, "--com-offset", metavar="M",
-                                     help="Target centre-of-mass offset subtracted from modelled ranges, m "
-                                          "(LAGEOS 0.251)."),
-    wavelength_nm: Optional[float] = typer.Option(
-        None, "--wavelength-nm", metavar="NM", help="Laser wavelength for --troposphere mendes-pavlis on ranges "
-                                                    "without a CRD configuration record."),
-    solid_tides: Optional[bool] = typer.Option(
-        None, "--solid-tides/--no-solid-tides", show_default=False,
-        help="Solid-Earth tide displacement of the stations on range samples (IERS 2010 step 1; default: on for "
-             "CRD laser data)."),
-    eccentricities: Optional[str] = typer.Option(
-        None, "--eccentricities", metavar="ECC.snx", help="SINEX eccentricities applied to --stations FILE.snx."),
+    troposphere: str = TroposphereOpt,
+    com_offset: float = ComOffsetOpt,
+    wavelength_nm: Optional[float] = WavelengthOpt,
+    solid_tides: Optional[bool] = SolidTidesOpt,
+    eccentricities: Optional[str] = EccentricitiesOpt,
     force=ForceOpt,
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
     dut1: Optional[float] = Dut1Opt,
-    range_rate_model: Optional[RangeRateModel] = typer.Option(
-        None, "--range-rate-model",
-        help="doppler (derivative of the light-time range) or instantaneous (Orekit's RangeRate); "
-             "default: the pass files' metadata, else doppler."),
+    range_rate_model: Optional[RangeRateModel] = PassRangeRateModelOpt,
     compare_doppler_only: bool = typer.Option(
         False, "--compare-doppler-only", help="Seed 002: also solve without the ranges; print both motion blocks."),
     two_stage: bool = typer.Option(False, "--two-stage",
                                    help="Seed 002 two-stage method: per-pass offsets, then bias-corrected ranges."),
     opm: Optional[str] = typer.Option(None, "--opm", metavar="FILE", help="Also write a CCSDS OPM (KVN) with covariance."),
-    object_name: str = typer.Option("UNKNOWN", "--object-name", help="OBJECT_NAME of the OPM."),
-    object_id: str = typer.Option("UNKNOWN", "--object-id", help="OBJECT_ID of the OPM."),
+    object_name: str = OpmObjectNameOpt,
+    object_id: str = OpmObjectIdOpt,
     residuals: Optional[str] = typer.Option(None, "--residuals", metavar="FILE",
                                             help="Write the residuals (Parquet, or CSV by the .csv suffix)."),
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",

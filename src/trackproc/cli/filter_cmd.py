@@ -10,8 +10,10 @@ import typer
 from trackproc.cli.app import app
 from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc import vocabulary
-from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, JsonSummaryOpt, OutputOpt, StrictOpt,
-                                  RangeRateModel, choices, named_values, read_passes_and_stations, resolve_output)
+from trackproc.cli.common import (ComOffsetOpt, Dut1Opt, EarthOpt, EccentricitiesOpt, EopOpt, ForceOpt,
+                                  JsonSummaryOpt, OutputOpt, PassRangeRateModelOpt, RangeRateModel, SolidTidesOpt,
+                                  StrictOpt, TroposphereOpt, WavelengthOpt, choices, named_values,
+                                  read_passes_and_stations, resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -144,27 +146,17 @@ def filter_command(
     epoch: Optional[str] = typer.Option(None, "--epoch", metavar="ISO",
                                         help="Epoch of the written state (default: the last measurement; with "
                                              "--smooth the filter's first time)."),
-    troposphere: str = typer.Option(
-        "auto", "--troposphere", metavar="auto|mendes-pavlis|none",
-        help="Tropospheric delay of range samples, as estimate's (auto: laser sessions not already corrected)."),
-    com_offset: float = typer.Option(0.0, "--com-offset", metavar="M",
-                                     help="Target centre-of-mass offset subtracted from modelled ranges, m "
-                                          "(LAGEOS 0.251)."),
-    wavelength_nm: Optional[float] = typer.Option(
-        None, "--wavelength-nm", metavar="NM", help="Laser wavelength for --troposphere mendes-pavlis on ranges "
-                                                    "without a CRD configuration record."),
-    solid_tides: Optional[bool] = typer.Option(
-        None, "--solid-tides/--no-solid-tides", show_default=False,
-        help="Solid-Earth tide displacement of the stations on range samples (default: on for CRD laser data)."),
-    eccentricities: Optional[str] = typer.Option(
-        None, "--eccentricities", metavar="ECC.snx", help="SINEX eccentricities applied to --stations FILE.snx."),
+    troposphere: str = TroposphereOpt,
+    com_offset: float = ComOffsetOpt,
+    wavelength_nm: Optional[float] = WavelengthOpt,
+    solid_tides: Optional[bool] = SolidTidesOpt,
+    eccentricities: Optional[str] = EccentricitiesOpt,
     kinds: Optional[str] = typer.Option(None, "--kinds", metavar="KIND[,KIND]", help="Kinds to use (default all)."),
     force=ForceOpt,
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
     dut1: Optional[float] = Dut1Opt,
-    range_rate_model: Optional[RangeRateModel] = typer.Option(
-        None, "--range-rate-model", help="doppler or instantaneous; default: the pass files' metadata, else doppler."),
+    range_rate_model: Optional[RangeRateModel] = PassRangeRateModelOpt,
     history: Optional[str] = typer.Option(None, "--history", metavar="FILE.csv|FILE.oem",
                                           help="Every filtered (and smoothed) state with sigmas and covariance: CSV "
                                                "(every parameter), or CCSDS OEM with covariance blocks by the suffix "

@@ -11,7 +11,8 @@ import typer
 from trackproc.cli.app import app
 from trackproc import vocabulary
 from trackproc.cli.common import (Dut1Opt, EarthOpt, EopOpt, ForceOpt, HorizonOpt, JsonSummaryOpt, Noise,
-                                  OscillatorNoiseOpt, OutputOpt, StrictOpt, RangeRateModel, choices, named_values, resolve_output)
+                                  OpmObjectIdOpt, OpmObjectNameOpt, OscillatorNoiseOpt, OutputOpt, PassRangeRateModelOpt,
+                                  RangeRateModel, StrictOpt, choices, named_values, resolve_output)
 
 log = logging.getLogger("trackproc")
 
@@ -112,10 +113,7 @@ def refine_command(
     earth=EarthOpt,
     eop: Optional[str] = EopOpt,
     dut1: Optional[float] = Dut1Opt,
-    range_rate_model: Optional[RangeRateModel] = typer.Option(
-        None, "--range-rate-model",
-        help="doppler (derivative of the light-time range) or instantaneous (Orekit's RangeRate); "
-             "default: the pass file's metadata, else doppler."),
+    range_rate_model: Optional[RangeRateModel] = PassRangeRateModelOpt,
     output_epoch: OutputEpoch = typer.Option(
         OutputEpoch.traverse, "--output-epoch",
         help="Epoch of the state written by -o: the traverse point (default) or the stale state's epoch; "
@@ -125,8 +123,8 @@ def refine_command(
     opm: Optional[str] = typer.Option(None, "--opm", metavar="FILE",
                                       help="Also write the state written by -o as a CCSDS OPM (KVN) with its "
                                            "covariance and a COMMENT QUALITY line."),
-    object_name: str = typer.Option("UNKNOWN", "--object-name", help="OBJECT_NAME of the OPM."),
-    object_id: str = typer.Option("UNKNOWN", "--object-id", help="OBJECT_ID of the OPM."),
+    object_name: str = OpmObjectNameOpt,
+    object_id: str = OpmObjectIdOpt,
     plot: Optional[str] = typer.Option(None, "--plot", metavar="FILE.png",
                                        help="Plot the data with the refined model, the residuals and what the pass "
                                             "cannot see (needs matplotlib: pip install 'trackproc[plot]')."),

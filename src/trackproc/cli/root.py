@@ -98,7 +98,8 @@ COMMAND_MODULES = {"ingest": "ingest_cmd", "info": "info_cmd", "simulate": "simu
                    "propagate": "propagate_cmd", "smooth": "smooth_cmd", "estimate": "estimate_cmd",
                    "refine": "refine_cmd", "accuracy": "accuracy_cmd", "requirements": "requirements_cmd",
                    "detect": "detect_cmd", "batch": "batch_cmd", "passes": "passes_cmd", "compare": "compare_cmd",
-                   "identify": "identify_cmd", "fit-tle": "fit_tle_cmd", "filter": "filter_cmd", "help": "help_cmd"}
+                   "identify": "identify_cmd", "fit-tle": "fit_tle_cmd", "filter": "filter_cmd", "help": "help_cmd",
+                   "import-orekit": "import_orekit_cmd"}
 
 
 def _register(command: str | None = None) -> None:
