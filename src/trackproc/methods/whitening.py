@@ -60,6 +60,7 @@ class MarkovFactor:
         n = t.size
         t0 = float(t.min()) if t0 is None else float(t0)
         self.n = n
+        self._gains = None
         w2 = float(model.white) ** 2
         has_ar = model.ar_sigma > 0 and model.ar_tau_s > 0
         has_walk = model.walk > 0
@@ -129,6 +130,7 @@ class MarkovFactor:
         ab[2, 1:-2:2] = -(1.0 - g1)                        # row 2k+3, column 2k+1
         self._band = ab
         self._b = (f * g0, g1)
+        self._gains = (f, g0, g1) if kernel is not None else None     # the compiled filter whitens too
 
     def whiten(self, m) -> np.ndarray:
         m = np.asarray(m, float)
@@ -142,6 +144,8 @@ class MarkovFactor:
             dm = np.array(m2, order="F")                 # D M; LAPACK's column order, solved in place
             dm[1:] -= self._phi[:, None] * m2[:-1]
             out, _ = dtbtrs(self._chol, dm, uplo="L", overwrite_b=1)
+        elif self._gains is not None:
+            out = _compiled_whiten()(*self._gains, self._sd, np.ascontiguousarray(m2))
         else:
             rhs = np.zeros((2 * self.n, m2.shape[1]), order="F")
             rhs[2::2] = self._b[0][:, None] * m2[:-1]
@@ -176,6 +180,13 @@ def compiled_riccati():
                 kernel = None
         _RICCATI.append(kernel)
     return _RICCATI[0]
+
+
+def _compiled_whiten():
+    """The compiled two-state filter over a matrix's columns (loaded with :func:`compiled_riccati`)."""
+    from trackproc.methods.whitening_jit import kalman_whiten
+
+    return kalman_whiten
 
 
 def markov_grid(t: np.ndarray, t0: float) -> tuple:
