@@ -121,6 +121,9 @@ class MarkovFactor:
         g0 = (np.array(h0v) / self._s)[:-1]
         g1 = (np.array(h1v) / self._s)[:-1]
         f = phi
+        if kernel is not None:         # the compiled filter whitens (whiten): no banded system
+            self._gains = (f, g0, g1)
+            return
         # x̂_k+1 = A_k x̂_k + b_k y_k with A_k = F (I - g h), b_k = F g, F = diag(φ, 1), h = (1, 1):
         # a unit lower triangular system of bandwidth 3 in the interleaved predictions
         ab = np.zeros((4, 2 * self.n))
@@ -130,7 +133,6 @@ class MarkovFactor:
         ab[2, 1:-2:2] = -(1.0 - g1)                        # row 2k+3, column 2k+1
         self._band = ab
         self._b = (f * g0, g1)
-        self._gains = (f, g0, g1) if kernel is not None else None     # the compiled filter whitens too
 
     def whiten(self, m) -> np.ndarray:
         m = np.asarray(m, float)
