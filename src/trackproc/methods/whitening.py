@@ -24,7 +24,9 @@ instead of factorising the dense n x n covariance (O(n³); issue 19):
   ``log|C| = Σ log S_k`` (the prediction-error decomposition, Schweppe 1965). The gains are a scalar recursion; the
   filtered predictions of all columns at once are one banded triangular solve.
 
-Pure numpy/scipy; the gain recursion optionally compiled (numba, :func:`compiled_riccati`).
+Pure numpy/scipy; the gain recursion optionally compiled (numba, :func:`compiled_riccati`), and
+with it the whitening of the two-state case (the filter's state recursion over each column, equal
+to the banded solve to rounding).
 """
 
 from __future__ import annotations
