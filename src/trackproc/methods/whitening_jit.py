@@ -2,7 +2,8 @@
 compiled by numba (issue 19): the same scalar Riccati loop, the same operations in the same order
 (IEEE arithmetic, no ``fastmath``), so the compiled and the Python loop give the same bits
 (tests/pipeline/test_whitening_jit.py); :func:`kalman_whiten` applies the filter to a matrix's
-columns (equal to the Python path's banded solve to rounding, not bit for bit). Import this module only when :func:`trackproc.dynamics.jit.enabled`;
+columns (equal to the Python path's banded solve to rounding, not bit for bit).
+Import this module only when :func:`trackproc.dynamics.jit.enabled`;
 :mod:`trackproc.methods.whitening` decides when the import pays (:func:`~trackproc.methods.whitening.compiled_riccati`).
 """
 
