@@ -1,6 +1,7 @@
 """The compiled gain recursion of the two-state Kalman filter (methods/whitening_jit.py, numba,
 optional) against the Python loop it replaces (methods/whitening.py MarkovFactor._kalman): the
-same bits (innovation variances, log|C|, whitened rows) on irregular grids with duplicate times
+same bits (innovation variances, log|C|; the whitened rows, by the compiled filter's state
+recursion, to rounding) on irregular grids with duplicate times
 and near-zero gaps, and the REML noise fit of a pass identical either way; TRACKPROC_JIT=0 and
 an unset TRACKPROC_JIT in a process without numba keep the Python loop."""
 
@@ -47,7 +48,9 @@ def test_compiled_riccati_gives_the_same_bits(model, seed, monkeypatch):
         assert py._mode == jit._mode == "both"
         assert np.array_equal(py._s, jit._s)
         assert py.logdet == jit.logdet
-        assert np.array_equal(py.whiten(m), jit.whiten(m))
+        # the compiled filter whitens by the state recursion, the Python path by a banded
+        # triangular solve: the same innovations to rounding, not bit for bit
+        np.testing.assert_allclose(jit.whiten(m), py.whiten(m), rtol=0, atol=1e-12 * np.abs(py.whiten(m)).max())
 
 
 def test_reml_fit_identical_with_and_without_the_kernel(monkeypatch):

@@ -24,7 +24,9 @@ instead of factorising the dense n x n covariance (O(n³); issue 19):
   ``log|C| = Σ log S_k`` (the prediction-error decomposition, Schweppe 1965). The gains are a scalar recursion; the
   filtered predictions of all columns at once are one banded triangular solve.
 
-Pure numpy/scipy; the gain recursion optionally compiled (numba, :func:`compiled_riccati`).
+Pure numpy/scipy; the gain recursion optionally compiled (numba, :func:`compiled_riccati`), and
+with it the whitening of the two-state case (the filter's state recursion over each column, equal
+to the banded solve to rounding).
 """
 
 from __future__ import annotations
@@ -60,6 +62,7 @@ class MarkovFactor:
         n = t.size
         t0 = float(t.min()) if t0 is None else float(t0)
         self.n = n
+        self._gains = None
         w2 = float(model.white) ** 2
         has_ar = model.ar_sigma > 0 and model.ar_tau_s > 0
         has_walk = model.walk > 0
@@ -120,6 +123,9 @@ class MarkovFactor:
         g0 = (np.array(h0v) / self._s)[:-1]
         g1 = (np.array(h1v) / self._s)[:-1]
         f = phi
+        if kernel is not None:         # the compiled filter whitens (whiten): no banded system
+            self._gains = (f, g0, g1)
+            return
         # x̂_k+1 = A_k x̂_k + b_k y_k with A_k = F (I - g h), b_k = F g, F = diag(φ, 1), h = (1, 1):
         # a unit lower triangular system of bandwidth 3 in the interleaved predictions
         ab = np.zeros((4, 2 * self.n))
@@ -142,6 +148,8 @@ class MarkovFactor:
             dm = np.array(m2, order="F")                 # D M; LAPACK's column order, solved in place
             dm[1:] -= self._phi[:, None] * m2[:-1]
             out, _ = dtbtrs(self._chol, dm, uplo="L", overwrite_b=1)
+        elif self._gains is not None:
+            out = _compiled_whiten()(*self._gains, self._sd, np.ascontiguousarray(m2))
         else:
             rhs = np.zeros((2 * self.n, m2.shape[1]), order="F")
             rhs[2::2] = self._b[0][:, None] * m2[:-1]
@@ -176,6 +184,13 @@ def compiled_riccati():
                 kernel = None
         _RICCATI.append(kernel)
     return _RICCATI[0]
+
+
+def _compiled_whiten():
+    """The compiled two-state filter over a matrix's columns (loaded with :func:`compiled_riccati`)."""
+    from trackproc.methods.whitening_jit import kalman_whiten
+
+    return kalman_whiten
 
 
 def markov_grid(t: np.ndarray, t0: float) -> tuple:

@@ -74,6 +74,22 @@ def closest_approach(fit: PolynomialFit, kind: str, doppler_mode: str = "one-way
     (the S-curve is steepest at closest approach); roots outside the fitted interval are never used.
     Raises :class:`SmoothingError` (``no_tca``) when no root of the right sign lies in the pass.
     """
+    order, definition, t_star, gp, n_candidates = _tca_time(fit, kind, doppler_mode)
+    slope = float(gp(t_star))
+    phi_m = design_matrix([t_star], fit.degree, fit.domain_s, fit.basis, order)[0]
+    phi_0 = design_matrix([t_star], fit.degree, fit.domain_s, fit.basis, 0)[0]
+    dt_dc = -phi_m / slope
+    dv_dc = phi_0 + float(fit(t_star, 1)) * dt_dc
+    jac = np.vstack([dt_dc, dv_dc])
+    cov_u = jac @ fit.cov_unscaled @ jac.T
+    return ClosestApproach(definition=definition, order=order, t_s=float(t_star), value=float(fit(t_star)),
+                           cov=cov_u * fit.variance_factor, cov_unscaled=cov_u, slope=slope,
+                           n_candidates=n_candidates)
+
+
+def _tca_time(fit: PolynomialFit, kind: str, doppler_mode: str):
+    """``(order, definition, t*, the derivative series at order + 1, candidates)`` of
+    :func:`closest_approach` (the time alone: :func:`tca_degree_spread` needs no covariance)."""
     if kind == "range_rate":
         order, sign, definition = 0, +1, "zero of the fitted range-rate (negative to positive)"
     elif kind == "range":
@@ -102,17 +118,7 @@ def closest_approach(fit: PolynomialFit, kind: str, doppler_mode: str = "one-way
         t_star = min(good, key=lambda r: fit(r))
     else:               # steepest crossing
         t_star = max(good, key=lambda r: abs(gp(r)))
-
-    slope = float(gp(t_star))
-    phi_m = design_matrix([t_star], fit.degree, fit.domain_s, fit.basis, order)[0]
-    phi_0 = design_matrix([t_star], fit.degree, fit.domain_s, fit.basis, 0)[0]
-    dt_dc = -phi_m / slope
-    dv_dc = phi_0 + float(fit(t_star, 1)) * dt_dc
-    jac = np.vstack([dt_dc, dv_dc])
-    cov_u = jac @ fit.cov_unscaled @ jac.T
-    return ClosestApproach(definition=definition, order=order, t_s=float(t_star), value=float(fit(t_star)),
-                           cov=cov_u * fit.variance_factor, cov_unscaled=cov_u, slope=slope,
-                           n_candidates=len(candidates))
+    return order, definition, t_star, gp, len(candidates)
 
 
 def tca_uncertain(fit: PolynomialFit, ca: ClosestApproach, spread_s: float) -> bool:
@@ -152,11 +158,11 @@ def tca_degree_spread(t_s, y, sigma, fit: PolynomialFit, kind: str, doppler_mode
             other = fit if d == fit.degree else fit_polynomial(t, yy, s, d, basis=fit.basis,
                                                                domain_s=fit.domain_s, used=fit.used,
                                                                noise=fit.noise)
-            ca = closest_approach(other, kind, doppler_mode)
+            t_star = _tca_time(other, kind, doppler_mode)[2]      # closest_approach's t*, no covariance
         except SmoothingError:
             continue
-        times.append(ca.t_s)
-        values.append(ca.value)
+        times.append(float(t_star))
+        values.append(float(other(t_star)))
     if len(times) < 3:
         return float("nan"), float("nan"), len(times)
     return float(np.std(times, ddof=1)), float(np.std(values, ddof=1)), len(times)

@@ -49,5 +49,8 @@ def load_numba() -> None:
             riccati = compiled_riccati()
         if riccati is not None:
             riccati(np.ones(1), np.ones(2), np.ones(2), 1.0, 1.0)     # compiled or loaded here, once
+            from trackproc.methods.whitening_jit import kalman_whiten
+
+            kalman_whiten(np.ones(1), np.ones(1), np.ones(1), np.ones(2), np.ones((2, 1)))
     except Exception:  # noqa: BLE001 - optional: the numpy paths serve
         pass
