@@ -17,12 +17,14 @@ pytestmark = requires(DOPTRACK)
 
 #: The transmitter's random walk used (Hz/sqrt(s)); see docs/filter.md for the values tried.
 OSCILLATOR_NOISE = 0.01
+#: The passes' noise model (``--noise``): auto = each pass's REML choice, in sequential form.
+NOISE = "auto"
 
 
-def filter_held_back(group, oscillator_noise=OSCILLATOR_NOISE, snc_accel=0.0):
+def filter_held_back(group, oscillator_noise=OSCILLATOR_NOISE, snc_accel=0.0, noise=NOISE):
     """``filter`` over every pass of ``group`` but the last, from the TLE of the first (at its
     first sample, refine's default a-priori covariance), offset and drift per pass, the offset a
-    random walk of ``oscillator_noise`` Hz/sqrt(s); the held-back last pass's Doppler RMS
+    random walk of ``oscillator_noise`` Hz/sqrt(s), each pass's noise model ``noise``; the held-back last pass's Doppler RMS
     predicted from the last filtered state and by the TLE. Returns ``(tle Hz, ours Hz, FilterResult)``."""
     from trackproc.constants import MU_EARTH
     from trackproc.io.statefile import State
@@ -39,7 +41,7 @@ def filter_held_back(group, oscillator_noise=OSCILLATOR_NOISE, snc_accel=0.0):
     st = tle_state(tle, at=first, eop=EOP)
     initial = State.from_vectors(st.epoch, st.r_m, st.v_m_s,
                                  covariance=default_apriori_covariance(np.r_[st.r_m, st.v_m_s], MU_EARTH))
-    eo = EstimateOptions(doppler_bias="offset+drift", apriori_initial=True, noise="white", kinds=["doppler"])
+    eo = EstimateOptions(doppler_bias="offset+drift", apriori_initial=True, noise=noise, kinds=["doppler"])
     fo = FilterOptions(problem=eo, bias_walk={"doppler_offset": oscillator_noise} if oscillator_noise else {},
                        snc_accel=(snc_accel,) * 3)
     res = filter_passes([(s, t) for s, (t, _) in zip(fit, loaded)], initial, None, fo, EOP)
