@@ -15,8 +15,9 @@ from test_refine_realdata import EOP, _load, _predicted_rms, evenings, is_dev
 
 pytestmark = requires(DOPTRACK)
 
-#: The transmitter's random walk used (Hz/sqrt(s)); see docs/filter.md for the values tried.
-OSCILLATOR_NOISE = 0.01
+#: The transmitter's random walk given (Hz/sqrt(s)); 0: none given, each pass's walk chosen by
+#: REML with its noise model (as estimate's default); see docs/filter.md for the values tried.
+OSCILLATOR_NOISE = 0.0
 #: The passes' noise model (``--noise``): auto = each pass's REML choice, in sequential form.
 NOISE = "auto"
 
@@ -62,3 +63,4 @@ def test_doptrack_filter_predicts_a_held_back_pass_within_1_2x_the_tle():
     print("DopTrack held-back pass (Hz), TLE vs filter:", rows)
     assert len(rows) == 2
     assert all(o <= 1.2 * t for _, t, o, _ in rows), rows
+    assert all(res.state.extra["filter"]["noise"] == "auto" for _ in rows)

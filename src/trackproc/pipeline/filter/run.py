@@ -185,12 +185,12 @@ class PassNoise:
     report: dict
 
 
-def pass_noise(problem: Problem, opt: FilterOptions) -> PassNoise | None:
+def pass_noise(problem: Problem, opt: FilterOptions, residual=None) -> PassNoise | None:
     """The noise model of each pass's Doppler and range-rate samples, chosen as ``estimate`` and
     ``refine`` choose it (:func:`trackproc.methods.noise.fit_noise`: REML among white, AR(1) and,
     for a pass with its own transmitter offset, the offset's random walk; the pass's Jacobian
-    columns as fixed effects), on the residuals against the initial orbit (the problem's first
-    guess). In sequential form (Bryson & Henrikson 1968; Tapley, Schutz & Born 2004 4.9): the
+    columns as fixed effects), on ``residual`` (per sample; default the residuals against the
+    initial orbit, the problem's first guess). In sequential form (Bryson & Henrikson 1968; Tapley, Schutz & Born 2004 4.9): the
     AR(1) part ``σ_a² e^{−|Δt|/τ}`` is a first-order Gauss–Markov state added to the pass's
     samples (steady state σ_a, time constant τ; its steady-state prior at the pass's start), the
     random walk a random walk of the pass's offset, the white part the samples' noise. None for
@@ -205,7 +205,7 @@ def pass_noise(problem: Problem, opt: FilterOptions) -> PassNoise | None:
     if not rr.any():
         return None
     h, jac = problem.model(np.asarray(problem.x0, float))
-    r = np.asarray(meas.observed, float) - np.asarray(h, float)
+    r = np.asarray(meas.observed, float) - np.asarray(h, float) if residual is None else np.asarray(residual, float)
     sigma = np.asarray(meas.sigma, float).copy()
     column = np.full(sigma.size, -1)
     states, walk, report = [], {}, {}
