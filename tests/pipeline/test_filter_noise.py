@@ -81,6 +81,7 @@ def test_filter_with_the_passes_ar1_noise_equals_estimates_gls(case):
     print("models:", models)
     assert models.count("ar1") >= 7, noise.report
     taus = [v["ar1_tau_s"] for v in noise.report.values() if v["model"] == "ar1"]
+    print("AR(1) tau (s):", np.round(taus, 1))
     assert 20.0 < np.median(taus) < 180.0, taus
     sw, hist = fr.run(pb, fo, None, noise)
     x, p = sw.absolute("s", sw.epoch_step)
