@@ -15,14 +15,17 @@ from test_refine_realdata import EOP, _load, _predicted_rms, evenings, is_dev
 
 pytestmark = requires(DOPTRACK)
 
-#: The transmitter's random walk used (Hz/sqrt(s)); see docs/filter.md for the values tried.
-OSCILLATOR_NOISE = 0.01
+#: The transmitter's random walk given (Hz/sqrt(s)); 0: none given, each pass's walk chosen by
+#: REML with its noise model (as estimate's default); see docs/filter.md for the values tried.
+OSCILLATOR_NOISE = 0.0
+#: The passes' noise model (``--noise``): auto = each pass's REML choice, in sequential form.
+NOISE = "auto"
 
 
-def filter_held_back(group, oscillator_noise=OSCILLATOR_NOISE, snc_accel=0.0):
+def filter_held_back(group, oscillator_noise=OSCILLATOR_NOISE, snc_accel=0.0, noise=NOISE):
     """``filter`` over every pass of ``group`` but the last, from the TLE of the first (at its
     first sample, refine's default a-priori covariance), offset and drift per pass, the offset a
-    random walk of ``oscillator_noise`` Hz/sqrt(s); the held-back last pass's Doppler RMS
+    random walk of ``oscillator_noise`` Hz/sqrt(s), each pass's noise model ``noise``; the held-back last pass's Doppler RMS
     predicted from the last filtered state and by the TLE. Returns ``(tle Hz, ours Hz, FilterResult)``."""
     from trackproc.constants import MU_EARTH
     from trackproc.io.statefile import State
@@ -39,7 +42,7 @@ def filter_held_back(group, oscillator_noise=OSCILLATOR_NOISE, snc_accel=0.0):
     st = tle_state(tle, at=first, eop=EOP)
     initial = State.from_vectors(st.epoch, st.r_m, st.v_m_s,
                                  covariance=default_apriori_covariance(np.r_[st.r_m, st.v_m_s], MU_EARTH))
-    eo = EstimateOptions(doppler_bias="offset+drift", apriori_initial=True, noise="white", kinds=["doppler"])
+    eo = EstimateOptions(doppler_bias="offset+drift", apriori_initial=True, noise=noise, kinds=["doppler"])
     fo = FilterOptions(problem=eo, bias_walk={"doppler_offset": oscillator_noise} if oscillator_noise else {},
                        snc_accel=(snc_accel,) * 3)
     res = filter_passes([(s, t) for s, (t, _) in zip(fit, loaded)], initial, None, fo, EOP)
@@ -57,6 +60,9 @@ def test_doptrack_filter_predicts_a_held_back_pass_within_1_2x_the_tle():
     for group in dev_evenings(2):
         tle_hz, ours, res = filter_held_back(group)
         rows.append((group, round(tle_hz, 2), round(ours, 2), res.quality.verdict))
+        # each pass's noise model is recorded, as estimate records it
+        assert set(res.state.diagnostics["noise"]) == {f"{s}/{p}" for s, p in
+                                                       zip(res.problem.meas.station, res.problem.meas.pass_id)}
     print("DopTrack held-back pass (Hz), TLE vs filter:", rows)
     assert len(rows) == 2
     assert all(o <= 1.2 * t for _, t, o, _ in rows), rows

@@ -11,8 +11,8 @@ from trackproc.cli.app import app
 from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc import vocabulary
 from trackproc.cli.common import (ComOffsetOpt, Dut1Opt, EarthOpt, EccentricitiesOpt, EopOpt, ForceOpt,
-                                  JsonSummaryOpt, OutputOpt, PassRangeRateModelOpt, RangeRateModel, SolidTidesOpt,
-                                  StrictOpt, TroposphereOpt, WavelengthOpt, choices, named_values,
+                                  JsonSummaryOpt, Noise, OutputOpt, PassRangeRateModelOpt, RangeRateModel,
+                                  SolidTidesOpt, StrictOpt, TroposphereOpt, WavelengthOpt, choices, named_values,
                                   read_passes_and_stations, resolve_output)
 
 log = logging.getLogger("trackproc")
@@ -129,6 +129,12 @@ def filter_command(
         help="Dynamic model compensation: empirical radial, along-track, cross-track accelerations estimated as "
              "first-order Gauss-Markov states, steady-state 1-sigma in m/s^2 and time constant in s (default "
              "3600). Needs --force full; adds --estimate-force empirical-rtn."),
+    noise: Noise = typer.Option(
+        Noise.white, "--noise",
+        help="Noise model of each pass's Doppler/range-rate samples, estimate's: auto = chosen per pass by REML "
+             "among white, AR(1) and (one-way, with a Doppler offset) a random walk of the transmitter frequency, "
+             "in sequential form (AR(1) a Gauss-Markov state of the pass, the walk on its offset); white = "
+             "independent samples at their sigma (the default); or that model. See docs/filter.md."),
     oscillator_noise: Optional[float] = typer.Option(
         None, "--oscillator-noise", metavar="HZ_PER_SQRT_S",
         help="Random walk of the transmitter frequency offset (Hz/sqrt(s)): --bias-walk doppler_offset=VALUE."),
@@ -245,7 +251,7 @@ def filter_command(
         range_bias=True if range_bias else list(range_bias_station), doppler_bias=doppler_bias.value,
         doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,
         apriori_initial=apriori_initial, force=force.value, earth=earth.value,
-        range_rate_model=range_rate_model.value if range_rate_model else None, kinds=kind_list, noise="white",
+        range_rate_model=range_rate_model.value if range_rate_model else None, kinds=kind_list, noise=noise.value,
         estimate_force=forces_estimated, troposphere=troposphere, com_offset_m=com_offset,
         wavelength_nm=wavelength_nm, solid_tides=solid_tides,
         force_model=force_settings.model(force.value, state0.epoch, orientation, state0))

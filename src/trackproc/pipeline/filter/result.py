@@ -307,7 +307,13 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
     problem = build_problem(tables, initial, stations, popt, eop)
     if carried is not None and np.datetime64(problem.epoch, "ns") != np.datetime64(initial.epoch, "ns"):
         carried = None
-    sw, iterations = fr.run(problem, opt, carried)
+    noise = fr.pass_noise(problem, opt)
+    if noise is not None and opt.smooth and opt.iterations > 1:
+        # the noise models from the residuals of the white iterated smoother (estimate's weighted fit
+        # with zero process noise), not of a first guess whose error is not linear over the arc
+        white, _ = fr.run(problem, opt, carried)
+        noise = fr.pass_noise(problem, opt, white.residuals("s"))
+    sw, iterations = fr.run(problem, opt, carried, noise)
     which = "s" if opt.smooth else "f"
     last_k = sw.t_s.size - 1
     if opt.output_epoch is None:
@@ -339,7 +345,9 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
                              if opt.dmc is not None else {}),
                           **({"bias_gauss_markov": {k2: {"sigma": float(v[0]), "tau_s": float(v[1])}
                                                     for k2, v in opt.bias_gm.items()}} if opt.bias_gm else {}),
-                          **({"bias_reset_per_pass": list(opt.bias_reset)} if opt.bias_reset else {})},
+                          **({"bias_reset_per_pass": list(opt.bias_reset)} if opt.bias_reset else {}),
+                          **({"pass_noise_walk_per_sqrt_s": dict(noise.walk)} if noise is not None and noise.walk else {})},
+        "noise": popt.noise,
         "edit_sigma": opt.edit_sigma, "segment_gap_s": opt.segment_gap_s,
         "updates": int(kept.sum()), "edited": int(sw.edited.sum()), "steps": int(sw.t_s.size),
         "segments": len(sw.segments), "sweeps": len(iterations) + 1, "iterations": iterations,
@@ -352,6 +360,9 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
                    "covariance_rtn": rtn,
                    "sigma_rtn": sigma_rtn(rtn),
                    "units": problem.params.units()}
+    if noise is not None:
+        # each pass's model, as estimate records it; its AR(1) part is a Gauss-Markov state of the filter
+        diagnostics["noise"] = noise.report
     extra = {"estimation": {"method": "sequential: " + record["method"], "range_rate_model": problem.range_rate_model,
                             "apriori_initial": problem.apriori_initial,
                             "sources": sorted({str(s) for s in problem.sources})},

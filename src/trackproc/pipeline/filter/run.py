@@ -169,6 +169,77 @@ def _segments(t: np.ndarray, gap: float) -> list:
     return list(zip(starts.tolist(), ends.tolist()))
 
 
+@dataclass
+class PassNoise:
+    """The per-pass measurement noise of the filter in sequential form (:func:`pass_noise`):
+    ``sigma`` the white part per sample (the samples' unit), ``column`` per sample the index of
+    its pass's AR(1) state among the ``states`` (-1: none), ``states`` ``[(sigma, tau_s), ...]``
+    one first-order Gauss–Markov measurement-noise state per pass with an AR(1) component,
+    ``walk`` ``{doppler_offset parameter: Hz/√s}`` the transmitter's random walk per pass,
+    ``report`` ``{"STATION/PASS": model}`` as ``estimate`` records it."""
+
+    sigma: np.ndarray
+    column: np.ndarray
+    states: list
+    walk: dict
+    report: dict
+
+
+def pass_noise(problem: Problem, opt: FilterOptions, residual=None) -> PassNoise | None:
+    """The noise model of each pass's Doppler and range-rate samples, chosen as ``estimate`` and
+    ``refine`` choose it (:func:`trackproc.methods.noise.fit_noise`: REML among white, AR(1) and,
+    for a pass with its own transmitter offset, the offset's random walk; the pass's Jacobian
+    columns as fixed effects), on ``residual`` (per sample; default the residuals against the
+    initial orbit, the problem's first guess). In sequential form (Bryson & Henrikson 1968; Tapley, Schutz & Born 2004 4.9): the
+    AR(1) part ``σ_a² e^{−|Δt|/τ}`` is a first-order Gauss–Markov state added to the pass's
+    samples (steady state σ_a, time constant τ; its steady-state prior at the pass's start), the
+    random walk a random walk of the pass's offset, the white part the samples' noise. None for
+    ``--noise white`` or when no pass has 20 samples."""
+    from trackproc.methods import noise as nz
+
+    popt = opt.problem
+    if popt.noise == "white":
+        return None
+    meas = problem.meas
+    rr = np.isin(meas.kind, ["doppler", "range_rate"])
+    if not rr.any():
+        return None
+    h, jac = problem.model(np.asarray(problem.x0, float))
+    r = np.asarray(meas.observed, float) - np.asarray(h, float) if residual is None else np.asarray(residual, float)
+    sigma = np.asarray(meas.sigma, float).copy()
+    column = np.full(sigma.size, -1)
+    states, walk, report = [], {}, {}
+    names = problem.names
+    given = opt.bias_walk.get("doppler_offset")
+    two_way = np.asarray(getattr(meas, "two_way", np.zeros(sigma.size, bool)), bool)
+    for st, pid in sorted(set(zip(np.asarray(meas.station)[rr].astype(str), np.asarray(meas.pass_id)[rr].astype(str)))):
+        rows = np.flatnonzero(rr & (np.asarray(meas.station).astype(str) == st) & (np.asarray(meas.pass_id).astype(str) == pid))
+        if rows.size < 20:
+            continue
+        rows = rows[np.argsort(meas.t_s[rows], kind="stable")]
+        offset = next((f"doppler_offset:{k}" for k in (pid, st) if f"doppler_offset:{k}" in names), None)
+        osc = offset is not None and not two_way[rows].any()
+        gwalk = opt.bias_walk.get(offset, given) if osc else None
+        t = meas.t_s[rows]
+        nf = nz.fit_noise(t, r[rows], np.asarray(jac, float)[rows], models=nz.candidate_models(popt.noise, osc),
+                          walk=gwalk, t0=float(t.min()))
+        d = nf.as_dict()
+        d.pop("candidates", None)
+        report[f"{st}/{pid}"] = d
+        m = nf.model
+        if m.is_white:
+            continue
+        sigma[rows] = m.white
+        if m.ar_sigma > 0 and m.ar_tau_s > 0:
+            column[rows] = len(states)
+            states.append((float(m.ar_sigma), float(m.ar_tau_s)))
+        if m.walk > 0 and osc and gwalk is None:
+            walk[offset] = float(m.walk)
+    if not report:
+        return None
+    return PassNoise(sigma=sigma, column=column, states=states, walk=walk, report=report)
+
+
 #: The force parameters dynamic model compensation turns into Gauss–Markov states (R, T, N).
 DMC_NAMES = ("empirical_r", "empirical_t", "empirical_n")
 
@@ -207,6 +278,16 @@ def gauss_markov(problem: Problem, opt: FilterOptions) -> dict:
         raise InputError("no estimated bias of that name", column="--bias-gm", found=", ".join(unused),
                          expected="a bias family (range_bias, doppler_offset, ...) or parameter the problem estimates")
     return out
+
+
+def noise_states(problem: Problem, opt: FilterOptions, noise: PassNoise | None) -> dict:
+    """:func:`gauss_markov` with the passes' AR(1) measurement-noise states (:func:`pass_noise`),
+    which follow the problem's parameters in the filter's state."""
+    gm = gauss_markov(problem, opt)
+    if noise is not None:
+        n_par = len(problem.names)
+        gm.update({n_par + j: (sigma, tau, False) for j, (sigma, tau) in enumerate(noise.states)})
+    return gm
 
 
 #: Bias families ``--bias-reset-per-pass`` may name (per-station biases).
@@ -307,15 +388,20 @@ def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales
     return q / np.outer(scales, scales)
 
 
-def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None, restarts: bool = True) -> Sweep:
+def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None, restarts: bool = True,
+          noise: PassNoise | None = None) -> Sweep:
     """The filter over every measurement time in order (samples at one reception time as
     sequential scalar updates, their noise independent). The reference trajectory starts at
     ``x_ref0`` (the problem's epoch) and restarts at each tracking segment through the filtered
     state at the segment's previous step, or ``targets[k]`` (a previous sweep's smoothed states,
     absolute) when given; between references the filter works on deviations, so no information
-    is lost at a restart. Scaled variables inside."""
+    is lost at a restart. ``noise`` (:func:`pass_noise`): the passes' AR(1) noise states follow
+    the problem's parameters in the state (``x_ref0``, ``centre``, ``p0`` include them), the
+    samples' white sigma replaces theirs. Scaled variables inside."""
     meas = problem.meas
-    scales = problem.params.scales()
+    n_par = len(problem.names)
+    n_noise = 0 if noise is None else len(noise.states)
+    scales = np.concatenate([problem.params.scales(), np.ones(n_noise)])
     n = scales.size
     ss = np.outer(scales, scales)
     steps_t = np.unique(np.concatenate([[0.0], meas.t_s]))
@@ -330,10 +416,11 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     edited = np.zeros(nobs, bool)
     h_ref, h_row = np.zeros(nobs), np.zeros((nobs, n))
     y = np.asarray(meas.observed, float)
-    r2 = np.asarray(meas.sigma, float) ** 2
+    r2 = np.asarray(meas.sigma if noise is None else noise.sigma, float) ** 2
+    noise_col = None if not n_noise else noise.column
     periodic = np.asarray(meas.periodic, bool)
     edit2 = (opt.edit_sigma ** 2) if opt.edit_sigma else np.inf
-    gm = gauss_markov(problem, opt)
+    gm = noise_states(problem, opt, noise)
     gm_idx = np.array(sorted(gm), int)
     resets = {int(np.searchsorted(steps_t, t0)): idx for t0, idx in pass_resets(problem, opt).items()}
     x_ref = np.asarray(x_ref0, float).copy()
@@ -370,18 +457,25 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
         t_need = steps_t[max(kprev, 0):kb + 1]
         if rows.size:
             sub = _sub_problem(problem, np.sort(rows))
-            h, jac, traj = _evaluate(sub, x_ref, cover=t_need)
+            h, jac, traj = _evaluate(sub, x_ref[:n_par], cover=t_need)
             evaluations += 1
             pos = np.searchsorted(np.sort(rows), rows)         # rows (time order) -> sub's order
             h, jac = h[pos], jac[pos]
         else:
-            traj = problem.trajectory(x_ref, cover=t_need)
-            h, jac = np.zeros(0), np.zeros((0, n))
+            traj = problem.trajectory(x_ref[:n_par], cover=t_need)
+            h, jac = np.zeros(0), np.zeros((0, n_par))
         last_traj = traj
         psi = _transition(traj, t_need, n) * scales[None, None, :] / scales[None, :, None]
         z_abs = np.concatenate([traj.state(t_need), np.broadcast_to(x_ref[6:], (t_need.size, n - 6))], axis=1)
         z = z_abs / scales
         off = 0 if kprev < 0 else 1                            # index of step ka in t_need
+        if noise_col is not None:
+            # a sample's AR(1) noise state enters it with coefficient 1 (the samples' unit)
+            extra = np.zeros((rows.size, n_noise))
+            col = noise_col[rows]
+            has = col >= 0
+            extra[np.flatnonzero(has), col[has]] = 1.0
+            jac = np.hstack([np.asarray(jac, float).reshape(rows.size, n_par), extra])
         jac = jac * scales[None, :]
         cursor = 0
         for k in range(ka, kb + 1):
@@ -453,13 +547,23 @@ def smooth(sw: Sweep) -> Sweep:
     return sw
 
 
-def run(problem: Problem, opt: FilterOptions, carried=None) -> tuple[Sweep, list]:
+def run(problem: Problem, opt: FilterOptions, carried=None, noise: PassNoise | None = None) -> tuple[Sweep, list]:
     """The filter (and smoother) over the problem, iterated ``opt.iterations`` times at most: each
     later sweep linearised about the previous one's smoothed states, the prior kept; stops when
-    the smoothed start moves less than ``opt.tolerance_sigma`` of its sigma. Returns the last
+    the smoothed start moves less than ``opt.tolerance_sigma`` of its sigma. ``noise``
+    (:func:`pass_noise`): the passes' correlated noise as states (steady-state prior) and the
+    offsets' random walks; the returned sweep carries the problem's parameters only (the noise
+    states dropped, so that residuals are against the deterministic model). Returns the last
     sweep and the history of ``{"sweep", "max_change_sigma"}``."""
-    gm = gauss_markov(problem, opt)
-    centre, p0 = initial_covariance(problem, carried, gm)
+    if noise is not None and noise.walk:
+        opt = replace(opt, bias_walk={**opt.bias_walk, **noise.walk})
+    gm = noise_states(problem, opt, noise)
+    centre, p0 = initial_covariance(problem, carried, gauss_markov(problem, opt))
+    n_noise = 0 if noise is None else len(noise.states)
+    if n_noise:
+        centre = np.concatenate([centre, np.zeros(n_noise)])
+        p0 = np.block([[p0, np.zeros((p0.shape[0], n_noise))],
+                       [np.zeros((n_noise, p0.shape[0])), np.diag([s * s for s, _ in noise.states])]])
     # without process noise the smoothed states are one trajectory, the smoothed epoch state's:
     # later sweeps are linearised about it alone (Gauss-Newton on the batch problem), which does
     # not lean on the first sweep's states where its linearisation was poor
@@ -468,7 +572,7 @@ def run(problem: Problem, opt: FilterOptions, carried=None) -> tuple[Sweep, list
     history = []
     sw = None
     for it in range(opt.iterations):
-        sw = sweep(problem, x_ref, centre, p0, opt, targets, restarts=it == 0 or noisy)
+        sw = sweep(problem, x_ref, centre, p0, opt, targets, restarts=it == 0 or noisy, noise=noise)
         if opt.smooth:
             smooth(sw)
         if it == opt.iterations - 1:
@@ -480,4 +584,20 @@ def run(problem: Problem, opt: FilterOptions, carried=None) -> tuple[Sweep, list
             break
         x_ref = x_new
         targets = sw.x_s * sw.scales
+    if n_noise:
+        sw = _without_noise_states(sw, len(problem.names))
     return sw, history
+
+
+def _without_noise_states(sw: Sweep, n: int) -> Sweep:
+    """The sweep on its first ``n`` variables (the problem's parameters)."""
+    def cut(a, square):
+        if a is None:
+            return None
+        return a[:, :n, :n] if square else a[..., :n]
+
+    out = replace(sw, scales=sw.scales[:n], x_p=cut(sw.x_p, False), p_p=cut(sw.p_p, True), x_f=cut(sw.x_f, False),
+                  p_f=cut(sw.p_f, True), phi=cut(sw.phi, True), z_ref=cut(sw.z_ref, False), h_row=cut(sw.h_row, False),
+                  x_s=cut(sw.x_s, False), p_s=cut(sw.p_s, True))
+    out.h_obs = sw.h_obs
+    return out
