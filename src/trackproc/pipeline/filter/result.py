@@ -307,12 +307,7 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
     problem = build_problem(tables, initial, stations, popt, eop)
     if carried is not None and np.datetime64(problem.epoch, "ns") != np.datetime64(initial.epoch, "ns"):
         carried = None
-    noise = fr.pass_noise(problem, opt)
-    if noise is not None and opt.smooth and opt.iterations > 1:
-        # the noise models from the residuals of the white iterated smoother (estimate's weighted fit
-        # with zero process noise), not of a first guess whose error is not linear over the arc
-        white, _ = fr.run(problem, opt, carried)
-        noise = fr.pass_noise(problem, opt, white.residuals("s"))
+    noise = fr.fitted_noise(problem, opt, carried)
     sw, iterations = fr.run(problem, opt, carried, noise)
     which = "s" if opt.smooth else "f"
     last_k = sw.t_s.size - 1

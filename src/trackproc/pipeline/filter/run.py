@@ -185,12 +185,13 @@ class PassNoise:
     report: dict
 
 
-def pass_noise(problem: Problem, opt: FilterOptions, residual=None) -> PassNoise | None:
+def pass_noise(problem: Problem, opt: FilterOptions, residual=None, keep=None) -> PassNoise | None:
     """The noise model of each pass's Doppler and range-rate samples, chosen as ``estimate`` and
     ``refine`` choose it (:func:`trackproc.methods.noise.fit_noise`: REML among white, AR(1) and,
     for a pass with its own transmitter offset, the offset's random walk; the pass's Jacobian
     columns as fixed effects), on ``residual`` (per sample; default the residuals against the
-    initial orbit, the problem's first guess). In sequential form (Bryson & Henrikson 1968; Tapley, Schutz & Born 2004 4.9): the
+    initial orbit, the problem's first guess), the samples outside ``keep`` (edited) left out as
+    estimate leaves its edited samples out. In sequential form (Bryson & Henrikson 1968; Tapley, Schutz & Born 2004 4.9): the
     AR(1) part ``σ_a² e^{−|Δt|/τ}`` is a first-order Gauss–Markov state added to the pass's
     samples (steady state σ_a, time constant τ; its steady-state prior at the pass's start), the
     random walk a random walk of the pass's offset, the white part the samples' noise. None for
@@ -206,6 +207,7 @@ def pass_noise(problem: Problem, opt: FilterOptions, residual=None) -> PassNoise
         return None
     h, jac = problem.model(np.asarray(problem.x0, float))
     r = np.asarray(meas.observed, float) - np.asarray(h, float) if residual is None else np.asarray(residual, float)
+    keep = np.ones(r.size, bool) if keep is None else np.asarray(keep, bool)
     sigma = np.asarray(meas.sigma, float).copy()
     column = np.full(sigma.size, -1)
     states, walk, report = [], {}, {}
@@ -217,12 +219,15 @@ def pass_noise(problem: Problem, opt: FilterOptions, residual=None) -> PassNoise
         if rows.size < 20:
             continue
         rows = rows[np.argsort(meas.t_s[rows], kind="stable")]
+        used = rows[keep[rows]]
+        if used.size < 20:
+            continue
         offset = next((f"doppler_offset:{k}" for k in (pid, st) if f"doppler_offset:{k}" in names), None)
         osc = offset is not None and not two_way[rows].any()
         gwalk = opt.bias_walk.get(offset, given) if osc else None
         t = meas.t_s[rows]
-        nf = nz.fit_noise(t, r[rows], np.asarray(jac, float)[rows], models=nz.candidate_models(popt.noise, osc),
-                          walk=gwalk, t0=float(t.min()))
+        nf = nz.fit_noise(meas.t_s[used], r[used], np.asarray(jac, float)[used],
+                          models=nz.candidate_models(popt.noise, osc), walk=gwalk, t0=float(t.min()))
         d = nf.as_dict()
         d.pop("candidates", None)
         report[f"{st}/{pid}"] = d
@@ -238,6 +243,34 @@ def pass_noise(problem: Problem, opt: FilterOptions, residual=None) -> PassNoise
     if not report:
         return None
     return PassNoise(sigma=sigma, column=column, states=states, walk=walk, report=report)
+
+
+#: The first white smoother of :func:`fitted_noise` edits at this multiple of ``--edit-sigma``:
+#: generous, since white noise at the samples' sigma understates a correlated pass's innovation
+#: variance, and editing that pass would leave REML its few samples near the first guess.
+FIRST_EDIT_FACTOR = 4.0
+
+
+def fitted_noise(problem: Problem, opt: FilterOptions, carried=None) -> PassNoise | None:
+    """The passes' noise models (:func:`pass_noise`) fitted on residuals that do not carry the
+    initial orbit's error, in every mode: those of a first, white, smoother over the run (zero
+    measurement correlation; the run's process noise, a-priori and ``--iterations``; editing at
+    :data:`FIRST_EDIT_FACTOR` × ``--edit-sigma``, the edited samples left out of REML), as
+    ``estimate`` fits them on its weighted fit's residuals. With zero process noise the smoother
+    is the weighted least-squares fit of the whole run linearised about the reference, so each
+    pass's residuals are against one orbit fitted to every pass, where the residuals against a
+    stale first guess (a TLE) carry its along-track error, which REML may take for white noise
+    or for a walk. None when every pass is white or nothing is Doppler/range-rate."""
+    meas = problem.meas
+    rr = np.isin(meas.kind, ["doppler", "range_rate"])
+    if opt.problem.noise == "white" or not rr.any():
+        return None
+    ids = np.char.add(np.asarray(meas.station).astype(str), "/" + np.asarray(meas.pass_id).astype(str))
+    if np.unique(ids[rr], return_counts=True)[1].max() < 20:
+        return None
+    edit = None if not opt.edit_sigma else FIRST_EDIT_FACTOR * opt.edit_sigma
+    white, _ = run(problem, replace(opt, smooth=True, edit_sigma=edit), carried)
+    return pass_noise(problem, opt, white.residuals("s"), keep=~white.edited)
 
 
 #: The force parameters dynamic model compensation turns into Gauss–Markov states (R, T, N).
