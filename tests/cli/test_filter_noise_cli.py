@@ -13,14 +13,14 @@ def test_noise_auto_records_each_pass_model_and_white_records_none(run_cli, tmp_
     args = ["filter", SAMPLE / "multistation.parquet", "--initial", SAMPLE / "stale.json", "--kinds", "range_rate",
             "-q"]
     auto, white = tmp_path / "auto.json", tmp_path / "white.json"
-    result = run_cli(args + ["--noise", "auto", "-o", auto])
+    result = run_cli(args + ["-o", auto])                # auto is the default, as estimate's
     assert result.exit_code == 0, result.stderr
     state = json.loads(auto.read_text())
     assert state["filter"]["noise"] == "auto"
     models = state["diagnostics"]["noise"]
     assert len(models) == 14 and all(m["model"] in ("white", "ar1") for m in models.values()), models
     assert all(m["how"].startswith("REML") and m["samples"] >= 20 for m in models.values())
-    result = run_cli(args + ["-o", white])
+    result = run_cli(args + ["--noise", "white", "-o", white])
     assert result.exit_code == 0, result.stderr
     state = json.loads(white.read_text())
     assert state["filter"]["noise"] == "white" and "noise" not in state["diagnostics"]

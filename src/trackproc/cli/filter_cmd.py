@@ -130,11 +130,12 @@ def filter_command(
              "first-order Gauss-Markov states, steady-state 1-sigma in m/s^2 and time constant in s (default "
              "3600). Needs --force full; adds --estimate-force empirical-rtn."),
     noise: Noise = typer.Option(
-        Noise.white, "--noise",
-        help="Noise model of each pass's Doppler/range-rate samples, estimate's: auto = chosen per pass by REML "
-             "among white, AR(1) and (one-way, with a Doppler offset) a random walk of the transmitter frequency, "
-             "in sequential form (AR(1) a Gauss-Markov state of the pass, the walk on its offset); white = "
-             "independent samples at their sigma (the default); or that model. See docs/filter.md."),
+        Noise.auto, "--noise",
+        help="Noise model of each pass's Doppler/range-rate samples, estimate's: auto (the default) = chosen per "
+             "pass by REML, on the residuals of a first white smoother, among white, AR(1) and (one-way, with a "
+             "Doppler offset) a random walk of the transmitter frequency, in sequential form (AR(1) a "
+             "Gauss-Markov state of the pass, the walk on its offset); white = independent samples at their "
+             "sigma; or that model. See docs/filter.md."),
     oscillator_noise: Optional[float] = typer.Option(
         None, "--oscillator-noise", metavar="HZ_PER_SQRT_S",
         help="Random walk of the transmitter frequency offset (Hz/sqrt(s)): --bias-walk doppler_offset=VALUE."),
