@@ -27,7 +27,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Optional
 
-from trackproc.vocabulary import RANGE_RATE_MODELS
+from trackproc.vocabulary import NOISE_MODELS, RANGE_RATE_MODELS
 
 #: Sections in the order they are documented; ``batch`` holds the run options.
 SECTIONS = ("batch", "ingest", "smooth", "refine", "estimate", "filter")
@@ -274,6 +274,9 @@ SCHEMA: tuple[Opt, ...] = (
     Opt("filter", "oscillator_noise", "float", 0.0, ("--filter-oscillator-noise",),
         "Random walk of the transmitter frequency offset, Hz/sqrt(s).", affects=True, check=_NONNEG,
         metavar="HZ_PER_SQRT_S"),
+    Opt("filter", "noise", "choice", "auto", ("--filter-noise",),
+        "Noise model of each pass's Doppler/range-rate samples, as filter's --noise (auto: chosen per pass by "
+        "REML).", choices=NOISE_MODELS, affects=True),
     Opt("filter", "edit_sigma", "float", 5.0, ("--filter-edit-sigma",),
         "Edit a sample whose innovation is beyond K sigmas (0: off).", affects=True, check=_NONNEG, metavar="K"),
     Opt("filter", "force", "choice", "j2", ("--filter-force-model",), "Force model.",

@@ -209,7 +209,7 @@ def filter_step(ctx: WindowContext, opt: dict) -> None:
                 else parse_stations(ctx.files["ingest.stations"], ctx.paths["ingest.stations"]))
     walks = {"doppler_offset": opt["oscillator_noise"]} if opt["oscillator_noise"] else {}
     problem = EstimateOptions(range_bias=opt["range_bias"], doppler_bias=opt["doppler_bias"],
-                              apriori_sigma=dict(opt["apriori_sigma"]), force=opt["force"], noise="white",
+                              apriori_sigma=dict(opt["apriori_sigma"]), force=opt["force"], noise=opt["noise"],
                               range_rate_model=opt["range_rate_model"],
                               kinds=list(opt["kinds"]) or None)
     options = FilterOptions(problem=problem, snc_accel=(opt["snc_accel"],) * 3, bias_walk=walks,
