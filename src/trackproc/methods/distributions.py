@@ -1,8 +1,8 @@
-"""Normal and chi-square quantiles and tails in closed form, without ``scipy.special``.
+"""Normal and chi-square quantiles and tails without ``scipy.special``: closed forms and short iterations.
 
 ``import scipy.special`` costs tens of milliseconds of CPU in every process (its ufunc tables and
 docstrings load at import), and a single ``refine`` needs only three values from it: a chi-square
-survival with two degrees of freedom, normal quantiles and chi-square quantiles. All have closed
+survival with two degrees of freedom, normal quantiles and chi-square quantiles. They have closed
 forms or short converging iterations; ``tests/methods/test_distributions.py`` checks them against
 scipy's ``chdtrc``, ``gammaincc``, ``ndtri`` and ``gammaincinv``.
 """
