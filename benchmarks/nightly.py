@@ -5,7 +5,8 @@ every figure as a ratio to a yardstick run alternately with it in the same run:
 * ``trackproc --help`` and every ``trackproc COMMAND --help`` against ``python -c pass``: the
   first run of each (rendered by typer) and the next ones (from the user cache);
 * one ``refine`` of the sample pass against ``python -c 'import numpy, scipy.linalg, pandas,
-  pyarrow.parquet'``;
+  pyarrow.parquet'``, and the CPU of each of its imports and of the refinement (``time.process_time``
+  between them, inside fresh processes);
 * ``trackproc batch`` ingest -> smooth -> refine over a nightly workload: simulated days of six
   stations at 1 s, one-way Doppler + elevation, ``trackproc simulate``'s defaults otherwise, a
   new seed per day, days added until there are N passes (default 200): every pass is distinct
@@ -150,6 +151,51 @@ def section_refine(runs: int, work: Path) -> None:
     res = paired(cmd, [sys.executable, "-c", BARE_IMPORTS], runs, env_a=bytecode_env(work / "cache"))
     print(f"  refine {res['a']:.3f} s CPU ({res['wall_a']:.3f} s wall), bare imports {res['b']:.3f} s: "
           f"{res['ratio']:.2f}x (pairs {res['spread'][0]:.2f}-{res['spread'][1]:.2f}; target <= 0.8x)")
+    print("  where its CPU goes (in-process, one BLAS thread; medians, ms): " + refine_stages(cmd[1:], runs, work))
+
+
+#: The imports of one refine in the order it needs them, then the command itself: each stage's CPU.
+_STAGES = """import json, os, sys, time
+clock = time.process_time
+marks = [clock()]
+from trackproc.cli import app
+import trackproc.cli.root
+marks.append(clock())
+import numpy
+app._defer_unused_numpy_modules()
+marks.append(clock())
+import pyarrow.parquet
+marks.append(clock())
+import scipy.linalg
+marks.append(clock())
+import pandas
+marks.append(clock())
+import trackproc.io.passfile, trackproc.pipeline.refine, trackproc.cli.refine_cmd
+marks.append(clock())
+code = app._main(json.loads(sys.argv[1]))
+marks.append(clock())
+print(json.dumps([code, [b - a for a, b in zip(marks, marks[1:])]]))
+"""
+_STAGE_NAMES = ("Typer app", "numpy", "pyarrow.parquet", "scipy.linalg", "pandas", "trackproc modules", "refine")
+
+
+def refine_stages(args, runs: int, work: Path) -> str:
+    """Median CPU of each stage of :data:`_STAGES` over ``runs`` fresh processes."""
+    import json
+
+    env = bytecode_env(work / "cache")
+    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        env.setdefault(name, "1")                       # as the trackproc entry point sets them
+    samples = []
+    for _ in range(runs):
+        out = subprocess.run([sys.executable, "-c", _STAGES, json.dumps(args)], capture_output=True, text=True,
+                             env=env, check=True)
+        code, stages = json.loads(out.stdout.strip().splitlines()[-1])
+        if code != 0:
+            raise RuntimeError(f"refine exited {code}: {out.stderr[-500:]}")
+        samples.append(stages)
+    medians = [statistics.median(column) for column in zip(*samples)]
+    return ", ".join(f"{name} {1e3 * m:.0f}" for name, m in zip(_STAGE_NAMES, medians))
 
 
 def make_workload(directory: Path, passes: int) -> int:

@@ -91,7 +91,8 @@ def test_plain_values_equal_typers_own_coercion():
 def test_the_tour_does_not_import_scipy_optimize(tmp_path):
     """ingest -> smooth -> refine -> estimate of the README tour in one process: none of them
     imports scipy.optimize (or scipy.integrate, which imports it): the noise model's simplex and
-    the root finders are methods/simplex.py (scipy's iterates, tests/methods/test_simplex.py)."""
+    the root finders are methods/simplex.py (scipy's iterates, tests/methods/test_simplex.py); the
+    first three do not import scipy.special either (tests/methods/test_distributions.py)."""
     out = str(tmp_path)
     commands = [
         ["ingest", "sample_data/doppler_pass.csv", "--stations", "sample_data/stations.csv", "--carrier-hz", "2.2e9",
@@ -102,13 +103,16 @@ def test_the_tour_does_not_import_scipy_optimize(tmp_path):
         ["estimate", "sample_data/multistation.parquet", "--initial", f"{out}/refined.json", "--apriori-initial",
          "--range-bias", "-o", f"{out}/solution.json"]]
     probe = ("import sys; from trackproc.cli import app as a; "
-             f"codes = [a._main(c) for c in {commands!r}]; "
-             "print(*codes, 'trackproc.methods.noise' in sys.modules, "
+             f"codes = [a._main(c) for c in {commands[:3]!r}]; "
+             "special = 'scipy.special' in sys.modules; "
+             f"codes.append(a._main({commands[3]!r})); "
+             "print(*codes, 'trackproc.methods.noise' in sys.modules, special, "
              "*[m for m in ('scipy.optimize', 'scipy.integrate') if m in sys.modules])")
     root = __import__("pathlib").Path(__file__).resolve().parents[2]
     res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=root)
-    # the refinement ran the REML noise model (methods.noise imported), without scipy.optimize
-    assert res.stdout.split() == ["0", "0", "0", "0", "True"], res.stdout + res.stderr[-2000:]
+    # the refinement ran the REML noise model (methods.noise imported), without scipy.optimize, and
+    # ingest -> smooth -> refine without scipy.special (methods/distributions.py: its quantiles)
+    assert res.stdout.split() == ["0", "0", "0", "0", "True", "False"], res.stdout + res.stderr[-2000:]
 
 
 @pytest.mark.subprocess

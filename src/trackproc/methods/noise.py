@@ -56,6 +56,7 @@ import numpy as np
 from scipy.linalg import cho_factor, solve_triangular
 from scipy.linalg.lapack import dgeqrf
 
+from trackproc.methods.distributions import chi2_quantile
 from trackproc.methods.whitening import (MarkovFactor, PassCovariance, effective_samples,  # noqa: F401  (re-exported)
                                         effective_samples_beyond, markov_grid)
 
@@ -295,8 +296,6 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
 
     Over 100 lines with this docstring; its code is under 100.
     """
-    from scipy.special import gammaincinv  # chi-square quantile without scipy.stats (issue 19)
-
     t = np.asarray(t_s, float)
     r = np.asarray(residual, float)
     n = t.size
@@ -386,7 +385,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     for name in models:
         _, ll, k = fitted[name]
         d = k - k_base
-        if d > 0 and 2.0 * (ll - ll_base) > max(d * math.log(m), 2.0 * float(gammaincinv(d / 2.0, p_select))):
+        if d > 0 and 2.0 * (ll - ll_base) > max(d * math.log(m), chi2_quantile(d, p_select)):
             passing.append(name)
     chosen = base if len(passing) == 1 else max(passing[1:], key=lambda name: (fitted[name][2], fitted[name][1]))
     model = fitted[chosen][0]

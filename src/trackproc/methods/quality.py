@@ -20,6 +20,9 @@ from typing import Optional
 
 import numpy as np
 
+from trackproc.methods import distributions
+from trackproc.methods.distributions import chi2_quantile, normal_quantile
+
 VERDICTS = ("ok", "suspect", "rejected")
 #: Significance of the chi-square gates (a-priori conflict, variance factor): 99.9 %.
 GATE_PROBABILITY = 0.999
@@ -72,9 +75,7 @@ def _plain(v):
 
 def chi2_limit(dof: int, probability: float = GATE_PROBABILITY) -> float:
     """The ``probability`` quantile of χ²(dof)."""
-    from scipy.special import gammaincinv  # chi-square quantile without scipy.stats (issue 19)
-
-    return 2.0 * float(gammaincinv(max(int(dof), 1) / 2.0, probability))
+    return chi2_quantile(max(int(dof), 1), probability)
 
 
 def add_apriori_check(q, chi2: float, rows: int, noun: str, conflict: str) -> None:
@@ -236,9 +237,7 @@ def block_consistency(jac_w, z, covariance, rows, tol: float = 1e-6) -> dict:
 
 def chi2_survival(x: float, dof: int) -> float:
     """P(χ²(dof) > x)."""
-    from scipy.special import gammaincc
-
-    return float(gammaincc(max(int(dof), 1) / 2.0, max(float(x), 0.0) / 2.0))
+    return distributions.chi2_survival(x, dof)
 
 
 def whiteness_score(w: dict) -> float:
@@ -254,9 +253,7 @@ def whiteness_family_limit(m: int, probability: float = GATE_PROBABILITY) -> flo
     """The normal score above which the worst of ``m`` passes' :func:`whiteness_score` is not
     chance at ``probability`` (Bonferroni over the m passes and the two tests:
     ``Φ⁻¹(1 - (1 - probability)/(2m))``)."""
-    from scipy.special import ndtri
-
-    return float(ndtri(1.0 - (1.0 - probability) / (2 * max(int(m), 1))))
+    return normal_quantile(1.0 - (1.0 - probability) / (2 * max(int(m), 1)))
 
 
 def add_whiteness_family(q: Quality, passes: list) -> None:

@@ -13,10 +13,10 @@ from dataclasses import dataclass, replace
 from typing import Any, Optional
 
 import numpy as np
-from scipy.special import chdtrc  # chi-square survival without scipy.stats (issue 19)
 
 from trackproc.errors import ProcessingError
 from trackproc.methods import quality as qm
+from trackproc.methods.distributions import chi2_survival_2
 from trackproc.methods.estimation import decision as dm
 from trackproc.methods.estimation import prior as pr
 from trackproc.methods.noise import PassCovariance
@@ -150,7 +150,7 @@ def circular_consistency(free: Refinement, constrained, sigma_scale: float = 1.0
         return {"test": "likelihood ratio", "status": f"the unconstrained fit failed: {exc}"}
     delta = float(constrained.chi2 - sol.chi2)
     out = {"test": "likelihood ratio", "delta_chi2": delta, "dof": 2,
-           "p_value": float(chdtrc(2, max(delta, 0.0))),
+           "p_value": chi2_survival_2(delta),
            "free_fit_eccentricity": eccentricity(sol.values[:3], sol.values[3:6], free.mu),
            "edited_constrained_free": [int(constrained.n_edited), int(sol.n_edited)]}
     if constrained.n_edited != sol.n_edited:

@@ -12,10 +12,10 @@ from dataclasses import replace
 from typing import Callable, Optional
 
 import numpy as np
-from scipy.special import ndtri
 
 from trackproc.errors import ProcessingError
 from trackproc.isotime import iso_utc
+from trackproc.methods.distributions import normal_quantile
 from trackproc.methods.estimation import decision as dm
 from trackproc.methods.estimation import prior as pr
 from trackproc.methods.whitening import PassCovariance
@@ -48,7 +48,7 @@ MIN_LEFT = 20
 def limit_sigmas(n: int, false_alarm: float = FALSE_ALARM) -> float:
     """``k`` such that any of ``n`` standard normal samples exceeds ``|k|`` with probability at most
     ``false_alarm`` (Bonferroni: each two-sided tail ``false_alarm / n``)."""
-    return float(-ndtri(false_alarm / (2.0 * max(int(n), 1))))
+    return -normal_quantile(false_alarm / (2.0 * max(int(n), 1)))
 
 
 def signal_runs(t, r, false_alarm: float = FALSE_ALARM) -> Optional[dict]:
