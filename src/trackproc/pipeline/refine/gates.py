@@ -19,23 +19,9 @@ from trackproc.errors import ProcessingError
 from trackproc.methods import quality as qm
 from trackproc.methods.estimation import decision as dm
 from trackproc.methods.estimation import prior as pr
-from trackproc.methods.noise import PassCovariance
 from trackproc.pipeline.refine.options import MAX_ADAPT_ITERATIONS, MAX_APRIORI_ADAPT, MAX_REWEIGHT, REWEIGHT_THRESHOLD
-from trackproc.pipeline.refine.problem import Refinement
+from trackproc.pipeline.refine.problem import Refinement, with_noise_of  # noqa: F401  (re-exported)
 from trackproc.pipeline.refine.traverse import eccentricity, time_tag_covariance
-
-
-def with_noise_of(moved: Refinement, ref: Refinement) -> Refinement:
-    """``moved`` (the same pass at another solution epoch) with ``ref``'s noise model: the model
-    depends on the sample times' differences only, so it carries over (REML is not run again: a
-    traverse re-solve moves the epoch by seconds)."""
-    if ref.noise is None:
-        return replace(moved, noise=None, noise_edited=ref.noise_edited, noise_report=ref.noise_report)
-    t = moved.problem.meas.t_s
-    shift = float(np.min(t) - np.min(ref.problem.meas.t_s))
-    blocks = [(idx, model, t0 + shift) for idx, model, t0 in ref.noise.blocks]
-    cov = PassCovariance(moved.problem.meas.sigma, t, blocks)
-    return replace(moved, noise=cov, noise_edited=ref.noise_edited, noise_report=ref.noise_report)
 
 
 def may_refuse(ref: Refinement) -> bool:
