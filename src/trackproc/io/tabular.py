@@ -45,6 +45,7 @@ from trackproc.io.layouts import (DEG, KIND_SPELLINGS, UNIT_SPELLINGS, is_long_l
 from trackproc.io.problems import (NONFINITE_SIGMA, NONFINITE_VALUE, TIME_EXPECTED, UNKNOWN_KIND,  # noqa: F401
                                    UNPARSEABLE_TIME, WRONG_TYPE, Problems, add_counts)
 from trackproc.io.raw import RawMeasurements
+from trackproc.io import crd, doptrack, orekit_aer
 
 
 
@@ -58,8 +59,6 @@ def detect_layout(data: bytes, name: str) -> str:
     head = data[:4096].decode("utf-8-sig", errors="replace").lstrip()
     if head.startswith("CCSDS_TDM_VERS"):
         return "tdm"
-    from trackproc.io import crd, doptrack, orekit_aer
-
     if crd.looks_like_crd(head) or name.lower().endswith((".npt", ".crd", ".frd")):
         return "crd"
     if doptrack.looks_like_doptrack(head):

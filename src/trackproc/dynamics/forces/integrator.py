@@ -35,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from trackproc.dynamics.taylor import STATE_PARAMETERS, Outcome, Propagation
+from trackproc.dynamics import jit
 
 __all__ = ["propagate", "rtol_for", "RTOL", "STM_RTOL", "use_compiled"]
 
@@ -123,8 +124,6 @@ def use_compiled(model, t_end_s: float, stm: bool = False) -> bool:
     path's expected cost above loading the kernels. The choice depends on the call alone, never
     on what the process ran before (the two paths agree to micrometres, not to the bit, and a
     batch's outputs must not depend on which tasks a worker happened to run first)."""
-    from trackproc.dynamics import jit
-
     if not jit.enabled():
         return False
     if not jit.forced() and abs(t_end_s) * NUMPY_COST[bool(stm)] < JIT_LOAD_S:
@@ -150,8 +149,7 @@ def _warn_once(message: str) -> None:
 
 def _run_compiled(env, y0, t_end_s, rt, at, max_step, max_steps, stm, est):
     """The compiled DOP853: accepted steps' times and their dense-output values at the nodes."""
-    from trackproc.dynamics import jit
-    from trackproc.dynamics.forces import compiled
+    from trackproc.dynamics.forces import compiled  # start-up: loads numba and compiles (or reads) the kernels
 
     jit.announce_compiling([compiled.integrate], "the force kernels", 30)
     model = env.model
