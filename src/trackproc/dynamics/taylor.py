@@ -66,10 +66,9 @@ import numpy as np
 
 from trackproc import vocabulary
 from trackproc.constants import J2, MU_EARTH, RE_EARTH
+from trackproc.dynamics import gravity, jit
 from trackproc.dynamics.taylor_dense import Outcome, Propagation
 from trackproc.dynamics.taylor_series import series_dual, series_state, series_state_single, series_var_single
-from trackproc.dynamics import gravity
-from trackproc.dynamics import jit
 
 __all__ = ["Outcome", "Propagation", "propagate", "default_order", "acceleration", "FORCES",
            "STATE_PARAMETERS", "ENGINES", "COMPILED_MIN_STEPS", "COMPILE_MIN_STEPS"]

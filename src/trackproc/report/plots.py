@@ -8,8 +8,12 @@ a multi-page PDF where a figure per pass is asked for).
 from __future__ import annotations
 
 import io
+import textwrap
+from pathlib import Path
 
 import numpy as np
+
+from trackproc.pipeline.plotting import require_matplotlib
 
 #: How each measurement kind is shown: (label, unit, factor from SI).
 DISPLAY = {"range": ("range", "m", 1.0), "range_rate": ("range-rate", "m/s", 1.0),
@@ -19,8 +23,6 @@ DISPLAY = {"range": ("range", "m", 1.0), "range_rate": ("range-rate", "m/s", 1.0
 
 def pyplot():
     """matplotlib's pyplot on the file-only Agg backend (a clear error when the extra is missing)."""
-    from trackproc.pipeline.plotting import require_matplotlib
-
     require_matplotlib()
     import matplotlib
 
@@ -182,8 +184,6 @@ def refine_png(residuals, diagnostics: dict) -> bytes:
         ax.set_title(("position" if col == 0 else "velocity") + ": refined - stale", fontsize=10)
         if col == 1:  # the same four entries for both panels: once, right of the velocity panel
             legend_outside(ax)
-    import textwrap
-
     unseen_text = "; ".join(obs.get("unobservable") or []) or "none"
     fig.suptitle(textwrap.fill(f"trackproc refine - not seen by the pass: {unseen_text}", 110), fontsize=10)
     fig.tight_layout()
@@ -276,8 +276,6 @@ def smooth_plots(result, path: str) -> dict:
     """``smooth --plot``: one figure per pass and kind. ``*.pdf``: one page each in one file; a PNG
     path with one fit: that figure; with several: ``NAME-<pass>-<kind>.png`` beside it (a
     1170 x 6912 px stack is unreadable). Returns {file name: bytes} to write."""
-    from pathlib import Path
-
     plt = pyplot()
     frame = result.samples.frame
     fits = list(result.fits)

@@ -7,6 +7,7 @@ the CLI imports this module at start-up.
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 from dataclasses import dataclass, field
@@ -129,7 +130,7 @@ def _as_int(opt: Opt, value, text: bool, base_dir, bad):
 
 def _as_duration(opt: Opt, value, text: bool, base_dir, bad):
     """Seconds, or text with a unit (``parse_duration``)."""
-    from trackproc.types.checks import parse_duration
+    from trackproc.types.checks import parse_duration  # start-up: numpy and pandas; this module is stdlib-only
 
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
         raise bad()
@@ -260,8 +261,6 @@ def load_toml(path: str) -> dict:
 
 
 def _closest(name: str, candidates) -> str:
-    import difflib
-
     match = difflib.get_close_matches(name, list(candidates), n=1)
     return f" (did you mean {match[0]}?)" if match else ""
 
