@@ -88,19 +88,13 @@ def read_raw(path: str, layout: str = "auto", *, sidecar: str | None = None,
     if layout == "auto":
         layout = detect_layout(data, "" if is_stdio(path) else Path(path).name)
     if layout == "doptrack":
-        from trackproc.io.doptrack import read_doptrack
-
         data_path = None if is_stdio(path) else Path(path)
-        return read_doptrack(data, source, data_path=data_path, sidecar=sidecar,
+        return doptrack.read_doptrack(data, source, data_path=data_path, sidecar=sidecar,
                              carrier_hz=carrier_hz, drop_invalid=drop_invalid)
     if layout == "crd":
-        from trackproc.io.crd import read_crd
-
-        return read_crd(data, source, drop_invalid=drop_invalid)
+        return crd.read_crd(data, source, drop_invalid=drop_invalid)
     if layout == "aer":
-        from trackproc.io.orekit_aer import read_aer
-
-        return read_aer(data, source, drop_invalid=drop_invalid)
+        return orekit_aer.read_aer(data, source, drop_invalid=drop_invalid)
     if layout == "tdm":
         try:
             from trackproc.io.tdm import read_tdm

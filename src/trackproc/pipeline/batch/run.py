@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from trackproc import __version__
-from trackproc.errors import InputError, TrackprocError
+from trackproc.errors import InputError, OutputError, ProcessingError, TrackprocError
 from trackproc.io.atomic import max_input_bytes, write_bytes
 from trackproc.pipeline.batch.chain import STEPS, Chain, WindowContext, make_chain
 from trackproc.pipeline.batch.config import Settings
@@ -76,8 +76,6 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None,
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as exc:
-        from trackproc.errors import OutputError
-
         raise OutputError(output, exc) from None
     try:
         with interruptible(), batch_lock(out, settings.get("batch.wait"), settings.get("batch.wait_timeout_s")):
@@ -359,8 +357,6 @@ def _run_filter(settings, records, files, paths, out) -> list:
     t0 = time.perf_counter()
     try:
         if not data:
-            from trackproc.errors import ProcessingError
-
             raise ProcessingError("no processed input to filter")
         STEPS["filter"].run(ctx, settings.section("filter"))
     except TrackprocError as exc:
