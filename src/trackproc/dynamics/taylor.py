@@ -60,6 +60,7 @@ J2000); no event detection.
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
@@ -110,8 +111,6 @@ def _jit_module():
         try:
             from trackproc.dynamics import taylor_jit as mod
         except Exception as exc:                         # noqa: BLE001 - any failure: numpy
-            import logging
-
             logging.getLogger(__name__).warning(
                 "compiled Taylor engine unavailable (%s: %s); using the numpy engine",
                 type(exc).__name__, exc)

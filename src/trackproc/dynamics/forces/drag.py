@@ -86,7 +86,7 @@ def nrlmsis_density(datetime_utc, r_itrf, height_m, f107: float, f107a: float, a
     Raises ``ImportError`` with the install hint when pymsis is absent.
     """
     try:
-        import pymsis
+        import pymsis  # optional: the msis extra
     except ImportError:                                            # pragma: no cover - optional
         raise ImportError("--atmosphere nrlmsis needs the pymsis package (pip install pymsis)") from None
     lat, lon, _ = itrf_to_geodetic(np.atleast_2d(r_itrf))

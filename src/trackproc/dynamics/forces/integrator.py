@@ -32,6 +32,8 @@ to ~0.1 mm (drag): far inside the integration error.
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from trackproc.dynamics.taylor import STATE_PARAMETERS, Outcome, Propagation
@@ -142,8 +144,6 @@ _WARNED: set = set()
 def _warn_once(message: str) -> None:
     if message not in _WARNED:
         _WARNED.add(message)
-        import logging
-
         logging.getLogger(__name__).warning(message)
 
 
@@ -208,7 +208,7 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
             sens = phi if not npar else np.concatenate([phi, c[:, 42:].reshape(-1, 6, npar, _DEGREE + 1)[:, :3]], 2)
             senss = list(sens[:, None])
         return _result(model, outcome, [0.0] + list(t_new), coefs, senss, stm, est, rtol, force_label)
-    from scipy.integrate import DOP853
+    from scipy.integrate import DOP853  # start-up: scipy.integrate (~0.3 s) only on the numpy path
 
     fun = _rhs(env, stm, npar)
     mstep = max_step_s(model, y0[:6])

@@ -238,7 +238,7 @@ def _path(value: str, base_dir: Optional[str]) -> str:
 def load_toml(path: str) -> dict:
     """The TOML document of ``path`` (stdlib tomllib; tomli on Python 3.10)."""
     try:
-        import tomllib
+        import tomllib  # Python >= 3.11
     except ImportError:  # Python 3.10
         try:
             import tomli as tomllib  # type: ignore[no-redef]

@@ -215,7 +215,7 @@ class DaskExecutor:
 
     def __init__(self, address: str):
         try:
-            from distributed import Client
+            from distributed import Client  # optional: the dask extra
         except ImportError:
             raise InputError("--scheduler needs Dask distributed, which is not installed", column="--scheduler",
                              found=address, expected="pip install 'trackproc[dask]' (or dask[distributed]), "
@@ -233,7 +233,7 @@ class DaskExecutor:
                                   key=f"trackproc-batch-{task.kind}-{task.key[:12]}-{uuid.uuid4().hex[:8]}")
 
     def wait_first(self, futures):
-        from distributed import wait
+        from distributed import wait  # optional: the dask extra
 
         with self.client.as_current():
             result = wait(list(futures), return_when="FIRST_COMPLETED")

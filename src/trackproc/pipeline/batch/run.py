@@ -379,7 +379,7 @@ def _run_filter(settings, records, files, paths, out) -> list:
 
 def _utc(text):
     """An ISO UTC time as numpy datetime64 (ns), or None."""
-    import numpy as np
+    import numpy as np  # numpy after the driver fixed the BLAS threads (batch/steps)
 
     try:
         return np.datetime64(str(text).rstrip("Z"), "ns") if text else None
