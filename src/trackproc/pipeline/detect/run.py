@@ -40,6 +40,17 @@ class DetectResult:
     samples: dict = field(default_factory=dict)
 
 
+def _chosen(given, available: list, source: str, column: str, several: str, which: str, unknown: str):
+    """The nominal file's ``given`` choice among ``available``, or the only one when it gives none."""
+    if given is None:
+        if len(available) > 1:
+            raise InputError(several, file=source, column=column, found=", ".join(available), expected=which)
+        return available[0]
+    if given not in available:
+        raise InputError(unknown, file=source, column=column, found=given, expected="one of " + ", ".join(available))
+    return given
+
+
 def select_samples(table, nominal: Nominal, source: str):
     frame = table.frame
     kinds_wanted = nominal.kinds or (("elevation", "azimuth") if nominal.model == "3d" else ("elevation",))
@@ -48,26 +59,12 @@ def select_samples(table, nominal: Nominal, source: str):
         raise InputError("no elevation samples", file=source, column="kind",
                          found=", ".join(sorted(frame["kind"].unique())) or "(none)", expected="elevation rows")
     stations = sorted(elev["station"].unique())
-    name = nominal.station
-    if name is None:
-        if len(stations) > 1:
-            raise InputError("several stations have elevations", file=nominal.source, column="station",
-                             found=", ".join(stations), expected="the station to use")
-        name = stations[0]
-    elif name not in stations:
-        raise InputError("station has no elevation samples in the pass file", file=nominal.source,
-                         column="station", found=name, expected="one of " + ", ".join(stations))
+    name = _chosen(nominal.station, stations, nominal.source, "station", "several stations have elevations",
+                   "the station to use", "station has no elevation samples in the pass file")
     rows = frame[(frame["station"] == name) & frame["kind"].isin(kinds_wanted)]
     passes = sorted(rows["pass_id"].unique())
-    pass_id = nominal.pass_id
-    if pass_id is None:
-        if len(passes) > 1:
-            raise InputError("the station has several passes", file=nominal.source, column="pass_id",
-                             found=", ".join(passes), expected="the pass to use")
-        pass_id = passes[0]
-    elif pass_id not in passes:
-        raise InputError("unknown pass", file=nominal.source, column="pass_id", found=pass_id,
-                         expected="one of " + ", ".join(passes))
+    pass_id = _chosen(nominal.pass_id, passes, nominal.source, "pass_id", "the station has several passes",
+                      "the pass to use", "unknown pass")
     rows = rows[rows["pass_id"] == pass_id]
     if nominal.kinds is not None and "azimuth" in nominal.kinds and not (rows["kind"] == "azimuth").any():
         raise InputError("no azimuth samples for the requested kinds", file=source, column="kind",
