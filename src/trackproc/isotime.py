@@ -20,7 +20,7 @@ def to_datetime64_ns(t) -> np.datetime64:
     """A UTC ``datetime64[ns]`` from a datetime64, a (tz-aware or naive = UTC) pandas Timestamp or
     datetime, or an ISO string."""
     if getattr(t, "tzinfo", None) is not None:
-        import pandas as pd
+        import pandas as pd  # start-up: isotime is a leaf every layer imports; pandas only for Timestamps
 
         t = pd.Timestamp(t).tz_convert("UTC").tz_localize(None)
     if hasattr(t, "to_datetime64"):

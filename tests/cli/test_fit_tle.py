@@ -167,6 +167,14 @@ def iss_doppler_day(tmp_path_factory):
     return table, exact["computed"].to_numpy()
 
 
+def _start_tle(x, truth: str) -> str:
+    """The TLE of the fit's element vector ``x`` at ``truth``'s epoch (a Monte Carlo start)."""
+    c = tf.classical(x)
+    return format_tle(MeanElements(tle_epoch(truth), c["inclination_deg"], c["raan_deg"], c["eccentricity"],
+                                   c["arg_perigee_deg"], c["mean_anomaly_deg"], c["mean_motion_rev_day"],
+                                   c["bstar"]), truth)
+
+
 @pytest.mark.slow
 @pytest.mark.statistical
 @pytest.mark.parametrize("apriori_model", ["refine", "tle"])
@@ -203,10 +211,7 @@ def test_covariance_covers_the_element_error_monte_carlo(iss_doppler_day, aprior
             prior_sigma = tf.tle_element_sigmas(**tf.TLE_APRIORI, bstar=1e-4, n_rev_day=x_true[0],
                                                 semi_major_m=6.79e6, inclination_deg=x_true[3])
         x0 = x_true + rng.normal(0.0, prior_sigma)
-        c = tf.classical(x0)
-        start = format_tle(MeanElements(tle_epoch(truth), c["inclination_deg"], c["raan_deg"], c["eccentricity"],
-                                        c["arg_perigee_deg"], c["mean_anomaly_deg"], c["mean_motion_rev_day"],
-                                        c["bstar"]), truth)
+        start = _start_tle(x0, truth)
         res = fit_tle([("p", table)], [], OrbitInput(tle=start, source="start"),
                       FitTleOptions(epoch=tle_epoch(truth), model_error=0.0, apriori_model=apriori_model,
                                     refusal=False), eop)
@@ -274,10 +279,7 @@ def test_covariance_covers_sgp4_theory_error_monte_carlo(tmp_path):
                         + rng.normal(0, 0.1) * (t[m] - t[m].min()))
         table.frame = frame.assign(value=value + rng.normal(0, 1.0, len(frame)))
         x0 = x_true + rng.normal(0.0, prior_sigma)
-        c = tf.classical(x0)
-        start = format_tle(MeanElements(tle_epoch(truth), c["inclination_deg"], c["raan_deg"], c["eccentricity"],
-                                        c["arg_perigee_deg"], c["mean_anomaly_deg"], c["mean_motion_rev_day"],
-                                        c["bstar"]), truth)
+        start = _start_tle(x0, truth)
         res = fit_tle([("p", table)], [], OrbitInput(tle=start, source="start"),
                       FitTleOptions(epoch=tle_epoch(truth), apriori_model="refine", refusal=False), eop)
         assert res.summary["refused"] is None, res.quality.as_dict()

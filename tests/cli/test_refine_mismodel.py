@@ -29,13 +29,13 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from trackproc.errors import ProcessingError
 from trackproc.io.passfile import PassTable, write_pass_table
 from trackproc.io.statefile import State
 from trackproc.methods import quality as qm
 from trackproc.pipeline.refine import RefineOptions, refine, traverse_station
 from trackproc.pipeline.simulate import SimulateOptions, simulate
 
+from refine_outcomes import refine_outcome
 from test_refine import EOP, EPOCH, STALE, STALE_RV, TRUTH, truth_at
 
 STALE_NO_COV = State.from_vectors(EPOCH, STALE_RV[:3], STALE_RV[3:])
@@ -116,15 +116,11 @@ def outcome(geometry: str, scenario: str, stale: str, seed: int = 1) -> dict:
     """Refine the mis-modelled pass: the largest |error|/sigma over x..vz at the solution epoch, the
     verdict, the reasons that are not ``ok``, refused or not, or ``failed`` (exit 1)."""
     table, stations = mismodelled(geometry, scenario, seed)
-    try:
-        res = refine(table, STALES[stale], stations, RefineOptions(), EOP)
-    except ProcessingError as exc:
-        return {"failed": str(exc)}
-    err = res.state.values[:6] - truth_at(res.state.epoch)
-    q = res.state.extra["quality"]
-    return {"max_z": float(np.max(np.abs(err / res.state.sigma[:6]))), "verdict": q["verdict"],
-            "reasons": [r["code"] for r in q["reasons"] if r["severity"] != "ok"],
-            "refused": res.state.diagnostics["refused"] is not None, "result": res}
+    out = refine_outcome(table, STALES[stale], stations, RefineOptions(), EOP, truth_at)
+    if "result" in out:
+        out.update(reasons=[c for c, r in out["reasons"].items() if r["severity"] != "ok"],
+                   refused=out["result"].state.diagnostics["refused"] is not None)
+    return out
 
 
 def covers_or_says_so(out: dict) -> bool:

@@ -8,10 +8,8 @@ held-back test). Issue 27's criterion: no worse than 1.2x the TLE."""
 
 from __future__ import annotations
 
-import numpy as np
-
 from realdata import DOPTRACK, requires
-from test_refine_realdata import EOP, _load, _predicted_rms, evenings, is_dev
+from test_refine_realdata import EOP, _predicted_rms, evenings, held_back, is_dev
 
 pytestmark = requires(DOPTRACK)
 
@@ -27,26 +25,15 @@ def filter_held_back(group, oscillator_noise=OSCILLATOR_NOISE, snc_accel=0.0, no
     first sample, refine's default a-priori covariance), offset and drift per pass, the offset a
     random walk of ``oscillator_noise`` Hz/sqrt(s), each pass's noise model ``noise``; the held-back last pass's Doppler RMS
     predicted from the last filtered state and by the TLE. Returns ``(tle Hz, ours Hz, FilterResult)``."""
-    from trackproc.constants import MU_EARTH
-    from trackproc.io.statefile import State
-    from trackproc.io.tle import tle_state
     from trackproc.pipeline.estimate import EstimateOptions
     from trackproc.pipeline.filter import FilterOptions, filter_passes
-    from trackproc.pipeline.refine import default_apriori_covariance
 
-    fit, held = group[:-1], group[-1]
-    loaded = [_load(s) for s in fit]
-    table_b, _ = _load(held)
-    tle = loaded[0][1]
-    first = min(t.frame["time"].min() for t, _ in loaded).tz_convert("UTC").tz_localize(None).to_datetime64()
-    st = tle_state(tle, at=first, eop=EOP)
-    initial = State.from_vectors(st.epoch, st.r_m, st.v_m_s,
-                                 covariance=default_apriori_covariance(np.r_[st.r_m, st.v_m_s], MU_EARTH))
+    hb = held_back(group)
     eo = EstimateOptions(doppler_bias="offset+drift", apriori_initial=True, noise=noise, kinds=["doppler"])
     fo = FilterOptions(problem=eo, bias_walk={"doppler_offset": oscillator_noise} if oscillator_noise else {},
                        snc_accel=(snc_accel,) * 3)
-    res = filter_passes([(s, t) for s, (t, _) in zip(fit, loaded)], initial, None, fo, EOP)
-    return _predicted_rms(table_b, res.state, tle), _predicted_rms(table_b, res.state), res
+    res = filter_passes(hb.passes, hb.initial, None, fo, EOP)
+    return _predicted_rms(hb.held, res.state, hb.tle), _predicted_rms(hb.held, res.state), res
 
 
 def dev_evenings(n=None):

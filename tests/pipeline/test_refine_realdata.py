@@ -10,6 +10,7 @@ offset and drift (fitted, 4-sigma editing), which no orbit can predict.
 from __future__ import annotations
 
 import datetime as dt
+from dataclasses import dataclass
 import json
 
 import numpy as np
@@ -205,15 +206,22 @@ def evenings():
     return [g for g in groups if len(g) >= 2]
 
 
-def estimate_held_back(group, noise="auto"):
-    """``estimate`` over every pass of ``group`` but the last (the TLE of the first at its first
-    sample, with the default a-priori covariance of ``refine`` for a state without one, as a
-    state file with that covariance and --apriori-initial; offset and drift per pass), and the
-    held-back last pass's Doppler RMS predicted by it and by the TLE. Returns ``(tle Hz, ours Hz,
-    EstimateResult)``."""
+@dataclass(frozen=True)
+class HeldBack:
+    """An evening for a held-back test: ``passes`` ``[(stamp, table)]`` fitted, the ``held``-back
+    last pass's table, the ``tle`` of the first pass and the ``initial`` state: that TLE at the
+    first fitted sample, with refine's default a-priori covariance for a state without one."""
+
+    passes: list
+    held: object
+    tle: object
+    initial: object
+
+
+def held_back(group) -> HeldBack:
+    """:class:`HeldBack` of the evening ``group`` (its passes' stamps, in time order)."""
     from trackproc.constants import MU_EARTH
     from trackproc.io.statefile import State
-    from trackproc.pipeline.estimate import estimate
     from trackproc.pipeline.refine import default_apriori_covariance
 
     fit, held = group[:-1], group[-1]
@@ -224,9 +232,21 @@ def estimate_held_back(group, noise="auto"):
     st = tle_state(tle, at=first, eop=EOP)
     initial = State.from_vectors(st.epoch, st.r_m, st.v_m_s,
                                  covariance=default_apriori_covariance(np.r_[st.r_m, st.v_m_s], MU_EARTH))
+    return HeldBack(passes=[(s, t) for s, (t, _) in zip(fit, loaded)], held=table_b, tle=tle, initial=initial)
+
+
+def estimate_held_back(group, noise="auto"):
+    """``estimate`` over every pass of ``group`` but the last (the TLE of the first at its first
+    sample, with the default a-priori covariance of ``refine`` for a state without one, as a
+    state file with that covariance and --apriori-initial; offset and drift per pass), and the
+    held-back last pass's Doppler RMS predicted by it and by the TLE. Returns ``(tle Hz, ours Hz,
+    EstimateResult)``."""
+    from trackproc.pipeline.estimate import estimate
+
+    hb = held_back(group)
     opts = EstimateOptions(doppler_bias="offset+drift", epoch="first", apriori_initial=True, noise=noise)
-    res = estimate([(s, t) for s, (t, _) in zip(fit, loaded)], initial, None, opts, EOP)
-    return _predicted_rms(table_b, res.state, tle), _predicted_rms(table_b, res.state), res
+    res = estimate(hb.passes, hb.initial, None, opts, EOP)
+    return _predicted_rms(hb.held, res.state, hb.tle), _predicted_rms(hb.held, res.state), res
 
 
 def _next_pass_rows(pairs, bias=None):

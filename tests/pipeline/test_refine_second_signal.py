@@ -15,10 +15,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from trackproc.errors import ProcessingError
-from trackproc.pipeline.refine import RefineOptions, refine
+from trackproc.pipeline.refine import RefineOptions
 from trackproc.pipeline.refine import second_signal as ss
 
+from refine_outcomes import covered_or_said, refine_outcome
 from test_refine_mismodel import EOP, STALES, mismodelled, truth_at
 
 T0 = np.datetime64("2026-03-20T09:30:00")
@@ -50,19 +50,10 @@ def signalled(geometry: str, size: float, fraction: float, scattered: bool = Fal
 
 def outcome(geometry, size, fraction, stale, scattered=False, seed=1) -> dict:
     table, stations, span = signalled(geometry, size, fraction, scattered, seed)
-    try:
-        res = refine(table, STALES[stale], stations, RefineOptions(), EOP)
-    except ProcessingError as exc:
-        return {"failed": str(exc)}
-    err = res.state.values[:6] - truth_at(res.state.epoch)
-    q = res.state.extra["quality"]
-    return {"max_z": float(np.max(np.abs(err / res.state.sigma[:6]))), "verdict": q["verdict"],
-            "reasons": {r["code"]: r for r in q["reasons"]}, "signal": res.state.diagnostics.get("second_signal"),
-            "result": res, "span": span}
-
-
-def covered_or_said(out: dict) -> bool:
-    return "failed" in out or out["max_z"] < 4.0 or out["verdict"] != "ok"
+    out = refine_outcome(table, STALES[stale], stations, RefineOptions(), EOP, truth_at)
+    if "result" in out:
+        out.update(signal=out["result"].state.diagnostics.get("second_signal"), span=span)
+    return out
 
 
 def _brief(out):

@@ -15,10 +15,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from trackproc.errors import ProcessingError
 from trackproc.methods import quality as qm
-from trackproc.pipeline.refine import RefineOptions, refine
+from trackproc.pipeline.refine import RefineOptions
 
+from refine_outcomes import covered_or_said, refine_outcome
 from test_refine_mismodel import EOP, STALES, mismodelled, truth_at
 
 
@@ -44,19 +44,10 @@ def faulted(geometry: str, fault: str, size: float, seed: int = 1):
 
 def outcome(geometry, fault, size, stale, seed=1) -> dict:
     table, stations, mid = faulted(geometry, fault, size, seed)
-    try:
-        res = refine(table, STALES[stale], stations, RefineOptions(), EOP)
-    except ProcessingError as exc:
-        return {"failed": str(exc)}
-    err = res.state.values[:6] - truth_at(res.state.epoch)
-    q = res.state.extra["quality"]
-    return {"max_z": float(np.max(np.abs(err / res.state.sigma[:6]))), "verdict": q["verdict"],
-            "reasons": {r["code"]: r for r in q["reasons"]}, "step": res.state.diagnostics.get("step"),
-            "result": res, "mid": mid}
-
-
-def covered_or_said(out: dict) -> bool:
-    return "failed" in out or out["max_z"] < 4.0 or out["verdict"] != "ok"
+    out = refine_outcome(table, STALES[stale], stations, RefineOptions(), EOP, truth_at)
+    if "result" in out:
+        out.update(step=out["result"].state.diagnostics.get("step"), mid=mid)
+    return out
 
 
 def _brief(out):

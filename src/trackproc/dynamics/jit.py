@@ -10,6 +10,7 @@ import contextlib
 import functools
 import os
 import threading
+import logging
 
 __all__ = ["announce_compiling", "cold", "default", "enabled", "forced", "mode", "njit"]
 
@@ -88,7 +89,5 @@ def announce_compiling(kernels, what: str, cpu_s: float) -> None:
     if what in _ANNOUNCED or not any(cold(k) for k in kernels):
         return
     _ANNOUNCED.add(what)
-    import logging
-
     logging.getLogger("trackproc").warning(
         "compiling %s, once per installation (~%d s of CPU); later runs load them from the cache", what, cpu_s)

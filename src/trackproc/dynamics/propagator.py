@@ -143,7 +143,7 @@ class Trajectory:
         """Raise :class:`ProcessingError` unless every run reached its end; return self."""
         for run in self.runs:
             if run.outcome is taylor.Outcome.REENTRY:
-                from trackproc.dynamics.forces.integrator import REENTRY_RADIUS_M
+                from trackproc.dynamics.forces.integrator import REENTRY_RADIUS_M  # start-up: as in propagate
 
                 reached = self.times_utc(run.t_end_s)
                 raise ProcessingError(
@@ -383,6 +383,7 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
     ends = ([t_min] if t_min < 0.0 else []) + ([t_max if t_max > 0.0 else _MIN_SPAN_S]
                                              if (t_max > 0.0 or t_min == 0.0) else [])
     if model is not None:
+        # start-up: the force models (~30 ms of imports) load only when a force model is asked for
         from trackproc.dynamics.forces import integrator
 
         env = model.environment(jd, q, t_min, max(t_max, _MIN_SPAN_S))

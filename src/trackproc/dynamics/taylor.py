@@ -60,12 +60,14 @@ J2000); no event detection.
 
 from __future__ import annotations
 
+import logging
 import math
 
 import numpy as np
 
 from trackproc import vocabulary
 from trackproc.constants import J2, MU_EARTH, RE_EARTH
+from trackproc.dynamics import gravity, jit
 from trackproc.dynamics.taylor_dense import Outcome, Propagation
 from trackproc.dynamics.taylor_series import series_dual, series_state, series_state_single, series_var_single
 
@@ -90,8 +92,6 @@ COMPILE_MIN_STEPS = {False: 100_000, True: 50_000}
 def _jit_mode() -> str:
     """``"off"`` (TRACKPROC_JIT=0), ``"on"`` (TRACKPROC_JIT=1) or ``"auto"``; read at each call
     (:func:`trackproc.dynamics.jit.mode`)."""
-    from trackproc.dynamics import jit
-
     v = jit.mode()
     return "off" if v == "0" else "on" if v == "1" else "auto"
 
@@ -105,16 +105,12 @@ def _jit_module():
     numba can refuse ``cache=True`` at import (no writable cache directory); the numpy engine
     then serves, with one warning.
     """
-    from trackproc.dynamics import jit
-
     if not jit.enabled():
         return None
     if not _JIT_MODULE:
         try:
             from trackproc.dynamics import taylor_jit as mod
         except Exception as exc:                         # noqa: BLE001 - any failure: numpy
-            import logging
-
             logging.getLogger(__name__).warning(
                 "compiled Taylor engine unavailable (%s: %s); using the numpy engine",
                 type(exc).__name__, exc)
@@ -156,8 +152,6 @@ def acceleration(r_m, *, force: str = "j2", mu_m3_s2: float = MU_EARTH, j2: floa
     The right-hand side whose spectrum the integrator builds (:func:`trackproc.dynamics.gravity.acceleration`);
     used by tests and by conventional integrators for comparison.
     """
-    from trackproc.dynamics import gravity
-
     if force not in FORCES:
         raise ValueError(f"unknown force model {force!r}; expected one of {FORCES}")
     return gravity.acceleration(r_m, mu_m3_s2, j2 if force == "j2" else 0.0, re_m)
@@ -379,8 +373,6 @@ def _check_span_and_options(t0: float, t1: float, p: int, stm: bool, mu_sensitiv
 def _propagate_compiled(s0, t0, t1, p, mu, kj2, tol, stm, mu_sensitivity, max_steps, *, force,
                         j2, re_m, batch) -> Propagation:
     """:func:`propagate` of one trajectory by the compiled loop (:mod:`taylor_jit`)."""
-    from trackproc.dynamics import jit
-
     tj = _jit_module()
     jit.announce_compiling([tj.propagate_var if stm else tj.propagate_state, tj.dense],
                            "the Taylor engine's kernels", 10)

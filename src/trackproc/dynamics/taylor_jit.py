@@ -35,6 +35,7 @@ trackproc.dynamics.taylor_jit`` compiles them ahead of use.
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
@@ -548,8 +549,6 @@ def ready(stm: bool) -> bool:
 
 def compile_all() -> float:
     """Compile (or load) every kernel with the signatures the engine uses; CPU seconds taken."""
-    import time
-
     c0 = time.process_time()
     r = np.array([7.0e6, 0.0, 0.0])
     v = np.array([0.0, 7.5e3, 0.0])

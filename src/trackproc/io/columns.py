@@ -74,7 +74,7 @@ def load_arrow(data: bytes, source: str, container: str) -> pa.Table:
     """A Parquet or Arrow IPC (file or stream) buffer as an Arrow table."""
     try:
         if container == "parquet":
-            import pyarrow.parquet as pq
+            import pyarrow.parquet as pq  # start-up: pyarrow.parquet only for Parquet input
             parquet = pq.ParquetFile(pa.BufferReader(data))
             check_input_rows(parquet.metadata.num_rows, file=source)
             return parquet.read()      # not pq.read_table: it imports pyarrow.dataset (~0.1 s CPU)
@@ -159,7 +159,7 @@ def _arrow_chunks(stream, source: str, container: str) -> Iterator[SourceTable]:
     size = chunk_rows()
     try:
         if container == "parquet":
-            import pyarrow.parquet as pq
+            import pyarrow.parquet as pq  # start-up: pyarrow.parquet only for Parquet input
 
             handle = pq.ParquetFile(stream)
             check_input_rows(handle.metadata.num_rows, file=source)

@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 import os
 import re
 from dataclasses import dataclass, field
 from typing import Iterable, Iterator
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.compute as pc
 
 from trackproc.errors import InputError
 from trackproc.io.validate import check_input_rows
@@ -48,8 +51,6 @@ def csv_metadata_line(meta_text: str) -> str:
     Parquet/Arrow outputs)."""
     if os.environ.get("TRACKPROC_CSV_METADATA", "1").strip().lower() in ("0", "false", "no", "off"):
         return ""
-    import json
-
     lines = _json_lines(json.loads(meta_text), "", "")
     return f"# {CSV_META_PREFIX} " + "\n# ".join(lines) + "\n"
 
@@ -57,8 +58,6 @@ def csv_metadata_line(meta_text: str) -> str:
 def _json_lines(value, key: str, indent: str) -> list[str]:
     """``key`` + ``value`` as JSON lines: on one line when it fits in :data:`META_WIDTH`, else
     an object one member a line (a list one item a line), indented by two spaces a level."""
-    import json
-
     flat = key + json.dumps(value, ensure_ascii=False, separators=(", ", ": "))
     if len(indent) + len(flat) <= META_WIDTH or not value or not isinstance(value, (dict, list)):
         return [indent + flat]
@@ -79,8 +78,6 @@ def _json_lines(value, key: str, indent: str) -> list[str]:
 def _packed(values: list, key: str, indent: str) -> list[str]:
     """A list of scalars over as few lines of :data:`META_WIDTH` as its items allow, the first
     items on the key's line and the closing bracket after the last."""
-    import json
-
     out, line = [], indent + key + "["
     for i, v in enumerate(values):
         item = json.dumps(v, ensure_ascii=False) + ("," if i < len(values) - 1 else "]")
@@ -96,8 +93,6 @@ def parse_csv_metadata(comments: Iterable[str]) -> dict:
     """The trackproc metadata of a CSV from its comment lines (``#`` removed): the block
     :func:`csv_metadata_line` writes, or the one-line ``trackproc: {...}`` of earlier versions;
     {} when there is none or it is not valid JSON."""
-    import json
-
     text = None
     for comment in comments:
         comment = comment.strip()
@@ -200,9 +195,7 @@ def _plain_chunk(piece: bytes, header: list[str], line0: int) -> TextTable | Non
     of fields, which that reader reports with its row)."""
     if not piece.endswith(b"\n") or _NOT_PLAIN.search(piece):
         return None
-    import pyarrow as pa
-    import pyarrow.compute as pc
-    import pyarrow.csv as pacsv
+    import pyarrow.csv as pacsv  # start-up: Arrow's CSV reader (~30 ms) only for large plain files
 
     try:
         table = pacsv.read_csv(

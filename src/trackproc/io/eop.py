@@ -98,7 +98,7 @@ def bundled_earth_orientation():
     the user cache directory (io/table_cache.py), keyed by the package version; a cache
     that cannot be written is simply not used."""
     try:
-        import astropy_iers_data
+        import astropy_iers_data  # may be absent: then None
     except ImportError:
         return None
     version = astropy_iers_data.__version__

@@ -37,6 +37,7 @@ import numpy as np
 from trackproc.dynamics.forces.gravity_field import GravityField
 from trackproc.constants import MAX_GRAVITY_DEGREE
 from trackproc.errors import InputError
+from trackproc.io import table_cache
 
 __all__ = ["read_icgem", "default_field_path", "load_field", "DEFAULT_FIELD_NAME"]
 
@@ -266,8 +267,6 @@ def _parse(path: Path, fname: str, degree: int | None = None, order: int | None 
 def _parsed(path: Path, fname: str, degree: int | None, order: int | None):
     """:func:`_parse` through the user cache (io/table_cache.py): the whole file parsed once per
     content, then truncated to ``degree`` x ``order`` as reading it with them would have."""
-    from trackproc.io import table_cache
-
     arrays = table_cache.cached_arrays("icgem", path, lambda: _to_arrays(*_parse(path, fname)), parser=__file__)
     lmax = int(arrays["lmax"])
     if degree is not None and degree > lmax:

@@ -7,6 +7,7 @@ import io
 import json
 
 import pyarrow as pa
+import pyarrow.parquet as pq
 
 from trackproc.io.atomic import open_atomic
 from trackproc.io.columns import META_KEY
@@ -50,8 +51,6 @@ def write_pass_batches(batches, schema: pa.Schema, path: str, fmt: str = "parque
             return
         sink = _Sink(handle)
         if fmt == "parquet":
-            import pyarrow.parquet as pq
-
             writer = pq.ParquetWriter(sink, schema, compression="zstd", version="2.6")   # nanosecond times (io/tables.py)
             empty = True
             for batch in batches:

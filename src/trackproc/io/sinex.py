@@ -26,6 +26,7 @@ import numpy as np
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
+from trackproc.dynamics.geodesy import enu_matrix, itrf_to_geodetic
 
 _YEAR_S = 365.25 * 86400.0
 #: Largest plausible station velocity, m/yr: plates move at most ~0.2 m/yr (ITRF2020); a larger
@@ -95,7 +96,6 @@ def sinex_stations(data: bytes, source: str, epoch, eccentricities: tuple[bytes,
     """Stations (site code -> :class:`~trackproc.io.stations.Station`) at ``epoch``
     (datetime64, UTC) from the bytes of a SINEX file, with the eccentricities of the same file
     or of ``eccentricities = (bytes, source)`` applied (see the module docstring)."""
-    from trackproc.dynamics.geodesy import enu_matrix, itrf_to_geodetic
     from trackproc.io.stations import Station   # here: io/stations reads SINEX through this module (a cycle)
 
     epoch = np.datetime64(epoch, "ns")

@@ -17,6 +17,7 @@ from trackproc.io.csvtext import CSV_META_PREFIX
 from trackproc.io.tabular import parse_text_table
 from trackproc.io.validate import check_name, check_station
 from trackproc.types.station import Station  # noqa: F401  (re-exported)
+from trackproc.io.columns import sniff_container
 
 REQUIRED = ("station", "lat_deg", "lon_deg", "height_m")
 #: ``metadata:PASS`` (the spelling of ``--initial``) names the pass file's stations, as PASS does.
@@ -91,8 +92,6 @@ def read_stations(path: str, epoch=None, eccentricities: str | None = None) -> d
                              expected="metadata:PASS.parquet (the pass file whose metadata holds the stations)")
     source = "<stdin>" if is_stdio(path) else str(path)
     data = read_input_bytes(path)
-    from trackproc.io.columns import sniff_container
-
     if sniff_container(data) != "text":
         return pass_file_stations(data, source)
     if not data.strip():
@@ -126,7 +125,7 @@ def read_stations(path: str, epoch=None, eccentricities: str | None = None) -> d
 def pass_file_stations(data: bytes, source: str) -> dict[str, Station]:
     """The stations a pass file records in its metadata (as ``ingest`` wrote them), so that a
     pass file can stand for its stations table."""
-    from trackproc.io.passfile import parse_pass_table
+    from trackproc.io.passfile import parse_pass_table  # import cycle: io.passfile imports this module
 
     stations = parse_pass_table(data, source).stations()
     if not stations:

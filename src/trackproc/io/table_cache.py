@@ -80,7 +80,7 @@ def cached_arrays(kind: str, source, parse, *, parser: str) -> dict:
     ``source``, from the cache when an entry for the same bytes of ``source`` and of the parser
     module ``parser`` (its ``__file__``) is there; else parsed and stored. The arrays returned
     are read-only (shared with later callers of this process)."""
-    import numpy as np
+    import numpy as np  # start-up: this module is on the --help path (trackproc.io)
 
     try:
         key = f"{kind}:{_digest(source, parser)}"

@@ -45,6 +45,7 @@ from trackproc.io.layouts import (DEG, KIND_SPELLINGS, UNIT_SPELLINGS, is_long_l
 from trackproc.io.problems import (NONFINITE_SIGMA, NONFINITE_VALUE, TIME_EXPECTED, UNKNOWN_KIND,  # noqa: F401
                                    UNPARSEABLE_TIME, WRONG_TYPE, Problems, add_counts)
 from trackproc.io.raw import RawMeasurements
+from trackproc.io import crd, doptrack, orekit_aer
 
 
 
@@ -58,8 +59,6 @@ def detect_layout(data: bytes, name: str) -> str:
     head = data[:4096].decode("utf-8-sig", errors="replace").lstrip()
     if head.startswith("CCSDS_TDM_VERS"):
         return "tdm"
-    from trackproc.io import crd, doptrack, orekit_aer
-
     if crd.looks_like_crd(head) or name.lower().endswith((".npt", ".crd", ".frd")):
         return "crd"
     if doptrack.looks_like_doptrack(head):
@@ -89,19 +88,13 @@ def read_raw(path: str, layout: str = "auto", *, sidecar: str | None = None,
     if layout == "auto":
         layout = detect_layout(data, "" if is_stdio(path) else Path(path).name)
     if layout == "doptrack":
-        from trackproc.io.doptrack import read_doptrack
-
         data_path = None if is_stdio(path) else Path(path)
-        return read_doptrack(data, source, data_path=data_path, sidecar=sidecar,
+        return doptrack.read_doptrack(data, source, data_path=data_path, sidecar=sidecar,
                              carrier_hz=carrier_hz, drop_invalid=drop_invalid)
     if layout == "crd":
-        from trackproc.io.crd import read_crd
-
-        return read_crd(data, source, drop_invalid=drop_invalid)
+        return crd.read_crd(data, source, drop_invalid=drop_invalid)
     if layout == "aer":
-        from trackproc.io.orekit_aer import read_aer
-
-        return read_aer(data, source, drop_invalid=drop_invalid)
+        return orekit_aer.read_aer(data, source, drop_invalid=drop_invalid)
     if layout == "tdm":
         try:
             from trackproc.io.tdm import read_tdm

@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from sgp4.api import Satrec
 
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io.atomic import is_stdio, read_input_bytes
@@ -183,8 +184,6 @@ def read_tle(path: str) -> Tle:
 
 def satrec(tle: Tle):
     """The ``sgp4.api.Satrec`` of a TLE (WGS-72)."""
-    from sgp4.api import Satrec
-
     sat = Satrec.twoline2rv(tle.line1, tle.line2)
     if sat.error:
         raise InputError(f"SGP4 rejects the elements: {sgp4_error_text(sat.error)}", file=tle.source,

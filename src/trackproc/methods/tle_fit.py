@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+from sgp4.api import WGS72, Satrec
 
 # a TLE's measured accuracy (TLE differencing) has one home, the a-priori shared by every command
 from trackproc.methods.estimation.prior import TLE_APRIORI, TLE_APRIORI_MAX_AGE_DAYS  # noqa: F401
@@ -75,8 +76,6 @@ def satrec_of(x, epoch: Epoch):
     """The ``Satrec`` of a fitted vector (``sgp4init``, WGS-72, mode 'i'); ValueError when the
     elements are not an orbit SGP4 accepts (e outside [0, 1), inclination outside [0, 180°],
     non-positive mean motion, or an SGP4 initialisation error)."""
-    from sgp4.api import WGS72, Satrec
-
     c = classical(x)
     if not (c["mean_motion_rev_day"] > 0 and 0 <= c["eccentricity"] < 1 and 0 <= c["inclination_deg"] <= 180):
         raise ValueError(f"not an SGP4 orbit: n {c['mean_motion_rev_day']:.6g} rev/day, e {c['eccentricity']:.6g}, "

@@ -33,10 +33,13 @@ from __future__ import annotations
 
 import math
 from typing import Optional, Sequence
+import sys
 
 import numpy as np
 from scipy.linalg import solve_triangular
 from scipy.linalg.lapack import dpbtrf, dtbtrs
+
+from trackproc.dynamics import jit
 
 __all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor",
            "compiled_riccati", "markov_grid"]
@@ -168,10 +171,6 @@ def compiled_riccati():
     ``TRACKPROC_JIT=0``: never; ``TRACKPROC_JIT=1``: whenever numba is importable; unset: only
     when numba is already loaded in this process (a compiled engine or ``trackproc batch`` paid
     its import, ~0.15 s; a single refine's few hundred filter runs save less than that)."""
-    import sys
-
-    from trackproc.dynamics import jit
-
     mode = jit.mode()
     if mode == "0" or (mode != "1" and "numba" not in sys.modules):
         return None

@@ -80,14 +80,28 @@ def _check(options: BallisticOptions) -> None:
                          expected="a non-zero number of metres")
 
 
-def simulate_ballistic(nominal, stations: Mapping, options: BallisticOptions, eop=None) -> BallisticSimulation:
-    """Simulate the pass of ``nominal`` (:class:`~trackproc.pipeline.detect.Nominal`) at its station.
+@dataclass(frozen=True)
+class _Encounter:
+    """The model a simulation samples: the planar encounter (always; its parameters are
+    recorded), the station geometry (None for the planar model) and the kinds it predicts."""
 
-    ``stations``: name -> :class:`~trackproc.io.stations.Station`. Raises
-    :class:`~trackproc.errors.InputError` for bad options or an unknown station and
-    :class:`~trackproc.errors.ProcessingError` when nothing is visible.
-    """
-    _check(options)
+    planar: object
+    geometry: Optional[object]
+    kinds: tuple
+
+
+@dataclass(frozen=True)
+class _Span:
+    """The sample times before impact (UTC labels and seconds from impact), the model's values
+    at them per kind, and the indices of the visible pass."""
+
+    times: np.ndarray
+    model: dict
+    visible: np.ndarray
+
+
+def _station_name(nominal, stations: Mapping) -> str:
+    """The nominal file's station, or the stations table's only one."""
     name = nominal.station
     if name is None:
         if len(stations) != 1:
@@ -98,45 +112,54 @@ def simulate_ballistic(nominal, stations: Mapping, options: BallisticOptions, eo
     if name not in stations:
         raise InputError("unknown station", file=nominal.source, column="station", found=name,
                          expected="a station of the stations table: " + ", ".join(sorted(stations)))
-    station = stations[name]
-    displacement = 0.0
-    if options.hypothesis == "h1":
-        displacement = options.displacement_m if options.displacement_m is not None else nominal.displacement_m
+    return name
+
+
+def _encounter(nominal, station, options: BallisticOptions) -> _Encounter:
+    """The planar model (seed 003 eqs. 9-11, elevation only) or the 3-D one (elevation, azimuth)."""
     if nominal.model == "planar":
         kinds = tuple(k for k in ("elevation",) if k in options.kinds)
         if not kinds:
             raise InputError("the planar model predicts elevation only", column="--kinds",
                              found=",".join(options.kinds), expected="a list including elevation")
-        enc = dp.planar_encounter(nominal, station)
-        geometry = None
-    else:
-        kinds = tuple(k for k in ("elevation", "azimuth") if k in options.kinds)
-        if not kinds:
-            raise InputError("a ballistic pass has elevation and azimuth only", column="--kinds",
-                             found=",".join(options.kinds), expected="elevation and/or azimuth")
-        geometry = dp.StationGeometry.of(station, nominal.earth)
-        enc = dp.planar_for_3d(nominal, geometry)
+        return _Encounter(dp.planar_encounter(nominal, station), None, kinds)
+    kinds = tuple(k for k in ("elevation", "azimuth") if k in options.kinds)
+    if not kinds:
+        raise InputError("a ballistic pass has elevation and azimuth only", column="--kinds",
+                         found=",".join(options.kinds), expected="elevation and/or azimuth")
+    geometry = dp.StationGeometry.of(station, nominal.earth)
+    return _Encounter(dp.planar_for_3d(nominal, geometry), geometry, kinds)
+
+
+def _sample_times(nominal, enc: _Encounter, displacement: float, step_s: float) -> np.ndarray:
+    """UTC labels ``T - k·step``, k = n ... 1, back to the rise of the simulated hypothesis
+    (15 % earlier for the 3-D model, whose rise the planar one only approximates)."""
     try:
-        rise = enc.rise_time(displacement)
+        rise = enc.planar.rise_time(displacement)
     except ValueError as exc:
         raise ProcessingError(f"no visible pass: {exc}") from None
-    launch = -2.0 * enc.impact_from_apogee_s
-    window = min(-rise * (1.0 if geometry is None else 1.15) + options.step_s, -launch)
-    n = math.floor(window / options.step_s)
+    launch = -2.0 * enc.planar.impact_from_apogee_s
+    window = min(-rise * (1.0 if enc.geometry is None else 1.15) + step_s, -launch)
+    n = math.floor(window / step_s)
     if n < 1:
         raise ProcessingError("no visible pass: the step is longer than the visible flight "
                               f"({-rise:.1f} s); use a smaller --step")
     if n > 2_000_000:
-        raise InputError("too many samples", column="--step", found=options.step_s,
+        raise InputError("too many samples", column="--step", found=step_s,
                          expected=f"a step giving at most 2e6 samples over {window:.0f} s")
     k = np.arange(n, 0, -1, dtype=np.int64)
-    step_ns = round(options.step_s * 1e9)
-    times = np.datetime64(nominal.impact_time, "ns") - k * np.timedelta64(step_ns, "ns")
+    return np.datetime64(nominal.impact_time, "ns") - k * np.timedelta64(round(step_s * 1e9), "ns")
+
+
+def _visible_span(nominal, enc: _Encounter, displacement: float, options: BallisticOptions,
+                  name: str, eop) -> _Span:
+    """The model at the sample times and the last uninterrupted stretch above the mask."""
+    times = _sample_times(nominal, enc, displacement, options.step_s)
     s = dp.seconds_from_impact(times, nominal.impact_time)
-    if geometry is None:
-        model = {"elevation": enc.elevation(s, displacement)}
+    if enc.geometry is None:
+        model = {"elevation": enc.planar.elevation(s, displacement)}
     else:
-        m = dp.model_3d(nominal, geometry, s, displacement, eop)
+        m = dp.model_3d(nominal, enc.geometry, s, displacement, eop)
         model = {"elevation": m.elevation_rad, "azimuth": m.azimuth_rad}
     el = model["elevation"]
     visible = el >= options.elevation_mask_deg * DEG
@@ -146,31 +169,39 @@ def simulate_ballistic(nominal, stations: Mapping, options: BallisticOptions, eo
     last = np.flatnonzero(visible)[-1]
     below = np.flatnonzero(~visible[: last + 1])
     first = below[-1] + 1 if below.size else 0
-    idx = np.arange(first, last + 1)
+    return _Span(times=times, model=model, visible=np.arange(first, last + 1))
 
+
+def _noisy_table(span: _Span, kinds: tuple, name: str, options: BallisticOptions) -> tuple[pd.DataFrame, np.ndarray]:
+    """The pass table (noise drawn kind by kind in ``kinds`` order, azimuth wrapped to [0, 2π))
+    sorted by time then kind, and the noiseless values in the same order."""
+    idx = span.visible
     rng = np.random.default_rng(options.seed)
     sigma = options.sigma_angle_deg * DEG
     pieces, truth = [], []
     pass_id = f"{name}-001"
     for kind in kinds:
-        value = model[kind][idx].copy()
+        value = span.model[kind][idx].copy()
         truth.append(value.copy())
         if sigma > 0:
             value = value + rng.normal(0.0, sigma, idx.size)
         if kind == "azimuth":
             value = np.mod(value, 2 * np.pi)
             value = np.where(value >= 2 * np.pi, 0.0, value)
-        pieces.append(pd.DataFrame({"time": times[idx], "station": name, "pass_id": pass_id, "kind": kind,
+        pieces.append(pd.DataFrame({"time": span.times[idx], "station": name, "pass_id": pass_id, "kind": kind,
                                     "value": value, "sigma": sigma if sigma > 0 else NOISELESS_SIGMA_DEG * DEG}))
     frame = pd.concat(pieces, ignore_index=True)
     truth_values = np.concatenate(truth)
     order = np.lexsort((frame["kind"].to_numpy(dtype=str), frame["time"].to_numpy()))
     frame = frame.iloc[order].reset_index(drop=True)
-    truth_values = truth_values[order]
     frame["time"] = pd.DatetimeIndex(frame["time"]).tz_localize("UTC")
+    return frame, truth_values[order]
 
-    station_meta = station.as_dict() if hasattr(station, "as_dict") else {
-        "lat_deg": float(station.lat_deg), "lon_deg": float(station.lon_deg), "height_m": float(station.height_m)}
+
+def _simulation_record(nominal, enc: _Encounter, span: _Span, displacement: float,
+                       options: BallisticOptions, eop) -> dict:
+    """The ``simulation`` block of the pass file's metadata: what was simulated and how."""
+    planar = enc.planar
     simulation = {
         "generator": "trackproc simulate --ballistic",
         "hypothesis": options.hypothesis,
@@ -179,18 +210,40 @@ def simulate_ballistic(nominal, stations: Mapping, options: BallisticOptions, eo
         "model": nominal.model,
         "step_s": float(options.step_s),
         "elevation_mask_deg": float(options.elevation_mask_deg),
-        "kinds": list(kinds),
+        "kinds": list(enc.kinds),
         "noise_sigma": {"angle_deg": float(options.sigma_angle_deg)},
         "seed": options.seed,
-        "start": format_epoch(times[idx[0]]), "end": format_epoch(times[idx[-1]]),
+        "start": format_epoch(span.times[span.visible[0]]), "end": format_epoch(span.times[span.visible[-1]]),
         "impact_time": format_epoch(nominal.impact_time),
-        "planar": {"p_m": enc.p_m, "e": enc.e, "theta_f_deg": enc.theta_f / DEG, "radius_m": enc.radius_m,
-                   "observer_rate_rad_s": enc.observer_rate},
+        "planar": {"p_m": planar.p_m, "e": planar.e, "theta_f_deg": planar.theta_f / DEG,
+                   "radius_m": planar.radius_m, "observer_rate_rad_s": planar.observer_rate},
     }
-    if geometry is not None:
+    if enc.geometry is not None:
         simulation.update(force=nominal.force, earth=nominal.earth,
                           propagator="DOP853 rtol 1e-13 (scipy), from the impact state backwards",
                           earth_orientation=getattr(eop, "source", None) or "none (UT1-UTC = 0, no polar motion)")
+    return simulation
+
+
+def simulate_ballistic(nominal, stations: Mapping, options: BallisticOptions, eop=None) -> BallisticSimulation:
+    """Simulate the pass of ``nominal`` (:class:`~trackproc.pipeline.detect.Nominal`) at its station.
+
+    ``stations``: name -> :class:`~trackproc.io.stations.Station`. Raises
+    :class:`~trackproc.errors.InputError` for bad options or an unknown station and
+    :class:`~trackproc.errors.ProcessingError` when nothing is visible.
+    """
+    _check(options)
+    name = _station_name(nominal, stations)
+    station = stations[name]
+    displacement = 0.0
+    if options.hypothesis == "h1":
+        displacement = options.displacement_m if options.displacement_m is not None else nominal.displacement_m
+    enc = _encounter(nominal, station, options)
+    span = _visible_span(nominal, enc, displacement, options, name, eop)
+    frame, truth_values = _noisy_table(span, enc.kinds, name, options)
+    station_meta = station.as_dict() if hasattr(station, "as_dict") else {
+        "lat_deg": float(station.lat_deg), "lon_deg": float(station.lon_deg), "height_m": float(station.height_m)}
+    simulation = _simulation_record(nominal, enc, span, displacement, options, eop)
     meta = base_meta(sources=["trackproc simulate --ballistic"], stations={name: station_meta}, simulation=simulation)
     return BallisticSimulation(frame=frame, meta=meta, truth_values=truth_values, station=name)
 

@@ -20,9 +20,23 @@ from pathlib import Path
 
 import numpy as np
 
+from trackproc.constants import WGS84_A
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio
+from trackproc.io import cpf, crd, doptrack, orekit_aer, orekit_config, sinex
+from trackproc.io.columns import column_numbers, column_strings, column_times, sniff_container, source_table
+from trackproc.io.cpf import parse_cpf
+from trackproc.io.doptrack import load_sidecar
+from trackproc.io.ephemeris import parse_ephemeris
+from trackproc.io.passfile import COLUMNS, parse_pass_table
+from trackproc.io.problems import Problems
+from trackproc.io.raw import KIND_UNITS
+from trackproc.io.statefile import format_epoch
+from trackproc.io.stations import parse_stations
+from trackproc.io.tabular import read_raw
+from trackproc.io.tle import parse_tle, tle_epoch
 from trackproc.isotime import iso_utc
+from trackproc.pipeline import info as base
 
 #: The kinds :func:`describe` recognises (named in the error for anything else).
 KINDS = ("canonical pass file", "raw pass table (CSV, Parquet, Arrow)", "stations table", "ephemeris",
@@ -51,8 +65,6 @@ def describe(data: bytes, path: str) -> tuple[dict, str | None]:
                          expected="one of the recognised kinds: " + ", ".join(KINDS))
     if data[:2] == _GZIP:
         return _gzipped(data, path, source), None
-    from trackproc.io.columns import sniff_container
-
     if sniff_container(data) != "text":
         return _table(data, path, source)
     head = data[:65536]
@@ -60,13 +72,9 @@ def describe(data: bytes, path: str) -> tuple[dict, str | None]:
     first = text.split("\n", 1)[0].strip()
     if text.startswith("{"):
         return _json(data, source), None
-    from trackproc.pipeline import info as base
-
     for kind, summarize in (("OPM", base.opm_info), ("OEM", base.oem_info), ("TDM", base.tdm_info)):
         if text.startswith(f"CCSDS_{kind}_VERS"):
             return summarize(data, source), None
-    from trackproc.io import cpf, crd, doptrack, orekit_aer, sinex
-
     if sinex.looks_like_sinex(data):
         return sinex_info(data, source), None
     if crd.looks_like_crd(text):
@@ -83,8 +91,6 @@ def describe(data: bytes, path: str) -> tuple[dict, str | None]:
         return raw_info(data, path, source, "DopTrack pass (received frequency, one-way Doppler)"), None
     if orekit_aer.looks_like_aer(text) or source.lower().endswith(".aer"):
         return raw_info(data, path, source, "Orekit .aer measurements (azimuth, elevation, range)"), None
-    from trackproc.io import orekit_config
-
     if orekit_config.looks_like_orekit_config(text):
         return orekit_config_info(data, source), None
     if first.startswith("|") or (first and "\n|" in text[:2000] and not first.startswith("#")):
@@ -104,18 +110,12 @@ def _has(columns, *names) -> bool:
 
 def _table(data: bytes, path: str, source: str) -> tuple[dict, str | None]:
     """A CSV, Parquet or Arrow table: which one by its columns."""
-    from trackproc.io.columns import source_table
-    from trackproc.io.passfile import COLUMNS, parse_pass_table
-    from trackproc.pipeline import info as base
-
     table = source_table(data, source)
     columns = set(table.columns)
     if _has(columns, *COLUMNS):
         info = base.summarize(parse_pass_table(data, source), source)
         return base.info_dict(info), base.format_info(info)
     if _has(columns, "time", "x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s"):
-        from trackproc.io.ephemeris import parse_ephemeris
-
         eph = parse_ephemeris(data, source)
         return base.ephemeris_info(eph.frame, eph.meta, source), None
     if _has(columns, "observed", "computed", "residual"):
@@ -151,9 +151,6 @@ def raw_info(data: bytes, path: str, source: str, what: str) -> dict:
     """Samples a reader found in a raw input (before ``trackproc ingest``): per kind (with the
     canonical SI unit), per station, the span, and the reader's own facts (CRD sessions, DopTrack
     satellite and TLE). A row the reader refuses is an input error, as for ingest."""
-    from trackproc.io.raw import KIND_UNITS
-    from trackproc.io.tabular import read_raw
-
     raw = read_raw(path, data=data)
     frame, meta = raw.frame, raw.meta
     kinds = {str(k): int(n) for k, n in frame["kind"].value_counts().sort_index().items()}
@@ -188,8 +185,6 @@ def raw_info(data: bytes, path: str, source: str, what: str) -> dict:
 
 
 def stations_info(data: bytes, source: str) -> dict:
-    from trackproc.io.stations import parse_stations
-
     stations = parse_stations(data, source)
     return {"file": source, "kind": "stations table (WGS-84 geodetic)", "stations": len(stations),
             "positions": {name: {"lat_deg": s.lat_deg, "lon_deg": s.lon_deg, "height_m": s.height_m,
@@ -199,22 +194,15 @@ def stations_info(data: bytes, source: str) -> dict:
 
 
 def _numbers(table, name):
-    from trackproc.io.columns import column_numbers
-
     values, missing, wrong = column_numbers(table, table.columns[name])
     return np.where(missing | wrong, np.nan, values)
 
 
 def _strings(table, name):
-    from trackproc.io.columns import column_strings
-
     return np.asarray(column_strings(table, table.columns[name]), dtype=object).astype(str)
 
 
 def _times(table, name="time"):
-    from trackproc.io.columns import column_times
-    from trackproc.io.problems import Problems
-
     problems = Problems(table.rows, table.source)
     times = column_times(table, table.columns[name], problems)
     problems.resolve(drop_invalid=False)
@@ -321,8 +309,6 @@ def markdown_info(data: bytes, source: str) -> dict:
 
 
 def _json(data: bytes, source: str) -> dict:
-    from trackproc.pipeline import info as base
-
     try:
         doc = json.loads(data)
     except (ValueError, RecursionError) as exc:
@@ -382,7 +368,7 @@ def smooth_summary_info(doc: dict, source: str) -> dict:
 
 
 def nominal_info(data: bytes, source: str) -> dict:
-    from trackproc.pipeline.detect import parse_nominal
+    from trackproc.pipeline.detect import parse_nominal  # start-up: scipy (the detection test)
 
     nominal = parse_nominal(data, source)
     return {"file": source, "kind": "detect nominal trajectory (JSON)", **nominal.describe()}
@@ -398,10 +384,7 @@ def _looks_like_tle(text: str) -> bool:
 
 def tle_catalogue_info(data: bytes, source: str) -> dict:
     """One TLE (its elements) or a catalogue (each satellite's name, number and epoch)."""
-    from trackproc.io.statefile import format_epoch
-    from trackproc.io.tle import tle_epoch
-    from trackproc.pipeline import info as base
-    from trackproc.pipeline.identify import parse_catalogue
+    from trackproc.pipeline.identify import parse_catalogue  # start-up: SGP4 comparison, propagator
 
     tles = parse_catalogue(data.decode("ascii", errors="replace"), source)
     if len(tles) == 1:
@@ -413,9 +396,6 @@ def tle_catalogue_info(data: bytes, source: str) -> dict:
 
 
 def cpf_info(data: bytes, source: str) -> dict:
-    from trackproc.constants import WGS84_A
-    from trackproc.io.cpf import parse_cpf
-
     eph = parse_cpf(data, source)
     r = np.linalg.norm(eph.r_itrf, axis=1)
     steps = np.diff(eph.times) / np.timedelta64(1, "s")
@@ -430,11 +410,9 @@ def cpf_info(data: bytes, source: str) -> dict:
 def orekit_config_info(data: bytes, source: str) -> dict:
     """Orekit's orbit-determination configuration: the initial orbit, the stations and the range
     sigma, through the reader ``import-orekit`` uses (so a file it would refuse is refused here)."""
-    from trackproc.io import orekit_config as oc
-
-    cfg = oc.parse_orekit_config(data, source)
-    rows = oc.stations(cfg)
-    state = oc.initial_state(cfg)
+    cfg = orekit_config.parse_orekit_config(data, source)
+    rows = orekit_config.stations(cfg)
+    state = orekit_config.initial_state(cfg)
     sigmas = sorted({r["range_sigma_m"] for r in rows if math.isfinite(r["range_sigma_m"])})
     return {"file": source, "kind": "Orekit orbit-determination configuration (.in)",
             "initial_orbit": f"{state['epoch']} {state['frame']}", "stations": len(rows),
@@ -448,8 +426,6 @@ def sinex_info(data: bytes, source: str) -> dict:
     """SINEX: the header line, the sites with coordinates and with eccentricities, and the
     stations the reader resolves at the end of the file's data span (positions propagated by
     their velocities, one solution per site)."""
-    from trackproc.io import sinex
-
     text = sinex._decode(data, source)
     header = text.split("\n", 1)[0].split()
     blocks = sinex._blocks(text, source)
@@ -506,7 +482,7 @@ def _gzipped(data: bytes, path: str, source: str) -> dict:
 
 
 def icgem_info(data: bytes, path: str, source: str, suffix: str = ".gfc") -> dict:
-    from trackproc.io.icgem import read_icgem
+    from trackproc.io.icgem import read_icgem  # start-up: the gravity-field modules
 
     with _on_disk(data, path, suffix) as file:
         field = read_icgem(file)
@@ -522,8 +498,6 @@ def _looks_like_doptrack_yaml(text: str) -> bool:
 
 
 def doptrack_yaml_info(data: bytes, path: str, source: str) -> dict:
-    from trackproc.io.doptrack import load_sidecar
-
     with _on_disk(data, path, ".yml") as file:
         doc = load_sidecar(file)
     sat = doc.get("satellite") if isinstance(doc.get("satellite"), dict) else {}
@@ -542,9 +516,6 @@ def doptrack_yaml_info(data: bytes, path: str, source: str) -> dict:
            "tca": text(tracking.get("tca")), "tca_error_s": tracking.get("tca_error"),
            "fca_hz": tracking.get("fca"), "fca_error_hz": tracking.get("fca_error")}
     if tle.get("line1") and tle.get("line2"):
-        from trackproc.io.statefile import format_epoch
-        from trackproc.io.tle import parse_tle, tle_epoch
-
         parsed = parse_tle(f"{tle['line1']}\n{tle['line2']}\n", f"{source}: satellite.tle")
         out["tle_epoch"] = format_epoch(tle_epoch(parsed))
     return out

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
 from trackproc.io.passfile import COLUMNS, KINDS
 
@@ -144,8 +145,6 @@ class Samples:
 
     def arrow_batches(self, schema):
         """The canonical table as Arrow record batches of :data:`SLICE_ROWS` rows."""
-        import pyarrow as pa
-
         c = self.columns
         dictionaries = [pa.array(self.stations.names, pa.string()), pa.array(self.passes.names, pa.string()),
                         pa.array(list(KINDS), pa.string())]

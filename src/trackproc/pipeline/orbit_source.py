@@ -32,6 +32,8 @@ from trackproc.io.statefile import is_state_json, parse_state, read_state_or_tle
 from trackproc.io.tle import parse_tle, sgp4_teme, tle_epoch, tle_state
 from trackproc.models.measurements import observables, station_gcrf
 from trackproc.io.statefile import parse_epoch
+from trackproc.io.columns import sniff_container
+from trackproc.io.passfile import parse_pass_table
 
 DEG = np.pi / 180.0
 #: Step of the central differences giving SGP4's acceleration and jerk, s.
@@ -78,9 +80,6 @@ def orbit_from_pass(table, source: str) -> OrbitInput:
 def read_orbit(path: str, eop=None) -> OrbitInput:
     """A JSON state file or a 2/3-line TLE (``-`` = stdin), told apart by the first character; or
     the TLE a pass file's metadata holds, for ``metadata:PASS`` or a Parquet/Arrow pass file."""
-
-    from trackproc.io.columns import sniff_container
-    from trackproc.io.passfile import parse_pass_table
 
     spec = metadata_path(path)
     source = "<stdin>" if is_stdio(spec or path) else str(spec or path)

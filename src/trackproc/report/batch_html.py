@@ -152,7 +152,7 @@ def overview_png(records: list) -> Optional[bytes]:
     """Per input (in the table's order): the smoothing fit RMS of its primary kind, the refined
     pass's residual RMS, and the refined state's RTN 1-sigma (log scales; one marker per
     quantity); None when no input has any of them."""
-    import numpy as np
+    import numpy as np  # numpy and matplotlib only when a figure is drawn, after the BLAS set-up (batch/steps)
 
     from trackproc.report.plots import encode, pyplot
 
@@ -214,7 +214,7 @@ def window_png(out: Path, record: dict) -> Optional[bytes]:
     rel = next((o for o in record.get("outputs") or [] if o.endswith(".residuals.parquet")), None)
     if rel is None or not (out / rel).is_file():
         return None
-    import pyarrow.parquet as pq
+    import pyarrow.parquet as pq  # only when a figure is drawn, as in overview_png
 
     from trackproc.report.plots import residuals_png
 

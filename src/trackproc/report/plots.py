@@ -8,8 +8,12 @@ a multi-page PDF where a figure per pass is asked for).
 from __future__ import annotations
 
 import io
+import textwrap
+from pathlib import Path
 
 import numpy as np
+
+from trackproc.pipeline.plotting import require_matplotlib
 
 #: How each measurement kind is shown: (label, unit, factor from SI).
 DISPLAY = {"range": ("range", "m", 1.0), "range_rate": ("range-rate", "m/s", 1.0),
@@ -19,10 +23,8 @@ DISPLAY = {"range": ("range", "m", 1.0), "range_rate": ("range-rate", "m/s", 1.0
 
 def pyplot():
     """matplotlib's pyplot on the file-only Agg backend (a clear error when the extra is missing)."""
-    from trackproc.pipeline.plotting import require_matplotlib
-
     require_matplotlib()
-    import matplotlib
+    import matplotlib  # optional (the plot extra), ~0.3 s with pyplot
 
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
@@ -147,7 +149,7 @@ def refine_png(residuals, diagnostics: dict) -> bytes:
     ax.plot(*break_gaps(t, computed), "-", lw=1.2, color="C0", label="refined orbit (model)")
     traverse = (diagnostics.get("traverse") or {}).get("epoch")
     if traverse:
-        import pandas as pd
+        import pandas as pd  # start-up: pandas (~0.3 s) only for this figure
 
         tt = (pd.Timestamp(traverse) - t0).total_seconds()
         ax.axvline(tt, color="green", lw=0.8, label="traverse point")
@@ -182,8 +184,6 @@ def refine_png(residuals, diagnostics: dict) -> bytes:
         ax.set_title(("position" if col == 0 else "velocity") + ": refined - stale", fontsize=10)
         if col == 1:  # the same four entries for both panels: once, right of the velocity panel
             legend_outside(ax)
-    import textwrap
-
     unseen_text = "; ".join(obs.get("unobservable") or []) or "none"
     fig.suptitle(textwrap.fill(f"trackproc refine - not seen by the pass: {unseen_text}", 110), fontsize=10)
     fig.tight_layout()
@@ -276,14 +276,12 @@ def smooth_plots(result, path: str) -> dict:
     """``smooth --plot``: one figure per pass and kind. ``*.pdf``: one page each in one file; a PNG
     path with one fit: that figure; with several: ``NAME-<pass>-<kind>.png`` beside it (a
     1170 x 6912 px stack is unreadable). Returns {file name: bytes} to write."""
-    from pathlib import Path
-
     plt = pyplot()
     frame = result.samples.frame
     fits = list(result.fits)
     target = Path(path)
     if target.suffix.lower() == ".pdf":
-        from matplotlib.backends.backend_pdf import PdfPages
+        from matplotlib.backends.backend_pdf import PdfPages  # optional: the plot extra
 
         buffer = io.BytesIO()
         with PdfPages(buffer) as pdf:
@@ -311,7 +309,7 @@ def filter_png(innovations, sigmas) -> bytes:
 
     ``innovations``: the filter's innovation table; ``sigmas``: one row per step and solution with
     ``time`` (UTC), ``solution``, ``radial_m``, ``along_m``, ``cross_m``."""
-    import pandas as pd
+    import pandas as pd  # start-up: pandas (~0.3 s) only for this figure
 
     plt = pyplot()
     frame = innovations

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import weakref
+from fractions import Fraction
 
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dc
@@ -36,6 +37,7 @@ from trackproc.constants import C_LIGHT, OMEGA_EARTH, WGS84_A, WGS84_F
 from trackproc.dynamics.forces import drag as drag_mod
 from trackproc.dynamics.forces import srp, third_body
 from trackproc.dynamics.jit import njit
+from trackproc.dynamics.forces.model import GRID_S, PARAMETERS
 
 __all__ = ["supported", "field_tables", "environment_tables", "integrate", "perturbation", "partials"]
 
@@ -79,8 +81,6 @@ def field_tables(field):
 
 def _normalisation(n: int, m: int) -> float:
     """``N_nm = sqrt((n+m)! / ((2-δ_m0)(2n+1)(n-m)!))``: ``V_nm = N_nm V̄_nm`` (gravity_field's convention)."""
-    from fractions import Fraction
-
     return math.sqrt(Fraction(math.factorial(n + m), math.factorial(n - m) * (1 if m == 0 else 2) * (2 * n + 1)))
 
 
@@ -154,8 +154,6 @@ def environment_tables(env, estimated=()):
     """An :class:`~trackproc.dynamics.forces.model.Environment` as a tuple of arrays: settings,
     the integration frame, the tabulated Earth rotation, Sun and Moon, the estimated parameters'
     codes (their index in :data:`~trackproc.dynamics.forces.model.PARAMETERS`)."""
-    from trackproc.dynamics.forces.model import GRID_S, PARAMETERS
-
     mdl = env.model
     sc = mdl.spacecraft
     cfg = np.zeros(_NCFG)

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from trackproc.dynamics.geodesy import itrf_to_geodetic
+
 __all__ = ["harris_priester", "acceleration", "nrlmsis_density", "HP_TABLE", "NRLMSIS_VERSION"]
 
 #: Height (km), minimum and maximum density (g/km³ = 1e-12 kg/m³): M&G 2000 Table 3.8.
@@ -84,11 +86,9 @@ def nrlmsis_density(datetime_utc, r_itrf, height_m, f107: float, f107a: float, a
     Raises ``ImportError`` with the install hint when pymsis is absent.
     """
     try:
-        import pymsis
+        import pymsis  # optional: the msis extra
     except ImportError:                                            # pragma: no cover - optional
         raise ImportError("--atmosphere nrlmsis needs the pymsis package (pip install pymsis)") from None
-    from trackproc.dynamics.geodesy import itrf_to_geodetic
-
     lat, lon, _ = itrf_to_geodetic(np.atleast_2d(r_itrf))
     n = lat.size
     # equal lengths: pymsis's fly-through mode (one output row per point, no grid)

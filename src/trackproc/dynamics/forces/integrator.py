@@ -32,9 +32,12 @@ to ~0.1 mm (drag): far inside the integration error.
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 
 from trackproc.dynamics.taylor import STATE_PARAMETERS, Outcome, Propagation
+from trackproc.dynamics import jit
 
 __all__ = ["propagate", "rtol_for", "RTOL", "STM_RTOL", "use_compiled"]
 
@@ -123,8 +126,6 @@ def use_compiled(model, t_end_s: float, stm: bool = False) -> bool:
     path's expected cost above loading the kernels. The choice depends on the call alone, never
     on what the process ran before (the two paths agree to micrometres, not to the bit, and a
     batch's outputs must not depend on which tasks a worker happened to run first)."""
-    from trackproc.dynamics import jit
-
     if not jit.enabled():
         return False
     if not jit.forced() and abs(t_end_s) * NUMPY_COST[bool(stm)] < JIT_LOAD_S:
@@ -143,15 +144,12 @@ _WARNED: set = set()
 def _warn_once(message: str) -> None:
     if message not in _WARNED:
         _WARNED.add(message)
-        import logging
-
         logging.getLogger(__name__).warning(message)
 
 
 def _run_compiled(env, y0, t_end_s, rt, at, max_step, max_steps, stm, est):
     """The compiled DOP853: accepted steps' times and their dense-output values at the nodes."""
-    from trackproc.dynamics import jit
-    from trackproc.dynamics.forces import compiled
+    from trackproc.dynamics.forces import compiled  # start-up: loads numba and compiles (or reads) the kernels
 
     jit.announce_compiling([compiled.integrate], "the force kernels", 30)
     model = env.model
@@ -210,7 +208,7 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
             sens = phi if not npar else np.concatenate([phi, c[:, 42:].reshape(-1, 6, npar, _DEGREE + 1)[:, :3]], 2)
             senss = list(sens[:, None])
         return _result(model, outcome, [0.0] + list(t_new), coefs, senss, stm, est, rtol, force_label)
-    from scipy.integrate import DOP853
+    from scipy.integrate import DOP853  # start-up: scipy.integrate (~0.3 s) only on the numpy path
 
     fun = _rhs(env, stm, npar)
     mstep = max_step_s(model, y0[:6])

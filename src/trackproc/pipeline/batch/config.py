@@ -7,6 +7,7 @@ the CLI imports this module at start-up.
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 from dataclasses import dataclass, field
@@ -67,6 +68,139 @@ def _split(text: str) -> list:
     return [part.strip() for part in text.split(",") if part.strip()]
 
 
+def _as_text(opt: Opt, value, text: bool, base_dir, bad):
+    """``str``, ``path`` and ``choice``: empty (or ``none`` for a choice without default) is unset."""
+    kind = opt.kind
+    if not isinstance(value, str):
+        raise bad()
+    value = value.strip() if kind == "choice" else value
+    if kind == "choice":
+        if value in ("", "none") and opt.default is None:
+            return None
+        if value not in opt.choices:
+            raise bad()
+    if kind == "str" and value == "":
+        return None
+    if kind == "path":
+        if value == "":
+            return None
+        return _path(value, base_dir)
+    return value
+
+
+def _as_list(opt: Opt, value, text: bool, base_dir, bad):
+    """``list`` and ``paths``: comma-separated text, or a TOML list of strings."""
+    if isinstance(value, str) and text:
+        items = _split(value)
+    elif isinstance(value, str):
+        items = [value]
+    elif isinstance(value, (list, tuple)):
+        items = []
+        for item in value:
+            if not isinstance(item, str):
+                raise bad()
+            items.extend(_split(item) if text else [item])
+    else:
+        raise bad()
+    if opt.kind == "paths":
+        items = [_path(item, base_dir) for item in items]
+    return tuple(items)
+
+
+def _as_bool(opt: Opt, value, text: bool, base_dir, bad):
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, str) and text and value.strip().lower() in _TRUE | _FALSE:
+        return value.strip().lower() in _TRUE
+    raise bad()
+
+
+def _as_int(opt: Opt, value, text: bool, base_dir, bad):
+    if isinstance(value, bool):
+        raise bad()
+    if isinstance(value, str) and text:
+        try:
+            value = int(value.strip())
+        except ValueError:
+            raise bad() from None
+    if not isinstance(value, int):
+        raise bad()
+    return _checked(opt, value, bad)
+
+
+def _as_duration(opt: Opt, value, text: bool, base_dir, bad):
+    """Seconds, or text with a unit (``parse_duration``)."""
+    from trackproc.types.checks import parse_duration  # start-up: numpy and pandas; this module is stdlib-only
+
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise bad()
+    try:
+        return _checked(opt, parse_duration(value, opt.name), bad)
+    except InputError:
+        raise bad() from None
+
+
+def _as_float(opt: Opt, value, text: bool, base_dir, bad):
+    if isinstance(value, bool):
+        raise bad()
+    if isinstance(value, str) and text:
+        try:
+            value = float(value.strip())
+        except ValueError:
+            raise bad() from None
+    if not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise bad()
+    return _checked(opt, float(value), bad)
+
+
+def _as_degree(opt: Opt, value, text: bool, base_dir, bad):
+    """A non-negative integer or ``auto``."""
+    if isinstance(value, str):
+        if value.strip().lower() == "auto":
+            return "auto"
+        if not text:
+            raise bad()
+        try:
+            value = int(value.strip())
+        except ValueError:
+            raise bad() from None
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise bad()
+    return value
+
+
+def _as_map(opt: Opt, value, text: bool, base_dir, bad):
+    """NAME=SIGMA pairs (text or a TOML list of them, or a TOML table), each SIGMA > 0."""
+    if isinstance(value, Mapping):
+        pairs = list(value.items())
+    elif isinstance(value, (str, list, tuple)) and (text or not isinstance(value, str)):
+        items = _split(value) if isinstance(value, str) else [p for v in value for p in _split(str(v))]
+        pairs = []
+        for item in items:
+            name, sep, number = item.partition("=")
+            if not sep or not name.strip():
+                raise bad(found=item)
+            pairs.append((name.strip(), number.strip()))
+    else:
+        raise bad()
+    out = {}
+    for name, number in pairs:
+        try:
+            number = float(number) if not isinstance(number, bool) else math.nan
+        except (TypeError, ValueError):
+            raise bad(found=f"{name}={number}") from None
+        if not (math.isfinite(number) and number > 0):
+            raise bad(found=f"{name}={number}", expected="NAME=SIGMA with SIGMA > 0")
+        out[str(name)] = number
+    return out
+
+
+#: The converter of each option kind of the schema.
+_CONVERTERS = {"str": _as_text, "path": _as_text, "choice": _as_text, "list": _as_list, "paths": _as_list,
+               "bool": _as_bool, "int": _as_int, "duration": _as_duration, "float": _as_float,
+               "degree": _as_degree, "map": _as_map}
+
+
 def convert(opt: Opt, value, origin: str, config_file: Optional[str] = None, base_dir: Optional[str] = None):
     """``value`` (TOML value, environment text or flag value) as the type of ``opt``.
 
@@ -74,121 +208,16 @@ def convert(opt: Opt, value, origin: str, config_file: Optional[str] = None, bas
     Relative paths are joined to ``base_dir`` (the config file's directory for config values).
     Raises :class:`InputError` (exit 2) naming the key, flag or variable.
     """
-    text = origin in ("env", "flag")
-
     def bad(found=value, expected=None):
         return InputError("invalid setting", found=found, expected=expected or _expected(opt),
                           **_where(opt, origin, config_file))
 
     if value is None:
         return None
-    kind = opt.kind
-    if kind in ("str", "path", "choice"):
-        if not isinstance(value, str):
-            raise bad()
-        value = value.strip() if kind == "choice" else value
-        if kind == "choice":
-            if value in ("", "none") and opt.default is None:
-                return None
-            if value not in opt.choices:
-                raise bad()
-        if kind == "str" and value == "":
-            return None
-        if kind == "path":
-            if value == "":
-                return None
-            return _path(value, base_dir)
-        return value
-    if kind in ("list", "paths"):
-        if isinstance(value, str) and text:
-            items = _split(value)
-        elif isinstance(value, str):
-            items = [value]
-        elif isinstance(value, (list, tuple)):
-            items = []
-            for item in value:
-                if not isinstance(item, str):
-                    raise bad()
-                items.extend(_split(item) if text else [item])
-        else:
-            raise bad()
-        if kind == "paths":
-            items = [_path(item, base_dir) for item in items]
-        return tuple(items)
-    if kind == "bool":
-        if isinstance(value, bool):
-            return value
-        if isinstance(value, str) and text and value.strip().lower() in _TRUE | _FALSE:
-            return value.strip().lower() in _TRUE
-        raise bad()
-    if kind == "int":
-        if isinstance(value, bool):
-            raise bad()
-        if isinstance(value, str) and text:
-            try:
-                value = int(value.strip())
-            except ValueError:
-                raise bad() from None
-        if not isinstance(value, int):
-            raise bad()
-        return _checked(opt, value, bad)
-    if kind == "duration":
-        from trackproc.types.checks import parse_duration
-
-        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-            raise bad()
-        try:
-            return _checked(opt, parse_duration(value, opt.name), bad)
-        except InputError:
-            raise bad() from None
-    if kind == "float":
-        if isinstance(value, bool):
-            raise bad()
-        if isinstance(value, str) and text:
-            try:
-                value = float(value.strip())
-            except ValueError:
-                raise bad() from None
-        if not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise bad()
-        return _checked(opt, float(value), bad)
-    if kind == "degree":
-        if isinstance(value, str):
-            if value.strip().lower() == "auto":
-                return "auto"
-            if not text:
-                raise bad()
-            try:
-                value = int(value.strip())
-            except ValueError:
-                raise bad() from None
-        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-            raise bad()
-        return value
-    if kind == "map":
-        if isinstance(value, Mapping):
-            pairs = list(value.items())
-        elif isinstance(value, (str, list, tuple)) and (text or not isinstance(value, str)):
-            items = _split(value) if isinstance(value, str) else [p for v in value for p in _split(str(v))]
-            pairs = []
-            for item in items:
-                name, sep, number = item.partition("=")
-                if not sep or not name.strip():
-                    raise bad(found=item)
-                pairs.append((name.strip(), number.strip()))
-        else:
-            raise bad()
-        out = {}
-        for name, number in pairs:
-            try:
-                number = float(number) if not isinstance(number, bool) else math.nan
-            except (TypeError, ValueError):
-                raise bad(found=f"{name}={number}") from None
-            if not (math.isfinite(number) and number > 0):
-                raise bad(found=f"{name}={number}", expected="NAME=SIGMA with SIGMA > 0")
-            out[str(name)] = number
-        return out
-    raise AssertionError(kind)  # pragma: no cover
+    converter = _CONVERTERS.get(opt.kind)
+    if converter is None:  # pragma: no cover - every kind of the schema has one
+        raise AssertionError(opt.kind)
+    return converter(opt, value, origin in ("env", "flag"), base_dir, bad)
 
 
 def _checked(opt: Opt, value, bad):
@@ -209,7 +238,7 @@ def _path(value: str, base_dir: Optional[str]) -> str:
 def load_toml(path: str) -> dict:
     """The TOML document of ``path`` (stdlib tomllib; tomli on Python 3.10)."""
     try:
-        import tomllib
+        import tomllib  # Python >= 3.11
     except ImportError:  # Python 3.10
         try:
             import tomli as tomllib  # type: ignore[no-redef]
@@ -232,8 +261,6 @@ def load_toml(path: str) -> dict:
 
 
 def _closest(name: str, candidates) -> str:
-    import difflib
-
     match = difflib.get_close_matches(name, list(candidates), n=1)
     return f" (did you mean {match[0]}?)" if match else ""
 

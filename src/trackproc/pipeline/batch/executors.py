@@ -18,11 +18,14 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import multiprocessing
 import os
 import signal
 import threading
 import time
 import traceback
+import uuid
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Callable, Sequence
 
 from trackproc.errors import InputError, ProcessingError
@@ -150,8 +153,6 @@ class SerialExecutor:
             load_numba()
 
     def submit(self, task: Task):
-        from concurrent.futures import Future
-
         future: Future = Future()
         future.set_result(run_task(task))
         return future
@@ -170,9 +171,6 @@ class PoolExecutor:
     """A process pool (forkserver start: no fork of this process's threads)."""
 
     def __init__(self, workers: int, jit: bool = False):
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
         method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
         context = multiprocessing.get_context(method)
         if method == "forkserver":
@@ -189,8 +187,6 @@ class PoolExecutor:
 
     @staticmethod
     def wait_first(futures):
-        from concurrent.futures import FIRST_COMPLETED, wait
-
         done, pending = wait(futures, return_when=FIRST_COMPLETED)
         return done, pending
 
@@ -219,7 +215,7 @@ class DaskExecutor:
 
     def __init__(self, address: str):
         try:
-            from distributed import Client
+            from distributed import Client  # optional: the dask extra
         except ImportError:
             raise InputError("--scheduler needs Dask distributed, which is not installed", column="--scheduler",
                              found=address, expected="pip install 'trackproc[dask]' (or dask[distributed]), "
@@ -233,13 +229,11 @@ class DaskExecutor:
         self.slots = 2 * threads
 
     def submit(self, task: Task):
-        import uuid
-
         return self.client.submit(run_task, task, pure=False,
                                   key=f"trackproc-batch-{task.kind}-{task.key[:12]}-{uuid.uuid4().hex[:8]}")
 
     def wait_first(self, futures):
-        from distributed import wait
+        from distributed import wait  # optional: the dask extra
 
         with self.client.as_current():
             result = wait(list(futures), return_when="FIRST_COMPLETED")

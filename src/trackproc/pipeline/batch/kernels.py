@@ -3,8 +3,10 @@ before its tasks run (:func:`compiled_kernels`, :func:`load_numba`)."""
 
 from __future__ import annotations
 
+import importlib.util
 import logging
 
+from trackproc.dynamics import jit
 from trackproc.pipeline.batch.config import Settings
 
 log = logging.getLogger("trackproc.batch")
@@ -20,14 +22,10 @@ def compiled_kernels(settings: Settings) -> bool:
     ``trackproc refine``; the two agree to ~1e-13 relative, not bit for bit). ``import numba``
     and loading the cached kernels cost ~0.2 s of CPU a process; the compiled Taylor engine
     saves ~0.03–0.04 s of CPU a pass (measured in ``benchmarks/throughput.py``)."""
-    from trackproc.dynamics import jit
-
     if jit.mode() == "0":
         return False
     if not {"refine", "estimate"} & set(settings.get("batch.steps")):
         return False
-    import importlib.util
-
     return importlib.util.find_spec("numba") is not None
 
 

@@ -30,7 +30,7 @@ def batch_lock(directory: Path, wait: bool = False, timeout_s: float = 0.0):
     it would let a third run lock a different file); the kernel releases the lock when the
     holder exits, however it exits.
     """
-    import fcntl
+    import fcntl  # POSIX only: imported where the lock is taken
 
     path = directory / LOCK_NAME
     fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)

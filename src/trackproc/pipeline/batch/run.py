@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import calendar
 import contextlib
+import json
 import logging
 import math
 import os
@@ -15,8 +16,9 @@ from pathlib import Path
 from typing import Callable, Optional
 
 from trackproc import __version__
-from trackproc.errors import InputError
-from trackproc.pipeline.batch.chain import Chain, make_chain
+from trackproc.errors import InputError, OutputError, ProcessingError, TrackprocError
+from trackproc.io.atomic import max_input_bytes, write_bytes
+from trackproc.pipeline.batch.chain import STEPS, Chain, WindowContext, make_chain
 from trackproc.pipeline.batch.config import Settings
 from trackproc.pipeline.batch.discovery import discover
 from trackproc.pipeline.batch.executors import Executors, Interrupted, execute, interruptible
@@ -74,8 +76,6 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None,
         probe.write_bytes(b"")
         probe.unlink()
     except OSError as exc:
-        from trackproc.errors import OutputError
-
         raise OutputError(output, exc) from None
     try:
         with interruptible(), batch_lock(out, settings.get("batch.wait"), settings.get("batch.wait_timeout_s")):
@@ -163,8 +163,6 @@ def _read_input(item):
     """``(bytes, None, None)`` of an input, or ``(None, error, error_type)``: a name that is not
     UTF-8 or a file above the input bound (``TRACKPROC_MAX_INPUT_MB``, checked on its size
     before reading) is an input error of that input alone; an unreadable file an internal one."""
-    from trackproc.io.atomic import max_input_bytes
-
     if item.problem:
         return None, f"{item.path}: {item.problem}", "input"
     try:
@@ -337,13 +335,6 @@ def _run_filter(settings, records, files, paths, out) -> list:
     processed input's pass table, from the carried state when it exists (else ``filter.initial``).
     Writes ``OUTPUT/filter/<last measurement>.json`` then the carried state (each atomically);
     nothing newer than the carried state: nothing done, the record says up to date."""
-    import time as _time
-
-    from trackproc.errors import TrackprocError
-    from trackproc.io.atomic import write_bytes
-    from trackproc.pipeline.batch.chain import STEPS, WindowContext
-    from trackproc.pipeline.batch.store import Record
-
     state_path = filter_state_path(settings, out)
     members = [r for r in records if r.status == "ok"]
     run_files, run_paths = dict(files), dict(paths)
@@ -363,11 +354,9 @@ def _run_filter(settings, records, files, paths, out) -> list:
     data = [(f"{PASSES_DIR}/{r.name}.parquet", (out / PASSES_DIR / f"{r.name}.parquet").read_bytes())
             for r in members]
     ctx = WindowContext(name="filter", members=data, files=run_files, paths=run_paths)
-    t0 = _time.perf_counter()
+    t0 = time.perf_counter()
     try:
         if not data:
-            from trackproc.errors import ProcessingError
-
             raise ProcessingError("no processed input to filter")
         STEPS["filter"].run(ctx, settings.section("filter"))
     except TrackprocError as exc:
@@ -385,12 +374,12 @@ def _run_filter(settings, records, files, paths, out) -> list:
     return [Record(task="filter", name=name, status="ok", skipped=False, key="", path=str(state_path),
                    numbers=ctx.numbers, details=ctx.details, warnings=ctx.warnings,
                    outputs=[str(dated.relative_to(out)) if dated.is_relative_to(out) else str(dated), str(state_path)],
-                   seconds=round(_time.perf_counter() - t0, 3), members=[r.name for r in members])]
+                   seconds=round(time.perf_counter() - t0, 3), members=[r.name for r in members])]
 
 
 def _utc(text):
     """An ISO UTC time as numpy datetime64 (ns), or None."""
-    import numpy as np
+    import numpy as np  # numpy after the driver fixed the BLAS threads (batch/steps)
 
     try:
         return np.datetime64(str(text).rstrip("Z"), "ns") if text else None
@@ -399,8 +388,6 @@ def _utc(text):
 
 
 def json_loads(data: bytes) -> dict:
-    import json
-
     try:
         doc = json.loads(data)
     except ValueError:

@@ -120,7 +120,7 @@ def _run_task(task: Task) -> TaskResult:
         if task.kind == "input":
             ctx = InputContext(task.name, task.source, task.data, task.files, task.paths)
             if not task.reads_raw:
-                from trackproc.io.passfile import parse_pass_table
+                from trackproc.io.passfile import parse_pass_table  # start-up: pandas, pyarrow (batch/steps)
 
                 ctx.table = parse_pass_table(task.data, task.source)
             if task.stage is not None:  # the table stage is stored: only the side steps run
@@ -131,7 +131,7 @@ def _run_task(task: Task) -> TaskResult:
             else:
                 for name in task.steps:
                     STEPS[name].run(ctx, task.options[name])
-                from trackproc.io.passfile import pass_table_bytes
+                from trackproc.io.passfile import pass_table_bytes  # start-up: pandas, pyarrow (batch/steps)
 
                 ctx.outputs[".parquet"] = pass_table_bytes(ctx.table, "parquet")
                 ctx.numbers = {**_table_numbers(ctx.table), **ctx.numbers}

@@ -40,6 +40,17 @@ class DetectResult:
     samples: dict = field(default_factory=dict)
 
 
+def _chosen(given, available: list, source: str, column: str, several: str, which: str, unknown: str):
+    """The nominal file's ``given`` choice among ``available``, or the only one when it gives none."""
+    if given is None:
+        if len(available) > 1:
+            raise InputError(several, file=source, column=column, found=", ".join(available), expected=which)
+        return available[0]
+    if given not in available:
+        raise InputError(unknown, file=source, column=column, found=given, expected="one of " + ", ".join(available))
+    return given
+
+
 def select_samples(table, nominal: Nominal, source: str):
     frame = table.frame
     kinds_wanted = nominal.kinds or (("elevation", "azimuth") if nominal.model == "3d" else ("elevation",))
@@ -48,26 +59,12 @@ def select_samples(table, nominal: Nominal, source: str):
         raise InputError("no elevation samples", file=source, column="kind",
                          found=", ".join(sorted(frame["kind"].unique())) or "(none)", expected="elevation rows")
     stations = sorted(elev["station"].unique())
-    name = nominal.station
-    if name is None:
-        if len(stations) > 1:
-            raise InputError("several stations have elevations", file=nominal.source, column="station",
-                             found=", ".join(stations), expected="the station to use")
-        name = stations[0]
-    elif name not in stations:
-        raise InputError("station has no elevation samples in the pass file", file=nominal.source,
-                         column="station", found=name, expected="one of " + ", ".join(stations))
+    name = _chosen(nominal.station, stations, nominal.source, "station", "several stations have elevations",
+                   "the station to use", "station has no elevation samples in the pass file")
     rows = frame[(frame["station"] == name) & frame["kind"].isin(kinds_wanted)]
     passes = sorted(rows["pass_id"].unique())
-    pass_id = nominal.pass_id
-    if pass_id is None:
-        if len(passes) > 1:
-            raise InputError("the station has several passes", file=nominal.source, column="pass_id",
-                             found=", ".join(passes), expected="the pass to use")
-        pass_id = passes[0]
-    elif pass_id not in passes:
-        raise InputError("unknown pass", file=nominal.source, column="pass_id", found=pass_id,
-                         expected="one of " + ", ".join(passes))
+    pass_id = _chosen(nominal.pass_id, passes, nominal.source, "pass_id", "the station has several passes",
+                      "the pass to use", "unknown pass")
     rows = rows[rows["pass_id"] == pass_id]
     if nominal.kinds is not None and "azimuth" in nominal.kinds and not (rows["kind"] == "azimuth").any():
         raise InputError("no azimuth samples for the requested kinds", file=source, column="kind",
@@ -75,20 +72,35 @@ def select_samples(table, nominal: Nominal, source: str):
     return name, pass_id, rows
 
 
-def detect(table, nominal: Nominal, options: DetectOptions | None = None, *, source: str = "<pass>",
-           eop=None) -> DetectResult:
-    """Run the seed 003 test on one pass of ``table`` (:class:`~trackproc.io.passfile.PassTable`)."""
-    options = options or DetectOptions()
-    displacement = options.displacement_m if options.displacement_m is not None else nominal.displacement_m
-    if not math.isfinite(displacement) or displacement == 0:
-        raise InputError("invalid displacement", column="--displacement-m", found=displacement,
-                         expected="a non-zero number of metres")
-    name, pass_id, rows = select_samples(table, nominal, source)
+@dataclass(frozen=True)
+class _Flight:
+    """The pass's samples during the flight up to ``T - tau``: their rows, UTC times (``keep``
+    selects them from ``times_all``), seconds from impact, and how many later ones were dropped."""
+
+    rows: object
+    times_all: np.ndarray
+    keep: np.ndarray
+    s: np.ndarray
+    dropped: int
+
+
+@dataclass(frozen=True)
+class _Predictions:
+    """The observations ``x`` and the predictions under H0 (``a``) and H1 (``b``), azimuths on
+    the branch of ``a``; ``info`` the model's extra record for the document."""
+
+    x: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    info: dict
+
+
+def _flight_samples(rows, nominal: Nominal, source: str) -> _Flight:
+    """The samples before ``T - tau`` (the reaction time), none before the launch."""
     times = rows["time"].dt.tz_convert("UTC").dt.tz_localize(None).to_numpy("datetime64[ns]")
     s_all = seconds_from_impact(times, nominal.impact_time)
     keep = s_all <= -nominal.tau_s
     keep &= s_all < 0
-    dropped = int((~keep).sum())
     if not keep.any():
         raise InputError("no samples before impact_time - tau_s", file=source, column="time",
                          found=f"{iso_utc(times.min())} .. {iso_utc(times.max())}",
@@ -101,57 +113,59 @@ def detect(table, nominal: Nominal, options: DetectOptions | None = None, *, sou
                          f"(a flight of {flight:.1f} s ending at {iso_utc(nominal.impact_time)})",
                          file=source, column="time", found=iso_utc(times[i]),
                          expected="samples of the flight (check impact_time in the nominal file and the pass)")
-    rows = rows[keep]
-    s = s_all[keep]
-    kinds = rows["kind"].to_numpy(dtype=str)
-    x = rows["value"].to_numpy(float)
-    sigma_source = "pass file sigma column"
-    if options.sigma_rad is not None:
-        sigma = np.full(x.shape, float(options.sigma_rad))
-        sigma_source = "--sigma-rad"
-    elif nominal.sigma_rad is not None:
-        sigma = np.full(x.shape, nominal.sigma_rad)
-        sigma_source = "nominal sigma_rad"
-    else:
-        sigma = rows["sigma"].to_numpy(float)
-        bad = ~(np.isfinite(sigma) & (sigma > 0))
-        if bad.any():
-            raise InputError("sigma must be positive", file=source, column="sigma", found=float(sigma[bad][0]),
-                             expected="a positive sigma in rad, or sigma_rad in the nominal file")
+    return _Flight(rows=rows[keep], times_all=times, keep=keep, s=s_all[keep], dropped=int((~keep).sum()))
 
-    station = table.stations().get(name)
-    info: dict = {}
+
+def _sigmas(rows, options: DetectOptions, nominal: Nominal, source: str) -> tuple[np.ndarray, str]:
+    """Each sample's sigma and where it came from: ``--sigma-rad``, the nominal file, or the pass file."""
+    n = len(rows)
+    if options.sigma_rad is not None:
+        return np.full(n, float(options.sigma_rad)), "--sigma-rad"
+    if nominal.sigma_rad is not None:
+        return np.full(n, nominal.sigma_rad), "nominal sigma_rad"
+    sigma = rows["sigma"].to_numpy(float)
+    bad = ~(np.isfinite(sigma) & (sigma > 0))
+    if bad.any():
+        raise InputError("sigma must be positive", file=source, column="sigma", found=float(sigma[bad][0]),
+                         expected="a positive sigma in rad, or sigma_rad in the nominal file")
+    return sigma, "pass file sigma column"
+
+
+def _predictions(station, name: str, nominal: Nominal, flight: _Flight, kinds: np.ndarray, x: np.ndarray,
+                 sigma: np.ndarray, displacement: float, eop, source: str) -> _Predictions:
+    """H0 and H1 predictions by the planar model (elevation) or the 3-D one (azimuth, elevation)."""
+    s = flight.s
     if nominal.model == "planar":
         if nominal.direction != "none" and nominal.latitude_deg is None and station is None:
             raise InputError("station missing from the pass file metadata", file=source, column="stations",
                              found=name, expected="its latitude there, or latitude_deg in the nominal file")
         enc = planar_encounter(nominal, station)
-        a = enc.elevation(s)
-        b = enc.elevation(s, displacement)
-        info = _planar_info(enc)
-    else:
-        if station is None:
-            raise InputError("station missing from the pass file metadata", file=source, column="stations",
-                             found=name, expected="the station's lat_deg, lon_deg, height_m (from ingest/simulate)")
-        geometry = StationGeometry.of(station, nominal.earth)
-        m0 = model_3d(nominal, geometry, s, 0.0, eop)
-        m1 = model_3d(nominal, geometry, s, displacement, eop)
-        az = kinds == "azimuth"
-        a = np.where(az, m0.azimuth_rad, m0.elevation_rad)
-        b = np.where(az, m1.azimuth_rad, m1.elevation_rad)
-        # wrap azimuth differences: compare on the branch of a
-        x = np.where(az, a + wrap_pi(x - a), x)
-        b = np.where(az, a + wrap_pi(b - a), b)
-        info = {"planar_comparison": compare_planar(nominal, geometry, s, kinds, a, b, sigma, displacement)}
+        return _Predictions(x=x, a=enc.elevation(s), b=enc.elevation(s, displacement), info=_planar_info(enc))
+    if station is None:
+        raise InputError("station missing from the pass file metadata", file=source, column="stations",
+                         found=name, expected="the station's lat_deg, lon_deg, height_m (from ingest/simulate)")
+    geometry = StationGeometry.of(station, nominal.earth)
+    m0 = model_3d(nominal, geometry, s, 0.0, eop)
+    m1 = model_3d(nominal, geometry, s, displacement, eop)
+    az = kinds == "azimuth"
+    a = np.where(az, m0.azimuth_rad, m0.elevation_rad)
+    b = np.where(az, m1.azimuth_rad, m1.elevation_rad)
+    # wrap azimuth differences: compare on the branch of a
+    x = np.where(az, a + wrap_pi(x - a), x)
+    b = np.where(az, a + wrap_pi(b - a), b)
+    info = {"planar_comparison": compare_planar(nominal, geometry, s, kinds, a, b, sigma, displacement)}
+    return _Predictions(x=x, a=a, b=b, info=info)
 
-    try:
-        stat = dt.statistic(x, a, b, sigma)
-        decision = dt.decide(stat, options.false_alarm)
-    except ValueError as exc:
-        raise ProcessingError(str(exc)) from None
+
+def _document(stat, decision, nominal: Nominal, flight: _Flight, kinds: np.ndarray, pred: _Predictions, *,
+              source: str, name: str, pass_id, displacement: float, sigma_source: str) -> dict:
+    """The JSON document of one test: decision, statistic, error probabilities, samples used."""
+    s = flight.s
+    times = flight.times_all[flight.keep]
     spacing = float(np.median(np.diff(np.unique(s)))) if np.unique(s).size > 1 else float("nan")
     by_kind = {k: int((kinds == k).sum()) for k in ("elevation", "azimuth") if (kinds == k).any()}
-    doc = {
+    info = dict(pred.info)
+    return {
         "decision": "H1" if decision.decide_h1 else "H0",
         "displaced": decision.decide_h1,
         "model": nominal.model,
@@ -173,23 +187,46 @@ def detect(table, nominal: Nominal, options: DetectOptions | None = None, *, sou
         "sigma_source": sigma_source,
         "uniform_sigma": stat.uniform_sigma,
         "samples": {
-            "used": stat.n, "by_kind": by_kind, "not_used_after_T_minus_tau": dropped,
-            "first": iso_utc(times[keep].min()), "last": iso_utc(times[keep].max()),
+            "used": stat.n, "by_kind": by_kind, "not_used_after_T_minus_tau": flight.dropped,
+            "first": iso_utc(times.min()), "last": iso_utc(times.max()),
             "first_s_from_impact": float(s.min()), "last_s_from_impact": float(s.max()),
             "median_spacing_s": spacing,
         },
         "g_achieved_rad_s05": float(stat.sigma0 * math.sqrt(spacing)) if math.isfinite(spacing) else None,
         "information_distance_rad_s05": float(math.sqrt(stat.c_n * spacing)) if math.isfinite(spacing) else None,
-        "max_abs_b_minus_a_rad": float(np.max(np.abs(b - a))),
+        "max_abs_b_minus_a_rad": float(np.max(np.abs(pred.b - pred.a))),
         "nominal": {**nominal.describe(), **info.pop("nominal", {})},
         **info,
         "units": {"angles": "rad", "S": "rad^2", "variance": "rad^4", "g": "rad s^0.5", "time": "UTC"},
         "method": "seed 003 eqs. 1-8: S = sum w_i (x_i - a_i)(b_i - a_i), w_i = (sigma0/sigma_i)^2 (1 when "
                   "sigma is uniform); E[S|H0] = 0, E[S|H1] = C_n, Var S = sigma0^2 C_n",
     }
+
+
+def detect(table, nominal: Nominal, options: DetectOptions | None = None, *, source: str = "<pass>",
+           eop=None) -> DetectResult:
+    """Run the seed 003 test on one pass of ``table`` (:class:`~trackproc.io.passfile.PassTable`)."""
+    options = options or DetectOptions()
+    displacement = options.displacement_m if options.displacement_m is not None else nominal.displacement_m
+    if not math.isfinite(displacement) or displacement == 0:
+        raise InputError("invalid displacement", column="--displacement-m", found=displacement,
+                         expected="a non-zero number of metres")
+    name, pass_id, rows = select_samples(table, nominal, source)
+    flight = _flight_samples(rows, nominal, source)
+    kinds = flight.rows["kind"].to_numpy(dtype=str)
+    sigma, sigma_source = _sigmas(flight.rows, options, nominal, source)
+    pred = _predictions(table.stations().get(name), name, nominal, flight, kinds,
+                        flight.rows["value"].to_numpy(float), sigma, displacement, eop, source)
+    try:
+        stat = dt.statistic(pred.x, pred.a, pred.b, sigma)
+        decision = dt.decide(stat, options.false_alarm)
+    except ValueError as exc:
+        raise ProcessingError(str(exc)) from None
+    doc = _document(stat, decision, nominal, flight, kinds, pred, source=source, name=name, pass_id=pass_id,
+                    displacement=displacement, sigma_source=sigma_source)
     return DetectResult(document=doc, statistic=stat, decision=decision,
-                        samples={"times": times[keep], "s": s, "kinds": kinds, "x": x, "a": a, "b": b,
-                                 "sigma": sigma})
+                        samples={"times": flight.times_all[flight.keep], "s": flight.s, "kinds": kinds,
+                                 "x": pred.x, "a": pred.a, "b": pred.b, "sigma": sigma})
 
 
 def _planar_info(enc) -> dict:

@@ -8,6 +8,7 @@ import math
 from dataclasses import replace
 
 import numpy as np
+from scipy.linalg import eigh
 
 from trackproc.errors import ProcessingError
 from trackproc.methods import noise as nz
@@ -131,8 +132,6 @@ def knowledge_lost(priors, sol) -> str | None:
     all the solution has, and the data move the state there by their own systematic errors: the
     initial state is kept instead (DopTrack 12 April 2020, one pass: the adapted solution
     predicted the next pass 6.4 times worse than the TLE, with verdict ok)."""
-    from scipy.linalg import eigh
-
     p = state_prior_covariance(priors)
     if p is None:
         return None

@@ -172,7 +172,7 @@ def add_edited_pass(q, problem: Problem, sol, clip: float | None) -> None:
     probability at most ``p0 = 2 Φ(-clip)``, and the pass's count is tested against Binomial(n, p0)
     at 0.001/m for the worst of m passes. A pass of another kind than its label (two-way Doppler
     read as one-way) is edited whole and the solution stays right, but silently without it."""
-    from scipy.special import bdtrc, ndtr
+    from scipy.special import bdtrc, ndtr  # start-up: scipy.special (~0.25 s) only for an edited pass
 
     if not clip:
         return

@@ -63,8 +63,8 @@ from trackproc.pipeline.refine.assemble import apriori_choice, check_options, in
 from trackproc.pipeline.refine.traverse import (  # noqa: F401
     eccentricity, link_range_rate, max_elevation_deg, model_traverse, traverse_station)
 from trackproc.pipeline.refine.gates import (  # noqa: F401
-    Gated, circular_consistency, correlated_conflict_reason, may_refuse, solve_adapted, solve_gated, solve_weighted,
-    stale_improvement, with_noise_of)
+    Adapted, Gated, circular_consistency, correlated_conflict_reason, may_refuse, solve_adapted, solve_gated,
+    solve_weighted, stale_improvement, with_noise_of)
 from trackproc.methods.estimation.prior import DEFAULT_APRIORI_ELEMENTS  # noqa: F401
 from trackproc.pipeline.refine.noise import DRIFT_T, noise_model, oscillator_link, solve_noise  # noqa: F401
 from trackproc.pipeline.refine.quality import refine_quality  # noqa: F401

@@ -19,23 +19,9 @@ from trackproc.methods import quality as qm
 from trackproc.methods.distributions import chi2_survival_2
 from trackproc.methods.estimation import decision as dm
 from trackproc.methods.estimation import prior as pr
-from trackproc.methods.noise import PassCovariance
 from trackproc.pipeline.refine.options import MAX_ADAPT_ITERATIONS, MAX_APRIORI_ADAPT, MAX_REWEIGHT, REWEIGHT_THRESHOLD
-from trackproc.pipeline.refine.problem import Refinement
+from trackproc.pipeline.refine.problem import Refinement, with_noise_of  # noqa: F401  (re-exported)
 from trackproc.pipeline.refine.traverse import eccentricity, time_tag_covariance
-
-
-def with_noise_of(moved: Refinement, ref: Refinement) -> Refinement:
-    """``moved`` (the same pass at another solution epoch) with ``ref``'s noise model: the model
-    depends on the sample times' differences only, so it carries over (REML is not run again: a
-    traverse re-solve moves the epoch by seconds)."""
-    if ref.noise is None:
-        return replace(moved, noise=None, noise_edited=ref.noise_edited, noise_report=ref.noise_report)
-    t = moved.problem.meas.t_s
-    shift = float(np.min(t) - np.min(ref.problem.meas.t_s))
-    blocks = [(idx, model, t0 + shift) for idx, model, t0 in ref.noise.blocks]
-    cov = PassCovariance(moved.problem.meas.sigma, t, blocks)
-    return replace(moved, noise=cov, noise_edited=ref.noise_edited, noise_report=ref.noise_report)
 
 
 def may_refuse(ref: Refinement) -> bool:
@@ -64,6 +50,19 @@ class Gated:
     def solved(self) -> tuple:
         """``(ref, sol, kkt, scale)``: the solution in the form the solvers take as ``first``."""
         return self.ref, self.sol, self.kkt, self.scale
+
+
+@dataclass(frozen=True)
+class Adapted:
+    """A solution with the a-priori adapted to the pass (:func:`solve_adapted`): the refinement
+    with the a-priori used, its solution, KKT result (or None) and sigma scale, and the
+    adaptation record (None when the a-priori was used as given)."""
+
+    ref: Refinement
+    sol: Any
+    kkt: Any
+    scale: float
+    adaptation: Optional[dict]
 
 
 def correlated_conflict_reason(test: dict, whiteness: dict, factor: float, inflation: float) -> str:
@@ -126,7 +125,8 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None) -> Gated
                 "code": "apriori_conflict_correlated", "state_covariance": original * factor,
                 "covariance_factor": factor,
                 "reason": correlated_conflict_reason(test, w, factor, improvement["inflation"])})
-    work, sol, kkt, scale, adaptation = solve_adapted(ref, start_factor, first=(work,) + tuple(first))
+    adapted = solve_adapted(ref, start_factor, first=(work,) + tuple(first))
+    work, sol, kkt, scale, adaptation = adapted.ref, adapted.sol, adapted.kkt, adapted.scale, adapted.adaptation
     if adaptation is not None:
         improvement = stale_improvement(work, sol, scale) if work.priors else improvement
         if may and not adaptation.get("resolved", True):
@@ -230,7 +230,7 @@ def with_scaled_priors(ref: Refinement, factor: float) -> Refinement:
     return replace(ref, priors=pr.scaled_priors(ref.priors, factor))
 
 
-def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=None):
+def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=None) -> Adapted:
     """:func:`solve_weighted`, then, when the a-priori test rejects (the state's a-priori share of
     χ² above the 99.9 % point of χ²(rows)), the a-priori covariance is scaled by its
     maximum-likelihood variance component (Helmert/Förstner:
@@ -238,19 +238,18 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
     never below 1) and the problem solved again: a stale state further off than its a-priori says
     is weighed by how far off the data show it to be, and the covariance covers that.
     ``start_factor`` starts from an already scaled a-priori; ``first`` ``(work, sol, kkt, scale)``
-    a solution already made with it. Returns ``(Refinement with the a-priori used, Solution,
-    KKTResult or None, sigma scale, adaptation dict or None)``."""
+    a solution already made with it. Returns :class:`Adapted`."""
     if first is not None:
         work, sol, kkt, scale = first
     else:
         work = with_scaled_priors(ref, start_factor) if start_factor != 1.0 else ref
         sol, kkt, scale = solve_weighted(work, x0=x0)
     if not pr.has_state_prior(ref.priors):
-        return work, sol, kkt, scale, None
+        return Adapted(work, sol, kkt, scale, None)
     test = refinement_apriori_test(work, sol, kkt)
     chi2, rows = test["chi2"], test["rows"]
     if not test["conflict"] and start_factor == 1.0:
-        return work, sol, kkt, scale, None
+        return Adapted(work, sol, kkt, scale, None)
     start = {"chi2": chi2, "rows": rows, "limit": qm.chi2_limit(rows), "test": test}
     factor = start_factor
     history = []
@@ -277,13 +276,13 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
             history.append({"factor": factor, "failed": str(exc)})
             factor = history[-2]["factor"] if len(history) > 1 else start_factor
             chi2, rows = pr.state_prior_chi2(work.priors, sol.values)
-            return work, sol, kkt, scale, {
+            return Adapted(work, sol, kkt, scale, {
                 "method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated",
                 "factor": factor, "sigma_factor": math.sqrt(factor), "chi2_before": start["chi2"], "chi2_after": chi2,
                 "rows": rows, "limit": start["limit"], "iterations": history, "resolved": False,
                 "test": pr.test_report(start["test"]),
                 "failure": f"with the a-priori scaled by {history[-1]['factor']:.3g} the refinement failed: "
-                           f"{str(exc).split(' (')[0]}"}
+                           f"{str(exc).split(' (')[0]}"})
         kept = (work, sol, kkt, scale)
         chi2, rows = pr.state_prior_chi2(work.priors, sol.values)
     after = refinement_apriori_test(work, sol, kkt)
@@ -293,7 +292,7 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
                   "test": pr.test_report(start["test"]), "test_after": pr.test_report(after),
                   "resolved": bool(not after["conflict"] or (history and history[-1].get("component") is not None
                                                              and abs(history[-1]["component"] - 1.0) < 0.1))}
-    return work, sol, kkt, scale, adaptation
+    return Adapted(work, sol, kkt, scale, adaptation)
 
 
 def solve_weighted(ref: Refinement, observed=None, prior_centre=None, x0=None):

@@ -17,6 +17,7 @@ from trackproc.methods.refinement import (ELEMENT_NAMES, CachedModel, circular_c
                                            element_covariance, geodesic_retraction, profile_mixture, solve_kkt,
                                            solve_soft_kkt)
 from trackproc.methods.estimation.prior import default_apriori_covariance, state_prior_covariance  # noqa: F401
+from trackproc.methods.whitening import PassCovariance
 from trackproc.pipeline.refine.options import RefineOptions, SmoothedCurve
 
 
@@ -310,3 +311,27 @@ class Refinement:
             n = len(kkt.solution.values)
             return np.sqrt(np.clip(np.diag(self.joint_covariance(kkt.solution, kkt)[n:, n:]), 0.0, None))
         return np.sqrt(np.diag(kkt.target_covariance))
+
+
+def with_noise_of(target: Refinement, source: Refinement, *, same_samples: bool = True) -> Refinement:
+    """``target`` (the pass of ``source`` at another solution epoch, or with samples removed) with
+    ``source``'s noise model, REML not run again: the model depends on the sample times'
+    differences only, so it carries over with each block's walk start moved by the shift of the
+    time axis.
+
+    ``same_samples``: ``target`` has ``source``'s samples (a traverse re-solve moves the epoch by
+    seconds): the blocks keep their samples, the shift is that of the first sample's time, and the
+    samples edited in the fit stay edited. Otherwise (a second signal's samples removed) every block
+    spans all of ``target``'s samples, the shift is that of the epoch, and nothing starts edited."""
+    edited = source.noise_edited if same_samples else None
+    if source.noise is None:
+        return replace(target, noise=None, noise_edited=edited, noise_report=source.noise_report)
+    t = target.problem.meas.t_s
+    if same_samples:
+        shift = float(np.min(t) - np.min(source.problem.meas.t_s))
+        blocks = [(idx, model, t0 + shift) for idx, model, t0 in source.noise.blocks]
+    else:
+        shift = float((source.problem.epoch - target.problem.epoch) / np.timedelta64(1, "ns")) * 1e-9
+        blocks = [(np.arange(t.size), model, t0 + shift) for _, model, t0 in source.noise.blocks]
+    return replace(target, noise=PassCovariance(target.problem.meas.sigma, t, blocks), noise_edited=edited,
+                   noise_report=source.noise_report)

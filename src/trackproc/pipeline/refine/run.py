@@ -18,8 +18,8 @@ from trackproc.pipeline.refine.gates import (circular_consistency, may_refuse, s
 from trackproc.pipeline.refine.noise import solve_noise
 from trackproc.pipeline.refine.options import MAX_TRAVERSE_ITERATIONS, TRAVERSE_TOLERANCE_S, RefineOptions, RefineResult
 from trackproc.pipeline.refine.result import finish
-from trackproc.pipeline.refine.second_signal import (annotate, declined_signal, find_second_signal, carry_noise,
-                                                    public, refine_edited)
+from trackproc.pipeline.refine.second_signal import (annotate, declined_signal, find_second_signal, public,
+                                                    refine_edited)
 from trackproc.pipeline.refine.steps import as_kind, declined_step, scan_steps, shifted, step_modifier
 from trackproc.pipeline.refine.traverse import model_traverse, time_tag_covariance
 from trackproc.types import PassTable
@@ -55,7 +55,7 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
     ref = prepare(table, initial, stations, opt, eop, source)
     # the pass's noise model (REML) and transmitter drift first, then the gates on that solution
     if _noise_of is not None:                           # a second signal edited out: the noise model stands
-        ref = carry_noise(ref, _noise_of)
+        ref = with_noise_of(ref, _noise_of, same_samples=False)
         sol, kkt, scale = solve_weighted(ref)
     else:
         ref, sol, kkt, scale = solve_noise(table, initial, ref, stations, eop, source)

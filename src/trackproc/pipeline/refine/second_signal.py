@@ -18,7 +18,6 @@ from trackproc.isotime import iso_utc
 from trackproc.methods.distributions import normal_quantile
 from trackproc.methods.estimation import decision as dm
 from trackproc.methods.estimation import prior as pr
-from trackproc.methods.whitening import PassCovariance
 from trackproc.models import modifiers as md
 from trackproc.pipeline.od import UNITS
 from trackproc.pipeline.refine.problem import Refinement
@@ -210,19 +209,6 @@ def without_samples(table, times_ns) -> object:
     return type(table)(frame.loc[~drop].reset_index(drop=True), table.meta)
 
 
-def carry_noise(new: Refinement, old: Refinement) -> Refinement:
-    """``new`` (the pass without the edited samples, perhaps at another epoch) with ``old``'s noise
-    model (as :func:`~trackproc.pipeline.refine.gates.with_noise_of`: the model depends on the sample
-    times' differences only, so REML is not run again); the walk's start moved with the epoch."""
-    if old.noise is None:
-        return replace(new, noise=None, noise_edited=None, noise_report=old.noise_report)
-    t = new.problem.meas.t_s
-    shift = float((old.problem.epoch - new.problem.epoch) / np.timedelta64(1, "ns")) * 1e-9
-    blocks = [(np.arange(t.size), model, t0 + shift) for _, model, t0 in old.noise.blocks]
-    return replace(new, noise=PassCovariance(new.problem.meas.sigma, t, blocks), noise_edited=None,
-                   noise_report=old.noise_report)
-
-
 def refine_edited(refine: Callable, table, initial, stations, opt, eop, source, ref: Refinement, found: dict):
     """The pass refined again without the samples of ``found`` (``refine`` with ``ref``'s noise model
     and transmitter model), annotated (:func:`annotate`); None when too few samples would be left or
@@ -294,4 +280,4 @@ def annotate(res, record: Optional[dict]):
 
 
 __all__ = ["signal_runs", "limit_sigmas", "find_second_signal", "refine_edited", "declined_signal", "annotate",
-           "carry_noise", "eligible"]
+           "eligible"]
