@@ -117,9 +117,9 @@ def test_force_parameter_columns_match_central_differences_of_the_measurement_mo
     problem = build_problem(simulated(3.0, 60.0), GUESS, STATIONS,
                             options(estimate_force=["cr,cd,empirical-rtn,empirical-xyz,empirical-xyz-rate"]), EOP)
     x = problem.x0.copy()
-    # 23 propagations of 3 h with 17 sensitivities: on the compiled integrator (a 3 h run would take
-    # the numpy path, integrator.use_compiled) 1.5 s of CPU instead of 16; its partials equal the
-    # numpy path's for every parameter kind (tests/io/test_forces_jit.py)
+    # 23 propagations of 3 h with 17 sensitivities, on the compiled integrator: alone, a 3 h run takes
+    # the numpy path (integrator.use_compiled), ten times the CPU here; the compiled partials equal
+    # the numpy path's for every parameter kind (tests/io/test_forces_jit.py)
     with jit.default("1"):
         _, jac = problem.model(x)
     # steps large against DOP853's step-selection noise (decimetres after eclipse crossings)

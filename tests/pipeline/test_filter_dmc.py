@@ -100,9 +100,9 @@ def test_mismodelled_drag_dmc_nees_monte_carlo(drag):
     from trackproc.dynamics import jit
 
     nf, ns, ok = [], [], 0
-    # the compiled integrator for every segment: the filter's short segments would take the numpy
-    # path (integrator.use_compiled), 2.3x the CPU a draw here; the two paths agree to micrometres,
-    # far below the metre-level errors whose NEES is tested, and the single run above keeps the
+    # the compiled integrator for every segment: alone, the filter's short segments take the numpy
+    # path (integrator.use_compiled), twice the CPU a draw; the two paths agree to micrometres, far
+    # below the metre-level errors whose NEES is tested, and the single run above keeps the
     # automatic choice
     with jit.default("1"):
         for seed in range(100):
