@@ -112,10 +112,16 @@ def test_cli_estimate_force_needs_force_full(run_cli, tmp_path):
 
 @pytest.mark.slow
 def test_force_parameter_columns_match_central_differences_of_the_measurement_model():
+    from trackproc.dynamics import jit
+
     problem = build_problem(simulated(3.0, 60.0), GUESS, STATIONS,
                             options(estimate_force=["cr,cd,empirical-rtn,empirical-xyz,empirical-xyz-rate"]), EOP)
     x = problem.x0.copy()
-    _, jac = problem.model(x)
+    # 23 propagations of 3 h with 17 sensitivities, on the compiled integrator: alone, a 3 h run takes
+    # the numpy path (integrator.use_compiled), ten times the CPU here; the compiled partials equal
+    # the numpy path's for every parameter kind (tests/io/test_forces_jit.py)
+    with jit.default("1"):
+        _, jac = problem.model(x)
     # steps large against DOP853's step-selection noise (decimetres after eclipse crossings)
     for name, h in (("cr", 0.5), ("cd", 0.5), *((f"empirical_{c}", 5e-6) for c in "rtnxyz"),
                     *((f"empirical_{c}_rate", 5e-10) for c in "xyz")):
@@ -123,7 +129,8 @@ def test_force_parameter_columns_match_central_differences_of_the_measurement_mo
         plus, minus = x.copy(), x.copy()
         plus[k] += h
         minus[k] -= h
-        ref = (problem.model(plus)[0] - problem.model(minus)[0]) / (2 * h)
+        with jit.default("1"):
+            ref = (problem.model(plus)[0] - problem.model(minus)[0]) / (2 * h)
         scale = np.abs(ref).max()
         assert scale > 0 and np.abs(jac[:, k] - ref).max() < 2e-2 * scale, name
         # the column is not the state's or another parameter's
