@@ -9,7 +9,7 @@ process given to the filter, the filtered and smoothed offset are within 4 of th
 drawn path at every sample, and the normalised innovations squared per sample is about 1 (χ²);
 with the offset held constant, the same data are not (the check can fail).
 
-A Monte Carlo over 100 draws on two passes of the station 1.5 h apart (10 s samples, one offset
+A Monte Carlo over 100 draws on two consecutive passes (10 s samples, a 1.5 h gap, one offset
 for the station walking through the gap): the mean NEES (Bar-Shalom et al. 2001, 5.4.2) of the
 last filtered and of the smoothed epoch state, against the truth's trajectory and the drawn path,
 inside the 95 % band of chi2; with the offset held constant the verdict says the filter diverges."""
@@ -106,8 +106,9 @@ def test_filter_recovers_a_wandering_oscillator_within_its_sigmas(process):
     assert z_c.max() > 4.0 and nis_c > 1.5, (z_c.max(), nis_c)
 
 
-#: the Monte Carlo's arc: two passes of the station 1.5 h apart (5.5 h from the first sample), 10 s
-#: samples, one offset for the station (the transmitter's oscillator wanders through the gap)
+#: the Monte Carlo's arc: the 5.5 h simulated hold the station's two consecutive passes (1.9 h,
+#: 123 samples at 10 s, a 1.5 h gap), one offset for the station (the transmitter's oscillator
+#: wanders through the gap)
 MC_DURATION_S, MC_STEP_S, MC_DRAWS = 20000.0, 10.0, 100
 
 
