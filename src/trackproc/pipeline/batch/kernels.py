@@ -41,14 +41,19 @@ def load_numba() -> None:
 
         module = taylor._jit_module()
         if module is not None and not (module.ready(True) and module.ready(False)):
-            log.info("compiling the Taylor engine's kernels for this installation (once: ~10 s of CPU)")
-            module.compile_all()
+            # the same locks as the engine's first calls: one process compiles, the others load
+            with jit.compile_once([module.propagate_state, module.propagate_var], "taylor"), \
+                    jit.compile_once([module.dense], "taylor-dense"):
+                if not (module.ready(True) and module.ready(False)):
+                    log.info("compiling the Taylor engine's kernels for this installation (once: ~10 s of CPU)")
+                module.compile_all()
         with jit.default("1"):
             riccati = compiled_riccati()
         if riccati is not None:
-            riccati(np.ones(1), np.ones(2), np.ones(2), 1.0, 1.0)     # compiled or loaded here, once
             from trackproc.methods.whitening_jit import kalman_whiten
 
-            kalman_whiten(np.ones(1), np.ones(1), np.ones(1), np.ones(2), np.ones((2, 1)))
+            with jit.compile_once([riccati, kalman_whiten], "whitening"):
+                riccati(np.ones(1), np.ones(2), np.ones(2), 1.0, 1.0)     # compiled or loaded here, once
+                kalman_whiten(np.ones(1), np.ones(1), np.ones(1), np.ones(2), np.ones((2, 1)))
     except Exception:  # noqa: BLE001 - optional: the numpy paths serve
         pass
