@@ -132,8 +132,13 @@ def compile_once(kernels, family: str, what: str = "", cpu_s: float = 0, timeout
     held = getattr(_HELD, "families", None)
     if held is None:
         held = _HELD.families = set()
-    path = _lock_path(kernels[0], family) if kernels else None
-    if family in held or path is None or not any(cold(k) for k in kernels):
+    if family in held or not any(cold(k) for k in kernels):
+        yield
+        return
+    path = _lock_path(kernels[0], family)
+    if path is None:
+        if what:
+            announce_compiling(kernels, what, cpu_s)
         yield
         return
     try:
