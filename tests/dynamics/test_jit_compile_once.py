@@ -12,6 +12,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("numba")
@@ -143,3 +144,38 @@ def test_an_unwritable_cache_directory_runs_without_a_lock(tmp_path, monkeypatch
     (tmp_path / "no").write_text("a file, not a directory")
     with jit.compile_once([module.cube], "probe", timeout_s=0.0):
         assert module.cube(4.0) == 64.0
+
+
+TAYLOR_RUN = textwrap.dedent('''
+    import numpy as np
+    from trackproc.dynamics.taylor import propagate
+    state = np.array([7.0e6, 0.0, 0.0, 0.0, 7.6e3, 0.0])
+    run = propagate(state, 0.0, 6000.0, force="two-body", engine="compiled")
+    print(repr(float(run.state(np.array([6000.0]))[0, 0])))
+''')
+
+
+@pytest.mark.slow
+def test_two_processes_started_together_compile_the_taylor_kernels_once(tmp_path):
+    """The real kernels (~11 s of CPU to compile): two processes on an empty numba cache, one
+    compile notice between them, the same orbit in both and the closed-form two-body one."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), TRACKPROC_JIT="1")
+    env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
+    runs = [subprocess.Popen([sys.executable, "-c", TAYLOR_RUN], env=env, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    outs = [r.communicate(timeout=600) for r in runs]
+    assert all(r.returncode == 0 for r in runs), outs
+    notices = [err for _, err in outs if "compiling the Taylor engine's kernels" in err]
+    assert len(notices) == 1, outs
+    x1, x2 = (float(out) for out, _ in outs)
+    assert x1 == x2
+    # Kepler's equation for the circular-ish orbit above (independent of the integrator)
+    mu, r0, v0 = 3.986004418e14, 7.0e6, 7.6e3
+    a = 1.0 / (2.0 / r0 - v0 * v0 / mu)
+    e = 1.0 - r0 / a                                    # at periapsis (v0 > circular speed)
+    n = (mu / a**3) ** 0.5
+    mean = n * 6000.0
+    ecc = mean
+    for _ in range(50):
+        ecc = mean + e * np.sin(ecc)
+    assert abs(x1 - a * (np.cos(ecc) - e)) < 1e-3       # m
