@@ -10,9 +10,10 @@ import contextlib
 import functools
 import os
 import threading
+import time
 import logging
 
-__all__ = ["announce_compiling", "cold", "default", "enabled", "forced", "mode", "njit"]
+__all__ = ["announce_compiling", "cold", "compile_once", "default", "enabled", "forced", "mode", "njit"]
 
 _LOCAL = threading.local()
 
@@ -91,3 +92,90 @@ def announce_compiling(kernels, what: str, cpu_s: float) -> None:
     _ANNOUNCED.add(what)
     logging.getLogger("trackproc").warning(
         "compiling %s, once per installation (~%d s of CPU); later runs load them from the cache", what, cpu_s)
+
+
+#: How long a process waits for another one compiling the same kernels (s): past it, it compiles
+#: its own copy, so a lock held by a hung process delays a run but never blocks it. Above a
+#: compilation's wall time on a loaded 2-core machine (the force kernels: ~20 s of CPU).
+LOCK_TIMEOUT_S = 300.0
+#: Between two attempts at the lock while another process holds it (s).
+LOCK_POLL_S = 0.1
+
+_HELD = threading.local()
+
+
+def _lock_path(kernel, family: str) -> str | None:
+    """The lock file of ``family`` in the directory where numba caches ``kernel``, so that the
+    processes sharing that cache (``NUMBA_CACHE_DIR`` or numba's choice) share the lock; None when
+    numba's internals do not say where (no lock then)."""
+    try:
+        directory = kernel._cache._cache_path
+    except Exception:                                     # noqa: BLE001 - numba internals moved
+        return None
+    return os.path.join(directory, f"trackproc-{family}.lock") if directory else None
+
+
+@contextlib.contextmanager
+def compile_once(kernels, family: str, what: str = "", cpu_s: float = 0, timeout_s: float | None = None):
+    """Run the block (a first call of ``kernels``) holding a per-machine lock when any of them is
+    :func:`cold`, so that processes needing the same kernels at once on a fresh cache (xdist or
+    batch pool workers, two cron jobs) compile them once: the others wait, then load numba's cache.
+    With ``what``, :func:`announce_compiling` once the lock is held (the waiters, finding the
+    cache written, say nothing).
+
+    The lock is an ``fcntl.flock`` on a file beside numba's cache of the first kernel: the kernel
+    releases it when its holder exits, even killed, so a leftover file never blocks. A holder that
+    hangs is waited for ``timeout_s`` (:data:`LOCK_TIMEOUT_S`), then the block runs anyway (the
+    compilation the lock would have saved). A read-only or missing cache directory, or no
+    ``fcntl``: the block runs without a lock (numba compiles in memory as before)."""
+    kernels = list(kernels)
+    held = getattr(_HELD, "families", None)
+    if held is None:
+        held = _HELD.families = set()
+    if family in held or not any(cold(k) for k in kernels):
+        yield
+        return
+    path = _lock_path(kernels[0], family)
+    if path is None:
+        if what:
+            announce_compiling(kernels, what, cpu_s)
+        yield
+        return
+    try:
+        import fcntl
+
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+    except (ImportError, OSError):
+        if what:
+            announce_compiling(kernels, what, cpu_s)
+        yield
+        return
+    locked = False
+    try:
+        deadline = time.monotonic() + (LOCK_TIMEOUT_S if timeout_s is None else timeout_s)
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                locked = True
+                break
+            except BlockingIOError:
+                if time.monotonic() >= deadline:
+                    logging.getLogger("trackproc").warning(
+                        "%s: held past %.0f s by another process; compiling without it", path,
+                        LOCK_TIMEOUT_S if timeout_s is None else timeout_s)
+                    break
+                time.sleep(LOCK_POLL_S)
+            except OSError:                               # e.g. a file system without locks
+                break
+        if what:
+            announce_compiling(kernels, what, cpu_s)
+        held.add(family)
+        try:
+            yield
+        finally:
+            held.discard(family)
+    finally:
+        if locked:
+            fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)

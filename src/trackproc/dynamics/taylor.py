@@ -374,12 +374,11 @@ def _propagate_compiled(s0, t0, t1, p, mu, kj2, tol, stm, mu_sensitivity, max_st
                         j2, re_m, batch) -> Propagation:
     """:func:`propagate` of one trajectory by the compiled loop (:mod:`taylor_jit`)."""
     tj = _jit_module()
-    jit.announce_compiling([tj.propagate_var if stm else tj.propagate_state, tj.dense],
-                           "the Taylor engine's kernels", 10)
     r0 = np.ascontiguousarray(s0[0, :3], dtype=float)
     v0 = np.ascontiguousarray(s0[0, 3:], dtype=float)
     args = (float(t0), float(t1), int(p), float(mu), float(kj2))
-    with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"), jit.compile_once([tj.propagate_var if stm else tj.propagate_state], "taylor",
+                                                     "the Taylor engine's kernels", 10):
         if stm:
             npar = 7 if mu_sensitivity else 6
             dr0 = np.zeros((3, npar))

@@ -177,10 +177,11 @@ class Propagation:
         # compiled (numba is loaded already) when steps are many and samples per step few; one
         # BLAS product per step wins for hundreds of samples in a step (a pass: 601 in 1 step)
         if self.engine == "compiled" and idx is not None and tf.size <= 64 * self.n_steps:
-            from trackproc.dynamics import taylor_jit  # start-up: numba, loaded only for the compiled engine
+            from trackproc.dynamics import jit, taylor_jit  # start-up: numba, loaded only for the compiled engine
 
-            return taylor_jit.dense(np.ascontiguousarray(coef), np.ascontiguousarray(tb, dtype=float),
-                                    idx.astype(np.int64), np.ascontiguousarray(tf), m), t.shape
+            with jit.compile_once([taylor_jit.dense], "taylor-dense", "the Taylor engine's kernels", 10):
+                return taylor_jit.dense(np.ascontiguousarray(coef), np.ascontiguousarray(tb, dtype=float),
+                                        idx.astype(np.int64), np.ascontiguousarray(tf), m), t.shape
         if idx is None:
             groups = [(0, None)]
         elif np.all(idx[1:] >= idx[:-1]):                            # sorted: slices

@@ -178,7 +178,12 @@ def compiled_riccati():
         kernel = None
         if jit.enabled():
             try:
-                from trackproc.methods.whitening_jit import riccati as kernel
+                from trackproc.methods.whitening_jit import kalman_whiten, riccati as kernel
+
+                # compiled or loaded here, by one process at a time on a fresh cache
+                with jit.compile_once([kernel, kalman_whiten], "whitening"):
+                    kernel(np.ones(1), np.ones(2), np.ones(2), 1.0, 1.0)
+                    kalman_whiten(np.ones(1), np.ones(1), np.ones(1), np.ones(2), np.ones((2, 1)))
             except Exception:                      # noqa: BLE001 - numba unusable here: the Python loop
                 kernel = None
         _RICCATI.append(kernel)

@@ -151,13 +151,13 @@ def _run_compiled(env, y0, t_end_s, rt, at, max_step, max_steps, stm, est):
     """The compiled DOP853: accepted steps' times and their dense-output values at the nodes."""
     from trackproc.dynamics.forces import compiled  # start-up: loads numba and compiles (or reads) the kernels
 
-    jit.announce_compiling([compiled.integrate], "the force kernels", 30)
     model = env.model
     F = compiled.field_tables(model.field)
     HT = compiled.hessian_tables(compiled.stm_field(env))
     E = compiled.environment_tables(env, est)
-    code, _, t_old, y_old, dense, t_last = compiled.integrate(
-        y0, float(t_end_s), rt, at, float(max_step), int(max_steps), bool(stm), len(est), E, F, HT)
+    with jit.compile_once([compiled.integrate], "force", "the force kernels", 30):
+        code, _, t_old, y_old, dense, t_last = compiled.integrate(
+            y0, float(t_end_s), rt, at, float(max_step), int(max_steps), bool(stm), len(est), E, F, HT)
     outcome = (Outcome.SUCCESS, Outcome.STEP_LIMIT, Outcome.NON_FINITE)[code]
     t_new = np.append(t_old[1:], t_last)[:t_old.size]
     h = t_new - t_old

@@ -34,21 +34,18 @@ def load_numba() -> None:
     Taylor kernels and the Kalman gains in this process (:func:`compiled_kernels`), so that the
     workers only load them; nothing when they cannot be."""
     try:
-        import numpy as np
-
         from trackproc.dynamics import jit, taylor
         from trackproc.methods.whitening import compiled_riccati
 
         module = taylor._jit_module()
         if module is not None and not (module.ready(True) and module.ready(False)):
-            log.info("compiling the Taylor engine's kernels for this installation (once: ~10 s of CPU)")
-            module.compile_all()
+            # the same locks as the engine's first calls: one process compiles, the others load
+            with jit.compile_once([module.propagate_state, module.propagate_var], "taylor"), \
+                    jit.compile_once([module.dense], "taylor-dense"):
+                if not (module.ready(True) and module.ready(False)):
+                    log.info("compiling the Taylor engine's kernels for this installation (once: ~10 s of CPU)")
+                module.compile_all()
         with jit.default("1"):
-            riccati = compiled_riccati()
-        if riccati is not None:
-            riccati(np.ones(1), np.ones(2), np.ones(2), 1.0, 1.0)     # compiled or loaded here, once
-            from trackproc.methods.whitening_jit import kalman_whiten
-
-            kalman_whiten(np.ones(1), np.ones(1), np.ones(1), np.ones(2), np.ones((2, 1)))
+            compiled_riccati()                 # the Kalman gains and whitening, compiled or loaded here
     except Exception:  # noqa: BLE001 - optional: the numpy paths serve
         pass
