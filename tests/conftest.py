@@ -114,7 +114,8 @@ SLOW_SUBPROCESS = {
     "test_hostile_time.py": {"test_parquet_year_3000_never_aborts"},
     "test_hostile_signals.py": {"test_sigterm_of_a_running_command"},
     "test_startup.py": {"test_the_tour_does_not_import_scipy_optimize", "test_plain_command_runs_without_pydantic",
-                        "test_commands_leave_numpys_unused_modules_unloaded_and_usable"},
+                        "test_commands_leave_numpys_unused_modules_unloaded_and_usable",
+                        "test_help_from_the_cache_is_typers_without_typer"},
     "test_batch.py": {
         "test_dask_cluster_and_process_pool_give_the_serial_results", "test_a_dying_worker_fails_only_its_own_input",
         "test_a_killed_run_resumes_where_it_stopped", "test_two_overlapping_runs_do_not_corrupt_each_other",
@@ -133,6 +134,10 @@ SLOW_CPU: dict[str, str | dict[str, str]] = {
     "test_batch_hostile.py": {
         "test_a_newline_in_a_file_name_cannot_forge_a_log_line": "batch estimate with the compiled kernels: "
                                                                  "compiles them on a fresh clone, 22-32 s"},
+    "test_batch_report.py": {
+        "test_report_lists_every_input_links_its_outputs_and_fetches_nothing": "a batch with the compiled kernels: "
+                                                                               "compiles them on a fresh clone, 16 s "
+                                                                               "(2.1 s warm)"},
     "test_batch_quality.py": {
         "test_the_summary_carries_each_solutions_verdict_and_strict_counts_suspect_as_failed":
             "batch refine with the compiled kernels (compiles them on a fresh clone), 2.2 s warm"},
