@@ -466,15 +466,21 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     last_traj = None
     limit = np.inf if opt.ekf_sigma_m is None else float(opt.ekf_sigma_m)
 
+    latched = [False]
+
     def settled(pk):
         if not restarts:
             return False
         # the filter's state is trusted as a reference once its position sigma is below the limit;
         # before, it is a linearised filter about the current reference (Tapley et al. 2004 4.7.3:
         # the extended filter from a poor first guess diverges, so start it once the covariance has
-        # converged)
-        var = np.diag(pk)[:6] * scales[:6] ** 2
-        return float(np.sqrt(var[:3].sum()) + EKF_HORIZON_S * np.sqrt(var[3:].sum())) < limit
+        # converged). Once started it stays extended: the covariance grows again through a gap or
+        # under process noise, and a reference no longer restarted drifts with its first guess's
+        # energy error (kilometres a day) while the filter stays linearised about it.
+        if not latched[0]:
+            var = np.diag(pk)[:6] * scales[:6] ** 2
+            latched[0] = float(np.sqrt(var[:3].sum()) + EKF_HORIZON_S * np.sqrt(var[3:].sum())) < limit
+        return latched[0]
 
     while chunks:
         ka, kb, restart = chunks.pop(0)
@@ -557,6 +563,7 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                     x, p, _ = sq.scalar_update(x, p, row, nu, r2[i])
                 cursor += 1
             x_f[k], p_f[k] = x, p
+            settled(p)                                         # latches once converged
             moved = x if targets is None else np.asarray(targets[k], float) / scales
             if k < kb and np.linalg.norm((moved[:3] - z[j][:3]) * scales[:3]) > opt.relinearise_m and settled(p):
                 # the state left the reference by more than its linearisation holds: restart it here
