@@ -90,11 +90,15 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None) -> Gated
     if first is None or start_factor != 1.0:
         first = solve_weighted(work)
     improvement = stale_improvement(work, first[0], first[2]) if work.priors else None
-    if may and ref.apriori_source == "stated" and start_factor == 1.0:
+    stated = may and ref.apriori_source == "stated" and start_factor == 1.0
+    # the a-priori test of the first solution, once (with a station's time-tag sigma it propagates
+    # the orbit): the gates below and solve_adapted read the same one
+    test = (refinement_apriori_test(work, first[0], first[1])
+            if stated or (may and improvement is not None) else None)
+    if stated:
         # a stated a-priori (a TLE's, a state file's covariance, --apriori-sigma) that the pass
         # contradicts is kept as it is: its accuracy is known, so the pass is the likely culprit
         # (methods/estimation/decision.py); it is never loosened to let the pass move the orbit
-        test = refinement_apriori_test(work, first[0], first[1])
         if test is not None and test["conflict"]:
             decision = dm.declined("the stale state's stated a-priori", test)
             return Gated(work, first[0], first[1], first[2], None, improvement, {
@@ -109,7 +113,6 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None) -> Gated
         # holds: time-correlated residuals overstate the data's information just as much, and
         # loosening the a-priori would then let the pass move the state by its own systematic
         # errors (docs/refine.md, "Quality")
-        test = refinement_apriori_test(work, first[0], first[1])
         w = improvement["whiteness"]
         correlated = (w["lag1_autocorrelation"] > qm.WHITENESS_RHO
                       or (np.isfinite(w["runs_z"]) and abs(w["runs_z"]) > qm.RUNS_Z))
@@ -125,7 +128,7 @@ def solve_gated(ref: Refinement, start_factor: float = 1.0, first=None) -> Gated
                 "code": "apriori_conflict_correlated", "state_covariance": original * factor,
                 "covariance_factor": factor,
                 "reason": correlated_conflict_reason(test, w, factor, improvement["inflation"])})
-    adapted = solve_adapted(ref, start_factor, first=(work,) + tuple(first))
+    adapted = solve_adapted(ref, start_factor, first=(work,) + tuple(first), first_test=test)
     work, sol, kkt, scale, adaptation = adapted.ref, adapted.sol, adapted.kkt, adapted.scale, adapted.adaptation
     if adaptation is not None:
         improvement = stale_improvement(work, sol, scale) if work.priors else improvement
@@ -230,7 +233,8 @@ def with_scaled_priors(ref: Refinement, factor: float) -> Refinement:
     return replace(ref, priors=pr.scaled_priors(ref.priors, factor))
 
 
-def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=None) -> Adapted:
+def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=None,
+                  first_test: Optional[dict] = None) -> Adapted:
     """:func:`solve_weighted`, then, when the a-priori test rejects (the state's a-priori share of
     χ² above the 99.9 % point of χ²(rows)), the a-priori covariance is scaled by its
     maximum-likelihood variance component (Helmert/Förstner:
@@ -238,7 +242,8 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
     never below 1) and the problem solved again: a stale state further off than its a-priori says
     is weighed by how far off the data show it to be, and the covariance covers that.
     ``start_factor`` starts from an already scaled a-priori; ``first`` ``(work, sol, kkt, scale)``
-    a solution already made with it. Returns :class:`Adapted`."""
+    a solution already made with it, ``first_test`` its :func:`refinement_apriori_test` when already
+    made. Returns :class:`Adapted`."""
     if first is not None:
         work, sol, kkt, scale = first
     else:
@@ -246,7 +251,7 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
         sol, kkt, scale = solve_weighted(work, x0=x0)
     if not pr.has_state_prior(ref.priors):
         return Adapted(work, sol, kkt, scale, None)
-    test = refinement_apriori_test(work, sol, kkt)
+    test = first_test if first is not None and first_test is not None else refinement_apriori_test(work, sol, kkt)
     chi2, rows = test["chi2"], test["rows"]
     if not test["conflict"] and start_factor == 1.0:
         return Adapted(work, sol, kkt, scale, None)
