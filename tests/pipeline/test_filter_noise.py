@@ -17,6 +17,7 @@ from trackproc.pipeline.estimate import EstimateOptions, build_problem
 from trackproc.pipeline.estimate.gates import solve as estimate_solve
 from trackproc.pipeline.filter import FilterOptions
 from trackproc.pipeline.filter import run as fr
+from trackproc.pipeline.filter.noise import pass_noise
 from trackproc.pipeline.filter.result import filter_quality
 
 DATA = Path(__file__).resolve().parents[2] / "sample_data"
@@ -76,7 +77,7 @@ def test_filter_with_the_passes_ar1_noise_equals_estimates_gls(case):
     fo = FilterOptions(problem=case[3], smooth=True, iterations=6, edit_sigma=None)
     white = FilterOptions(problem=case[3], smooth=True, iterations=6, edit_sigma=None)
     sw_w, hist_w = fr.run(pb, white)
-    noise = fr.pass_noise(pb, fo, sw_w.residuals("s"))      # as filter_passes: on the white smoother's residuals
+    noise = pass_noise(pb, fo, sw_w.residuals("s"))      # as filter_passes: on the white smoother's residuals
     models = [v["model"] for v in noise.report.values()]
     print("models:", models)
     assert models.count("ar1") >= 7, noise.report

@@ -17,6 +17,7 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.io.statefile import State, format_epoch
 from trackproc.methods import quality as qm
 from trackproc.methods import sequential as sq
+from trackproc.pipeline.filter import noise as fn
 from trackproc.pipeline.filter import run as fr
 from trackproc.pipeline.filter.options import FilterOptions, check_filter_options
 from trackproc.pipeline.od import UNITS, Problem, build_problem
@@ -110,20 +111,20 @@ def move(problem: Problem, opt: FilterOptions, x, p, epoch, to_epoch):
     if dt == 0.0:
         return x, p
     n = x.size
-    gm = fr.gauss_markov(problem, opt) if dt > 0 else {}
+    gm = fn.gauss_markov(problem, opt) if dt > 0 else {}
     xz = np.array(x, float)
     xz[sorted(gm)] = 0.0                  # propagated about the Gauss-Markov states' zero mean
     traj = propagator.propagate(x[:3], x[3:6], epoch, [dt], force=problem.force, stm=True, eop=problem.eop,
                                 force_model=problem.force_model_at(xz)).raise_for_outcome()
     psi = _extended_stm(traj, dt, n)
     if gm:
-        fr.gm_transition(psi, dt, gm)
+        fn.gm_transition(psi, dt, gm)
     x2 = xz.copy()
     x2[:6] = traj.state(dt)
     x2 = x2 + psi @ (x - xz)
     p2 = psi @ p @ psi.T
     scales = problem.params.scales()
-    q = fr.process_noise(problem, opt, dt, x, scales, gm) if dt > 0 else None
+    q = fn.process_noise(problem, opt, dt, x, scales, gm) if dt > 0 else None
     if q is not None:
         p2 = p2 + q * np.outer(scales, scales)
     return x2, 0.5 * (p2 + p2.T)
