@@ -3,6 +3,8 @@ filter linearised about a reference trajectory that restarts from the filter's s
 tracking segment), the smoother (:func:`smooth`) and the iterated run (:func:`run`), with the
 passes' noise models fitted on a first white run (:func:`fitted_noise`); the noise models, the
 Gauss–Markov states and the process noise themselves are in :mod:`trackproc.pipeline.filter.noise`.
+One responsibility, the filter's recursion; its length is the sweep's (:func:`sweep`, whose
+steps share the reference, the scaled state and the restart bookkeeping).
 
 Variables are scaled by the drivers' scales inside (``ξ = x / scale``) so that metres, m/s, Hz
 and force coefficients share one well-conditioned covariance; everything returned is in the
