@@ -68,17 +68,30 @@ def _rms_after_own_offset_drift(t_s, residual):
     return _fit_after_own_offset_drift(t_s, residual)[0]
 
 
-def _fit_after_own_offset_drift(t_s, residual, *extra):
+def _fit_after_own_offset_drift(t_s, residual, *extra, sigmas=False):
     """``(rms, coefficients of extra)``: the RMS (Hz) after the pass's own offset and drift and
-    the ``extra`` columns fitted together (least squares, 4-sigma editing)."""
+    the ``extra`` columns fitted together (least squares, 4-sigma editing); with ``sigmas`` also
+    the coefficients' formal sigmas (from that RMS)."""
     t = t_s - t_s.min()
     a = np.column_stack([np.ones_like(t), t, *extra])
     keep = np.ones(t.size, bool)
     for _ in range(5):
         c = np.linalg.lstsq(a[keep], residual[keep], rcond=None)[0]
         r = residual - a @ c
-        keep = np.abs(r) < 4 * max(1.0, float(np.sqrt(np.mean(r[keep] ** 2))))
-    return float(np.sqrt(np.mean(r[keep] ** 2))), c[2:]
+        rms = float(np.sqrt(np.mean(r[keep] ** 2)))
+        keep = np.abs(r) < 4 * max(1.0, rms)
+    rms = float(np.sqrt(np.mean(r[keep] ** 2)))
+    if not sigmas:
+        return rms, c[2:]
+    return rms, c[2:], rms * np.sqrt(np.diag(np.linalg.inv(a[keep].T @ a[keep])))[2:]
+
+
+def _rate(t_s, computed):
+    """The modelled observable's rate (per second) at each sample, any order."""
+    order = np.argsort(t_s)
+    rate = np.empty_like(computed)
+    rate[order] = np.gradient(computed[order], t_s[order])
+    return rate
 
 
 def timing_split(table, state, tle=None):
@@ -88,10 +101,7 @@ def timing_split(table, state, tle=None):
     convention), and that shift. An along-track error of the orbit and a time-tag error of the
     station look the same here."""
     t_s, residual, computed = _predicted_residuals(table, state, tle)
-    order = np.argsort(t_s)
-    rate = np.empty_like(computed)
-    rate[order] = np.gradient(computed[order], t_s[order])
-    rms_after, (c,) = _fit_after_own_offset_drift(t_s, residual, rate)
+    rms_after, (c,) = _fit_after_own_offset_drift(t_s, residual, _rate(t_s, computed))
     return _rms_after_own_offset_drift(t_s, residual), rms_after, -float(c)
 
 
@@ -121,18 +131,8 @@ def time_shift_and_sigma(table, state, tle=None):
     """The best time shift of the prediction (s, :func:`timing_split`'s) and its formal sigma (the
     least-squares sigma of the shift coefficient, with the offset and drift, from the RMS after)."""
     t_s, residual, computed = _predicted_residuals(table, state, tle)
-    order = np.argsort(t_s)
-    rate = np.empty_like(computed)
-    rate[order] = np.gradient(computed[order], t_s[order])
-    t = t_s - t_s.min()
-    a = np.column_stack([np.ones_like(t), t, rate])
-    keep = np.ones(t.size, bool)
-    for _ in range(5):
-        c = np.linalg.lstsq(a[keep], residual[keep], rcond=None)[0]
-        r = residual - a @ c
-        rms = float(np.sqrt(np.mean(r[keep] ** 2)))
-        keep = np.abs(r) < 4 * max(1.0, rms)
-    return -float(c[2]), rms * float(np.sqrt(np.linalg.inv(a[keep].T @ a[keep])[2, 2]))
+    _, (c,), (sigma,) = _fit_after_own_offset_drift(t_s, residual, _rate(t_s, computed), sigmas=True)
+    return -float(c), float(sigma)
 
 
 def station_time_sigma(shifts, formal, centre=0.0, k=3.0):
