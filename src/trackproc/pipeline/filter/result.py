@@ -18,6 +18,7 @@ from trackproc.io.statefile import State, format_epoch
 from trackproc.methods import quality as qm
 from trackproc.methods import sequential as sq
 from trackproc.pipeline.filter import noise as fn
+from trackproc.pipeline.filter import policy as fp
 from trackproc.pipeline.filter import run as fr
 from trackproc.pipeline.filter.options import FilterOptions, check_filter_options
 from trackproc.pipeline.od import UNITS, Problem, build_problem
@@ -323,6 +324,18 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
         x, p = sw.absolute(which, k)
         x, p = move(problem, opt, x, p, _utc_of_step(problem, sw, k), out_epoch)
     quality = filter_quality(problem, sw, iterations, opt)
+    # the shared prior-and-decline policy (pipeline/filter/policy.py): the filter's start moved to
+    # the output epoch by its own time update without data; the a-priori test where the prior is
+    # stated, on the solution moved there (a loose prior's covariance is not mapped over the arc)
+    start_x, start_p = fr.initial_covariance(problem, carried, fn.gauss_markov(problem, opt))
+    prior_x, prior_p = move(problem, opt, start_x, start_p, problem.epoch, out_epoch)
+    back_x, back_p = move(problem, opt, x, p, out_epoch, problem.epoch)
+    prior_back_p = move(problem, opt, prior_x, prior_p, out_epoch, problem.epoch)[1]
+    outcome = fp.decide(problem, x, p, prior_x, prior_p, out_epoch, popt.horizon_days, popt.allow_keep,
+                        tested=(back_x, back_p, start_x, prior_back_p))
+    fp.add_reasons(quality, outcome, problem.apriori_source)
+    x, p = outcome.x, outcome.p
+    problem.decision = outcome.decision
     names = problem.names
     sigma = np.sqrt(np.clip(np.diag(p), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -355,12 +368,14 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
     diagnostics = {"measurements": int(sw.edited.size), "edited": int(sw.edited.sum()), "correlation": corr,
                    "covariance_rtn": rtn,
                    "sigma_rtn": sigma_rtn(rtn),
-                   "units": problem.params.units()}
+                   "units": problem.params.units(), "decision": outcome.decision}
     if noise is not None:
         # each pass's model, as estimate records it; its AR(1) part is a Gauss-Markov state of the filter
         diagnostics["noise"] = noise.report
     extra = {"estimation": {"method": "sequential: " + record["method"], "range_rate_model": problem.range_rate_model,
                             "apriori_initial": problem.apriori_initial,
+                            "apriori_source": problem.apriori_source or None,
+                            "apriori_note": problem.apriori_note or None,
                             "sources": sorted({str(s) for s in problem.sources})},
              "filter": record, "quality": quality.as_dict()}
     state = solution_state(problem, out_epoch, x, names, sigma, p, popt.force, eop, diagnostics, extra)
@@ -382,6 +397,9 @@ def summary_text(result: FilterResult) -> str:
     srtn = st.diagnostics["sigma_rtn"]
     lines.append(f"  sigma RTN {srtn['radial_m']:.4g} / {srtn['along_m']:.4g} / {srtn['cross_m']:.4g} m")
     lines.append(f"  normalised innovations squared {rec['nis']:.5g} over {rec['nis_dof']}")
+    decision = (st.diagnostics or {}).get("decision")
+    if decision:
+        lines.append(f"  decision: {decision['reason']}")
     lines.extend(f"warning: {w}" for w in result.warnings)
     lines.append(result.quality.text())
     return "\n".join(lines) + "\n"
