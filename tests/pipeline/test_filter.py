@@ -14,6 +14,7 @@ from trackproc.io.passfile import PassTable, read_pass_table
 from trackproc.io.statefile import parse_state, read_state, state_json
 from trackproc.io.stations import read_stations
 from trackproc.pipeline.estimate import EstimateOptions, build_problem, estimate
+from trackproc.pipeline.od.problem import initial_at_epoch
 from trackproc.pipeline.filter import FilterOptions, filter_passes
 from trackproc.pipeline.filter import run as fr
 from trackproc.pipeline.filter.result import filter_quality
@@ -175,3 +176,91 @@ def test_carried_state_equals_one_run_and_skips_older_passes(case, caplog):
     np.testing.assert_allclose(second.state.sigma, sigma, rtol=0.02)
     for run in (first, second, both):
         assert run.state.diagnostics["decision"]["action"] == "replaced", run.state.diagnostics["decision"]
+
+
+def _first_pass(case):
+    """The set's first pass alone (ZHY, 100 range + range-rate samples): one station's pass."""
+    frame = case[1][0][1].frame
+    first = frame.groupby(["station", "pass_id"])["time"].min().sort_values().index[0]
+    sel = ((frame["station"] == first[0]) & (frame["pass_id"] == first[1])).to_numpy()
+    return [("one", PassTable(frame[sel].reset_index(drop=True), case[1][0][1].meta))]
+
+
+def _along(case, metres):
+    truth = read_state(str(DATA / "truth_at_start.json"), case[0])
+    return np.concatenate([metres * truth.v_m_s / np.linalg.norm(truth.v_m_s), np.zeros(3)])
+
+
+def _same_decision(filtered: dict, batch: dict):
+    assert filtered["action"] == batch["action"], (filtered, batch)
+    assert filtered["apriori_source"] == batch["apriori_source"] == "stated"
+    for key in ("probability_better", "moved_m", "moved_sigma_m"):
+        assert (key in filtered) == (key in batch), key
+        if key in batch:
+            np.testing.assert_allclose(filtered[key], batch[key], rtol=1e-4, err_msg=key)
+    if "apriori_test" in batch:
+        assert filtered["apriori_test"]["dof"] == batch["apriori_test"]["dof"]
+        np.testing.assert_allclose(filtered["apriori_test"]["statistic"], batch["apriori_test"]["statistic"],
+                                   rtol=1e-4)
+
+
+@pytest.mark.parametrize("start, action", [
+    ("truth, 100 m / 0.1 m/s", "kept"),                # the data cannot show a gain: the initial state is the answer
+    ("500 m along-track, 10 m / 0.01 m/s", "replaced"),  # 50 sigma off: 14 passes carry a looser a-priori
+])
+def test_decision_equals_estimates_with_zero_process_noise(case, start, action):
+    """The shared policy (methods/estimation) on the iterated smoother at the epoch and on
+    estimate's batch solution, the same problem (all 14 passes, range biases, no editing, zero
+    process noise): the same action and the same numbers. A stated prior 50 sigma off is
+    contradicted (a-priori innovation chi2 ~2500 over 6), but the passes of three stations
+    determine the state without it and pass their tests: its covariance is scaled (the filter
+    run again from it) and the solution replaces it, as estimate's. From the truth the data move
+    the state by less than its error (probability 0.68 < 0.9): kept, the written state the
+    initial one."""
+    eop, tables, stations = case
+    initial = (_guess(case, 0, offset=np.zeros(6)) if action == "kept" else
+               _guess(case, 0, offset=_along(case, 500.0), sigma=(10.0, 0.01)))
+    eo = EstimateOptions(range_bias=True, apriori_sigma={"range_bias": 1000.0}, apriori_initial=True, noise="white",
+                         clip=None, kinds=["range", "range_rate"])
+    est = estimate(tables, initial, stations, eo, eop)
+    res = filter_passes(tables, initial, stations, FilterOptions(problem=eo, smooth=True, iterations=8,
+                                                                 edit_sigma=None), eop)
+    _same_decision(res.state.diagnostics["decision"], est.state.diagnostics["decision"])
+    codes = {r["code"]: r["severity"] for r in res.quality.reasons}
+    assert codes[action] == "ok" and res.quality.verdict == "ok", res.quality.text()
+    if action == "kept":
+        np.testing.assert_allclose(res.state.values[:6], initial.rv, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(np.asarray(res.state.covariance)[:6, :6], initial.covariance, rtol=1e-9)
+    else:
+        assert codes["apriori_conflict"] == "ok" and "stated accuracy was wrong" in res.quality.text(
+            ) + str([r["message"] for r in res.quality.reasons])
+        x, _ = res.sweep.absolute("s", res.sweep.epoch_step)
+        np.testing.assert_array_equal(res.state.values, x)      # the (adapted) run's own state
+
+
+@pytest.mark.parametrize("smooth", [True, False])
+def test_one_pass_contradicting_a_stated_prior_is_declined(case, smooth):
+    """One pass (ZHY, 100 samples) against a state file 500 m along-track off with a 10 m /
+    1 cm/s covariance (50 sigma): the a-priori test fires (chi2 ~5560 over 4, limit 18.5) and one
+    pass cannot determine the state without it (posterior/a-priori variance 1.00 after scaling):
+    declined, verdict suspect, the written state the prior's — at the epoch with the smoother (the
+    prior itself), at the last measurement without (the prior propagated there by estimate's own
+    mapping, ``initial_at_epoch``); the decision as estimate's."""
+    eop, _, stations = case
+    one = _first_pass(case)
+    initial = _guess(case, 0, offset=_along(case, 500.0), sigma=(10.0, 0.01))
+    eo = EstimateOptions(apriori_initial=True, noise="white", clip=None, kinds=["range", "range_rate"])
+    res = filter_passes(one, initial, stations, FilterOptions(problem=eo, smooth=smooth, iterations=3 if smooth else 1,
+                                                              edit_sigma=None), eop)
+    d = res.state.diagnostics["decision"]
+    assert d["action"] == "declined" and d["reason"].startswith("declined: ")
+    assert res.quality.verdict == "suspect"
+    assert {r["code"]: r["severity"] for r in res.quality.reasons}["declined"] == "suspect"
+    rv, cov = initial_at_epoch(initial, np.datetime64(res.state.epoch, "ns"), "j2", eop)
+    np.testing.assert_allclose(res.state.values, rv, rtol=0, atol=1e-3)
+    np.testing.assert_allclose(res.state.covariance, cov, rtol=1e-6, atol=1e-12)
+    if smooth:
+        est = estimate(one, initial, stations, eo, eop)
+        _same_decision(d, est.state.diagnostics["decision"])
+    else:
+        assert np.datetime64(res.state.epoch, "ns") > np.datetime64(initial.epoch, "ns")
