@@ -154,7 +154,8 @@ def adapt(first: Candidate, prior: PriorAt, test: dict, rerun: Callable[[float],
         if share > 0.5:
             resolved = False
             failure = (f"with the a-priori loosened, the data weigh less than it in some direction of the state "
-                       f"(posterior/a-priori variance {share:.2f} > 0.5): the solution there is the loosened a-priori's")
+                       f"(posterior/a-priori variance {share:.2f} > 0.5): the solution there is the loosened "
+                       "a-priori's")
     return cand, {"method": "maximum-likelihood variance component of the a-priori (Helmert/Foerstner), iterated, "
                             "the filter run again from it",
                   "factor": factor, "sigma_factor": math.sqrt(factor), "test": test["test"],
