@@ -59,6 +59,9 @@ def test_zero_process_noise_iterated_smoother_equals_estimate(case, noise):
     assert rel.max() < 0.01, rel.max()
     assert res.iterations[-1]["max_change_sigma"] < 1e-3
     assert res.quality.verdict == "ok", res.quality.text()
+    # the stale state 10 km off is replaced, by estimate's decision (moved 7822 m against 0.257 m)
+    _same_decision(st.diagnostics["decision"], est.state.diagnostics["decision"])
+    assert st.diagnostics["decision"]["action"] == "replaced"
 
 
 def _manoeuvre_truth(case, dv=1e-3, at_s=4 * 3600.0):
