@@ -37,13 +37,16 @@ def table(dev: bool, oscillator_noise: float, noise: str = NOISE):
         tle_hz, ours, res = filter_held_back(group, oscillator_noise, noise=noise)
         f = res.state.extra["filter"]
         models = ",".join(v["model"] for v in (res.state.diagnostics or {}).get("noise", {}).values()) or "-"
+        d = (res.state.diagnostics or {}).get("decision") or {}
+        said = d.get("action", "-") + (f" {d['probability_better']:.2f}" if d.get("probability_better") is not None
+                                       else "")
         rows.append((",".join(group[:-1]), group[-1], tle_hz, ours, ours / tle_hz, res.quality.verdict,
                      ",".join(r["code"] for r in res.quality.reasons if r["severity"] != "ok"),
-                     time.process_time() - t0, f["edited"] / max(f["edited"] + f["updates"], 1), models))
+                     time.process_time() - t0, f["edited"] / max(f["edited"] + f["updates"], 1), models, said))
     print(f"filter, --noise {noise}, oscillator noise {oscillator_noise:g} Hz/sqrt(s), {'development (1-10 April)' if dev else 'HOLD-OUT (11-15 April)'}")
     for r in rows:
         print(f"  fit {r[0]:>27}  held back {r[1]}: TLE {r[2]:6.2f} Hz, ours {r[3]:6.2f} Hz, ratio {r[4]:.2f} "
-              f"({r[5]} {r[6]}; edited {r[8]:.0%}; noise {r[9]}; {r[7]:.1f} s CPU)")
+              f"({r[5]} {r[6]}; decision {r[10]}; edited {r[8]:.0%}; noise {r[9]}; {r[7]:.1f} s CPU)")
     ratio = np.array([r[4] for r in rows])
     print(f"  {int((ratio <= 1.2).sum())} of {ratio.size} within 1.2x the TLE; median ratio {np.median(ratio):.3f}, "
           f"max {ratio.max():.3f}\n")

@@ -20,6 +20,22 @@ SETTINGS = ["--steps", "filter", "--workers", "1", "--filter-initial", str(SAMPL
             "--filter-force-model", "j2"]
 
 
+def _guess(path: Path) -> Path:
+    """The truth moved within a 100 m / 0.1 m/s covariance that the state file states (a consistent
+    prior: night 1's filtered state is then consistent too, and night 2 replaces it; from the 10 km
+    stale state one sweep leaves night 1 overconfident, NEES 40 against the truth, and night 2
+    contradicts it: docs/filter.md, "Prior and decision")."""
+    from trackproc.io.statefile import read_state, state_json
+    from trackproc.types.state import State
+
+    truth = read_state(str(SAMPLE / "truth_at_start.json"), None)
+    sig = np.array([100.0] * 3 + [0.1] * 3)
+    rv = truth.rv + np.random.default_rng(1).standard_normal(6) * sig
+    path.write_text(state_json(State.from_vectors(truth.epoch, rv[:3], rv[3:], values=rv, sigma=sig,
+                                                  covariance=np.diag(sig ** 2))))
+    return path
+
+
 def _split(inbox: Path) -> tuple:
     """One pass file per pass of the shipped set; (night-1 names, night-2 names) cut 5 h in."""
     table = read_pass_table(str(SAMPLE / "multistation.parquet"))
@@ -38,14 +54,16 @@ def test_two_nights_in_two_batch_runs_equal_one_filter_run(tmp_path, run_cli):
     all_dir.mkdir()
     night1, night2 = _split(all_dir)
     assert night1 and night2
+    initial = _guess(tmp_path / "initial.json")
+    settings = [str(initial) if s == str(SAMPLE / "stale.json") else s for s in SETTINGS]
     night1_dir.mkdir()
     for name in night1:
         (night1_dir / f"{name}.parquet").write_bytes((all_dir / f"{name}.parquet").read_bytes())
-    first = run_cli(["batch", "-i", night1_dir, "-o", out, *SETTINGS])
+    first = run_cli(["batch", "-i", night1_dir, "-o", out, *settings])
     assert first.exit_code == 0, first.stderr
     state1 = json.loads((out / "filter" / "state.json").read_text())
     assert state1["filter"]["carried_state"] is False
-    second = run_cli(["batch", "-i", all_dir, "-o", out, *SETTINGS])
+    second = run_cli(["batch", "-i", all_dir, "-o", out, *settings])
     assert second.exit_code == 0, second.stderr
     state2 = json.loads((out / "filter" / "state.json").read_text())
     rec = state2["filter"]
@@ -58,11 +76,13 @@ def test_two_nights_in_two_batch_runs_equal_one_filter_run(tmp_path, run_cli):
     assert len(dated) == 2                      # one output per night
     # the reference: one filter over both nights' passes
     one = tmp_path / "one.json"
-    res = run_cli(["filter", *sorted(all_dir.glob("*.parquet")), "--initial", SAMPLE / "stale.json",
+    res = run_cli(["filter", *sorted(all_dir.glob("*.parquet")), "--initial", initial,
                    "--stations", SAMPLE / "stations.csv", "--range-bias", "--apriori-sigma", "range_bias=1000",
                    "--kinds", "range,range_rate", "--edit-sigma", "0", "--force", "j2", "-q", "-o", one])
     assert res.exit_code == 0, res.stderr
     ref = json.loads(one.read_text())
+    for state in (state1, state2, ref):
+        assert state["diagnostics"]["decision"]["action"] == "replaced", state["diagnostics"]["decision"]
     assert ref["epoch"] == state2["epoch"] and ref["parameters"] == state2["parameters"]
     z = (np.asarray(state2["values"]) - np.asarray(ref["values"])) / np.asarray(ref["sigma"])
     # measured 0.0042 sigma, sigmas 1e-8 relative (docs/filter.md: the extended filter's
@@ -71,7 +91,7 @@ def test_two_nights_in_two_batch_runs_equal_one_filter_run(tmp_path, run_cli):
     np.testing.assert_allclose(state2["sigma"], ref["sigma"], rtol=1e-4)
     # a third run with nothing new: the carried state is kept as it is
     before = (out / "filter" / "state.json").read_bytes()
-    third = run_cli(["batch", "-i", all_dir, "-o", out, *SETTINGS])
+    third = run_cli(["batch", "-i", all_dir, "-o", out, *settings])
     assert third.exit_code == 0, third.stderr
     assert (out / "filter" / "state.json").read_bytes() == before
     assert "no pass newer than the carried state" in third.stderr

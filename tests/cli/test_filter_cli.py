@@ -88,3 +88,55 @@ def parse_oem(text: str) -> dict:
                 m[i, :i + 1] = row
             c["matrix"] = m + np.tril(m, -1).T
     return {"header": header, "segments": segments}
+
+
+def _one_pass_and_state(tmp_path, offset_m: float, sigma=(10.0, 0.01)):
+    """The shipped set's first pass (ZHY, 100 range + range-rate samples) as a pass file, and a
+    state file: the truth moved ``offset_m`` along-track with a stated covariance ``sigma``."""
+    from trackproc.io.passfile import PassTable, read_pass_table, write_pass_table
+    from trackproc.io.statefile import read_state, state_json
+    from trackproc.types.state import State
+
+    table = read_pass_table(str(SAMPLE / "multistation.parquet"))
+    frame = table.frame
+    first = frame.groupby(["station", "pass_id"])["time"].min().sort_values().index[0]
+    sel = ((frame["station"] == first[0]) & (frame["pass_id"] == first[1])).to_numpy()
+    passes = tmp_path / "one.parquet"
+    write_pass_table(PassTable(frame[sel].reset_index(drop=True), table.meta), str(passes))
+    truth = read_state(str(SAMPLE / "truth_at_start.json"), None)
+    sig = np.array([sigma[0]] * 3 + [sigma[1]] * 3)
+    rv = truth.rv + np.concatenate([offset_m * truth.v_m_s / np.linalg.norm(truth.v_m_s), np.zeros(3)])
+    state = tmp_path / f"initial_{offset_m:g}.json"
+    state.write_text(state_json(State.from_vectors(truth.epoch, rv[:3], rv[3:], values=rv, sigma=sig,
+                                                   covariance=np.diag(sig ** 2))))
+    return passes, state
+
+
+def test_declined_prior_exits_0_and_1_with_strict(run_cli, tmp_path):
+    """A pass that contradicts a stated prior (500 m along-track off, 10 m / 1 cm/s: 50 sigma) is
+    declined: the prior written with its covariance, verdict suspect with reason ``declined``,
+    exit 0, and 1 with ``--strict`` (the file written either way); ``--horizon`` reaches the
+    replace-or-keep rule of a consistent prior (the truth, 100 m / 0.1 m/s)."""
+    passes, bad = _one_pass_and_state(tmp_path, 500.0)
+    args = ["filter", passes, "--initial", bad, "--range-bias", "--apriori-sigma", "range_bias=1000",
+            "--kinds", "range,range_rate", "--noise", "white",
+            "--edit-sigma", "0", "--force", "j2"]
+    for strict, code in ((False, 0), (True, 1)):
+        out = tmp_path / f"declined_{strict}.json"
+        result = run_cli(args + (["--strict"] if strict else []) + ["-o", out])
+        assert result.exit_code == code, result.stderr
+        state = json.loads(out.read_text())
+        decision = state["diagnostics"]["decision"]
+        assert decision["action"] == "declined" and decision["apriori_source"] == "stated", decision
+        assert state["quality"]["verdict"] == "suspect"
+        assert "declined" in [r["code"] for r in state["quality"]["reasons"]]
+        assert "declined: " in result.stderr
+        assert state["estimation"]["apriori_source"] == "stated"
+    _, good = _one_pass_and_state(tmp_path, 0.0, sigma=(100.0, 0.1))
+    out = tmp_path / "horizon.json"
+    result = run_cli(["filter", passes, "--initial", good, "--range-bias", "--apriori-sigma", "range_bias=1000",
+                      "--kinds", "range,range_rate", "--noise", "white",
+                      "--force", "j2", "--horizon", "2", "-q", "-o", out])
+    assert result.exit_code == 0, result.stderr
+    decision = json.loads(out.read_text())["diagnostics"]["decision"]
+    assert decision["action"] in ("kept", "replaced") and decision["horizon_days"] == 2.0, decision

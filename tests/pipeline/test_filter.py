@@ -14,9 +14,11 @@ from trackproc.io.passfile import PassTable, read_pass_table
 from trackproc.io.statefile import parse_state, read_state, state_json
 from trackproc.io.stations import read_stations
 from trackproc.pipeline.estimate import EstimateOptions, build_problem, estimate
+from trackproc.pipeline.od.problem import initial_at_epoch
 from trackproc.pipeline.filter import FilterOptions, filter_passes
 from trackproc.pipeline.filter import run as fr
 from trackproc.pipeline.filter.result import filter_quality
+from trackproc.types.state import State
 
 DATA = Path(__file__).resolve().parents[2] / "sample_data"
 
@@ -57,6 +59,9 @@ def test_zero_process_noise_iterated_smoother_equals_estimate(case, noise):
     assert rel.max() < 0.01, rel.max()
     assert res.iterations[-1]["max_change_sigma"] < 1e-3
     assert res.quality.verdict == "ok", res.quality.text()
+    # the stale state 10 km off is replaced, by estimate's decision (moved 7822 m against 0.257 m)
+    _same_decision(st.diagnostics["decision"], est.state.diagnostics["decision"])
+    assert st.diagnostics["decision"]["action"] == "replaced"
 
 
 def _manoeuvre_truth(case, dv=1e-3, at_s=4 * 3600.0):
@@ -136,17 +141,30 @@ def test_manoeuvre_nees_monte_carlo():
     assert ok >= 95
 
 
+def _guess(case, seed, offset=None, sigma=(100.0, 0.1)):
+    """A state file's state with a diagonal covariance (a stated prior, sigmas ``sigma`` m, m/s):
+    the truth drawn within it (``seed``), or moved by ``offset`` (6,)."""
+    eop = case[0]
+    truth = read_state(str(DATA / "truth_at_start.json"), eop)
+    sig = np.array([sigma[0]] * 3 + [sigma[1]] * 3)
+    rv = truth.rv + (np.random.default_rng(seed).standard_normal(6) * sig if offset is None else offset)
+    return State.from_vectors(truth.epoch, rv[:3], rv[3:], values=rv, sigma=sig, covariance=np.diag(sig ** 2))
+
+
 def test_carried_state_equals_one_run_and_skips_older_passes(case, caplog):
     """Night 1 (passes before 15:00) filtered, its output given as --initial to a run over every
     pass: the passes night 1 saw are skipped by name, and the result equals one run over all
-    (zero process noise, no editing: the filter is linear in the updates between references)."""
+    (zero process noise, no editing: the filter is linear in the updates between references).
+    From a first guess drawn within its 100 m / 0.1 m/s a-priori, so that night 1's filtered state
+    is consistent: every run replaces its prior (from the 10 km stale state one sweep leaves night
+    1's filtered state at NEES 40 against the truth, which night 2 contradicts)."""
     eop, tables, stations = case
-    initial = read_state(str(DATA / "stale.json"), eop)
+    initial = _guess(case, 1)
     frame = tables[0][1].frame
     cut = frame["time"] < frame["time"].min() + np.timedelta64(5, "h")
     night1 = [("night1", PassTable(frame[cut.to_numpy()].reset_index(drop=True), tables[0][1].meta))]
-    eo = EstimateOptions(range_bias=True, apriori_sigma={"range_bias": 1000.0}, noise="white",
-                         kinds=["range", "range_rate"])
+    eo = EstimateOptions(range_bias=True, apriori_sigma={"range_bias": 1000.0, "position": 100.0, "velocity": 0.1},
+                         noise="white", kinds=["range", "range_rate"])
     fo = FilterOptions(problem=eo, edit_sigma=None)
     first = filter_passes(night1, initial, stations, fo, eop)
     carried = parse_state(state_json(first.state), "night1.json", eop)
@@ -159,3 +177,94 @@ def test_carried_state_equals_one_run_and_skips_older_passes(case, caplog):
     z = (np.asarray(second.state.values) - np.asarray(both.state.values)) / sigma
     assert np.max(np.abs(z)) < 0.05, z
     np.testing.assert_allclose(second.state.sigma, sigma, rtol=0.02)
+    for run in (first, second, both):
+        assert run.state.diagnostics["decision"]["action"] == "replaced", run.state.diagnostics["decision"]
+
+
+def _first_pass(case):
+    """The set's first pass alone (ZHY, 100 range + range-rate samples): one station's pass."""
+    frame = case[1][0][1].frame
+    first = frame.groupby(["station", "pass_id"])["time"].min().sort_values().index[0]
+    sel = ((frame["station"] == first[0]) & (frame["pass_id"] == first[1])).to_numpy()
+    return [("one", PassTable(frame[sel].reset_index(drop=True), case[1][0][1].meta))]
+
+
+def _along(case, metres):
+    truth = read_state(str(DATA / "truth_at_start.json"), case[0])
+    return np.concatenate([metres * truth.v_m_s / np.linalg.norm(truth.v_m_s), np.zeros(3)])
+
+
+def _same_decision(filtered: dict, batch: dict):
+    assert filtered["action"] == batch["action"], (filtered, batch)
+    assert filtered["apriori_source"] == batch["apriori_source"] == "stated"
+    for key in ("probability_better", "moved_m", "moved_sigma_m"):
+        assert (key in filtered) == (key in batch), key
+        if key in batch:
+            np.testing.assert_allclose(filtered[key], batch[key], rtol=1e-4, err_msg=key)
+    if "apriori_test" in batch:
+        assert filtered["apriori_test"]["dof"] == batch["apriori_test"]["dof"]
+        np.testing.assert_allclose(filtered["apriori_test"]["statistic"], batch["apriori_test"]["statistic"],
+                                   rtol=1e-4)
+
+
+@pytest.mark.parametrize("start, action", [
+    ("truth, 100 m / 0.1 m/s", "kept"),                # the data cannot show a gain: the initial state is the answer
+    ("500 m along-track, 10 m / 0.01 m/s", "replaced"),  # 50 sigma off: 14 passes carry a looser a-priori
+])
+def test_decision_equals_estimates_with_zero_process_noise(case, start, action):
+    """The shared policy (methods/estimation) on the iterated smoother at the epoch and on
+    estimate's batch solution, the same problem (all 14 passes, range biases, no editing, zero
+    process noise): the same action and the same numbers. A stated prior 50 sigma off is
+    contradicted (a-priori innovation chi2 ~2500 over 6), but the passes of three stations
+    determine the state without it and pass their tests: its covariance is scaled (the filter
+    run again from it) and the solution replaces it, as estimate's. From the truth the data move
+    the state by less than its error (probability 0.68 < 0.9): kept, the written state the
+    initial one."""
+    eop, tables, stations = case
+    initial = (_guess(case, 0, offset=np.zeros(6)) if action == "kept" else
+               _guess(case, 0, offset=_along(case, 500.0), sigma=(10.0, 0.01)))
+    eo = EstimateOptions(range_bias=True, apriori_sigma={"range_bias": 1000.0}, apriori_initial=True, noise="white",
+                         clip=None, kinds=["range", "range_rate"])
+    est = estimate(tables, initial, stations, eo, eop)
+    res = filter_passes(tables, initial, stations, FilterOptions(problem=eo, smooth=True, iterations=8,
+                                                                 edit_sigma=None), eop)
+    _same_decision(res.state.diagnostics["decision"], est.state.diagnostics["decision"])
+    codes = {r["code"]: r["severity"] for r in res.quality.reasons}
+    assert codes[action] == "ok" and res.quality.verdict == "ok", res.quality.text()
+    if action == "kept":
+        np.testing.assert_allclose(res.state.values[:6], initial.rv, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(np.asarray(res.state.covariance)[:6, :6], initial.covariance, rtol=1e-9)
+    else:
+        assert codes["apriori_conflict"] == "ok" and "stated accuracy was wrong" in res.quality.text(
+            ) + str([r["message"] for r in res.quality.reasons])
+        x, _ = res.sweep.absolute("s", res.sweep.epoch_step)
+        np.testing.assert_array_equal(res.state.values, x)      # the (adapted) run's own state
+
+
+@pytest.mark.parametrize("smooth", [True, False])
+def test_one_pass_contradicting_a_stated_prior_is_declined(case, smooth):
+    """One pass (ZHY, 100 samples) against a state file 500 m along-track off with a 10 m /
+    1 cm/s covariance (50 sigma): the a-priori test fires (chi2 2461 over 3, limit 16.3) and one
+    pass cannot determine the state without it (posterior/a-priori variance 1.00 after scaling):
+    declined, verdict suspect, the written state the prior's — at the epoch with the smoother (the
+    prior itself), at the last measurement without (the prior propagated there by estimate's own
+    mapping, ``initial_at_epoch``); the decision as estimate's."""
+    eop, _, stations = case
+    one = _first_pass(case)
+    initial = _guess(case, 0, offset=_along(case, 500.0), sigma=(10.0, 0.01))
+    eo = EstimateOptions(range_bias=True, apriori_sigma={"range_bias": 1000.0}, apriori_initial=True, noise="white",
+                         clip=None, kinds=["range", "range_rate"])
+    res = filter_passes(one, initial, stations, FilterOptions(problem=eo, smooth=smooth, iterations=3 if smooth else 1,
+                                                              edit_sigma=None), eop)
+    d = res.state.diagnostics["decision"]
+    assert d["action"] == "declined" and d["reason"].startswith("declined: ")
+    assert res.quality.verdict == "suspect"
+    assert {r["code"]: r["severity"] for r in res.quality.reasons}["declined"] == "suspect"
+    rv, cov = initial_at_epoch(initial, np.datetime64(res.state.epoch, "ns"), "j2", eop)
+    np.testing.assert_allclose(res.state.values[:6], rv, rtol=0, atol=1e-3)
+    np.testing.assert_allclose(np.asarray(res.state.covariance)[:6, :6], cov, rtol=1e-6, atol=1e-12)
+    if smooth:
+        est = estimate(one, initial, stations, eo, eop)
+        _same_decision(d, est.state.diagnostics["decision"])
+    else:
+        assert np.datetime64(res.state.epoch, "ns") > np.datetime64(initial.epoch, "ns")

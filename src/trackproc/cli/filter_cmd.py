@@ -11,7 +11,7 @@ from trackproc.cli.app import app
 from trackproc.cli.force_options import ForceSettings, force_options
 from trackproc import vocabulary
 from trackproc.cli.common import (ComOffsetOpt, Dut1Opt, EarthOpt, EccentricitiesOpt, EopOpt, ForceOpt,
-                                  JsonSummaryOpt, Noise, OutputOpt, PassRangeRateModelOpt, RangeRateModel,
+                                  HorizonOpt, JsonSummaryOpt, Noise, OutputOpt, PassRangeRateModelOpt, RangeRateModel,
                                   SolidTidesOpt, StrictOpt, TroposphereOpt, WavelengthOpt, choices, named_values,
                                   read_passes_and_stations, resolve_output)
 
@@ -177,6 +177,7 @@ def filter_command(
                                        help="Plot the innovations per kind with their +-3 sigma bands and the "
                                             "position sigmas (R, T, N) over time (needs matplotlib: "
                                             "pip install 'trackproc[plot]')."),
+    horizon: float = HorizonOpt,
     as_json: bool = JsonSummaryOpt,
     strict: bool = StrictOpt,
     output: Optional[str] = OutputOpt,
@@ -251,7 +252,7 @@ def filter_command(
     problem = EstimateOptions(
         range_bias=True if range_bias else list(range_bias_station), doppler_bias=doppler_bias.value,
         doppler_bias_per=doppler_bias_per.value, angle_bias=angle_bias, apriori_sigma=sigmas,
-        apriori_initial=apriori_initial, force=force.value, earth=earth.value,
+        apriori_initial=apriori_initial, horizon_days=horizon, force=force.value, earth=earth.value,
         range_rate_model=range_rate_model.value if range_rate_model else None, kinds=kind_list, noise=noise.value,
         estimate_force=forces_estimated, troposphere=troposphere, com_offset_m=com_offset,
         wavelength_nm=wavelength_nm, solid_tides=solid_tides,

@@ -186,6 +186,16 @@ def apriori_test(priors, x, posterior_cov=None, innovation: bool = True, conside
                                None if consider_cov is None else np.asarray(consider_cov, float)[:6, :6])
 
 
+def prior_dominance(posterior_cov, prior_cov) -> float:
+    """How much a solution rests on its a-priori rather than on the data: the largest generalised
+    eigenvalue of ``C v = λ P v`` (``C`` the posterior, ``P`` the a-priori covariance of the same
+    parameters; ``λ = 1 / (1 + d)`` with ``d`` the data's information in that direction relative
+    to the a-priori's). Above 1/2 the a-priori weighs more than the data in some direction."""
+    from scipy.linalg import eigh
+
+    return float(eigh(np.asarray(posterior_cov, float), np.asarray(prior_cov, float), eigvals_only=True).max())
+
+
 def test_report(test: dict) -> dict:
     """The a-priori test (:func:`apriori_test`) as the diagnostics give it."""
     return {k: test[k] for k in ("test", "statistic", "dof", "limit", "conflict")}

@@ -8,7 +8,6 @@ import math
 from dataclasses import replace
 
 import numpy as np
-from scipy.linalg import eigh
 
 from trackproc.errors import ProcessingError
 from trackproc.methods import noise as nz
@@ -135,8 +134,7 @@ def knowledge_lost(priors, sol) -> str | None:
     p = state_prior_covariance(priors)
     if p is None:
         return None
-    lam = eigh(np.asarray(sol.covariance, float)[:6, :6], p, eigvals_only=True)
-    worst = float(lam.max())
+    worst = pr.prior_dominance(np.asarray(sol.covariance, float)[:6, :6], p)
     if not worst > 0.5:
         return None
     return (f"with the a-priori loosened, the data weigh less than it in some direction of the state "

@@ -18,6 +18,7 @@ from trackproc.io.statefile import State, format_epoch
 from trackproc.methods import quality as qm
 from trackproc.methods import sequential as sq
 from trackproc.pipeline.filter import noise as fn
+from trackproc.pipeline.filter import policy as fp
 from trackproc.pipeline.filter import run as fr
 from trackproc.pipeline.filter.options import FilterOptions, check_filter_options
 from trackproc.pipeline.od import UNITS, Problem, build_problem
@@ -278,6 +279,22 @@ def filter_quality(problem: Problem, sw, iterations: list, opt: FilterOptions):
     return q
 
 
+def _output(problem: Problem, opt: FilterOptions, sw):
+    """``(x, P, epoch)`` written from a sweep: the smoothed (with ``--smooth``) or filtered state of
+    the last step at or before the output epoch, moved there through the force model."""
+    which = "s" if opt.smooth else "f"
+    if opt.output_epoch is None:
+        k = sw.epoch_step if opt.smooth else sw.t_s.size - 1
+        x, p = sw.absolute(which, k)
+        return x, p, _utc_of_step(problem, sw, k)
+    out_epoch = np.datetime64(opt.output_epoch, "ns")
+    t_out = float(ts.seconds_since(ts.datetime64_to_jd_utc(out_epoch), ts.datetime64_to_jd_utc(problem.epoch)))
+    k = max(int(np.searchsorted(sw.t_s, t_out, side="right")) - 1, 0)
+    x, p = sw.absolute(which, k)
+    x, p = move(problem, opt, x, p, _utc_of_step(problem, sw, k), out_epoch)
+    return x, p, out_epoch
+
+
 def filter_passes(tables, initial, stations=None, options: FilterOptions | None = None, eop=None) -> FilterResult:
     """Filter (and smooth) the passes from the initial state (see :mod:`trackproc.pipeline.filter`).
 
@@ -309,20 +326,30 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
     if carried is not None and np.datetime64(problem.epoch, "ns") != np.datetime64(initial.epoch, "ns"):
         carried = None
     noise = fr.fitted_noise(problem, opt, carried)
-    sw, iterations = fr.run(problem, opt, carried, noise)
-    which = "s" if opt.smooth else "f"
-    last_k = sw.t_s.size - 1
-    if opt.output_epoch is None:
-        k = sw.epoch_step if opt.smooth else last_k
-        x, p = sw.absolute(which, k)
-        out_epoch = _utc_of_step(problem, sw, k)
-    else:
-        out_epoch = np.datetime64(opt.output_epoch, "ns")
-        t_out = float(ts.seconds_since(ts.datetime64_to_jd_utc(out_epoch), ts.datetime64_to_jd_utc(problem.epoch)))
-        k = max(int(np.searchsorted(sw.t_s, t_out, side="right")) - 1, 0)
-        x, p = sw.absolute(which, k)
-        x, p = move(problem, opt, x, p, _utc_of_step(problem, sw, k), out_epoch)
-    quality = filter_quality(problem, sw, iterations, opt)
+
+    def solve(state_scale: float = 1.0) -> fp.Candidate:
+        # one run (its state a-priori scaled by ``state_scale``), its output and the output moved
+        # back to the prior's epoch, where the a-priori test is made
+        sw, iterations = fr.run(problem, opt, carried, noise, state_scale=state_scale)
+        x, p, at = _output(problem, opt, sw)
+        back_x, back_p = move(problem, opt, x, p, at, problem.epoch)
+        return fp.Candidate(x, p, at, back_x, back_p, filter_quality(problem, sw, iterations, opt), sw, iterations)
+
+    first = solve()
+    out_epoch = first.epoch
+    # the shared prior-and-decline policy (pipeline/filter/policy.py): the filter's start moved to
+    # the output epoch by its own time update without data; the a-priori test where the prior is
+    # stated, on the solution moved there (a loose prior's covariance is not mapped over the arc)
+    start_x, start_p = fr.initial_covariance(problem, carried, fn.gauss_markov(problem, opt))
+    prior_x, prior_p = move(problem, opt, start_x, start_p, problem.epoch, out_epoch)
+    prior_back_p = move(problem, opt, prior_x, prior_p, out_epoch, problem.epoch)[1]
+    outcome = fp.decide(problem, first, fp.PriorAt(prior_x, prior_p, start_x, prior_back_p), out_epoch, solve,
+                        popt.horizon_days, popt.allow_keep)
+    chosen = outcome.candidate
+    sw, iterations, quality = chosen.sweep, chosen.iterations, chosen.quality
+    fp.add_reasons(quality, outcome, problem.apriori_source)
+    x, p = outcome.x, outcome.p
+    problem.decision = outcome.decision
     names = problem.names
     sigma = np.sqrt(np.clip(np.diag(p), 0.0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -355,12 +382,14 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
     diagnostics = {"measurements": int(sw.edited.size), "edited": int(sw.edited.sum()), "correlation": corr,
                    "covariance_rtn": rtn,
                    "sigma_rtn": sigma_rtn(rtn),
-                   "units": problem.params.units()}
+                   "units": problem.params.units(), "decision": outcome.decision}
     if noise is not None:
         # each pass's model, as estimate records it; its AR(1) part is a Gauss-Markov state of the filter
         diagnostics["noise"] = noise.report
     extra = {"estimation": {"method": "sequential: " + record["method"], "range_rate_model": problem.range_rate_model,
                             "apriori_initial": problem.apriori_initial,
+                            "apriori_source": problem.apriori_source or None,
+                            "apriori_note": problem.apriori_note or None,
                             "sources": sorted({str(s) for s in problem.sources})},
              "filter": record, "quality": quality.as_dict()}
     state = solution_state(problem, out_epoch, x, names, sigma, p, popt.force, eop, diagnostics, extra)
@@ -382,6 +411,9 @@ def summary_text(result: FilterResult) -> str:
     srtn = st.diagnostics["sigma_rtn"]
     lines.append(f"  sigma RTN {srtn['radial_m']:.4g} / {srtn['along_m']:.4g} / {srtn['cross_m']:.4g} m")
     lines.append(f"  normalised innovations squared {rec['nis']:.5g} over {rec['nis_dof']}")
+    decision = (st.diagnostics or {}).get("decision")
+    if decision:
+        lines.append(f"  decision: {decision['reason']}")
     lines.extend(f"warning: {w}" for w in result.warnings)
     lines.append(result.quality.text())
     return "\n".join(lines) + "\n"

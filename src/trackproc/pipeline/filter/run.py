@@ -368,18 +368,25 @@ def smooth(sw: Sweep) -> Sweep:
     return sw
 
 
-def run(problem: Problem, opt: FilterOptions, carried=None, noise: PassNoise | None = None) -> tuple[Sweep, list]:
+def run(problem: Problem, opt: FilterOptions, carried=None, noise: PassNoise | None = None,
+        state_scale: float = 1.0) -> tuple[Sweep, list]:
     """The filter (and smoother) over the problem, iterated ``opt.iterations`` times at most: each
     later sweep linearised about the previous one's smoothed states, the prior kept; stops when
     the smoothed start moves less than ``opt.tolerance_sigma`` of its sigma. ``noise``
     (:func:`pass_noise`): the passes' correlated noise as states (steady-state prior) and the
     offsets' random walks; the returned sweep carries the problem's parameters only (the noise
     states dropped, so that residuals are against the deterministic model). Returns the last
-    sweep and the history of ``{"sweep", "max_change_sigma"}``."""
+    sweep and the history of ``{"sweep", "max_change_sigma"}``. ``state_scale``: the start's state
+    covariance scaled by it (its cross-covariance with the other parameters by its root), the
+    a-priori's variance component (pipeline/filter/policy.py)."""
     if noise is not None and noise.walk:
         opt = replace(opt, bias_walk={**opt.bias_walk, **noise.walk})
     gm = noise_states(problem, opt, noise)
     centre, p0 = initial_covariance(problem, carried, gauss_markov(problem, opt))
+    if state_scale != 1.0:
+        d = np.ones(p0.shape[0])
+        d[:6] = np.sqrt(state_scale)
+        p0 = p0 * np.outer(d, d)
     n_noise = 0 if noise is None else len(noise.states)
     if n_noise:
         centre = np.concatenate([centre, np.zeros(n_noise)])
