@@ -31,9 +31,9 @@ import weakref
 from fractions import Fraction
 
 import numpy as np
-from scipy.integrate._ivp import dop853_coefficients as _dc
 
 from trackproc.constants import C_LIGHT, OMEGA_EARTH, WGS84_A, WGS84_F
+from trackproc.dynamics.forces import dop853_tableau as _dc
 from trackproc.dynamics.forces import drag as drag_mod
 from trackproc.dynamics.forces import srp, third_body
 from trackproc.dynamics.jit import njit
