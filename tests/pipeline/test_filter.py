@@ -268,3 +268,19 @@ def test_one_pass_contradicting_a_stated_prior_is_declined(case, smooth):
         _same_decision(d, est.state.diagnostics["decision"])
     else:
         assert np.datetime64(res.state.epoch, "ns") > np.datetime64(initial.epoch, "ns")
+
+
+@pytest.mark.parametrize("action", ["declined", "kept", "replaced"])
+def test_a_run_that_failed_its_own_tests_does_not_reject_a_written_prior(action):
+    """When the prior is written (declined, kept), the filter's failed run (a diverged filter,
+    most samples edited) says why the data were not used: the verdict is suspect, not rejected
+    (the policy's exit 0); when the run's state is written (replaced), rejected stays rejected."""
+    from trackproc.methods import quality as qm
+    from trackproc.pipeline.filter import policy as fp
+
+    q = qm.Quality()
+    q.add("edited", "rejected", "90 of 100 samples edited beyond 5 sigma: the filter has diverged", 0.9, 0.5)
+    test = {"test": "a-priori", "statistic": 40.0, "dof": 6, "limit": 22.5, "conflict": action == "declined"}
+    decision = {"action": action, "reason": f"{action}: ...", "probability_better": 0.95}
+    fp.add_reasons(q, fp.Outcome(np.zeros(6), np.eye(6), None, decision, test, None), "stated")
+    assert q.verdict == ("rejected" if action == "replaced" else "suspect"), q.text()

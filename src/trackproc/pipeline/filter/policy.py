@@ -202,8 +202,17 @@ def decide(problem: Problem, first: Candidate, prior: PriorAt, out_epoch, rerun:
 def add_reasons(q: qm.Quality, outcome: Outcome, source: Optional[str]) -> None:
     """The decision in the verdict, with estimate's codes: ``declined`` (suspect), ``kept`` (ok),
     ``replaced`` (ok), and ``apriori_conflict`` when the a-priori was scaled (ok: the data carried
-    it; suspect: a default a-priori they could not carry, the first run's solution stands)."""
+    it; suspect: a default a-priori they could not carry, the first run's solution stands).
+
+    When the prior is written (declined or kept), the run's own failures (a diverged filter, its
+    samples edited away) say why the data were not used, not that the written state is wrong:
+    they are at most ``suspect``, and the exit status is the policy's (0; 1 with ``--strict``)."""
     d, test, a = outcome.decision, outcome.test, outcome.adaptation
+    if d is not None and d["action"] in ("declined", "kept"):
+        for r in q.reasons:
+            if r["severity"] == "rejected":
+                r["severity"] = "suspect"
+                r["message"] += " (the filter's run; the prior is written, not this run's state)"
     if d is not None and d["action"] == "declined":
         q.add("declined", "suspect", d["reason"], value=test["statistic"], limit=test["limit"])
         return
