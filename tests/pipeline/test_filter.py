@@ -259,6 +259,7 @@ def test_one_pass_contradicting_a_stated_prior_is_declined(case, smooth):
     d = res.state.diagnostics["decision"]
     assert d["action"] == "declined" and d["reason"].startswith("declined: ")
     assert res.quality.verdict == "suspect"
+    assert res.state.extra["filter"]["declined_in_a_row"] == 1
     assert {r["code"]: r["severity"] for r in res.quality.reasons}["declined"] == "suspect"
     rv, cov = initial_at_epoch(initial, np.datetime64(res.state.epoch, "ns"), "j2", eop)
     np.testing.assert_allclose(res.state.values[:6], rv, rtol=0, atol=1e-3)
@@ -284,3 +285,20 @@ def test_a_run_that_failed_its_own_tests_does_not_reject_a_written_prior(action)
     decision = {"action": action, "reason": f"{action}: ...", "probability_better": 0.95}
     fp.add_reasons(q, fp.Outcome(np.zeros(6), np.eye(6), None, decision, test, None), "stated")
     assert q.verdict == ("rejected" if action == "replaced" else "suspect"), q.text()
+
+
+def test_runs_that_decline_their_carried_state_are_counted_in_a_row():
+    """A chain of nights each declining the state it carries is counted (the carried state, not the
+    data, is then the likely culprit and the reason says so); a run that replaces or keeps, or
+    starts from an orbit that is not a filter's output, starts the count again."""
+    from types import SimpleNamespace
+
+    from trackproc.pipeline.filter.result import declined_in_a_row
+
+    declined, kept = {"action": "declined"}, {"action": "kept"}
+    night = SimpleNamespace(extra={"filter": {"declined_in_a_row": 2}})
+    assert declined_in_a_row(night, declined) == 3
+    assert declined_in_a_row(night, kept) == 0
+    assert declined_in_a_row(SimpleNamespace(extra={}), declined) == 1        # a TLE or a plain state file
+    assert declined_in_a_row(SimpleNamespace(extra={"filter": {}}), declined) == 1  # a filter output before the count
+    assert declined_in_a_row(None, None) == 0

@@ -69,6 +69,17 @@ def carried_last_measurement(initial):
     return parse_epoch(str(rec["last_measurement"]), column="filter.last_measurement")
 
 
+def declined_in_a_row(carried, decision) -> int:
+    """How many runs in a row, this one included, declined the state they carried (0 when this
+    run's decision is not ``declined``): a chain of nights that each decline the carried state is
+    more likely held by an overconfident carried state than contradicted by every night's data."""
+    if not decision or decision.get("action") != "declined":
+        return 0
+    rec = (getattr(carried, "extra", None) or {}).get("filter") if carried is not None else None
+    before = rec.get("declined_in_a_row", 0) if isinstance(rec, dict) else 0
+    return (int(before) if isinstance(before, (int, float)) and before >= 0 else 0) + 1
+
+
 def skip_older(tables, last):
     """Drop the samples at or before ``last`` (a carried state's last measurement). Returns
     ``(tables, skipped pass names)``; a pass partly older keeps its newer samples."""
@@ -348,6 +359,14 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
     chosen = outcome.candidate
     sw, iterations, quality = chosen.sweep, chosen.iterations, chosen.quality
     fp.add_reasons(quality, outcome, problem.apriori_source)
+    in_a_row = declined_in_a_row(initial, outcome.decision)
+    if in_a_row > 1:
+        for r in quality.reasons:
+            if r["code"] == "declined":
+                r["message"] += (f"; the carried state has now been declined {in_a_row} runs in a row: the carried "
+                                 "state (an overconfident covariance), not each night's data, may be what is wrong: "
+                                 "restart from a fresh orbit (--initial TLE) or carry it with process noise "
+                                 "(--snc-accel)")
     x, p = outcome.x, outcome.p
     problem.decision = outcome.decision
     names = problem.names
@@ -377,7 +396,7 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
         "first_time": format_epoch(_utc_of_step(problem, sw, 0)),
         "apriori_epoch": format_epoch(problem.epoch), "last_measurement": format_epoch(last_time),
         "nis": float(np.sum(z[kept] ** 2)), "nis_dof": int(kept.sum()),
-        "skipped_passes": skipped, "carried_state": carried is not None,
+        "skipped_passes": skipped, "carried_state": carried is not None, "declined_in_a_row": in_a_row,
     }
     diagnostics = {"measurements": int(sw.edited.size), "edited": int(sw.edited.sum()), "correlation": corr,
                    "covariance_rtn": rtn,
