@@ -198,6 +198,10 @@ def filter_command(
         trackproc filter sample_data/multistation.parquet --initial sample_data/stale.json \\
             --range-bias --apriori-sigma range_bias=1000 --kinds range,range_rate --smooth --iterations 5 \\
             --history history.csv -o smoothed.json
+
+    \f
+    Over 100 lines because it declares the options (each with its help); the work is in
+    pipeline/filter/ (result.filter_passes), with the reading and writing around it here.
     """
     if sum(p == "-" for p in passes) > 1:
         raise typer.BadParameter("stdin (-) can be read once", param_hint="PASS")

@@ -138,6 +138,10 @@ def propagate_command(
 
     Exit status: 0 ok; 2 bad options or input; 1 propagation failure (the Taylor run stopped,
     the orbit enters the Earth, or --visible-only found no pass).
+
+    \f
+    Over 100 lines because it declares the options (each with its help); the work is in
+    dynamics/propagator and pipeline/propagate, with the reading and writing around it here.
     """
     from trackproc.io.validate import parse_duration
 
