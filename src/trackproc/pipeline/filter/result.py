@@ -306,6 +306,37 @@ def _output(problem: Problem, opt: FilterOptions, sw):
     return x, p, out_epoch
 
 
+def run_record(problem: Problem, opt: FilterOptions, sw, iterations: list, noise, skipped: list, carried: bool,
+               in_a_row: int) -> dict:
+    """The state file's ``filter`` record of a run (docs/filter.md, "Output"): method, process
+    noise, editing, counts, times, the NIS, skipped passes, whether a state was carried and the
+    runs in a row that declined it."""
+    kept = ~sw.edited
+    z = sw.innovation / np.sqrt(sw.variance)
+    last_time = problem.times.max()
+    return {
+        "method": "extended Kalman filter (Joseph form, sequential scalar updates), reference trajectory restarted "
+                  "at each tracking segment" + (", Rauch-Tung-Striebel smoother" if opt.smooth else ""),
+        "solution": "smoothed" if opt.smooth else "filtered",
+        "process_noise": {"snc_accel_rtn_m_s2_sqrt_hz": [float(a) for a in opt.snc_accel],
+                          "bias_walk_per_sqrt_s": {k2: float(v) for k2, v in opt.bias_walk.items()},
+                          **({"dmc_sigma_rtn_m_s2": [float(a) for a in opt.dmc[:3]], "dmc_tau_s": float(opt.dmc[3])}
+                             if opt.dmc is not None else {}),
+                          **({"bias_gauss_markov": {k2: {"sigma": float(v[0]), "tau_s": float(v[1])}
+                                                    for k2, v in opt.bias_gm.items()}} if opt.bias_gm else {}),
+                          **({"bias_reset_per_pass": list(opt.bias_reset)} if opt.bias_reset else {}),
+                          **({"pass_noise_walk_per_sqrt_s": dict(noise.walk)} if noise is not None and noise.walk else {})},
+        "noise": opt.problem.noise,
+        "edit_sigma": opt.edit_sigma, "segment_gap_s": opt.segment_gap_s,
+        "updates": int(kept.sum()), "edited": int(sw.edited.sum()), "steps": int(sw.t_s.size),
+        "segments": len(sw.segments), "sweeps": len(iterations) + 1, "iterations": iterations,
+        "first_time": format_epoch(_utc_of_step(problem, sw, 0)),
+        "apriori_epoch": format_epoch(problem.epoch), "last_measurement": format_epoch(last_time),
+        "nis": float(np.sum(z[kept] ** 2)), "nis_dof": int(kept.sum()),
+        "skipped_passes": skipped, "carried_state": carried, "declined_in_a_row": in_a_row,
+    }
+
+
 def filter_passes(tables, initial, stations=None, options: FilterOptions | None = None, eop=None) -> FilterResult:
     """Filter (and smooth) the passes from the initial state (see :mod:`trackproc.pipeline.filter`).
 
@@ -374,30 +405,7 @@ def filter_passes(tables, initial, stations=None, options: FilterOptions | None 
     with np.errstate(invalid="ignore", divide="ignore"):
         corr = np.nan_to_num(p / np.outer(sigma, sigma))
     rtn = rtn_covariance(x[:3], x[3:6], p[:6, :6])
-    kept = ~sw.edited
-    z = sw.innovation / np.sqrt(sw.variance)
-    last_time = problem.times.max()
-    record = {
-        "method": "extended Kalman filter (Joseph form, sequential scalar updates), reference trajectory restarted "
-                  "at each tracking segment" + (", Rauch-Tung-Striebel smoother" if opt.smooth else ""),
-        "solution": "smoothed" if opt.smooth else "filtered",
-        "process_noise": {"snc_accel_rtn_m_s2_sqrt_hz": [float(a) for a in opt.snc_accel],
-                          "bias_walk_per_sqrt_s": {k2: float(v) for k2, v in opt.bias_walk.items()},
-                          **({"dmc_sigma_rtn_m_s2": [float(a) for a in opt.dmc[:3]], "dmc_tau_s": float(opt.dmc[3])}
-                             if opt.dmc is not None else {}),
-                          **({"bias_gauss_markov": {k2: {"sigma": float(v[0]), "tau_s": float(v[1])}
-                                                    for k2, v in opt.bias_gm.items()}} if opt.bias_gm else {}),
-                          **({"bias_reset_per_pass": list(opt.bias_reset)} if opt.bias_reset else {}),
-                          **({"pass_noise_walk_per_sqrt_s": dict(noise.walk)} if noise is not None and noise.walk else {})},
-        "noise": popt.noise,
-        "edit_sigma": opt.edit_sigma, "segment_gap_s": opt.segment_gap_s,
-        "updates": int(kept.sum()), "edited": int(sw.edited.sum()), "steps": int(sw.t_s.size),
-        "segments": len(sw.segments), "sweeps": len(iterations) + 1, "iterations": iterations,
-        "first_time": format_epoch(_utc_of_step(problem, sw, 0)),
-        "apriori_epoch": format_epoch(problem.epoch), "last_measurement": format_epoch(last_time),
-        "nis": float(np.sum(z[kept] ** 2)), "nis_dof": int(kept.sum()),
-        "skipped_passes": skipped, "carried_state": carried is not None, "declined_in_a_row": in_a_row,
-    }
+    record = run_record(problem, opt, sw, iterations, noise, skipped, carried is not None, in_a_row)
     diagnostics = {"measurements": int(sw.edited.size), "edited": int(sw.edited.sum()), "correlation": corr,
                    "covariance_rtn": rtn,
                    "sigma_rtn": sigma_rtn(rtn),
