@@ -56,3 +56,23 @@ def test_factorize_is_pandas_factorize():
     codes, uniques = factorize(values)
     want_codes, want_uniques = pd.factorize(values)
     assert codes.tolist() == want_codes.tolist() and list(uniques) == list(want_uniques)
+
+
+@pytest.mark.parametrize("cells, plain", [
+    (["2026-03-20T09:24:28Z", "2026-03-20T09:24:28.5Z", "2024-02-29T00:00:00.123456789Z"], True),
+    (["2026-03-20T09:24:28Z", "2026-01-01T24:00:00Z"], False),          # pandas' NaT, reported by row
+    (["2026-03-20T09:24:28Z", "2026-02-29T00:00:00Z"], False),
+    (["2026-03-20T09:24:28+00:00"], False),
+    (["2300-01-01T00:00:00Z"], False),                                   # outside the supported years
+])
+def test_csv_times_parsed_by_numpy_are_pandas_times(cells, plain):
+    import pandas as pd
+
+    from trackproc.io.columns import Column
+    from trackproc.io.passfile import _plain_times
+
+    got = _plain_times(Column("time", text=np.array(cells, dtype=object)))
+    assert (got is not None) == plain
+    if plain:
+        want = pd.to_datetime(pd.Series(cells), utc=True, format="ISO8601").dt.tz_localize(None).to_numpy()
+        assert got.tolist() == want.astype("datetime64[ns]").tolist()

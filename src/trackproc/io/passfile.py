@@ -33,6 +33,7 @@ import csv
 import hashlib
 import io
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +51,8 @@ from trackproc.io.csvtext import csv_metadata_line
 from trackproc.io.problems import Problems
 from trackproc import __version__
 from trackproc.io import smoothing_record
-from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_carrier, check_los_speed, check_name
+from trackproc.io.validate import (FIRST_YEAR, LAST_YEAR, MAX_LOS_SPEED_M_S, check_carrier, check_los_speed,
+                                  check_name)
 from trackproc.io.stations import Station
 
 SCHEMA_VERSION = 1
@@ -235,7 +237,9 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
         raise InputError("pass file written by a newer trackproc", file=source, column="schema_version",
                          found=version, expected=f"schema_version <= {SCHEMA_VERSION}")
     problems = Problems(table.rows, source)
-    times = column_times(table, table.columns["time"], problems)
+    times = _plain_times(table.columns["time"])
+    if times is None:
+        times = column_times(table, table.columns["time"], problems)
     columns = {"time": times}
     for name in ("station", "pass_id", "kind"):
         columns[name] = np.asarray(column_strings(table, table.columns[name]), dtype=object)
@@ -268,6 +272,26 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
     return PassTable.from_columns(columns, meta, lambda: _frame_of(base, extras, degrees))
 
 
+#: The time text a trackproc CSV holds (:func:`iso_times`).
+_PLAIN_UTC = re.compile(r"\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(?:\.\d{1,9})?Z")
+
+
+def _plain_times(column):
+    """A CSV's time column as trackproc writes it (``YYYY-MM-DDTHH:MM:SS[.fff]Z``, every one a valid
+    time in the supported years) parsed by numpy; None for anything else, which
+    :func:`~trackproc.io.columns.column_times` parses with pandas and reports row by row."""
+    text = column.text
+    if text is None or not len(text) or not all(_PLAIN_UTC.fullmatch(t) for t in text):
+        return None
+    years = [int(t[:4]) for t in text]        # before parsing: beyond 2262 numpy's nanoseconds wrap
+    if not FIRST_YEAR <= min(years) <= max(years) <= LAST_YEAR:
+        return None
+    try:
+        return np.array([t[:-1] for t in text], dtype="datetime64[ns]")
+    except ValueError:                          # e.g. 24:00:00, 23:59:60, 30 February: pandas' NaT
+        return None
+
+
 def _frame_of(columns: dict, extras: list, degrees: np.ndarray):
     """The DataFrame of a pass file's columns (pandas imported here: refine and estimate read numpy)."""
     import pandas as pd  # start-up: pandas (~0.15 s) only for the commands that use the DataFrame
@@ -295,10 +319,14 @@ def factorize(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _extra_array(column, degrees: np.ndarray):
-    """A later command's column as numpy when Arrow typed it without nulls (bool, integer, float);
-    None otherwise (the DataFrame's :func:`_extra_column` types it)."""
+    """A later command's column as numpy when Arrow typed it without nulls (bool, integer, float)
+    or a CSV holds booleans; None otherwise (the DataFrame's :func:`_extra_column` types it)."""
+    if column.text is not None:           # a CSV's: its booleans (as _extra_column reads them) only
+        lowered = [t.lower() for t in column.text]
+        return np.array([t == "true" for t in lowered]) if lowered and all(
+            t in ("true", "false") for t in lowered) else None
     array = column.array
-    if column.text is not None or array.null_count or not (
+    if array.null_count or not (
             pa.types.is_boolean(array.type) or pa.types.is_integer(array.type) or pa.types.is_floating(array.type)):
         return None
     values = arrow_numpy(array)
