@@ -168,15 +168,13 @@ import pyarrow.parquet
 marks.append(clock())
 import scipy.linalg
 marks.append(clock())
-import pandas
-marks.append(clock())
 import trackproc.io.passfile, trackproc.pipeline.refine, trackproc.cli.refine_cmd
 marks.append(clock())
 code = app._main(json.loads(sys.argv[1]))
 marks.append(clock())
-print(json.dumps([code, [b - a for a, b in zip(marks, marks[1:])]]))
+print(json.dumps([code, [b - a for a, b in zip(marks, marks[1:])], "pandas" in sys.modules]))
 """
-_STAGE_NAMES = ("Typer app", "numpy", "pyarrow.parquet", "scipy.linalg", "pandas", "trackproc modules", "refine")
+_STAGE_NAMES = ("Typer app", "numpy", "pyarrow.parquet", "scipy.linalg", "trackproc modules", "refine")
 
 
 def refine_stages(args, runs: int, work: Path) -> str:
@@ -190,12 +188,13 @@ def refine_stages(args, runs: int, work: Path) -> str:
     for _ in range(runs):
         out = subprocess.run([sys.executable, "-c", _STAGES, json.dumps(args)], capture_output=True, text=True,
                              env=env, check=True)
-        code, stages = json.loads(out.stdout.strip().splitlines()[-1])
+        code, stages, pandas = json.loads(out.stdout.strip().splitlines()[-1])
         if code != 0:
             raise RuntimeError(f"refine exited {code}: {out.stderr[-500:]}")
         samples.append(stages)
     medians = [statistics.median(column) for column in zip(*samples)]
-    return ", ".join(f"{name} {1e3 * m:.0f}" for name, m in zip(_STAGE_NAMES, medians))
+    return (", ".join(f"{name} {1e3 * m:.0f}" for name, m in zip(_STAGE_NAMES, medians))
+            + ("; pandas imported" if pandas else "; pandas not imported"))
 
 
 def make_workload(directory: Path, passes: int) -> int:

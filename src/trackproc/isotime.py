@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["to_datetime64_ns", "iso_utc", "iso_utc_array"]
+__all__ = ["to_datetime64_ns", "iso_utc", "iso_utc_array", "iso_utc_offset"]
 
 
 def to_datetime64_ns(t) -> np.datetime64:
@@ -53,3 +53,15 @@ def iso_utc_array(ns) -> np.ndarray:
             unit = candidate
             break
     return np.char.add(np.datetime_as_string(ns, unit=unit), "Z")
+
+
+def iso_utc_offset(t) -> str:
+    """``YYYY-MM-DDTHH:MM:SS[.ffffff[fff]]+00:00``: a UTC ``datetime64`` as pandas'
+    ``Timestamp.isoformat`` writes a tz-aware UTC time (the input-error messages that showed it so
+    keep their text without pandas)."""
+    t = np.datetime64(t, "ns")
+    if np.isnat(t):
+        return "NaT"
+    date, frac = np.datetime_as_string(t, unit="ns").split(".")
+    frac = "" if frac == "000000000" else "." + (frac[:6] if frac.endswith("000") else frac)
+    return f"{date}{frac}+00:00"

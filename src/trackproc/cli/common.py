@@ -227,12 +227,14 @@ def read_passes_and_stations(passes: list, stations: Optional[str], eccentriciti
 
     check_distinct_files(passes, "PASS")
     tables = [("<stdin>" if is_stdio(p) else p, read_pass_table(p)) for p in passes]
-    check_no_repeated_samples([(source, t.frame) for source, t in tables])
+    if len(tables) > 1:        # one file's own repeats are its reader's business (and its DataFrame pandas's)
+        check_no_repeated_samples([(source, t.frame) for source, t in tables])
     if stations is None:
         return tables, None
-    lo = min(t.frame["time"].min() for _, t in tables)
-    hi = max(t.frame["time"].max() for _, t in tables)
-    mid = (lo + (hi - lo) / 2).tz_convert("UTC").tz_localize(None).to_datetime64()
+    import numpy as np
+
+    times = np.concatenate([t.column("time") for _, t in tables])
+    mid = times.min() + (times.max() - times.min()) // 2 if times.size else np.datetime64("NaT", "ns")
     return tables, read_stations(stations, epoch=mid, eccentricities=eccentricities)
 
 

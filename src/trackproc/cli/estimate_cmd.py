@@ -181,7 +181,7 @@ def estimate_command(
     if warning:
         log.warning(warning)
     tables, station_table = read_passes_and_stations(passes, stations, eccentricities)
-    n_samples = sum(len(t.frame) for _, t in tables)
+    n_samples = sum(t.n_rows for _, t in tables)
     if n_samples > max_samples:
         raise typer.BadParameter(f"{n_samples} samples in the pass files, more than {max_samples} (memory grows by "
                                  "~3.5 kB a sample); raise --max-samples, or thin the passes", param_hint="--max-samples")

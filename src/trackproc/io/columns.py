@@ -10,9 +10,7 @@ from dataclasses import dataclass
 from typing import Iterable, Iterator
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
-import pyarrow.compute as pc
 
 from trackproc.errors import InputError
 from trackproc.io.csvtext import TextTable, chunk_rows, iter_text_tables, parse_csv_metadata, parse_text_table
@@ -77,6 +75,10 @@ def load_arrow(data: bytes, source: str, container: str) -> pa.Table:
             import pyarrow.parquet as pq  # start-up: pyarrow.parquet only for Parquet input
             parquet = pq.ParquetFile(pa.BufferReader(data))
             check_input_rows(parquet.metadata.num_rows, file=source)
+            # text columns as stored, a dictionary: each string once, and no pyarrow.compute to encode them
+            text = [f.name for f in parquet.schema_arrow if _is_string(f.type)]
+            if text:
+                parquet = pq.ParquetFile(pa.BufferReader(data), read_dictionary=text)
             return parquet.read()      # not pq.read_table: it imports pyarrow.dataset (~0.1 s CPU)
         if container == "arrow-file":
             return pa.ipc.open_file(pa.BufferReader(data)).read_all()
@@ -187,18 +189,58 @@ def _arrow_chunks(stream, source: str, container: str) -> Iterator[SourceTable]:
                          expected=f"a complete {container} file") from None
 
 
-def _arrow_column(name: str, array: pa.Array) -> Column:
-    if pa.types.is_dictionary(array.type):
-        array = array.cast(array.type.value_type)
+#: numpy dtypes of the Arrow types :func:`arrow_numpy` reads from their buffers.
+_NUMPY_OF_ARROW = {"int8": "i1", "int16": "i2", "int32": "i4", "int64": "i8", "uint8": "u1", "uint16": "u2",
+                   "uint32": "u4", "uint64": "u8", "halffloat": "f2", "float": "f4", "double": "f8"}
+
+
+def arrow_numpy(array) -> np.ndarray:
+    """A null-free Arrow array of numbers, booleans or timestamps (as int64) as numpy, read from its
+    buffers: pyarrow's own ``to_numpy`` imports pandas (~0.15 s of CPU) on its first call."""
+    if isinstance(array, pa.ChunkedArray):
+        array = array.combine_chunks()
+    kind = str(array.type)
+    if array.null_count or not (kind in _NUMPY_OF_ARROW or kind == "bool" or pa.types.is_timestamp(array.type)):
+        return array.to_numpy(zero_copy_only=False)
+    n, data = len(array), array.buffers()[1]
+    if kind == "bool":
+        bits = np.unpackbits(np.frombuffer(data, np.uint8), bitorder="little")
+        return bits[array.offset:array.offset + n].astype(bool)
+    dtype = np.dtype(_NUMPY_OF_ARROW.get(kind, "i8"))
+    return np.frombuffer(data, dtype, count=n, offset=array.offset * dtype.itemsize).copy()
+
+
+def _is_string(kind) -> bool:
     # string_view exists from pyarrow 16 (the oldest supported is 12)
     is_view = getattr(pa.types, "is_string_view", None)
-    if pa.types.is_string(array.type) or pa.types.is_large_string(array.type) or \
-            (is_view is not None and is_view(array.type)):
-        # one Python string per distinct value (station, pass and kind repeat): ~8 bytes a row
-        encoded = pc.dictionary_encode(pc.fill_null(array.cast(pa.string()), ""))
+    return pa.types.is_string(kind) or pa.types.is_large_string(kind) or (is_view is not None and is_view(kind))
+
+
+def _arrow_column(name: str, array: pa.Array) -> Column:
+    if pa.types.is_dictionary(array.type) and _is_string(array.type.value_type) and not array.null_count \
+            and not array.dictionary.null_count:
+        # a dictionary as Parquet stores text (load_arrow): one Python string per entry, rows by index
+        values = np.array([v.strip() for v in array.dictionary.to_pylist()] or [""], dtype=object)
+        return Column(name, text=values[arrow_numpy(array.indices)])
+    if pa.types.is_dictionary(array.type):
+        array = array.cast(array.type.value_type)
+    if _is_string(array.type):
+        import pyarrow.compute as pc  # start-up: pyarrow.compute (~30 ms) only for other text columns
+
+        # one Python string per distinct value (station, pass and kind repeat): ~8 bytes a row;
+        # without nulls no fill value: a Python scalar given to Arrow makes it import pandas (~0.15 s)
+        strings = array.cast(pa.string())
+        encoded = strings.dictionary_encode() if not strings.null_count else \
+            pc.dictionary_encode(pc.fill_null(strings, ""))
         values = np.array([v.strip() for v in encoded.dictionary.to_pylist()] or [""], dtype=object)
-        return Column(name, text=values[encoded.indices.to_numpy(zero_copy_only=False)])
+        return Column(name, text=values[arrow_numpy(encoded.indices)])
     return Column(name, array=array)
+
+
+def _cast_to_numpy(array, kind) -> np.ndarray:
+    import pyarrow.compute as pc  # start-up: as in _arrow_column
+
+    return arrow_numpy(pc.cast(array, kind))
 
 
 def _wrong_type(table: SourceTable, column: Column, expected: str) -> InputError:
@@ -212,6 +254,8 @@ def column_times(table: SourceTable, column: Column, problems: Problems, index=N
     ``index`` maps the problems' positions to the table's rows (default: one to one).
     """
     if column.text is not None:
+        import pandas as pd  # start-up: pandas (~0.15 s) only for times written as text (CSV)
+
         text = pd.Series(column.text, dtype=object)
         # beyond 1678-2261 a nanosecond timestamp wraps or raises: such rows are unparseable times
         year = pd.to_numeric(text.astype(str).str.extract(r"^\s*([+-]?\d{4,})-", expand=False), errors="coerce")
@@ -225,14 +269,17 @@ def column_times(table: SourceTable, column: Column, problems: Problems, index=N
         # Out-of-range stamps (year 3000 in ms or us) become NaT and are reported by row; a failing
         # cast is not used for this (its exception left Arrow aborting at exit in ~7 % of runs).
         unit = column.array.type.unit
-        ticks = pc.cast(column.array, pa.int64()).to_numpy(zero_copy_only=False)
+        ticks = arrow_numpy(column.array) if not column.array.null_count else \
+            _cast_to_numpy(column.array, pa.int64())
         ticks = np.where(np.isnan(ticks.astype(float)), 0, ticks).astype(np.int64) if ticks.dtype != np.int64 \
             else ticks
         lo = np.datetime64(f"{FIRST_YEAR}-01-01", unit).astype(np.int64)
         hi = np.datetime64(f"{LAST_YEAR + 1}-01-01", unit).astype(np.int64)
         outside = (ticks < lo) | (ticks >= hi)
         values = np.where(outside, np.int64(0), ticks).astype(f"datetime64[{unit}]").astype("datetime64[ns]")
-        values[outside | column.array.is_null().to_numpy(zero_copy_only=False)] = np.datetime64("NaT")
+        values[outside] = np.datetime64("NaT")
+        if column.array.null_count:     # (is_null's numpy conversion imports pandas: only when needed)
+            values[column.array.is_null().to_numpy(zero_copy_only=False)] = np.datetime64("NaT")
     else:
         raise _wrong_type(table, column, "a timestamp column or ISO 8601 strings")
     bad = np.isnat(values)
@@ -249,7 +296,9 @@ def column_times(table: SourceTable, column: Column, problems: Problems, index=N
     return values
 
 
-def _one_time(text) -> pd.Timestamp:
+def _one_time(text):
+    import pandas as pd  # start-up: as in column_times
+
     try:
         return pd.to_datetime(text, utc=True, format="ISO8601")
     except (ValueError, OverflowError, TypeError):
@@ -283,6 +332,11 @@ def column_numbers(table: SourceTable, column: Column) -> tuple[np.ndarray, np.n
     arr = column.array
     if not (pa.types.is_integer(arr.type) or pa.types.is_floating(arr.type) or pa.types.is_decimal(arr.type)):
         raise _wrong_type(table, column, "a numeric column")
+    if not arr.null_count:              # no fill value, no null mask: both make Arrow import pandas
+        values = arrow_numpy(arr) if pa.types.is_float64(arr.type) else _cast_to_numpy(arr, pa.float64())
+        return values.astype(np.float64), np.zeros(len(values), dtype=bool), np.zeros(len(values), dtype=bool)
+    import pyarrow.compute as pc  # start-up: as in _arrow_column
+
     missing = arr.is_null().to_numpy(zero_copy_only=False)
     values = pc.fill_null(arr.cast(pa.float64()), math.nan).to_numpy(zero_copy_only=False)
     return values.astype(np.float64), missing, np.zeros(len(values), dtype=bool)

@@ -17,7 +17,6 @@ from typing import Iterable, Iterator
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 
 from trackproc.errors import InputError
 from trackproc.io.validate import check_input_rows
@@ -195,7 +194,8 @@ def _plain_chunk(piece: bytes, header: list[str], line0: int) -> TextTable | Non
     of fields, which that reader reports with its row)."""
     if not piece.endswith(b"\n") or _NOT_PLAIN.search(piece):
         return None
-    import pyarrow.csv as pacsv  # start-up: Arrow's CSV reader (~30 ms) only for large plain files
+    import pyarrow.compute as pc  # start-up: Arrow's CSV reader and compute (~30 ms each) only for large plain files
+    import pyarrow.csv as pacsv
 
     try:
         table = pacsv.read_csv(

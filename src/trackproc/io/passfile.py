@@ -33,10 +33,10 @@ import csv
 import hashlib
 import io
 import json
+import re
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 
 from trackproc.io.tables import arrow_table_bytes
@@ -45,11 +45,14 @@ from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
 from trackproc.isotime import iso_utc_array
 from trackproc.io.raw import KIND_UNITS
 from trackproc.types.passes import PassTable  # noqa: F401  (re-exported)
-from trackproc.io.tabular import (META_KEY, csv_metadata_line, Problems, column_numbers, column_strings,
-                                  column_times, source_table)
+# the column readers themselves, not io.tabular: it loads every raw layout's reader (and pandas)
+from trackproc.io.columns import META_KEY, arrow_numpy, column_numbers, column_strings, column_times, source_table
+from trackproc.io.csvtext import csv_metadata_line
+from trackproc.io.problems import Problems
 from trackproc import __version__
 from trackproc.io import smoothing_record
-from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_carrier, check_los_speed, check_name
+from trackproc.io.validate import (FIRST_YEAR, LAST_YEAR, MAX_LOS_SPEED_M_S, check_carrier, check_los_speed,
+                                  check_name)
 from trackproc.io.stations import Station
 
 SCHEMA_VERSION = 1
@@ -234,12 +237,14 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
         raise InputError("pass file written by a newer trackproc", file=source, column="schema_version",
                          found=version, expected=f"schema_version <= {SCHEMA_VERSION}")
     problems = Problems(table.rows, source)
-    times = column_times(table, table.columns["time"], problems)
-    data_columns = {"time": pd.DatetimeIndex(times).tz_localize("UTC")}
+    times = _plain_times(table.columns["time"])
+    if times is None:
+        times = column_times(table, table.columns["time"], problems)
+    columns = {"time": times}
     for name in ("station", "pass_id", "kind"):
-        data_columns[name] = pd.Series(column_strings(table, table.columns[name]), dtype=object).astype(str)
+        columns[name] = np.asarray(column_strings(table, table.columns[name]), dtype=object)
     # text columns compared through their few distinct values (codes), never row by row
-    codes, written = pd.factorize(data_columns["kind"])
+    codes, written = factorize(columns["kind"])
     written = [str(k) for k in written]
     in_degrees = [k in [a + "_deg" for a in ANGLE_KINDS] for k in written]   # a trackproc CSV's angle rows
     names = np.array([k[:-4] if deg else k for k, deg in zip(written, in_degrees)] or [""], dtype=object)
@@ -251,23 +256,83 @@ def parse_pass_table(data: bytes, source: str) -> PassTable:
         problems.add("wrong column type", wrong | missing_mask, column=name,
                      found=table.columns[name].text if table.columns[name].text is not None else "null",
                      expected="a number (SI units)")
-        data_columns[name] = values
+        columns[name] = values
     if degrees.any():   # a trackproc CSV's angle rows are in degrees (the CSV edge): radians inside
-        data_columns["kind"] = pd.Series(names[codes], dtype=object).astype(str)
+        columns["kind"] = names[codes]
         for name in ("value", "sigma"):
-            data_columns[name] = np.where(degrees, np.radians(data_columns[name]), data_columns[name])
-    _check_samples(problems, data_columns, table, source)
+            columns[name] = np.where(degrees, np.radians(columns[name]), columns[name])
+    _check_samples(problems, columns, table, source)
     problems.resolve(drop_invalid=False)
-    frame = pd.DataFrame(data_columns)
-    for key, column in table.columns.items():
-        if key not in COLUMNS:
-            frame[column.name] = _extra_column(column)
+    extras = [column for key, column in table.columns.items() if key not in COLUMNS]
+    for column in extras:
+        columns[column.name] = _extra_array(column, degrees)
+    _check_meta(meta, columns, table.rows, source)
+    _attach_records(meta, data, source)
+    base = {name: columns[name] for name in COLUMNS}
+    return PassTable.from_columns(columns, meta, lambda: _frame_of(base, extras, degrees))
+
+
+#: The time text a trackproc CSV holds (:func:`iso_times`).
+_PLAIN_UTC = re.compile(r"\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2}(?:\.\d{1,9})?Z")
+
+
+def _plain_times(column):
+    """A CSV's time column as trackproc writes it (``YYYY-MM-DDTHH:MM:SS[.fff]Z``, every one a valid
+    time in the supported years) parsed by numpy; None for anything else, which
+    :func:`~trackproc.io.columns.column_times` parses with pandas and reports row by row."""
+    text = column.text
+    if text is None or not len(text) or not all(_PLAIN_UTC.fullmatch(t) for t in text):
+        return None
+    years = [int(t[:4]) for t in text]        # before parsing: beyond 2262 numpy's nanoseconds wrap
+    if not FIRST_YEAR <= min(years) <= max(years) <= LAST_YEAR:
+        return None
+    try:
+        return np.array([t[:-1] for t in text], dtype="datetime64[ns]")
+    except ValueError:                          # e.g. 24:00:00, 23:59:60, 30 February: pandas' NaT
+        return None
+
+
+def _frame_of(columns: dict, extras: list, degrees: np.ndarray):
+    """The DataFrame of a pass file's columns (pandas imported here: refine and estimate read numpy)."""
+    import pandas as pd  # start-up: pandas (~0.15 s) only for the commands that use the DataFrame
+
+    data = {"time": pd.DatetimeIndex(columns["time"]).tz_localize("UTC")}
+    for name in ("station", "pass_id", "kind"):
+        data[name] = pd.Series(columns[name], dtype=object).astype(str)
+    data["value"], data["sigma"] = columns["value"], columns["sigma"]
+    frame = pd.DataFrame(data)
+    for column in extras:
+        frame[column.name] = _extra_column(column)
     for name in ANGLE_COLUMNS[2:]:   # what smooth added on those rows (smoothed, residual)
         if degrees.any() and name in frame.columns and frame[name].dtype.kind == "f":
             frame.loc[degrees, name] = np.radians(frame.loc[degrees, name].to_numpy(dtype=np.float64))
-    _check_meta(meta, frame, table.rows, source)
-    _attach_records(meta, data, source)
-    return PassTable(frame, meta)
+    return frame
+
+
+def factorize(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(codes, uniques)`` with the uniques in order of first appearance, as ``pandas.factorize``."""
+    uniques, first, inverse = np.unique(np.asarray(values), return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty(len(order), np.intp)
+    rank[order] = np.arange(len(order))
+    return rank[inverse.reshape(-1)], uniques[order]
+
+
+def _extra_array(column, degrees: np.ndarray):
+    """A later command's column as numpy when Arrow typed it without nulls (bool, integer, float)
+    or a CSV holds booleans; None otherwise (the DataFrame's :func:`_extra_column` types it)."""
+    if column.text is not None:           # a CSV's: its booleans (as _extra_column reads them) only
+        lowered = [t.lower() for t in column.text]
+        return np.array([t == "true" for t in lowered]) if lowered and all(
+            t in ("true", "false") for t in lowered) else None
+    array = column.array
+    if array.null_count or not (
+            pa.types.is_boolean(array.type) or pa.types.is_integer(array.type) or pa.types.is_floating(array.type)):
+        return None
+    values = arrow_numpy(array)
+    if column.name in ANGLE_COLUMNS[2:] and values.dtype.kind == "f" and degrees.any():
+        values = np.where(degrees, np.radians(values), values)
+    return values
 
 
 def _attach_records(meta: dict, data: bytes, source: str) -> None:
@@ -287,7 +352,7 @@ def _attach_records(meta: dict, data: bytes, source: str) -> None:
 def _check_samples(problems, columns: dict, table, source: str) -> None:
     """Values a pass file can hold: finite, sigma > 0, ranges >= 0, angles in their domains,
     |range-rate| <= 12 km/s; station names printable."""
-    codes, names = pd.factorize(columns["kind"])
+    codes, names = factorize(columns["kind"])
     names = [str(k) for k in names]
 
     def of_kind(kind: str) -> np.ndarray:
@@ -307,13 +372,13 @@ def _check_samples(problems, columns: dict, table, source: str) -> None:
     problems.add("implausible range-rate", given & of_kind("range_rate") & (np.abs(value) > MAX_LOS_SPEED_M_S),
                  column="value", found=value,
                  expected=f"|range-rate| <= {MAX_LOS_SPEED_M_S:g} m/s (an Earth orbit)")
-    codes, stations = pd.factorize(columns["station"])
+    codes, stations = factorize(columns["station"])
     _, first = np.unique(codes, return_index=True)
     for code, at in zip(range(len(stations)), first):
         check_name(str(stations[code]), "station name", file=source, row=int(table.rows[int(at)]), column="station")
 
 
-def _check_meta(meta: dict, frame: pd.DataFrame, rows, source: str) -> None:
+def _check_meta(meta: dict, columns: dict, rows, source: str) -> None:
     """Metadata types and plausibility: stations (coordinates near the ellipsoid), the carrier
     (a radio carrier in Hz) and the Doppler it implies (a line-of-sight speed <= 12 km/s)."""
     stations = meta.get("stations")
@@ -330,13 +395,15 @@ def _check_meta(meta: dict, frame: pd.DataFrame, rows, source: str) -> None:
     carrier = meta.get("carrier_hz")
     if carrier is not None:
         carrier = check_carrier(carrier, file=source, column="carrier_hz")
-        doppler = (frame["kind"] == "doppler").to_numpy()
-        check_los_speed(frame["value"].to_numpy()[doppler], "doppler", carrier_hz=carrier, mode=mode,
+        doppler = columns["kind"] == "doppler"
+        check_los_speed(columns["value"][doppler], "doppler", carrier_hz=carrier, mode=mode,
                         file=source, rows=np.asarray(rows)[doppler], column="value")
 
 
-def _extra_column(column) -> pd.Series:
+def _extra_column(column):
     """A column appended by a later command: typed as stored (CSV: number, boolean or text)."""
+    import pandas as pd  # start-up: pandas only where the DataFrame is built
+
     if column.text is None:
         return column.array.to_pandas()
     text = pd.Series(column.text, dtype=object)

@@ -6,7 +6,6 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
-import pandas as pd
 
 from trackproc.errors import InputError
 
@@ -88,8 +87,10 @@ def _picker(pos: int) -> Callable[[object], object]:
     def pick(item):
         if callable(item):
             return item(pos)
-        if isinstance(item, (np.ndarray, pd.Series, list, tuple)):
-            return item[pos] if not isinstance(item, pd.Series) else item.iloc[pos]
+        if hasattr(item, "iloc"):           # a pandas Series (not imported here: start-up)
+            return item.iloc[pos]
+        if isinstance(item, (np.ndarray, list, tuple)):
+            return item[pos]
         return item
     return pick
 

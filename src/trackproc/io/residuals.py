@@ -16,7 +16,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 
 from trackproc.io.atomic import open_atomic

@@ -14,7 +14,7 @@ import math
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, read_input_bytes
 from trackproc.io.csvtext import CSV_META_PREFIX
-from trackproc.io.tabular import parse_text_table
+from trackproc.io.csvtext import parse_text_table  # not io.tabular: it loads every raw reader (and pandas)
 from trackproc.io.validate import check_name, check_station
 from trackproc.types.station import Station  # noqa: F401  (re-exported)
 from trackproc.io.columns import sniff_container

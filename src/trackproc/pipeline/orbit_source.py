@@ -159,7 +159,8 @@ def tle_evaluation_epoch(epoch: Optional[str], tables: list, column: str = "--ep
         return None
     if epoch is not None and epoch.lower() != "first":
         return parse_epoch(epoch, column=column)
-    return min(t.frame["time"].min() for _, t in tables).tz_convert("UTC").tz_localize(None).to_datetime64()
+    times = [t.column("time") for _, t in tables]
+    return min((x.min() for x in times if x.size), default=np.datetime64("NaT", "ns"))
 
 
 def resolve_force(orbit: OrbitInput, force: Optional[str], allow_full: bool = False) -> str:

@@ -18,7 +18,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pandas as pd
 
 from trackproc.errors import InputError
 from trackproc.models import troposphere as tp
@@ -54,23 +53,24 @@ def check(troposphere: str, com_offset_m: float, wavelength_nm) -> None:
                          expected="355 to 1064 nm (an optical wavelength)")
 
 
-def range_correction_modifiers(frame: pd.DataFrame, tables, stations: dict, epoch, *, troposphere: str = "auto",
+def range_correction_modifiers(frame: dict, tables, stations: dict, epoch, *, troposphere: str = "auto",
                                com_offset_m: float = 0.0, wavelength_nm: float | None = None,
                                solid_tides: bool | None = None) -> list:
-    """The correction modifiers of the range samples of ``frame`` (merged samples with ``kind``,
-    ``station``, ``_source``); ``tables``: ``(source, PassTable)``; ``stations``: name -> Station;
+    """The correction modifiers of the range samples of ``frame`` (merged samples, numpy columns
+    ``time``, ``kind``, ``station``, ``_source``); ``tables``: ``(source, PassTable)``; ``stations``: name -> Station;
     ``epoch``: the solution epoch (UTC datetime64) the samples' seconds count from;
     ``solid_tides``: the stations' solid-Earth tide displacement on every range (None: on when
     the ranges come from CRD files, whose SINEX coordinates are tide-free)."""
     check(troposphere, com_offset_m, wavelength_nm)
-    is_range = frame["kind"].astype(str).to_numpy() == "range"
+    is_range = frame["kind"] == "range"
     if not is_range.any():
         return []
+
     out = []
     if com_offset_m != 0.0:
         out.append(tp.CentreOfMassOffset(com_offset_m))
     ref = ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns"))
-    range_sources = set(frame.loc[is_range, "_source"].unique())
+    range_sources = set(np.unique(frame["_source"][is_range]))
     if solid_tides is None:
         solid_tides = any(_crd_meta(table.meta or {}) for source, table in tables if source in range_sources)
     if solid_tides:
@@ -79,10 +79,12 @@ def range_correction_modifiers(frame: pd.DataFrame, tables, stations: dict, epoc
         return out
 
     def seconds(iso) -> np.ndarray:
+        import pandas as pd  # start-up: pandas (~0.15 s) only for the times of CRD sessions and meteo
+
         t = pd.to_datetime(pd.Series(list(iso), dtype=object), utc=True).dt.tz_localize(None)
         return np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(t.to_numpy("datetime64[ns]")), ref), float)
 
-    range_stations = sorted(set(frame.loc[is_range, "station"].astype(str)))
+    range_stations = sorted(set(frame["station"][is_range]))
     meteo: dict = {}
     sessions: dict = {}                     # station -> [(start_s, end_s, wavelength_nm, applied)]
     for source, table in tables:
@@ -124,7 +126,7 @@ def range_correction_modifiers(frame: pd.DataFrame, tables, stations: dict, epoc
         if troposphere == "mendes-pavlis":
             rest = tp.TroposphereDelay(st, lat, height, (wavelength_nm or tp.DEFAULT_WAVELENGTH_UM * 1e3) * 1e-3,
                                        exclude_s=[(a, b) for a, b, _, _ in spans], **kw)
-            rows = np.flatnonzero(is_range & (frame["station"].astype(str).to_numpy() == st))
+            rows = np.flatnonzero(is_range & (frame["station"] == st))
             if wavelength_nm is None and rows.size and _outside(frame, rows, spans, seconds):
                 raise InputError("the Mendes-Pavlis troposphere needs the laser wavelength", column="--wavelength-nm",
                                  found=f"range samples of {st} outside any CRD session",
@@ -152,7 +154,9 @@ def _disjoint(spans: list) -> list:
 
 def _outside(frame, rows, spans, seconds) -> bool:
     """True when some of ``rows`` lie outside every span."""
-    t = seconds(frame["time"].iloc[rows].dt.tz_convert("UTC").dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ"))
+    import pandas as pd  # start-up: as in range_correction_modifiers' seconds
+
+    t = seconds(pd.Series(frame["time"][rows]).dt.strftime("%Y-%m-%dT%H:%M:%S.%fZ"))
     inside = np.zeros(t.shape, dtype=bool)
     for a, b, _, _ in spans:
         inside |= (t >= a) & (t <= b)

@@ -16,7 +16,6 @@ import os
 import re
 
 import numpy as np
-import pandas as pd
 
 from trackproc.constants import MU_EARTH
 from trackproc.errors import InputError
@@ -241,6 +240,8 @@ def check_no_repeated_samples(frames) -> None:
     error naming both files. ``frames`` is a list of (source, DataFrame with station, kind, time)."""
     if len(frames) < 2:
         return
+    import pandas as pd  # start-up: pandas (~0.15 s) only when several inputs are compared
+
     parts = [pd.DataFrame({"station": f["station"].astype(str).to_numpy(), "kind": f["kind"].astype(str).to_numpy(),
                            "time": f["time"].to_numpy(), "input": i})
              for i, (_, f) in enumerate(frames)]

@@ -7,7 +7,6 @@ from dataclasses import dataclass, field, replace
 from typing import Optional
 
 import numpy as np
-import pandas as pd
 
 from trackproc.constants import MU_EARTH
 from trackproc.dynamics.rtn import rtn_covariance
@@ -19,6 +18,7 @@ from trackproc.pipeline.estimate.quality import estimate_quality
 from trackproc.pipeline.estimate import seed002 as s2
 from trackproc.pipeline.od import Problem, build_problem, residual_frame, rms_table  # noqa: F401
 from trackproc.pipeline.od.options import EstimateOptions
+from trackproc.pipeline.od.residuals import DeferredField
 from trackproc.pipeline.od.state import sigma_rtn, solution_state
 from trackproc.pipeline.timing import time_tag_rate, timing_warning, tle_reference, tle_timing
 from trackproc.io.passfile import PassTable
@@ -39,7 +39,7 @@ class EstimateResult:
     state: object
     solution: object
     problem: Problem
-    residuals: pd.DataFrame
+    residuals: pd.DataFrame = DeferredField()        # built when first read (pandas then)
     rtn_covariance: np.ndarray
     comparison: Optional[dict] = None
     two_stage: Optional[object] = None

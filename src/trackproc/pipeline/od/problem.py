@@ -275,7 +275,7 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     sm.check_samples(frame)
     model = sm.range_rate_model(opt.range_rate_model, file_models)
     known = sm.resolve_stations(frame, tables, stations)
-    t64 = sm.utc_times(frame)
+    t64 = frame["time"]
     epoch = sm.solution_epoch(opt.epoch, initial, t64)
     meas = sm.measurement_set(frame, t64, epoch, known, opt.earth, eop)
 
@@ -308,6 +308,6 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     priors, note, initial_prior, source = priors_of(params, opt, rv0, cov0, initial, epoch)
     frame_q = propagator.reference_frame(*(float(a) for a in ts.datetime64_to_jd_utc(epoch)), eop)
     return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force, range_rate_model=model,
-                   modifiers=bound, priors=priors, times=t64, sources=frame["_source"].to_numpy(dtype=object),
+                   modifiers=bound, priors=priors, times=t64, sources=frame["_source"],
                    eop=eop, apriori_note=note, force_model=force_model, force_names=force_names,
                    apriori_initial=initial_prior, apriori_source=source)

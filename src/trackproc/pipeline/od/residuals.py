@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 
 from trackproc.models import observation as ob
 from trackproc.pipeline.od.options import UNITS
@@ -31,14 +30,49 @@ def rms_table(problem: Problem, sol) -> dict:
     return out
 
 
-def residual_frame(problem: Problem, sol) -> pd.DataFrame:
-    """The residual table (:data:`RESIDUAL_COLUMNS`), samples in time order per station."""
+def residual_frame(problem: Problem, sol) -> "DeferredFrame":
+    """The residual table (:data:`RESIDUAL_COLUMNS`), samples in time order per station: its columns
+    now, the DataFrame when first read (a :class:`DeferredField` of the result)."""
     meas = problem.meas
-    frame = pd.DataFrame({
-        "time": pd.DatetimeIndex(problem.times).tz_localize("UTC"), "station": meas.station.astype(str),
+    columns = {
+        "time": np.asarray(problem.times, "datetime64[ns]"), "station": meas.station.astype(str),
         "pass_id": meas.pass_id.astype(str), "kind": meas.kind.astype(str),
-        "unit": [UNITS[k] for k in meas.kind], "observed": meas.observed, "computed": sol.computed,
-        "residual": sol.residual, "normalized_residual": sol.normalized, "sigma": meas.sigma,
-        "edited": sol.edited.astype(bool)})
-    order = np.lexsort((frame["kind"].to_numpy(dtype=str), problem.times, frame["station"].to_numpy(dtype=str)))
-    return frame.iloc[order].reset_index(drop=True)
+        "unit": [UNITS[k] for k in meas.kind], "observed": np.array(meas.observed), "computed": np.array(sol.computed),
+        "residual": np.array(sol.residual), "normalized_residual": np.array(sol.normalized),
+        "sigma": np.array(meas.sigma), "edited": sol.edited.astype(bool)}
+    order = np.lexsort((columns["kind"].astype(str), problem.times, columns["station"].astype(str)))
+    return DeferredFrame(columns, order)
+
+
+class DeferredFrame:
+    """A DataFrame's columns and row order, built into the DataFrame by :meth:`build` (pandas is
+    imported there: a ``refine`` or ``estimate`` that writes no residual table never loads it)."""
+
+    def __init__(self, columns: dict, order: np.ndarray):
+        self.columns, self.order = columns, order
+
+    def build(self):
+        import pandas as pd  # start-up: pandas (~0.15 s) only when the table is read
+
+        columns = dict(self.columns)
+        columns["time"] = pd.DatetimeIndex(columns["time"]).tz_localize("UTC")
+        return pd.DataFrame(columns).iloc[self.order].reset_index(drop=True)
+
+
+class DeferredField:
+    """A dataclass field that may be given a :class:`DeferredFrame`: the DataFrame is built when
+    the field is first read, and kept."""
+
+    def __set_name__(self, owner, name):
+        self.slot = "_deferred_" + name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            raise AttributeError(self.slot)          # no default value for the dataclass
+        value = obj.__dict__[self.slot]
+        if isinstance(value, DeferredFrame):
+            value = obj.__dict__[self.slot] = value.build()
+        return value
+
+    def __set__(self, obj, value):
+        obj.__dict__[self.slot] = value

@@ -5,58 +5,64 @@ reception times in SI seconds from the solution epoch, stations in GCRF (steps 1
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 
 from trackproc.dynamics import geodesy
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import InputError
 from trackproc.io.statefile import parse_epoch
 from trackproc.io.validate import MAX_SPAN_S, stated_carrier
+from trackproc.isotime import iso_utc_offset
 from trackproc.models import observation as ob
 
 
+#: The merged samples' columns: a pass file's, then each sample's file, carrier, link and row in its file.
+SAMPLE_COLUMNS = ("time", "station", "pass_id", "kind", "value", "sigma", "_source", "_carrier", "_mode", "_row")
+
+
 def merge_tables(tables, kinds):
-    """One frame of all samples with their file, carrier and metadata checks."""
-    frames, carriers, models, sources = [], [], [], []
+    """The samples of all files as one dict of numpy columns (:data:`SAMPLE_COLUMNS`; ``time``
+    naive UTC datetime64[ns]) with their file, carrier and metadata checks."""
+    parts, carriers, models, sources = [], [], [], []
     for source, table in tables:
-        frame = table.frame
         meta = table.meta or {}
-        if len(frame) == 0:
+        n = table.n_rows
+        if n == 0:
             raise InputError("no samples", file=source, expected="a pass file with at least one sample")
         mode = meta.get("doppler_mode") or "one-way"
-        kinds_here = set(frame["kind"].astype(str).unique())   # not a Python loop over the rows
+        kinds_here = set(np.unique(table.column("kind")))   # not a Python loop over the rows
         if mode not in ob.MODES and kinds_here & set(ob.LINK_KINDS):
             raise InputError("unknown link mode", file=source, column="doppler_mode", found=mode,
                              expected="one-way or two-way (a round trip through a transponder of ratio 1)")
         carriers.append(stated_carrier(meta, file=source,
                                        needed="doppler" in kinds_here and (kinds is None or "doppler" in kinds)))
         models.append(meta.get("range_rate_model"))
-        sub = frame[["time", "station", "pass_id", "kind", "value", "sigma"]].copy()
-        sub["_source"] = source
-        sub["_carrier"] = carriers[-1]
-        sub["_mode"] = mode if mode in ob.MODES else "one-way"     # angles only: the link does not matter
-        sub["_row"] = np.arange(len(sub))
-        frames.append(sub)
+        part = {name: table.column(name) for name in SAMPLE_COLUMNS[:6]}
+        part["_source"] = np.full(n, source, dtype=object)
+        part["_carrier"] = np.full(n, np.nan if carriers[-1] is None else carriers[-1], dtype=float)
+        part["_mode"] = np.full(n, mode if mode in ob.MODES else "one-way", dtype=object)  # angles: any link
+        part["_row"] = np.arange(n)
+        parts.append(part)
         sources.append(source)
-    frame = pd.concat(frames, ignore_index=True)
+    frame = {name: np.concatenate([p[name] for p in parts]) for name in SAMPLE_COLUMNS}
     if kinds is not None:
-        frame = frame[frame["kind"].isin(list(kinds))].reset_index(drop=True)
-        if len(frame) == 0:
+        keep = np.isin(frame["kind"], list(kinds))
+        frame = {name: values[keep] for name, values in frame.items()}
+        if not keep.any():
             raise InputError("no samples of the requested kinds", column="--kinds", found=",".join(kinds),
                              expected="kinds present in the pass files")
     return frame, models
 
 
 def check_samples(frame):
-    bad = ~(np.isfinite(frame["value"].to_numpy(float)))
-    bad_sigma = ~(np.isfinite(frame["sigma"].to_numpy(float)) & (frame["sigma"].to_numpy(float) > 0))
+    value, sigma = np.asarray(frame["value"], float), np.asarray(frame["sigma"], float)
+    bad = ~(np.isfinite(value))
+    bad_sigma = ~(np.isfinite(sigma) & (sigma > 0))
     for mask, column, expected in ((bad, "value", "a finite number"), (bad_sigma, "sigma", "a positive number")):
         if mask.any():
             i = int(np.flatnonzero(mask)[0])
-            r = frame.iloc[i]
-            raise InputError(f"invalid {column} at {pd.Timestamp(r['time']).isoformat()} ({r['station']}, "
-                             f"{r['kind']}; sample {int(r['_row']) + 1} of the file)", file=r["_source"],
-                             column=column, found=r[column], expected=expected)
+            raise InputError(f"invalid {column} at {iso_utc_offset(frame['time'][i])} ({frame['station'][i]}, "
+                             f"{frame['kind'][i]}; sample {int(frame['_row'][i]) + 1} of the file)",
+                             file=frame["_source"][i], column=column, found=frame[column][i], expected=expected)
 
 
 def resolve_stations(frame, tables, stations):
@@ -65,10 +71,10 @@ def resolve_stations(frame, tables, stations):
     for source, table in tables:
         for name, st in table.stations().items():
             known.setdefault(name, st)
-    missing = sorted(set(frame["station"].astype(str).unique()) - set(known))
+    missing = sorted(set(np.unique(frame["station"])) - set(known))
     if missing:
         name = missing[0]
-        src = frame.loc[frame["station"] == name, "_source"].iloc[0]
+        src = frame["_source"][np.flatnonzero(frame["station"] == name)[0]]
         raise InputError("unknown station", file=src, column="station", found=name,
                          expected="a station of --stations or of the pass file's metadata"
                          + (f" ({', '.join(sorted(known))})" if known else " (give --stations STATIONS.csv)"))
@@ -122,18 +128,18 @@ def utc_times(frame) -> np.ndarray:
 
 
 def measurement_set(frame, t64, epoch, known, earth: str, eop) -> ob.MeasurementSet:
-    """The :class:`~trackproc.models.observation.MeasurementSet` of ``frame``: reception times
+    """The :class:`~trackproc.models.observation.MeasurementSet` of ``frame`` (:func:`merge_tables`): reception times
     in SI seconds from ``epoch`` (through TAI), every station in GCRF at its reception times
     (IAU 2006/2000A) with its velocity, acceleration and GCRF -> ENU rotation."""
     epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(epoch))
     jd1, jd2 = ts.datetime64_to_jd_utc(t64)
     t_s = np.asarray(ts.seconds_since((jd1, jd2), epoch_jd), float)
-    n = len(frame)
+    n = len(frame["time"])
     r_st = np.empty((n, 3))
     v_st = np.empty((n, 3))
     a_st = np.empty((n, 3))
     enu = np.empty((n, 3, 3))
-    station_col = frame["station"].astype(str).to_numpy(dtype=object)
+    station_col = frame["station"]
     for name in sorted(set(station_col)):
         rows = np.flatnonzero(station_col == name)
         st = known[name]
@@ -141,8 +147,7 @@ def measurement_set(frame, t64, epoch, known, earth: str, eop) -> ob.Measurement
         track = geodesy.station_gcrf(r_itrf, jd1[rows], jd2[rows], eop)
         r_st[rows], v_st[rows], a_st[rows] = track.r, track.v, track.a
         enu[rows] = geodesy.enu_matrix(lat, lon) @ track.gcrf_to_itrf
-    return ob.MeasurementSet(t_s=t_s, kind=frame["kind"].astype(str).to_numpy(dtype=object), station=station_col,
-                             pass_id=frame["pass_id"].astype(str).to_numpy(dtype=object),
-                             observed=frame["value"].to_numpy(float), sigma=frame["sigma"].to_numpy(float),
-                             r_st=r_st, v_st=v_st, gcrf_to_enu=enu, carrier_hz=frame["_carrier"].to_numpy(float),
-                             a_st=a_st, mode=frame["_mode"].to_numpy(dtype=object))
+    return ob.MeasurementSet(t_s=t_s, kind=frame["kind"], station=station_col, pass_id=frame["pass_id"],
+                             observed=np.asarray(frame["value"], float), sigma=np.asarray(frame["sigma"], float),
+                             r_st=r_st, v_st=v_st, gcrf_to_enu=enu, carrier_hz=frame["_carrier"], a_st=a_st,
+                             mode=frame["_mode"])

@@ -11,7 +11,6 @@ import math
 from typing import Optional
 
 import numpy as np
-import pandas as pd
 
 from trackproc.dynamics import geodesy, propagator
 from trackproc.dynamics import measurement_spectra as ms
@@ -20,6 +19,7 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.io import smoothing_record
 from trackproc.io.tle import parse_tle, tle_state
 from trackproc.io.validate import stated_carrier
+from trackproc.isotime import iso_utc_offset
 from trackproc.methods import refinement as rf
 from trackproc.methods.least_squares import Prior
 from trackproc.models import observation as ob
@@ -110,14 +110,13 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
         raise InputError("a Doppler offset on range-rate samples needs the carrier frequency", file=source,
                          column="carrier_hz", found=meta.get("carrier_hz"),
                          expected="carrier_hz in the metadata, or --doppler-bias none")
-    frame = sub.frame
-    sig = frame["sigma"].to_numpy(float)
+    sig = np.asarray(sub.column("sigma"), float)
     if not np.all(np.isfinite(sig) & (sig > 0)):
         i = int(np.flatnonzero(~(np.isfinite(sig) & (sig > 0)))[0])
-        raise InputError(f"invalid sigma at {pd.Timestamp(frame['time'].iloc[i]).isoformat()} (sample {i + 1} of the "
+        raise InputError(f"invalid sigma at {iso_utc_offset(sub.column('time')[i])} (sample {i + 1} of the "
                          "pass)", file=source, column="sigma", found=sig[i], expected="a positive number")
-    if len(frame) < 8:
-        raise ProcessingError(f"too few samples in the pass: {len(frame)} (at least 8 are needed)")
+    if sub.n_rows < 8:
+        raise ProcessingError(f"too few samples in the pass: {sub.n_rows} (at least 8 are needed)")
 
     curve = curve if curve is not None else smoothed_curve(sub, kind, station, pass_id, source)
     t_traverse, how = curve_traverse_epoch(curve, warnings, opt.traverse_epoch)
@@ -137,7 +136,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
                           earth=opt.earth, range_rate_model=opt.range_rate_model, max_iterations=opt.max_iterations,
                           clip=opt.clip, epoch=t_traverse, kinds=[kind], modifiers=opt.modifiers,
                           oscillator_noise=opt.oscillator_noise)
-    problem = build_problem([(source, PassTable(frame, meta))], initial, stations, est, eop)
+    problem = build_problem([(source, sub)], initial, stations, est, eop)
     mu = propagator.force_parameters(opt.force)[0]
     if source == "default":
         rv0 = problem.x0[:6]
@@ -181,11 +180,11 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
                      carrier_hz=carrier, station_axis=axis / np.linalg.norm(axis), warnings=warnings,
                      station_time_sigma_s=getattr(st, "time_sigma_s", None))
     if opt.cost == "integral":
-        ref.integral = integral_setup(ref, frame)
+        ref.integral = integral_setup(ref, sub)
     return ref
 
 
-def integral_setup(ref: Refinement, frame) -> dict:
+def integral_setup(ref: Refinement, table: PassTable) -> dict:
     """Gauss-Legendre nodes on the covered parts of the pass, the curve there (range-rate), the
     pseudo-sigmas, the bias coefficients and the basis (for the sandwich covariance). Implements
     seed 004 eq. 14 (the integral cost, by quadrature on the smoothed curve)."""
@@ -205,7 +204,7 @@ def integral_setup(ref: Refinement, frame) -> dict:
     to_rr = range_rate_per_hz(ref.carrier_hz, mode == "two-way") if ref.kind == "doppler" else 1.0
     observed = to_rr * curve.fit(t_poly)
     design = to_rr * curve.fit.design(t_poly)
-    sig = frame["sigma"].to_numpy(float) * abs(to_rr)
+    sig = np.asarray(table.column("sigma"), float) * abs(to_rr)
     n_used = curve.used_t_s.size
     covered = float(sum(b - a for a, b in intervals))
     spacing = covered / max(n_used - len(intervals), 1)

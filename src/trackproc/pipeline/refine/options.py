@@ -7,10 +7,10 @@ from dataclasses import dataclass, field
 from typing import Mapping, Optional
 
 import numpy as np
-import pandas as pd
 
 from trackproc import vocabulary
 from trackproc.vocabulary import REFINE_DOPPLER_BIASES
+from trackproc.pipeline.od.residuals import DeferredField
 
 
 COSTS = ("pointwise", "integral")
@@ -147,7 +147,7 @@ class RefineResult:
     solution: object
     problem: object
     curve: SmoothedCurve
-    residuals: pd.DataFrame
+    residuals: pd.DataFrame = DeferredField()        # built when first read (pandas then)
     observability: object
     constraints: dict
     covariance: np.ndarray

@@ -6,22 +6,19 @@ traverse epoch that curve gives (:func:`curve_traverse_epoch`).
 from __future__ import annotations
 
 import numpy as np
-import pandas as pd
 
 from trackproc.errors import InputError, ProcessingError
 from trackproc.io import smoothing_record
 from trackproc.methods.smoothing import SmoothingError, closest_approach
 from trackproc.pipeline.refine.options import LINK_MODES, RANGE_RATE_KINDS, RefineOptions, SmoothedCurve
-from trackproc.pipeline.od.samples import utc_times
-from trackproc.pipeline.smooth import SmoothOptions, smooth
 from trackproc.types import PassTable
 
 
 def select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple[PassTable, str, str, str]:
-    frame = table.frame
-    if len(frame) == 0:
+    if table.n_rows == 0:
         raise InputError("no samples", file=source, expected="a pass file with one Doppler or range-rate pass")
-    kinds = set(frame["kind"].astype(str).unique())      # not a Python loop over the rows
+    kind_of = table.column("kind")
+    kinds = set(np.unique(kind_of))      # not a Python loop over the rows
     if options.kind is not None:
         if options.kind not in RANGE_RATE_KINDS:
             raise InputError("refine uses Doppler or range-rate", column="--kind", found=options.kind,
@@ -36,15 +33,15 @@ def select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple[
             raise InputError("no Doppler or range-rate samples", file=source, column="kind",
                              found=", ".join(sorted(kinds)), expected="doppler or range_rate (one Doppler station)")
         kind = present[0]
-    sub = frame[frame["kind"].astype(str) == kind]
+    rows = kind_of == kind
+    pass_of = table.column("pass_id")
     if options.pass_id is not None:
-        sub = sub[sub["pass_id"].astype(str) == options.pass_id]
-        if len(sub) == 0:
-            found = ", ".join(sorted(set(frame.loc[frame["kind"] == kind, "pass_id"].astype(str))))
+        rows = rows & (pass_of == options.pass_id)
+        if not rows.any():
+            found = ", ".join(sorted(set(pass_of[kind_of == kind])))
             raise InputError("no such pass", file=source, column="--pass-id", found=options.pass_id,
                              expected=f"one of {found}")
-    pairs = sub[["station", "pass_id"]].astype(str).drop_duplicates()
-    keys = sorted(set(zip(pairs["station"], pairs["pass_id"])))
+    keys = sorted(set(zip(table.column("station")[rows], pass_of[rows])))
     if len(keys) > 1:
         listed = ", ".join(f"{s}/{p}" for s, p in keys[:8]) + (" ..." if len(keys) > 8 else "")
         raise InputError("more than one pass", file=source, column="pass_id", found=listed,
@@ -54,7 +51,7 @@ def select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple[
     if mode not in LINK_MODES:
         raise InputError("unknown link mode", file=source, column="doppler_mode", found=mode,
                          expected=" or ".join(LINK_MODES))
-    return PassTable(sub.reset_index(drop=True), dict(table.meta or {})), kind, station, pass_id
+    return table.take(rows, dict(table.meta or {})), kind, station, pass_id
 
 
 def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source: str) -> SmoothedCurve:
@@ -62,12 +59,12 @@ def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source
     it (seed 004 eq. 1), else fitted here with ``smooth``'s defaults; and its closest approach."""
     meta = sub.meta or {}
     mode = str(meta.get("doppler_mode") or "one-way")
-    times = utc_times(sub.frame)
+    times = sub.column("time")
     rec = smoothing_record.find_fit_record(meta, station, pass_id, kind)
     if rec is not None:
         fit = smoothing_record.fit_from_record(rec)
         epoch = smoothing_record.record_epoch(rec)
-        used = ~sub.frame["flag"].to_numpy(bool) if "flag" in sub.frame.columns else np.ones(len(sub.frame), bool)
+        used = ~np.asarray(sub.column("flag")).astype(bool) if "flag" in sub.column_names else np.ones(sub.n_rows, bool)
         t_used = (times[used] - epoch).astype(np.int64) * 1e-9
         tca, note = None, ""
         try:
@@ -81,6 +78,10 @@ def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source
     if smoothing_record.output_of(meta) == "grid":
         raise InputError("a smoothed grid without its polynomial", file=source, column="smoothing",
                          expected=f"the smoothing record of {station}/{pass_id}/{kind} in the metadata")
+    # start-up: smooth (and pandas) only for a pass that was not smoothed
+    import pandas as pd
+    from trackproc.pipeline.smooth import SmoothOptions, smooth
+
     try:
         result = smooth(PassTable(sub.frame[["time", "station", "pass_id", "kind", "value", "sigma"]], meta),
                         SmoothOptions(), source=source)

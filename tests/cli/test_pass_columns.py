@@ -1,0 +1,78 @@
+"""The pass table's numpy columns (``PassTable.column``, what refine and estimate read without
+pandas) against the DataFrame the same file gives (``PassTable.frame``, what the other commands
+read): the same values, types and rows, also after :meth:`PassTable.take`."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from trackproc.io.passfile import factorize, read_pass_table
+from trackproc.types import PassTable
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def smoothed(tmp_path_factory):
+    out = tmp_path_factory.mktemp("passes")
+    for args in (["ingest", "sample_data/doppler_pass.csv", "--stations", "sample_data/stations.csv",
+                  "--carrier-hz", "2.2e9", "--mode", "one-way", "-o", str(out / "pass.parquet")],
+                 ["smooth", str(out / "pass.parquet"), "-o", str(out / "smoothed.parquet")],
+                 ["smooth", str(out / "pass.parquet"), "-o", str(out / "smoothed.csv")]):
+        subprocess.run([sys.executable, "-m", "trackproc", "-q", *args], check=True, cwd=ROOT)
+    return out
+
+
+def _same(columns_table: PassTable, frame_table: PassTable):
+    assert columns_table.column_names == frame_table.column_names
+    for name in columns_table.column_names:
+        a, b = columns_table.column(name), frame_table.column(name)
+        assert a.dtype == b.dtype, name
+        if a.dtype.kind == "f":
+            np.testing.assert_array_equal(a, b)
+        else:
+            assert list(a) == list(b), name
+
+
+@pytest.mark.parametrize("name", ["pass.parquet", "smoothed.parquet", "smoothed.csv"])
+def test_columns_equal_the_frames(smoothed, name):
+    table = read_pass_table(str(smoothed / name))
+    from_frame = PassTable(read_pass_table(str(smoothed / name)).frame, table.meta)
+    assert table.n_rows == from_frame.n_rows == len(from_frame.frame) > 100
+    _same(table, from_frame)
+    rows = np.arange(table.n_rows) % 3 == 1
+    _same(table.take(rows), from_frame.take(rows))
+    assert table.take(rows).frame.equals(from_frame.take(rows).frame)
+    assert table.frame.equals(from_frame.frame)
+
+
+def test_factorize_is_pandas_factorize():
+    import pandas as pd
+
+    values = np.array(["b", "a", "c", "a", "b", "d"], dtype=object)
+    codes, uniques = factorize(values)
+    want_codes, want_uniques = pd.factorize(values)
+    assert codes.tolist() == want_codes.tolist() and list(uniques) == list(want_uniques)
+
+
+@pytest.mark.parametrize("cells, plain", [
+    (["2026-03-20T09:24:28Z", "2026-03-20T09:24:28.5Z", "2024-02-29T00:00:00.123456789Z"], True),
+    (["2026-03-20T09:24:28Z", "2026-01-01T24:00:00Z"], False),          # pandas' NaT, reported by row
+    (["2026-03-20T09:24:28Z", "2026-02-29T00:00:00Z"], False),
+    (["2026-03-20T09:24:28+00:00"], False),
+    (["2300-01-01T00:00:00Z"], False),                                   # outside the supported years
+])
+def test_csv_times_parsed_by_numpy_are_pandas_times(cells, plain):
+    import pandas as pd
+
+    from trackproc.io.columns import Column
+    from trackproc.io.passfile import _plain_times
+
+    got = _plain_times(Column("time", text=np.array(cells, dtype=object)))
+    assert (got is not None) == plain
+    if plain:
+        want = pd.to_datetime(pd.Series(cells), utc=True, format="ISO8601").dt.tz_localize(None).to_numpy()
+        assert got.tolist() == want.astype("datetime64[ns]").tolist()
