@@ -196,19 +196,22 @@ def gm_transition(phi: np.ndarray, dt: float, gm: dict) -> np.ndarray:
     return phi
 
 
-def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales, gm=None) -> np.ndarray | None:
+def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales, gm=None,
+                  rot=None) -> np.ndarray | None:
     """Q over ``dt`` (scaled variables): state noise compensation in RTN (:func:`~trackproc.methods.sequential.snc_noise`,
     rotated to GCRF at the reference state), the random walks of the biases (``q² dt``), and the
     Gauss–Markov states ``gm`` (:func:`gauss_markov`): a bias ``σ²(1 − e^{−2dt/τ})``, an
     empirical acceleration DMC's exact noise on (position, velocity, acceleration) per RTN axis
-    (:func:`~trackproc.methods.sequential.dmc_noise`), its position and velocity rotated to GCRF."""
+    (:func:`~trackproc.methods.sequential.dmc_noise`), its position and velocity rotated to GCRF.
+    ``rot``: :func:`~trackproc.dynamics.rtn.rtn_rotation` at ``z_abs`` when the caller has it
+    (the sweep computes a segment's at once)."""
     n = scales.size
     q = np.zeros((n, n))
     any_noise = False
     acc = np.asarray(opt.snc_accel, float)
-    rot = None
     if acc.any() and dt > 0:
-        rot = rtn_rotation(z_abs[:3], z_abs[3:6])              # rows R, T, N in GCRF
+        if rot is None:
+            rot = rtn_rotation(z_abs[:3], z_abs[3:6])          # rows R, T, N in GCRF
         psd = rot.T @ np.diag(acc ** 2) @ rot
         q[:6, :6] = sq.snc_noise(dt, psd)
         any_noise = True
@@ -219,6 +222,7 @@ def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales
                 q[i, i] += rate ** 2 * dt
                 any_noise = True
     if gm and dt > 0:
+        blocks = {}                                            # the axes usually share sigma and tau
         for i, (sigma, tau, accel) in gm.items():
             if not accel:
                 q[i, i] += sq.gm_bias_noise(dt, tau, sigma)
@@ -226,11 +230,14 @@ def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales
             if rot is None:
                 rot = rtn_rotation(z_abs[:3], z_abs[3:6])
             u = rot[DMC_NAMES.index(problem.names[i])]        # this axis in GCRF
-            b = sq.dmc_noise(dt, tau, sigma)
-            q[:3, :3] += b[0, 0] * np.outer(u, u)
-            q[:3, 3:6] += b[0, 1] * np.outer(u, u)
-            q[3:6, :3] += b[0, 1] * np.outer(u, u)
-            q[3:6, 3:6] += b[1, 1] * np.outer(u, u)
+            b = blocks.get((sigma, tau))
+            if b is None:
+                b = blocks[(sigma, tau)] = sq.dmc_noise(dt, tau, sigma)
+            uu = np.outer(u, u)
+            q[:3, :3] += b[0, 0] * uu
+            q[:3, 3:6] += b[0, 1] * uu
+            q[3:6, :3] += b[0, 1] * uu
+            q[3:6, 3:6] += b[1, 1] * uu
             q[:3, i] += b[0, 2] * u
             q[i, :3] += b[0, 2] * u
             q[3:6, i] += b[1, 2] * u
