@@ -17,12 +17,11 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from trackproc.dynamics.rtn import rtn_rotation
 from trackproc.errors import InputError
 from trackproc.methods import sequential as sq
 from trackproc.pipeline.filter.options import DIFFUSE_SCALES, FilterOptions
 from trackproc.pipeline.filter.noise import (PassNoise, gauss_markov, gm_transition, noise_states,
-                                              pass_noise, pass_resets, process_noise)
+                                              pass_noise, pass_resets, process_noise_steps)
 from trackproc.pipeline.od import Problem
 
 
@@ -289,10 +288,9 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
         psi = _transition(traj, t_need, n) * scales[None, None, :] / scales[None, :, None]
         z_abs = np.concatenate([traj.state(t_need), np.broadcast_to(x_ref[6:], (t_need.size, n - 6))], axis=1)
         z = z_abs / scales
-        # the RTN axes of process noise at every step of the segment in one call, not one per step
-        rots = rtn_rotation(z_abs[:, :3], z_abs[:, 3:6]) if any(opt.snc_accel) or gm else None
-        # the steps' transitions Ψ(t_k) Ψ(t_{k-1})⁻¹ and inverses Ψ(t_k)⁻¹ likewise (stacked LAPACK calls,
-        # the same per matrix)
+        # the process noise, transitions Ψ(t_k) Ψ(t_{k-1})⁻¹ and inverses Ψ(t_k)⁻¹ of the segment's
+        # steps in one call each, not one per step (stacked LAPACK calls: the same per matrix)
+        qs = process_noise_steps(problem, opt, np.diff(t_need), z_abs[1:], scales, gm) if t_need.size > 1 else None
         steps_phi = np.linalg.solve(psi[:-1].transpose(0, 2, 1), psi[1:].transpose(0, 2, 1)).transpose(0, 2, 1)
         psi_inv = np.linalg.inv(psi)
         off = 0 if kprev < 0 else 1                            # index of step ka in t_need
@@ -320,8 +318,7 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                 phi[k] = steps_phi[j - 1]                               # Ψ(t_k) Ψ(t_{k-1})⁻¹
                 if gm:
                     gm_transition(phi[k], steps_t[k] - steps_t[k - 1], gm)
-                q = process_noise(problem, opt, steps_t[k] - steps_t[k - 1], z_abs[j], scales, gm,
-                                  rot=None if rots is None else rots[j])
+                q = None if qs is None else qs[j - 1]
                 x = z[j] + phi[k] @ (x_f[k - 1] - z[j - 1])
                 p = phi[k] @ p_f[k - 1] @ phi[k].T
                 if q is not None:
