@@ -36,8 +36,12 @@ def scalar_update(x, p, h, innovation, variance):
     s = float(h @ ph) + variance
     k = ph / s
     x = x + k * innovation
-    a = np.eye(x.size) - np.outer(k, h)
-    p = a @ p @ a.T + variance * np.outer(k, k)
+    # in place, without np.outer: a filter calls this once per sample, and its cost was the
+    # temporaries (same numbers)
+    a = np.eye(x.size)
+    a -= k[:, None] * h
+    p = a @ p @ a.T
+    p += variance * (k[:, None] * k)
     return x, 0.5 * (p + p.T), s
 
 
