@@ -31,8 +31,10 @@ DMC = (8e-8, 8e-8, 8e-8, 3600.0)
 def drag():
     """The multistation samples' times, stations and sigmas (range + range-rate, 12 h, 14 passes)
     of the orbit of sample_data/truth_at_start.json (820 km) under J2 and Harris–Priester drag of a
-    10 kg, 1 m² body with Cd × 1.3 (the truth), and the filter's problems with Cd (without and with
-    the empirical RTN acceleration as states). The truth arc ends 79 m from the model's."""
+    10 kg, 1 m² body with Cd × 1.3 (the truth), and the filter's options and problems with Cd
+    (without and with the empirical RTN acceleration as states), built once: a draw replaces only
+    their samples' values, a-priori centre and first guess. The truth arc ends 79 m from the
+    model's."""
     eop, _ = earth_orientation(None, None)
     tables = [("multistation", read_pass_table(str(DATA / "multistation.parquet")))]
     stations = read_stations(str(DATA / "stations.csv"))
@@ -46,14 +48,17 @@ def drag():
                                kinds=["range", "range_rate"], force="full", force_model=fm, **kw)
 
     true_pb = build_problem(tables, truth, stations, options(CD * 1.3), eop)
+    eo = {"plain": options(CD), "dmc": options(CD, estimate_force=["empirical-rtn"])}
     return dict(eop=eop, tables=tables, stations=stations, truth=truth, h=true_pb.model(truth.rv)[0],
-                traj=true_pb.trajectory(truth.rv), plain=options(CD), dmc=options(CD, estimate_force=["empirical-rtn"]))
+                traj=true_pb.trajectory(truth.rv), **eo,
+                problems={k: build_problem(tables, truth, stations, v, eop) for k, v in eo.items()})
 
 
-def _draw(d, eo, seed):
-    """The filter's problem with the truth's samples plus noise and a first guess 100 m / 0.1 m/s
-    off (that a-priori), the empirical accelerations starting at zero."""
-    pb = build_problem(d["tables"], d["truth"], d["stations"], eo, d["eop"])
+def _draw(d, which, seed):
+    """The filter's problem ``which`` (``plain`` or ``dmc``) with the truth's samples plus noise
+    and a first guess 100 m / 0.1 m/s off (that a-priori), the empirical accelerations starting
+    at zero: every input a draw changes is set here, so the problem is reused."""
+    pb = d["problems"][which]
     rng = np.random.default_rng(seed)
     pb.meas.observed = d["h"] + pb.meas.sigma * rng.standard_normal(d["h"].size)
     start = d["truth"].rv + rng.standard_normal(6) * np.array([100.0] * 3 + [0.1] * 3)
@@ -62,11 +67,11 @@ def _draw(d, eo, seed):
     return pb
 
 
-def _run(d, eo, seed, dmc=None):
+def _run(d, which, seed, dmc=None):
     """``(quality, NEES of the last filtered state, NEES of the smoothed state at the epoch)``,
     6 orbit states against the truth's trajectory."""
-    pb = _draw(d, eo, seed)
-    fo = FilterOptions(problem=eo, smooth=True, dmc=dmc)
+    pb = _draw(d, which, seed)
+    fo = FilterOptions(problem=d[which], smooth=True, dmc=dmc)
     sw, hist = fr.run(pb, fo)
     out = [filter_quality(pb, sw, hist, fo)]
     for which, k in (("f", sw.t_s.size - 1), ("s", sw.epoch_step)):
@@ -78,12 +83,12 @@ def _run(d, eo, seed, dmc=None):
 
 @pytest.mark.slow           # two full-force filter runs and the truth's, ~3 s of CPU
 def test_mismodelled_drag_diverges_without_process_noise_and_not_with_dmc(drag):
-    q, nees_f, nees_s = _run(drag, drag["plain"], seed=0)
+    q, nees_f, nees_s = _run(drag, "plain", seed=0)
     codes = {r["code"] for r in q.reasons if r["severity"] != "ok"}
     assert q.verdict != "ok" and "innovations" in codes, q.text()
     assert "diverges" in next(r["message"] for r in q.reasons if r["code"] == "innovations")
     assert nees_f > 1000 and nees_s > 1000
-    q, nees_f, nees_s = _run(drag, drag["dmc"], seed=0, dmc=DMC)
+    q, nees_f, nees_s = _run(drag, "dmc", seed=0, dmc=DMC)
     assert q.verdict == "ok", q.text()
     assert nees_f < 22.5 and nees_s < 22.5          # chi2(6) 99.9 % point
 
@@ -106,7 +111,7 @@ def test_mismodelled_drag_dmc_nees_monte_carlo(drag):
     # automatic choice
     with jit.default("1"):
         for seed in range(100):
-            q, a, b = _run(drag, drag["dmc"], seed, dmc=DMC)
+            q, a, b = _run(drag, "dmc", seed, dmc=DMC)
             nf.append(a)
             ns.append(b)
             ok += q.verdict == "ok"

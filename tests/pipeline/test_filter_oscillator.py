@@ -167,7 +167,13 @@ def test_random_walk_oscillator_nees_over_100_draws():
     wandering draw, the verdict says the filter diverges."""
     from scipy.stats import chi2
 
-    runs = [_mc_draw(seed) for seed in range(MC_DRAWS)]
+    from trackproc.dynamics import jit
+
+    # the compiled Taylor engine for every reference arc: alone, the filter's short segments take
+    # the numpy engine (dynamics/taylor.py COMPILED_MIN_STEPS), half of a draw's CPU; the engines
+    # agree to rounding (~1e-13), the mean NEES moves by 2e-10 of itself
+    with jit.default("1"):
+        runs = [_mc_draw(seed) for seed in range(MC_DRAWS)]
     ok = sum(q.verdict == "ok" for q, _ in runs)
     means = {key: float(np.mean([n[key] for _, n in runs])) for key in ("f6", "f7", "s6", "s7")}
     print(f"mean NEES {means}, verdict ok in {ok} of {MC_DRAWS}")

@@ -36,8 +36,12 @@ def scalar_update(x, p, h, innovation, variance):
     s = float(h @ ph) + variance
     k = ph / s
     x = x + k * innovation
-    a = np.eye(x.size) - np.outer(k, h)
-    p = a @ p @ a.T + variance * np.outer(k, k)
+    # in place, without np.outer: a filter calls this once per sample, and its cost was the
+    # temporaries (same numbers)
+    a = np.eye(x.size)
+    a -= k[:, None] * h
+    p = a @ p @ a.T
+    p += variance * (k[:, None] * k)
     return x, 0.5 * (p + p.T), s
 
 
@@ -58,7 +62,12 @@ def snc_noise(dt: float, psd) -> np.ndarray:
     kinematic transition over the step): ``Q = [[dt³/3 Q̃, dt²/2 Q̃], [dt²/2 Q̃, dt Q̃]]``."""
     dt = abs(float(dt))
     q = np.asarray(psd, float)
-    return np.block([[dt ** 3 / 3.0 * q, dt ** 2 / 2.0 * q], [dt ** 2 / 2.0 * q, dt * q]])
+    m = q.shape[0]
+    out = np.empty((2 * m, 2 * m))              # filled by blocks: np.block costs more than the products
+    out[:m, :m] = dt ** 3 / 3.0 * q
+    out[:m, m:] = out[m:, :m] = dt ** 2 / 2.0 * q
+    out[m:, m:] = dt * q
+    return out
 
 
 def nis_test(chi2: float, dof: int, probability: float = 0.999) -> tuple[float, float]:

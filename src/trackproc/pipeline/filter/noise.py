@@ -197,45 +197,69 @@ def gm_transition(phi: np.ndarray, dt: float, gm: dict) -> np.ndarray:
 
 
 def process_noise(problem: Problem, opt: FilterOptions, dt: float, z_abs, scales, gm=None) -> np.ndarray | None:
-    """Q over ``dt`` (scaled variables): state noise compensation in RTN (:func:`~trackproc.methods.sequential.snc_noise`,
-    rotated to GCRF at the reference state), the random walks of the biases (``q² dt``), and the
-    Gauss–Markov states ``gm`` (:func:`gauss_markov`): a bias ``σ²(1 − e^{−2dt/τ})``, an
-    empirical acceleration DMC's exact noise on (position, velocity, acceleration) per RTN axis
-    (:func:`~trackproc.methods.sequential.dmc_noise`), its position and velocity rotated to GCRF."""
-    n = scales.size
-    q = np.zeros((n, n))
+    """Q over ``dt`` (scaled variables) at the reference state ``z_abs``: one step of
+    :func:`process_noise_steps`; None when ``dt ≤ 0`` or nothing is noisy."""
+    if not dt > 0:
+        return None
+    q = process_noise_steps(problem, opt, np.array([float(dt)]), np.asarray(z_abs, float)[None], scales, gm)
+    return None if q is None else q[0]
+
+
+def process_noise_steps(problem: Problem, opt: FilterOptions, dt, z_abs, scales, gm=None) -> np.ndarray | None:
+    """Q over each of the steps ``dt`` (m,), all > 0, ending at the reference states ``z_abs``
+    (m, n), as (m, n, n) in scaled variables; None when nothing is noisy. State noise
+    compensation in RTN (:func:`~trackproc.methods.sequential.snc_noise`, rotated to GCRF at the
+    reference state), the random walks of the biases (``q² dt``), and the Gauss–Markov states
+    ``gm`` (:func:`gauss_markov`): a bias ``σ²(1 − e^{−2dt/τ})``, an empirical acceleration
+    DMC's exact noise on (position, velocity, acceleration) per RTN axis
+    (:func:`~trackproc.methods.sequential.dmc_noise`), its position and velocity rotated to GCRF.
+    The steps of a segment at once: the sweep's per-step cost was these small products; each
+    step's Q is the same numbers as alone."""
+    dt = np.asarray(dt, float)
+    m, n = dt.size, scales.size
+    q = np.zeros((m, n, n))
     any_noise = False
     acc = np.asarray(opt.snc_accel, float)
     rot = None
-    if acc.any() and dt > 0:
-        rot = rtn_rotation(z_abs[:3], z_abs[3:6])              # rows R, T, N in GCRF
-        psd = rot.T @ np.diag(acc ** 2) @ rot
-        q[:6, :6] = sq.snc_noise(dt, psd)
+
+    def axes():
+        return rot if rot is not None else rtn_rotation(z_abs[:, :3], z_abs[:, 3:6])   # rows R, T, N in GCRF
+
+    if acc.any():
+        rot = axes()
+        psd = rot.transpose(0, 2, 1) @ np.diag(acc ** 2) @ rot
+        q[:, :6, :6] = [sq.snc_noise(d, c) for d, c in zip(dt, psd)]
         any_noise = True
-    if opt.bias_walk and dt > 0:
+    if opt.bias_walk:
         for i, d in enumerate(problem.params.selected):
             rate = opt.bias_walk.get(d.name, opt.bias_walk.get(d.family))
             if rate:
-                q[i, i] += rate ** 2 * dt
+                q[:, i, i] += rate ** 2 * dt
                 any_noise = True
-    if gm and dt > 0:
+    if gm:
+        blocks = {}                            # per (sigma, tau, dt): the axes and steps share most
         for i, (sigma, tau, accel) in gm.items():
             if not accel:
-                q[i, i] += sq.gm_bias_noise(dt, tau, sigma)
+                q[:, i, i] += [sq.gm_bias_noise(d, tau, sigma) for d in dt]
                 continue
-            if rot is None:
-                rot = rtn_rotation(z_abs[:3], z_abs[3:6])
-            u = rot[DMC_NAMES.index(problem.names[i])]        # this axis in GCRF
-            b = sq.dmc_noise(dt, tau, sigma)
-            q[:3, :3] += b[0, 0] * np.outer(u, u)
-            q[:3, 3:6] += b[0, 1] * np.outer(u, u)
-            q[3:6, :3] += b[0, 1] * np.outer(u, u)
-            q[3:6, 3:6] += b[1, 1] * np.outer(u, u)
-            q[:3, i] += b[0, 2] * u
-            q[i, :3] += b[0, 2] * u
-            q[3:6, i] += b[1, 2] * u
-            q[i, 3:6] += b[1, 2] * u
-            q[i, i] += b[2, 2]
+            rot = axes()
+            u = rot[:, DMC_NAMES.index(problem.names[i])]      # this axis in GCRF (m, 3)
+            b = []
+            for d in dt.tolist():
+                if (sigma, tau, d) not in blocks:
+                    blocks[(sigma, tau, d)] = sq.dmc_noise(d, tau, sigma)
+                b.append(blocks[(sigma, tau, d)])
+            b = np.array(b)
+            uu = u[:, :, None] * u[:, None, :]
+            q[:, :3, :3] += b[:, 0, 0, None, None] * uu
+            q[:, :3, 3:6] += b[:, 0, 1, None, None] * uu
+            q[:, 3:6, :3] += b[:, 0, 1, None, None] * uu
+            q[:, 3:6, 3:6] += b[:, 1, 1, None, None] * uu
+            q[:, :3, i] += b[:, 0, 2, None] * u
+            q[:, i, :3] += b[:, 0, 2, None] * u
+            q[:, 3:6, i] += b[:, 1, 2, None] * u
+            q[:, i, 3:6] += b[:, 1, 2, None] * u
+            q[:, i, i] += b[:, 2, 2]
         any_noise = True
     if not any_noise:
         return None

@@ -21,7 +21,7 @@ from trackproc.errors import InputError
 from trackproc.methods import sequential as sq
 from trackproc.pipeline.filter.options import DIFFUSE_SCALES, FilterOptions
 from trackproc.pipeline.filter.noise import (PassNoise, gauss_markov, gm_transition, noise_states,
-                                              pass_noise, pass_resets, process_noise)
+                                              pass_noise, pass_resets, process_noise_steps)
 from trackproc.pipeline.od import Problem
 
 
@@ -288,6 +288,11 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
         psi = _transition(traj, t_need, n) * scales[None, None, :] / scales[None, :, None]
         z_abs = np.concatenate([traj.state(t_need), np.broadcast_to(x_ref[6:], (t_need.size, n - 6))], axis=1)
         z = z_abs / scales
+        # the process noise, transitions Ψ(t_k) Ψ(t_{k-1})⁻¹ and inverses Ψ(t_k)⁻¹ of the segment's
+        # steps in one call each, not one per step (stacked LAPACK calls: the same per matrix)
+        qs = process_noise_steps(problem, opt, np.diff(t_need), z_abs[1:], scales, gm) if t_need.size > 1 else None
+        steps_phi = np.linalg.solve(psi[:-1].transpose(0, 2, 1), psi[1:].transpose(0, 2, 1)).transpose(0, 2, 1)
+        psi_inv = np.linalg.inv(psi)
         off = 0 if kprev < 0 else 1                            # index of step ka in t_need
         if noise_col is not None:
             # a sample's AR(1) noise state enters it with coefficient 1 (the samples' unit)
@@ -310,10 +315,10 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                 p = 0.5 * (p + p.T)
                 phi[k] = np.eye(n)
             else:
-                phi[k] = np.linalg.solve(psi[j - 1].T, psi[j].T).T       # Ψ(t_k) Ψ(t_{k-1})⁻¹
+                phi[k] = steps_phi[j - 1]                               # Ψ(t_k) Ψ(t_{k-1})⁻¹
                 if gm:
                     gm_transition(phi[k], steps_t[k] - steps_t[k - 1], gm)
-                q = process_noise(problem, opt, steps_t[k] - steps_t[k - 1], z_abs[j], scales, gm)
+                q = None if qs is None else qs[j - 1]
                 x = z[j] + phi[k] @ (x_f[k - 1] - z[j - 1])
                 p = phi[k] @ p_f[k - 1] @ phi[k].T
                 if q is not None:
@@ -328,7 +333,7 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                     p[:, i] = 0.0
                     p[i, i] = P0[i, i]
             x_p[k], p_p[k] = x, p
-            inv = np.linalg.inv(psi[j])
+            inv = psi_inv[j]
             while cursor < rows.size and step[rows[cursor]] == k:
                 i = rows[cursor]
                 row = jac[cursor] @ inv
