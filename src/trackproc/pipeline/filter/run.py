@@ -211,7 +211,13 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     absolute) when given; between references the filter works on deviations, so no information
     is lost at a restart. ``noise`` (:func:`pass_noise`): the passes' AR(1) noise states follow
     the problem's parameters in the state (``x_ref0``, ``centre``, ``p0`` include them), the
-    samples' white sigma replaces theirs. Scaled variables inside."""
+    samples' white sigma replaces theirs. Scaled variables inside.
+
+    Over 100 lines on purpose: one recursion whose stages (the reference restarted, a segment's
+    model evaluated, the time update, the scalar updates with editing, the relinearisation) read
+    and write the same step arrays, the reference and the latch; split, each would pass a dozen of
+    them at every step, and the order of the recursion is what a reader checks against Tapley,
+    Schutz & Born (2004) 4.7."""
     meas = problem.meas
     n_par = len(problem.names)
     n_noise = 0 if noise is None else len(noise.states)
