@@ -113,8 +113,8 @@ class Problem:
     def model(self, x):
         """``(computed (N,), jacobian (N, n))`` at the selected parameter values ``x`` (copies of
         the last :data:`MODEL_MEMO` results for the same ``x``, fixed drivers and force model: a
-        refinement evaluates its solution again in the noise model, the step and second-signal
-        scans, and the stale state twice in its gates)."""
+        refinement evaluates its solution again in the noise model and the step and second-signal
+        scans)."""
         x = np.asarray(x, float)
         cols, fixed = self._columns()
         key = (x.tobytes(), repr(sorted(fixed.items())))
