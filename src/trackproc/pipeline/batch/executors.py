@@ -174,7 +174,10 @@ class PoolExecutor:
         method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
         context = multiprocessing.get_context(method)
         if method == "forkserver":
-            context.set_forkserver_preload(["trackproc.pipeline.batch.tasks"])
+            # the server imports the steps' modules (and loads the kernels) once: each worker is
+            # forked with them instead of importing them itself (read when the server starts)
+            context.set_forkserver_preload(["trackproc.pipeline.batch.tasks", "trackproc.pipeline.batch.preload"
+                                            + ("_jit" if jit else "")])
         self.workers = workers
         self.pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=start_worker,
                                         initargs=(os.getpid(), jit))

@@ -169,10 +169,12 @@ def _run_task(task: Task) -> TaskResult:
 
 def _table_numbers(table) -> dict:
     frame = table.frame
-    times = frame["time"]
-    return {"samples": int(len(frame)), "passes": int(frame[["station", "pass_id"]].drop_duplicates().shape[0]),
-            "stations": " ".join(sorted(frame["station"].astype(str).unique())),
-            "kinds": " ".join(sorted(frame["kind"].astype(str).unique())),
+    times = frame["time"].to_numpy()                # numpy: the pandas calls cost ~3 ms a pass
+    stations = frame["station"].astype(str).to_numpy()
+    passes = frame["pass_id"].astype(str).to_numpy()
+    return {"samples": int(len(frame)), "passes": len(set(zip(stations.tolist(), passes.tolist()))),
+            "stations": " ".join(sorted(set(stations.tolist()))),
+            "kinds": " ".join(sorted(set(frame["kind"].astype(str).tolist()))),
             "start_utc": iso_utc(times.min(), 6) if len(frame) else None,
             "end_utc": iso_utc(times.max(), 6) if len(frame) else None}
 

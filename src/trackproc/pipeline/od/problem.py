@@ -38,6 +38,10 @@ from trackproc.io.icgem import load_field
 from trackproc.pipeline.range_corrections import range_correction_modifiers
 
 
+#: Model results a :class:`Problem` keeps (see :meth:`Problem.model`).
+MODEL_MEMO = 4
+
+
 @dataclass
 class Problem:
     """An assembled estimation problem: samples, parameters, model (reusable, e.g. Monte Carlo).
@@ -107,9 +111,24 @@ class Problem:
         return _WithForceParameters(traj) if self.force_names else traj
 
     def model(self, x):
-        """``(computed (N,), jacobian (N, n))`` at the selected parameter values ``x``."""
+        """``(computed (N,), jacobian (N, n))`` at the selected parameter values ``x`` (copies of
+        the last :data:`MODEL_MEMO` results for the same ``x``, fixed drivers and force model: a
+        refinement evaluates its solution again in the noise model and the step and second-signal
+        scans)."""
         x = np.asarray(x, float)
         cols, fixed = self._columns()
+        key = (x.tobytes(), repr(sorted(fixed.items())))
+        memo = self.__dict__.setdefault("_memo", {})
+        hit = memo.get(key)
+        if hit is not None and hit[2] is self.force_model:
+            return hit[0].copy(), hit[1].copy()
+        h, jac = self._model(x, cols, fixed)
+        if len(memo) >= MODEL_MEMO:
+            memo.pop(next(iter(memo)))
+        memo[key] = (h, jac, self.force_model)
+        return h.copy(), jac.copy()
+
+    def _model(self, x, cols, fixed):
         values = dict(fixed)
         values.update({n: x[i] for n, i in cols.items()})
         try:

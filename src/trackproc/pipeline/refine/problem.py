@@ -62,6 +62,9 @@ class Refinement:
     apriori_source: str = ""
     #: the station's ``time_sigma_s`` (stations table or pass metadata; None = not given)
     station_time_sigma_s: Optional[float] = None
+    #: :func:`~trackproc.pipeline.refine.traverse.model_traverse` by solution bytes: the traverse
+    #: loop's last call and the result's are the same propagation (a ``replace`` starts it empty)
+    traverse_memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def time_tag_sigma(self) -> tuple:
         """``(sigma_s, source)`` of the time-tag consider parameter: ``--time-tag-sigma`` when

@@ -52,7 +52,14 @@ def link_range_rate(ref: Refinement, traj, t_s) -> np.ndarray:
 
 def model_traverse(ref: Refinement, x) -> Optional[float]:
     """Seconds from the traverse epoch where the refined orbit's range-rate (by the pass's link,
-    one- or two-way) vanishes (None if not within ±60 s)."""
+    one- or two-way) vanishes (None if not within ±60 s); once per solution of ``ref``."""
+    key = np.asarray(x, float).tobytes()
+    if key not in ref.traverse_memo:
+        ref.traverse_memo[key] = _model_traverse(ref, x)
+    return ref.traverse_memo[key]
+
+
+def _model_traverse(ref: Refinement, x) -> Optional[float]:
     try:
         traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [-62.0, 62.0], force=ref.options.force,
                                     stm=link_mode(ref) == "two-way", frame=ref.problem.frame,

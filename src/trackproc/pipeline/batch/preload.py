@@ -1,0 +1,25 @@
+"""Imported once by the fork server of a batch's process pool, before it forks the workers
+(:class:`~trackproc.pipeline.batch.executors.PoolExecutor`): one BLAS thread, then the modules
+that the input steps import (numpy, pandas, pyarrow, the ingest, smooth and refine pipelines),
+so that each worker starts with them instead of importing them again on its first task
+(~1 s of CPU a worker). :mod:`trackproc.pipeline.batch.preload_jit` adds the compiled kernels.
+
+The fork server imports a preload module with ``except ImportError`` only: nothing here may
+raise; a module that fails to import is imported again, and reported, by the task that needs it.
+"""
+
+from __future__ import annotations
+
+from trackproc.pipeline.batch.executors import single_thread_blas
+
+single_thread_blas()                        # before numpy, in this process as in the workers
+
+try:
+    import numpy  # noqa: F401
+    import pyarrow.parquet  # noqa: F401
+
+    from trackproc.io import passfile, smoothing_record, statefile, stations, tabular  # noqa: F401
+    from trackproc.pipeline import ingest, smooth  # noqa: F401
+    from trackproc.pipeline import refine  # noqa: F401
+except Exception:  # noqa: BLE001 - the workers import what they need themselves
+    pass
