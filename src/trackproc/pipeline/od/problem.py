@@ -117,7 +117,7 @@ class Problem:
         scans)."""
         x = np.asarray(x, float)
         cols, fixed = self._columns()
-        key = (x.tobytes(), repr(sorted(fixed.items())))
+        key = (x.tobytes(), tuple(cols), repr(sorted(fixed.items())))      # the selection too
         memo = self.__dict__.setdefault("_memo", {})
         hit = memo.get(key)
         if hit is not None and hit[2] is self.force_model:
