@@ -331,6 +331,18 @@ def doppler_spread(table, summary, matrix) -> float:
     """The RMS Doppler spread (Hz) at a pass of the fitted TLE's SGP4 prediction under the element
     covariance ``matrix`` (7, 7), the pass's offset and drift removed: the linear map through
     SGP4's partials (central differences), ``sqrt(trace(Π A C Aᵀ Π) / n)``."""
+    return spread(doppler_partials(table, summary), matrix)
+
+
+def spread(a, matrix) -> float:
+    """``sqrt(trace(A C Aᵀ) / n)`` for the partials ``a`` of :func:`doppler_partials` (several
+    covariances of one fit share its partials: 15 SGP4 runs over the pass each)."""
+    return float(np.sqrt(np.trace(a @ np.asarray(matrix) @ a.T) / a.shape[0]))
+
+
+def doppler_partials(table, summary):
+    """``Π A`` of :func:`doppler_spread`: the Doppler's partials (n, 7) at ``table``'s samples
+    with respect to the fitted TLE's elements, offset and drift removed."""
     from trackproc.io.tle import satrec
     from trackproc.methods import tle_fit as tf
 
@@ -352,8 +364,7 @@ def doppler_spread(table, summary, matrix) -> float:
         cols.append((h(x + d)[0] - h(x - d)[0]) / (2 * steps[k]))
     a = np.stack(cols, axis=1)
     b = np.stack([np.ones_like(t), t], axis=1)
-    a = a - b @ np.linalg.lstsq(b, a, rcond=None)[0]          # offset and drift removed
-    return float(np.sqrt(np.trace(a @ np.asarray(matrix) @ a.T) / len(t)))
+    return a - b @ np.linalg.lstsq(b, a, rcond=None)[0]          # offset and drift removed
 
 
 def _curve_difference(table, tle, reference) -> float:
@@ -404,14 +415,14 @@ def covariance_rows(dev: bool = True, model_error=None, protocols=("held-back", 
         share = _curve_difference(held, _tle(res.summary), _tle(own.summary))
         own_sigma = doppler_spread(held, own.summary, own.summary["covariance_without_model_error"])
         me = res.summary["model_error"]
+        a = doppler_partials(held, res.summary)                 # the fit's three covariances share them
         rows.append({"protocol": protocol, "predicted": target, "fitted_passes": len(fit),
                      "noise_hz": round(noise, 2), "fitted_hz": round(fitted, 2), "orbit_share_hz": round(share, 2),
                      "own_fit_sigma_hz": round(own_sigma, 2),
-                     "sigma_hz": round(float(np.hypot(doppler_spread(held, res.summary, res.summary["covariance"][
-                         "matrix"]), own_sigma)), 2),
-                     "sigma_without_model_error_hz": round(float(np.hypot(doppler_spread(
-                         held, res.summary, res.summary["covariance_without_model_error"]), own_sigma)), 2),
-                     "sigma_model_error_only_hz": round(doppler_spread(held, res.summary, me["element_covariance"]), 2),
+                     "sigma_hz": round(float(np.hypot(spread(a, res.summary["covariance"]["matrix"]), own_sigma)), 2),
+                     "sigma_without_model_error_hz": round(float(np.hypot(spread(
+                         a, res.summary["covariance_without_model_error"]), own_sigma)), 2),
+                     "sigma_model_error_only_hz": round(spread(a, me["element_covariance"]), 2),
                      "verdict": res.quality.verdict})
         rows[-1]["normalised"] = round(rows[-1]["orbit_share_hz"] / rows[-1]["sigma_hz"], 2)
         print(json.dumps(rows[-1]), flush=True)

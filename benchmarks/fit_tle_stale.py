@@ -40,7 +40,8 @@ from doptrack_never_worse import STALE_DAYS  # noqa: E402
 
 sys.argv = _argv
 from fit_tle_doptrack import _rms, _tle  # noqa: E402
-from test_refine_realdata import BAD_PASSES, DOPTRACK, EOP, MAX_PAIR_GAP_S, _load, evenings, is_dev  # noqa: E402
+from test_refine_realdata import (BAD_PASSES, DOPTRACK, EOP, MAX_PAIR_GAP_S, _load, evenings, is_dev,  # noqa: E402
+                                  metadata_tle_of)
 from trackproc.io.tle import tle_epoch  # noqa: E402
 from trackproc.pipeline.fit_tle import FitTleOptions, fit_tle  # noqa: E402
 from trackproc.pipeline.orbit_source import OrbitInput, metadata_tle  # noqa: E402
@@ -63,7 +64,7 @@ def catalogue():
     """Every distinct TLE of the passes' metadata, oldest first."""
     out = {}
     for s in _stamps():
-        t = _load(s)[1]
+        t = metadata_tle_of(s)
         out[t.line1] = t
     return sorted(out.values(), key=lambda t: tle_epoch(t))
 

@@ -9,8 +9,10 @@ offset and drift (fitted, 4-sigma editing), which no orbit can predict.
 
 from __future__ import annotations
 
+import copy
 import datetime as dt
 from dataclasses import dataclass
+from functools import lru_cache
 import json
 
 import numpy as np
@@ -35,14 +37,28 @@ MAX_PAIR_GAP_S = 4 * 3600.0
 
 
 def _load(stamp):
-    import yaml
+    """The pass ``stamp`` ingested and the TLE of its metadata. Each file is read once per process
+    (the realdata tests and benchmarks read the same passes many times over); every caller gets a
+    table of its own to change."""
+    table = _ingested(stamp)
+    return type(table)(table.frame.copy(), copy.deepcopy(table.meta)), metadata_tle_of(stamp)
 
+
+@lru_cache(maxsize=None)
+def _ingested(stamp):
     from trackproc.io.tabular import read_raw
     from trackproc.pipeline.ingest import ingest
 
-    table = ingest([read_raw(str(DOPTRACK / "data" / f"Delfi-C3_32789_{stamp}.csv"))]).table
+    return ingest([read_raw(str(DOPTRACK / "data" / f"Delfi-C3_32789_{stamp}.csv"))]).table
+
+
+@lru_cache(maxsize=None)
+def metadata_tle_of(stamp):
+    """The TLE in the metadata of pass ``stamp`` (its CSV not read)."""
+    import yaml
+
     doc = yaml.safe_load((DOPTRACK / "metadata" / f"Delfi-C3_32789_{stamp}.yml").read_text())
-    return table, parse_tle(doc["satellite"]["tle"]["line1"] + "\n" + doc["satellite"]["tle"]["line2"])
+    return parse_tle(doc["satellite"]["tle"]["line1"] + "\n" + doc["satellite"]["tle"]["line2"])
 
 
 class _Sgp4Trajectory:
