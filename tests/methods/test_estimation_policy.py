@@ -134,3 +134,17 @@ def test_the_a_priori_innovation_with_a_consider_term_is_chi2_by_monte_carlo():
     assert abs(with_e.mean() - dof) < 0.15 * dof
     assert abs(np.mean(with_e > chi2_dist.ppf(0.95, dof)) - 0.05) < 0.015
     assert np.mean(without > chi2_dist.ppf(0.999, dof)) > 0.05       # the test without E: far too many
+
+
+def test_one_step_of_the_variance_component_fixed_point():
+    """:func:`prior.adapt_step`, the gate every command iterates: k̂ = χ²/r (Koch 1999 eq. 3.291);
+    stop when it is within 0.1 of 1, cannot be estimated (redundancy ≤ 0.05), or would tighten a
+    stated a-priori; else scale by k̂, never below the stated a-priori."""
+    from trackproc.methods.estimation.prior import adapt_step
+
+    assert adapt_step(40.0, 2.0, 1.0) == (20.0, 20.0)          # loosen by k̂
+    assert adapt_step(6.0, 2.0, 20.0) == (3.0, 60.0)           # and again, from the loosened one
+    assert adapt_step(2.1, 2.0, 60.0) == (1.05, None)          # converged
+    assert adapt_step(1.0, 2.0, 1.0) == (0.5, None)            # never tighter than stated
+    assert adapt_step(1.0, 2.0, 1.5) == (0.5, 1.0)             # back towards the stated one, not below
+    assert adapt_step(40.0, 0.01, 1.0) == (None, None)         # the data cannot check the a-priori

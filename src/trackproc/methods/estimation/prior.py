@@ -199,3 +199,15 @@ def prior_dominance(posterior_cov, prior_cov) -> float:
 def test_report(test: dict) -> dict:
     """The a-priori test (:func:`apriori_test`) as the diagnostics give it."""
     return {k: test[k] for k in ("test", "statistic", "dof", "limit", "conflict")}
+
+
+def adapt_step(chi2: float, redundancy: float, factor: float) -> tuple:
+    """One step of the a-priori's variance-component fixed point (the maximum-likelihood component
+    ``σ²_p = vᵀPv / r_p``, Koch 1999 eq. 3.291: :func:`~trackproc.methods.quality.prior_variance_component`),
+    the rule of every command's gate: ``(k̂, next factor)``, the next factor None when the iteration
+    stops — k̂ cannot be estimated, is within 0.1 of 1 (converged), or would tighten an a-priori
+    that is not loosened (never below the stated one, ``max(1, factor k̂)``)."""
+    k_hat = qm.prior_variance_component(chi2, redundancy)
+    if k_hat is None or abs(k_hat - 1.0) < 0.1 or (k_hat < 1.0 and factor <= 1.0):
+        return k_hat, None
+    return k_hat, max(1.0, factor * k_hat)

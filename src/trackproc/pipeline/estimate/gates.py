@@ -206,11 +206,10 @@ def adapt_apriori(problem: Problem, opt: EstimateOptions, sol, noise=None):
     priors = problem.priors
     for _ in range(MAX_APRIORI_ADAPT):
         red = qm.prior_redundancy(np.asarray(sol.covariance, float)[:6, :6], state_prior_covariance(priors))
-        k_hat = qm.prior_variance_component(chi2, red)
+        k_hat, trial_factor = pr.adapt_step(chi2, red, factor)
         history.append({"factor": factor, "chi2": chi2, "redundancy": red, "component": k_hat})
-        if k_hat is None or abs(k_hat - 1.0) < 0.1 or (k_hat < 1.0 and factor <= 1.0):
+        if trial_factor is None:
             break
-        trial_factor = max(1.0, factor * k_hat)
         trial = scaled_priors(problem.priors, trial_factor)
         try:
             sol = problem.solve(max_iterations=opt.max_iterations, clip=opt.clip, rank_rtol=opt.rank_rtol,

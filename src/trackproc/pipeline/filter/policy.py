@@ -132,11 +132,10 @@ def adapt(first: Candidate, prior: PriorAt, test: dict, rerun: Callable[[float],
     cand, factor, chi2, history, failure = first, 1.0, test["chi2"], [], None
     for _ in range(MAX_APRIORI_ADAPT):
         red = qm.prior_redundancy(np.asarray(cand.back_p, float)[:6, :6], prior.p0[:6, :6] * factor)
-        k_hat = qm.prior_variance_component(chi2, red)
+        k_hat, trial = pr.adapt_step(chi2, red, factor)
         history.append({"factor": factor, "chi2": chi2, "redundancy": red, "component": k_hat})
-        if k_hat is None or abs(k_hat - 1.0) < 0.1 or (k_hat < 1.0 and factor <= 1.0):
+        if trial is None:
             break
-        trial = max(1.0, factor * k_hat)
         try:
             cand = rerun(trial)
         except (ProcessingError, np.linalg.LinAlgError) as exc:

@@ -263,11 +263,11 @@ def solve_adapted(ref: Refinement, start_factor: float = 1.0, x0=None, first=Non
         pcov = pr.state_prior_covariance(work.priors)
         red = (qm.prior_redundancy(np.asarray(work.covariance(sol, kkt), float)[:6, :6], pcov)
                if pcov is not None else math.nan)
-        k_hat = qm.prior_variance_component(chi2, red)
+        k_hat, following = pr.adapt_step(chi2, red, factor)
         history.append({"factor": factor, "chi2": chi2, "redundancy": red, "component": k_hat})
-        if k_hat is None or abs(k_hat - 1.0) < 0.1 or (k_hat < 1.0 and factor <= 1.0):
+        if following is None:
             break
-        factor = max(1.0, factor * k_hat)
+        factor = following
         try:
             trial = with_scaled_priors(ref, factor)
             # from the previous solution a consistent scale converges in a few iterations
