@@ -298,3 +298,20 @@ def test_refine_and_estimate_do_not_import_pandas(tmp_path):
         [r.stdout + r.stderr[-1000:] for r in results]
     assert (tmp_path / "refined.json").read_bytes() == (tmp_path / "with.json").read_bytes()
     assert (tmp_path / "r.csv").read_text().count("\n") > 100
+
+
+@pytest.mark.subprocess
+def test_estimate_imports_scipy_special_only_for_an_edited_pass(tmp_path):
+    """``estimate`` needs scipy.special (~30 ms of CPU) only for the edited-pass test's binomial
+    tail: a run where no pass loses more than 10 % of its samples (the shipped multistation set,
+    default editing) does not import it; the run with ``--clip 0`` neither."""
+    root = __import__("pathlib").Path(__file__).resolve().parents[2]
+    probe = ("import sys; from trackproc.cli import app as a; "
+             "print(a._main({!r}), 'scipy.special' in sys.modules, 'scipy.linalg' in sys.modules)")
+    base = ["-q", "estimate", "sample_data/multistation.parquet", "--initial", "sample_data/stale.json",
+            "--apriori-initial", "--range-bias", "-o"]
+    results = [subprocess.run([sys.executable, "-c", probe.format(args)], capture_output=True, text=True, cwd=root)
+               for args in (base + [f"{tmp_path}/a.json"], base + [f"{tmp_path}/b.json", "--clip", "0"])]
+    # scipy.linalg loaded: the estimation ran (the noise model), only scipy.special was left out
+    assert [r.stdout.split() for r in results] == [["0", "False", "True"]] * 2, \
+        [r.stdout + r.stderr[-1000:] for r in results]

@@ -172,21 +172,29 @@ def add_edited_pass(q, problem: Problem, sol, clip: float | None) -> None:
     probability at most ``p0 = 2 Φ(-clip)``, and the pass's count is tested against Binomial(n, p0)
     at 0.001/m for the worst of m passes. A pass of another kind than its label (two-way Doppler
     read as one-way) is edited whole and the solution stays right, but silently without it."""
-    from scipy.special import bdtrc, ndtr  # start-up: scipy.special (~0.25 s) only for an edited pass
-
     if not clip:
         return
     meas = problem.meas
     edited = np.asarray(sol.edited, bool)
+    if not edited.any():
+        return
     station, pass_id = meas.station.astype(str), meas.pass_id.astype(str)
     keys = sorted(set(zip(station, pass_id)))
+    counts = []
+    for st, pid in keys:
+        sel = (station == st) & (pass_id == pid)
+        counts.append((st, pid, int(sel.sum()), int(edited[sel].sum())))
+    over = [c for c in counts if c[3] > 0.1 * c[2]]
+    if not over:
+        return
+    # start-up: scipy.special (~30 ms of CPU) only for a pass more than 10 % edited
+    from scipy.special import bdtrc, ndtr
+
     p0 = 2.0 * float(ndtr(-float(clip)))
     alpha = (1.0 - qm.GATE_PROBABILITY) / max(len(keys), 1)
     bad = []
-    for st, pid in keys:
-        sel = (station == st) & (pass_id == pid)
-        n, k = int(sel.sum()), int(edited[sel].sum())
-        if k > 0.1 * n and float(bdtrc(k - 1, n, p0)) < alpha:     # P(K >= k)
+    for st, pid, n, k in over:
+        if float(bdtrc(k - 1, n, p0)) < alpha:     # P(K >= k)
             bad.append((k / n, f"{st}/{pid}", k, n))
     if bad:
         bad.sort(reverse=True)
