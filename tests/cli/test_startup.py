@@ -315,3 +315,31 @@ def test_estimate_imports_scipy_special_only_for_an_edited_pass(tmp_path):
     # scipy.linalg loaded: the estimation ran (the noise model), only scipy.special was left out
     assert [r.stdout.split() for r in results] == [["0", "False", "True"]] * 2, \
         [r.stdout + r.stderr[-1000:] for r in results]
+
+
+@pytest.mark.subprocess
+def test_propagate_does_not_import_pandas(tmp_path):
+    """``propagate`` writes Parquet, Arrow, CSV and OEM from numpy columns (io/ephemeris.py,
+    io/tables.py's buffer-built Arrow arrays): a fresh interpreter never imports pandas (~0.25 s
+    of CPU) or pyarrow.compute, with a station's predictions and a propagated covariance too;
+    ``info`` and the ephemeris reader still read what it wrote."""
+    root = __import__("pathlib").Path(__file__).resolve().parents[2]
+    probe = ("import sys; from trackproc.cli import app as a; "
+             "print(a._main({!r}), 'pandas' in sys.modules, 'pyarrow.compute' in sys.modules)")
+    base = ["-q", "propagate", "sample_data/stale.json", "--span", "2h", "--step", "60"]
+    station = ["--at-station", "ZHY", "--stations", "sample_data/stations.csv", "--carrier-hz", "2.2e9"]
+    runs = [base + station + ["-o", f"{tmp_path}/e.parquet"], base + station + ["-o", f"{tmp_path}/e.csv"],
+            base + ["--stm", "--format", "arrow", "-o", f"{tmp_path}/e.arrow"],
+            base + ["--format", "oem", "-o", f"{tmp_path}/e.oem"]]
+    results = [subprocess.run([sys.executable, "-c", probe.format(args)], capture_output=True, text=True, cwd=root)
+               for args in runs]
+    assert [r.stdout.split() for r in results] == [["0", "False", "False"]] * 4, \
+        [r.stdout + r.stderr[-1000:] for r in results]
+    from trackproc.io.ephemeris import read_ephemeris
+
+    parquet, csv = read_ephemeris(str(tmp_path / "e.parquet")), read_ephemeris(str(tmp_path / "e.csv"))
+    assert len(parquet) == 121 and "doppler_hz" in parquet.columns and "sigma_range_m" in parquet.columns
+    assert list(parquet.columns) == list(csv.columns)
+    assert __import__("numpy").array_equal(parquet.states, csv.states)
+    assert "stm_1_4" in read_ephemeris(str(tmp_path / "e.arrow")).columns
+    assert main(["-q", "info", str(tmp_path / "e.parquet")]) == 0
