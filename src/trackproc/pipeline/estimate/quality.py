@@ -17,6 +17,32 @@ from trackproc.pipeline.od.problem import Problem
 from trackproc.pipeline.timing import add_timing_reason
 
 
+def groups(*columns) -> list:
+    """``[(key, rows), ...]``: each distinct tuple of ``columns`` (equal-length arrays of text) in
+    sorted order, as ``sorted(set(zip(*columns)))``, with the indices of its rows, increasing.
+    By integer codes (each column's rank among its sorted distinct values) rather than a Python
+    pass over the tuples and a string comparison per key: a day of samples has ~24,000 rows and
+    ~40 passes."""
+    columns = [np.asarray(c).astype(str) for c in columns]
+    if not columns or columns[0].size == 0:
+        return []
+    code = np.zeros(columns[0].size, np.int64)
+    uniques = []
+    for col in columns:
+        values, inverse = np.unique(col, return_inverse=True)
+        uniques.append(values)
+        code = code * values.size + inverse.reshape(-1)
+    order = np.argsort(code, kind="stable")
+    out = []
+    for rows in np.split(order, np.flatnonzero(np.diff(code[order])) + 1):
+        c, key = int(code[rows[0]]), []
+        for values in reversed(uniques):
+            c, r = divmod(c, values.size)
+            key.append(values[r])
+        out.append((tuple(reversed(key)), rows))
+    return out
+
+
 def pass_residuals(problem: Problem, sol) -> list:
     """Per pass and kind (station/pass kind), the kept normalised residuals in time order:
     ``{"pass", "n", "chi2", "whiteness"}`` (:func:`~trackproc.methods.quality.whiteness`)."""
@@ -24,12 +50,10 @@ def pass_residuals(problem: Problem, sol) -> list:
     kept = ~np.asarray(sol.edited, bool)
     z = np.asarray(sol.normalized, float)
     passes = []
-    station, pass_id, kind = meas.station.astype(str), meas.pass_id.astype(str), meas.kind.astype(str)
-    for key in sorted(set(zip(station, pass_id, kind))):
-        rows = kept & (station == key[0]) & (pass_id == key[1]) & (kind == key[2])
-        if not rows.any():
+    for key, rows in groups(meas.station, meas.pass_id, meas.kind):
+        idx = rows[kept[rows]]
+        if not idx.size:
             continue
-        idx = np.flatnonzero(rows)
         idx = idx[np.argsort(problem.times[idx], kind="stable")]
         passes.append({"pass": f"{key[0]}/{key[1]} {key[2]}", "n": int(idx.size), "chi2": float(z[idx] @ z[idx]),
                        "whiteness": qm.whiteness(z[idx])})
@@ -67,16 +91,14 @@ def add_step(q, problem: Problem, sol, noise_report: dict | None = None) -> None
         return
     idx, jw, z, cov = w
     meas = problem.meas
-    station, pass_id = meas.station.astype(str)[idx], meas.pass_id.astype(str)[idx]
-    kind = meas.kind.astype(str)[idx]
+    station, pass_id, kind = meas.station[idx], meas.pass_id[idx], meas.kind[idx]
     times = np.asarray(meas.t_s, float)[idx]          # SI seconds from the solution epoch
     sigma = np.asarray(meas.sigma, float)[idx]
     correlated = {k for k, v in (noise_report or {}).items() if v.get("model", "white") != "white"}
     scans = []
-    for key in sorted(set(zip(station, pass_id, kind))):
+    for key, rows in groups(station, pass_id, kind):
         if f"{key[0]}/{key[1]}" in correlated and key[2] in ("doppler", "range_rate"):
             continue
-        rows = np.flatnonzero((station == key[0]) & (pass_id == key[1]) & (kind == key[2]))
         if rows.size < 20:
             continue
         rows = rows[np.argsort(times[rows], kind="stable")]
@@ -115,16 +137,16 @@ def pass_consistency(problem: Problem, sol, scale: float = 1.0) -> list:
     if w is None:
         return []
     idx, jw, z, cov = w
-    station, pass_id = meas.station.astype(str)[idx], meas.pass_id.astype(str)[idx]
-    keys = sorted(set(zip(station, pass_id)))
-    blocks = [(f"{st}/{pid}", (station == st) & (pass_id == pid)) for st, pid in keys]
-    for st in sorted(set(station)):
+    station, pass_id = meas.station[idx], meas.pass_id[idx]
+    passes = groups(station, pass_id)
+    keys = [key for key, _ in passes]
+    blocks = [(f"{st}/{pid}", rows) for (st, pid), rows in passes]
+    for (st,), rows in groups(station):
         count = sum(1 for k in keys if k[0] == st)
         if count > 1 and len(keys) > count:
-            blocks.append((f"{st} (all {count} passes)", station == st))
+            blocks.append((f"{st} (all {count} passes)", rows))
     out = []
-    for name, sel in blocks:
-        rows = np.flatnonzero(sel)
+    for name, rows in blocks:
         t = qm.block_consistency(jw, z, cov, rows)
         t["statistic"] /= scale
         if t["dof"] > 0:
@@ -178,12 +200,8 @@ def add_edited_pass(q, problem: Problem, sol, clip: float | None) -> None:
     edited = np.asarray(sol.edited, bool)
     if not edited.any():
         return
-    station, pass_id = meas.station.astype(str), meas.pass_id.astype(str)
-    keys = sorted(set(zip(station, pass_id)))
-    counts = []
-    for st, pid in keys:
-        sel = (station == st) & (pass_id == pid)
-        counts.append((st, pid, int(sel.sum()), int(edited[sel].sum())))
+    passes = groups(meas.station, meas.pass_id)
+    counts = [(st, pid, int(rows.size), int(edited[rows].sum())) for (st, pid), rows in passes]
     over = [c for c in counts if c[3] > 0.1 * c[2]]
     if not over:
         return
@@ -191,7 +209,7 @@ def add_edited_pass(q, problem: Problem, sol, clip: float | None) -> None:
     from scipy.special import bdtrc, ndtr
 
     p0 = 2.0 * float(ndtr(-float(clip)))
-    alpha = (1.0 - qm.GATE_PROBABILITY) / max(len(keys), 1)
+    alpha = (1.0 - qm.GATE_PROBABILITY) / max(len(passes), 1)
     bad = []
     for st, pid, n, k in over:
         if float(bdtrc(k - 1, n, p0)) < alpha:     # P(K >= k)
@@ -202,7 +220,7 @@ def add_edited_pass(q, problem: Problem, sol, clip: float | None) -> None:
               "passes edited beyond chance (the solution goes without them): " +
               ", ".join(f"{name} {k} of {n} samples" for _, name, k, n in bad[:4]) +
               (f" and {len(bad) - 4} more" if len(bad) > 4 else "") +
-              f" (> 10 % and beyond the 99.9 % point of Binomial(n, {p0:.2g}) for the worst of {len(keys)} passes): "
+              f" (> 10 % and beyond the 99.9 % point of Binomial(n, {p0:.2g}) for the worst of {len(passes)} passes): "
               "check their kind, mode, carrier or time tags", value=bad[0][0], limit=0.1)
 
 
