@@ -38,7 +38,7 @@ def groups(*columns) -> list:
         c, key = int(code[rows[0]]), []
         for values in reversed(uniques):
             c, r = divmod(c, values.size)
-            key.append(values[r])
+            key.append(str(values[r]))
         out.append((tuple(reversed(key)), rows))
     return out
 
