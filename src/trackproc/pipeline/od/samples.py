@@ -29,7 +29,7 @@ def merge_tables(tables, kinds):
         if n == 0:
             raise InputError("no samples", file=source, expected="a pass file with at least one sample")
         mode = meta.get("doppler_mode") or "one-way"
-        kinds_here = set(np.unique(table.column("kind")))   # not a Python loop over the rows
+        kinds_here = set(table.column("kind").tolist())   # not np.unique: a sort of str objects
         if mode not in ob.MODES and kinds_here & set(ob.LINK_KINDS):
             raise InputError("unknown link mode", file=source, column="doppler_mode", found=mode,
                              expected="one-way or two-way (a round trip through a transponder of ratio 1)")
@@ -71,7 +71,7 @@ def resolve_stations(frame, tables, stations):
     for source, table in tables:
         for name, st in table.stations().items():
             known.setdefault(name, st)
-    missing = sorted(set(np.unique(frame["station"])) - set(known))
+    missing = sorted(set(frame["station"].tolist()) - set(known))
     if missing:
         name = missing[0]
         src = frame["_source"][np.flatnonzero(frame["station"] == name)[0]]
