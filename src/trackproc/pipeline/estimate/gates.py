@@ -20,7 +20,8 @@ from trackproc.models import modifiers as md
 from trackproc.pipeline.od.options import EstimateOptions
 from trackproc.pipeline.od import decision as od_decision
 from trackproc.pipeline.od.problem import Problem
-from trackproc.pipeline.estimate.quality import groups, pass_residuals
+from trackproc.pipeline.estimate.quality import pass_residuals
+from trackproc.pipeline.od.samples import groups
 
 
 #: Iterations of the a-priori variance-component adaptation at most (as refine's).

@@ -14,33 +14,8 @@ import numpy as np
 from trackproc.methods import quality as qm
 from trackproc.methods.estimation import decision as dm
 from trackproc.pipeline.od.problem import Problem
+from trackproc.pipeline.od.samples import groups
 from trackproc.pipeline.timing import add_timing_reason
-
-
-def groups(*columns) -> list:
-    """``[(key, rows), ...]``: each distinct tuple of ``columns`` (equal-length arrays of text) in
-    sorted order, as ``sorted(set(zip(*columns)))``, with the indices of its rows, increasing.
-    By integer codes (each column's rank among its sorted distinct values) rather than a Python
-    pass over the tuples and a string comparison per key: a day of samples has ~24,000 rows and
-    ~40 passes."""
-    columns = [np.asarray(c).astype(str) for c in columns]
-    if not columns or columns[0].size == 0:
-        return []
-    code = np.zeros(columns[0].size, np.int64)
-    uniques = []
-    for col in columns:
-        values, inverse = np.unique(col, return_inverse=True)
-        uniques.append(values)
-        code = code * values.size + inverse.reshape(-1)
-    order = np.argsort(code, kind="stable")
-    out = []
-    for rows in np.split(order, np.flatnonzero(np.diff(code[order])) + 1):
-        c, key = int(code[rows[0]]), []
-        for values in reversed(uniques):
-            c, r = divmod(c, values.size)
-            key.append(str(values[r]))
-        out.append((tuple(reversed(key)), rows))
-    return out
 
 
 def pass_residuals(problem: Problem, sol) -> list:

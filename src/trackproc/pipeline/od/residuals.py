@@ -8,22 +8,25 @@ import numpy as np
 from trackproc.models import observation as ob
 from trackproc.pipeline.od.options import UNITS
 from trackproc.pipeline.od.problem import Problem
+from trackproc.pipeline.od.samples import groups
 
 
 def rms_table(problem: Problem, sol) -> dict:
     """Per station and kind: counts, edited, RMS (unit) and WRMS (normalized) of kept samples."""
     out = {}
     meas = problem.meas
-    for st in sorted(set(meas.station)):
+    edited = np.asarray(sol.edited, bool)
+    rows_of = dict(groups(meas.station, meas.kind))        # (station, kind) -> its rows, increasing
+    for st in sorted({st for st, _ in rows_of}):
         for kind in ob.KINDS:
-            rows = (meas.station == st) & (meas.kind == kind)
-            if not rows.any():
+            rows = rows_of.get((st, kind))
+            if rows is None:
                 continue
-            kept = rows & ~sol.edited
+            kept = rows[~edited[rows]]
             r = sol.residual[kept]
             z = sol.normalized[kept]
             out.setdefault(st, {})[kind] = {
-                "n": int(rows.sum()), "edited": int((rows & sol.edited).sum()), "unit": UNITS[kind],
+                "n": int(rows.size), "edited": int(edited[rows].sum()), "unit": UNITS[kind],
                 "rms": float(np.sqrt(np.mean(r * r))) if r.size else None,
                 "mean": float(np.mean(r)) if r.size else None,
                 "wrms": float(np.sqrt(np.mean(z * z))) if z.size else None}

@@ -1,9 +1,9 @@
-"""``pipeline/estimate/quality.groups``: the passes of a day of samples by integer codes equal
+"""``pipeline/od/samples.groups``: the passes of a day of samples by integer codes equal
 the Python grouping it replaced (``sorted(set(zip(...)))`` and a boolean mask per key)."""
 
 import numpy as np
 
-from trackproc.pipeline.estimate.quality import groups
+from trackproc.pipeline.od.samples import groups
 
 
 def _reference(*columns):
