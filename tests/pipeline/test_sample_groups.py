@@ -33,3 +33,15 @@ def test_groups_equal_the_sorted_tuples_and_their_masks():
     assert groups(np.array([], dtype=object)) == []
     sub = np.flatnonzero(rng.random(n) > 0.3)                   # a subset, as the kept rows
     assert [k for k, _ in groups(station[sub], kind[sub])] == [k for k, _ in _reference(station[sub], kind[sub])]
+
+
+def test_groups_of_columns_that_are_not_strings_are_their_texts():
+    """Numbers or a None in a column group as their text does (``astype(str)``): 10 sorts before 9."""
+    numbers = np.array([9, 10, 1, 10, 9], dtype=object)
+    mixed = np.array(["KIR", None, "KIR", "MAD", None], dtype=object)
+    fixed = np.array(["b", "a", "b", "a", "c"])                  # numpy text, not objects
+    for cols in ((numbers,), (mixed, numbers), (fixed, mixed)):
+        ours, theirs = groups(*cols), _reference(*cols)
+        assert [k for k, _ in ours] == [k for k, _ in theirs] and all(isinstance(p, str) for k, _ in ours for p in k)
+        for (_, a), (_, b) in zip(ours, theirs):
+            np.testing.assert_array_equal(a, b)

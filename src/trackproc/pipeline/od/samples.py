@@ -25,24 +25,39 @@ def groups(*columns) -> list:
     By integer codes (each column's rank among its sorted distinct values) rather than a Python
     pass over the tuples and a string comparison per key: a day of samples has ~24,000 rows and
     ~40 passes."""
-    columns = [np.asarray(c).astype(str) for c in columns]
-    if not columns or columns[0].size == 0:
+    if not columns or np.asarray(columns[0]).size == 0:
         return []
-    code = np.zeros(columns[0].size, np.int64)
+    code = np.zeros(np.asarray(columns[0]).size, np.int64)
     uniques = []
     for col in columns:
-        values, inverse = np.unique(col, return_inverse=True)
+        values, ranks = _ranks(col)
         uniques.append(values)
-        code = code * values.size + inverse.reshape(-1)
+        code = code * len(values) + ranks
     order = np.argsort(code, kind="stable")
     out = []
     for rows in np.split(order, np.flatnonzero(np.diff(code[order])) + 1):
         c, key = int(code[rows[0]]), []
         for values in reversed(uniques):
-            c, r = divmod(c, values.size)
-            key.append(str(values[r]))
+            c, r = divmod(c, len(values))
+            key.append(values[r])
         out.append((tuple(reversed(key)), rows))
     return out
+
+
+def _ranks(column) -> tuple[list, np.ndarray]:
+    """The sorted distinct values of a text column (``str``) and each row's rank among them. A
+    set and a dict of the few names (~1 ms for 24,000 rows) rather than numpy's conversion to
+    fixed-width text and its sort (~2.6 ms); anything but strings goes that way."""
+    items = np.asarray(column).tolist()
+    try:
+        values = sorted(set(items))
+    except TypeError:
+        values = None
+    if values is None or not all(isinstance(v, str) for v in values):
+        text, ranks = np.unique(np.asarray(column).astype(str), return_inverse=True)
+        return [str(v) for v in text], ranks.reshape(-1)
+    rank = {v: i for i, v in enumerate(values)}
+    return [str(v) for v in values], np.fromiter(map(rank.__getitem__, items), np.int64, len(items))
 
 
 def merge_tables(tables, kinds):
