@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import statistics
 import sys
@@ -42,7 +43,13 @@ import time
 import tracemalloc
 from pathlib import Path
 
-import numpy as np
+# One BLAS thread, as the trackproc command sets before numpy loads (cli/app.py): the in-process
+# figures otherwise time a multi-threaded BLAS fighting over two cores (1.9 s against the
+# command's 0.8 s on the shared 2-core machine).
+for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))     # the Orekit driver, shared with tests/cli/test_against_orekit.py

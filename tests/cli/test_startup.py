@@ -117,14 +117,16 @@ def test_the_tour_does_not_import_scipy_optimize(tmp_path):
 
 @pytest.mark.subprocess
 def test_commands_leave_numpys_unused_modules_unloaded_and_usable(tmp_path):
-    """A command that uses scipy (estimate) does not load numpy.f2py and numpy.testing, which
-    scipy only looks at (cli/app.py ``_defer_unused_numpy_modules``: lazy modules); both still
+    """A command does not load numpy.f2py and numpy.testing, which scipy only looks at when it
+    starts (cli/app.py ``_defer_unused_numpy_modules``: lazy modules), not even once scipy.linalg
+    is imported after it (estimate itself no longer imports it: methods/lapack.py); both still
     work when used afterwards; ``--help`` does not even import numpy."""
     probe = ("import sys, contextlib, io; from trackproc.cli import app as a\n"
              "with contextlib.redirect_stdout(io.StringIO()): h = a._main(['estimate', '--help'])\n"
              "numpy_at_help = 'numpy' in sys.modules\n"
              "code = a._main(['-q', 'estimate', 'sample_data/multistation.parquet', '--initial', "
              f"'sample_data/stale.json', '--apriori-initial', '--range-bias', '-o', '{tmp_path}/s.json'])\n"
+             "import scipy.linalg\n"
              "lazy = [type(sys.modules[m]).__name__ == '_LazyModule' for m in a._UNUSED_NUMPY_MODULES]\n"
              "import numpy, numpy.testing; numpy.testing.assert_allclose(1.0, 1.0)\n"
              "print('RESULT', h, numpy_at_help, code, 'scipy.linalg' in sys.modules, *lazy, "
@@ -298,3 +300,50 @@ def test_refine_and_estimate_do_not_import_pandas(tmp_path):
         [r.stdout + r.stderr[-1000:] for r in results]
     assert (tmp_path / "refined.json").read_bytes() == (tmp_path / "with.json").read_bytes()
     assert (tmp_path / "r.csv").read_text().count("\n") > 100
+
+
+@pytest.mark.subprocess
+def test_estimate_imports_neither_scipy_linalg_nor_scipy_special_without_an_edited_pass(tmp_path):
+    """``estimate`` needs scipy.special (~30 ms of CPU) only for the edited-pass test's binomial
+    tail: a run where no pass loses more than 10 % of its samples (the shipped multistation set,
+    default editing) does not import it; the run with ``--clip 0`` neither. Nor scipy.linalg
+    (~70 ms): the noise model's LAPACK routines come from SciPy's wrapper module alone
+    (methods/lapack.py), which is loaded: the noise model ran."""
+    root = __import__("pathlib").Path(__file__).resolve().parents[2]
+    probe = ("import sys; from trackproc.cli import app as a; "
+             "print(a._main({!r}), 'scipy.special' in sys.modules, 'scipy.linalg' in sys.modules, "
+             "'scipy.linalg._flapack' in sys.modules)")
+    base = ["-q", "estimate", "sample_data/multistation.parquet", "--initial", "sample_data/stale.json",
+            "--apriori-initial", "--range-bias", "-o"]
+    results = [subprocess.run([sys.executable, "-c", probe.format(args)], capture_output=True, text=True, cwd=root)
+               for args in (base + [f"{tmp_path}/a.json"], base + [f"{tmp_path}/b.json", "--clip", "0"])]
+    assert [r.stdout.split() for r in results] == [["0", "False", "False", "True"]] * 2, \
+        [r.stdout + r.stderr[-1000:] for r in results]
+
+
+@pytest.mark.subprocess
+def test_propagate_does_not_import_pandas(tmp_path):
+    """``propagate`` writes Parquet, Arrow, CSV and OEM from numpy columns (io/ephemeris.py,
+    io/tables.py's buffer-built Arrow arrays): a fresh interpreter never imports pandas (~0.25 s
+    of CPU) or pyarrow.compute, with a station's predictions and a propagated covariance too;
+    ``info`` and the ephemeris reader still read what it wrote."""
+    root = __import__("pathlib").Path(__file__).resolve().parents[2]
+    probe = ("import sys; from trackproc.cli import app as a; "
+             "print(a._main({!r}), 'pandas' in sys.modules, 'pyarrow.compute' in sys.modules)")
+    base = ["-q", "propagate", "sample_data/stale.json", "--span", "2h", "--step", "60"]
+    station = ["--at-station", "ZHY", "--stations", "sample_data/stations.csv", "--carrier-hz", "2.2e9"]
+    runs = [base + station + ["-o", f"{tmp_path}/e.parquet"], base + station + ["-o", f"{tmp_path}/e.csv"],
+            base + ["--stm", "--format", "arrow", "-o", f"{tmp_path}/e.arrow"],
+            base + ["--format", "oem", "-o", f"{tmp_path}/e.oem"]]
+    results = [subprocess.run([sys.executable, "-c", probe.format(args)], capture_output=True, text=True, cwd=root)
+               for args in runs]
+    assert [r.stdout.split() for r in results] == [["0", "False", "False"]] * 4, \
+        [r.stdout + r.stderr[-1000:] for r in results]
+    from trackproc.io.ephemeris import read_ephemeris
+
+    parquet, csv = read_ephemeris(str(tmp_path / "e.parquet")), read_ephemeris(str(tmp_path / "e.csv"))
+    assert len(parquet) == 121 and "doppler_hz" in parquet.columns and "sigma_range_m" in parquet.columns
+    assert list(parquet.columns) == list(csv.columns)
+    assert __import__("numpy").array_equal(parquet.states, csv.states)
+    assert "stm_1_4" in read_ephemeris(str(tmp_path / "e.arrow")).columns
+    assert main(["-q", "info", str(tmp_path / "e.parquet")]) == 0

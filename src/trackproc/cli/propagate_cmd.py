@@ -275,7 +275,7 @@ def propagate_command(
     eph = result.ephemeris
     steps = (f"{result.trajectory.n_steps} {'DOP853' if force_key == 'full' else 'Taylor'} steps"
              if result.trajectory is not None else "SGP4")
-    log.info("%d rows, %s .. %s, %s (%s) -> %s (%s)", len(eph.frame), eph.meta["start"],
+    log.info("%d rows, %s .. %s, %s (%s) -> %s (%s)", len(eph), eph.meta["start"],
              eph.meta["end"], steps, eph.meta["force_model"],
              "stdout" if out == "-" else out, out_format.value)
 

@@ -40,20 +40,21 @@ from __future__ import annotations
 import csv
 import io
 import os
-from dataclasses import dataclass, field
+from collections.abc import Mapping
 from datetime import datetime, timezone
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
-from trackproc.io.passfile import iso_times, meta_json
-from trackproc.io.tables import arrow_table_bytes
-from trackproc.io.tabular import META_KEY, Problems, column_numbers, column_times, csv_metadata_line, source_table
+from trackproc.io.columns import META_KEY, column_numbers, column_times, source_table
+from trackproc.io.csvtext import csv_metadata_line
+from trackproc.io.passfile import meta_json
+from trackproc.io.problems import Problems
+from trackproc.io.tables import arrow_table_bytes, bool_array, float_array, string_array, utc_time_array
 from trackproc.io.validate import check_name
-from trackproc.isotime import iso_utc
+from trackproc.isotime import iso_utc, iso_utc_array
 
 __all__ = ["COLUMNS", "STATE_NAMES", "STM_COLUMNS", "SIGMA_COLUMNS", "COV_COLUMNS", "MEASUREMENT_COLUMNS",
            "FORMATS", "Ephemeris", "ephemeris_bytes", "write_ephemeris", "read_ephemeris", "oem_text", "oem_segments_text",
@@ -71,50 +72,127 @@ FORMATS = ("parquet", "arrow", "csv", "oem")
 OEM_VERSION = "2.0"
 
 
-@dataclass
 class Ephemeris:
-    """Ephemeris rows (``frame``: :data:`COLUMNS` first, time tz-aware UTC) and metadata."""
+    """Ephemeris rows and metadata (``meta``).
 
-    frame: pd.DataFrame
-    meta: dict = field(default_factory=dict)
+    Held as numpy columns (``columns``: name -> array in :data:`COLUMNS` order first; ``time``
+    naive UTC ``datetime64[ns]``, numbers float64, text object arrays of ``str``), from which
+    the writers work; ``frame``, the pandas DataFrame (time tz-aware UTC), is built when first
+    read, so that ``propagate`` writes Parquet, Arrow, CSV and OEM without importing pandas.
+    ``Ephemeris(frame, meta)`` takes a DataFrame or a mapping of such columns."""
+
+    def __init__(self, frame=None, meta: dict | None = None):
+        if frame is None:
+            raise TypeError("an Ephemeris needs its rows (a DataFrame or a mapping of columns)")
+        self._frame, self._columns = (None, _as_columns(frame)) if isinstance(frame, Mapping) else (frame, None)
+        self.meta = {} if meta is None else meta
+
+    @property
+    def columns(self) -> dict:
+        """name -> numpy column (``time`` naive UTC ``datetime64[ns]``)."""
+        if self._columns is None:
+            self._columns = _frame_columns(self._frame)
+        return self._columns
+
+    @property
+    def frame(self):
+        """The rows as a pandas DataFrame (``time`` tz-aware UTC); pandas is imported here."""
+        if self._frame is None:
+            import pandas as pd  # start-up: pandas only for a caller that asks for the DataFrame
+
+            cols = dict(self._columns)
+            cols["time"] = pd.DatetimeIndex(cols["time"]).tz_localize("UTC")
+            self._frame = pd.DataFrame(cols)
+        return self._frame
+
+    def __len__(self) -> int:
+        return len(self.columns["time"]) if self._frame is None else len(self._frame)
+
+    def take(self, rows) -> "Ephemeris":
+        """The rows ``rows`` (a boolean mask or indices), same metadata."""
+        rows = np.asarray(rows)
+        return Ephemeris({name: values[rows] for name, values in self.columns.items()}, self.meta)
 
     def matrix(self, prefix: str) -> np.ndarray | None:
         """The (N, 6, 6) matrices of the ``stm`` or ``cov`` columns, or None."""
         names = [f"{prefix}_{i}_{j}" for i in range(1, 7) for j in range(1, 7)]
-        if not all(n in self.frame.columns for n in names):
+        columns = self.columns
+        if not all(n in columns for n in names):
             return None
-        return self.frame[names].to_numpy(float).reshape(-1, 6, 6)
+        return _float_matrix(columns, names).reshape(-1, 6, 6)
 
     @property
     def states(self) -> np.ndarray:
         """(N, 6) positions (m) and velocities (m/s), GCRF."""
-        return self.frame[list(COLUMNS[1:])].to_numpy(float)
+        return _float_matrix(self.columns, COLUMNS[1:])
+
+    def __repr__(self) -> str:
+        return f"Ephemeris({len(self)} rows, columns {list(self.columns)})"
 
 
-# --------------------------------------------------------------------------- tables
+def _as_columns(columns: Mapping) -> dict:
+    out = {}
+    for name, values in columns.items():
+        if name == "time":
+            values = np.asarray(values)
+            if values.dtype.kind != "M":      # a tz-aware pandas index: to naive UTC
+                values = values.tz_convert("UTC").tz_localize(None).to_numpy()
+            out[name] = values.astype("datetime64[ns]")
+        else:
+            out[str(name)] = np.asarray(values)
+    return out
 
-def to_arrow(eph: Ephemeris) -> pa.Table:
-    """Arrow table: time as timestamp[ns, UTC], numbers float64, metadata under ``trackproc``."""
-    frame = eph.frame
-    missing = [c for c in COLUMNS if c not in frame.columns]
-    if missing:
-        raise ValueError(f"ephemeris lacks columns {missing}")
+
+def _frame_columns(frame) -> dict:
+    import pandas as pd
+
     times = pd.DatetimeIndex(frame["time"])
-    if times.tz is None:
-        times = times.tz_localize("UTC")
-    arrays = [pa.array(times.tz_convert("UTC").tz_localize(None).as_unit("ns").to_numpy(), pa.timestamp("ns"))
-              .cast(pa.timestamp("ns", tz="UTC"))]
-    fields = [pa.field("time", pa.timestamp("ns", tz="UTC"), nullable=False)]
+    if times.tz is not None:
+        times = times.tz_convert("UTC").tz_localize(None)
+    out = {"time": times.as_unit("ns").to_numpy()}
     for name in frame.columns:
         if name == "time":
             continue
         col = frame[name]
         if pd.api.types.is_bool_dtype(col):
-            array = pa.array(col.to_numpy(bool), pa.bool_())
+            out[str(name)] = col.to_numpy(bool)
         elif pd.api.types.is_numeric_dtype(col):
-            array = pa.array(col.to_numpy(np.float64), pa.float64())
+            out[str(name)] = col.to_numpy(np.float64)
         else:
-            array = pa.array(col.astype(str).to_numpy(object), pa.string())
+            out[str(name)] = col.astype(str).to_numpy(object)
+    return out
+
+
+def _float_matrix(columns: dict, names) -> np.ndarray:
+    out = np.empty((len(columns["time"]), len(names)))
+    for k, name in enumerate(names):
+        out[:, k] = columns[name]
+    return out
+
+
+def _kind(values: np.ndarray) -> str:
+    """``bool``, ``number`` or ``text``: how a column is written (as pandas' dtype tests did)."""
+    kind = values.dtype.kind
+    return "bool" if kind == "b" else "number" if kind in "iufc" else "text"
+
+
+# --------------------------------------------------------------------------- tables
+
+def to_arrow(eph: Ephemeris) -> pa.Table:
+    """Arrow table: time as timestamp[ns, UTC], numbers float64, metadata under ``trackproc``
+    (no pandas metadata: the schema holds only the fields and ``trackproc``)."""
+    columns = eph.columns
+    missing = [c for c in COLUMNS if c not in columns]
+    if missing:
+        raise ValueError(f"ephemeris lacks columns {missing}")
+    arrays = [utc_time_array(columns["time"])]
+    fields = [pa.field("time", pa.timestamp("ns", tz="UTC"), nullable=False)]
+    for name, values in columns.items():
+        if name == "time":
+            continue
+        kind = _kind(values)
+        array = (bool_array(values) if kind == "bool" else float_array(values) if kind == "number"
+                 else string_array(values))
         arrays.append(array)
         fields.append(pa.field(str(name), array.type, nullable=False))
     schema = pa.schema(fields, metadata={META_KEY: meta_json(eph.meta).encode()})
@@ -122,24 +200,22 @@ def to_arrow(eph: Ephemeris) -> pa.Table:
 
 
 def _csv_bytes(eph: Ephemeris) -> bytes:
-    frame = eph.frame
+    columns = eph.columns
     out = io.StringIO()
     out.write(csv_metadata_line(meta_json(eph.meta)))
     writer = csv.writer(out, lineterminator="\n")
-    columns = list(frame.columns)
-    writer.writerow(columns)
-    times = pd.Series(pd.DatetimeIndex(frame["time"]))
-    if times.dt.tz is None:
-        times = times.dt.tz_localize("UTC")
-    cells = [iso_times(times)]
-    for name in columns[1:]:
-        col = frame[name]
-        if pd.api.types.is_bool_dtype(col):
-            cells.append(np.where(col.to_numpy(bool), "true", "false"))
-        elif pd.api.types.is_numeric_dtype(col):
-            cells.append([repr(float(v)) for v in col.to_numpy(np.float64)])
+    names = list(columns)
+    writer.writerow(names)
+    cells = [iso_utc_array(columns["time"])]
+    for name in names[1:]:
+        values = columns[name]
+        kind = _kind(values)
+        if kind == "bool":
+            cells.append(np.where(values.astype(bool), "true", "false"))
+        elif kind == "number":
+            cells.append([repr(float(v)) for v in values.astype(np.float64)])
         else:
-            cells.append(col.astype(str).to_numpy(object))
+            cells.append(values.astype(str).astype(object))
     for row in zip(*cells):
         writer.writerow(row)
     return out.getvalue().encode("utf-8")
@@ -182,19 +258,19 @@ def parse_ephemeris(data: bytes, source: str) -> Ephemeris:
                          found=", ".join(c.name for c in table.columns.values()),
                          expected="columns " + ", ".join(COLUMNS) + " (from trackproc propagate)")
     problems = Problems(table.rows, source)
-    columns = {"time": pd.DatetimeIndex(column_times(table, table.columns["time"], problems)).tz_localize("UTC")}
+    columns = {"time": np.asarray(column_times(table, table.columns["time"], problems), dtype="datetime64[ns]")}
     for key, column in table.columns.items():
         if key == "time":
             continue
         if column.text is not None and key not in COLUMNS and not _numeric_text(column.text):
-            columns[column.name] = pd.Series(column.text, dtype=object).astype(str)
+            columns[column.name] = np.array([str(v) for v in column.text], dtype=object)
             continue
         values, missing_mask, wrong = column_numbers(table, column)
         problems.add("wrong column type", wrong | missing_mask, column=column.name,
                      found=column.text if column.text is not None else "null", expected="a number (SI units)")
         columns[column.name] = values
     problems.resolve(drop_invalid=False)
-    return Ephemeris(pd.DataFrame(columns), dict(table.meta))
+    return Ephemeris(columns, dict(table.meta))
 
 
 def _numeric_text(cells) -> bool:
@@ -286,13 +362,9 @@ def oem_segments_text(segments, *, object_name: str = "UNKNOWN", object_id: str 
 
 
 def _oem_times(eph: Ephemeris) -> np.ndarray:
-    frame = eph.frame
-    if len(frame) == 0:
+    if len(eph) == 0:
         raise ValueError("an OEM needs at least one ephemeris line")
-    times = pd.DatetimeIndex(frame["time"])
-    if times.tz is not None:
-        times = times.tz_convert("UTC").tz_localize(None)
-    t64 = times.as_unit("ns").to_numpy()
+    t64 = eph.columns["time"]
     if np.any(np.diff(t64.astype(np.int64)) <= 0):
         raise ValueError("OEM ephemeris lines must be in increasing time order")
     return t64

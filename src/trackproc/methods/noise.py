@@ -53,12 +53,13 @@ from dataclasses import dataclass, field, replace
 from typing import Optional, Sequence
 
 import numpy as np
-from scipy.linalg import cho_factor, solve_triangular
-from scipy.linalg.lapack import dgeqrf
 
 from trackproc.methods.distributions import chi2_quantile
+from trackproc.methods.lapack import routines
 from trackproc.methods.whitening import (MarkovFactor, PassCovariance, effective_samples,  # noqa: F401  (re-exported)
                                         effective_samples_beyond, markov_grid)
+
+dgeqrf, = routines("dgeqrf")
 
 __all__ = ["NoiseModel", "NoiseFit", "PassCovariance", "fit_noise", "restricted_loglik", "MODELS",
            "effective_samples", "effective_samples_beyond", "lag1_correlation", "candidate_models"]
@@ -171,6 +172,9 @@ class _Reml:
         """``(log|C|, L⁻¹ [X r])``, or None when ``C`` is not positive definite."""
         try:
             if self.dense:
+                # start-up: scipy.linalg (~70 ms) only for times out of order (methods/lapack.py)
+                from scipy.linalg import cho_factor, solve_triangular
+
                 chol, _ = cho_factor(self.covariance(model), lower=True, check_finite=False)
                 return (2.0 * float(np.sum(np.log(np.diag(chol)))),
                         solve_triangular(chol, self.xr, lower=True, check_finite=False))

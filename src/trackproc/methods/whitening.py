@@ -36,10 +36,11 @@ from typing import Optional, Sequence
 import sys
 
 import numpy as np
-from scipy.linalg import solve_triangular
-from scipy.linalg.lapack import dpbtrf, dtbtrs
 
 from trackproc.dynamics import jit
+from trackproc.methods.lapack import routines
+
+dpbtrf, dtbtrs = routines("dpbtrf", "dtbtrs")     # scipy.linalg.lapack's, without scipy.linalg
 
 __all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor",
            "compiled_riccati", "markov_grid"]
@@ -262,8 +263,13 @@ class PassCovariance:
             m = np.asarray(m, float)[keep]
             out = np.empty_like(m)
             for pos, chol in fac:
-                out[pos] = (chol.whiten(m[pos]) if isinstance(chol, MarkovFactor)
-                            else solve_triangular(chol, m[pos], lower=True, check_finite=False))
+                if isinstance(chol, MarkovFactor):
+                    out[pos] = chol.whiten(m[pos])
+                else:
+                    # start-up: scipy.linalg (~70 ms) only for a dense factor (times out of order)
+                    from scipy.linalg import solve_triangular
+
+                    out[pos] = solve_triangular(chol, m[pos], lower=True, check_finite=False)
             out[dpos] = m[dpos] / (dsig if m.ndim == 1 else dsig[:, None])
             return out
 

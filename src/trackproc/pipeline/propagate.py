@@ -25,7 +25,6 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-import pandas as pd
 
 from trackproc import vocabulary
 from trackproc.constants import force_model_constants
@@ -154,11 +153,12 @@ def resolve_station(name: str, stations: Optional[Mapping] = None, pass_table=No
 def pass_times(pass_table, station: Optional[str] = None) -> np.ndarray:
     """Unique sample times (UTC ``datetime64[ns]``, increasing) of a pass table, restricted to
     ``station``'s samples when the table has some."""
-    frame = pass_table.frame
-    if station is not None and (frame["station"] == station).any():
-        frame = frame[frame["station"] == station]
-    times = pd.DatetimeIndex(frame["time"]).tz_convert("UTC").tz_localize(None).as_unit("ns").to_numpy()
-    return np.unique(times)
+    times = pass_table.column("time")
+    if station is not None:
+        mine = pass_table.column("station") == station
+        if mine.any():
+            times = times[mine]
+    return np.unique(np.asarray(times, dtype="datetime64[ns]"))
 
 
 def requested_times(options: PropagateOptions, default_start) -> np.ndarray:
@@ -192,12 +192,10 @@ def propagate_tle(tle, options: PropagateOptions, eop=None) -> PropagateResult:
         prediction = observe(sat, options.station, t_s, carrier_hz=options.carrier_hz or 1.0,
                              range_rate_model=options.range_rate_model, earth=options.earth)
         columns.update(station_columns(prediction, options.carrier_hz))
-    frame = pd.DataFrame(columns)
+    ephemeris = Ephemeris(columns, _meta(None, options, None, eop, False, times, tle=tle))
     if options.visible_only:
-        keep = visible_rows(prediction, options, times)
-        frame = frame[keep].reset_index(drop=True)
-    meta = _meta(None, options, None, eop, False, times, tle=tle)
-    return PropagateResult(ephemeris=Ephemeris(frame, meta), trajectory=None, t_s=t_s, prediction=prediction)
+        ephemeris = ephemeris.take(visible_rows(prediction, options, times))
+    return PropagateResult(ephemeris=ephemeris, trajectory=None, t_s=t_s, prediction=prediction)
 
 
 def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
@@ -259,15 +257,13 @@ def propagate(initial, options: PropagateOptions, eop=None) -> PropagateResult:
             if options.carrier_hz is not None:
                 # the one-way Doppler shift that sigma m/s of range-rate makes (its size)
                 columns["sigma_doppler_hz"] = np.abs(doppler_hz(columns["sigma_range_rate_m_s"], options.carrier_hz))
-    frame = pd.DataFrame(columns)
+    ephemeris = Ephemeris(columns, _meta(initial, options, traj, eop, cov0 is not None, times))
     if options.visible_only:
         keep = visible_rows(prediction, options, times)
-        frame = frame[keep].reset_index(drop=True)
+        ephemeris = ephemeris.take(keep)
         if cov is not None:
             cov = cov[keep]
-    meta = _meta(initial, options, traj, eop, cov0 is not None, times)
-    return PropagateResult(ephemeris=Ephemeris(frame, meta), trajectory=traj, t_s=t_s, prediction=prediction,
-                           covariance=cov)
+    return PropagateResult(ephemeris=ephemeris, trajectory=traj, t_s=t_s, prediction=prediction, covariance=cov)
 
 
 def _meta(initial, options, traj, eop, has_cov, times, tle=None) -> dict:
@@ -392,7 +388,7 @@ def state_columns(states, times) -> dict:
         i = int(np.argmin(radius))
         raise ProcessingError(f"the orbit enters the Earth: |r| = {radius[i] / 1e3:.1f} km at "
                               f"{iso_utc(times[i])} (below {MIN_RADIUS_M / 1e3:.0f} km)")
-    columns = {"time": pd.DatetimeIndex(times).tz_localize("UTC")}
+    columns = {"time": np.asarray(times, dtype="datetime64[ns]")}
     for k, name in enumerate(("x_m", "y_m", "z_m", "vx_m_s", "vy_m_s", "vz_m_s")):
         columns[name] = states[:, k]
     return columns

@@ -70,7 +70,7 @@ def range_correction_modifiers(frame: dict, tables, stations: dict, epoch, *, tr
     if com_offset_m != 0.0:
         out.append(tp.CentreOfMassOffset(com_offset_m))
     ref = ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns"))
-    range_sources = set(np.unique(frame["_source"][is_range]))
+    range_sources = set(frame["_source"][is_range].tolist())
     if solid_tides is None:
         solid_tides = any(_crd_meta(table.meta or {}) for source, table in tables if source in range_sources)
     if solid_tides:

@@ -21,6 +21,7 @@ from trackproc.pipeline.od.options import EstimateOptions
 from trackproc.pipeline.od import decision as od_decision
 from trackproc.pipeline.od.problem import Problem
 from trackproc.pipeline.estimate.quality import pass_residuals
+from trackproc.pipeline.od.samples import groups
 
 
 #: Iterations of the a-priori variance-component adaptation at most (as refine's).
@@ -286,8 +287,9 @@ def pass_noise(problem: Problem, sol, opt: EstimateOptions, jacobian=None):
     blocks, report = [], {}
     wanders = [b for b in problem.modifiers if isinstance(b.modifier, md.OscillatorWander)]
     jac_all = problem.model(np.asarray(sol.values, float))[1] if jacobian is None else jacobian
-    for st, pid in sorted(set(zip(meas.station[rr], meas.pass_id[rr]))):
-        rows = np.flatnonzero(rr & (meas.station == st) & (meas.pass_id == pid))
+    rr_rows = np.flatnonzero(rr)
+    for (st, pid), sub in groups(meas.station[rr_rows], meas.pass_id[rr_rows]):
+        rows = rr_rows[sub]
         keep = keep_all[rows]
         if keep.sum() < 20:
             continue

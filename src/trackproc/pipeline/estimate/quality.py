@@ -14,6 +14,7 @@ import numpy as np
 from trackproc.methods import quality as qm
 from trackproc.methods.estimation import decision as dm
 from trackproc.pipeline.od.problem import Problem
+from trackproc.pipeline.od.samples import groups
 from trackproc.pipeline.timing import add_timing_reason
 
 
@@ -24,12 +25,10 @@ def pass_residuals(problem: Problem, sol) -> list:
     kept = ~np.asarray(sol.edited, bool)
     z = np.asarray(sol.normalized, float)
     passes = []
-    station, pass_id, kind = meas.station.astype(str), meas.pass_id.astype(str), meas.kind.astype(str)
-    for key in sorted(set(zip(station, pass_id, kind))):
-        rows = kept & (station == key[0]) & (pass_id == key[1]) & (kind == key[2])
-        if not rows.any():
+    for key, rows in groups(meas.station, meas.pass_id, meas.kind):
+        idx = rows[kept[rows]]
+        if not idx.size:
             continue
-        idx = np.flatnonzero(rows)
         idx = idx[np.argsort(problem.times[idx], kind="stable")]
         passes.append({"pass": f"{key[0]}/{key[1]} {key[2]}", "n": int(idx.size), "chi2": float(z[idx] @ z[idx]),
                        "whiteness": qm.whiteness(z[idx])})
@@ -67,16 +66,14 @@ def add_step(q, problem: Problem, sol, noise_report: dict | None = None) -> None
         return
     idx, jw, z, cov = w
     meas = problem.meas
-    station, pass_id = meas.station.astype(str)[idx], meas.pass_id.astype(str)[idx]
-    kind = meas.kind.astype(str)[idx]
+    station, pass_id, kind = meas.station[idx], meas.pass_id[idx], meas.kind[idx]
     times = np.asarray(meas.t_s, float)[idx]          # SI seconds from the solution epoch
     sigma = np.asarray(meas.sigma, float)[idx]
     correlated = {k for k, v in (noise_report or {}).items() if v.get("model", "white") != "white"}
     scans = []
-    for key in sorted(set(zip(station, pass_id, kind))):
+    for key, rows in groups(station, pass_id, kind):
         if f"{key[0]}/{key[1]}" in correlated and key[2] in ("doppler", "range_rate"):
             continue
-        rows = np.flatnonzero((station == key[0]) & (pass_id == key[1]) & (kind == key[2]))
         if rows.size < 20:
             continue
         rows = rows[np.argsort(times[rows], kind="stable")]
@@ -115,16 +112,16 @@ def pass_consistency(problem: Problem, sol, scale: float = 1.0) -> list:
     if w is None:
         return []
     idx, jw, z, cov = w
-    station, pass_id = meas.station.astype(str)[idx], meas.pass_id.astype(str)[idx]
-    keys = sorted(set(zip(station, pass_id)))
-    blocks = [(f"{st}/{pid}", (station == st) & (pass_id == pid)) for st, pid in keys]
-    for st in sorted(set(station)):
+    station, pass_id = meas.station[idx], meas.pass_id[idx]
+    passes = groups(station, pass_id)
+    keys = [key for key, _ in passes]
+    blocks = [(f"{st}/{pid}", rows) for (st, pid), rows in passes]
+    for (st,), rows in groups(station):
         count = sum(1 for k in keys if k[0] == st)
         if count > 1 and len(keys) > count:
-            blocks.append((f"{st} (all {count} passes)", station == st))
+            blocks.append((f"{st} (all {count} passes)", rows))
     out = []
-    for name, sel in blocks:
-        rows = np.flatnonzero(sel)
+    for name, rows in blocks:
         t = qm.block_consistency(jw, z, cov, rows)
         t["statistic"] /= scale
         if t["dof"] > 0:
@@ -172,21 +169,25 @@ def add_edited_pass(q, problem: Problem, sol, clip: float | None) -> None:
     probability at most ``p0 = 2 Φ(-clip)``, and the pass's count is tested against Binomial(n, p0)
     at 0.001/m for the worst of m passes. A pass of another kind than its label (two-way Doppler
     read as one-way) is edited whole and the solution stays right, but silently without it."""
-    from scipy.special import bdtrc, ndtr  # start-up: scipy.special (~0.25 s) only for an edited pass
-
     if not clip:
         return
     meas = problem.meas
     edited = np.asarray(sol.edited, bool)
-    station, pass_id = meas.station.astype(str), meas.pass_id.astype(str)
-    keys = sorted(set(zip(station, pass_id)))
+    if not edited.any():
+        return
+    passes = groups(meas.station, meas.pass_id)
+    counts = [(st, pid, int(rows.size), int(edited[rows].sum())) for (st, pid), rows in passes]
+    over = [c for c in counts if c[3] > 0.1 * c[2]]
+    if not over:
+        return
+    # start-up: scipy.special (~30 ms of CPU) only for a pass more than 10 % edited
+    from scipy.special import bdtrc, ndtr
+
     p0 = 2.0 * float(ndtr(-float(clip)))
-    alpha = (1.0 - qm.GATE_PROBABILITY) / max(len(keys), 1)
+    alpha = (1.0 - qm.GATE_PROBABILITY) / max(len(passes), 1)
     bad = []
-    for st, pid in keys:
-        sel = (station == st) & (pass_id == pid)
-        n, k = int(sel.sum()), int(edited[sel].sum())
-        if k > 0.1 * n and float(bdtrc(k - 1, n, p0)) < alpha:     # P(K >= k)
+    for st, pid, n, k in over:
+        if float(bdtrc(k - 1, n, p0)) < alpha:     # P(K >= k)
             bad.append((k / n, f"{st}/{pid}", k, n))
     if bad:
         bad.sort(reverse=True)
@@ -194,7 +195,7 @@ def add_edited_pass(q, problem: Problem, sol, clip: float | None) -> None:
               "passes edited beyond chance (the solution goes without them): " +
               ", ".join(f"{name} {k} of {n} samples" for _, name, k, n in bad[:4]) +
               (f" and {len(bad) - 4} more" if len(bad) > 4 else "") +
-              f" (> 10 % and beyond the 99.9 % point of Binomial(n, {p0:.2g}) for the worst of {len(keys)} passes): "
+              f" (> 10 % and beyond the 99.9 % point of Binomial(n, {p0:.2g}) for the worst of {len(passes)} passes): "
               "check their kind, mode, carrier or time tags", value=bad[0][0], limit=0.1)
 
 

@@ -121,7 +121,9 @@ def time_bias_modifiers(opt: EstimateOptions, stations_here, known: dict, aprior
 
 def bias_modifiers(opt: EstimateOptions, frame, t_s, known, apriori) -> list:
     """Every modifier the options ask for, in the order of their drivers in the extended state."""
-    kinds_by_station = {s: set(np.unique(frame["kind"][frame["station"] == s])) for s in np.unique(frame["station"])}
+    # sets of the Python strings, not np.unique: sorting 24,000 str objects cost ~10 ms
+    kinds_by_station = {s: set(frame["kind"][frame["station"] == s].tolist())
+                        for s in sorted(set(frame["station"].tolist()))}
     return (range_bias_modifiers(opt, kinds_by_station, known, apriori) + frequency_modifiers(opt, frame, t_s, apriori)
             + angle_modifiers(opt, kinds_by_station, apriori)
             + time_bias_modifiers(opt, kinds_by_station, known, apriori))

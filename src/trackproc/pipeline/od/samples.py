@@ -19,6 +19,47 @@ from trackproc.models import observation as ob
 SAMPLE_COLUMNS = ("time", "station", "pass_id", "kind", "value", "sigma", "_source", "_carrier", "_mode", "_row")
 
 
+def groups(*columns) -> list:
+    """``[(key, rows), ...]``: each distinct tuple of ``columns`` (equal-length arrays of text) in
+    sorted order, as ``sorted(set(zip(*columns)))``, with the indices of its rows, increasing.
+    By integer codes (each column's rank among its sorted distinct values) rather than a Python
+    pass over the tuples and a string comparison per key: a day of samples has ~24,000 rows and
+    ~40 passes."""
+    if not columns or np.asarray(columns[0]).size == 0:
+        return []
+    code = np.zeros(np.asarray(columns[0]).size, np.int64)
+    uniques = []
+    for col in columns:
+        values, ranks = _ranks(col)
+        uniques.append(values)
+        code = code * len(values) + ranks
+    order = np.argsort(code, kind="stable")
+    out = []
+    for rows in np.split(order, np.flatnonzero(np.diff(code[order])) + 1):
+        c, key = int(code[rows[0]]), []
+        for values in reversed(uniques):
+            c, r = divmod(c, len(values))
+            key.append(values[r])
+        out.append((tuple(reversed(key)), rows))
+    return out
+
+
+def _ranks(column) -> tuple[list, np.ndarray]:
+    """The sorted distinct values of a text column (``str``) and each row's rank among them. A
+    set and a dict of the few names (~1 ms for 24,000 rows) rather than numpy's conversion to
+    fixed-width text and its sort (~2.6 ms); anything but strings goes that way."""
+    items = np.asarray(column).tolist()
+    try:
+        values = sorted(set(items))
+    except TypeError:
+        values = None
+    if values is None or not all(isinstance(v, str) for v in values):
+        text, ranks = np.unique(np.asarray(column).astype(str), return_inverse=True)
+        return [str(v) for v in text], ranks.reshape(-1)
+    rank = {v: i for i, v in enumerate(values)}
+    return [str(v) for v in values], np.fromiter(map(rank.__getitem__, items), np.int64, len(items))
+
+
 def merge_tables(tables, kinds):
     """The samples of all files as one dict of numpy columns (:data:`SAMPLE_COLUMNS`; ``time``
     naive UTC datetime64[ns]) with their file, carrier and metadata checks."""
@@ -29,7 +70,7 @@ def merge_tables(tables, kinds):
         if n == 0:
             raise InputError("no samples", file=source, expected="a pass file with at least one sample")
         mode = meta.get("doppler_mode") or "one-way"
-        kinds_here = set(np.unique(table.column("kind")))   # not a Python loop over the rows
+        kinds_here = set(table.column("kind").tolist())   # not np.unique: a sort of str objects
         if mode not in ob.MODES and kinds_here & set(ob.LINK_KINDS):
             raise InputError("unknown link mode", file=source, column="doppler_mode", found=mode,
                              expected="one-way or two-way (a round trip through a transponder of ratio 1)")
@@ -71,7 +112,7 @@ def resolve_stations(frame, tables, stations):
     for source, table in tables:
         for name, st in table.stations().items():
             known.setdefault(name, st)
-    missing = sorted(set(np.unique(frame["station"])) - set(known))
+    missing = sorted(set(frame["station"].tolist()) - set(known))
     if missing:
         name = missing[0]
         src = frame["_source"][np.flatnonzero(frame["station"] == name)[0]]
