@@ -192,13 +192,6 @@ def test_lageos2_walkthrough_of_slr_md_as_written(run_cli, tmp_path, monkeypatch
                                   np.array([3033.794, 1715.265, -4447.659]))
     dr = float(np.linalg.norm(np.ravel(doc["position_m"]) - np.ravel(r)))
     assert dr < 2.0, dr
-    assert doc["epoch"].startswith("2016-02-13T16:00:00")
-    import pandas as pd
-
-    frame = pd.read_csv(commands[-1][commands[-1].index("--residuals") + 1], comment="#")
-    kept = frame[~frame["edited"].astype(bool)]
-    rms = float(np.sqrt(np.mean(kept["smoothed_residual"] ** 2)))
-    assert len(kept) >= 90 and rms < 0.5, (len(kept), rms)
 
 
 @pytest.mark.realdata
