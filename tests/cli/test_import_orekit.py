@@ -173,24 +173,33 @@ def _linked(folder: Path, where: Path) -> Path:
     return where
 
 
-@pytest.mark.realdata
-@pytest.mark.slow
-def test_lageos2_walkthrough_of_slr_md_as_written(run_cli, tmp_path, monkeypatch):
-    """docs/slr.md's commands, from the imported initial state: the solution within 2 m of the
-    independent JAXA reference state at 2016-02-13T16:00 (docs/filter.md: estimate 0.89 m)."""
+#: The JAXA CPF reference state of LAGEOS-2 at 2016-02-13T16:00 UTC (the realdata README), EME2000.
+JAXA_L2 = ([7526994.072, -9646309.832, 1464110.239], [3033.794, 1715.265, -4447.659])
+
+
+def _lageos2_walkthrough(page: str, verb: str, run_cli, tmp_path, monkeypatch):
+    """Run ``page``'s LAGEOS-2 block (import-orekit, ingest, ``verb``) as written in a copy of the
+    realdata folder: ``(commands, the written state file, its distance (m) from the JAXA state)``."""
     if not L2.is_dir():
         pytest.skip(f"real data not available: {L2}")
     from trackproc.dynamics import frames
 
     monkeypatch.chdir(_linked(L2, tmp_path))
-    commands = _walkthrough("slr.md", "trackproc import-orekit od_test_Lageos2.in")
-    assert [c[1] for c in commands] == ["import-orekit", "ingest", "estimate"]
+    commands = _walkthrough(page, "trackproc import-orekit od_test_Lageos2.in")
+    assert [c[1] for c in commands] == ["import-orekit", "ingest", verb]
     _run_walkthrough(run_cli, commands, monkeypatch)
     doc = json.loads(Path(commands[-1][commands[-1].index("-o") + 1]).read_text())
+    r, _ = frames.eme2000_to_gcrf(np.array(JAXA_L2[0]), np.array(JAXA_L2[1]))
+    return commands, doc, float(np.linalg.norm(np.ravel(doc["position_m"]) - np.ravel(r)))
+
+
+@pytest.mark.realdata
+@pytest.mark.slow
+def test_lageos2_walkthrough_of_slr_md_as_written(run_cli, tmp_path, monkeypatch):
+    """docs/slr.md's commands, from the imported initial state: the solution within 2 m of the
+    independent JAXA reference state at 2016-02-13T16:00 (docs/filter.md: estimate 0.89 m)."""
+    _, doc, dr = _lageos2_walkthrough("slr.md", "estimate", run_cli, tmp_path, monkeypatch)
     assert doc["epoch"].startswith("2016-02-13T16:00:00")
-    r, v = frames.eme2000_to_gcrf(np.array([7526994.072, -9646309.832, 1464110.239]),
-                                  np.array([3033.794, 1715.265, -4447.659]))
-    dr = float(np.linalg.norm(np.ravel(doc["position_m"]) - np.ravel(r)))
     assert dr < 2.0, dr
 
 
@@ -222,22 +231,9 @@ def test_lageos2_filter_walkthrough_of_filter_md_as_written(run_cli, tmp_path, m
     of the independent JAXA reference state at 16:00 (measured 0.907 m), the smoothed residual RMS
     under 0.5 m over at least 90 of the 95 normal points (measured 0.241 m over 95) — issue 27's
     LAGEOS-2 validation, on the commands as the docs write them."""
-    if not L2.is_dir():
-        pytest.skip(f"real data not available: {L2}")
-    from trackproc.dynamics import frames
-
-    monkeypatch.chdir(_linked(L2, tmp_path))
-    commands = _walkthrough("filter.md", "trackproc import-orekit od_test_Lageos2.in")
-    assert [c[1] for c in commands] == ["import-orekit", "ingest", "filter"]
-    _run_walkthrough(run_cli, commands, monkeypatch)
-    doc = json.loads(Path(commands[-1][commands[-1].index("-o") + 1]).read_text())
-    r, _ = frames.eme2000_to_gcrf(np.array([7526994.072, -9646309.832, 1464110.239]),
-                                  np.array([3033.794, 1715.265, -4447.659]))
-    dr = float(np.linalg.norm(np.ravel(doc["position_m"]) - np.ravel(r)))
+    commands, doc, dr = _lageos2_walkthrough("filter.md", "filter", run_cli, tmp_path, monkeypatch)
     assert dr < 2.0, dr
     assert doc["epoch"].startswith("2016-02-13T16:00:00")
-    import pandas as pd
-
     frame = pd.read_csv(commands[-1][commands[-1].index("--residuals") + 1], comment="#")
     kept = frame[~frame["edited"].astype(bool)]
     rms = float(np.sqrt(np.mean(kept["smoothed_residual"] ** 2)))
