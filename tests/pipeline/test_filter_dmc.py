@@ -152,11 +152,12 @@ def test_gauss_markov_range_bias_variance_over_a_gap_is_its_steady_state():
             checked += 1
     assert checked >= 6
     # a forward move (to --epoch) decays the Gauss-Markov bias and its variance tends to σ²
-    from trackproc.pipeline.filter.result import _utc_of_step, move
+    from trackproc.pipeline.filter.history import utc_of_step
+    from trackproc.pipeline.filter.result import move
 
     k = sw.t_s.size - 1
     x, p = sw.absolute("f", k)
-    t = _utc_of_step(pb, sw, k)
+    t = utc_of_step(pb, sw, k)
     x2, p2 = move(pb, FilterOptions(problem=eo, bias_gm={"range_bias": (sigma, tau)}), x, p, t,
                   t + np.timedelta64(600, "s"))
     i = names.index("range_bias:KIR")

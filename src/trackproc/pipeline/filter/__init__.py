@@ -14,6 +14,7 @@ the verdict, the innovation and history tables); the numerical updates are
 from __future__ import annotations
 
 from trackproc.pipeline.filter.options import FilterOptions
-from trackproc.pipeline.filter.result import INNOVATION_COLUMNS, FilterResult, filter_passes, summary_text
+from trackproc.pipeline.filter.history import INNOVATION_COLUMNS
+from trackproc.pipeline.filter.result import FilterResult, filter_passes, summary_text
 
 __all__ = ["FilterOptions", "FilterResult", "filter_passes", "INNOVATION_COLUMNS", "summary_text"]

@@ -1,10 +1,9 @@
 """The result of ``trackproc filter``: :func:`filter_passes` (problem, carried state, run, verdict,
 outputs) and what it returns (:class:`FilterResult`: the state file, the innovation table, the
-history of states)."""
+history of states; the tables themselves are built in :mod:`trackproc.pipeline.filter.history`)."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -20,18 +19,16 @@ from trackproc.methods import sequential as sq
 from trackproc.pipeline.filter import noise as fn
 from trackproc.pipeline.filter import policy as fp
 from trackproc.pipeline.filter import run as fr
+from trackproc.pipeline.filter.history import (history_frame, history_oem, innovation_frame, sigma_rtn_frame,
+                                               utc_of_step)
 from trackproc.pipeline.filter.options import FilterOptions, check_filter_options
-from trackproc.pipeline.od import UNITS, Problem, build_problem
+from trackproc.pipeline.od import Problem, build_problem
 from trackproc.pipeline.od.state import sigma_rtn, solution_state
-
-INNOVATION_COLUMNS = ("time", "station", "pass_id", "kind", "unit", "observed", "predicted", "innovation",
-                      "innovation_sigma", "normalized_innovation", "edited", "residual")
-
 
 @dataclass
 class FilterResult:
     """``state`` (the state file), ``problem``, ``sweep`` (:class:`~trackproc.pipeline.filter.run.Sweep`),
-    ``innovations`` (one row per sample: :data:`INNOVATION_COLUMNS`, plus ``smoothed_residual``
+    ``innovations`` (one row per sample: :data:`~trackproc.pipeline.filter.history.INNOVATION_COLUMNS`, plus ``smoothed_residual``
     with the smoother), ``quality`` (:class:`~trackproc.methods.quality.Quality`), ``warnings``,
     ``skipped`` (passes older than a carried state's last measurement)."""
 
@@ -98,13 +95,6 @@ def skip_older(tables, last):
     return out, sorted(set(skipped))
 
 
-def _utc_of_step(problem: Problem, sw, k: int):
-    if sw.t_s[k] == 0.0:
-        return problem.epoch
-    i = int(np.flatnonzero(sw.step == k)[0])
-    return problem.times[i]
-
-
 def _extended_stm(traj, dt, n):
     top = traj.stm(np.array([dt]))[0]
     if traj.force_parameter_names:
@@ -140,93 +130,6 @@ def move(problem: Problem, opt: FilterOptions, x, p, epoch, to_epoch):
     if q is not None:
         p2 = p2 + q * np.outer(scales, scales)
     return x2, 0.5 * (p2 + p2.T)
-
-
-def innovation_frame(problem: Problem, sw) -> pd.DataFrame:
-    """The innovation table (:data:`INNOVATION_COLUMNS`), in time order."""
-    meas = problem.meas
-    sig = np.sqrt(sw.variance)
-    frame = pd.DataFrame({
-        "time": pd.DatetimeIndex(problem.times).tz_localize("UTC"), "station": meas.station.astype(str),
-        "pass_id": meas.pass_id.astype(str), "kind": meas.kind.astype(str), "unit": [UNITS[k] for k in meas.kind],
-        "observed": meas.observed, "predicted": meas.observed - sw.innovation, "innovation": sw.innovation,
-        "innovation_sigma": sig, "normalized_innovation": sw.innovation / sig, "edited": sw.edited,
-        "residual": sw.residuals("f")})
-    if sw.x_s is not None:
-        frame["smoothed_residual"] = sw.residuals("s")
-    order = np.lexsort((np.arange(len(frame)), problem.times))
-    return frame.iloc[order].reset_index(drop=True)
-
-
-def history_frame(problem: Problem, sw) -> pd.DataFrame:
-    """One row per step and solution (``filtered``, ``smoothed``): time, the values, sigmas and
-    the covariance's lower triangle (``cov_I_J``, rows/columns in parameter order)."""
-    names = problem.names
-    n = len(names)
-    low = np.tril_indices(n)
-    rows = []
-    for which, label in (("f", "filtered"), ("s", "smoothed")):
-        if getattr(sw, "x_" + which) is None:
-            continue
-        for k in range(sw.t_s.size):
-            x, p = sw.absolute(which, k)
-            row = {"time": format_epoch(_utc_of_step(problem, sw, k)), "solution": label}
-            row.update({nm: float(v) for nm, v in zip(names, x)})
-            row.update({f"sigma_{nm}": float(math.sqrt(max(p[i, i], 0.0))) for i, nm in enumerate(names)})
-            row.update({f"cov_{i}_{j}": float(p[i, j]) for i, j in zip(*low)})
-            rows.append(row)
-    return pd.DataFrame(rows)
-
-
-def sigma_rtn_frame(problem: Problem, sw) -> pd.DataFrame:
-    """One row per step and solution (``filtered``, ``smoothed``): ``time`` (UTC), ``solution``
-    and the RTN sigmas of the state file's ``sigma_rtn`` (``radial_m`` ... ``cross_m_s``)."""
-    rows = []
-    for which, label in (("f", "filtered"), ("s", "smoothed")):
-        if getattr(sw, "x_" + which) is None:
-            continue
-        for k in range(sw.t_s.size):
-            x, p = sw.absolute(which, k)
-            rows.append({"time": pd.Timestamp(_utc_of_step(problem, sw, k)).tz_localize("UTC"), "solution": label,
-                         **sigma_rtn(rtn_covariance(x[:3], x[3:6], p[:6, :6]))})
-    return pd.DataFrame(rows)
-
-
-def history_ephemerides(problem: Problem, sw, state=None) -> list:
-    """``[(label, Ephemeris), ...]`` per solution (``filtered``, ``smoothed``): every step's
-    position, velocity (GCRF, m, m/s) and the orbit's 6 × 6 block of the filter's covariance
-    (``cov_I_J``, I, J = 1..6)."""
-    from trackproc.io.ephemeris import COLUMNS, Ephemeris
-
-    out = []
-    meta = {}
-    if state is not None:
-        meta = {"force_model": state.force_model, "constants": state.constants}
-    for which, label in (("f", "filtered"), ("s", "smoothed")):
-        if getattr(sw, "x_" + which) is None:
-            continue
-        xs, ps = [], []
-        for k in range(sw.t_s.size):
-            x, p = sw.absolute(which, k)
-            xs.append(x[:6])
-            ps.append(p[:6, :6])
-        times = pd.DatetimeIndex([_utc_of_step(problem, sw, k) for k in range(sw.t_s.size)]).tz_localize("UTC")
-        frame = pd.DataFrame({"time": times, **{c: np.array(xs)[:, i] for i, c in enumerate(COLUMNS[1:])}})
-        cov = np.array(ps)
-        for i in range(6):
-            for j in range(6):
-                frame[f"cov_{i + 1}_{j + 1}"] = cov[:, i, j]
-        out.append((label, Ephemeris(frame, dict(meta))))
-    return out
-
-
-def history_oem(problem: Problem, sw, state=None, **oem_kwargs) -> str:
-    """The history as CCSDS OEM KVN (CCSDS 502.0-B-3): one segment per solution (filtered, then
-    smoothed), each with its covariance section (the filter's orbit covariance at every step)."""
-    from trackproc.io.ephemeris import oem_segments_text
-
-    segments = [(eph, f"{label} states of trackproc filter") for label, eph in history_ephemerides(problem, sw, state)]
-    return oem_segments_text(segments, **oem_kwargs)
 
 
 def filter_quality(problem: Problem, sw, iterations: list, opt: FilterOptions):
@@ -275,7 +178,7 @@ def filter_quality(problem: Problem, sw, iterations: list, opt: FilterOptions):
             worst = np.unravel_index(np.nanargmax(np.abs(stat)), stat.shape)
             value = float(abs(stat[worst]))
             name = problem.names[worst[1]]
-            when = format_epoch(_utc_of_step(problem, sw, int(worst[0])))
+            when = format_epoch(utc_of_step(problem, sw, int(worst[0])))
             said = (f"worst {name} at {when}: |smoothed - filtered| / sqrt(P_f - P_s) = {value:.3g}, limit "
                     f"{limit:.3g} (99.9 % for the worst of {int(finite.sum())})")
             q.add("filter_smoother", "suspect" if value > limit else "ok",
@@ -297,12 +200,12 @@ def _output(problem: Problem, opt: FilterOptions, sw):
     if opt.output_epoch is None:
         k = sw.epoch_step if opt.smooth else sw.t_s.size - 1
         x, p = sw.absolute(which, k)
-        return x, p, _utc_of_step(problem, sw, k)
+        return x, p, utc_of_step(problem, sw, k)
     out_epoch = np.datetime64(opt.output_epoch, "ns")
     t_out = float(ts.seconds_since(ts.datetime64_to_jd_utc(out_epoch), ts.datetime64_to_jd_utc(problem.epoch)))
     k = max(int(np.searchsorted(sw.t_s, t_out, side="right")) - 1, 0)
     x, p = sw.absolute(which, k)
-    x, p = move(problem, opt, x, p, _utc_of_step(problem, sw, k), out_epoch)
+    x, p = move(problem, opt, x, p, utc_of_step(problem, sw, k), out_epoch)
     return x, p, out_epoch
 
 
@@ -330,7 +233,7 @@ def run_record(problem: Problem, opt: FilterOptions, sw, iterations: list, noise
         "edit_sigma": opt.edit_sigma, "segment_gap_s": opt.segment_gap_s,
         "updates": int(kept.sum()), "edited": int(sw.edited.sum()), "steps": int(sw.t_s.size),
         "segments": len(sw.segments), "sweeps": len(iterations) + 1, "iterations": iterations,
-        "first_time": format_epoch(_utc_of_step(problem, sw, 0)),
+        "first_time": format_epoch(utc_of_step(problem, sw, 0)),
         "apriori_epoch": format_epoch(problem.epoch), "last_measurement": format_epoch(last_time),
         "nis": float(np.sum(z[kept] ** 2)), "nis_dof": int(kept.sum()),
         "skipped_passes": skipped, "carried_state": carried, "declined_in_a_row": in_a_row,
