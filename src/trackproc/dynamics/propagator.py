@@ -32,6 +32,10 @@ Example (the seed 004 orbit, one hour, J2, with the STM):
 True
 
 Everything here is pure numpy on SI units; nothing reads files or prints.
+
+One responsibility, the one door to the numerical engines (the Taylor series for two-body and J2,
+DOP853 for the full force model) and the trajectory they return; a little over 400 lines, most of
+it the trajectory's interpolation and that door's argument checks and docs.
 """
 
 from __future__ import annotations

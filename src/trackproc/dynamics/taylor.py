@@ -56,6 +56,9 @@ Phi(t, t0) and d state/d mu, dense like the state.
 Limits: two-body and J2 only; the frame must have its z axis along the J2 axis; times are
 plain float seconds (about 1e-16 relative resolution, so keep t0 near the data, not at
 J2000); no event detection.
+
+One responsibility, the adaptive Taylor integrator's step loop and dense output (the series
+themselves are :mod:`trackproc.dynamics.taylor_series`); 401 lines with its input checks.
 """
 
 from __future__ import annotations

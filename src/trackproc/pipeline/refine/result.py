@@ -1,6 +1,9 @@
 """The outputs of a solved refinement (:func:`finish`): the refined state at the traverse epoch and
 at the stale epoch with the covariance, the constraints of seed 004 eq. 5, the observability
 report, the residuals at the samples, the warnings and the diagnostics.
+
+One responsibility, turning a solution into what refine writes; over 400 lines because it writes
+that many things, each a short function of its own.
 """
 
 from __future__ import annotations
