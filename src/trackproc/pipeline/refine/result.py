@@ -3,7 +3,7 @@ at the stale epoch with the covariance, the constraints of seed 004 eq. 5, the o
 report, the residuals at the samples, the warnings and the diagnostics.
 
 One responsibility, turning a solution into what refine writes; over 400 lines because it writes
-that many things, each a short function of its own.
+that many things (the list above), assembled by :func:`finish`.
 """
 
 from __future__ import annotations
