@@ -26,6 +26,13 @@ def utc_of_step(problem: Problem, sw, k: int):
     return problem.times[i]
 
 
+def solutions(sw) -> list:
+    """``[(which, label), ...]`` of the solutions a sweep holds: ``("f", "filtered")``, and
+    ``("s", "smoothed")`` after the smoother."""
+    return [(which, label) for which, label in (("f", "filtered"), ("s", "smoothed"))
+            if getattr(sw, "x_" + which) is not None]
+
+
 def innovation_frame(problem: Problem, sw) -> pd.DataFrame:
     """The innovation table (:data:`INNOVATION_COLUMNS`), in time order."""
     meas = problem.meas
@@ -49,9 +56,7 @@ def history_frame(problem: Problem, sw) -> pd.DataFrame:
     n = len(names)
     low = np.tril_indices(n)
     rows = []
-    for which, label in (("f", "filtered"), ("s", "smoothed")):
-        if getattr(sw, "x_" + which) is None:
-            continue
+    for which, label in solutions(sw):
         for k in range(sw.t_s.size):
             x, p = sw.absolute(which, k)
             row = {"time": format_epoch(utc_of_step(problem, sw, k)), "solution": label}
@@ -66,9 +71,7 @@ def sigma_rtn_frame(problem: Problem, sw) -> pd.DataFrame:
     """One row per step and solution (``filtered``, ``smoothed``): ``time`` (UTC), ``solution``
     and the RTN sigmas of the state file's ``sigma_rtn`` (``radial_m`` ... ``cross_m_s``)."""
     rows = []
-    for which, label in (("f", "filtered"), ("s", "smoothed")):
-        if getattr(sw, "x_" + which) is None:
-            continue
+    for which, label in solutions(sw):
         for k in range(sw.t_s.size):
             x, p = sw.absolute(which, k)
             rows.append({"time": pd.Timestamp(utc_of_step(problem, sw, k)).tz_localize("UTC"), "solution": label,
@@ -86,9 +89,7 @@ def history_ephemerides(problem: Problem, sw, state=None) -> list:
     meta = {}
     if state is not None:
         meta = {"force_model": state.force_model, "constants": state.constants}
-    for which, label in (("f", "filtered"), ("s", "smoothed")):
-        if getattr(sw, "x_" + which) is None:
-            continue
+    for which, label in solutions(sw):
         xs, ps = [], []
         for k in range(sw.t_s.size):
             x, p = sw.absolute(which, k)
