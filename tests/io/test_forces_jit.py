@@ -46,6 +46,22 @@ def test_geodetic_height_matches_erfa():
     assert np.abs(h - erfa.gc2gd(1, r)[2]).max() < 1e-8
 
 
+def test_harris_priester_interpolation_is_numpys_bit_for_bit():
+    """The kernel's own table interpolation (numba's np.interp is left out for its import cost)
+    against np.interp: the table's nodes, its ends, 5000 random heights and NaN, equal to the bit,
+    compiled and as Python."""
+    from trackproc.dynamics.forces import compiled
+
+    xp, fp = compiled._HP_H, compiled._HP_LMIN
+    rng = np.random.default_rng(7)
+    x = np.concatenate([xp, np.nextafter(xp, np.inf)[:-1], rng.uniform(xp[0], xp[-1], 5000)])
+    want = np.interp(x, xp, fp)
+    for f in (compiled._table_interp, compiled._table_interp.py_func):
+        got = np.array([f(v, xp, fp) for v in x])
+        assert np.array_equal(got.view(np.int64), want.view(np.int64))
+        assert np.isnan(f(np.nan, xp, fp))
+
+
 def test_accelerations_and_partials_equal_the_numpy_path():
     """At 60 states along a LEO day (sunlit, penumbra, umbra; drag below 1000 km), all terms on,
     a 30x30 field with the STM's gradient on its 20x20 cut, every parameter kind estimated."""
