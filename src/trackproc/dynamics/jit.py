@@ -13,7 +13,8 @@ import threading
 import time
 import logging
 
-__all__ = ["announce_compiling", "cold", "compile_once", "default", "enabled", "forced", "mode", "njit"]
+__all__ = ["announce_compiling", "cold", "compile_once", "default", "enabled", "forced", "light_cache_load", "mode",
+           "njit"]
 
 _LOCAL = threading.local()
 
@@ -64,7 +65,42 @@ def njit(*args, **kwargs):
 
     kwargs.setdefault("cache", True)
     kwargs.setdefault("error_model", "numpy")
-    return numba.njit(*args, **kwargs)
+    if args and callable(args[0]):
+        return light_cache_load(numba.njit(*args, **kwargs))
+    decorate = numba.njit(*args, **kwargs)
+    return lambda func: light_cache_load(decorate(func))
+
+
+def light_cache_load(kernel):
+    """Let ``kernel`` (a numba dispatcher) load its machine code from numba's cache without first
+    loading every implementation registry of numba's CPU target, and return it.
+
+    numba's ``Cache.load_overload`` starts with ``target_context.refresh()``, which imports all of
+    numba's lowering modules (arrays, linalg with scipy.linalg, datetimes, random, typed
+    containers, ...): ~0.27 s of CPU, more than importing numba, and none of it is used by code
+    already compiled. Loading needs only the runtime's symbols (``rtsys.initialize``) and the
+    modules of the environments the cached code names (imported by the unpickling). When the
+    cache has no entry the dispatcher compiles as always, and numba's compiler refreshes the
+    context itself. Uses numba internals (``_cache._load_overload``): if they are not there the
+    kernel is returned unchanged (numba's own load)."""
+    cache = getattr(kernel, "_cache", None)
+    load = getattr(cache, "_load_overload", None)
+    guard = getattr(cache, "_guard_against_spurious_io_errors", None)
+    if load is None or guard is None:
+        return kernel
+    try:
+        from numba.core.runtime import rtsys
+    except ImportError:                                   # pragma: no cover - numba internals moved
+        return kernel
+
+    def load_overload(sig, target_context):
+        rtsys.initialize(target_context)
+        with guard():
+            return load(sig, target_context)
+        return None                                       # the guard swallowed an I/O error: compile
+
+    cache.load_overload = load_overload
+    return kernel
 
 
 _ANNOUNCED: set = set()
