@@ -122,20 +122,30 @@ def _reentry_step(radii) -> int | None:
 
 def use_compiled(model, t_end_s: float, stm: bool = False) -> bool:
     """Whether a run of ``t_end_s`` seconds goes to the compiled integrator: numba usable
-    (:func:`trackproc.dynamics.jit.enabled`), the model covered (not NRLMSIS), and the numpy
-    path's expected cost above loading the kernels. The choice depends on the call alone, never
-    on what the process ran before (the two paths agree to micrometres, not to the bit, and a
-    batch's outputs must not depend on which tasks a worker happened to run first)."""
-    if not jit.enabled():
+    (:func:`trackproc.dynamics.jit.enabled`, or the kernel's stored machine code,
+    :mod:`trackproc.dynamics.forces.native`, which spares importing numba), the model covered
+    (not NRLMSIS), and the numpy path's expected cost above loading the kernels. The choice
+    depends on the call alone, never on what the process ran before or what is cached (the two
+    paths agree to micrometres, not to the bit, and a batch's outputs must not depend on which
+    tasks a worker happened to run first)."""
+    if jit.mode() == "0":
         return False
     if not jit.forced() and abs(t_end_s) * NUMPY_COST[bool(stm)] < JIT_LOAD_S:
         return False
+    from trackproc.dynamics.forces import native, tables  # start-up: no numba on these
+
+    if not tables.supported(model):
+        return False
+    if native.stored():
+        return True
+    if not jit.enabled():
+        return False
     try:
-        from trackproc.dynamics.forces import compiled
+        from trackproc.dynamics.forces import compiled  # noqa: F401 - can numba build the kernels here
     except Exception as exc:                  # noqa: BLE001 - e.g. no writable numba cache: numpy
         _warn_once(f"compiled force model unavailable ({type(exc).__name__}: {exc}); using the numpy path")
         return False
-    return compiled.supported(model)
+    return True
 
 
 _WARNED: set = set()
@@ -149,15 +159,21 @@ def _warn_once(message: str) -> None:
 
 def _run_compiled(env, y0, t_end_s, rt, at, max_step, max_steps, stm, est):
     """The compiled DOP853: accepted steps' times and their dense-output values at the nodes."""
-    from trackproc.dynamics.forces import compiled  # start-up: loads numba and compiles (or reads) the kernels
+    from trackproc.dynamics.forces import native, tables  # start-up: the compiled path's modules only
 
     model = env.model
-    F = compiled.field_tables(model.field)
-    HT = compiled.hessian_tables(compiled.stm_field(env))
-    E = compiled.environment_tables(env, est)
-    with jit.compile_once([compiled.integrate], "force", "the force kernels", 30):
-        code, _, t_old, y_old, dense, t_last = compiled.integrate(
-            y0, float(t_end_s), rt, at, float(max_step), int(max_steps), bool(stm), len(est), E, F, HT)
+    args = (y0, float(t_end_s), rt, at, float(max_step), int(max_steps), bool(stm), len(est),
+            tables.environment_tables(env, est), tables.field_tables(model.field),
+            tables.hessian_tables(tables.stm_field(env)))
+    kernel = native.load(args)
+    if kernel is not None:
+        code, _, t_old, y_old, dense, t_last = kernel(*args)
+    else:
+        from trackproc.dynamics.forces import compiled  # start-up: loads numba and compiles (or reads) the kernels
+
+        with jit.compile_once([compiled.integrate], "force", "the force kernels", 30):
+            code, _, t_old, y_old, dense, t_last = compiled.integrate(*args)
+        native.export(compiled.integrate, args)
     outcome = (Outcome.SUCCESS, Outcome.STEP_LIMIT, Outcome.NON_FINITE)[code]
     t_new = np.append(t_old[1:], t_last)[:t_old.size]
     h = t_new - t_old
