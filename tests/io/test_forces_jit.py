@@ -180,21 +180,21 @@ def test_analytic_field_gradient_against_differences_and_symmetry():
     own acceleration (1e-15 relative), twice a symmetric ∂a/∂r equal to central differences of
     the acceleration (steps 1 m: their truncation (h/r)² ~ 2e-14, measured 1e-9 with rounding)
     at points of all latitudes, for a 70x70 field too."""
-    from trackproc.dynamics.forces import compiled
+    from trackproc.dynamics.forces import compiled, tables
 
     rng = np.random.default_rng(3)
     for deg in (20, 70):
         f = load_field(degree=deg, date=EPOCH)
         ht = compiled.hessian_tables(f)
-        w = {(n, m): complex(f.cbar[n, m], -f.sbar[n, m]) / compiled._normalisation(n, m)
+        w = {(n, m): complex(f.cbar[n, m], -f.sbar[n, m]) / tables._normalisation(n, m)
              for n in range(1, deg + 1) for m in range(n + 1)}
         for _ in range(5):
             r = rng.normal(size=3)
             r *= rng.uniform(6.7e6, 2.6e7) / np.linalg.norm(r)
             z = f.solid_harmonics(r)[0]
             acc = f.acceleration(r, central=False)
-            first = [f.gm_m3_s2 / f.radius_m ** 2 * sum((q * compiled._normalisation(n, m) * z[n, m]).real
-                                                        for (n, m), q in compiled._derivative(w, i).items())
+            first = [f.gm_m3_s2 / f.radius_m ** 2 * sum((q * tables._normalisation(n, m) * z[n, m]).real
+                                                        for (n, m), q in tables._derivative(w, i).items())
                      for i in range(3)]
             assert np.abs(np.array(first) - acc).max() < 1e-12 * np.abs(acc).max()
             g = np.empty((3, 3))
