@@ -82,15 +82,27 @@ def _stamp() -> tuple | None:
     return _FORMAT, sys.implementation.cache_tag, source, binaries
 
 
-def path() -> str:
-    """The stored code's file: in numba's cache directory of compiled.py (``NUMBA_CACHE_DIR``'s
-    subdirectory when set, else the package's ``__pycache__``)."""
-    name = f"compiled.integrate.{sys.implementation.cache_tag}.trackproc-native"
+_NAME = f"compiled.integrate.{sys.implementation.cache_tag}.trackproc-native"
+
+
+def _candidates() -> list[str]:
+    """Where numba keeps the cache of compiled.py, hence where the stored code is looked for:
+    ``NUMBA_CACHE_DIR`` when set, else the package's ``__pycache__`` or, when that was not
+    writable, the user's cache (numba's _CacheLocator classes, same subdirectory names)."""
+    here = os.path.dirname(_KERNEL_SOURCE)
+    sub = f"{os.path.basename(here)}_{hashlib.sha1(here.encode()).hexdigest()}"
     root = os.environ.get("NUMBA_CACHE_DIR")
     if root:
-        sub = os.path.dirname(_KERNEL_SOURCE)
-        return os.path.join(root, f"{os.path.basename(sub)}_{hashlib.sha1(sub.encode()).hexdigest()}", name)
-    return os.path.join(os.path.dirname(_KERNEL_SOURCE), "__pycache__", name)
+        return [os.path.join(root, sub, _NAME)]
+    user = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return [os.path.join(here, "__pycache__", _NAME), os.path.join(user, "numba", sub, _NAME)]
+
+
+def path() -> str:
+    """The stored code's file: the first of the places numba may cache compiled.py that holds one,
+    else the first place."""
+    candidates = _candidates()
+    return next((c for c in candidates if os.path.exists(c)), candidates[0])
 
 
 def _spec(value):
@@ -129,7 +141,7 @@ def export(kernel, args) -> bool:
     call made), unless an up-to-date copy is there; True when written. Any failure: nothing
     written (numba's path stays the one used)."""
     try:
-        target = path()
+        target = os.path.join(kernel._cache._cache_path, _NAME)   # where numba cached it
         stamp = _stamp()
         if stamp is None or _read(target, stamp) is not None:
             return False
@@ -180,7 +192,8 @@ def _usable() -> bool:
 def _record() -> dict | None:
     if "record" not in _LOADED:
         stamp = _stamp()
-        _LOADED["record"] = None if stamp is None else _read(path(), stamp)
+        found = (_read(c, stamp) for c in (_candidates() if stamp is not None else ()))
+        _LOADED["record"] = next((r for r in found if r is not None), None)
     return _LOADED["record"]
 
 
