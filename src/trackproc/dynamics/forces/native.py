@@ -138,8 +138,12 @@ def _undefined_symbols(obj: bytes) -> list[str] | None:
 
 def export(kernel, args) -> bool:
     """Store the machine code numba cached for ``kernel`` called with ``args`` (numba loaded, the
-    call made), unless an up-to-date copy is there; True when written. Any failure: nothing
-    written (numba's path stays the one used)."""
+    call made), unless an up-to-date copy is there; True when written. Once per process (a
+    batch worker calls the kernel per task). Any failure: nothing written (numba's path stays
+    the one used)."""
+    if _LOADED.setdefault("exported", False):
+        return False
+    _LOADED["exported"] = True
     try:
         target = os.path.join(kernel._cache._cache_path, _NAME)   # where numba cached it
         stamp = _stamp()
