@@ -22,8 +22,10 @@ and umbra entry and exit, where the force's slope jumps and an RK step loses its
 across one is redone to end :data:`EVENT_PAST_S` past it.
 
 With numba (a dependency) the same DOP853 and right-hand side run compiled
-(:mod:`trackproc.dynamics.forces.compiled`: no Python per step); chosen automatically for runs
-long enough to pay for loading numba (:func:`use_compiled`), ``TRACKPROC_JIT=0`` keeps scipy's.
+(:mod:`trackproc.dynamics.forces.compiled`: no Python per step; once numba has run it, from its
+stored machine code without importing numba, :mod:`trackproc.dynamics.forces.native`); chosen
+automatically for runs long enough to pay for loading numba (:func:`use_compiled`),
+``TRACKPROC_JIT=0`` keeps scipy's.
 The right-hand sides agree to rounding; the steps differ slightly because DOP853's error
 estimate of the positions is itself at the rounding level at rtol 1e-12 (the compiled sums
 are in another order than numpy's BLAS), which moves a LEO day by ~10 µm (gravity, Sun, Moon)
@@ -49,7 +51,8 @@ ATOL_M, ATOL_M_S = 1e-6, 1e-9
 STM_RTOL, STM_ATOL = 1e-8, 1e-8
 #: scipy's floor on rtol (100 machine epsilons).
 RTOL_FLOOR = 100 * np.finfo(float).eps
-#: Loading numba and the cached kernels, once per process (s, measured: 0.45 s CPU).
+#: Loading numba and the cached kernels, once per process (s, measured: 0.45 s CPU). The stored
+#: machine code loads in ~0.05 s, but the threshold stays: the choice must not depend on what is cached.
 JIT_LOAD_S = 0.5
 #: The numpy path's CPU seconds per second of run (LEO, 20x20 + Sun + Moon, rtol 1e-12, measured
 #: 1.9 s and 3.6 s per day without and with the STM); fewer for higher orbits' longer steps.
