@@ -78,6 +78,12 @@ def _run(cache: Path, *more: str) -> dict:
 
 @pytest.mark.slow
 def test_stored_code_gives_numbas_bits_without_numba(tmp_path):
+    import numba
+
+    from trackproc.dynamics import jit
+
+    if not jit.light_allowed(numba.__version__):
+        pytest.skip(f"numba {numba.__version__} is not one of jit.CHECKED_NUMBA: no stored code")
     cache = _cache_dir(tmp_path)
     first = _run(cache)            # numba's dispatcher; stores the code
     stored = list(cache.rglob("*.trackproc-native"))

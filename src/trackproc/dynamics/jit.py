@@ -71,6 +71,26 @@ def njit(*args, **kwargs):
     return lambda func: light_cache_load(decorate(func))
 
 
+#: The numba releases (major, minor) whose internals :func:`light_cache_load` and
+#: :mod:`trackproc.dynamics.forces.native` were checked against (their tests:
+#: tests/dynamics/test_jit_light_load.py, tests/io/test_forces_native.py). With any other release,
+#: or ``TRACKPROC_JIT_LIGHT=0``, both step aside and numba loads its cache its own way: a release
+#: that moved an internal could otherwise crash a process instead of costing 0.3 s.
+CHECKED_NUMBA = ((0, 68),)
+
+
+def light_allowed(numba_version: str | None) -> bool:
+    """True when numba ``numba_version`` is one of :data:`CHECKED_NUMBA` and ``TRACKPROC_JIT_LIGHT``
+    is not ``0``."""
+    if os.environ.get("TRACKPROC_JIT_LIGHT", "").strip() == "0" or not numba_version:
+        return False
+    try:
+        release = tuple(int(part) for part in numba_version.split(".")[:2])
+    except ValueError:
+        return False
+    return release in CHECKED_NUMBA
+
+
 def light_cache_load(kernel):
     """Let ``kernel`` (a numba dispatcher) load its machine code from numba's cache without first
     loading every implementation registry of numba's CPU target, and return it.
@@ -81,8 +101,12 @@ def light_cache_load(kernel):
     already compiled. Loading needs only the runtime's symbols (``rtsys.initialize``) and the
     modules of the environments the cached code names (imported by the unpickling). When the
     cache has no entry the dispatcher compiles as always, and numba's compiler refreshes the
-    context itself. Uses numba internals (``_cache._load_overload``): if they are not there the
-    kernel is returned unchanged (numba's own load)."""
+    context itself. Uses numba internals (``_cache._load_overload``): if they are not there, or
+    :func:`light_allowed` says no, the kernel is returned unchanged (numba's own load)."""
+    import numba
+
+    if not light_allowed(getattr(numba, "__version__", None)):
+        return kernel
     cache = getattr(kernel, "_cache", None)
     load = getattr(cache, "_load_overload", None)
     guard = getattr(cache, "_guard_against_spurious_io_errors", None)

@@ -16,7 +16,8 @@ LLVM's MCJIT, points the environments at fresh ones and wraps the entry point wi
 ``_dynfunc.make_function``, as ``numba.core.compiler.CompileResult._rebuild`` and
 ``CPUContext.get_executable`` do: the same machine code, hence the same bits.
 
-Used only when everything it depends on is the same as when it was written (the kernel's source,
+Used only with a numba release it was checked against (:data:`trackproc.dynamics.jit.CHECKED_NUMBA`,
+not with ``TRACKPROC_JIT_LIGHT=0``) and when everything it depends on is the same as when it was written (the kernel's source,
 Python, numba's and llvmlite's binaries, the CPU and LLVM's view of its features, no ``NUMBA_*``
 setting), every undefined symbol of the object resolves, and the arguments have exactly the
 recorded types (numba's wrapper trusts them: the dispatcher's type check is skipped); otherwise
@@ -145,6 +146,12 @@ def export(kernel, args) -> bool:
         return False
     _LOADED["exported"] = True
     try:
+        import numba
+
+        from trackproc.dynamics import jit
+
+        if not jit.light_allowed(numba.__version__):
+            return False
         target = os.path.join(kernel._cache._cache_path, _NAME)   # where numba cached it
         stamp = _stamp()
         if stamp is None or _read(target, stamp) is not None:
@@ -188,9 +195,24 @@ def _read(target: str, stamp) -> dict | None:
     return record if isinstance(record, dict) and record.get("stamp") == stamp else None
 
 
+def _numba_version() -> str | None:
+    """The installed numba's version from its ``.dist-info`` directory beside the package (numba
+    itself not imported), None when there is not exactly one."""
+    numba_dir = _package_dir("numba")
+    if numba_dir is None:
+        return None
+    found = [name[len("numba-"):-len(".dist-info")] for name in os.listdir(os.path.dirname(numba_dir))
+             if name.startswith("numba-") and name.endswith(".dist-info")]
+    return found[0] if len(found) == 1 else None
+
+
 def _usable() -> bool:
-    return "numba" not in sys.modules and not any(k.startswith("NUMBA_") and k != "NUMBA_CACHE_DIR"
-                                                  for k in os.environ)
+    from trackproc.dynamics import jit
+
+    if "usable" not in _LOADED:                           # the version and the settings: once a process
+        _LOADED["usable"] = jit.light_allowed(_numba_version()) and not any(
+            k.startswith("NUMBA_") and k != "NUMBA_CACHE_DIR" for k in os.environ)
+    return "numba" not in sys.modules and _LOADED["usable"]
 
 
 def _record() -> dict | None:
