@@ -65,6 +65,20 @@ def run_cli():
     return run
 
 
+@pytest.fixture(scope="session")
+def forked_trackproc(tmp_path_factory):
+    """A directory to put first on PATH: its ``trackproc`` runs each command in a fork of one server
+    that imported trackproc once (tests/cli/forkserver.py), for shell scripts whose subject is the
+    commands, not the interpreter's start."""
+    from forkserver import ForkServer
+
+    directory = tmp_path_factory.mktemp("forkserver")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(Path(__file__).resolve().parents[1] / "src")] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
+    with ForkServer(directory, env) as bin_dir:
+        yield bin_dir
+
+
 @pytest.fixture
 def write(tmp_path: Path):
     """``write(name, text_or_bytes)`` -> path of a new file in ``tmp_path``."""

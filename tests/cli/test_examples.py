@@ -65,19 +65,9 @@ def outputs_named(script: str) -> list[str]:
 
 
 def _env(bin_dir: Path) -> dict:
-    return dict(os.environ, PATH=f"{bin_dir}{os.pathsep}{os.environ.get('PATH', '')}",
+    return dict(os.environ, PATH=os.pathsep.join([str(bin_dir), str(Path(sys.executable).parent), os.environ.get("PATH", "")]),
                 PYTHONPATH=os.pathsep.join([str(ROOT / "src")] + [p for p in [os.environ.get("PYTHONPATH")] if p]),
                 TRACKPROC_LOG_LEVEL="WARNING")
-
-
-@pytest.fixture(scope="module")
-def trackproc_bin(tmp_path_factory):
-    """The directory of the ``trackproc`` the examples run: the fork server's shim."""
-    from forkserver import ForkServer
-
-    directory = tmp_path_factory.mktemp("forkserver")
-    with ForkServer(directory, _env(Path(sys.executable).parent)) as bin_dir:
-        yield bin_dir
 
 
 def run(script: str, tmp_path: Path, bin_dir: Path) -> None:
@@ -92,14 +82,14 @@ def run(script: str, tmp_path: Path, bin_dir: Path) -> None:
         assert path.exists() and (path.is_dir() or path.stat().st_size > 0), f"{name} not written by:\n{script}"
 
 
-def test_readme_tour_and_examples_run(tmp_path, trackproc_bin):
+def test_readme_tour_and_examples_run(tmp_path, forked_trackproc):
     blocks = readme_blocks()
     assert len(blocks) >= 2
-    run("\n".join(blocks), tmp_path, trackproc_bin)       # in order: later examples use earlier outputs
+    run("\n".join(blocks), tmp_path, forked_trackproc)       # in order: later examples use earlier outputs
 
 
 @pytest.mark.parametrize("command", ["ingest", "info", "simulate", "propagate", "smooth", "estimate", "filter", "refine",
                                      "accuracy", "requirements", "detect", "batch", "passes", "compare", "identify",
                                      "fit-tle", "import-orekit", "help"])
-def test_help_examples_run(command, tmp_path, trackproc_bin):
-    run(help_blocks()[command], tmp_path, trackproc_bin)
+def test_help_examples_run(command, tmp_path, forked_trackproc):
+    run(help_blocks()[command], tmp_path, forked_trackproc)
