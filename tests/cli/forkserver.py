@@ -165,6 +165,10 @@ class ForkServer:
 
     def __enter__(self) -> Path:
         sock = self.directory / "trackproc.sock"
+        if len(str(sock)) > 100:                          # AF_UNIX paths hold ~107 bytes
+            import tempfile
+
+            sock = Path(tempfile.mkdtemp(prefix="tpfs-", dir="/tmp")) / "s"
         bin_dir = self.directory / "bin"
         bin_dir.mkdir(parents=True, exist_ok=True)
         shim = bin_dir / "trackproc"
