@@ -41,6 +41,22 @@ PRELOAD = ("numpy", "pandas", "scipy.linalg", "scipy.optimize", "scipy.interpola
            "pyarrow", "pyarrow.parquet", "typer", "click")
 
 
+class _NoNumba:
+    """A meta path entry that refuses ``numba`` while the server preloads: a command decides whether
+    to use the compiled kernels by whether numba is loaded already (jit, whitening), so the server
+    must not load it (each child loads it, or not, as a fresh process would)."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name == "numba" or name.startswith("numba."):
+            raise ImportError("numba is not preloaded by the fork server")
+        return None
+
+
+#: modules never preloaded: they run work when imported (the batch pool's kernel loader), start a
+#: JVM (Orekit), or run the CLI (``__main__``)
+_SKIP = ("trackproc.pipeline.batch.preload_jit", "orekit", "__main__")
+
+
 def _preload() -> None:
     import importlib
     import pkgutil
@@ -51,13 +67,26 @@ def _preload() -> None:
     root._register()
     for name in PRELOAD:
         importlib.import_module(name)
-    for info in pkgutil.walk_packages(trackproc.__path__, "trackproc."):
-        if "orekit" in info.name or info.name.endswith("__main__"):   # no JVM in a process that forks;
-            continue                                                      # __main__ would run the CLI
-        try:
-            importlib.import_module(info.name)
-        except Exception:                                # noqa: BLE001 - a preload only; the command imports it
-            pass
+    blocker = _NoNumba()
+    sys.meta_path.insert(0, blocker)
+    try:
+        for info in pkgutil.walk_packages(trackproc.__path__, "trackproc."):
+            if any(part in info.name for part in _SKIP):
+                continue
+            try:
+                importlib.import_module(info.name)
+            except Exception:                            # noqa: BLE001 - e.g. it needs numba: the command imports it
+                pass
+    finally:
+        sys.meta_path.remove(blocker)
+    from trackproc.dynamics import jit
+
+    jit._numba_importable.cache_clear()                  # nothing may remember the refusal
+    assert "numba" not in sys.modules, "the fork server loaded numba"
+    from trackproc.dynamics import taylor
+    from trackproc.methods import whitening
+
+    assert not taylor._JIT_MODULE and not whitening._RICCATI, "a kernel lookup ran while preloading"
 
 
 def _recv(conn: socket.socket):
