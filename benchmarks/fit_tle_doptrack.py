@@ -387,11 +387,18 @@ def _tle(summary):
     return parse_tle("\n".join(lines))
 
 
-def covariance_rows(dev: bool = True, model_error=None, protocols=("held-back", "next")):
+def covariance_rows(dev: bool = True, model_error=None, protocols=("held-back", "next"), fits=None):
     """Held-back and next-group passes: the fitted TLE's Doppler prediction error (the orbit's
     share, ``sqrt(rms^2 - noise^2)``, noise the RMS of a fit to that pass itself) against the
     spread its covariance predicts there (the written, prediction covariance and the one without
-    SGP4's theory error); their ratio is the normalised error."""
+    SGP4's theory error); their ratio is the normalised error.
+
+    ``fits``: {tuple of fitted pass names: FitTleResult} made with the default options (refusal
+    on) and ``model_error`` None, used instead of fitting again (tests/cli/test_fit_tle.py shares
+    its held-back fits): a refused fit's summary keeps the fitted TLE and the two terms of its
+    prediction covariance (``estimation_covariance`` + ``model_error.element_covariance``, the
+    matrix ``--no-refusal`` writes, bit for bit), so the rows are the same; only ``verdict`` is
+    then the refusing run's."""
     rows = []
     allg = evenings()
     pairs = []
@@ -405,8 +412,11 @@ def covariance_rows(dev: bool = True, model_error=None, protocols=("held-back", 
                 pairs.append(("next", g, nxt))
     opts = FitTleOptions(model_error=model_error, refusal=False)
     for protocol, fit, target in [p for p in pairs if p[0] in protocols]:
-        tables = [(s, _load(s)[0]) for s in fit]
-        res = fit_tle(tables, [], OrbitInput(tle=metadata_tle(tables), source="metadata"), opts, EOP)
+        if fits is not None and model_error is None and tuple(fit) in fits:
+            res = fits[tuple(fit)]
+        else:
+            tables = [(s, _load(s)[0]) for s in fit]
+            res = fit_tle(tables, [], OrbitInput(tle=metadata_tle(tables), source="metadata"), opts, EOP)
         held = _load(target)[0]
         own = fit_tle([(target, held)], [], OrbitInput(tle=metadata_tle([(target, held)]), source="metadata"),
                       FitTleOptions(refusal=False, model_error=0.0, apriori_model="refine"), EOP)   # its own curve
@@ -415,11 +425,13 @@ def covariance_rows(dev: bool = True, model_error=None, protocols=("held-back", 
         share = _curve_difference(held, _tle(res.summary), _tle(own.summary))
         own_sigma = doppler_spread(held, own.summary, own.summary["covariance_without_model_error"])
         me = res.summary["model_error"]
+        written = (np.array(res.summary["estimation_covariance"]) + np.array(me["element_covariance"])
+                   if res.summary["refused"] else res.summary["covariance"]["matrix"])   # as --no-refusal writes it
         a = doppler_partials(held, res.summary)                 # the fit's three covariances share them
         rows.append({"protocol": protocol, "predicted": target, "fitted_passes": len(fit),
                      "noise_hz": round(noise, 2), "fitted_hz": round(fitted, 2), "orbit_share_hz": round(share, 2),
                      "own_fit_sigma_hz": round(own_sigma, 2),
-                     "sigma_hz": round(float(np.hypot(spread(a, res.summary["covariance"]["matrix"]), own_sigma)), 2),
+                     "sigma_hz": round(float(np.hypot(spread(a, written), own_sigma)), 2),
                      "sigma_without_model_error_hz": round(float(np.hypot(spread(
                          a, res.summary["covariance_without_model_error"]), own_sigma)), 2),
                      "sigma_model_error_only_hz": round(spread(a, me["element_covariance"]), 2),

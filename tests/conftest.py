@@ -43,26 +43,46 @@ class CliResult:
         return self.stdout_bytes.decode("utf-8")
 
 
+def _run_cli(args, input: bytes | str | None = None) -> CliResult:
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    try:
+        with CliRunner().isolation(input=input) as (out, err, _):
+            code = cli_app.main([str(a) for a in args])
+            sys.stdout.flush()
+            sys.stderr.flush()
+            return CliResult(code, out.getvalue(), err.getvalue().decode("utf-8"))
+    finally:
+        root.handlers[:] = handlers
+        root.setLevel(level)
+
+
 @pytest.fixture
 def run_cli():
     """``run_cli(args, input=bytes)`` -> CliResult: the real entry point (``main``: exit codes and
     one-line errors) inside CliRunner's isolated stdin/stdout/stderr."""
-    runner = CliRunner()
+    return _run_cli
 
-    def run(args, input: bytes | str | None = None) -> CliResult:
-        root = logging.getLogger()
-        handlers, level = list(root.handlers), root.level
-        try:
-            with runner.isolation(input=input) as (out, err, _):
-                code = cli_app.main([str(a) for a in args])
-                sys.stdout.flush()
-                sys.stderr.flush()
-                return CliResult(code, out.getvalue(), err.getvalue().decode("utf-8"))
-        finally:
-            root.handlers[:] = handlers
-            root.setLevel(level)
 
-    return run
+@pytest.fixture(scope="session")
+def run_cli_shared():
+    """:func:`run_cli` for module- and session-scoped fixtures (one command's output that several
+    tests check)."""
+    return _run_cli
+
+
+@pytest.fixture(scope="session")
+def forked_trackproc(tmp_path_factory):
+    """A directory to put first on PATH: its ``trackproc`` runs each command in a fork of one server
+    that imported trackproc once (tests/cli/forkserver.py), for shell scripts whose subject is the
+    commands, not the interpreter's start."""
+    from forkserver import ForkServer
+
+    directory = tmp_path_factory.mktemp("forkserver")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(Path(__file__).resolve().parents[1] / "src")] + [p for p in [os.environ.get("PYTHONPATH")] if p]))
+    with ForkServer(directory, env) as bin_dir:
+        yield bin_dir
 
 
 @pytest.fixture

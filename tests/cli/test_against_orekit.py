@@ -9,7 +9,7 @@ of +100 / -80 / +120 m, two-body, ``--range-rate-model instantaneous`` (Orekit's
 reads the same file from a private data directory). ``trackproc estimate --range-bias
 --clip 0`` and Orekit's ``BatchLSEstimator`` (one ``Bias`` per station, no outlier filter) start
 from the same guess (0.96 km and 0.98 m/s off). Orekit runs in a child process
-(``tests/orekit_helpers.py``).
+(``tests/orekit_helpers.py``), one for both cases below (one JVM start and warm-up).
 
 Checked, with the agreement reached at the time of writing (Orekit 13.1.9, see
 docs/estimate_orekit.md):
@@ -66,14 +66,30 @@ def _cli(args):
 
 
 @pytest.fixture(scope="module")
-def case(tmp_path_factory):
-    """Both tools on the same files: trackproc in-process, Orekit in a child process."""
+def both_cases(tmp_path_factory):
+    """The one-way case in ``dir``, the two-way case in ``dir/two_way``: trackproc in-process,
+    Orekit for both in one child process (one JVM start and warm-up)."""
     if not _OK:
         pytest.skip(_WHY)
-    return once_per_run(tmp_path_factory, "orekit", _build_case)
+    return once_per_run(tmp_path_factory, "orekit", _build_both)
+
+
+def _build_both(d):
+    (d / "two_way").mkdir(exist_ok=True)
+    one, config = _build_case(d)
+    two, two_config = _build_two_way_case(d / "two_way")
+    one["orekit"], two["orekit"] = oh.run_subprocess_many([(config, d), (two_config, d / "two_way")], timeout_s=600)
+    return {**one, "two_way_orekit": two["orekit"], "two_way_trackproc": two["trackproc"]}
+
+
+@pytest.fixture(scope="module")
+def case(both_cases):
+    """Both tools on the same files: trackproc in-process, Orekit in a child process."""
+    return {k: v for k, v in both_cases.items() if not k.startswith("two_way")}
 
 
 def _build_case(d):
+    """The one-way case's trackproc side in ``d``, and the Orekit run's config."""
     eop, biased = oh.write_case_inputs(d)
     sim = ["simulate", "--state", d / "truth.json", "--stations", d / "stations.csv", "--duration", "43200",
            "--step", "30", "--eop", eop, "--kinds", "range,range_rate", "-q"]
@@ -85,12 +101,12 @@ def _build_case(d):
     assert _cli(["estimate", d / "passes.parquet", "--initial", d / "guess.json", "--stations", d / "stations.csv",
                  "--eop", eop, "--range-bias", "--clip", "0", "-q", "-o", d / "trackproc.json"] + COMMON) == 0
     station_times = [t.isoformat() for t in pd.date_range(EPOCH, periods=13, freq="1h")]
-    orekit = oh.run_subprocess({
+    config = {
         "eop": str(eop), "stations": str(d / "stations.csv"), "station_times": station_times,
         "model": {"passes": [str(d / "noiseless.parquet")], "state": TRUTH},
-        "estimate": {"passes": [str(d / "passes.parquet")], "initial": GUESS, "range_bias": True}}, d, timeout_s=300)
-    return {"dir": d, "eop": eop, "orekit": orekit, "station_times": station_times,
-            "trackproc": json.loads((d / "trackproc.json").read_text())}
+        "estimate": {"passes": [str(d / "passes.parquet")], "initial": GUESS, "range_bias": True}}
+    return {"dir": d, "eop": eop, "station_times": station_times,
+            "trackproc": json.loads((d / "trackproc.json").read_text())}, config
 
 
 def test_stations_in_gcrf_agree(case):
@@ -171,16 +187,17 @@ def _compare_estimates(ours, orekit, label):
 # ----------------------------------------------------------------------------- two-way
 
 @pytest.fixture(scope="module")
-def two_way_case(tmp_path_factory):
+def two_way_case(both_cases):
     """The same case with two-way (round-trip) range and range-rate: ``simulate --mode two-way``
     (pass files with ``doppler_mode = two-way``), Orekit's measurements built with
     ``twoWay = true`` from that metadata."""
-    if not _OK:
-        pytest.skip(_WHY)
-    return once_per_run(tmp_path_factory, "orekit_two_way", _build_two_way_case)
+    d = both_cases["dir"] / "two_way"
+    return {"dir": d, "eop": d / both_cases["eop"].name, "orekit": both_cases["two_way_orekit"],
+            "trackproc": both_cases["two_way_trackproc"]}
 
 
 def _build_two_way_case(d):
+    """The two-way case's trackproc side in ``d``, and the Orekit run's config."""
     eop, biased = oh.write_case_inputs(d)
     sim = ["simulate", "--state", d / "truth.json", "--stations", d / "stations.csv", "--duration", "43200",
            "--step", "30", "--eop", eop, "--kinds", "range,range_rate", "--mode", "two-way", "-q"]
@@ -189,11 +206,11 @@ def _build_two_way_case(d):
     assert _cli(sim + COMMON + biased + ["--seed", "7", "-o", d / "passes.parquet"]) == 0
     assert _cli(["estimate", d / "passes.parquet", "--initial", d / "guess.json", "--stations", d / "stations.csv",
                  "--eop", eop, "--range-bias", "--clip", "0", "-q", "-o", d / "trackproc.json"] + COMMON) == 0
-    orekit = oh.run_subprocess({
+    config = {
         "eop": str(eop), "stations": str(d / "stations.csv"),
         "model": {"passes": [str(d / "noiseless.parquet")], "state": TRUTH},
-        "estimate": {"passes": [str(d / "passes.parquet")], "initial": GUESS, "range_bias": True}}, d, timeout_s=300)
-    return {"dir": d, "eop": eop, "orekit": orekit, "trackproc": json.loads((d / "trackproc.json").read_text())}
+        "estimate": {"passes": [str(d / "passes.parquet")], "initial": GUESS, "range_bias": True}}
+    return {"dir": d, "eop": eop, "trackproc": json.loads((d / "trackproc.json").read_text())}, config
 
 
 def test_two_way_measurement_models_agree_on_noiseless_data(two_way_case):

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import pytest
 
+from once_per_run import once_per_run
 from trackproc.pipeline import batch as batch_module
 from trackproc.pipeline.batch.schema import SCHEMA
 
@@ -43,7 +44,12 @@ GOOD = 25
 
 @pytest.fixture(scope="session")
 def passes(tmp_path_factory) -> Path:
-    """``inbox/`` with 25 good passes and 5 broken ones, ``stations.csv``, ``stale.json``."""
+    """``inbox/`` with 25 good passes and 5 broken ones, ``stations.csv``, ``stale.json``; made once
+    per test run (the xdist workers share it: tests only read it)."""
+    return once_per_run(tmp_path_factory, "batch_passes", _make_passes)["dir"]
+
+
+def _make_passes(root: Path) -> dict:
     import pyarrow as pa
     import pyarrow.parquet as pq
 
@@ -51,7 +57,6 @@ def passes(tmp_path_factory) -> Path:
     from trackproc.io.statefile import read_state
     from trackproc.pipeline.simulate import SimulateOptions, simulate
 
-    root = tmp_path_factory.mktemp("batch")
     inbox = root / "inbox"
     inbox.mkdir()
     (root / "stations.csv").write_text(STATIONS)
@@ -86,7 +91,7 @@ def passes(tmp_path_factory) -> Path:
     pq.write_table(pa.Table.from_pandas(spare, preserve_index=False), sink)
     data = sink.getvalue().to_pybytes()
     (inbox / "broken_truncated.parquet").write_bytes(data[: len(data) // 2])
-    return root
+    return {"dir": root}
 
 
 def write_config(path: Path, passes: Path, output: Path, **sections) -> Path:

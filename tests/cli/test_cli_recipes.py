@@ -1,4 +1,6 @@
-"""The shell recipes in cli/ run as written (they are what users copy into their scripts)."""
+"""The shell recipes in cli/ run as written (they are what users copy into their scripts). Their
+``trackproc`` is a fork of one server that imported trackproc once (tests/conftest.py
+``forked_trackproc``): real pipes, files and exit codes."""
 
 import os
 import shutil
@@ -14,16 +16,16 @@ ROOT = Path(__file__).resolve().parents[2]
 pytestmark = pytest.mark.skipif(shutil.which("bash") is None, reason="needs bash")
 
 
-def env():
+def env(bin_dir: Path):
     e = dict(os.environ)
-    e["PATH"] = str(Path(sys.executable).parent) + os.pathsep + e.get("PATH", "")
+    e["PATH"] = os.pathsep.join([str(bin_dir), str(Path(sys.executable).parent), e.get("PATH", "")])
     return e
 
 
-def test_pipeline_recipe(tmp_path):
+def test_pipeline_recipe(tmp_path, forked_trackproc):
     out = tmp_path / "out"
     run = subprocess.run(["bash", str(ROOT / "cli" / "pipeline.sh"), str(out)], capture_output=True,
-                         text=True, env=env(), timeout=300)
+                         text=True, env=env(forked_trackproc), timeout=300)
     assert run.returncode == 0, run.stderr
     assert "Traceback" not in run.stderr
     by_file = read_pass_table(out / "smoothed.parquet").frame
@@ -74,7 +76,7 @@ def test_pipeline_recipe(tmp_path):
     assert (out / "refine_residuals.csv").stat().st_size > 0
 
 
-def test_cron_recipe_reports_partial_failure_and_skips_done_files(tmp_path):
+def test_cron_recipe_reports_partial_failure_and_skips_done_files(tmp_path, forked_trackproc):
     inbox, outbox = tmp_path / "inbox", tmp_path / "outbox"
     inbox.mkdir()
     shutil.copy(ROOT / "sample_data" / "doppler_pass.csv", inbox / "a.csv")
@@ -83,11 +85,11 @@ def test_cron_recipe_reports_partial_failure_and_skips_done_files(tmp_path):
     (inbox / "bad.csv").write_text("time,station,doppler_hz\nnot-a-time,CPH,12.0\n")
     cmd = ["bash", str(ROOT / "cli" / "cron_ingest.sh"), str(inbox), str(outbox),
            str(ROOT / "sample_data" / "stations.csv")]
-    first = subprocess.run(cmd, capture_output=True, text=True, env=env(), timeout=300)
+    first = subprocess.run(cmd, capture_output=True, text=True, env=env(forked_trackproc), timeout=300)
     assert first.returncode == 3, first.stderr
     assert "FAILED" in first.stderr and "bad.csv" in first.stderr and "row 2" in first.stderr
     assert (outbox / "a.smoothed.parquet").exists() and (outbox / "b.smoothed.parquet").exists()
     assert not (outbox / "bad.smoothed.parquet").exists()
-    second = subprocess.run(cmd, capture_output=True, text=True, env=env(), timeout=300)
+    second = subprocess.run(cmd, capture_output=True, text=True, env=env(forked_trackproc), timeout=300)
     assert second.returncode == 1  # only the bad file was tried again, and it failed again
     assert "0 ok, 1 failed" in second.stderr

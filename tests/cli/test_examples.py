@@ -1,6 +1,8 @@
 """Every example in the README and in every command's --help runs, unchanged, on the shipped files
 (issue 16): the blocks are extracted, run by bash in a temporary directory where ``sample_data``
-is the project's own, and must exit 0 and write the files they name."""
+is the project's own, and must exit 0 and write the files they name. The ``trackproc`` they call is
+a fork of one server that imported trackproc once (tests/cli/forkserver.py: real pipes, files, exit
+codes and environment; the interpreter's start is test_startup.py's subject)."""
 
 from __future__ import annotations
 
@@ -62,11 +64,15 @@ def outputs_named(script: str) -> list[str]:
     return [n for n in names if n != "-" and not n.startswith("-")]
 
 
-def run(script: str, tmp_path: Path) -> None:
+def _env(bin_dir: Path) -> dict:
+    return dict(os.environ, PATH=os.pathsep.join([str(bin_dir), str(Path(sys.executable).parent), os.environ.get("PATH", "")]),
+                PYTHONPATH=os.pathsep.join([str(ROOT / "src")] + [p for p in [os.environ.get("PYTHONPATH")] if p]),
+                TRACKPROC_LOG_LEVEL="WARNING")
+
+
+def run(script: str, tmp_path: Path, bin_dir: Path) -> None:
     (tmp_path / "sample_data").symlink_to(ROOT / "sample_data")
-    env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
-               PYTHONPATH=os.pathsep.join([str(ROOT / "src")] + [p for p in [os.environ.get("PYTHONPATH")] if p]),
-               TRACKPROC_LOG_LEVEL="WARNING")
+    env = _env(bin_dir)
     proc = subprocess.run(["bash", "-euo", "pipefail", "-c", script], cwd=tmp_path, env=env, capture_output=True,
                           text=True, timeout=600)
     assert proc.returncode == 0, f"example failed (exit {proc.returncode}):\n{script}\n--- stderr:\n{proc.stderr[-3000:]}"
@@ -76,14 +82,14 @@ def run(script: str, tmp_path: Path) -> None:
         assert path.exists() and (path.is_dir() or path.stat().st_size > 0), f"{name} not written by:\n{script}"
 
 
-def test_readme_tour_and_examples_run(tmp_path):
+def test_readme_tour_and_examples_run(tmp_path, forked_trackproc):
     blocks = readme_blocks()
     assert len(blocks) >= 2
-    run("\n".join(blocks), tmp_path)       # in order: later examples use earlier outputs
+    run("\n".join(blocks), tmp_path, forked_trackproc)       # in order: later examples use earlier outputs
 
 
 @pytest.mark.parametrize("command", ["ingest", "info", "simulate", "propagate", "smooth", "estimate", "filter", "refine",
                                      "accuracy", "requirements", "detect", "batch", "passes", "compare", "identify",
                                      "fit-tle", "import-orekit", "help"])
-def test_help_examples_run(command, tmp_path):
-    run(help_blocks()[command], tmp_path)
+def test_help_examples_run(command, tmp_path, forked_trackproc):
+    run(help_blocks()[command], tmp_path, forked_trackproc)

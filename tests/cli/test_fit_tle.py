@@ -430,19 +430,39 @@ def test_bad_input_exit_2(run_cli, write, tmp_path):
 # --------------------------------------------------------------------------- real data (DopTrack)
 
 
-def _doptrack_held_back(groups):
+@pytest.fixture(scope="module")
+def doptrack_held_back_fits():
+    """{fitted passes: FitTleResult}: on each development evening, every pass but the last fitted
+    from the metadata TLE with the default options; the held-back tests below check different
+    things of the same fits."""
+    from realdata import DOPTRACK
+
+    if not DOPTRACK.is_dir():
+        pytest.skip(f"real data not available: {DOPTRACK}")
+    from test_refine_realdata import EOP, _load, evenings, is_dev
+
+    from trackproc.pipeline.fit_tle import FitTleOptions, fit_tle
+    from trackproc.pipeline.orbit_source import OrbitInput, metadata_tle
+
+    fits = {}
+    for group in [g for g in evenings() if is_dev(g[0])]:
+        tables = [(s, _load(s)[0]) for s in group[:-1]]
+        fits[tuple(group[:-1])] = fit_tle(tables, [], OrbitInput(tle=metadata_tle(tables), source="metadata"),
+                                          FitTleOptions(), EOP)
+    return fits
+
+
+def _doptrack_held_back(groups, fits):
     from test_refine_realdata import EOP, _load
 
     from trackproc.pipeline.compare import CompareOptions, compare
-    from trackproc.pipeline.fit_tle import FitTleOptions, fit_tle
     from trackproc.pipeline.orbit_source import OrbitInput, metadata_tle
 
     rows = []
     for group in groups:
         fit, held = group[:-1], group[-1]
-        tables = [(s, _load(s)[0]) for s in fit]
-        initial = metadata_tle(tables)
-        res = fit_tle(tables, [], OrbitInput(tle=initial, source="metadata"), FitTleOptions(), EOP)
+        initial = metadata_tle([(s, _load(s)[0]) for s in fit])
+        res = fits[tuple(fit)]
         table_b = _load(held)[0]
 
         def rms(tle):
@@ -462,7 +482,7 @@ def _doptrack_held_back(groups):
 @pytest.mark.slow
 @pytest.mark.realdata
 @pytest.mark.validation
-def test_doptrack_fitted_tle_predicts_the_held_back_pass():
+def test_doptrack_fitted_tle_predicts_the_held_back_pass(doptrack_held_back_fits):
     """Issue 18's criterion on the development evenings (1-10 April): the TLE fitted to every
     pass of an evening but the last (from the metadata TLE) predicts that last pass (~95 min
     later) at least as well as the initial TLE in most evenings, never more than 1 % worse (the
@@ -474,7 +494,7 @@ def test_doptrack_fitted_tle_predicts_the_held_back_pass():
 
     if not DOPTRACK.is_dir():
         pytest.skip(f"real data not available: {DOPTRACK}")
-    rows = _doptrack_held_back([g for g in evenings() if is_dev(g[0])])
+    rows = _doptrack_held_back([g for g in evenings() if is_dev(g[0])], doptrack_held_back_fits)
     assert len(rows) >= 6
     ratio = np.array([r["fitted_hz"] / r["tle_hz"] for r in rows])
     assert (ratio <= 1.0).mean() > 0.5 and ratio.max() <= 1.01 and np.median(ratio) <= 1.0, rows
@@ -566,7 +586,7 @@ def test_probability_better_against_monte_carlo():
 @pytest.mark.slow
 @pytest.mark.realdata
 @pytest.mark.validation
-def test_doptrack_prediction_covariance_covers_the_held_back_pass():
+def test_doptrack_prediction_covariance_covers_the_held_back_pass(doptrack_held_back_fits):
     """The written covariance (SGP4's theory error included) against the real prediction error on
     the development evenings (1-10 April): the held-back pass's orbit error (the fitted TLE's
     Doppler curve minus that of a TLE fitted to the pass itself, offset and drift removed) over
@@ -583,7 +603,7 @@ def test_doptrack_prediction_covariance_covers_the_held_back_pass():
     sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
     from fit_tle_doptrack import covariance_rows
 
-    rows = covariance_rows(True, protocols=("held-back",))
+    rows = covariance_rows(True, protocols=("held-back",), fits=doptrack_held_back_fits)
     assert len(rows) >= 6
     z = np.array([r["normalised"] for r in rows])
     z0 = np.array([r["orbit_share_hz"] / r["sigma_without_model_error_hz"] for r in rows])
@@ -684,7 +704,7 @@ def test_one_pass_is_refused_and_the_initial_tle_written(run_cli, tmp_path):
     from realdata import DOPTRACK
 
     from trackproc.io.passfile import read_pass_table
-    from trackproc.pipeline.orbit_source import metadata_tle
+    from trackproc.pipeline.orbit_source import OrbitInput, metadata_tle
 
     raw = DOPTRACK / "data" / "Delfi-C3_32789_202004072055.csv"
     if not raw.exists():

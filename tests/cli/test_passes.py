@@ -78,13 +78,19 @@ def test_tle_passes_match_a_brute_force_sgp4_erfa_scan(run_cli, write, tmp_path)
     assert checked >= 4
 
 
-@pytest.mark.parametrize("station", ["CPH", "ZHY", "KIR"])
-def test_sample_state_passes_match_propagate_at_station(run_cli, tmp_path, station):
-    out = tmp_path / "passes.json"
-    res = run_cli(["passes", SAMPLE / "truth.json", "--stations", SAMPLE / "stations.csv", "--span", "43200",
-                   "--min-elevation", "10", "--dut1", "0", "-o", out])
+@pytest.fixture(scope="module")
+def sample_passes(run_cli_shared, tmp_path_factory) -> dict:
+    """The sample state's passes over the three stations, 12 h: one run that each station's test reads."""
+    out = tmp_path_factory.mktemp("passes") / "passes.json"
+    res = run_cli_shared(["passes", SAMPLE / "truth.json", "--stations", SAMPLE / "stations.csv", "--span", "43200",
+                          "--min-elevation", "10", "--dut1", "0", "-o", out])
     assert res.exit_code == 0, res.stderr
-    doc = json.loads(out.read_text())
+    return json.loads(out.read_text())
+
+
+@pytest.mark.parametrize("station", ["CPH", "ZHY", "KIR"])
+def test_sample_state_passes_match_propagate_at_station(run_cli, tmp_path, station, sample_passes):
+    doc = sample_passes
     assert doc["meta"]["force_model"] == "j2" and doc["meta"]["min_elevation_deg"] == 10
     eph_path = tmp_path / "eph.parquet"
     res = run_cli(["propagate", SAMPLE / "truth.json", "--span", "43200", "--step", "1", "--at-station", station,

@@ -548,14 +548,22 @@ def ready(stm: bool) -> bool:
 
 
 def compile_all() -> float:
-    """Compile (or load) every kernel with the signatures the engine uses; CPU seconds taken."""
+    """Compile (or load) every kernel with the signatures the engine uses; CPU seconds taken.
+
+    Under the engine's own locks (:func:`trackproc.dynamics.jit.compile_once`, families
+    ``taylor`` and ``taylor-dense``, taken in that order as everywhere): a process propagating
+    at the same time on a fresh cache waits and loads these kernels instead of compiling its own
+    copy (~8 s of CPU)."""
+    from trackproc.dynamics import jit
+
     c0 = time.process_time()
     r = np.array([7.0e6, 0.0, 0.0])
     v = np.array([0.0, 7.5e3, 0.0])
     e = np.zeros((3, 6))
-    _, tb, c = propagate_state(r, v, 0.0, 60.0, 24, 3.986e14, 0.0, 1e-15, 10)
-    propagate_var(r, v, e, e, 0.0, 60.0, 24, 3.986e14, 0.0, -1, 1e-15, 10)
-    dense(np.ascontiguousarray(c[:, None]), tb, np.zeros(2, dtype=np.int64), np.array([0.0, 1.0]), 0)
+    with jit.compile_once([propagate_state, propagate_var], "taylor"), jit.compile_once([dense], "taylor-dense"):
+        _, tb, c = propagate_state(r, v, 0.0, 60.0, 24, 3.986e14, 0.0, 1e-15, 10)
+        propagate_var(r, v, e, e, 0.0, 60.0, 24, 3.986e14, 0.0, -1, 1e-15, 10)
+        dense(np.ascontiguousarray(c[:, None]), tb, np.zeros(2, dtype=np.int64), np.array([0.0, 1.0]), 0)
     return time.process_time() - c0
 
 

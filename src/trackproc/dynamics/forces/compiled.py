@@ -34,7 +34,7 @@ from trackproc.constants import C_LIGHT, OMEGA_EARTH, WGS84_A, WGS84_F
 from trackproc.dynamics.forces import dop853_tableau as _dc
 from trackproc.dynamics.forces import drag as drag_mod
 from trackproc.dynamics.forces import srp, third_body
-from trackproc.dynamics.jit import njit
+from trackproc.dynamics.jit import compile_once, njit
 from trackproc.dynamics.forces.tables import (  # noqa: F401 - the kernels' cfg slots; the table builders re-exported
     _AM_DRAG, _AM_SRP, _CD, _CR, _DRAG, _ER, _EX, _EXR, _FLAT, _GM, _GRID, _HPN, _MOON, _NCFG, _NNODES, _RE, _REL,
     _SRP, _SUN, _T0, environment_tables, field_tables, hessian_tables, stm_field, supported)
@@ -719,7 +719,8 @@ def perturbation(env, t, r, v):
     E = environment_tables(env)
     F = field_tables(env.model.field)
     acc = np.empty(3)
-    _acceleration(float(t), np.asarray(r, float), np.asarray(v, float), E, F, acc)
+    with compile_once([_acceleration], "force"):        # integrate's lock: one process compiles
+        _acceleration(float(t), np.asarray(r, float), np.asarray(v, float), E, F, acc)
     return acc
 
 
@@ -731,5 +732,6 @@ def partials(env, t, r, v):
     HT = hessian_tables(stm_field(env))
     a, g, hv = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
     dp = np.zeros((3, max(len(est), 1)))
-    _partials(float(t), np.asarray(r, float), np.asarray(v, float), E, F, HT, a, g, hv, dp)
+    with compile_once([_partials], "force"):
+        _partials(float(t), np.asarray(r, float), np.asarray(v, float), E, F, HT, a, g, hv, dp)
     return a, g, hv, dp[:, :len(est)]
