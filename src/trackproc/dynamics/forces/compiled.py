@@ -437,9 +437,26 @@ def _position_part(t, r, F, central, E, M, sun, moon, out):
 
 
 @njit
+def _density(r, M, sun_itrf, n):
+    """Harris-Priester density (kg/m³) at inertial ``r``; ``sun_itrf`` the Sun in ITRF."""
+    r_itrf = _mv(M, r)
+    return _harris_priester(_height(r_itrf), r_itrf, sun_itrf, n)
+
+
+@njit
 def _rest(t, r, v, E, M, sun, axis, acc, unit, with_units):
     """Relativity, SRP, drag and the empirical accelerations added to ``acc`` (the position
     part); ``unit`` (11, 3) gets the unit-coefficient parts in PARAMETERS order."""
+    cfg = E[0]
+    rho = _density(r, M, _mv(M, sun), cfg[_HPN]) if cfg[_DRAG] else 0.0
+    _rest_rho(t, r, v, E, sun, axis, acc, unit, with_units, rho)
+
+
+@njit
+def _rest_rho(t, r, v, E, sun, axis, acc, unit, with_units, rho):
+    """:func:`_rest` with the density ``rho`` at ``r`` given: it depends on the position alone,
+    so the velocity differences of :func:`_partials` reuse it (the same number). Scalars, not
+    small arrays: this runs 13 times per right-hand side with the variational equations."""
     cfg, q = E[0], E[1]
     if cfg[_REL]:
         gm = cfg[_GM]
@@ -461,36 +478,34 @@ def _rest(t, r, v, E, M, sun, axis, acc, unit, with_units):
         cx = axis[1] * r[2] - axis[2] * r[1]
         cy = axis[2] * r[0] - axis[0] * r[2]
         cz = axis[0] * r[1] - axis[1] * r[0]
-        vr = np.array([v[0] - OMEGA_EARTH * cx, v[1] - OMEGA_EARTH * cy, v[2] - OMEGA_EARTH * cz])
-        r_itrf = _mv(M, r)
-        rho = _harris_priester(_height(r_itrf), r_itrf, _mv(M, sun), cfg[_HPN])
-        vn = math.sqrt(vr[0] ** 2 + vr[1] ** 2 + vr[2] ** 2)
-        for i in range(3):
-            a1 = -0.5 * rho * 1.0 * cfg[_AM_DRAG] * vn * vr[i]
-            acc[i] += cfg[_CD] * a1
-            unit[1, i] = a1
+        vr0, vr1, vr2 = v[0] - OMEGA_EARTH * cx, v[1] - OMEGA_EARTH * cy, v[2] - OMEGA_EARTH * cz
+        vn = math.sqrt(vr0 ** 2 + vr1 ** 2 + vr2 ** 2)
+        f = -0.5 * rho * 1.0 * cfg[_AM_DRAG] * vn
+        a0, a1, a2 = f * vr0, f * vr1, f * vr2
+        acc[0] += cfg[_CD] * a0
+        acc[1] += cfg[_CD] * a1
+        acc[2] += cfg[_CD] * a2
+        unit[1, 0], unit[1, 1], unit[1, 2] = a0, a1, a2
     er, et, en = cfg[_ER], cfg[_ER + 1], cfg[_ER + 2]
     emp = er != 0.0 or et != 0.0 or en != 0.0
     if emp or with_units:
         rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
-        ru = r / rn
-        h = np.array([r[1] * v[2] - r[2] * v[1], r[2] * v[0] - r[0] * v[2], r[0] * v[1] - r[1] * v[0]])
-        nu_ = h / math.sqrt(h[0] ** 2 + h[1] ** 2 + h[2] ** 2)
-        tu = np.array([nu_[1] * ru[2] - nu_[2] * ru[1], nu_[2] * ru[0] - nu_[0] * ru[2],
-                       nu_[0] * ru[1] - nu_[1] * ru[0]])
+        r0, r1, r2 = r[0] / rn, r[1] / rn, r[2] / rn
+        h0, h1, h2 = r[1] * v[2] - r[2] * v[1], r[2] * v[0] - r[0] * v[2], r[0] * v[1] - r[1] * v[0]
+        hn = math.sqrt(h0 ** 2 + h1 ** 2 + h2 ** 2)
+        n0, n1, n2 = h0 / hn, h1 / hn, h2 / hn
+        t0, t1, t2 = n1 * r2 - n2 * r1, n2 * r0 - n0 * r2, n0 * r1 - n1 * r0
         if emp:
-            for i in range(3):
-                acc[i] += er * ru[i] + et * tu[i] + en * nu_[i]
+            acc[0] += er * r0 + et * t0 + en * n0
+            acc[1] += er * r1 + et * t1 + en * n1
+            acc[2] += er * r2 + et * t2 + en * n2
+        unit[2, 0], unit[3, 0], unit[4, 0] = r0, t0, n0
+        unit[2, 1], unit[3, 1], unit[4, 1] = r1, t1, n1
+        unit[2, 2], unit[3, 2], unit[4, 2] = r2, t2, n2
+    x0, x1, x2 = cfg[_EX] + t * cfg[_EXR], cfg[_EX + 1] + t * cfg[_EXR + 1], cfg[_EX + 2] + t * cfg[_EXR + 2]
+    if x0 != 0.0 or x1 != 0.0 or x2 != 0.0:
         for i in range(3):
-            unit[2, i], unit[3, i], unit[4, i] = ru[i], tu[i], nu_[i]
-    xyz = np.empty(3)
-    anyx = False
-    for j in range(3):
-        xyz[j] = cfg[_EX + j] + t * cfg[_EXR + j]
-        anyx = anyx or xyz[j] != 0.0
-    if anyx:
-        for i in range(3):
-            acc[i] += q[i, 0] * xyz[0] + q[i, 1] * xyz[1] + q[i, 2] * xyz[2]
+            acc[i] += q[i, 0] * x0 + q[i, 1] * x1 + q[i, 2] * x2
     if with_units:
         for j in range(3):
             for i in range(3):
@@ -528,7 +543,11 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
     scratch = np.zeros((11, 3))
     p0 = np.empty(3)
     _position_part(t, r, F, False, E, M, sun, moon, p0)
-    _rest(t, r, v, E, M, sun, axis, p0, unit, True)
+    # the density at r serves the velocity differences below too (it depends on the position alone)
+    drag = cfg[_DRAG] != 0.0
+    sun_itrf = _mv(M, sun)
+    rho = _density(r, M, sun_itrf, cfg[_HPN]) if drag else 0.0
+    _rest_rho(t, r, v, E, sun, axis, p0, unit, True, rho)
     gi = np.empty((3, 3))
     _field_hessian(_mv(M, r), HT, gi)
     gf = _mat3(_mat3(M.T.copy(), gi), M)                    # ITRF -> integration frame
@@ -541,14 +560,15 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
         _point_mass_gradient(r, moon, _GM_MOON, g)
     hr, hvs = 1.0, 1e-3
     pp, pm = np.empty(3), np.empty(3)
+    # the differences need the accelerations only, not the unit parts (with_units False)
     rr = r.copy()
     for j in range(3):
         rr[j] = r[j] + hr
         pp[:] = 0.0
-        _rest(t, rr, v, E, M, sun, axis, pp, scratch, True)
+        _rest_rho(t, rr, v, E, sun, axis, pp, scratch, False, _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0)
         rr[j] = r[j] - hr
         pm[:] = 0.0
-        _rest(t, rr, v, E, M, sun, axis, pm, scratch, True)
+        _rest_rho(t, rr, v, E, sun, axis, pm, scratch, False, _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0)
         rr[j] = r[j]
         for i in range(3):
             g[i, j] += (pp[i] - pm[i]) / (2 * hr)
@@ -556,10 +576,10 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
     for j in range(3):
         vv[j] = v[j] + hvs
         pp[:] = 0.0
-        _rest(t, r, vv, E, M, sun, axis, pp, scratch, True)
+        _rest_rho(t, r, vv, E, sun, axis, pp, scratch, False, rho)
         vv[j] = v[j] - hvs
         pm[:] = 0.0
-        _rest(t, r, vv, E, M, sun, axis, pm, scratch, True)
+        _rest_rho(t, r, vv, E, sun, axis, pm, scratch, False, rho)
         vv[j] = v[j]
         for i in range(3):
             hv[i, j] = (pp[i] - pm[i]) / (2 * hvs)
