@@ -46,6 +46,26 @@ def test_geodetic_height_matches_erfa():
     assert np.abs(h - erfa.gc2gd(1, r)[2]).max() < 1e-8
 
 
+
+def test_density_table_interpolation_is_np_interp_bit_for_bit():
+    """The Harris-Priester table read with one search for both columns (compiled._interp2) gives
+    numba's np.interp of each column to the last bit: at random heights, at every node, between
+    nodes, at and beyond both ends, and NaN."""
+    from trackproc.dynamics.forces import compiled
+
+    @numba.njit
+    def reference(x, xp, f1, f2):
+        return np.interp(x, xp, f1), np.interp(x, xp, f2)
+
+    xp, f1, f2 = compiled._HP_H, compiled._HP_LMIN, compiled._HP_LMAX
+    rng = np.random.default_rng(3)
+    heights = np.concatenate([rng.uniform(xp[0] - 1e4, xp[-1] + 1e4, 3000), xp, 0.5 * (xp[1:] + xp[:-1]),
+                              np.nextafter(xp, -np.inf), np.nextafter(xp, np.inf), [np.nan]])
+    got = np.array([compiled._interp2(h, xp, f1, f2) for h in heights])
+    want = np.array([reference(h, xp, f1, f2) for h in heights])
+    assert np.array_equal(got, want, equal_nan=True)
+    assert np.isnan(got[-1]).all() and np.isfinite(got[:-1]).all()
+
 def test_accelerations_and_partials_equal_the_numpy_path():
     """At 60 states along a LEO day (sunlit, penumbra, umbra; drag below 1000 km), all terms on,
     a 30x30 field with the STM's gradient on its 20x20 cut, every parameter kind estimated."""

@@ -404,13 +404,53 @@ def _height(r):
 
 
 @njit
+def _interp2(x, xp, f1, f2):
+    """``(np.interp(x, xp, f1), np.interp(x, xp, f2))`` for a scalar ``x`` and increasing ``xp`` with
+    one search of the interval and no arrays: numba's np.interp arithmetic (a copy of numpy's
+    ``arr_interp``: the slope computed at the interval, the node's value at a node and at the
+    end, the value from the other end when one gives NaN), so the same numbers."""
+    n = xp.size
+    if x != x:
+        return x, x
+    if x < xp[0]:
+        return f1[0], f2[0]
+    if x > xp[n - 1]:
+        return f1[n - 1], f2[n - 1]
+    lo, hi = 0, n - 1                        # xp[lo] <= x; the last j with xp[j] <= x
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if x >= xp[mid]:
+            lo = mid
+        else:
+            hi = mid
+    j = n - 1 if x >= xp[n - 1] else lo
+    if j == n - 1 or xp[j] == x:
+        return f1[j], f2[j]
+    return _lerp(x, xp, f1, j), _lerp(x, xp, f2, j)
+
+
+@njit
+def _lerp(x, xp, fp, j):
+    """numba's (numpy's) np.interp inside the interval ``j``: the slope, the value from the left
+    node, from the right one when that is NaN."""
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    v = slope * (x - xp[j]) + fp[j]
+    if math.isnan(v):
+        v = slope * (x - xp[j + 1]) + fp[j + 1]
+        if math.isnan(v) and fp[j] == fp[j + 1]:
+            v = fp[j]
+    return v
+
+
+@njit
 def _harris_priester(h, r_itrf, sun_itrf, n):
     """Density (kg/m³), M&G eqs. 3.99-3.104 as drag.harris_priester."""
     if h > _HP_H[-1]:
         return 0.0
     hc = min(max(h, _HP_H[0]), _HP_H[-1])
-    rho_min = math.exp(np.interp(hc, _HP_H, _HP_LMIN))
-    rho_max = math.exp(np.interp(hc, _HP_H, _HP_LMAX))
+    lmin, lmax = _interp2(hc, _HP_H, _HP_LMIN, _HP_LMAX)
+    rho_min = math.exp(lmin)
+    rho_max = math.exp(lmax)
     sn = math.sqrt(sun_itrf[0] ** 2 + sun_itrf[1] ** 2 + sun_itrf[2] ** 2)
     s0, s1, s2 = sun_itrf[0] / sn, sun_itrf[1] / sn, sun_itrf[2] / sn
     c, si = math.cos(_LAG), math.sin(_LAG)
