@@ -462,9 +462,8 @@ def _harris_priester(h, r_itrf, sun_itrf, n):
 
 
 @njit
-def _position_part(t, r, F, central, E, M, sun, moon, out):
+def _position_part(t, r, F, central, cfg, M, sun, moon, out):
     """Field (in ITRF through M) + Sun + Moon at inertial ``r`` into ``out``."""
-    cfg = E[0]
     r_itrf = _mv(M, r)
     fi = np.empty(3)
     _field_acc(r_itrf, F, central, fi)
@@ -489,15 +488,16 @@ def _rest(t, r, v, E, M, sun, axis, acc, unit, with_units):
     part); ``unit`` (11, 3) gets the unit-coefficient parts in PARAMETERS order."""
     cfg = E[0]
     rho = _density(r, M, _mv(M, sun), cfg[_HPN]) if cfg[_DRAG] else 0.0
-    _rest_rho(t, r, v, E, sun, axis, acc, unit, with_units, rho)
+    _rest_rho(t, r, v, cfg, E[1], sun, axis, acc, unit, with_units, rho)
 
 
 @njit
-def _rest_rho(t, r, v, E, sun, axis, acc, unit, with_units, rho):
+def _rest_rho(t, r, v, cfg, q, sun, axis, acc, unit, with_units, rho):
     """:func:`_rest` with the density ``rho`` at ``r`` given: it depends on the position alone,
     so the velocity differences of :func:`_partials` reuse it (the same number). Scalars, not
-    small arrays: this runs 13 times per right-hand side with the variational equations."""
-    cfg, q = E[0], E[1]
+    small arrays, and the settings ``cfg`` and the empirical frame ``q``, not the tuple of every
+    table (numba counts the references of each array a call passes): this runs 13 times per
+    right-hand side with the variational equations."""
     if cfg[_REL]:
         gm = cfg[_GM]
         rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
@@ -560,7 +560,7 @@ def _acceleration(t, r, v, E, F, acc):
     sun, moon, axis = np.empty(3), np.empty(3), np.empty(3)
     _at(t, E, M, sun, moon, axis)
     unit = np.zeros((11, 3))
-    _position_part(t, r, F, False, E, M, sun, moon, acc)
+    _position_part(t, r, F, False, E[0], M, sun, moon, acc)
     _rest(t, r, v, E, M, sun, axis, acc, unit, False)
     gm = E[0][_GM]
     rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
@@ -574,20 +574,19 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
     field's from ``HT``, hessian_tables of the STM's field), the rest (relativity, SRP, drag,
     empirical) by the same central differences (1 m, 1 mm/s), the central term analytic;
     ``∂a/∂v`` and ``∂a/∂p`` as there."""
-    cfg = E[0]
-    codes = E[7]
+    cfg, q, codes = E[0], E[1], E[7]
     M = np.empty((3, 3))
     sun, moon, axis = np.empty(3), np.empty(3), np.empty(3)
     _at(t, E, M, sun, moon, axis)
     unit = np.zeros((11, 3))
     scratch = np.zeros((11, 3))
     p0 = np.empty(3)
-    _position_part(t, r, F, False, E, M, sun, moon, p0)
+    _position_part(t, r, F, False, E[0], M, sun, moon, p0)
     # the density at r serves the velocity differences below too (it depends on the position alone)
     drag = cfg[_DRAG] != 0.0
     sun_itrf = _mv(M, sun)
     rho = _density(r, M, sun_itrf, cfg[_HPN]) if drag else 0.0
-    _rest_rho(t, r, v, E, sun, axis, p0, unit, True, rho)
+    _rest_rho(t, r, v, cfg, q, sun, axis, p0, unit, True, rho)
     gi = np.empty((3, 3))
     _field_hessian(_mv(M, r), HT, gi)
     gf = _mat3(_mat3(M.T.copy(), gi), M)                    # ITRF -> integration frame
@@ -605,10 +604,10 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
     for j in range(3):
         rr[j] = r[j] + hr
         pp[:] = 0.0
-        _rest_rho(t, rr, v, E, sun, axis, pp, scratch, False, _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0)
+        _rest_rho(t, rr, v, cfg, q, sun, axis, pp, scratch, False, _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0)
         rr[j] = r[j] - hr
         pm[:] = 0.0
-        _rest_rho(t, rr, v, E, sun, axis, pm, scratch, False, _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0)
+        _rest_rho(t, rr, v, cfg, q, sun, axis, pm, scratch, False, _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0)
         rr[j] = r[j]
         for i in range(3):
             g[i, j] += (pp[i] - pm[i]) / (2 * hr)
@@ -616,10 +615,10 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
     for j in range(3):
         vv[j] = v[j] + hvs
         pp[:] = 0.0
-        _rest_rho(t, r, vv, E, sun, axis, pp, scratch, False, rho)
+        _rest_rho(t, r, vv, cfg, q, sun, axis, pp, scratch, False, rho)
         vv[j] = v[j] - hvs
         pm[:] = 0.0
-        _rest_rho(t, r, vv, E, sun, axis, pm, scratch, False, rho)
+        _rest_rho(t, r, vv, cfg, q, sun, axis, pm, scratch, False, rho)
         vv[j] = v[j]
         for i in range(3):
             hv[i, j] = (pp[i] - pm[i]) / (2 * hvs)
