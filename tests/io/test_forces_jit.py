@@ -66,6 +66,7 @@ def test_density_table_interpolation_is_np_interp_bit_for_bit():
     assert np.array_equal(got, want, equal_nan=True)
     assert np.isnan(got[-1]).all() and np.isfinite(got[:-1]).all()
 
+
 def test_accelerations_and_partials_equal_the_numpy_path():
     """At 60 states along a LEO day (sunlit, penumbra, umbra; drag below 1000 km), all terms on,
     a 30x30 field with the STM's gradient on its 20x20 cut, every parameter kind estimated."""

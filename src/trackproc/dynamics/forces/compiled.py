@@ -604,10 +604,12 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
     for j in range(3):
         rr[j] = r[j] + hr
         pp[:] = 0.0
-        _rest_rho(t, rr, v, cfg, q, sun, axis, pp, scratch, False, _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0)
+        rho_d = _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0
+        _rest_rho(t, rr, v, cfg, q, sun, axis, pp, scratch, False, rho_d)
         rr[j] = r[j] - hr
         pm[:] = 0.0
-        _rest_rho(t, rr, v, cfg, q, sun, axis, pm, scratch, False, _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0)
+        rho_d = _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0
+        _rest_rho(t, rr, v, cfg, q, sun, axis, pm, scratch, False, rho_d)
         rr[j] = r[j]
         for i in range(3):
             g[i, j] += (pp[i] - pm[i]) / (2 * hr)
