@@ -478,7 +478,8 @@ def _position_part(t, r, F, central, cfg, M, sun, moon, out):
 @njit
 def _density(r, M, sun_itrf, n):
     """Harris-Priester density (kg/m³) at inertial ``r``; ``sun_itrf`` the Sun in ITRF."""
-    r_itrf = _mv(M, r)
+    r_itrf = (M[0, 0] * r[0] + M[0, 1] * r[1] + M[0, 2] * r[2], M[1, 0] * r[0] + M[1, 1] * r[1] + M[1, 2] * r[2],
+              M[2, 0] * r[0] + M[2, 1] * r[1] + M[2, 2] * r[2])             # _mv's sums, without its array
     return _harris_priester(_height(r_itrf), r_itrf, sun_itrf, n)
 
 
