@@ -570,25 +570,28 @@ def _acceleration(t, r, v, E, F, acc):
 
 
 @njit
-def _partials(t, r, v, E, F, HT, a, g, hv, dp):
+def _partials(t, r, v, E, F, HT, a, g, hv, dp, work):
     """Environment.partials with the field's and the Sun's and Moon's ``∂a/∂r`` analytic (the
     field's from ``HT``, hessian_tables of the STM's field), the rest (relativity, SRP, drag,
     empirical) by the same central differences (1 m, 1 mm/s), the central term analytic;
-    ``∂a/∂v`` and ``∂a/∂p`` as there."""
+    ``∂a/∂v`` and ``∂a/∂p`` as there. ``work`` (:data:`_NWORK`,) holds the intermediate arrays:
+    this runs at every stage of every step, and allocating them each time cost more than their
+    arithmetic."""
     cfg, q, codes = E[0], E[1], E[7]
-    M = np.empty((3, 3))
-    sun, moon, axis = np.empty(3), np.empty(3), np.empty(3)
+    M = work[0:9].reshape((3, 3))
+    sun, moon, axis = work[9:12], work[12:15], work[15:18]
     _at(t, E, M, sun, moon, axis)
-    unit = np.zeros((11, 3))
-    scratch = np.zeros((11, 3))
-    p0 = np.empty(3)
+    unit = work[18:51].reshape((11, 3))
+    unit[:, :] = 0.0
+    scratch = work[51:84].reshape((11, 3))                 # written by the differences, never read
+    p0 = work[84:87]
     _position_part(t, r, F, False, E[0], M, sun, moon, p0)
     # the density at r serves the velocity differences below too (it depends on the position alone)
     drag = cfg[_DRAG] != 0.0
     sun_itrf = _mv(M, sun)
     rho = _density(r, M, sun_itrf, cfg[_HPN]) if drag else 0.0
     _rest_rho(t, r, v, cfg, q, sun, axis, p0, unit, True, rho)
-    gi = np.empty((3, 3))
+    gi = work[87:96].reshape((3, 3))
     _field_hessian(_mv(M, r), HT, gi)
     gf = _mat3(_mat3(M.T.copy(), gi), M)                    # ITRF -> integration frame
     for i in range(3):
@@ -599,9 +602,10 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
     if cfg[_MOON]:
         _point_mass_gradient(r, moon, _GM_MOON, g)
     hr, hvs = 1.0, 1e-3
-    pp, pm = np.empty(3), np.empty(3)
+    pp, pm = work[96:99], work[99:102]
     # the differences need the accelerations only, not the unit parts (with_units False)
-    rr = r.copy()
+    rr = work[102:105]
+    rr[:] = r
     for j in range(3):
         rr[j] = r[j] + hr
         pp[:] = 0.0
@@ -614,7 +618,8 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
         rr[j] = r[j]
         for i in range(3):
             g[i, j] += (pp[i] - pm[i]) / (2 * hr)
-    vv = v.copy()
+    vv = work[105:108]
+    vv[:] = v
     for j in range(3):
         vv[j] = v[j] + hvs
         pp[:] = 0.0
@@ -636,18 +641,29 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
             dp[i, k] = unit[codes[k], i]
 
 
+#: The partials' intermediate arrays in :func:`_work` (:func:`_partials` lays them out), then ∂a/∂p
+_NWORK = 129
+
+
 @njit
-def _rhs(t, y, stm, npar, E, F, HT, out):
-    """The state's derivative, with Φ' = A Φ and S' = A S + [0; ∂a/∂p] when ``stm``."""
+def _work(npar):
+    """The work array of :func:`_rhs` and :func:`_partials` for ``npar`` parameters."""
+    return np.zeros(_NWORK + 3 * max(npar, 1))
+
+
+@njit
+def _rhs(t, y, stm, npar, E, F, HT, out, work):
+    """The state's derivative, with Φ' = A Φ and S' = A S + [0; ∂a/∂p] when ``stm``; ``work``
+    (:func:`_work`) the partials' intermediate arrays."""
     out[0], out[1], out[2] = y[3], y[4], y[5]
     if not stm:
         acc = np.empty(3)
         _acceleration(t, y[:3], y[3:6], E, F, acc)
         out[3], out[4], out[5] = acc[0], acc[1], acc[2]
         return
-    a, g, hv = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
-    dp = np.zeros((3, max(npar, 1)))
-    _partials(t, y[:3], y[3:6], E, F, HT, a, g, hv, dp)
+    a, g, hv = work[108:111], work[111:120].reshape((3, 3)), work[120:129].reshape((3, 3))
+    dp = work[_NWORK:].reshape((3, max(npar, 1)))
+    _partials(t, y[:3], y[3:6], E, F, HT, a, g, hv, dp, work)
     out[3], out[4], out[5] = a[0], a[1], a[2]
     ncol = 6 + npar
     # Φ rows 0..5 at y[6:42] (6 x 6), S at y[42:] (6 x npar): treat [Φ S] column by column
@@ -691,7 +707,8 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
     t = 0.0
     y = y0.copy()
     f = np.empty(n)
-    _rhs(t, y, stm, npar, E, F, HT, f)
+    work = _work(npar)
+    _rhs(t, y, stm, npar, E, F, HT, f, work)
     nfev = 1
     # select_initial_step (scipy common.py; Hairer et al. II.4)
     interval = abs(t_end)
@@ -700,7 +717,7 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
     h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
     h0 = min(h0, interval)
     f1 = np.empty(n)
-    _rhs(t + h0 * direction, y + h0 * direction * f, stm, npar, E, F, HT, f1)
+    _rhs(t + h0 * direction, y + h0 * direction * f, stm, npar, E, F, HT, f1, work)
     nfev += 1
     d2 = _rms((f1 - f) / scale) / h0
     if d1 <= 1e-15 and d2 <= 1e-15:
@@ -760,13 +777,13 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
                     for j in range(s):
                         acc += K[j, i] * _A[s, j]
                     ys[i] = y[i] + acc * h
-                _rhs(t + _C[s] * h, ys, stm, npar, E, F, HT, K[s])
+                _rhs(t + _C[s] * h, ys, stm, npar, E, F, HT, K[s], work)
             for i in range(n):
                 acc = 0.0
                 for j in range(_NS):
                     acc += K[j, i] * _B[j]
                 ynew[i] = y[i] + h * acc
-            _rhs(t + h, ynew, stm, npar, E, F, HT, fnew)
+            _rhs(t + h, ynew, stm, npar, E, F, HT, fnew, work)
             nfev += _NS
             K[_NS] = fnew
             e5, e3 = 0.0, 0.0
@@ -822,7 +839,7 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
                 for j in range(s):
                     acc += K[j, i] * _A[s, j]
                 ys[i] = y[i] + acc * h
-            _rhs(t + _C[s] * h, ys, stm, npar, E, F, HT, K[s])
+            _rhs(t + _C[s] * h, ys, stm, npar, E, F, HT, K[s], work)
         nfev += 3
         for i in range(n):
             dy = ynew[i] - y[i]
@@ -887,5 +904,5 @@ def partials(env, t, r, v):
     HT = hessian_tables(stm_field(env))
     a, g, hv = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
     dp = np.zeros((3, max(len(est), 1)))
-    _partials(float(t), np.asarray(r, float), np.asarray(v, float), E, F, HT, a, g, hv, dp)
+    _partials(float(t), np.asarray(r, float), np.asarray(v, float), E, F, HT, a, g, hv, dp, _work(len(est)))
     return a, g, hv, dp[:, :len(est)]
