@@ -46,20 +46,27 @@ def test_geodetic_height_matches_erfa():
     assert np.abs(h - erfa.gc2gd(1, r)[2]).max() < 1e-8
 
 
-def test_harris_priester_interpolation_is_numpys_bit_for_bit():
-    """The kernel's own table interpolation (numba's np.interp is left out for its import cost)
-    against np.interp: the table's nodes, its ends, 5000 random heights and NaN, equal to the bit,
-    compiled and as Python."""
+def test_density_table_interpolation_is_np_interp_bit_for_bit():
+    """The Harris-Priester table read with one search for both columns (compiled._interp2) gives
+    numba's np.interp of each column to the last bit: at random heights, at every node, between
+    nodes, at and beyond both ends, and NaN."""
     from trackproc.dynamics.forces import compiled
 
-    xp, fp = compiled._HP_H, compiled._HP_LMIN
-    rng = np.random.default_rng(7)
-    x = np.concatenate([xp, np.nextafter(xp, np.inf)[:-1], rng.uniform(xp[0], xp[-1], 5000)])
-    want = np.interp(x, xp, fp)
-    for f in (compiled._table_interp, compiled._table_interp.py_func):
-        got = np.array([f(v, xp, fp) for v in x])
-        assert np.array_equal(got.view(np.int64), want.view(np.int64))
-        assert np.isnan(f(np.nan, xp, fp))
+    @numba.njit
+    def reference(x, xp, f1, f2):
+        return np.interp(x, xp, f1), np.interp(x, xp, f2)
+
+    xp, f1, f2 = compiled._HP_H, compiled._HP_LMIN, compiled._HP_LMAX
+    rng = np.random.default_rng(3)
+    heights = np.concatenate([rng.uniform(xp[0] - 1e4, xp[-1] + 1e4, 3000), xp, 0.5 * (xp[1:] + xp[:-1]),
+                              np.nextafter(xp, -np.inf), np.nextafter(xp, np.inf), [np.nan]])
+    got = np.array([compiled._interp2(h, xp, f1, f2) for h in heights])
+    want = np.array([reference(h, xp, f1, f2) for h in heights])
+    assert np.array_equal(got, want, equal_nan=True)
+    numpy = np.array([(np.interp(h, xp, f1), np.interp(h, xp, f2)) for h in heights])   # and numpy's own
+    assert np.array_equal(got, numpy, equal_nan=True)
+    assert np.array_equal(np.array([compiled._interp2.py_func(h, xp, f1, f2) for h in heights]), got, equal_nan=True)
+    assert np.isnan(got[-1]).all() and np.isfinite(got[:-1]).all()
 
 
 def test_accelerations_and_partials_equal_the_numpy_path():

@@ -288,25 +288,42 @@ def _height(r):
 
 
 @njit
-def _table_interp(x, xp, fp):
-    """``np.interp(x, xp, fp)`` for one ``x`` in ``[xp[0], xp[-1]]`` (NaN passes through):
-    numpy's arr_interp (multiarray/compiled_base.c), the same operations in the same order, so
-    the same bits. Written out because numba's np.interp lives in numba.np.arraymath, whose
-    import (it loads scipy.linalg for BLAS) is ~0.16 s of CPU, a third of a full-force day."""
+def _interp2(x, xp, f1, f2):
+    """``(np.interp(x, xp, f1), np.interp(x, xp, f2))`` for a scalar ``x`` and increasing ``xp`` with
+    one search of the interval and no arrays: numba's np.interp arithmetic (a copy of numpy's
+    ``arr_interp``: the slope computed at the interval, the node's value at a node and at the
+    end, the value from the other end when one gives NaN), so the same numbers."""
+    n = xp.size
     if x != x:
-        return x
-    lo, hi = 0, xp.size - 1
-    if x >= xp[hi]:
-        return fp[hi]
-    while hi - lo > 1:                      # xp[lo] <= x < xp[hi]
+        return x, x
+    if x < xp[0]:
+        return f1[0], f2[0]
+    if x > xp[n - 1]:
+        return f1[n - 1], f2[n - 1]
+    lo, hi = 0, n - 1                        # xp[lo] <= x; the last j with xp[j] <= x
+    while hi - lo > 1:
         mid = (lo + hi) // 2
-        if xp[mid] <= x:
+        if x >= xp[mid]:
             lo = mid
         else:
             hi = mid
-    if xp[lo] == x:
-        return fp[lo]
-    return (fp[lo + 1] - fp[lo]) / (xp[lo + 1] - xp[lo]) * (x - xp[lo]) + fp[lo]
+    j = n - 1 if x >= xp[n - 1] else lo
+    if j == n - 1 or xp[j] == x:
+        return f1[j], f2[j]
+    return _lerp(x, xp, f1, j), _lerp(x, xp, f2, j)
+
+
+@njit
+def _lerp(x, xp, fp, j):
+    """numba's (numpy's) np.interp inside the interval ``j``: the slope, the value from the left
+    node, from the right one when that is NaN."""
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    v = slope * (x - xp[j]) + fp[j]
+    if math.isnan(v):
+        v = slope * (x - xp[j + 1]) + fp[j + 1]
+        if math.isnan(v) and fp[j] == fp[j + 1]:
+            v = fp[j]
+    return v
 
 
 @njit
@@ -315,8 +332,9 @@ def _harris_priester(h, r_itrf, sun_itrf, n):
     if h > _HP_H[-1]:
         return 0.0
     hc = min(max(h, _HP_H[0]), _HP_H[-1])
-    rho_min = math.exp(_table_interp(hc, _HP_H, _HP_LMIN))
-    rho_max = math.exp(_table_interp(hc, _HP_H, _HP_LMAX))
+    lmin, lmax = _interp2(hc, _HP_H, _HP_LMIN, _HP_LMAX)
+    rho_min = math.exp(lmin)
+    rho_max = math.exp(lmax)
     sn = math.sqrt(sun_itrf[0] ** 2 + sun_itrf[1] ** 2 + sun_itrf[2] ** 2)
     s0, s1, s2 = sun_itrf[0] / sn, sun_itrf[1] / sn, sun_itrf[2] / sn
     c, si = math.cos(_LAG), math.sin(_LAG)
@@ -328,9 +346,8 @@ def _harris_priester(h, r_itrf, sun_itrf, n):
 
 
 @njit
-def _position_part(t, r, F, central, E, M, sun, moon, out):
+def _position_part(t, r, F, central, cfg, M, sun, moon, out):
     """Field (in ITRF through M) + Sun + Moon at inertial ``r`` into ``out``."""
-    cfg = E[0]
     r_itrf = _mv(M, r)
     fi = np.empty(3)
     _field_acc(r_itrf, F, central, fi)
@@ -343,10 +360,29 @@ def _position_part(t, r, F, central, E, M, sun, moon, out):
 
 
 @njit
+def _density(r, M, sun_itrf, n):
+    """Harris-Priester density (kg/m³) at inertial ``r``; ``sun_itrf`` the Sun in ITRF."""
+    r_itrf = (M[0, 0] * r[0] + M[0, 1] * r[1] + M[0, 2] * r[2], M[1, 0] * r[0] + M[1, 1] * r[1] + M[1, 2] * r[2],
+              M[2, 0] * r[0] + M[2, 1] * r[1] + M[2, 2] * r[2])             # _mv's sums, without its array
+    return _harris_priester(_height(r_itrf), r_itrf, sun_itrf, n)
+
+
+@njit
 def _rest(t, r, v, E, M, sun, axis, acc, unit, with_units):
     """Relativity, SRP, drag and the empirical accelerations added to ``acc`` (the position
     part); ``unit`` (11, 3) gets the unit-coefficient parts in PARAMETERS order."""
-    cfg, q = E[0], E[1]
+    cfg = E[0]
+    rho = _density(r, M, _mv(M, sun), cfg[_HPN]) if cfg[_DRAG] else 0.0
+    _rest_rho(t, r, v, cfg, E[1], sun, axis, acc, unit, with_units, rho)
+
+
+@njit
+def _rest_rho(t, r, v, cfg, q, sun, axis, acc, unit, with_units, rho):
+    """:func:`_rest` with the density ``rho`` at ``r`` given: it depends on the position alone,
+    so the velocity differences of :func:`_partials` reuse it (the same number). Scalars, not
+    small arrays, and the settings ``cfg`` and the empirical frame ``q``, not the tuple of every
+    table (numba counts the references of each array a call passes): this runs 13 times per
+    right-hand side with the variational equations."""
     if cfg[_REL]:
         gm = cfg[_GM]
         rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
@@ -367,36 +403,34 @@ def _rest(t, r, v, E, M, sun, axis, acc, unit, with_units):
         cx = axis[1] * r[2] - axis[2] * r[1]
         cy = axis[2] * r[0] - axis[0] * r[2]
         cz = axis[0] * r[1] - axis[1] * r[0]
-        vr = np.array([v[0] - OMEGA_EARTH * cx, v[1] - OMEGA_EARTH * cy, v[2] - OMEGA_EARTH * cz])
-        r_itrf = _mv(M, r)
-        rho = _harris_priester(_height(r_itrf), r_itrf, _mv(M, sun), cfg[_HPN])
-        vn = math.sqrt(vr[0] ** 2 + vr[1] ** 2 + vr[2] ** 2)
-        for i in range(3):
-            a1 = -0.5 * rho * 1.0 * cfg[_AM_DRAG] * vn * vr[i]
-            acc[i] += cfg[_CD] * a1
-            unit[1, i] = a1
+        vr0, vr1, vr2 = v[0] - OMEGA_EARTH * cx, v[1] - OMEGA_EARTH * cy, v[2] - OMEGA_EARTH * cz
+        vn = math.sqrt(vr0 ** 2 + vr1 ** 2 + vr2 ** 2)
+        f = -0.5 * rho * 1.0 * cfg[_AM_DRAG] * vn
+        a0, a1, a2 = f * vr0, f * vr1, f * vr2
+        acc[0] += cfg[_CD] * a0
+        acc[1] += cfg[_CD] * a1
+        acc[2] += cfg[_CD] * a2
+        unit[1, 0], unit[1, 1], unit[1, 2] = a0, a1, a2
     er, et, en = cfg[_ER], cfg[_ER + 1], cfg[_ER + 2]
     emp = er != 0.0 or et != 0.0 or en != 0.0
     if emp or with_units:
         rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
-        ru = r / rn
-        h = np.array([r[1] * v[2] - r[2] * v[1], r[2] * v[0] - r[0] * v[2], r[0] * v[1] - r[1] * v[0]])
-        nu_ = h / math.sqrt(h[0] ** 2 + h[1] ** 2 + h[2] ** 2)
-        tu = np.array([nu_[1] * ru[2] - nu_[2] * ru[1], nu_[2] * ru[0] - nu_[0] * ru[2],
-                       nu_[0] * ru[1] - nu_[1] * ru[0]])
+        r0, r1, r2 = r[0] / rn, r[1] / rn, r[2] / rn
+        h0, h1, h2 = r[1] * v[2] - r[2] * v[1], r[2] * v[0] - r[0] * v[2], r[0] * v[1] - r[1] * v[0]
+        hn = math.sqrt(h0 ** 2 + h1 ** 2 + h2 ** 2)
+        n0, n1, n2 = h0 / hn, h1 / hn, h2 / hn
+        t0, t1, t2 = n1 * r2 - n2 * r1, n2 * r0 - n0 * r2, n0 * r1 - n1 * r0
         if emp:
-            for i in range(3):
-                acc[i] += er * ru[i] + et * tu[i] + en * nu_[i]
+            acc[0] += er * r0 + et * t0 + en * n0
+            acc[1] += er * r1 + et * t1 + en * n1
+            acc[2] += er * r2 + et * t2 + en * n2
+        unit[2, 0], unit[3, 0], unit[4, 0] = r0, t0, n0
+        unit[2, 1], unit[3, 1], unit[4, 1] = r1, t1, n1
+        unit[2, 2], unit[3, 2], unit[4, 2] = r2, t2, n2
+    x0, x1, x2 = cfg[_EX] + t * cfg[_EXR], cfg[_EX + 1] + t * cfg[_EXR + 1], cfg[_EX + 2] + t * cfg[_EXR + 2]
+    if x0 != 0.0 or x1 != 0.0 or x2 != 0.0:
         for i in range(3):
-            unit[2, i], unit[3, i], unit[4, i] = ru[i], tu[i], nu_[i]
-    xyz = np.empty(3)
-    anyx = False
-    for j in range(3):
-        xyz[j] = cfg[_EX + j] + t * cfg[_EXR + j]
-        anyx = anyx or xyz[j] != 0.0
-    if anyx:
-        for i in range(3):
-            acc[i] += q[i, 0] * xyz[0] + q[i, 1] * xyz[1] + q[i, 2] * xyz[2]
+            acc[i] += q[i, 0] * x0 + q[i, 1] * x1 + q[i, 2] * x2
     if with_units:
         for j in range(3):
             for i in range(3):
@@ -411,7 +445,7 @@ def _acceleration(t, r, v, E, F, acc):
     sun, moon, axis = np.empty(3), np.empty(3), np.empty(3)
     _at(t, E, M, sun, moon, axis)
     unit = np.zeros((11, 3))
-    _position_part(t, r, F, False, E, M, sun, moon, acc)
+    _position_part(t, r, F, False, E[0], M, sun, moon, acc)
     _rest(t, r, v, E, M, sun, axis, acc, unit, False)
     gm = E[0][_GM]
     rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
@@ -420,22 +454,28 @@ def _acceleration(t, r, v, E, F, acc):
 
 
 @njit
-def _partials(t, r, v, E, F, HT, a, g, hv, dp):
+def _partials(t, r, v, E, F, HT, a, g, hv, dp, work):
     """Environment.partials with the field's and the Sun's and Moon's ``∂a/∂r`` analytic (the
     field's from ``HT``, hessian_tables of the STM's field), the rest (relativity, SRP, drag,
     empirical) by the same central differences (1 m, 1 mm/s), the central term analytic;
-    ``∂a/∂v`` and ``∂a/∂p`` as there."""
-    cfg = E[0]
-    codes = E[7]
-    M = np.empty((3, 3))
-    sun, moon, axis = np.empty(3), np.empty(3), np.empty(3)
+    ``∂a/∂v`` and ``∂a/∂p`` as there. ``work`` (:data:`_NWORK`,) holds the intermediate arrays:
+    this runs at every stage of every step, and allocating them each time cost more than their
+    arithmetic."""
+    cfg, q, codes = E[0], E[1], E[7]
+    M = work[0:9].reshape((3, 3))
+    sun, moon, axis = work[9:12], work[12:15], work[15:18]
     _at(t, E, M, sun, moon, axis)
-    unit = np.zeros((11, 3))
-    scratch = np.zeros((11, 3))
-    p0 = np.empty(3)
-    _position_part(t, r, F, False, E, M, sun, moon, p0)
-    _rest(t, r, v, E, M, sun, axis, p0, unit, True)
-    gi = np.empty((3, 3))
+    unit = work[18:51].reshape((11, 3))
+    unit[:, :] = 0.0
+    scratch = work[51:84].reshape((11, 3))                 # written by the differences, never read
+    p0 = work[84:87]
+    _position_part(t, r, F, False, E[0], M, sun, moon, p0)
+    # the density at r serves the velocity differences below too (it depends on the position alone)
+    drag = cfg[_DRAG] != 0.0
+    sun_itrf = _mv(M, sun)
+    rho = _density(r, M, sun_itrf, cfg[_HPN]) if drag else 0.0
+    _rest_rho(t, r, v, cfg, q, sun, axis, p0, unit, True, rho)
+    gi = work[87:96].reshape((3, 3))
     _field_hessian(_mv(M, r), HT, gi)
     gf = _mat3(_mat3(M.T.copy(), gi), M)                    # ITRF -> integration frame
     for i in range(3):
@@ -446,26 +486,31 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
     if cfg[_MOON]:
         _point_mass_gradient(r, moon, _GM_MOON, g)
     hr, hvs = 1.0, 1e-3
-    pp, pm = np.empty(3), np.empty(3)
-    rr = r.copy()
+    pp, pm = work[96:99], work[99:102]
+    # the differences need the accelerations only, not the unit parts (with_units False)
+    rr = work[102:105]
+    rr[:] = r
     for j in range(3):
         rr[j] = r[j] + hr
         pp[:] = 0.0
-        _rest(t, rr, v, E, M, sun, axis, pp, scratch, True)
+        rho_d = _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0
+        _rest_rho(t, rr, v, cfg, q, sun, axis, pp, scratch, False, rho_d)
         rr[j] = r[j] - hr
         pm[:] = 0.0
-        _rest(t, rr, v, E, M, sun, axis, pm, scratch, True)
+        rho_d = _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0
+        _rest_rho(t, rr, v, cfg, q, sun, axis, pm, scratch, False, rho_d)
         rr[j] = r[j]
         for i in range(3):
             g[i, j] += (pp[i] - pm[i]) / (2 * hr)
-    vv = v.copy()
+    vv = work[105:108]
+    vv[:] = v
     for j in range(3):
         vv[j] = v[j] + hvs
         pp[:] = 0.0
-        _rest(t, r, vv, E, M, sun, axis, pp, scratch, True)
+        _rest_rho(t, r, vv, cfg, q, sun, axis, pp, scratch, False, rho)
         vv[j] = v[j] - hvs
         pm[:] = 0.0
-        _rest(t, r, vv, E, M, sun, axis, pm, scratch, True)
+        _rest_rho(t, r, vv, cfg, q, sun, axis, pm, scratch, False, rho)
         vv[j] = v[j]
         for i in range(3):
             hv[i, j] = (pp[i] - pm[i]) / (2 * hvs)
@@ -480,18 +525,29 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp):
             dp[i, k] = unit[codes[k], i]
 
 
+#: The partials' intermediate arrays in :func:`_work` (:func:`_partials` lays them out), then ∂a/∂p
+_NWORK = 129
+
+
 @njit
-def _rhs(t, y, stm, npar, E, F, HT, out):
-    """The state's derivative, with Φ' = A Φ and S' = A S + [0; ∂a/∂p] when ``stm``."""
+def _work(npar):
+    """The work array of :func:`_rhs` and :func:`_partials` for ``npar`` parameters."""
+    return np.zeros(_NWORK + 3 * max(npar, 1))
+
+
+@njit
+def _rhs(t, y, stm, npar, E, F, HT, out, work):
+    """The state's derivative, with Φ' = A Φ and S' = A S + [0; ∂a/∂p] when ``stm``; ``work``
+    (:func:`_work`) the partials' intermediate arrays."""
     out[0], out[1], out[2] = y[3], y[4], y[5]
     if not stm:
         acc = np.empty(3)
         _acceleration(t, y[:3], y[3:6], E, F, acc)
         out[3], out[4], out[5] = acc[0], acc[1], acc[2]
         return
-    a, g, hv = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
-    dp = np.zeros((3, max(npar, 1)))
-    _partials(t, y[:3], y[3:6], E, F, HT, a, g, hv, dp)
+    a, g, hv = work[108:111], work[111:120].reshape((3, 3)), work[120:129].reshape((3, 3))
+    dp = work[_NWORK:].reshape((3, max(npar, 1)))
+    _partials(t, y[:3], y[3:6], E, F, HT, a, g, hv, dp, work)
     out[3], out[4], out[5] = a[0], a[1], a[2]
     ncol = 6 + npar
     # Φ rows 0..5 at y[6:42] (6 x 6), S at y[42:] (6 x npar): treat [Φ S] column by column
@@ -535,7 +591,8 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
     t = 0.0
     y = y0.copy()
     f = np.empty(n)
-    _rhs(t, y, stm, npar, E, F, HT, f)
+    work = _work(npar)
+    _rhs(t, y, stm, npar, E, F, HT, f, work)
     nfev = 1
     # select_initial_step (scipy common.py; Hairer et al. II.4)
     interval = abs(t_end)
@@ -544,7 +601,7 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
     h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
     h0 = min(h0, interval)
     f1 = np.empty(n)
-    _rhs(t + h0 * direction, y + h0 * direction * f, stm, npar, E, F, HT, f1)
+    _rhs(t + h0 * direction, y + h0 * direction * f, stm, npar, E, F, HT, f1, work)
     nfev += 1
     d2 = _rms((f1 - f) / scale) / h0
     if d1 <= 1e-15 and d2 <= 1e-15:
@@ -604,13 +661,13 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
                     for j in range(s):
                         acc += K[j, i] * _A[s, j]
                     ys[i] = y[i] + acc * h
-                _rhs(t + _C[s] * h, ys, stm, npar, E, F, HT, K[s])
+                _rhs(t + _C[s] * h, ys, stm, npar, E, F, HT, K[s], work)
             for i in range(n):
                 acc = 0.0
                 for j in range(_NS):
                     acc += K[j, i] * _B[j]
                 ynew[i] = y[i] + h * acc
-            _rhs(t + h, ynew, stm, npar, E, F, HT, fnew)
+            _rhs(t + h, ynew, stm, npar, E, F, HT, fnew, work)
             nfev += _NS
             K[_NS] = fnew
             e5, e3 = 0.0, 0.0
@@ -666,7 +723,7 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
                 for j in range(s):
                     acc += K[j, i] * _A[s, j]
                 ys[i] = y[i] + acc * h
-            _rhs(t + _C[s] * h, ys, stm, npar, E, F, HT, K[s])
+            _rhs(t + _C[s] * h, ys, stm, npar, E, F, HT, K[s], work)
         nfev += 3
         for i in range(n):
             dy = ynew[i] - y[i]
@@ -733,5 +790,5 @@ def partials(env, t, r, v):
     a, g, hv = np.empty(3), np.empty((3, 3)), np.empty((3, 3))
     dp = np.zeros((3, max(len(est), 1)))
     with compile_once([_partials], "force"):
-        _partials(float(t), np.asarray(r, float), np.asarray(v, float), E, F, HT, a, g, hv, dp)
+        _partials(float(t), np.asarray(r, float), np.asarray(v, float), E, F, HT, a, g, hv, dp, _work(len(est)))
     return a, g, hv, dp[:, :len(est)]

@@ -227,6 +227,37 @@ class ForceModel:
         return Environment(self, epoch_jd_utc, np.asarray(q, float), t_min_s, t_max_s)
 
 
+#: :func:`_tables` by their inputs, newest last: a filter restarts its reference over the same
+#: spans many times (and a Monte Carlo once per draw), each a new Environment of the same tables
+_TABLES: dict = {}
+_TABLES_KEPT = 32
+
+
+def _tables(eop, epoch_jd_utc, q, lo: float, hi: float) -> tuple:
+    """The time-dependent inputs on the grid ``lo .. hi`` (in :data:`GRID_S`) from the epoch, in the
+    frame ``q``: integration -> CIRS (Q qᵀ, rows of 9), polar motion W (rows of 9), the unwrapped
+    ERA, Sun and Moon (position, velocity) in the integration frame. The same inputs give the same
+    arrays, computed once (kept while :data:`_TABLES_KEPT` newer ones do not push them out; the
+    entry holds ``eop``, so its id is not reused meanwhile). Read only by the callers."""
+    q = np.asarray(q, float)
+    key = (id(eop), tuple(float(x) for x in epoch_jd_utc), q.tobytes(), float(lo), float(hi))
+    hit = _TABLES.pop(key, None)
+    if hit is None:
+        nodes = lo * GRID_S + GRID_S * np.arange(int(hi - lo) + 1)
+        jd1, jd2 = ts.add_seconds_utc(epoch_jd_utc, nodes)
+        rot = earth_rotation(jd1, jd2, eop, rates=False)
+        tt1, tt2 = ts.utc_to_tt(jd1, jd2)
+        sun, moon = third_body.sun_moon_gcrf(tt1, tt2)
+        # GCRF->CIRS composed with the integration frame: (Q q^T) maps integration -> CIRS; the
+        # Sun and Moon rotated into the integration frame
+        hit = (eop, ((rot.q @ q.T).reshape(-1, 9), rot.w.reshape(-1, 9), np.unwrap(np.asarray(rot.era, float)),
+                     np.einsum("ij,nkj->nki", q, sun), np.einsum("ij,nkj->nki", q, moon)))
+        while len(_TABLES) >= _TABLES_KEPT:
+            del _TABLES[next(iter(_TABLES))]
+    _TABLES[key] = hit
+    return hit[1]
+
+
 class Environment:
     """A :class:`ForceModel` over a time span: the time-dependent inputs tabulated, the
     accelerations and their partials evaluated at (t, r, v) in the integration frame."""
@@ -238,20 +269,9 @@ class Environment:
         lo = np.floor(min(t_min_s, 0.0) / GRID_S) - 2
         hi = np.ceil(max(t_max_s, 0.0) / GRID_S) + 2
         self.t0_grid = lo * GRID_S
-        nodes = self.t0_grid + GRID_S * np.arange(int(hi - lo) + 1)
-        jd1, jd2 = ts.add_seconds_utc(epoch_jd_utc, nodes)
-        rot = earth_rotation(jd1, jd2, model.eop, rates=False)
-        # GCRF->CIRS composed with the integration frame: (Q q^T) maps integration -> CIRS
-        self._qq = (rot.q @ q.T).reshape(-1, 9)
-        self._w = rot.w.reshape(-1, 9)
-        self._era = np.unwrap(np.asarray(rot.era, float))
-        tt1, tt2 = ts.utc_to_tt(jd1, jd2)
-        sun, moon = third_body.sun_moon_gcrf(tt1, tt2)
-        # rotate into the integration frame
-        self._sun = np.einsum("ij,nkj->nki", q, sun)
-        self._moon = np.einsum("ij,nkj->nki", q, moon)
+        self._qq, self._w, self._era, self._sun, self._moon = _tables(model.eop, epoch_jd_utc, q, lo, hi)
         self._cache_t = None
-        self.n_nodes = nodes.size
+        self.n_nodes = self._era.size
 
     # -- time-dependent inputs ---------------------------------------------------------------
     def _locate(self, t):
