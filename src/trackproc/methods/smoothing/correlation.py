@@ -46,10 +46,20 @@ def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", doma
     c_obs = float(z[1:] @ z[:-1]) / den
     lag1 = c_obs
 
+    memo: dict = {}
+
     def expected(rho: float) -> float:
+        # each rho once: brentq evaluates the bracket's ends again
+        if rho not in memo:
+            memo[rho] = _expected(rho)
+        return memo[rho]
+
+    def _expected(rho: float) -> float:
         model = NoiseModel(rho=rho, step_s=step)
         acorr = model.neighbour_correlation(t)
-        w = ou_apply(acorr, q)
+        # C = I at rho = 0: ou_apply would return a copy of q (x + 0 f), bit for bit; a copy, as
+        # numpy's q.T @ q of one buffer takes another BLAS routine (syrk) with other last bits
+        w = q.copy() if rho == 0.0 else ou_apply(acorr, q)
         g = q.T @ w
         tr_mcm = n - float(np.sum(q * w))
         lag = (float(np.sum(acorr)) - float(np.sum(q[1:] * w[:-1])) - float(np.sum(w[1:] * q[:-1]))

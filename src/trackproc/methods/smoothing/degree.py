@@ -165,12 +165,16 @@ def _choose(t, y, s, degree, basis, max_degree, domain, noise):
     if noise == "auto":
         # rho from the residuals of the white-noise choice: a degree that absorbs the curve (on
         # correlated noise the white BIC over-fits, which the projection correction allows for)
-        d0 = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain)[0]
+        white = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain)
+        d0 = white[0]
         model = estimate_noise(t, y, s, d0, basis=basis, domain_s=domain)
     else:
         model = noise
-    deg, scores, at_limit = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain,
-                                          noise=model)
+    if noise == "auto" and model.white:     # the same search again (white noise whitens nothing)
+        deg, scores, at_limit = white
+    else:
+        deg, scores, at_limit = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain,
+                                              noise=model)
     cap = degree_cap(t, max_degree, model)
     if noise == "auto" and not model.white and (model.rho >= MAX_RHO or (at_limit and cap < d0)
                                                  or _variance_ratio(t, y, s, d0, deg, domain, basis, model)
@@ -178,7 +182,7 @@ def _choose(t, y, s, degree, basis, max_degree, domain, noise):
         # AR(1) noise would leave fewer coefficients than the curve needs (or the correlation is at
         # its bound): correlated noise and unresolved curve cannot be told apart with these samples
         model = replace_fit(model, rho=0.0, n_eff=float(t.size), unresolved=True)
-        deg, scores, at_limit = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain)
+        deg, scores, at_limit = white
         cap = degree_cap(t, max_degree, model)
     return deg, scores, at_limit, model, cap
 

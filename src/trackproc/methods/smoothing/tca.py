@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trackproc.methods.smoothing.fit import PolynomialFit, SmoothingError, check_arrays, design_matrix, fit_polynomial
+from trackproc.methods.smoothing.fit import (WHITE, PolynomialFit, SmoothingError, check_arrays, check_enough,
+                                             design_matrix, replace_fit, whiten)
 
 
 #: A TCA whose spread over neighbouring degrees exceeds this many formal sigmas is ``uncertain``.
@@ -153,11 +154,11 @@ def tca_degree_spread(t_s, y, sigma, fit: PolynomialFit, kind: str, doppler_mode
     if width is None:
         width = degree_spread_width(fit.degree)
     times, values = [], []
-    for d in range(max(0, fit.degree - width), fit.degree + width + 1):
+    degrees = range(max(0, fit.degree - width), fit.degree + width + 1)
+    nested = _nested_coefficients(t, yy, s, fit, degrees[-1])
+    for d in degrees:
         try:
-            other = fit if d == fit.degree else fit_polynomial(t, yy, s, d, basis=fit.basis,
-                                                               domain_s=fit.domain_s, used=fit.used,
-                                                               noise=fit.noise)
+            other = fit if d == fit.degree else replace_fit(fit, degree=d, coef=nested(d))
             t_star = _tca_time(other, kind, doppler_mode)[2]      # closest_approach's t*, no covariance
         except SmoothingError:
             continue
@@ -166,6 +167,37 @@ def tca_degree_spread(t_s, y, sigma, fit: PolynomialFit, kind: str, doppler_mode
     if len(times) < 3:
         return float("nan"), float("nan"), len(times)
     return float(np.std(times, ddof=1)), float(np.std(values, ddof=1)), len(times)
+
+
+def _nested_coefficients(t, y, s, fit: PolynomialFit, top: int):
+    """``coef(d)``: the coefficients of :func:`fit_polynomial` of degree ``d`` <= ``top`` on the
+    samples, domain, basis and noise of ``fit`` (raises :class:`SmoothingError` where it would), all
+    from one QR of the whitened ``[Psi_top  y]``.
+
+    The fits are nested: the basis columns of degree ``d`` are the first ``d + 1`` of ``top``'s, and
+    the whitening acts on rows, so the leading ``(d + 1) x (d + 1)`` block of R is the R of the
+    smaller fit and the last column's first ``d + 1`` entries are its ``Q^T y`` (Householder QR,
+    Golub & Van Loan 2013, sec. 5.3): the same least-squares solution, to rounding, without a
+    factorisation for each degree.
+    """
+    used = np.asarray(fit.used, bool)
+    idx = np.flatnonzero(used)
+    idx = idx[np.argsort(t[idx], kind="stable")]
+    tu = t[idx]
+    noise = fit.noise or WHITE
+    aug = np.column_stack([design_matrix(tu, top, fit.domain_s, fit.basis), y[idx]]) / s[idx, None]
+    r = np.linalg.qr(whiten(tu, aug, noise), mode="r")
+    limit = 1.0 / (np.finfo(float).eps * 1e3)                 # solve_fit's rank test
+
+    def coef(d: int) -> np.ndarray:
+        check_enough(tu, d)
+        rd = r[: d + 1, : d + 1]
+        sv = np.linalg.svd(rd, compute_uv=False)
+        if not (sv[-1] > 0 and sv[0] / sv[-1] < limit):
+            raise SmoothingError("rank_deficient", f"degree {d} is not determined by the sample times")
+        return np.linalg.solve(rd, r[: d + 1, -1])
+
+    return coef
 
 
 def _real_roots(series, domain) -> list[float]:
