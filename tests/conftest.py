@@ -302,3 +302,8 @@ def pytest_collection_modifyitems(config, items):
                 item.add_marker(mark)
             item.add_marker(pytest.mark.slow)
     _warn_missing_slow_names(config, items)
+    # The slow tier first (a stable sort: each tier keeps the files' order, the same in every xdist
+    # worker): with pytest-xdist's work stealing (pyproject.toml's addopts) a worker that runs out takes
+    # the other's remaining tests, so the run ends on short tests instead of one worker finishing a
+    # long Monte Carlo while the other waits.
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
