@@ -221,6 +221,9 @@ SLOW_CPU: dict[str, str | dict[str, str]] = {
         "test_conflict_statistic_is_chi2_7_monte_carlo": "Monte Carlo of the conflict statistic, 1.1 s"},
     "test_fit_tle_apriori.py": {
         "test_a_time_tag_shift_within_the_theory_error_is_not_a_conflict": "two TLE fits, 0.7 s"},
+    "test_forces_native.py": {
+        "test_undefined_symbols_match_nm": "stores the machine code when none is: compiles the force kernels on a "
+                                           "fresh clone"},
     "test_progress.py": {
         "test_pipe_quiet_short_and_batch_see_nothing": "sleeps 1.25 s past the progress line's timers "
                                                        "(test_terminal_sees_progress_then_a_clean_line stays)"},

@@ -112,13 +112,29 @@ def test_arguments_of_other_kinds_are_refused():
     assert native.load((ro,)) is None                      # numba is imported here anyway: None
 
 
-def test_undefined_symbols_match_nm(tmp_path):
+def test_undefined_symbols_match_nm(tmp_path, monkeypatch):
     if shutil.which("nm") is None:
         pytest.skip("no nm")
+    import numba
+
+    from trackproc.dynamics import jit
+
+    if not jit.light_allowed(numba.__version__):
+        pytest.skip(f"numba {numba.__version__} is not one of jit.CHECKED_NUMBA: no stored code")
     stamp = native._stamp()
     record = None if stamp is None else native._read(native.path(), stamp)
-    if record is None:
-        pytest.skip("no stored machine code (run a full-force propagation first)")
+    if record is None:                 # none stored yet: a short full-force arc through numba stores it
+        from trackproc.dynamics.forces import ForceModel, Spacecraft
+        from trackproc.dynamics.propagator import propagate
+        from trackproc.io.icgem import load_field
+
+        monkeypatch.setenv("TRACKPROC_JIT", "1")
+        sc = Spacecraft(mass_kg=10.0, srp_area_m2=0.1, cr=1.3, drag_area_m2=0.1, cd=2.1)
+        model = ForceModel(field=load_field(degree=4, date="2020-04-05T00:00:00"), drag=True, srp=True,
+                           spacecraft=sc)
+        propagate(LEO[0], LEO[1], "2020-04-05T00:00:00", np.array([600.0]), force=model)
+        record = native._read(native.path(), stamp)
+    assert record is not None
     obj = tmp_path / "integrate.o"
     obj.write_bytes(record["object"])
     nm = subprocess.run(["nm", "-u", str(obj)], capture_output=True, text=True, check=True).stdout
