@@ -24,6 +24,18 @@ def time_update(x, p, phi, q=None):
     return x, 0.5 * (p + p.T)
 
 
+_IDENTITIES: dict = {}
+
+
+def _identity(n: int) -> np.ndarray:
+    """The n × n identity, made once and not writeable (shared by every update)."""
+    eye = _IDENTITIES.get(n)
+    if eye is None:
+        eye = _IDENTITIES[n] = np.eye(n)
+        eye.flags.writeable = False
+    return eye
+
+
 def scalar_update(x, p, h, innovation, variance):
     """Measurement update by one scalar observation with the Joseph form
     ``P⁺ = (I − K h) P (I − K h)ᵀ + K r Kᵀ`` (Tapley et al. 2004 eq. 4.7.19; Bucy & Joseph 1968),
@@ -36,11 +48,9 @@ def scalar_update(x, p, h, innovation, variance):
     s = float(h @ ph) + variance
     k = ph / s
     x = x + k * innovation
-    # in place, without np.eye or np.outer: a filter calls this once per sample, and its cost
-    # is the temporaries; I − K h built as −K h with 1 added on the diagonal (the same numbers)
-    a = k[:, None] * h
-    np.negative(a, out=a)
-    a.flat[::x.size + 1] += 1.0
+    # few temporaries and no np.eye or np.outer: a filter calls this once per sample, and its
+    # cost is the number of numpy calls (the identity is built once per size, read only)
+    a = np.subtract(_identity(x.size), k[:, None] * h)
     p = a @ p @ a.T
     p += variance * (k[:, None] * k)
     p += p.T

@@ -310,6 +310,8 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
             extra[np.flatnonzero(has), col[has]] = 1.0
             jac = np.hstack([np.asarray(jac, float).reshape(rows.size, n_par), extra])
         jac = jac * scales[None, :]
+        # the samples' indices and steps as Python ints: the loop below reads them once per sample
+        rows_at, steps_at = rows.tolist(), step[rows].tolist()
         cursor = 0
         for k in range(ka, kb + 1):
             j = k - ka + off
@@ -339,12 +341,12 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                     p[:, i] = 0.0
                     p[i, i] = P0[i, i]
             x_p[k], p_p[k] = x, p
-            inv = psi_inv[j]
-            while cursor < rows.size and step[rows[cursor]] == k:
-                i = rows[cursor]
+            inv, z_j = psi_inv[j], z[j]
+            while cursor < len(rows_at) and steps_at[cursor] == k:
+                i = rows_at[cursor]
                 row = jac[cursor] @ inv
                 h_ref[i], h_row[i] = h[cursor], row
-                nu = y[i] - h[cursor] - row @ (x - z[j])
+                nu = y[i] - h[cursor] - row @ (x - z_j)
                 if periodic[i]:
                     nu = (nu + np.pi) % (2 * np.pi) - np.pi
                 s = float(row @ p @ row) + r2[i]
@@ -357,7 +359,7 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
             x_f[k], p_f[k] = x, p
             trusted = settled(p)                               # latches once converged
             moved = x if targets is None else np.asarray(targets[k], float) / scales
-            if k < kb and trusted and np.linalg.norm((moved[:3] - z[j][:3]) * scales[:3]) > opt.relinearise_m:
+            if k < kb and trusted and np.linalg.norm((moved[:3] - z_j[:3]) * scales[:3]) > opt.relinearise_m:
                 # the state left the reference by more than its linearisation holds: restart it here
                 chunks.insert(0, (k + 1, kb, True))
                 break
