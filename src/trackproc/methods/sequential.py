@@ -24,6 +24,18 @@ def time_update(x, p, phi, q=None):
     return x, 0.5 * (p + p.T)
 
 
+_IDENTITIES: dict = {}
+
+
+def _identity(n: int) -> np.ndarray:
+    """The n × n identity, made once and not writeable (shared by every update)."""
+    eye = _IDENTITIES.get(n)
+    if eye is None:
+        eye = _IDENTITIES[n] = np.eye(n)
+        eye.flags.writeable = False
+    return eye
+
+
 def scalar_update(x, p, h, innovation, variance):
     """Measurement update by one scalar observation with the Joseph form
     ``P⁺ = (I − K h) P (I − K h)ᵀ + K r Kᵀ`` (Tapley et al. 2004 eq. 4.7.19; Bucy & Joseph 1968),
@@ -36,23 +48,35 @@ def scalar_update(x, p, h, innovation, variance):
     s = float(h @ ph) + variance
     k = ph / s
     x = x + k * innovation
-    # in place, without np.outer: a filter calls this once per sample, and its cost was the
-    # temporaries (same numbers)
-    a = np.eye(x.size)
-    a -= k[:, None] * h
+    # few temporaries and no np.eye or np.outer: a filter calls this once per sample, and its
+    # cost is the number of numpy calls (the identity is built once per size, read only)
+    a = np.subtract(_identity(x.size), k[:, None] * h)
     p = a @ p @ a.T
     p += variance * (k[:, None] * k)
-    return x, 0.5 * (p + p.T), s
+    p += p.T
+    p *= 0.5
+    return x, p, s
 
 
-def rts_step(x_f, p_f, x_p_next, p_p_next, phi_next, x_s_next, p_s_next):
+def rts_gain(p_f, p_p_next, phi_next):
+    """The Rauch–Tung–Striebel gain ``C = P_f Φᵀ (P⁻_{k+1})⁻¹`` (Tapley et al. 2004 eq. 4.15.10)
+    of one step, or of a stack of steps (…, n, n) in one call: it needs the filter's quantities
+    only, not the smoothed ones."""
+    swap = (lambda a: a.T) if np.ndim(p_f) == 2 else (lambda a: np.swapaxes(a, -1, -2))
+    return swap(np.linalg.solve(swap(p_p_next), swap(p_f @ swap(phi_next))))
+
+
+def rts_step(x_f, p_f, x_p_next, p_p_next, phi_next, x_s_next, p_s_next, gain=None):
     """One backward step of the Rauch–Tung–Striebel smoother (RTS 1965; Tapley et al. 2004
     eqs. 4.15.9-4.15.11): ``C = P_f Φᵀ (P⁻_{k+1})⁻¹``, ``x_s = x_f + C (x_s,k+1 − x⁻_{k+1})``,
-    ``P_s = P_f + C (P_s,k+1 − P⁻_{k+1}) Cᵀ``. ``phi_next`` = Φ(t_{k+1}, t_k)."""
-    c = np.linalg.solve(p_p_next.T, (p_f @ phi_next.T).T).T
+    ``P_s = P_f + C (P_s,k+1 − P⁻_{k+1}) Cᵀ``. ``phi_next`` = Φ(t_{k+1}, t_k); ``gain``: C when
+    already computed (:func:`rts_gain` over all the steps at once)."""
+    c = rts_gain(p_f, p_p_next, phi_next) if gain is None else gain
     x_s = x_f + c @ (x_s_next - x_p_next)
     p_s = p_f + c @ (p_s_next - p_p_next) @ c.T
-    return x_s, 0.5 * (p_s + p_s.T)
+    p_s += p_s.T
+    p_s *= 0.5
+    return x_s, p_s
 
 
 def snc_noise(dt: float, psd) -> np.ndarray:

@@ -181,18 +181,22 @@ def pass_resets(problem: Problem, opt: FilterOptions) -> dict:
     return out
 
 
-def gm_transition(phi: np.ndarray, dt: float, gm: dict) -> np.ndarray:
+def gm_transition(phi: np.ndarray, dt, gm: dict) -> np.ndarray:
     """``phi`` (Ψ over a forward step ``dt``, the parameters constants of the reference) with the
     Gauss–Markov states' transition: ``e^{−dt/τ}`` on their diagonal and, for an acceleration,
     its columns of the orbit's rows (a constant acceleration's effect over the step, from the
     problem's own partials) scaled to a decaying one's (:func:`~trackproc.methods.sequential.gm_transition`).
+    ``phi`` one matrix (n, n) and ``dt`` a number, or a stack of steps (m, n, n) and their ``dt``
+    (m,): a segment's steps in one call, the factors computed once per distinct step length.
     In place; scaling of the variables leaves both unchanged."""
+    dt = np.asarray(dt, float)
+    lengths, which = np.unique(dt.reshape(-1), return_inverse=True)
     for i, (_, tau, accel) in gm.items():
-        f_r, f_v, e = sq.gm_transition(dt, tau)
+        f = np.array([sq.gm_transition(d, tau) for d in lengths])[which].reshape(dt.shape + (3,))
         if accel:
-            phi[:3, i] *= f_r
-            phi[3:6, i] *= f_v
-        phi[i, i] = e
+            phi[..., :3, i] *= f[..., 0, None]
+            phi[..., 3:6, i] *= f[..., 1, None]
+        phi[..., i, i] = f[..., 2]
     return phi
 
 

@@ -299,6 +299,8 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
         qs = process_noise_steps(problem, opt, np.diff(t_need), z_abs[1:], scales, gm) if t_need.size > 1 else None
         steps_phi = np.linalg.solve(psi[:-1].transpose(0, 2, 1), psi[1:].transpose(0, 2, 1)).transpose(0, 2, 1)
         psi_inv = np.linalg.inv(psi)
+        if gm:
+            gm_transition(steps_phi, np.diff(t_need), gm)
         off = 0 if kprev < 0 else 1                            # index of step ka in t_need
         if noise_col is not None:
             # a sample's AR(1) noise state enters it with coefficient 1 (the samples' unit)
@@ -308,6 +310,8 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
             extra[np.flatnonzero(has), col[has]] = 1.0
             jac = np.hstack([np.asarray(jac, float).reshape(rows.size, n_par), extra])
         jac = jac * scales[None, :]
+        # the samples' indices and steps as Python ints: the loop below reads them once per sample
+        rows_at, steps_at = rows.tolist(), step[rows].tolist()
         cursor = 0
         for k in range(ka, kb + 1):
             j = k - ka + off
@@ -322,14 +326,12 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                 phi[k] = np.eye(n)
             else:
                 phi[k] = steps_phi[j - 1]                               # Ψ(t_k) Ψ(t_{k-1})⁻¹
-                if gm:
-                    gm_transition(phi[k], steps_t[k] - steps_t[k - 1], gm)
-                q = None if qs is None else qs[j - 1]
                 x = z[j] + phi[k] @ (x_f[k - 1] - z[j - 1])
                 p = phi[k] @ p_f[k - 1] @ phi[k].T
-                if q is not None:
-                    p = p + q
-                p = 0.5 * (p + p.T)
+                if qs is not None:
+                    p += qs[j - 1]
+                p += p.T
+                p *= 0.5
                 for i in resets.get(k, ()):
                     # a new pass: the bias forgets its past (a zero row of the transition) and
                     # restarts from its a-priori, as if drawn anew
@@ -339,12 +341,12 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                     p[:, i] = 0.0
                     p[i, i] = P0[i, i]
             x_p[k], p_p[k] = x, p
-            inv = psi_inv[j]
-            while cursor < rows.size and step[rows[cursor]] == k:
-                i = rows[cursor]
+            inv, z_j = psi_inv[j], z[j]
+            while cursor < len(rows_at) and steps_at[cursor] == k:
+                i = rows_at[cursor]
                 row = jac[cursor] @ inv
                 h_ref[i], h_row[i] = h[cursor], row
-                nu = y[i] - h[cursor] - row @ (x - z[j])
+                nu = y[i] - h[cursor] - row @ (x - z_j)
                 if periodic[i]:
                     nu = (nu + np.pi) % (2 * np.pi) - np.pi
                 s = float(row @ p @ row) + r2[i]
@@ -355,9 +357,9 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                     x, p, _ = sq.scalar_update(x, p, row, nu, r2[i])
                 cursor += 1
             x_f[k], p_f[k] = x, p
-            settled(p)                                         # latches once converged
+            trusted = settled(p)                               # latches once converged
             moved = x if targets is None else np.asarray(targets[k], float) / scales
-            if k < kb and np.linalg.norm((moved[:3] - z[j][:3]) * scales[:3]) > opt.relinearise_m and settled(p):
+            if k < kb and trusted and np.linalg.norm((moved[:3] - z_j[:3]) * scales[:3]) > opt.relinearise_m:
                 # the state left the reference by more than its linearisation holds: restart it here
                 chunks.insert(0, (k + 1, kb, True))
                 break
@@ -372,9 +374,11 @@ def smooth(sw: Sweep) -> Sweep:
     """The Rauch–Tung–Striebel smoother over the sweep's steps (:func:`~trackproc.methods.sequential.rts_step`)."""
     m = sw.t_s.size
     x_s, p_s = sw.x_f.copy(), sw.p_f.copy()
+    # the gains depend on the filter's quantities only: all of them in one stacked call
+    gains = sq.rts_gain(sw.p_f[:-1], sw.p_p[1:], sw.phi[1:])
     for k in range(m - 2, -1, -1):
         x_s[k], p_s[k] = sq.rts_step(sw.x_f[k], sw.p_f[k], sw.x_p[k + 1], sw.p_p[k + 1], sw.phi[k + 1],
-                                     x_s[k + 1], p_s[k + 1])
+                                     x_s[k + 1], p_s[k + 1], gain=gains[k])
     sw.x_s, sw.p_s = x_s, p_s
     return sw
 

@@ -22,6 +22,11 @@ from trackproc.pipeline.orbit_source import (Satellite, Sgp4Track, station_itrf,
                                              teme_to_gcrf_maps)
 
 
+#: the pass-file kind → the field of :class:`~trackproc.models.measurements.Observables` predicting it
+_OBSERVABLE_OF = {"range": "range_m", "range_rate": "range_rate_m_s", "doppler": "doppler_hz",
+                  "elevation": "elevation_rad", "azimuth": "azimuth_rad"}
+
+
 @dataclass
 class Block:
     """Samples of one station (or one ephemeris) and how to predict them."""
@@ -63,17 +68,18 @@ def observations(tables, ephemerides, options, eop, stations):
             track = Sgp4Track(times[sel], eop)
             view = station_gcrf(station_itrf(st, options.earth), *datetime64_to_jd_utc(times[sel]), eop)
             kinds = frame["kind"].to_numpy()[sel]
+            # each kind's rows, found once: the model is evaluated many times at these samples
+            where = [(field, np.flatnonzero(kinds == kind)) for kind, field in _OBSERVABLE_OF.items()]
+            where = [(field, idx) for field, idx in where if idx.size]
 
-            def predict(sat, track=track, view=view, st=st, kinds=kinds, carrier=carrier, mode=mode):
+            def predict(sat, track=track, view=view, st=st, where=where, size=kinds.size, carrier=carrier,
+                        mode=mode):
                 r, v, a, j = track.rvaj(sat)
                 obs = station_observables(r, v, a, j, view, st, carrier_hz=carrier or 1.0, mode=mode,
                                           range_rate_model=options.range_rate_model)
-                out = np.empty(kinds.size)
-                for kind, values in (("range", obs.range_m), ("range_rate", obs.range_rate_m_s),
-                                     ("doppler", obs.doppler_hz), ("elevation", obs.elevation_rad),
-                                     ("azimuth", obs.azimuth_rad)):
-                    m = kinds == kind
-                    out[m] = values[m]
+                out = np.empty(size)
+                for field, idx in where:
+                    out[idx] = getattr(obs, field)[idx]
                 return out
 
             blocks.append(Block(rows=offset + np.arange(sel.size), kind=kinds, predict=predict))
