@@ -65,6 +65,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 
 import numpy as np
 
@@ -196,6 +197,24 @@ def _step_size(x, p, tol):
 
 
 
+_FIRST = threading.local()      # .last: (key, spectra) of the last first step taken in this thread
+
+
+def _first_series(kern, s0, p, mu, kj2, *args):
+    """The spectra of a first step, ``kern(*args, p, mu, kj2[, mu_slot])``, kept for the next call
+    from the same start: a trajectory covering times on both sides of its epoch is two runs from
+    one state (:func:`trackproc.dynamics.propagator.propagate`), whose first series are the same
+    numbers (the step direction enters only when the series is summed). The kept array is never
+    written to (the runs stack copies of their spectra)."""
+    key = (kern, s0.tobytes(), s0.shape, p, mu, kj2, args[4] if len(args) == 5 else None)
+    last = getattr(_FIRST, "last", None)
+    if last is not None and last[0] == key:
+        return last[1]
+    out = kern(*args[:4], p, mu, kj2, args[4]) if len(args) == 5 else kern(*args, p, mu, kj2)
+    _FIRST.last = (key, out)
+    return out
+
+
 def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
               mu_m3_s2: float = MU_EARTH, j2: float = J2, re_m: float = RE_EARTH,
               tol: float = 1e-15, order: int | None = None, stm: bool = False,
@@ -293,11 +312,18 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
                 outcome = Outcome.STEP_LIMIT
                 break
             try:
+                if len(times) == 1:
+                    out = _first_series(kern, s0, p, mu_m3_s2, kj2, r, v, dr, dv, mu_slot) if stm else \
+                        _first_series(kern, s0, p, mu_m3_s2, kj2, r, v)
+                elif stm:
+                    out = kern(r, v, dr, dv, p, mu_m3_s2, kj2, mu_slot)
+                else:
+                    out = kern(r, v, p, mu_m3_s2, kj2)
                 if stm:
-                    xd = kern(r, v, dr, dv, p, mu_m3_s2, kj2, mu_slot)
+                    xd = out
                     x = xd[:, :, 0]
                 else:
-                    x = kern(r, v, p, mu_m3_s2, kj2)
+                    x = out
             except (ZeroDivisionError, OverflowError):         # scalar kernel, e.g. r = 0
                 outcome = Outcome.NON_FINITE
                 break

@@ -11,7 +11,7 @@ integrator (:mod:`trackproc.dynamics.forces.integrator`) return it.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum
 from functools import lru_cache
 
@@ -111,6 +111,8 @@ class Propagation:
     re_m: float
     batch: bool
     engine: str = "numpy"
+    #: derivative spectra of a step, made once: (values or sensitivities, step, m) -> (B*2F, n-m)
+    _spectra: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     # -- summary -----------------------------------------------------------------------------
     @property
@@ -159,11 +161,29 @@ class Propagation:
             idx = np.searchsorted(-tb, -t, side="right") - 1
         return np.clip(idx, 0, self.n_steps - 1)
 
-    def _dense(self, coef, t_s, m):
+    def _derivative_spectra(self, coef, s, m, key):
+        """Spectra of derivatives m and m+1 of step s of coef, (B*2F, max(n-m, 1)); kept, since
+        a light-time iteration evaluates the same steps several times."""
+        cd = self._spectra.get((key, s, m))
+        if cd is None:
+            _, nb, nf, n = coef.shape
+            nm = max(n - m, 1)
+            fac = _deriv_factors(n, m)                                # (2, nm)
+            cs = coef[s]                                              # (B, F, n)
+            cd = np.zeros((nb, 2, nf, nm))
+            if m < n:
+                cd[:, 0, :, :n - m] = cs[..., m:] * fac[0, :n - m]
+            if m + 1 < n:
+                cd[:, 1, :, :n - m - 1] = cs[..., m + 1:] * fac[1, :n - m - 1]
+            cd = self._spectra[(key, s, m)] = cd.reshape(nb * 2 * nf, nm)
+        return cd
+
+    def _dense(self, coef, t_s, m, key="state"):
         """Derivatives m and m+1 of spectra coef (n_steps, B, F, n) at t_s.
 
         Returns (B, M, 2, F) and the shape of t_s. One matrix product per step touched:
-        powers of the offsets (M, n) x derivative spectra (n, 2F).
+        powers of the offsets (M, n) x derivative spectra (n, 2F). ``key`` names coef
+        (``"state"`` or ``"jacobian"``) for the kept derivative spectra.
         """
         t = np.asarray(t_s, dtype=float)
         tf = t.reshape(-1)
@@ -171,7 +191,6 @@ class Propagation:
         _, nb, nf, n = coef.shape
         tb = self.step_times_s
         nm = max(n - m, 1)
-        fac = _deriv_factors(n, m)                                    # (2, nm)
         if tf.size == 0:
             return np.empty((nb, 0, 2, nf)), t.shape
         # compiled (numba is loaded already) when steps are many and samples per step few; one
@@ -196,15 +215,9 @@ class Propagation:
             groups = [(int(idx[g[0]]), g) for g in np.split(order, cuts)]
         out = None if len(groups) == 1 else np.empty((nb, tf.size, 2, nf))
         for s, sel in groups:
-            cs = coef[s]                                              # (B, F, n)
-            cd = np.zeros((nb, 2, nf, nm))
-            if m < n:
-                cd[:, 0, :, :n - m] = cs[..., m:] * fac[0, :n - m]
-            if m + 1 < n:
-                cd[:, 1, :, :n - m - 1] = cs[..., m + 1:] * fac[1, :n - m - 1]
             dt = (tf if sel is None else tf[sel]) - tb[s]
             # one 2-D product of contiguous operands (BLAS), (B*2F, nm) @ (nm, M)
-            res = (cd.reshape(nb * 2 * nf, nm) @ _powers(dt, nm)).reshape(nb, 2, nf, -1)
+            res = (self._derivative_spectra(coef, s, m, key) @ _powers(dt, nm)).reshape(nb, 2, nf, -1)
             res = res.transpose(0, 3, 1, 2)
             if out is None:
                 out = res
@@ -240,7 +253,7 @@ class Propagation:
         sens = self.sensitivities
         nsteps, nb, _, npar, n = sens.shape
         coef = sens.reshape(nsteps, nb, 3 * npar, n)
-        out, tshape = self._dense(coef, t_s, 0)
+        out, tshape = self._dense(coef, t_s, 0, "jacobian")
         out = out.reshape(out.shape[:2] + (6, npar))
         return self._finish(out, tshape, (6, npar))
 

@@ -17,6 +17,7 @@ per-order Python overhead that dominates this engine (benchmarks/throughput.py),
 
 from __future__ import annotations
 
+import threading
 from functools import lru_cache
 
 import numpy as np
@@ -191,26 +192,63 @@ _G_VAR_IDX = _gidx([(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2),          # P
                     (6, 14), (6, 16), (6, 17)])                              # w7 P_iz
 
 
+class _VarWork(threading.local):
+    """Per-thread work arrays of :func:`series_var_single`, with the views every order uses made
+    once per (p, P): the kernel's cost is numpy's per-call overhead, so each order makes three
+    numpy calls for the Cauchy sums, one ``put`` of its values and one product for Phi."""
+
+    def __init__(self):
+        self.by_shape = {}
+
+    def get(self, p, npar):
+        w = self.by_shape.get((p, npar))
+        if w is None:
+            w = self.by_shape[(p, npar)] = _var_work(p, npar)
+        return w
+
+
+def _var_work(p, npar):
+    n = p + 2
+    # one buffer: F (21, n), then G as (3, n, 3) so that G(0..K) is a contiguous (3, 3(K+1)) view
+    buf = np.zeros(30 * n)
+    f = buf[:21 * n].reshape(21, n)
+    gs = buf[21 * n:].reshape(3, n, 3)
+    phr = np.zeros((n, 3, npar))
+    # flat positions of one order's values: x y z at column K+2, rows 3-20 at column K, G(K)
+    rows = np.arange(3, 21)
+    put = [np.concatenate([np.arange(3) * n + k + 2, rows * n + k,
+                           21 * n + (np.arange(3)[:, None] * 3 * n + 3 * k + np.arange(3)).ravel()])
+           for k in range(p)]
+    views = [(f[:, :k + 1], f[:, k::-1].T, gs[:, :k + 1].reshape(3, 3 * (k + 1)),
+              phr[n - 1 - k:].reshape(3 * (k + 1), npar), phr[n - 3 - k]) for k in range(p)]
+    return buf, f, phr, put, views
+
+
+_VAR_WORK = _VarWork()
+
+
 def series_var_single(r0, v0, dr0, dv0, p, mu, kj2, mu_slot):
     """Same result as :func:`series_dual` for B = 1: (1, 3, 1+P, p+2). Implements seed 004
     eqs. 18-21 (two-dimensional DT, first order in the parameters)."""
     n = p + 2
     npar = dr0.shape[2]
     x0, y0, z0 = (float(c) for c in r0[0])
-    f = np.zeros((21, n))
+    buf, f, phr, put, views = _VAR_WORK.get(p, npar)
+    buf[:] = 0.0
     f[0:3, 0] = r0[0]
     f[0:3, 1] = v0[0]
-    # G(l) as gs[:, l, :] and Phi(K) at row n-1-K (reversed): the convolution over l of order K
-    # is then one matrix product of two contiguous views, (3, 3(K+1)) @ (3(K+1), P).
-    gs = np.zeros((3, n, 3))
-    phr = np.zeros((n, 3, npar))
+    # G(l) in the buffer's (3, n, 3) block and Phi(K) at row n-1-K of phr (reversed): the
+    # convolution over l of order K is then one matrix product of two contiguous views,
+    # (3, 3(K+1)) @ (3(K+1), P).
     phr[n - 1] = dr0[0]
     phr[n - 2] = dv0[0]
     mu_col = None if mu_slot is None else mu_slot - 1
     k = kj2
     matmul, take = np.matmul, _G_VAR_IDX
+    c10 = 10.0 * k
     for kk in range(p):
-        g = matmul(f[:, :kk + 1], f[:, kk::-1].T).take(take).tolist()
+        fa, fb, gk, phk, acc = views[kk]
+        g = matmul(fa, fb).take(take).tolist()
         (pxx, pxy, pxz, pyy, pyz, pzz, gw3, gw5, gw7, gw9, glw3, glw5, glw7, glw9,
          gt, gv, gax, gay, gaz, gq0, gq1, gq2, gq3, gq4, gq5, gu0, gu1, gu2) = g
         sk = pxx + pyy + pzz
@@ -234,32 +272,32 @@ def series_var_single(r0, v0, dr0, dv0, p, mu, kj2, mu_slot):
         hz = hxy + 2.0 * k * w5
         ax, ay, az = gax + x0 * hxy, gay + y0 * hxy, gaz + z0 * hz
         q = 3.0 * mu * w5 - 5.0 * k * w7 + 35.0 * k * v
-        pk = (pxx, pxy, pxz, pyy, pyz, pzz)
         if kk == 0:
             q0 = q
-            qp = [q0 * c for c in p0]
+            qp0, qp1, qp2, qp3, qp4, qp5 = (q0 * c for c in p0)
             ux, uy, uz = w70 * pxz, w70 * pyz, w70 * pzz
         else:
-            qp = [gq + q0 * c + q * c0 for gq, c, c0 in
-                  zip((gq0, gq1, gq2, gq3, gq4, gq5), pk, p0)]
+            qp0 = gq0 + q0 * pxx + q * p0[0]
+            qp1 = gq1 + q0 * pxy + q * p0[1]
+            qp2 = gq2 + q0 * pxz + q * p0[2]
+            qp3 = gq3 + q0 * pyy + q * p0[3]
+            qp4 = gq4 + q0 * pyz + q * p0[4]
+            qp5 = gq5 + q0 * pzz + q * p0[5]
             ux = gu0 + w70 * pxz + w7 * p0[2]
             uy = gu1 + w70 * pyz + w7 * p0[4]
             uz = gu2 + w70 * pzz + w7 * p0[5]
-        c10 = 10.0 * k
-        gxz = qp[2] - c10 * ux
-        gyz = qp[4] - c10 * uy
-        gs[:, kk] = ((hxy + qp[0], qp[1], gxz), (qp[1], hxy + qp[3], gyz),
-                     (gxz, gyz, hz + qp[5] - 2.0 * c10 * uz))
+        gxz = qp2 - c10 * ux
+        gyz = qp4 - c10 * uy
         fac = 1.0 / ((kk + 1.0) * (kk + 2.0))
-        f[3:21, kk] = (sk, w3, w5, w7, w9, kk * w3, kk * w5, kk * w7, kk * w9,
-                       pxx, pxy, pxz, pyy, pyz, pzz, hxy, hz, q)
-        f[0:3, kk + 2] = (ax * fac, ay * fac, az * fac)
-        m = 3 * (kk + 1)
-        acc = matmul(gs[:, :kk + 1].reshape(3, m), phr[n - 1 - kk:].reshape(m, npar))
+        buf.put(put[kk], (ax * fac, ay * fac, az * fac,
+                        sk, w3, w5, w7, w9, kk * w3, kk * w5, kk * w7, kk * w9,
+                        pxx, pxy, pxz, pyy, pyz, pzz, hxy, hz, q,
+                        hxy + qp0, qp1, gxz, qp1, hxy + qp3, gyz,
+                        gxz, gyz, hz + qp5 - 2.0 * c10 * uz))
+        matmul(gk, phk, out=acc)
         if mu_col is not None:
             acc[:, mu_col] += (ax / mu, ay / mu, az / mu)
         acc *= fac
-        phr[n - 3 - kk] = acc
     out = np.empty((1, 3, npar + 1, n))
     out[0, :, 0] = f[0:3]
     out[0, :, 1:] = phr[::-1].transpose(1, 2, 0)

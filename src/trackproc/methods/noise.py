@@ -57,7 +57,7 @@ import numpy as np
 from trackproc.methods.distributions import chi2_quantile
 from trackproc.methods.lapack import routines
 from trackproc.methods.whitening import (MarkovFactor, PassCovariance, effective_samples,  # noqa: F401  (re-exported)
-                                        effective_samples_beyond, markov_grid)
+                                        effective_samples_beyond, kept_markov_factor, markov_grid)
 
 dgeqrf, = routines("dgeqrf")
 
@@ -178,7 +178,7 @@ class _Reml:
                 chol, _ = cho_factor(self.covariance(model), lower=True, check_finite=False)
                 return (2.0 * float(np.sum(np.log(np.diag(chol)))),
                         solve_triangular(chol, self.xr, lower=True, check_finite=False))
-            fac = MarkovFactor(model, self.t, self.t0, self.grid)
+            fac = kept_markov_factor(model, self.t, self.t0, self.grid)
         except np.linalg.LinAlgError:
             return None
         w = fac.whiten(self.xr)

@@ -32,8 +32,10 @@ to the banded solve to rounding).
 from __future__ import annotations
 
 import math
-from typing import Optional, Sequence
 import sys
+import threading
+from collections import OrderedDict
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -42,7 +44,7 @@ from trackproc.methods.lapack import routines
 
 dpbtrf, dtbtrs = routines("dpbtrf", "dtbtrs")     # scipy.linalg.lapack's, without scipy.linalg
 
-__all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor",
+__all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor", "kept_markov_factor",
            "compiled_riccati", "markov_grid"]
 
 
@@ -203,6 +205,41 @@ def markov_grid(t: np.ndarray, t0: float) -> tuple:
     walk's clock ``s = max(t - t0, 0)`` (its first value first)."""
     s = np.clip(t - t0, 0.0, None)
     return np.diff(t), np.concatenate([s[:1], np.diff(s)])
+
+
+#: how many samples the factors :func:`kept_markov_factor` keeps may hold in all (a factor of n
+#: samples holds about 16 n doubles: ~25 MB in all)
+_KEPT_SAMPLES = 200_000
+_KEPT: OrderedDict = OrderedDict()
+_KEPT_LOCK = threading.Lock()
+_KEPT_HELD = [0]
+
+
+def kept_markov_factor(model, t: np.ndarray, t0: Optional[float], grid: Optional[tuple] = None) -> MarkovFactor:
+    """``MarkovFactor(model, t, t0, grid)``, kept while the factors kept hold fewer than
+    :data:`_KEPT_SAMPLES` samples (least recently used dropped first): the factor depends on
+    nothing else, and the REML searches of one pass (:func:`trackproc.methods.noise.fit_noise`,
+    once per update of the orbit) walk the same simplex points as long as the likelihoods keep
+    their order, so most of their models recur on the pass's times. ``grid`` must be
+    :func:`markov_grid` of ``t`` and ``t0``. A factor is never changed after it is made, so one
+    object serves every caller."""
+    t = np.asarray(t, float)
+    key = (float(model.white), float(model.ar_sigma), float(model.ar_tau_s), float(model.walk),
+           None if t0 is None else float(t0), t.tobytes())
+    with _KEPT_LOCK:
+        fac = _KEPT.get(key)
+        if fac is not None:
+            _KEPT.move_to_end(key)
+            return fac
+    fac = MarkovFactor(model, t, t0, grid)
+    with _KEPT_LOCK:
+        if key not in _KEPT:
+            _KEPT[key] = fac
+            _KEPT_HELD[0] += fac.n
+        while _KEPT_HELD[0] > _KEPT_SAMPLES and len(_KEPT) > 1:
+            _, old = _KEPT.popitem(last=False)
+            _KEPT_HELD[0] -= old.n
+    return fac
 
 
 def markov_factor(model, t, t0: Optional[float] = None) -> Optional[MarkovFactor]:

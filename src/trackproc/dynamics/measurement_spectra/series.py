@@ -57,9 +57,15 @@ def shift_matrix(delta_s, n: int) -> np.ndarray:
     Implements the re-expansion of a spectrum about another centre (docs/equations.md, notation).
     """
     d = np.asarray(delta_s, float)[..., None, None]
+    e, upper = _shift_exponents(n)
+    return _binomials(n) * np.where(upper, d ** e, 0.0)
+
+
+@lru_cache(maxsize=16)
+def _shift_exponents(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The exponents ``j - K`` (0 below the diagonal) and the mask ``j >= K`` of :func:`shift_matrix`."""
     j, k = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-    e = np.where(j >= k, j - k, 0)
-    return _binomials(n) * np.where(j >= k, d ** e, 0.0)
+    return np.where(j >= k, j - k, 0), j >= k
 
 
 def cauchy_sum(u, v) -> np.ndarray:

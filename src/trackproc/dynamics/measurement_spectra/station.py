@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import erfa
 import numpy as np
@@ -115,6 +115,21 @@ class StationModel:
     p_nodes: np.ndarray
     w_nodes: np.ndarray
     eop: object = None
+    #: what depends on the sample times only, kept for the next model evaluation (:meth:`_kept`)
+    _memo: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def _kept(self, key, make):
+        """``make()``, kept under ``key`` for the next calls (the last 32): a refinement evaluates
+        the model at the same sample times and segment centres on every iteration, and the
+        station's rotation there (ERFA's angle, the slow quadratics) does not depend on the orbit."""
+        memo = self._memo
+        got = memo.get(key)
+        if got is None:
+            got = make()
+            if len(memo) >= 32:
+                memo.pop(next(iter(memo)))
+            memo[key] = got
+        return got
 
     @classmethod
     def build(cls, r_itrf_m, lat_rad: float, lon_rad: float, epoch_jd_utc: tuple, q_ref,
@@ -173,6 +188,9 @@ class StationModel:
         slow precession-nutation and polar-motion polynomials.
         """
         c = np.atleast_1d(np.asarray(centres_s, float))
+        return self._kept(("spectra", c.tobytes(), c.shape, int(n)), lambda: self._spectra(c, n)).copy()
+
+    def _spectra(self, c, n: int) -> np.ndarray:
         theta, omega = self.angle(c)
         cs, sn = rotation_spectra(theta, omega, n)                     # (S, n)
         pn, p = self._slow(c)
@@ -203,21 +221,30 @@ class StationModel:
         Implements seed 004 eq. 10.
         """
         t = np.atleast_1d(np.asarray(t_s, float))
-        if centres_s is None or self.frozen:
+        plain = centres_s is None or self.frozen
+        cen = None if plain else np.asarray(centres_s, float)
+        key = ("enu", t.tobytes(), t.shape, None if plain else (cen.tobytes(), cen.shape))
+        pn, wq, rz = self._kept(key, lambda: self._enu_rotations(t, cen))
+        d_cirs = np.einsum("nji,nj->ni", pn, d_qi)                      # P^T d
+        d_itrf = np.einsum("nij,nj->ni", wq, np.einsum("nij,nj->ni", rz, d_cirs))
+        return np.einsum("ij,nj->ni", geodesy.enu_matrix(self.lat_rad, self.lon_rad), d_itrf)
+
+    def _enu_rotations(self, t, centres):
+        """``P``, ``W`` and ``R3(theta)`` (N, 3, 3) at ``t`` for :meth:`to_enu` (about ``centres``
+        when given)."""
+        if centres is None:
             theta, _ = self.angle(t)
             pn = self._slow(t)[0][:, 0]
             wq = self._w_quadratic(t)[:, 0]
         else:
-            cu, inv = np.unique(np.asarray(centres_s, float), return_inverse=True)
+            cu, inv = np.unique(centres, return_inverse=True)
             th_c, om_c = self.angle(cu)
             dt = t - cu[inv]
             theta = th_c[inv] + om_c[inv] * dt
             powers = np.stack([np.ones_like(dt), dt, dt * dt], axis=1)
             pn = np.einsum("sjab,sj->sab", self._slow(cu)[0][inv], powers)
             wq = np.einsum("sjab,sj->sab", self._w_quadratic(cu)[inv], powers)
-        d_cirs = np.einsum("nji,nj->ni", pn, d_qi)                      # P^T d
-        d_itrf = np.einsum("nij,nj->ni", wq, np.einsum("nij,nj->ni", rotation_z(theta), d_cirs))
-        return np.einsum("ij,nj->ni", geodesy.enu_matrix(self.lat_rad, self.lon_rad), d_itrf)
+        return pn, wq, rotation_z(theta)
 
     def _w_quadratic(self, c):
         if self.frozen:
