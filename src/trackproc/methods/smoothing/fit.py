@@ -235,6 +235,24 @@ def check_enough(t, degree: int) -> None:
                              "degree of freedom)")
 
 
+def used_in_time_order(t, used) -> np.ndarray:
+    """The indices of the samples ``used``, in time order (stable): the rows a fit whitens."""
+    idx = np.flatnonzero(used)
+    return idx[np.argsort(t[idx], kind="stable")]
+
+
+def check_rank(r, degree: int) -> float:
+    """The condition number of ``r``, the triangular factor of a degree-``degree`` fit; a
+    ``rank_deficient`` :class:`SmoothingError` when it is beyond 1/(1000 eps) (the sample times do
+    not determine the coefficients)."""
+    sv = np.linalg.svd(r, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
+    if not cond < 1.0 / (np.finfo(float).eps * 1e3):
+        raise SmoothingError("rank_deficient", f"degree {degree} is not determined by the sample times "
+                             f"(condition number {cond:.3g})")
+    return cond
+
+
 def solve_fit(t, y, s, degree, domain, basis, used, noise: NoiseModel = WHITE) -> PolynomialFit:
     """QR solution of the whitened system for the samples ``used``; residuals for all samples.
 
@@ -242,17 +260,12 @@ def solve_fit(t, y, s, degree, domain, basis, used, noise: NoiseModel = WHITE) -
     whitened by the inverse Cholesky factor of the correlation (generalized least squares).
     """
     psi = design_matrix(t, degree, domain, basis)
-    idx = np.flatnonzero(used)
-    idx = idx[np.argsort(t[idx], kind="stable")]
+    idx = used_in_time_order(t, used)
     tu = t[idx]
     a = whiten(tu, psi[idx] / s[idx, None], noise)
     yw = whiten(tu, y[idx] / s[idx], noise)
     q, r = np.linalg.qr(a)
-    sv = np.linalg.svd(r, compute_uv=False)
-    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
-    if not cond < 1.0 / (np.finfo(float).eps * 1e3):
-        raise SmoothingError("rank_deficient", f"degree {degree} is not determined by the sample times "
-                             f"(condition number {cond:.3g})")
+    cond = check_rank(r, degree)
     coef = np.linalg.solve(r, q.T @ yw)
     r_inv = np.linalg.solve(r, np.eye(degree + 1))
     cov = r_inv @ r_inv.T

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from trackproc.methods.smoothing.fit import (WHITE, PolynomialFit, SmoothingError, check_arrays, check_enough,
-                                             design_matrix, replace_fit, whiten)
+                                             check_rank, design_matrix, replace_fit, used_in_time_order, whiten)
 
 
 #: A TCA whose spread over neighbouring degrees exceeds this many formal sigmas is ``uncertain``.
@@ -180,21 +180,16 @@ def _nested_coefficients(t, y, s, fit: PolynomialFit, top: int):
     Golub & Van Loan 2013, sec. 5.3): the same least-squares solution, to rounding, without a
     factorisation for each degree.
     """
-    used = np.asarray(fit.used, bool)
-    idx = np.flatnonzero(used)
-    idx = idx[np.argsort(t[idx], kind="stable")]
+    idx = used_in_time_order(t, np.asarray(fit.used, bool))
     tu = t[idx]
     noise = fit.noise or WHITE
     aug = np.column_stack([design_matrix(tu, top, fit.domain_s, fit.basis), y[idx]]) / s[idx, None]
     r = np.linalg.qr(whiten(tu, aug, noise), mode="r")
-    limit = 1.0 / (np.finfo(float).eps * 1e3)                 # solve_fit's rank test
 
     def coef(d: int) -> np.ndarray:
         check_enough(tu, d)
         rd = r[: d + 1, : d + 1]
-        sv = np.linalg.svd(rd, compute_uv=False)
-        if not (sv[-1] > 0 and sv[0] / sv[-1] < limit):
-            raise SmoothingError("rank_deficient", f"degree {d} is not determined by the sample times")
+        check_rank(rd, d)                                     # solve_fit's rank test
         return np.linalg.solve(rd, r[: d + 1, -1])
 
     return coef
