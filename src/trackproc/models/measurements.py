@@ -56,6 +56,11 @@ def light_time_down(r_sat, v_sat, a_sat, j_sat, r_st, *, c: float = C_LIGHT, tol
 
 # --------------------------------------------------------------------------- observables
 
+#: a pass file's measurement kind -> the :class:`Observables` field that predicts it
+KIND_FIELDS = {"range": "range_m", "range_rate": "range_rate_m_s", "doppler": "doppler_hz",
+               "elevation": "elevation_rad", "azimuth": "azimuth_rad"}
+
+
 @dataclass(frozen=True)
 class Observables:
     """Modelled values at the reception times (arrays of one shape, SI units).
@@ -71,6 +76,10 @@ class Observables:
     elevation_rad: np.ndarray
     azimuth_rad: np.ndarray
     light_time_s: np.ndarray
+
+    def by_kind(self) -> dict:
+        """The values that predict each measurement kind of a pass file (:data:`KIND_FIELDS`)."""
+        return {kind: getattr(self, name) for kind, name in KIND_FIELDS.items()}
 
 
 def observables(r_sat, v_sat, a_sat, j_sat, r_st, v_st, a_st, gcrf_to_itrf_matrix, lat_rad, lon_rad, *,

@@ -103,9 +103,7 @@ def compare(table, orbit, options: CompareOptions, eop=None, stations: Optional[
         rows = np.flatnonzero(station_col == name)
         obs = observe(sat, known[name], t_s[rows], carrier_hz=carrier or 1.0, mode=mode,
                       range_rate_model=options.range_rate_model, earth=options.earth)
-        values = {"range": obs.range_m, "range_rate": obs.range_rate_m_s, "doppler": obs.doppler_hz,
-                  "elevation": obs.elevation_rad, "azimuth": obs.azimuth_rad}
-        for kind, series in values.items():
+        for kind, series in obs.by_kind().items():
             sel = kind_col[rows] == kind
             predicted[rows[sel]] = series[sel]
     observed = frame["value"].to_numpy(dtype=float)

@@ -214,8 +214,7 @@ def simulate(initial, stations: Mapping, options: SimulateOptions, eop=None) -> 
     obs = mm.observables(r_sat, v_sat, a_sat, j_sat, track.r, track.v, track.a, track.gcrf_to_itrf,
                          lat[:, None], lon[:, None], carrier_hz=options.carrier_hz, mode=options.mode,
                          range_rate_model=options.range_rate_model)
-    model = {"range": obs.range_m, "range_rate": obs.range_rate_m_s, "doppler": obs.doppler_hz,
-             "elevation": obs.elevation_rad, "azimuth": obs.azimuth_rad}
+    model = obs.by_kind()
 
     visible = obs.elevation_rad >= options.elevation_mask_deg * DEG     # (S, N)
     if not visible.any():

@@ -16,15 +16,10 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.io.tle import MeanElements, satrec
 from trackproc.io.validate import ORBIT_RADIUS_RANGE_M, stated_carrier
 from trackproc.methods import tle_fit as tf
-from trackproc.models.measurements import station_gcrf
+from trackproc.models.measurements import KIND_FIELDS, station_gcrf
 from trackproc.pipeline.fit_tle.options import KINDS, MU_WGS72, REEPOCH_HALF_SPAN_REV, REEPOCH_STEP_S
 from trackproc.pipeline.orbit_source import (Satellite, Sgp4Track, station_itrf, station_observables,
                                              teme_to_gcrf_maps)
-
-
-#: the pass-file kind → the field of :class:`~trackproc.models.measurements.Observables` predicting it
-_OBSERVABLE_OF = {"range": "range_m", "range_rate": "range_rate_m_s", "doppler": "doppler_hz",
-                  "elevation": "elevation_rad", "azimuth": "azimuth_rad"}
 
 
 @dataclass
@@ -69,7 +64,7 @@ def observations(tables, ephemerides, options, eop, stations):
             view = station_gcrf(station_itrf(st, options.earth), *datetime64_to_jd_utc(times[sel]), eop)
             kinds = frame["kind"].to_numpy()[sel]
             # each kind's rows, found once: the model is evaluated many times at these samples
-            where = [(field, np.flatnonzero(kinds == kind)) for kind, field in _OBSERVABLE_OF.items()]
+            where = [(field, np.flatnonzero(kinds == kind)) for kind, field in KIND_FIELDS.items()]
             where = [(field, idx) for field, idx in where if idx.size]
 
             def predict(sat, track=track, view=view, st=st, where=where, size=kinds.size, carrier=carrier,
