@@ -58,7 +58,8 @@ plain float seconds (about 1e-16 relative resolution, so keep t0 near the data, 
 J2000); no event detection.
 
 One responsibility, the adaptive Taylor integrator's step loop and dense output (the series
-themselves are :mod:`trackproc.dynamics.taylor_series`); 401 lines with its input checks.
+themselves are :mod:`trackproc.dynamics.taylor_series`); a little over 400 lines with its input
+checks and the first step's kept series.
 """
 
 from __future__ import annotations

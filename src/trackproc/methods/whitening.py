@@ -44,8 +44,8 @@ from trackproc.methods.lapack import routines
 
 dpbtrf, dtbtrs = routines("dpbtrf", "dtbtrs")     # scipy.linalg.lapack's, without scipy.linalg
 
-__all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor", "kept_markov_factor",
-           "compiled_riccati", "markov_grid"]
+__all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor",
+           "kept_markov_factor", "compiled_riccati", "markov_grid"]
 
 
 def effective_samples(cov: np.ndarray) -> float:

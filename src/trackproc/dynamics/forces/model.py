@@ -16,6 +16,9 @@ lunar position at a 10-minute grid). The field acts in ITRF through the full IAU
 rotation (:func:`trackproc.dynamics.frames.earth_rotation`), not the frozen frame the
 Taylor engine uses for J2 (frozen precession-nutation drifts 0.15"/day, i.e. tens of metres
 over a day through the tesseral terms).
+
+One responsibility, the force model's settings and its time-tabulated evaluation; a little over
+400 lines, the Environment's accelerations and partials beside the tables they read.
 """
 
 from __future__ import annotations

@@ -16,10 +16,10 @@ LLVM's MCJIT, points the environments at fresh ones and wraps the entry point wi
 ``_dynfunc.make_function``, as ``numba.core.compiler.CompileResult._rebuild`` and
 ``CPUContext.get_executable`` do: the same machine code, hence the same bits.
 
-Used only with a numba release it was checked against (:data:`trackproc.dynamics.jit.CHECKED_NUMBA`,
-not with ``TRACKPROC_JIT_LIGHT=0``) and when everything it depends on is the same as when it was written (the kernel's source,
-Python, numba's and llvmlite's binaries, the CPU and LLVM's view of its features, no ``NUMBA_*``
-setting), every undefined symbol of the object resolves, and the arguments have exactly the
+Used only with a numba release it was checked against
+(:data:`trackproc.dynamics.jit.CHECKED_NUMBA`, not with ``TRACKPROC_JIT_LIGHT=0``) and when
+everything it depends on is the same as when it was written (the kernel's source, Python, numba's
+and llvmlite's binaries, the CPU and LLVM's view of its features, no ``NUMBA_*`` setting), every undefined symbol of the object resolves, and the arguments have exactly the
 recorded types (numba's wrapper trusts them: the dispatcher's type check is skipped); otherwise
 the caller runs numba's dispatcher, which is always correct. Linux (ELF) only.
 """
