@@ -1,0 +1,75 @@
+"""DopTrack Delfi-C3 (../shared/realdata): how much better than an old TLE can ANY orbit predict a pass?
+
+The never-worse issue asks a refined orbit to predict the next pass better than a TLE 7-8 days
+older than the refined pass (median ratio <= 0.95). On some days an old TLE already predicts at
+the level of the pass's own time-tag error, and then no orbit can do much better. This measures
+that room, for the same pairs as ``benchmarks/doptrack_never_worse.py`` (pass A, its next pass B;
+the TLE of the latest pass at least 7 days before A):
+
+* ``old``: B's Doppler RMS after B's own offset and drift, predicted by the old TLE (SGP4);
+* ``bound``: the same after also the best time shift of that prediction (an along-track
+  correction of the old TLE; it also removes B's own time-tag error, which no orbit can, so it is
+  an optimistic bound for any orbit whose error is mostly along-track, as a week-old TLE's is);
+* ``fresh``: the same predicted by B's own TLE (hours old).
+
+A median of ``bound / old`` above 0.95 says the issue's target cannot be met on those pairs by
+any along-track correction, however good. No refinement is run: nothing here is tuned.
+
+Usage: ``PYTHONPATH=src python benchmarks/doptrack_bound.py [dev|holdout|both] [evening|day]``
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import numpy as np  # noqa: E402
+
+from doptrack_never_worse import _day_pairs, stale_tle_for  # noqa: E402
+from test_refine_realdata import _load, _pairs, _predicted_rms, is_dev, timing_split  # noqa: E402
+from trackproc.io.tle import tle_state  # noqa: E402
+from test_refine_realdata import EOP  # noqa: E402
+
+
+def rows(dev: bool, pairs: str) -> list:
+    stamps = sorted(p.stem.rsplit("_", 1)[-1] for p in
+                    (Path(__file__).resolve().parents[2] / "shared" / "realdata" / "doptrack-delfic3" / "data")
+                    .glob("Delfi-C3_32789_*.csv"))
+    out = []
+    for a, b in (_day_pairs(stamps) if pairs == "day" else _pairs()):
+        if is_dev(a) != dev or is_dev(b) != dev:
+            continue
+        old = stale_tle_for(a, stamps)
+        if old is None:
+            continue
+        tb, fresh_b = _load(b)
+        state = tle_state(old, eop=EOP)
+        rms, after, shift = timing_split(tb, state, old)
+        fresh = _predicted_rms(tb, tle_state(fresh_b, eop=EOP), fresh_b)
+        out.append((a, b, rms, after, shift, fresh))
+    return out
+
+
+def main() -> None:
+    sets = {"dev": [True], "holdout": [False], "both": [True, False]}[sys.argv[1] if len(sys.argv) > 1 else "dev"]
+    pairs = sys.argv[2] if len(sys.argv) > 2 else "evening"
+    for dev in sets:
+        got = rows(dev, pairs)
+        print(f"old TLE (>= 7 days) predicting the next pass, {pairs} pairs, "
+              f"{'development (1-10 April)' if dev else 'HOLD-OUT (11-15 April)'}")
+        print(f"{'pass':>13} {'next':>13} {'old Hz':>7} {'bound Hz':>8} {'shift s':>7} {'fresh Hz':>8} {'bound/old':>9}")
+        for a, b, rms, after, shift, fresh in got:
+            print(f"{a:>13} {b:>13} {rms:7.2f} {after:8.2f} {shift:7.2f} {fresh:8.2f} {after / rms:9.2f}")
+        if got:
+            ratio = np.array([r[3] / r[2] for r in got])
+            fresh_ratio = np.array([r[5] / r[2] for r in got])
+            print(f"  {len(got)} pairs: bound/old median {np.median(ratio):.3f} ({int((ratio <= 0.95).sum())} at or "
+                  f"below 0.95); fresh/old median {np.median(fresh_ratio):.3f}; |shift| median "
+                  f"{np.median(np.abs([r[4] for r in got])):.2f} s")
+        print()
+
+
+if __name__ == "__main__":
+    main()
