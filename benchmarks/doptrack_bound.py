@@ -27,10 +27,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numpy as np  # noqa: E402
 
-from doptrack_never_worse import _day_pairs, stale_tle_for  # noqa: E402
-from test_refine_realdata import _load, _pairs, _predicted_rms, is_dev, timing_split  # noqa: E402
+# (doptrack_never_worse puts tests/ on the path and holds the pairs, the loader and the scores)
+from doptrack_never_worse import (EOP, _day_pairs, _load, _pairs, _predicted_rms, is_dev,  # noqa: E402
+                                  stale_tle_for, timing_split)
 from trackproc.io.tle import tle_state  # noqa: E402
-from test_refine_realdata import EOP  # noqa: E402
 
 
 def rows(dev: bool, pairs: str) -> list:
