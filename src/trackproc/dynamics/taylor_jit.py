@@ -26,7 +26,7 @@ kernel and does not follow the kernels it calls in other files (an edit there wo
 stale compiled caller), so kernels that call each other live in one file.
 
 Import this module only when :func:`trackproc.dynamics.jit.enabled` is true. The kernels are
-compiled at their first call (about 10 s of CPU for all of them, once per installation: numba
+compiled at their first call (about 6 s of CPU for all of them, once per installation: numba
 keeps the machine code on disk) and later processes only load them (~0.03 s, after the ~0.15 s
 of ``import numba``). :func:`ready` tells whether that is so; ``python -m
 trackproc.dynamics.taylor_jit`` compiles them ahead of use.
@@ -576,7 +576,7 @@ def compile_all() -> float:
     Under the engine's own locks (:func:`trackproc.dynamics.jit.compile_once`, families
     ``taylor`` and ``taylor-dense``, taken in that order as everywhere): a process propagating
     at the same time on a fresh cache waits and loads these kernels instead of compiling its own
-    copy (~8 s of CPU)."""
+    copy (~6 s of CPU)."""
     from trackproc.dynamics import jit
 
     c0 = time.process_time()
