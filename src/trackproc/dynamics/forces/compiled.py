@@ -61,8 +61,12 @@ _LAG = drag_mod.LAG_RAD
 
 
 
+#: kernels only other kernels call: no CPython wrapper (numba would compile one for each)
+_INNER = dict(no_cpython_wrapper=True)
+
+
 # -- forces ----------------------------------------------------------------------------------
-@njit
+@njit(**_INNER)
 def _solid_harmonics(r, a, b, fprod, nmax, mmax, R):
     """The normalised solid harmonics ``Z[n, m]`` (n <= nmax, m <= mmax) at ITRF ``r`` by the
     Cunningham recursion (Montenbruck & Gill 2000 eqs. 3.29-3.30, normalised as
@@ -87,7 +91,7 @@ def _solid_harmonics(r, a, b, fprod, nmax, mmax, R):
     return Z
 
 
-@njit
+@njit(**_INNER)
 def _field_acc(r, F, central, out):
     """Field acceleration at ITRF ``r`` (3,) into ``out`` (normalised Cunningham recursion,
     Montenbruck & Gill 2000 eqs. 3.27-3.33, as GravityField.acceleration)."""
@@ -107,7 +111,7 @@ def _field_acc(r, F, central, out):
     out[0], out[1], out[2] = g * axy.real, g * axy.imag, g * s3
 
 
-@njit
+@njit(**_INNER)
 def _mat3(a, b):
     out = np.empty((3, 3))
     for i in range(3):
@@ -116,7 +120,7 @@ def _mat3(a, b):
     return out
 
 
-@njit
+@njit(**_INNER)
 def _mv(m, x):
     return np.array([m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2], m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2],
                      m[2, 0] * x[0] + m[2, 1] * x[1] + m[2, 2] * x[2]])
@@ -143,7 +147,7 @@ def _field_hessian(r, HT, out):
     out[2, 0], out[2, 1], out[2, 2] = v[2], v[4], v[5]
 
 
-@njit
+@njit(**_INNER)
 def _point_mass_gradient(r, body, gm, g):
     """∂/∂r of M&G eq. 3.37: ``GM (3 d dᵀ/|d|⁵ - I/|d|³)``, d = body - r, added to ``g``."""
     d = (body[0] - r[0], body[1] - r[1], body[2] - r[2])
@@ -153,7 +157,7 @@ def _point_mass_gradient(r, body, gm, g):
             g[i, j] += gm * (3.0 * d[i] * d[j] / dn ** 5 - (1.0 if i == j else 0.0) / dn ** 3)
 
 
-@njit
+@njit(**_INNER)
 def _hermite(tab, k, x, h, out):
     x2, x3 = x * x, x * x * x
     for i in range(3):
@@ -161,7 +165,7 @@ def _hermite(tab, k, x, h, out):
                   + (-2 * x3 + 3 * x2) * tab[k + 1, 0, i] + (x3 - x2) * h * tab[k + 1, 1, i])
 
 
-@njit
+@njit(**_INNER)
 def _at(t, E, M, sun, moon, axis):
     """Environment.at: integration -> ITRF matrix, Sun, Moon, the Earth's axis at ``t``."""
     cfg, QQ, W, ERA = E[0], E[2], E[3], E[4]
@@ -190,7 +194,7 @@ def _at(t, E, M, sun, moon, axis):
     axis[0], axis[1], axis[2] = qq[2, 0], qq[2, 1], qq[2, 2]
 
 
-@njit
+@njit(**_INNER)
 def _point_mass(r, body, gm, acc):
     """M&G eq. 3.37, added to ``acc``."""
     d0, d1, d2 = body[0] - r[0], body[1] - r[1], body[2] - r[2]
@@ -202,7 +206,7 @@ def _point_mass(r, body, gm, acc):
     acc[2] += gm * (d2 / dn3 - body[2] / sn3)
 
 
-@njit
+@njit(**_INNER)
 def _discs(r, sun, re, axis, flat):
     """Apparent radii of the Sun and the Earth and their separation (srp._discs)."""
     k = 1.0 / (1.0 - flat) - 1.0
@@ -220,7 +224,7 @@ def _discs(r, sun, re, axis, flat):
     return a, b, c
 
 
-@njit
+@njit(**_INNER)
 def _shadow(r, sun, re, axis, flat):
     """Visible fraction of the solar disc (M&G eqs. 3.79-3.86, the stretched oblate Earth)."""
     a, b, c = _discs(r, sun, re, axis, flat)
@@ -237,7 +241,7 @@ def _shadow(r, sun, re, axis, flat):
     return 1.0
 
 
-@njit
+@njit(**_INNER)
 def _signs(t, r, E):
     """Environment.shadow_signs: outside the penumbra, outside the umbra."""
     cfg = E[0]
@@ -248,7 +252,7 @@ def _signs(t, r, E):
     return c - (a + b) >= 0.0, c - (b - a) >= 0.0
 
 
-@njit
+@njit(**_INNER)
 def _interp(F, y_old, x, k):
     """scipy's Dop853DenseOutput at the fraction ``x`` of the step: the first ``k`` components."""
     out = np.zeros(k)
@@ -337,7 +341,7 @@ def _lerp(x, xp, fp, j):
     return v
 
 
-@njit
+@njit(**_INNER)
 def _harris_priester(h, r_itrf, sun_itrf, n):
     """Density (kg/m³), M&G eqs. 3.99-3.104 as drag.harris_priester."""
     if h > _HP_H[-1]:
@@ -356,7 +360,7 @@ def _harris_priester(h, r_itrf, sun_itrf, n):
     return rho_min + (rho_max - rho_min) * cos2 ** (n / 2.0)
 
 
-@njit
+@njit(**_INNER)
 def _position_part(t, r, F, central, cfg, M, sun, moon, out):
     """Field (in ITRF through M) + Sun + Moon at inertial ``r`` into ``out``."""
     r_itrf = _mv(M, r)
@@ -370,7 +374,7 @@ def _position_part(t, r, F, central, cfg, M, sun, moon, out):
         _point_mass(r, moon, _GM_MOON, out)
 
 
-@njit
+@njit(**_INNER)
 def _density(r, M, sun_itrf, n):
     """Harris-Priester density (kg/m³) at inertial ``r``; ``sun_itrf`` the Sun in ITRF."""
     r_itrf = (M[0, 0] * r[0] + M[0, 1] * r[1] + M[0, 2] * r[2], M[1, 0] * r[0] + M[1, 1] * r[1] + M[1, 2] * r[2],
@@ -378,7 +382,7 @@ def _density(r, M, sun_itrf, n):
     return _harris_priester(_height(r_itrf), r_itrf, sun_itrf, n)
 
 
-@njit
+@njit(**_INNER)
 def _rest(t, r, v, E, M, sun, axis, acc, unit, with_units):
     """Relativity, SRP, drag and the empirical accelerations added to ``acc`` (the position
     part); ``unit`` (11, 3) gets the unit-coefficient parts in PARAMETERS order."""
@@ -387,7 +391,7 @@ def _rest(t, r, v, E, M, sun, axis, acc, unit, with_units):
     _rest_rho(t, r, v, cfg, E[1], sun, axis, acc, unit, with_units, rho)
 
 
-@njit
+@njit(**_INNER)
 def _rest_rho(t, r, v, cfg, q, sun, axis, acc, unit, with_units, rho):
     """:func:`_rest` with the density ``rho`` at ``r`` given: it depends on the position alone,
     so the velocity differences of :func:`_partials` reuse it (the same number). Scalars, not
@@ -549,7 +553,7 @@ def _work(npar):
     return np.zeros(_NWORK + 3 * max(npar, 1))
 
 
-@njit
+@njit(**_INNER)
 def _rhs(t, y, stm, npar, E, F, HT, out, work):
     """The state's derivative, with Φ' = A Φ and S' = A S + [0; ∂a/∂p] when ``stm``; ``work``
     (:func:`_work`) the partials' intermediate arrays."""
@@ -583,7 +587,7 @@ def _rhs(t, y, stm, npar, E, F, HT, out, work):
             out[base + (3 + i) * stride + col] = s
 
 
-@njit
+@njit(**_INNER)
 def _rms(x):
     s = 0.0
     for i in range(x.size):
