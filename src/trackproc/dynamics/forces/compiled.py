@@ -61,7 +61,8 @@ _LAG = drag_mod.LAG_RAD
 
 
 
-#: kernels only other kernels call: no CPython wrapper (numba would compile one for each)
+#: kernels only other kernels call: no CPython wrapper (numba would compile one for each); never
+#: call one from Python (it would crash the process; tests/dynamics/test_compiled_inner_kernels.py)
 _INNER = dict(no_cpython_wrapper=True)
 
 
