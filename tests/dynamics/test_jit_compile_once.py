@@ -3,6 +3,7 @@ need the same cold kernels at once compile them in one process, the others wait 
 then load numba's on-disk cache; a lock held past its timeout, or a cache directory without a
 lock file, never blocks the run."""
 
+import contextlib
 import fcntl
 import importlib
 import logging
@@ -38,13 +39,13 @@ RACER = textwrap.dedent('''
     import probe_cube
     here = os.environ["PROBE_DIR"]
     if os.environ["ROLE"] == "second":
-        real_sleep = jit.time.sleep
+        import types
 
-        def sleep(s):
+        def sleep(s):                                  # the lock's poll, not this process's own waits
             open(os.path.join(here, "waiting"), "w").close()
-            real_sleep(s)
+            time.sleep(s)
 
-        jit.time.sleep = sleep
+        jit.time = types.SimpleNamespace(monotonic=time.monotonic, sleep=sleep)
         while not os.path.exists(os.path.join(here, "holding")):
             time.sleep(0.01)
     with jit.compile_once([probe_cube.cube], "probe", "the probe kernel", 1, timeout_s=60):
@@ -146,36 +147,86 @@ def test_an_unwritable_cache_directory_runs_without_a_lock(tmp_path, monkeypatch
         assert module.cube(4.0) == 64.0
 
 
-TAYLOR_RUN = textwrap.dedent('''
-    import numpy as np
-    from trackproc.dynamics.taylor import propagate
+# -- every real kernel family runs its first call under its lock ------------------------------------
+# The race above proves the lock; these prove each family's first call goes through it, in-process and
+# without compiling anything: jit.compile_once is replaced by a recorder of the open blocks and the
+# kernel by a stand-in that stops the run, reporting which families were open around its call and
+# whether it was among their kernels (the ones whose coldness decides the lock).
+# tests/methods/test_whitening_compile_once.py races two processes on the real whitening kernels.
+
+
+class _Called(Exception):
+    """Raised by a stand-in kernel: ``args[0]`` the [(family, kernel listed)] open around the call."""
+
+
+@pytest.fixture
+def open_blocks(monkeypatch):
+    from trackproc.dynamics.forces import compiled
+
+    blocks = []
+
+    @contextlib.contextmanager
+    def record(kernels, family, *args, **kwargs):
+        blocks.append((family, list(kernels)))
+        try:
+            yield
+        finally:
+            blocks.pop()
+
+    monkeypatch.setattr(jit, "compile_once", record)
+    monkeypatch.setattr(compiled, "compile_once", record)       # bound by name there
+    return blocks
+
+
+def _stand_in(monkeypatch, module, name, blocks):
+    def kernel(*args, **kwargs):
+        raise _Called([(family, any(k is kernel for k in kernels)) for family, kernels in blocks])
+
+    monkeypatch.setattr(module, name, kernel)
+
+
+def _families(run):
+    with pytest.raises(_Called) as called:
+        run()
+    return called.value.args[0]
+
+
+@pytest.mark.parametrize("stm, kernel", [(False, "propagate_state"), (True, "propagate_var")])
+def test_the_taylor_loops_run_under_the_taylor_lock(stm, kernel, monkeypatch, open_blocks):
+    from trackproc.dynamics import taylor, taylor_jit
+
+    _stand_in(monkeypatch, taylor_jit, kernel, open_blocks)
     state = np.array([7.0e6, 0.0, 0.0, 0.0, 7.6e3, 0.0])
-    run = propagate(state, 0.0, 6000.0, force="two-body", engine="compiled")
-    print(repr(float(run.state(np.array([6000.0]))[0, 0])))
-''')
+    assert _families(lambda: taylor.propagate(state, 0.0, 600.0, force="j2", stm=stm, engine="compiled")) == [
+        ("taylor", True)]
+    if not stm:              # python -m trackproc.dynamics.taylor_jit: both families, in the order taken everywhere
+        assert _families(taylor_jit.compile_all) == [("taylor", True), ("taylor-dense", False)]
 
 
-@pytest.mark.slow
-def test_two_processes_started_together_compile_the_taylor_kernels_once(tmp_path):
-    """The real kernels (~11 s of CPU to compile): two processes on an empty numba cache, one
-    compile notice between them, the same orbit in both and the closed-form two-body one."""
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"), TRACKPROC_JIT="1")
-    env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
-    runs = [subprocess.Popen([sys.executable, "-c", TAYLOR_RUN], env=env, stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True) for _ in range(2)]
-    outs = [r.communicate(timeout=600) for r in runs]
-    assert all(r.returncode == 0 for r in runs), outs
-    notices = [err for _, err in outs if "compiling the Taylor engine's kernels" in err]
-    assert len(notices) == 1, outs
-    x1, x2 = (float(out) for out, _ in outs)
-    assert x1 == x2
-    # Kepler's equation for the circular-ish orbit above (independent of the integrator)
-    mu, r0, v0 = 3.986004418e14, 7.0e6, 7.6e3
-    a = 1.0 / (2.0 / r0 - v0 * v0 / mu)
-    e = 1.0 - r0 / a                                    # at periapsis (v0 > circular speed)
-    n = (mu / a**3) ** 0.5
-    mean = n * 6000.0
-    ecc = mean
-    for _ in range(50):
-        ecc = mean + e * np.sin(ecc)
-    assert abs(x1 - a * (np.cos(ecc) - e)) < 1e-3       # m
+def test_the_taylor_dense_output_runs_under_its_lock(monkeypatch, open_blocks):
+    import dataclasses
+
+    from trackproc.dynamics import taylor, taylor_jit
+
+    state = np.array([7.0e6, 0.0, 0.0, 0.0, 7.6e3, 0.0])
+    run = dataclasses.replace(taylor.propagate(state, 0.0, 6000.0, force="j2", engine="numpy"), engine="compiled")
+    assert run.n_steps > 1                                    # (a single step needs no kernel)
+    _stand_in(monkeypatch, taylor_jit, "dense", open_blocks)
+    assert _families(lambda: run.state(np.array([100.0, 5000.0]))) == [("taylor-dense", True)]
+
+
+def test_the_force_kernels_run_under_the_force_lock(monkeypatch, open_blocks):
+    from trackproc.dynamics.forces import ForceModel, compiled, integrator
+    from trackproc.dynamics.forces.gravity_field import GravityField
+
+    cbar, sbar = np.zeros((3, 3)), np.zeros((3, 3))
+    cbar[0, 0], cbar[2, 0] = 1.0, -4.84e-4
+    model = ForceModel(field=GravityField(3.986004415e14, 6378136.3, cbar, sbar))
+    env = model.environment((2458944.5, 0.0), np.eye(3), 0.0, 600.0)
+    r, v = np.array([7.0e6, 0.0, 0.0]), np.array([0.0, 7.6e3, 0.0])
+    _stand_in(monkeypatch, compiled, "integrate", open_blocks)
+    assert _families(lambda: integrator.propagate(env, np.concatenate([r, v]), 600.0, compiled=True)) == [
+        ("force", True)]
+    for helper, kernel in ((compiled.perturbation, "_acceleration"), (compiled.partials, "_partials")):
+        _stand_in(monkeypatch, compiled, kernel, open_blocks)
+        assert _families(lambda: helper(env, 0.0, r, v)) == [("force", True)]

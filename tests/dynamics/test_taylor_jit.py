@@ -2,7 +2,7 @@
 rounding (state, STM, d/d mu, dense output; LEO, eccentric, HEO; two-body and J2), against Kepler
 on its own, the same outcomes, and the automatic choice of the engine (a pass never pays for numba).
 
-The kernels are compiled once per checkout (numba cache=True; about 10 s of CPU the first time,
+The kernels are compiled once per checkout (numba cache=True; about 6 s of CPU the first time,
 then ~0.2 s to load them in a process)."""
 
 from __future__ import annotations

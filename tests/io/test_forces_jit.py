@@ -2,7 +2,7 @@
 path they replace: the same accelerations and Jacobians (every term: field, Sun, Moon, SRP in
 and out of the shadow, Harris-Priester drag, relativity, empirical accelerations, the
 truncated STM field), and the same trajectories, STM and parameter sensitivities to far below
-the integration error. The first run compiles the kernels (~20 s, cached in __pycache__), hence
+the integration error. The first run compiles the kernels (~12 s of CPU, cached in __pycache__), hence
 the slow tier.
 """
 

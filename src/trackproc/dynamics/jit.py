@@ -156,7 +156,7 @@ def announce_compiling(kernels, what: str, cpu_s: float) -> None:
 
 #: How long a process waits for another one compiling the same kernels (s): past it, it compiles
 #: its own copy, so a lock held by a hung process delays a run but never blocks it. Above a
-#: compilation's wall time on a loaded 2-core machine (the force kernels: ~20 s of CPU).
+#: compilation's wall time on a loaded 2-core machine (the force kernels: ~12 s of CPU).
 LOCK_TIMEOUT_S = 300.0
 #: Between two attempts at the lock while another process holds it (s).
 LOCK_POLL_S = 0.1

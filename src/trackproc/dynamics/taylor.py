@@ -89,7 +89,7 @@ ENGINES = ("auto", "numpy", "compiled")
 #: of CPU each) pay for ``import numba`` and loading the cached kernels (~0.18 s);
 #: benchmarks/propagation.py --only jit measures both (2000 / 1000 steps: 18 / 9 LEO days).
 COMPILED_MIN_STEPS = {False: 2000, True: 1000}
-#: The same when the kernels are not compiled yet (~10 s of CPU once per installation; ``python -m
+#: The same when the kernels are not compiled yet (~6 s of CPU once per installation; ``python -m
 #: trackproc.dynamics.taylor_jit`` or ``TRACKPROC_JIT=1`` compiles them ahead).
 COMPILE_MIN_STEPS = {False: 100_000, True: 50_000}
 
@@ -408,7 +408,7 @@ def _propagate_compiled(s0, t0, t1, p, mu, kj2, tol, stm, mu_sensitivity, max_st
     v0 = np.ascontiguousarray(s0[0, 3:], dtype=float)
     args = (float(t0), float(t1), int(p), float(mu), float(kj2))
     with np.errstate(all="ignore"), jit.compile_once([tj.propagate_var if stm else tj.propagate_state], "taylor",
-                                                     "the Taylor engine's kernels", 10):
+                                                     "the Taylor engine's kernels", 6):
         if stm:
             npar = 7 if mu_sensitivity else 6
             dr0 = np.zeros((3, npar))

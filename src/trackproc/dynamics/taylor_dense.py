@@ -198,7 +198,7 @@ class Propagation:
         if self.engine == "compiled" and idx is not None and tf.size <= 64 * self.n_steps:
             from trackproc.dynamics import jit, taylor_jit  # start-up: numba, loaded only for the compiled engine
 
-            with jit.compile_once([taylor_jit.dense], "taylor-dense", "the Taylor engine's kernels", 10):
+            with jit.compile_once([taylor_jit.dense], "taylor-dense", "the Taylor engine's kernels", 6):
                 return taylor_jit.dense(np.ascontiguousarray(coef), np.ascontiguousarray(tb, dtype=float),
                                         idx.astype(np.int64), np.ascontiguousarray(tf), m), t.shape
         if idx is None:

@@ -26,7 +26,7 @@ kernel and does not follow the kernels it calls in other files (an edit there wo
 stale compiled caller), so kernels that call each other live in one file.
 
 Import this module only when :func:`trackproc.dynamics.jit.enabled` is true. The kernels are
-compiled at their first call (about 10 s of CPU for all of them, once per installation: numba
+compiled at their first call (about 6 s of CPU for all of them, once per installation: numba
 keeps the machine code on disk) and later processes only load them (~0.03 s, after the ~0.15 s
 of ``import numba``). :func:`ready` tells whether that is so; ``python -m
 trackproc.dynamics.taylor_jit`` compiles them ahead of use.
@@ -326,7 +326,9 @@ def _series_var(x, ph, p, mu, kj2, mu_col, wk):
 
 @njit(**_KW)
 def _all_finite(a):
-    for v in a.ravel():
+    """True when every element of the 1-D ``a`` is finite (callers pass ``.ravel()``: one
+    compiled signature for arrays of any rank)."""
+    for v in a:
         if not math.isfinite(v):
             return False
     return True
@@ -342,9 +344,19 @@ def _step_offset(t, t1, h, direction):
 
 
 @njit(**_KW)
+def _copy(dst, src):
+    """``dst[:src.size] = src`` for 1-D arrays, by element. Callers pass flat views (``.ravel()``
+    of C-contiguous arrays) instead of assigning slices of arrays: numba compiles each slice
+    assignment with a formatted shape-mismatch error, seconds of compile for every array rank."""
+    for i in range(src.size):
+        dst[i] = src[i]
+
+
+@njit(**_KW)
 def _grow(a, cap):
+    """``a`` (C-contiguous) in a new array of ``cap`` rows."""
     out = np.empty((cap,) + a.shape[1:])
-    out[:a.shape[0]] = a
+    _copy(out.ravel(), a.ravel())
     return out
 
 
@@ -379,7 +391,7 @@ def propagate_state(r0, v0, t0, t1, p, mu, kj2, tol, max_steps):
             x[i, 0] = r[i]
             x[i, 1] = v[i]
         _series_state(x, p, mu, kj2, s, z2, w3, w5, w7, hxy, hz)
-        if not _all_finite(x):
+        if not _all_finite(x.ravel()):
             outcome = OUTCOME_NON_FINITE
             break
         hs, last = _step_offset(t, t1, _step_size(x, p, tol), direction)
@@ -394,14 +406,14 @@ def propagate_state(r0, v0, t0, t1, p, mu, kj2, tol, max_steps):
                 vi += x[i, k] * (k * hp[k - 1])
             r[i] = ri
             v[i] = vi
-        if not (_all_finite(r) and _all_finite(v)):
+        if not (_all_finite(r.ravel()) and _all_finite(v.ravel())):
             outcome = OUTCOME_NON_FINITE
             break
         if ns == cap:
             cap *= 2
             coefs = _grow(coefs, cap)
             times = _grow(times, cap + 1)
-        coefs[ns] = x
+        _copy(coefs[ns].ravel(), x.ravel())
         ns += 1
         t = t1 if last else t + hs
         times[ns] = t
@@ -441,7 +453,7 @@ def propagate_var(r0, v0, dr0, dv0, t0, t1, p, mu, kj2, mu_col, tol, max_steps):
                 ph[i, j, 0] = dr[i, j]
                 ph[i, j, 1] = dv[i, j]
         _series_var(x, ph, p, mu, kj2, mu_col, wk)
-        if not (_all_finite(x) and _all_finite(ph)):
+        if not (_all_finite(x.ravel()) and _all_finite(ph.ravel())):
             outcome = OUTCOME_NON_FINITE
             break
         hs, last = _step_offset(t, t1, _step_size(x, p, tol), direction)
@@ -465,7 +477,7 @@ def propagate_var(r0, v0, dr0, dv0, t0, t1, p, mu, kj2, mu_col, tol, max_steps):
                     b += ph[i, j, k] * (k * hp[k - 1])
                 dr[i, j] = a
                 dv[i, j] = b
-        if not (_all_finite(r) and _all_finite(v)):
+        if not (_all_finite(r.ravel()) and _all_finite(v.ravel())):
             outcome = OUTCOME_NON_FINITE
             break
         if ns == cap:
@@ -473,8 +485,8 @@ def propagate_var(r0, v0, dr0, dv0, t0, t1, p, mu, kj2, mu_col, tol, max_steps):
             coefs = _grow(coefs, cap)
             sens = _grow(sens, cap)
             times = _grow(times, cap + 1)
-        coefs[ns] = x
-        sens[ns] = ph
+        _copy(coefs[ns].ravel(), x.ravel())
+        _copy(sens[ns].ravel(), ph.ravel())
         ns += 1
         t = t1 if last else t + hs
         times[ns] = t
@@ -499,7 +511,18 @@ def dense(coef, tb, idx, t, m):
             for i in range(d + m):
                 g *= kk - i
             fw[d, kk] = g
-    order = np.argsort(idx, kind="mergesort")
+    # the samples grouped by step, in their order within a step: a stable counting sort of idx
+    # (0 <= idx < S), the permutation np.argsort(idx, kind="mergesort") gives, without compiling
+    # numba's mergesort
+    start = np.zeros(coef.shape[0] + 1, np.int64)
+    for j in range(nt):
+        start[idx[j] + 1] += 1
+    for j in range(coef.shape[0]):
+        start[j + 1] += start[j]
+    order = np.empty(nt, np.int64)
+    for j in range(nt):
+        order[start[idx[j]]] = j
+        start[idx[j]] += 1
     dt = np.empty(nt)
     acc = np.empty(nt)
     a = 0
@@ -553,7 +576,7 @@ def compile_all() -> float:
     Under the engine's own locks (:func:`trackproc.dynamics.jit.compile_once`, families
     ``taylor`` and ``taylor-dense``, taken in that order as everywhere): a process propagating
     at the same time on a fresh cache waits and loads these kernels instead of compiling its own
-    copy (~8 s of CPU)."""
+    copy (~6 s of CPU)."""
     from trackproc.dynamics import jit
 
     c0 = time.process_time()

@@ -61,8 +61,13 @@ _LAG = drag_mod.LAG_RAD
 
 
 
+#: kernels only other kernels call: no CPython wrapper (numba would compile one for each); never
+#: call one from Python (it would crash the process; tests/dynamics/test_compiled_inner_kernels.py)
+_INNER = dict(no_cpython_wrapper=True)
+
+
 # -- forces ----------------------------------------------------------------------------------
-@njit
+@njit(**_INNER)
 def _solid_harmonics(r, a, b, fprod, nmax, mmax, R):
     """The normalised solid harmonics ``Z[n, m]`` (n <= nmax, m <= mmax) at ITRF ``r`` by the
     Cunningham recursion (Montenbruck & Gill 2000 eqs. 3.29-3.30, normalised as
@@ -87,7 +92,7 @@ def _solid_harmonics(r, a, b, fprod, nmax, mmax, R):
     return Z
 
 
-@njit
+@njit(**_INNER)
 def _field_acc(r, F, central, out):
     """Field acceleration at ITRF ``r`` (3,) into ``out`` (normalised Cunningham recursion,
     Montenbruck & Gill 2000 eqs. 3.27-3.33, as GravityField.acceleration)."""
@@ -107,7 +112,7 @@ def _field_acc(r, F, central, out):
     out[0], out[1], out[2] = g * axy.real, g * axy.imag, g * s3
 
 
-@njit
+@njit(**_INNER)
 def _mat3(a, b):
     out = np.empty((3, 3))
     for i in range(3):
@@ -116,7 +121,7 @@ def _mat3(a, b):
     return out
 
 
-@njit
+@njit(**_INNER)
 def _mv(m, x):
     return np.array([m[0, 0] * x[0] + m[0, 1] * x[1] + m[0, 2] * x[2], m[1, 0] * x[0] + m[1, 1] * x[1] + m[1, 2] * x[2],
                      m[2, 0] * x[0] + m[2, 1] * x[1] + m[2, 2] * x[2]])
@@ -143,17 +148,17 @@ def _field_hessian(r, HT, out):
     out[2, 0], out[2, 1], out[2, 2] = v[2], v[4], v[5]
 
 
-@njit
+@njit(**_INNER)
 def _point_mass_gradient(r, body, gm, g):
     """∂/∂r of M&G eq. 3.37: ``GM (3 d dᵀ/|d|⁵ - I/|d|³)``, d = body - r, added to ``g``."""
-    d = body - r
+    d = (body[0] - r[0], body[1] - r[1], body[2] - r[2])
     dn = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
     for i in range(3):
         for j in range(3):
             g[i, j] += gm * (3.0 * d[i] * d[j] / dn ** 5 - (1.0 if i == j else 0.0) / dn ** 3)
 
 
-@njit
+@njit(**_INNER)
 def _hermite(tab, k, x, h, out):
     x2, x3 = x * x, x * x * x
     for i in range(3):
@@ -161,7 +166,7 @@ def _hermite(tab, k, x, h, out):
                   + (-2 * x3 + 3 * x2) * tab[k + 1, 0, i] + (x3 - x2) * h * tab[k + 1, 1, i])
 
 
-@njit
+@njit(**_INNER)
 def _at(t, E, M, sun, moon, axis):
     """Environment.at: integration -> ITRF matrix, Sun, Moon, the Earth's axis at ``t``."""
     cfg, QQ, W, ERA = E[0], E[2], E[3], E[4]
@@ -169,18 +174,28 @@ def _at(t, E, M, sun, moon, axis):
     u = (t - cfg[_T0]) / grid
     k = int(min(max(math.floor(u), 0.0), cfg[_NNODES] - 2))
     x = u - k
-    qq = ((1 - x) * QQ[k] + x * QQ[k + 1]).reshape(3, 3)
-    w = ((1 - x) * W[k] + x * W[k + 1]).reshape(3, 3)
+    # element loops, not array expressions and slice copies: the same arithmetic, and numba
+    # compiles far less for them (an array expression or a slice copy adds a compiled loop nest)
+    qq, w, r3 = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            qq[i, j] = (1 - x) * QQ[k, 3 * i + j] + x * QQ[k + 1, 3 * i + j]
+            w[i, j] = (1 - x) * W[k, 3 * i + j] + x * W[k + 1, 3 * i + j]
     era = (1 - x) * ERA[k] + x * ERA[k + 1]
     c, sn = math.cos(era), math.sin(era)
-    r3 = np.array([[c, sn, 0.0], [-sn, c, 0.0], [0.0, 0.0, 1.0]])
-    M[:, :] = _mat3(_mat3(w, r3), qq)
+    r3[0, 0], r3[0, 1], r3[0, 2] = c, sn, 0.0
+    r3[1, 0], r3[1, 1], r3[1, 2] = -sn, c, 0.0
+    r3[2, 0], r3[2, 1], r3[2, 2] = 0.0, 0.0, 1.0
+    m = _mat3(_mat3(w, r3), qq)
+    for i in range(3):
+        for j in range(3):
+            M[i, j] = m[i, j]
     _hermite(E[5], k, x, grid, sun)
     _hermite(E[6], k, x, grid, moon)
-    axis[:] = qq[2]
+    axis[0], axis[1], axis[2] = qq[2, 0], qq[2, 1], qq[2, 2]
 
 
-@njit
+@njit(**_INNER)
 def _point_mass(r, body, gm, acc):
     """M&G eq. 3.37, added to ``acc``."""
     d0, d1, d2 = body[0] - r[0], body[1] - r[1], body[2] - r[2]
@@ -192,24 +207,25 @@ def _point_mass(r, body, gm, acc):
     acc[2] += gm * (d2 / dn3 - body[2] / sn3)
 
 
-@njit
+@njit(**_INNER)
 def _discs(r, sun, re, axis, flat):
     """Apparent radii of the Sun and the Earth and their separation (srp._discs)."""
     k = 1.0 / (1.0 - flat) - 1.0
     ra = r[0] * axis[0] + r[1] * axis[1] + r[2] * axis[2]
     sa = sun[0] * axis[0] + sun[1] * axis[1] + sun[2] * axis[2]
-    rs = r + k * ra * axis
-    ss = sun + k * sa * axis
-    d = ss - rs
-    rn = math.sqrt(rs[0] ** 2 + rs[1] ** 2 + rs[2] ** 2)
-    dn = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
+    rs0, rs1, rs2 = r[0] + k * ra * axis[0], r[1] + k * ra * axis[1], r[2] + k * ra * axis[2]
+    d0 = sun[0] + k * sa * axis[0] - rs0
+    d1 = sun[1] + k * sa * axis[1] - rs1
+    d2 = sun[2] + k * sa * axis[2] - rs2
+    rn = math.sqrt(rs0 ** 2 + rs1 ** 2 + rs2 ** 2)
+    dn = math.sqrt(d0 ** 2 + d1 ** 2 + d2 ** 2)
     a = math.asin(min(max(_R_SUN / dn, -1.0), 1.0))
     b = math.asin(min(max(re / rn, -1.0), 1.0))
-    c = math.acos(min(max(-(rs[0] * d[0] + rs[1] * d[1] + rs[2] * d[2]) / (rn * dn), -1.0), 1.0))
+    c = math.acos(min(max(-(rs0 * d0 + rs1 * d1 + rs2 * d2) / (rn * dn), -1.0), 1.0))
     return a, b, c
 
 
-@njit
+@njit(**_INNER)
 def _shadow(r, sun, re, axis, flat):
     """Visible fraction of the solar disc (M&G eqs. 3.79-3.86, the stretched oblate Earth)."""
     a, b, c = _discs(r, sun, re, axis, flat)
@@ -226,7 +242,7 @@ def _shadow(r, sun, re, axis, flat):
     return 1.0
 
 
-@njit
+@njit(**_INNER)
 def _signs(t, r, E):
     """Environment.shadow_signs: outside the penumbra, outside the umbra."""
     cfg = E[0]
@@ -237,7 +253,7 @@ def _signs(t, r, E):
     return c - (a + b) >= 0.0, c - (b - a) >= 0.0
 
 
-@njit
+@njit(**_INNER)
 def _interp(F, y_old, x, k):
     """scipy's Dop853DenseOutput at the fraction ``x`` of the step: the first ``k`` components."""
     out = np.zeros(k)
@@ -326,7 +342,7 @@ def _lerp(x, xp, fp, j):
     return v
 
 
-@njit
+@njit(**_INNER)
 def _harris_priester(h, r_itrf, sun_itrf, n):
     """Density (kg/m³), M&G eqs. 3.99-3.104 as drag.harris_priester."""
     if h > _HP_H[-1]:
@@ -345,7 +361,7 @@ def _harris_priester(h, r_itrf, sun_itrf, n):
     return rho_min + (rho_max - rho_min) * cos2 ** (n / 2.0)
 
 
-@njit
+@njit(**_INNER)
 def _position_part(t, r, F, central, cfg, M, sun, moon, out):
     """Field (in ITRF through M) + Sun + Moon at inertial ``r`` into ``out``."""
     r_itrf = _mv(M, r)
@@ -359,7 +375,7 @@ def _position_part(t, r, F, central, cfg, M, sun, moon, out):
         _point_mass(r, moon, _GM_MOON, out)
 
 
-@njit
+@njit(**_INNER)
 def _density(r, M, sun_itrf, n):
     """Harris-Priester density (kg/m³) at inertial ``r``; ``sun_itrf`` the Sun in ITRF."""
     r_itrf = (M[0, 0] * r[0] + M[0, 1] * r[1] + M[0, 2] * r[2], M[1, 0] * r[0] + M[1, 1] * r[1] + M[1, 2] * r[2],
@@ -367,7 +383,7 @@ def _density(r, M, sun_itrf, n):
     return _harris_priester(_height(r_itrf), r_itrf, sun_itrf, n)
 
 
-@njit
+@njit(**_INNER)
 def _rest(t, r, v, E, M, sun, axis, acc, unit, with_units):
     """Relativity, SRP, drag and the empirical accelerations added to ``acc`` (the position
     part); ``unit`` (11, 3) gets the unit-coefficient parts in PARAMETERS order."""
@@ -376,13 +392,14 @@ def _rest(t, r, v, E, M, sun, axis, acc, unit, with_units):
     _rest_rho(t, r, v, cfg, E[1], sun, axis, acc, unit, with_units, rho)
 
 
-@njit
+@njit(**_INNER)
 def _rest_rho(t, r, v, cfg, q, sun, axis, acc, unit, with_units, rho):
     """:func:`_rest` with the density ``rho`` at ``r`` given: it depends on the position alone,
     so the velocity differences of :func:`_partials` reuse it (the same number). Scalars, not
     small arrays, and the settings ``cfg`` and the empirical frame ``q``, not the tuple of every
     table (numba counts the references of each array a call passes): this runs 13 times per
-    right-hand side with the variational equations."""
+    right-hand side with the variational equations. Callers pass ``with_units`` as ``bool(...)``:
+    a bare ``True`` or ``False`` is a literal type to numba, which would compile this twice."""
     if cfg[_REL]:
         gm = cfg[_GM]
         rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
@@ -392,7 +409,7 @@ def _rest_rho(t, r, v, cfg, q, sun, axis, acc, unit, with_units, rho):
         for i in range(3):
             acc[i] += f * ((4 * gm / rn - v2) * r[i] + 4 * rv * v[i])
     if cfg[_SRP]:
-        d = r - sun
+        d = (r[0] - sun[0], r[1] - sun[1], r[2] - sun[2])
         dn = math.sqrt(d[0] ** 2 + d[1] ** 2 + d[2] ** 2)
         nu = _shadow(r, sun, cfg[_RE], axis, cfg[_FLAT])
         for i in range(3):
@@ -446,7 +463,7 @@ def _acceleration(t, r, v, E, F, acc):
     _at(t, E, M, sun, moon, axis)
     unit = np.zeros((11, 3))
     _position_part(t, r, F, False, E[0], M, sun, moon, acc)
-    _rest(t, r, v, E, M, sun, axis, acc, unit, False)
+    _rest(t, r, v, E, M, sun, axis, acc, unit, bool(False))
     gm = E[0][_GM]
     rn = math.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
     for i in range(3):
@@ -474,7 +491,7 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp, work):
     drag = cfg[_DRAG] != 0.0
     sun_itrf = _mv(M, sun)
     rho = _density(r, M, sun_itrf, cfg[_HPN]) if drag else 0.0
-    _rest_rho(t, r, v, cfg, q, sun, axis, p0, unit, True, rho)
+    _rest_rho(t, r, v, cfg, q, sun, axis, p0, unit, bool(True), rho)
     gi = work[87:96].reshape((3, 3))
     _field_hessian(_mv(M, r), HT, gi)
     gf = _mat3(_mat3(M.T.copy(), gi), M)                    # ITRF -> integration frame
@@ -489,28 +506,30 @@ def _partials(t, r, v, E, F, HT, a, g, hv, dp, work):
     pp, pm = work[96:99], work[99:102]
     # the differences need the accelerations only, not the unit parts (with_units False)
     rr = work[102:105]
-    rr[:] = r
+    for i in range(3):
+        rr[i] = r[i]
     for j in range(3):
         rr[j] = r[j] + hr
         pp[:] = 0.0
         rho_d = _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0
-        _rest_rho(t, rr, v, cfg, q, sun, axis, pp, scratch, False, rho_d)
+        _rest_rho(t, rr, v, cfg, q, sun, axis, pp, scratch, bool(False), rho_d)
         rr[j] = r[j] - hr
         pm[:] = 0.0
         rho_d = _density(rr, M, sun_itrf, cfg[_HPN]) if drag else 0.0
-        _rest_rho(t, rr, v, cfg, q, sun, axis, pm, scratch, False, rho_d)
+        _rest_rho(t, rr, v, cfg, q, sun, axis, pm, scratch, bool(False), rho_d)
         rr[j] = r[j]
         for i in range(3):
             g[i, j] += (pp[i] - pm[i]) / (2 * hr)
     vv = work[105:108]
-    vv[:] = v
+    for i in range(3):
+        vv[i] = v[i]
     for j in range(3):
         vv[j] = v[j] + hvs
         pp[:] = 0.0
-        _rest_rho(t, r, vv, cfg, q, sun, axis, pp, scratch, False, rho)
+        _rest_rho(t, r, vv, cfg, q, sun, axis, pp, scratch, bool(False), rho)
         vv[j] = v[j] - hvs
         pm[:] = 0.0
-        _rest_rho(t, r, vv, cfg, q, sun, axis, pm, scratch, False, rho)
+        _rest_rho(t, r, vv, cfg, q, sun, axis, pm, scratch, bool(False), rho)
         vv[j] = v[j]
         for i in range(3):
             hv[i, j] = (pp[i] - pm[i]) / (2 * hvs)
@@ -535,7 +554,7 @@ def _work(npar):
     return np.zeros(_NWORK + 3 * max(npar, 1))
 
 
-@njit
+@njit(**_INNER)
 def _rhs(t, y, stm, npar, E, F, HT, out, work):
     """The state's derivative, with Φ' = A Φ and S' = A S + [0; ∂a/∂p] when ``stm``; ``work``
     (:func:`_work`) the partials' intermediate arrays."""
@@ -569,7 +588,7 @@ def _rhs(t, y, stm, npar, E, F, HT, out, work):
             out[base + (3 + i) * stride + col] = s
 
 
-@njit
+@njit(**_INNER)
 def _rms(x):
     s = 0.0
     for i in range(x.size):
@@ -594,16 +613,25 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
     work = _work(npar)
     _rhs(t, y, stm, npar, E, F, HT, f, work)
     nfev = 1
-    # select_initial_step (scipy common.py; Hairer et al. II.4)
+    # select_initial_step (scipy common.py; Hairer et al. II.4); element loops rather than array
+    # expressions and slice copies throughout, the same arithmetic for a fraction of the compile
     interval = abs(t_end)
-    scale = atol + np.abs(y) * rtol
-    d0, d1 = _rms(y / scale), _rms(f / scale)
+    scale, q0, q1 = np.empty(n), np.empty(n), np.empty(n)
+    for i in range(n):
+        scale[i] = atol[i] + abs(y[i]) * rtol[i]
+        q0[i] = y[i] / scale[i]
+        q1[i] = f[i] / scale[i]
+    d0, d1 = _rms(q0), _rms(q1)
     h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
     h0 = min(h0, interval)
     f1 = np.empty(n)
-    _rhs(t + h0 * direction, y + h0 * direction * f, stm, npar, E, F, HT, f1, work)
+    for i in range(n):
+        q0[i] = y[i] + h0 * direction * f[i]
+    _rhs(t + h0 * direction, q0, stm, npar, E, F, HT, f1, work)
     nfev += 1
-    d2 = _rms((f1 - f) / scale) / h0
+    for i in range(n):
+        q1[i] = (f1[i] - f[i]) / scale[i]
+    d2 = _rms(q1) / h0
     if d1 <= 1e-15 and d2 <= 1e-15:
         h1 = max(1e-6, h0 * 1e-3)
     else:
@@ -654,7 +682,8 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
                 t_new = t_seg
             h = t_new - t
             h_abs = abs(h)
-            K[0] = f
+            for i in range(n):
+                K[0, i] = f[i]
             for s in range(1, _NS):
                 for i in range(n):
                     acc = 0.0
@@ -669,7 +698,8 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
                 ynew[i] = y[i] + h * acc
             _rhs(t + h, ynew, stm, npar, E, F, HT, fnew, work)
             nfev += _NS
-            K[_NS] = fnew
+            for i in range(n):
+                K[_NS, i] = fnew[i]
             e5, e3 = 0.0, 0.0
             for i in range(n):
                 sc = atol[i] + max(abs(y[i]), abs(ynew[i])) * rtol[i]
@@ -710,11 +740,14 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
         if steps == cap:
             cap *= 2
             t2 = np.empty(cap)
-            t2[:steps] = t_olds[:steps]
             y2 = np.empty((cap, n))
-            y2[:steps] = y_olds[:steps]
             d2_ = np.empty((cap, 7, n))
-            d2_[:steps] = dense[:steps]
+            for s in range(steps):
+                t2[s] = t_olds[s]
+                for i in range(n):
+                    y2[s, i] = y_olds[s, i]
+                    for j in range(7):
+                        d2_[s, j, i] = dense[s, j, i]
             t_olds, y_olds, dense = t2, y2, d2_
         # dense output: three extra stages and the interpolant's coefficients (scipy's F)
         for s in range(_NS + 1, 16):
@@ -757,11 +790,13 @@ def integrate(y0, t_end, rtol, atol, max_step, max_steps, stm, npar, E, F, HT):
                     continue
             s1, s2 = n1, n2
         t_olds[steps] = t
-        y_olds[steps] = y
+        for i in range(n):
+            y_olds[steps, i] = y[i]
         steps += 1
         t = t_new
-        y[:] = ynew
-        f[:] = fnew
+        for i in range(n):
+            y[i] = ynew[i]
+            f[i] = fnew[i]
         if direction * (t - t_end) >= 0:
             break
         if t_seg != t_end and direction * (t - t_seg) >= 0:

@@ -174,7 +174,7 @@ def _run_compiled(env, y0, t_end_s, rt, at, max_step, max_steps, stm, est):
     else:
         from trackproc.dynamics.forces import compiled  # start-up: loads numba and compiles (or reads) the kernels
 
-        with jit.compile_once([compiled.integrate], "force", "the force kernels", 30):
+        with jit.compile_once([compiled.integrate], "force", "the force kernels", 12):
             code, _, t_old, y_old, dense, t_last = compiled.integrate(*args)
         native.export(compiled.integrate, args)
     outcome = (Outcome.SUCCESS, Outcome.STEP_LIMIT, Outcome.NON_FINITE)[code]
