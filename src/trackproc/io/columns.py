@@ -258,8 +258,10 @@ def column_times(table: SourceTable, column: Column, problems: Problems, index=N
 
         text = pd.Series(column.text, dtype=object)
         # beyond 1678-2261 a nanosecond timestamp wraps or raises: such rows are unparseable times
-        year = pd.to_numeric(text.astype(str).str.extract(r"^\s*([+-]?\d{4,})-", expand=False), errors="coerce")
-        text = text.where(~((year < FIRST_YEAR) | (year > LAST_YEAR)), "")
+        if not _years_in_range(column.text):
+            year = pd.to_numeric(text.astype(str).str.extract(r"^\s*([+-]?\d{4,})-", expand=False),
+                                 errors="coerce")
+            text = text.where(~((year < FIRST_YEAR) | (year > LAST_YEAR)), "")
         try:
             parsed = pd.to_datetime(text, utc=True, format="ISO8601", errors="coerce")
         except (ValueError, OverflowError):   # OutOfBoundsDatetime despite errors="coerce"
@@ -294,6 +296,15 @@ def column_times(table: SourceTable, column: Column, problems: Problems, index=N
         found = "null or out of range"
     problems.add(UNPARSEABLE_TIME, bad, column=column.name, found=found, expected=TIME_EXPECTED)
     return values
+
+
+def _years_in_range(text) -> bool:
+    """True when every cell starts with a four-digit year and a dash (``YYYY-``, what the year
+    test of :func:`column_times` reads there) inside FIRST_YEAR..LAST_YEAR: the test can be skipped.
+    One look per distinct first five characters (a pass file has one or two)."""
+    heads = {cell[:5] if type(cell) is str else None for cell in text}
+    return all(head is not None and len(head) == 5 and head[4] == "-" and head[:4].isascii() and head[:4].isdigit()
+               and FIRST_YEAR <= int(head[:4]) <= LAST_YEAR for head in heads)
 
 
 def _one_time(text):

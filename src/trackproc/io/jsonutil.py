@@ -22,6 +22,8 @@ def json_ready(value):
         return value.tolist()                 # nothing to replace: Python floats already
     if isinstance(value, dict):
         return {str(k): json_ready(v) for k, v in value.items()}
+    if kind is list and all(type(v) is float for v in value) and all(map(math.isfinite, value)):
+        return value[:]                       # a row of finite floats (a covariance row): as it is
     if isinstance(value, (list, tuple)):
         return [json_ready(v) for v in value]
     if isinstance(value, np.ndarray):

@@ -40,7 +40,10 @@ UNIT_FACTORS = {unit: factor for _, factor, unit in UNIT_SPELLINGS.values()}
 
 def unit_factors(units: np.ndarray) -> np.ndarray:
     """Per sample, the factor from the unit the file used to SI (1 where unknown)."""
-    return pd.Series(units, dtype=object).map(UNIT_FACTORS).fillna(1.0).to_numpy(dtype=np.float64)
+    codes, uniques = pd.factorize(np.asarray(units, dtype=object))   # one lookup per distinct unit
+    factors = np.array([UNIT_FACTORS.get(u, 1.0) if isinstance(u, str) else 1.0 for u in uniques] + [1.0],
+                       dtype=np.float64)
+    return factors[codes]                                                # code -1 (missing): the last, 1
 
 
 def sample_problems(frame: pd.DataFrame) -> Problems:

@@ -40,7 +40,7 @@ class Names:
 
     def encode(self, values) -> np.ndarray:
         """Codes of an array of strings (factorised first: one dictionary lookup per distinct value)."""
-        codes, uniques = pd.factorize(pd.Series(values, dtype=object), sort=False)
+        codes, uniques = pd.factorize(np.asarray(values, dtype=object), sort=False)
         mapping = np.array([self.code(str(u)) for u in uniques] or [0], dtype=np.int32)
         return mapping[codes] if len(codes) else np.zeros(0, np.int32)
 
@@ -69,8 +69,8 @@ class Samples:
                               .to_numpy().astype(np.int64))
         pieces["station"].append(self.stations.encode(frame["station"].to_numpy(dtype=object)))
         pieces["pass_id"].append(self.passes.encode(frame["pass_id"].to_numpy(dtype=object)))
-        pieces["kind"].append(pd.Series(frame["kind"].to_numpy(dtype=object)).map(kind_codes)
-                              .to_numpy(dtype=np.int8))
+        codes, kinds = pd.factorize(frame["kind"].to_numpy(dtype=object))   # kinds checked before
+        pieces["kind"].append(np.array([kind_codes[k] for k in kinds] or [0], dtype=np.int8)[codes])
         pieces["value"].append(frame["value"].to_numpy(dtype=np.float64))
         pieces["sigma"].append(frame["sigma"].to_numpy(dtype=np.float64))
         pieces["row"].append(frame["row"].to_numpy(dtype=np.int64))

@@ -138,11 +138,18 @@ class PolynomialFit:
     def covariance(self, scaled: bool = True) -> np.ndarray:
         return self.cov_scaled if scaled else self.cov_unscaled
 
+    #: series made so far, by derivative order (the TCA search asks for the same ones many times)
+    _series: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
     def series(self, deriv: int = 0):
-        """The fitted curve (or its ``deriv``-th time derivative) as a numpy series in t_s."""
-        cls = BASES[self.basis][0]
-        poly = cls(self.coef, domain=list(self.domain_s))
-        return poly.deriv(deriv) if deriv else poly
+        """The fitted curve (or its ``deriv``-th time derivative) as a numpy series in t_s (made
+        once per order: treat it as read-only)."""
+        made = self._series.get(deriv)
+        if made is None:
+            cls = BASES[self.basis][0]
+            poly = cls(self.coef, domain=list(self.domain_s))
+            made = self._series[deriv] = poly.deriv(deriv) if deriv else poly
+        return made
 
     def __call__(self, t_s, deriv: int = 0) -> np.ndarray:
         return self.series(deriv)(np.asarray(t_s, dtype=float))
@@ -305,9 +312,13 @@ def _markov_sum(a, x):
     if f.ndim > 1:
         coef = coef.reshape((-1,) + (1,) * (f.ndim - 1))
     k = 1
-    while k < f.shape[0]:
+    n = f.shape[0]
+    term = np.empty_like(f)
+    while k < n:
         # (A, X) after (A', X') = (A A', A X' + X): combine each element with the one k before
-        f[k:] = f[k:] + coef[k:] * f[:-k]
+        # (the product into a scratch array first, then added in place: the same sums, fewer copies)
+        np.multiply(coef[k:], f[:-k], out=term[k:])
+        f[k:] += term[k:]
         coef[k:] = coef[k:] * coef[:-k]
         k *= 2
     return f

@@ -105,7 +105,7 @@ def _tca_time(fit: PolynomialFit, kind: str, doppler_mode: str):
 
     g = fit.series(order)
     gp = fit.series(order + 1)
-    candidates = _real_roots(g, fit.domain_s)
+    candidates = _real_roots(g, fit.domain_s, gp)
     good = [r for r in candidates if sign * gp(r) > 0]
     if not good:
         what = {0: "zero", 1: "minimum", 2: "inflection point"}[order]
@@ -195,14 +195,15 @@ def _nested_coefficients(t, y, s, fit: PolynomialFit, top: int):
     return coef
 
 
-def _real_roots(series, domain) -> list[float]:
-    """Real roots of a numpy series inside [a, b], polished by Newton steps."""
+def _real_roots(series, domain, d1=None) -> list[float]:
+    """Real roots of a numpy series inside [a, b], polished by Newton steps; ``d1`` its
+    derivative when the caller has it already (the same series as ``series.deriv()``)."""
     a, b = domain
     if series.degree() < 1:
         return []
     roots = series.roots()
     half = 0.5 * (b - a)
-    d1 = series.deriv()
+    d1 = series.deriv() if d1 is None else d1
     out = []
     for z in roots:
         if abs(z.imag) > 1e-3 * half:
