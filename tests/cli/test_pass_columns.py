@@ -2,8 +2,6 @@
 pandas) against the DataFrame the same file gives (``PassTable.frame``, what the other commands
 read): the same values, types and rows, also after :meth:`PassTable.take`."""
 
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,13 +14,16 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
-def smoothed(tmp_path_factory):
+def smoothed(tmp_path_factory, run_cli_shared):
+    """The files under test, made in-process (this module's subject is what they contain; the
+    commands' process paths are test_ingest.py's and test_smooth_cli.py's)."""
     out = tmp_path_factory.mktemp("passes")
-    for args in (["ingest", "sample_data/doppler_pass.csv", "--stations", "sample_data/stations.csv",
-                  "--carrier-hz", "2.2e9", "--mode", "one-way", "-o", str(out / "pass.parquet")],
-                 ["smooth", str(out / "pass.parquet"), "-o", str(out / "smoothed.parquet")],
-                 ["smooth", str(out / "pass.parquet"), "-o", str(out / "smoothed.csv")]):
-        subprocess.run([sys.executable, "-m", "trackproc", "-q", *args], check=True, cwd=ROOT)
+    for args in (["ingest", ROOT / "sample_data/doppler_pass.csv", "--stations", ROOT / "sample_data/stations.csv",
+                  "--carrier-hz", "2.2e9", "--mode", "one-way", "-o", out / "pass.parquet"],
+                 ["smooth", out / "pass.parquet", "-o", out / "smoothed.parquet"],
+                 ["smooth", out / "pass.parquet", "-o", out / "smoothed.csv"]):
+        result = run_cli_shared(["-q", *args])
+        assert result.exit_code == 0, result.stderr
     return out
 
 

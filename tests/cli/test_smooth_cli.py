@@ -344,16 +344,17 @@ SAMPLE = Path(__file__).resolve().parents[2] / "sample_data"
 
 
 @pytest.fixture(scope="module")
-def multistation_truth(tmp_path_factory) -> pd.DataFrame:
+def multistation_truth(tmp_path_factory, run_cli_shared) -> pd.DataFrame:
     """The noise-free truth of sample_data/multistation.parquet: its make.sh command with zero noise
-    (same orbit, stations, biases and sample times; the noisy file minus it is the simulated noise)."""
+    (same orbit, stations, biases and sample times; the noisy file minus it is the simulated noise),
+    run in-process (the numbers are the subject; simulate's process path is test_simulate.py's)."""
     out = tmp_path_factory.mktemp("truth") / "truth.parquet"
-    cmd = (f"{_trackproc()} simulate --state truth.json --stations stations.csv --duration 43200 --step 10 "
-           "--kinds range,range_rate,elevation,azimuth --range-bias CPH=120 --range-bias ZHY=-80 "
-           "--range-bias KIR=45 --sigma-range-m 0 --sigma-range-rate-m-s 0 --sigma-angle-deg 0 --seed 2 "
-           f"-o '{out}'")
-    proc = subprocess.run(cmd, shell=True, capture_output=True, text=True, cwd=SAMPLE, timeout=300)
-    assert proc.returncode == 0, proc.stderr
+    result = run_cli_shared(["simulate", "--state", SAMPLE / "truth.json", "--stations", SAMPLE / "stations.csv",
+                             "--duration", "43200", "--step", "10", "--kinds", "range,range_rate,elevation,azimuth",
+                             "--range-bias", "CPH=120", "--range-bias", "ZHY=-80", "--range-bias", "KIR=45",
+                             "--sigma-range-m", "0", "--sigma-range-rate-m-s", "0", "--sigma-angle-deg", "0",
+                             "--seed", "2", "-q", "-o", out])
+    assert result.exit_code == 0, result.stderr
     return read_pass_table(str(out)).frame
 
 
