@@ -255,6 +255,10 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     x_ref[gm_idx] = 0.0
     c0, P0 = np.asarray(centre, float) / scales, np.asarray(p0, float) / ss
     evaluations, integrated_steps, propagated_s = 0, 0, 0.0
+    # chunk-local references under the Taylor models (two-body, J2); the full model's DOP853 keeps
+    # the epoch anchor: restarted, its adaptive steps put a 0.02-sigma floor under the iterations'
+    # change on the DMC case (docs/filter.md)
+    local = problem.force != "full"
     chunks = [(ka, kb, seg > 0) for seg, (ka, kb) in enumerate(segments)]
     last_traj = None
     limit = np.inf if opt.ekf_sigma_m is None else float(opt.ekf_sigma_m)
@@ -279,7 +283,16 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
         ka, kb, restart = chunks.pop(0)
         rows = order[(step[order] >= ka) & (step[order] <= kb)]
         kprev = ka - 1
-        if kprev >= 0:
+        if kprev >= 0 and not local:
+            if restart and settled(p_f[kprev]):
+                # the epoch-anchored reference (DOP853): the filter's state mapped back to the epoch
+                target = (x_f[kprev] if targets is None else np.asarray(targets[kprev], float) / scales) * scales
+                old = _transition(last_traj, steps_t[kprev], n)[0]
+                old_z = np.concatenate([last_traj.state(steps_t[kprev]), x_ref[6:]])
+                delta = target - old_z
+                delta[gm_idx] = 0.0
+                x_ref = x_ref + np.linalg.solve(old, delta)
+        elif kprev >= 0:
             # the chunk's reference starts at its previous step, from the filter's state there (a
             # restart) or the current reference's (the same orbit): integrated over the chunk
             # alone, so the sweep's integration grows with the arc, not with its square. Every
