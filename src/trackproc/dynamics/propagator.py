@@ -407,3 +407,80 @@ def propagate_state(state, t_s, **kwargs) -> Trajectory:
     """:func:`propagate` from a state object with ``r_m``, ``v_m_s`` (GCRF) and ``epoch``
     (UTC ``datetime64``), e.g. :class:`trackproc.io.statefile.State`."""
     return propagate(state.r_m, state.v_m_s, state.epoch, t_s, **kwargs)
+
+
+class Restarted:
+    """A trajectory propagated from a state at ``start_s`` (s from another epoch), read on that
+    epoch's time axis: ``state(t)``, ``stm(t) = Φ(t, start_s)``, ``parameter_partials(t) =
+    ∂s(t)/∂p`` at fixed ``s(start_s)`` take and give times in seconds from the axis's epoch
+    (``datetime64`` labels pass through as they are absolute). ``traj`` is the
+    :class:`Trajectory` propagated from the restart's own UTC epoch (so that time-dependent
+    forces see the absolute time); only what the measurement models and the filter read is
+    exposed, so that nothing reads the inner trajectory's axis by mistake."""
+
+    def __init__(self, traj: Trajectory, start_s: float):
+        self.traj = traj
+        self.start_s = float(start_s)
+
+    def _t(self, t_s):
+        t = np.asarray(t_s)
+        return t if np.issubdtype(t.dtype, np.datetime64) else np.asarray(t, float) - self.start_s
+
+    def state(self, t_s, **kw) -> np.ndarray:
+        return self.traj.state(self._t(t_s), **kw)
+
+    def stm(self, t_s, **kw) -> np.ndarray:
+        return self.traj.stm(self._t(t_s), **kw)
+
+    def parameter_partials(self, t_s, **kw) -> np.ndarray:
+        return self.traj.parameter_partials(self._t(t_s), **kw)
+
+    def seconds(self, times_utc) -> np.ndarray:
+        return self.traj.seconds(times_utc) + self.start_s
+
+    def times_utc(self, t_s) -> np.ndarray:
+        return self.traj.times_utc(self._t(t_s))
+
+    @property
+    def t_min_s(self) -> float:
+        return self.traj.t_min_s + self.start_s
+
+    @property
+    def t_max_s(self) -> float:
+        return self.traj.t_max_s + self.start_s
+
+    @property
+    def n_steps(self) -> int:
+        return self.traj.n_steps
+
+    @property
+    def has_stm(self) -> bool:
+        return self.traj.has_stm
+
+    @property
+    def force_parameter_names(self) -> tuple:
+        return self.traj.force_parameter_names
+
+    @property
+    def frame(self):
+        return self.traj.frame
+
+    def raise_for_outcome(self) -> "Restarted":
+        self.traj.raise_for_outcome()
+        return self
+
+
+def propagate_from(r_m, v_m_s, epoch, start_s: float, t_s, **kwargs) -> Restarted | Trajectory:
+    """:func:`propagate` of a GCRF state at ``start_s`` (SI seconds from the UTC ``epoch``) to
+    cover times ``t_s`` (s from ``epoch``), as a :class:`Restarted` on ``epoch``'s axis (the plain
+    :class:`Trajectory` when ``start_s`` is 0). The run starts at the restart's own UTC time (leap
+    seconds counted), so the forces that depend on time see it; pass ``frame`` to keep the
+    integration frame of ``epoch``."""
+    if start_s == 0.0:
+        return propagate(r_m, v_m_s, epoch, t_s, **kwargs)
+    if isinstance(epoch, str):
+        epoch = np.datetime64(epoch.rstrip("Zz"), "ns")
+    jd1, jd2 = ts.add_seconds_utc(ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns")), np.asarray([float(start_s)]))
+    start = ts.jd_utc_to_datetime64(jd1, jd2)[0]
+    t = np.asarray(t_s, float) - float(start_s)
+    return Restarted(propagate(r_m, v_m_s, start, t, **kwargs), start_s)

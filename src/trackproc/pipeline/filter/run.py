@@ -59,6 +59,9 @@ class Sweep:
     x_s: np.ndarray | None = None
     p_s: np.ndarray | None = None
     evaluations: int = 0
+    #: the reference's integration work over the sweep: Taylor/DOP853 steps and seconds propagated
+    integrated_steps: int = 0
+    propagated_s: float = 0.0
 
     @property
     def epoch_step(self) -> int:
@@ -136,14 +139,15 @@ def _sub_problem(problem: Problem, rows) -> Problem:
     return replace(problem, meas=meas, modifiers=bound, times=problem.times[rows], sources=problem.sources[rows])
 
 
-def _evaluate(sub: Problem, x, cover=()):
-    """``(h, J, trajectory)`` of the sub-problem at ``x``: the problem's own model, its trajectory
-    (over the samples and the times ``cover``) kept."""
+def _evaluate(sub: Problem, x, cover=(), start_s: float = 0.0):
+    """``(h, J, trajectory)`` of the sub-problem at ``x`` (the state at ``start_s``, s from the
+    epoch, and the other parameters): the problem's own model, its trajectory (over the samples
+    and the times ``cover``) kept; J is with respect to the state at ``start_s``."""
     kept = {}
     own = sub.trajectory
 
     def recording(xx):
-        kept["traj"] = own(xx, cover)
+        kept["traj"] = own(xx, cover, start_s=start_s)
         return kept["traj"]
 
     sub.trajectory = recording
@@ -157,8 +161,9 @@ def _evaluate(sub: Problem, x, cover=()):
 
 
 def _transition(traj, t, n: int) -> np.ndarray:
-    """Ψ(t, t0) of the extended state (n × n): ``[Φ | ∂s/∂p]`` on the orbit's rows, identity on
-    the parameters' (biases and force coefficients are constants of the reference)."""
+    """Ψ(t, t_a) of the extended state (n × n), t_a the trajectory's anchor (the epoch, or its
+    restart): ``[Φ | ∂s/∂p]`` on the orbit's rows, identity on the parameters' (biases and force
+    coefficients are constants of the reference)."""
     t = np.atleast_1d(np.asarray(t, float))
     top = traj.stm(t)                           # (m, 6, 6 + P)
     out = np.broadcast_to(np.eye(n), (t.size, n, n)).copy()
@@ -244,11 +249,16 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     gm_idx = np.array(sorted(gm), int)
     resets = {int(np.searchsorted(steps_t, t0)): idx for t0, idx in pass_resets(problem, opt).items()}
     x_ref = np.asarray(x_ref0, float).copy()
+    t_anchor = 0.0                  # x_ref[:6] is the reference's state at this time (s from the epoch)
     # a Gauss-Markov state's reference is its zero mean: the filter's value is then the deviation
     # the transition e^{-dt/tau} decays (a constant reference would make it decay to that value)
     x_ref[gm_idx] = 0.0
     c0, P0 = np.asarray(centre, float) / scales, np.asarray(p0, float) / ss
-    evaluations = 0
+    evaluations, integrated_steps, propagated_s = 0, 0, 0.0
+    # chunk-local references under the Taylor models (two-body, J2); the full model's DOP853 keeps
+    # the epoch anchor: restarted, its adaptive steps put a 0.02-sigma floor under the iterations'
+    # change on the DMC case (docs/filter.md)
+    local = problem.force != "full"
     chunks = [(ka, kb, seg > 0) for seg, (ka, kb) in enumerate(segments)]
     last_traj = None
     limit = np.inf if opt.ekf_sigma_m is None else float(opt.ekf_sigma_m)
@@ -273,24 +283,40 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
         ka, kb, restart = chunks.pop(0)
         rows = order[(step[order] >= ka) & (step[order] <= kb)]
         kprev = ka - 1
-        if restart and settled(p_f[kprev]):
-            target = (x_f[kprev] if targets is None else np.asarray(targets[kprev], float) / scales) * scales
-            old = _transition(last_traj, steps_t[kprev], n)[0]
-            old_z = np.concatenate([last_traj.state(steps_t[kprev]), x_ref[6:]])
-            delta = target - old_z
-            delta[gm_idx] = 0.0
-            x_ref = x_ref + np.linalg.solve(old, delta)
+        if kprev >= 0 and not local:
+            if restart and settled(p_f[kprev]):
+                # the epoch-anchored reference (DOP853): the filter's state mapped back to the epoch
+                target = (x_f[kprev] if targets is None else np.asarray(targets[kprev], float) / scales) * scales
+                old = _transition(last_traj, steps_t[kprev], n)[0]
+                old_z = np.concatenate([last_traj.state(steps_t[kprev]), x_ref[6:]])
+                delta = target - old_z
+                delta[gm_idx] = 0.0
+                x_ref = x_ref + np.linalg.solve(old, delta)
+        elif kprev >= 0:
+            # the chunk's reference starts at its previous step, from the filter's state there (a
+            # restart) or the current reference's (the same orbit): integrated over the chunk
+            # alone, so the sweep's integration grows with the arc, not with its square. Every
+            # use of the transition below is relative to the anchor (Ψ(t_k) Ψ(t_k-1)⁻¹, J Ψ(t_k)⁻¹).
+            t_anchor = float(steps_t[kprev])
+            if restart and settled(p_f[kprev]):
+                target = (x_f[kprev] if targets is None else np.asarray(targets[kprev], float) / scales) * scales
+                x_ref = target.copy()
+                x_ref[gm_idx] = 0.0
+            else:
+                x_ref = np.concatenate([last_traj.state(t_anchor), x_ref[6:]])
         t_need = steps_t[max(kprev, 0):kb + 1]
         if rows.size:
             sub = _sub_problem(problem, np.sort(rows))
-            h, jac, traj = _evaluate(sub, x_ref[:n_par], cover=t_need)
+            h, jac, traj = _evaluate(sub, x_ref[:n_par], cover=t_need, start_s=t_anchor)
             evaluations += 1
             pos = np.searchsorted(np.sort(rows), rows)         # rows (time order) -> sub's order
             h, jac = h[pos], jac[pos]
         else:
-            traj = problem.trajectory(x_ref[:n_par], cover=t_need)
+            traj = problem.trajectory(x_ref[:n_par], cover=t_need, start_s=t_anchor)
             h, jac = np.zeros(0), np.zeros((0, n_par))
         last_traj = traj
+        integrated_steps += traj.n_steps
+        propagated_s += traj.t_max_s - traj.t_min_s
         psi = _transition(traj, t_need, n) * scales[None, None, :] / scales[None, :, None]
         z_abs = np.concatenate([traj.state(t_need), np.broadcast_to(x_ref[6:], (t_need.size, n - 6))], axis=1)
         z = z_abs / scales
@@ -365,7 +391,8 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                 break
     out = Sweep(t_s=steps_t, scales=scales, x_p=x_p, p_p=p_p, x_f=x_f, p_f=p_f, phi=phi, z_ref=z_ref, step=step,
                 innovation=innovation, variance=variance, edited=edited, h_ref=h_ref, h_row=h_row,
-                segments=segments, evaluations=evaluations)
+                segments=segments, evaluations=evaluations, integrated_steps=integrated_steps,
+                propagated_s=propagated_s)
     out.h_obs = y
     return out
 

@@ -98,15 +98,18 @@ class Problem:
             return self.force_model
         return self.force_model.with_parameters(**{n: float(x[6 + i]) for i, n in enumerate(self.force_names)})
 
-    def trajectory(self, x, cover=()):
+    def trajectory(self, x, cover=(), start_s: float = 0.0):
         """The propagated trajectory (with STM, and the force parameters' partials) of ``x``, over
-        the samples' times and ``cover`` (further times, s from the epoch)."""
+        the samples' times and ``cover`` (further times, s from the epoch). ``start_s``: the
+        state ``x[:6]`` is the one at that time (s from the epoch), where the run starts (at that
+        absolute time, in the epoch's integration frame); the trajectory is read on the epoch's
+        time axis and its STM is Ψ(t, start_s) (:class:`~trackproc.dynamics.propagator.Restarted`)."""
         t = np.concatenate([self.meas.t_s, np.asarray(cover, float).ravel()])
         # a time-tag offset moves samples up to its bound (and the derivative's step) either way
         margin = (md.TIME_BIAS_LIMIT_S + 1.0) if any(b.modifier.shifts_time for b in self.modifiers) else 0.0
         span = [float(t.min()) - LIGHT_TIME_MARGIN_S - margin, float(t.max()) + margin]
-        traj = propagator.propagate(x[:3], x[3:6], self.epoch, span, force=self.force, stm=True, frame=self.frame,
-                                    eop=self.eop, force_model=self.force_model_at(x))
+        traj = propagator.propagate_from(x[:3], x[3:6], self.epoch, float(start_s), span, force=self.force, stm=True,
+                                         frame=self.frame, eop=self.eop, force_model=self.force_model_at(x))
         traj = traj.raise_for_outcome()
         return _WithForceParameters(traj) if self.force_names else traj
 
