@@ -465,9 +465,15 @@ def _doptrack_held_back(groups, fits):
         res = fits[tuple(fit)]
         table_b = _load(held)[0]
 
+        done = {}
+
         def rms(tle):
-            _, s = compare(table_b, OrbitInput(tle=tle), CompareOptions(), EOP)
-            return s["passes"][0]["rms"]
+            # a refused fit writes the initial TLE: its RMS is the initial's, computed once
+            key = (tle.line1, tle.line2)
+            if key not in done:
+                _, s = compare(table_b, OrbitInput(tle=tle), CompareOptions(), EOP)
+                done[key] = s["passes"][0]["rms"]
+            return done[key]
 
         refused = res.summary["refused"]
         fitted = parse_tle("\n".join(refused["fitted_tle"])) if refused else res.tle
