@@ -80,7 +80,7 @@ def _golden_max(f, lo, hi):
     """Maximise ``f`` (vectorised) on brackets ``[lo, hi]``: golden-section search."""
     a, b = lo.copy(), hi.copy()
     c, d = b - GOLDEN * (b - a), a + GOLDEN * (b - a)
-    fc, fd = f(c), f(d)
+    fc, fd = np.split(f(np.concatenate([c, d])), 2)        # one call: f is elementwise
     for _ in range(GOLDEN_STEPS):
         left = fc > fd                       # the maximum lies in [a, d]
         a, b = np.where(left, a, c), np.where(left, d, b)
@@ -147,14 +147,15 @@ def station_passes(sat, station, options: PassesOptions) -> list[dict]:
     los_hi[k_after < len(below_t)] = below_t[k_after[k_after < len(below_t)]]
 
     def crossing(lo, hi):
-        out = np.full(len(t_max), np.nan)
+        out = np.full(len(lo), np.nan)
         ok = np.isfinite(lo) & np.isfinite(hi)
         if ok.any():
             out[ok] = _bisect(lambda t: elevation(t) - mask, lo[ok], hi[ok])
         return out
 
-    aos = crossing(aos_lo, t_max)
-    los = crossing(t_max, los_hi)
+    # AOS and LOS bisected together: one model call per step for both (each element's search is
+    # its own: the same times as two searches)
+    aos, los = np.split(crossing(np.concatenate([aos_lo, t_max]), np.concatenate([t_max, los_hi])), 2)
     aos_complete, los_complete = np.isfinite(aos), np.isfinite(los)
     aos = np.where(aos_complete, aos, 0.0)
     los = np.where(los_complete, los, grid[-1])
@@ -163,12 +164,12 @@ def station_passes(sat, station, options: PassesOptions) -> list[dict]:
     order = np.sort(first)
     aos, los, t_max, el_max = aos[order], los[order], t_max[order], el_max[order]
     aos_complete, los_complete = aos_complete[order], los_complete[order]
-    rr_a, rr_l = obs(aos).range_rate_m_s, obs(los).range_rate_m_s
+    at_aos, at_los = obs(aos), obs(los)
     tca = np.full(len(aos), np.nan)
-    sign_change = (rr_a < 0) & (rr_l > 0)
+    sign_change = (at_aos.range_rate_m_s < 0) & (at_los.range_rate_m_s > 0)
     if sign_change.any():
         tca[sign_change] = _bisect(lambda t: obs(t).range_rate_m_s, aos[sign_change], los[sign_change])
-    at = {name: obs(t) for name, t in (("aos", aos), ("tca", np.where(np.isfinite(tca), tca, aos)), ("los", los))}
+    at = {"aos": at_aos, "tca": obs(np.where(np.isfinite(tca), tca, aos)), "los": at_los}
     times = {name: sat.times(t) for name, t in (("aos", aos), ("tca", np.where(np.isfinite(tca), tca, 0.0)),
                                                  ("los", los), ("max", t_max))}
     for i in range(len(aos)):
