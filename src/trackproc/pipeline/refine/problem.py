@@ -107,8 +107,8 @@ class Refinement:
         return self.problem.values(np.asarray(x, float)[: self.n_problem])
 
     def values(self):
-        """The values-only function of :meth:`data`'s model (pointwise), or None (integral)."""
-        return None if self.options.cost == "integral" else self.pointwise_values
+        """The values-only function of :meth:`data`'s model."""
+        return self.integral["model"].values if self.options.cost == "integral" else self.pointwise_values
 
     def constraints(self, x):
         return circular_constraints(x, self.mu, rka_index=len(self.names) - 1)
