@@ -61,3 +61,15 @@ def test_a_fixed_drivers_new_value_or_other_parameters_evaluate_again():
         pb.model(x + np.r_[float(k + 1), np.zeros(x.size - 1)])
     assert pb.evaluations == count + od_problem.MODEL_MEMO + 1
     assert np.array_equal(pb.model(x)[0], h_25) and pb.evaluations == count + od_problem.MODEL_MEMO + 2
+
+
+def test_values_without_the_jacobian_are_the_models_values():
+    """``Problem.values`` (a step rule's trial point: no STM, no partials) gives the numbers
+    ``Problem.model`` gives, bit for bit, on a fresh problem and from the kept results."""
+    pb, fresh = _problem(), _problem()
+    x = pb.x0 + np.r_[300.0, -80.0, 40.0, 0.2, -0.1, 0.05, 5.0 * np.ones(pb.x0.size - 6)]
+    h, _ = pb.model(x)
+    count = fresh.evaluations
+    assert np.array_equal(fresh.values(x), h)
+    assert fresh.evaluations == count + 1 and not fresh.__dict__.get("_memo")   # values alone are not kept
+    assert np.array_equal(pb.values(x), h)                                      # from the kept result

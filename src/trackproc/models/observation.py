@@ -304,7 +304,7 @@ def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | No
 
 def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modifiers: Sequence[BiasModifier] = (),
              bias_values: dict | None = None, bias_columns: dict | None = None, n_columns: int | None = None,
-             range_rate_model: str = "doppler", c: float = C_LIGHT):
+             range_rate_model: str = "doppler", c: float = C_LIGHT, partials: bool = True):
     """Model values and partials of every sample (eqs. (1)-(13) of the module docstring).
 
     ``trajectory`` gives GCRF ``state(t, derivative=0|1)`` (N, 6) and ``stm(t)`` (N, 6, P) —
@@ -320,6 +320,9 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
     A modifier that shifts time (:class:`~trackproc.models.modifiers.StationTimeBias`, ``τ``)
     moves its rows' reception times to ``t - τ`` before everything else, and its column is
     ``-ḣ(t - τ)``, by a central difference of the model (:func:`_time_partials`).
+
+    ``partials=False``: the values alone (the same numbers), the Jacobian None; ``trajectory.stm``
+    is not read (a step rule's trial point needs no Jacobian).
 
     Implements seed 002 eq. 17 (with light time, station motion and the offsets) and its Jacobian (eq. 10).
     """
@@ -337,8 +340,9 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
     ncol = n_columns if n_columns is not None else n_state_params + len(bias_columns)
     geo = solve_light_time(trajectory, meas.t_s, meas.r_st, c=c)
     r_e, v_e = geo.state[:, :3], geo.state[:, 3:]
-    phi = trajectory.stm(geo.t_e_s)
-    dstate, _ = emission_jacobian(geo.u, v_e, geo.state_dot, phi, c)
+    if partials:
+        phi = trajectory.stm(geo.t_e_s)
+        dstate, _ = emission_jacobian(geo.u, v_e, geo.state_dot, phi, c)
     value = np.empty(n)
     g = np.zeros((n, 6))                            # ∂ value / ∂ s_e
 
@@ -391,6 +395,10 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         g[ang, :3] = np.where(is_az[:, None], d_az, d_el)
 
     jac = np.zeros((n, ncol))
+    if not partials:
+        for mod in modifiers:
+            mod.apply(value, jac, bias_values, bias_columns, geo)
+        return value, None, geo
     jac[:, :n_state_params] = np.einsum("ni,nip->np", g, dstate)
     if up is not None:
         d_big_t = round_trip_jacobian(geo.u[two], up.u, up.v_st, dstate[two, :3, :n_state_params], c)

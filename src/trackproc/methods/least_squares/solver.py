@@ -120,12 +120,14 @@ def _raise_rank(s, vt, names, scales, rtol, it):
 
 
 def solve_gls(model: Callable[[np.ndarray], tuple], x0, observed, covariance, fit, *, clip: Optional[float] = 4.0,
-              sigma_scale: float = 1.0, edited=None, max_editing_rounds: int = 4):
+              sigma_scale: float = 1.0, edited=None, max_editing_rounds: int = 4, values=None):
     """Generalised least squares: the samples' covariance ``covariance`` (a
     :class:`trackproc.methods.noise.PassCovariance`) is not diagonal. Seed 002 eqs. 4-9 with a
     full ``K``: the kept samples are whitened (``L⁻¹ y``, ``L⁻¹ h(x)``, ``L⁻¹ J``, ``K = L Lᵀ``
     times ``sigma_scale²``), which makes them independent of unit sigma, and solved by
-    ``fit(model_w, y_w, start) -> (Solution, extra)`` (:func:`solve`, or a constrained solver).
+    ``fit(model_w, y_w, start) -> (Solution, extra)`` (:func:`solve`, or a constrained solver);
+    ``model_w.values(x)`` is its values alone, from ``values(x)`` (``model(x)``'s values without
+    the Jacobian, the same numbers) when given.
     The k-sigma editing (``clip``) is made on the innovations ``L⁻¹ r`` of every sample (the
     standardised one-step prediction errors; an outlier stands out at its own sample), the
     whitening refactored on the kept samples, until the edited set settles.
@@ -148,6 +150,11 @@ def solve_gls(model: Callable[[np.ndarray], tuple], x0, observed, covariance, fi
         def model_w(x, w=w):
             h_, jac_ = model(x)
             return w(h_) * k, w(jac_) * k
+
+        def values_w(x, w=w):
+            return w(model(x)[0] if values is None else values(x)) * k
+
+        model_w.values = values_w
 
         sol_w, extra = fit(model_w, w(y) * k, start)
         h, jac = model(sol_w.values)

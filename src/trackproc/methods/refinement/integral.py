@@ -84,15 +84,28 @@ class IntegralModel:
             self._nodes = range_rate_samples(self.epoch, self.station.r_itrf_m, self.t_s, self.mode, self.eop)
         return self._nodes
 
-    def _state_part(self, x):
-        """``(Vr (K,), ∂Vr/∂state (K, 6))`` of the link (one-way: DT spectra; two-way: round trip)."""
+    def _state_part(self, x, partials: bool = True):
+        """``(Vr (K,), ∂Vr/∂state (K, 6))`` of the link (one-way: DT spectra; two-way: round trip);
+        ``partials=False``: the same ``Vr``, the sensitivities not computed (None)."""
         traj = self.trajectory(x)
         if self.mode == "two-way":
             value, jac, _ = ob.evaluate(self.node_measurements(), traj, n_state_params=6, n_columns=6,
-                                        range_rate_model=self.range_rate_model)
+                                        range_rate_model=self.range_rate_model, partials=partials)
             return value, jac
-        pred = ms.predict(traj, self.station, self.t_s, range_rate_model=self.range_rate_model)
-        return pred.range_rate_m_s.copy(), pred.d_range_rate_d_state
+        pred = ms.predict(traj, self.station, self.t_s, range_rate_model=self.range_rate_model, partials=partials)
+        return pred.range_rate_m_s.copy(), pred.d_range_rate_d_state if partials else None
+
+    def values(self, x):
+        """``Vr`` alone (the same numbers as the call's, without the sensitivities: a step rule's trial point)."""
+        x = np.asarray(x, float)
+        try:
+            value, _ = self._state_part(x, partials=False)
+        except ValueError as exc:
+            raise ArithmeticError(str(exc)) from None
+        for j, coef in enumerate(self.bias):
+            value += coef * x[6 + j]
+        self.evaluations += 1
+        return value
 
     def __call__(self, x):
         x = np.asarray(x, float)

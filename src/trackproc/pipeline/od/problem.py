@@ -113,6 +113,25 @@ class Problem:
         traj = traj.raise_for_outcome()
         return _WithForceParameters(traj) if self.force_names else traj
 
+    def values(self, x):
+        """``computed (N,)`` at ``x``: :meth:`model`'s values (the same numbers: the same trajectory,
+        its sensitivities propagated too) without the partials, for a step rule's trial point."""
+        x = np.asarray(x, float)
+        cols, fixed = self._columns()
+        hit = self.__dict__.get("_memo", {}).get((x.tobytes(), tuple(cols), repr(sorted(fixed.items()))))
+        if hit is not None and hit[2] is self.force_model:
+            return hit[0].copy()
+        values = dict(fixed)
+        values.update({n: x[i] for n, i in cols.items()})
+        try:
+            h, _, _ = ob.evaluate(self.meas, self.trajectory(x), n_state_params=6 + len(self.force_names),
+                                  modifiers=self.modifiers, bias_values=values, bias_columns=cols,
+                                  n_columns=x.size, range_rate_model=self.range_rate_model, partials=False)
+        except ValueError as exc:
+            raise ArithmeticError(str(exc)) from None
+        self.evaluations += 1
+        return h
+
     def model(self, x):
         """``(computed (N,), jacobian (N, n))`` at the selected parameter values ``x`` (copies of
         the last :data:`MODEL_MEMO` results for the same ``x``, fixed drivers and force model: a
@@ -158,13 +177,14 @@ class Problem:
 
             def fit(model_w, y_w, start):
                 # the step follows the curved valleys the correlated weighting leaves (as refine's)
-                cached = CachedModel(model_w)
+                cached = CachedModel(model_w, values=model_w.values)
                 ones = np.ones(y_w.size)
                 return solve(cached, start, y_w, ones, names=self.names, scales=self.params.scales(), priors=pri,
                              bounds=(lo, hi), options=opts,
                              retract=geodesic_retraction(cached, ones, self.params.scales(), pri)), None
 
-            return solve_gls(self.model, self.x0 if x0 is None else x0, y, noise, fit, clip=clip, edited=edited)[0]
+            return solve_gls(self.model, self.x0 if x0 is None else x0, y, noise, fit, clip=clip, edited=edited,
+                             values=self.values)[0]
         return solve(self.model, self.x0 if x0 is None else x0, y, self.meas.sigma, names=self.names,
                      scales=self.params.scales(), priors=self.priors if priors is None else priors,
                      periodic=self.meas.periodic, bounds=(lo, hi),

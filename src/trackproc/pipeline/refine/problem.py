@@ -102,6 +102,14 @@ class Refinement:
             jac = np.hstack([jac, np.zeros((jac.shape[0], len(self.names) - self.n_problem))])
         return h, jac
 
+    def pointwise_values(self, x):
+        """:meth:`pointwise_model`'s values alone (the same numbers, no Jacobian)."""
+        return self.problem.values(np.asarray(x, float)[: self.n_problem])
+
+    def values(self):
+        """The values-only function of :meth:`data`'s model."""
+        return self.integral["model"].values if self.options.cost == "integral" else self.pointwise_values
+
     def constraints(self, x):
         return circular_constraints(x, self.mu, rka_index=len(self.names) - 1)
 
@@ -150,7 +158,7 @@ class Refinement:
         priors = self.priors_at(prior_centre)
         start = self.x0 if x0 is None else np.asarray(x0, float)
         opts = Options(max_iterations=self.options.max_iterations, clip=clip, rank_rtol=self.options.rank_rtol)
-        model = CachedModel(model)
+        model = CachedModel(model, values=self.values())
         retract = geodesic_retraction(model, sigma, self.scales, priors)
         if self.options.circular:
             kkt = self.solve_circular(model, start, y, sigma, priors=priors, periodic=periodic, options=opts,
@@ -191,7 +199,7 @@ class Refinement:
         opts = Options(max_iterations=self.options.max_iterations, clip=None, rank_rtol=self.options.rank_rtol)
 
         def fit(model_w, y_w, start):
-            cached = CachedModel(model_w)
+            cached = CachedModel(model_w, values=model_w.values)
             ones = np.ones(y_w.size)
             retract = geodesic_retraction(cached, ones, self.scales, priors)
             if self.options.circular:
@@ -201,7 +209,7 @@ class Refinement:
                          bounds=(lo, hi), options=opts, retract=retract), None
 
         sol, kkt = solve_gls(model, self.x0 if x0 is None else np.asarray(x0, float), y, self.noise, fit, clip=clip,
-                             sigma_scale=sigma_scale, edited=self.noise_edited)
+                             sigma_scale=sigma_scale, edited=self.noise_edited, values=self.values())
         if kkt is not None:
             kkt = replace(kkt, solution=sol)
         return sol, kkt
