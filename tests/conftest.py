@@ -221,6 +221,11 @@ SLOW_CPU: dict[str, str | dict[str, str]] = {
         "test_conflict_statistic_is_chi2_7_monte_carlo": "Monte Carlo of the conflict statistic, 1.1 s"},
     "test_fit_tle_apriori.py": {
         "test_a_time_tag_shift_within_the_theory_error_is_not_a_conflict": "two TLE fits, 0.7 s"},
+    "test_filter_reference.py": {
+        "test_a_restarted_trajectory_sees_the_absolute_time_of_the_sun_and_the_moon": "full-force restarts: "
+                                                                                      "compiles the force kernels "
+                                                                                      "on a fresh clone",
+        "test_the_propagated_span_grows_with_the_arc_not_its_square": "filters over 1 and 4 days, 1.1 s"},
     "test_forces_native.py": {
         "test_undefined_symbols_match_nm": "stores the machine code when none is: compiles the force kernels on a "
                                            "fresh clone"},
