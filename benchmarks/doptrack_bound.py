@@ -59,7 +59,8 @@ def main() -> None:
         got = rows(dev, pairs)
         print(f"old TLE (>= 7 days) predicting the next pass, {pairs} pairs, "
               f"{'development (1-10 April)' if dev else 'HOLD-OUT (11-15 April)'}")
-        print(f"{'pass':>13} {'next':>13} {'old Hz':>7} {'bound Hz':>8} {'shift s':>7} {'fresh Hz':>8} {'bound/old':>9}")
+        print(f"{'pass':>13} {'next':>13} {'old Hz':>7} {'bound Hz':>8} {'shift s':>7} {'fresh Hz':>8} "
+              f"{'bound/old':>9}")
         for a, b, rms, after, shift, fresh in got:
             print(f"{a:>13} {b:>13} {rms:7.2f} {after:8.2f} {shift:7.2f} {fresh:8.2f} {after / rms:9.2f}")
         if got:

@@ -25,8 +25,8 @@ def test_the_wrapperless_kernels_are_called_by_kernels_only():
     inner = _inner()
     assert "_rhs" in inner and "integrate" not in inner        # the entry points keep their wrapper
     here = Path(compiled.__file__).resolve()
-    texts = {path: path.read_text() for path in sorted((ROOT / "src").rglob("*.py")) + sorted((ROOT / "tests").rglob("*.py"))
-             if path.resolve() != here}
+    files = sorted((ROOT / "src").rglob("*.py")) + sorted((ROOT / "tests").rglob("*.py"))
+    texts = {path: path.read_text() for path in files if path.resolve() != here}
     # kernels run as Python through .py_func: whatever they call is called from Python too
     run_as_python = {m for text in texts.values() for m in re.findall(r"\bcompiled\.(\w+)\.py_func\b", text)}
     assert "_interp2" in run_as_python                            # tests/io/test_forces_jit.py

@@ -57,8 +57,9 @@ def geodesic_retraction(model, sigma, scales, priors=(), *, fraction: float = 0.
     dropped when ``|a| > alpha |δ|`` (scaled), where the expansion is not to be trusted.
 
     ``model`` (a :class:`CachedModel`, so that ``h(x), J(x)`` come from the solver's own
-    evaluation, and the trial point's values come without a Jacobian), ``sigma`` the data sigmas, ``scales`` the parameter scales, ``priors`` the
-    a-priori constraints (linear: no curvature). Returns ``retract(x, dx) -> x_new`` for
+    evaluation, and the trial point's values come without a Jacobian), ``sigma`` the data
+    sigmas, ``scales`` the parameter scales, ``priors`` the a-priori constraints (linear: no
+    curvature). Returns ``retract(x, dx) -> x_new`` for
     :func:`trackproc.methods.least_squares.solve`.
     """
     sig = np.asarray(sigma, float)
