@@ -28,19 +28,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import numpy as np  # noqa: E402
 
 # (doptrack_never_worse puts tests/ on the path and holds the pairs, the loader and the scores)
-from doptrack_never_worse import (EOP, _day_pairs, _load, _pairs, _predicted_rms, is_dev,  # noqa: E402
-                                  stale_tle_for, timing_split)
+from doptrack_never_worse import (EOP, _load, _predicted_rms, pass_pairs, stale_tle_for,  # noqa: E402
+                                  timing_split)
 from trackproc.io.tle import tle_state  # noqa: E402
 
 
 def rows(dev: bool, pairs: str) -> list:
-    stamps = sorted(p.stem.rsplit("_", 1)[-1] for p in
-                    (Path(__file__).resolve().parents[2] / "shared" / "realdata" / "doptrack-delfic3" / "data")
-                    .glob("Delfi-C3_32789_*.csv"))
+    stamps, chosen = pass_pairs(dev, pairs)
     out = []
-    for a, b in (_day_pairs(stamps) if pairs == "day" else _pairs()):
-        if is_dev(a) != dev or is_dev(b) != dev:
-            continue
+    for a, b in chosen:
         old = stale_tle_for(a, stamps)
         if old is None:
             continue

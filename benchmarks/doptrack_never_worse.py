@@ -82,14 +82,21 @@ def time_offset_z(table_b, state, time_sigma_s=None):
     return shift / sigma_s if sigma_s > 0 else math.nan, shift, sigma_s
 
 
-def table(dev: bool, which: str):
+def pass_pairs(dev: bool, pairs: str) -> tuple:
+    """``(stamps, [(a, b), ...])``: every pass's stamp, and the pairs (``evening`` or ``day``) of
+    the development (``dev``) or hold-out set."""
     stamps = sorted(p.stem.rsplit("_", 1)[-1] for p in
                     (Path(__file__).resolve().parents[2] / "shared" / "realdata" / "doptrack-delfic3" / "data")
                     .glob("Delfi-C3_32789_*.csv"))
+    chosen = [(a, b) for a, b in (_day_pairs(stamps) if pairs == "day" else _pairs())
+              if is_dev(a) == dev and is_dev(b) == dev]
+    return stamps, chosen
+
+
+def table(dev: bool, which: str):
+    stamps, pairs = pass_pairs(dev, PAIRS)
     rows = []
-    for a, b in (_day_pairs(stamps) if PAIRS == "day" else _pairs()):
-        if is_dev(a) != dev or is_dev(b) != dev:
-            continue
+    for a, b in pairs:
         ta, fresh = _load(a)
         tb, _ = _load(b)
         tle = fresh if which == "fresh" else stale_tle_for(a, stamps)
