@@ -308,6 +308,28 @@ def test_two_overlapping_runs_do_not_corrupt_each_other(passes, tmp_path):
     assert sorted(f"{n} up to date, 0 to do" in log for log in logs) == [False, True]
 
 
+def test_a_write_probe_removed_by_a_running_batch_is_no_error(passes, tmp_path, run_cli, monkeypatch):
+    """The output's write probe is made before the lock; a run holding the lock removes temporary
+    files as leftovers of an interrupted run, the probe among them, between its write and its
+    removal (the race seen once in CI with two overlapping runs): the second run goes on."""
+    from trackproc.pipeline.batch import store
+
+    out = tmp_path / "out"
+    config = write_config(tmp_path / "b.toml", passes, out, batch={"inputs": [str(passes / "inbox" / "C*.csv")]})
+    real_write = Path.write_bytes
+
+    def write_then_removed(path, data):
+        written = real_write(path, data)
+        if path.name.startswith(".write-test-"):
+            store.remove_leftovers(path.parent)              # the other run, under its lock
+        return written
+
+    monkeypatch.setattr(Path, "write_bytes", write_then_removed)
+    run = run_cli(["batch", config, "--workers", "1"])
+    assert run.exit_code == 0, run.stderr
+    assert not list(out.glob(".write-test-*"))
+
+
 def test_a_killed_run_resumes_where_it_stopped(passes, tmp_path):
     import signal
 

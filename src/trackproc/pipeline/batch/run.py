@@ -74,7 +74,9 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None,
         out.mkdir(parents=True, exist_ok=True)
         probe = out / f".write-test-{os.getpid()}.tmp"      # a read-only file system or a full disk: now
         probe.write_bytes(b"")
-        probe.unlink()
+        # a run holding the lock may have removed it already as a leftover (remove_leftovers: this
+        # probe is written before the lock is taken)
+        probe.unlink(missing_ok=True)
     except OSError as exc:
         raise OutputError(output, exc) from None
     try:
