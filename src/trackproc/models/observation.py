@@ -395,16 +395,15 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         g[ang, :3] = np.where(is_az[:, None], d_az, d_el)
 
     jac = np.zeros((n, ncol))
-    if not partials:
-        for mod in modifiers:
-            mod.apply(value, jac, bias_values, bias_columns, geo)
-        return value, None, geo
-    jac[:, :n_state_params] = np.einsum("ni,nip->np", g, dstate)
-    if up is not None:
-        d_big_t = round_trip_jacobian(geo.u[two], up.u, up.v_st, dstate[two, :3, :n_state_params], c)
-        jac[two, :n_state_params] += g_t[two, None] * d_big_t
+    if partials:
+        jac[:, :n_state_params] = np.einsum("ni,nip->np", g, dstate)
+        if up is not None:
+            d_big_t = round_trip_jacobian(geo.u[two], up.u, up.v_st, dstate[two, :3, :n_state_params], c)
+            jac[two, :n_state_params] += g_t[two, None] * d_big_t
     for mod in modifiers:
         mod.apply(value, jac, bias_values, bias_columns, geo)
+    if not partials:
+        return value, None, geo
     for mod in timed:
         col = bias_columns.get(mod.name)
         if col is not None:

@@ -42,6 +42,11 @@ from trackproc.pipeline.range_corrections import range_correction_modifiers
 MODEL_MEMO = 4
 
 
+def _memo_key(x, cols, fixed) -> tuple:
+    """A :class:`Problem`'s memo key of a model result: the values, and the selection too."""
+    return x.tobytes(), tuple(cols), repr(sorted(fixed.items()))
+
+
 @dataclass
 class Problem:
     """An assembled estimation problem: samples, parameters, model (reusable, e.g. Monte Carlo).
@@ -118,19 +123,10 @@ class Problem:
         its sensitivities propagated too) without the partials, for a step rule's trial point."""
         x = np.asarray(x, float)
         cols, fixed = self._columns()
-        hit = self.__dict__.get("_memo", {}).get((x.tobytes(), tuple(cols), repr(sorted(fixed.items()))))
+        hit = self.__dict__.get("_memo", {}).get(_memo_key(x, cols, fixed))
         if hit is not None and hit[2] is self.force_model:
             return hit[0].copy()
-        values = dict(fixed)
-        values.update({n: x[i] for n, i in cols.items()})
-        try:
-            h, _, _ = ob.evaluate(self.meas, self.trajectory(x), n_state_params=6 + len(self.force_names),
-                                  modifiers=self.modifiers, bias_values=values, bias_columns=cols,
-                                  n_columns=x.size, range_rate_model=self.range_rate_model, partials=False)
-        except ValueError as exc:
-            raise ArithmeticError(str(exc)) from None
-        self.evaluations += 1
-        return h
+        return self._model(x, cols, fixed, partials=False)[0]
 
     def model(self, x):
         """``(computed (N,), jacobian (N, n))`` at the selected parameter values ``x`` (copies of
@@ -139,7 +135,7 @@ class Problem:
         scans)."""
         x = np.asarray(x, float)
         cols, fixed = self._columns()
-        key = (x.tobytes(), tuple(cols), repr(sorted(fixed.items())))      # the selection too
+        key = _memo_key(x, cols, fixed)
         memo = self.__dict__.setdefault("_memo", {})
         hit = memo.get(key)
         if hit is not None and hit[2] is self.force_model:
@@ -150,14 +146,14 @@ class Problem:
         memo[key] = (h, jac, self.force_model)
         return h.copy(), jac.copy()
 
-    def _model(self, x, cols, fixed):
+    def _model(self, x, cols, fixed, partials: bool = True):
         values = dict(fixed)
         values.update({n: x[i] for n, i in cols.items()})
         try:
             traj = self.trajectory(x)
             h, jac, _ = ob.evaluate(self.meas, traj, n_state_params=6 + len(self.force_names),
                                     modifiers=self.modifiers, bias_values=values, bias_columns=cols,
-                                    n_columns=x.size, range_rate_model=self.range_rate_model)
+                                    n_columns=x.size, range_rate_model=self.range_rate_model, partials=partials)
         except ValueError as exc:
             raise ArithmeticError(str(exc)) from None
         self.evaluations += 1

@@ -106,8 +106,8 @@ class Refinement:
         """:meth:`pointwise_model`'s values alone (the same numbers, no Jacobian)."""
         return self.problem.values(np.asarray(x, float)[: self.n_problem])
 
-    def values(self):
-        """The values-only function of :meth:`data`'s model."""
+    def values_function(self):
+        """The values-only function of :meth:`data`'s model (for a step rule's trial point)."""
         return self.integral["model"].values if self.options.cost == "integral" else self.pointwise_values
 
     def constraints(self, x):
@@ -158,7 +158,7 @@ class Refinement:
         priors = self.priors_at(prior_centre)
         start = self.x0 if x0 is None else np.asarray(x0, float)
         opts = Options(max_iterations=self.options.max_iterations, clip=clip, rank_rtol=self.options.rank_rtol)
-        model = CachedModel(model, values=self.values())
+        model = CachedModel(model, values=self.values_function())
         retract = geodesic_retraction(model, sigma, self.scales, priors)
         if self.options.circular:
             kkt = self.solve_circular(model, start, y, sigma, priors=priors, periodic=periodic, options=opts,
@@ -209,7 +209,7 @@ class Refinement:
                          bounds=(lo, hi), options=opts, retract=retract), None
 
         sol, kkt = solve_gls(model, self.x0 if x0 is None else np.asarray(x0, float), y, self.noise, fit, clip=clip,
-                             sigma_scale=sigma_scale, edited=self.noise_edited, values=self.values())
+                             sigma_scale=sigma_scale, edited=self.noise_edited, values=self.values_function())
         if kkt is not None:
             kkt = replace(kkt, solution=sol)
         return sol, kkt
