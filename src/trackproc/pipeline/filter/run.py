@@ -283,27 +283,29 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
         ka, kb, restart = chunks.pop(0)
         rows = order[(step[order] >= ka) & (step[order] <= kb)]
         kprev = ka - 1
-        if kprev >= 0 and not local:
-            if restart and settled(p_f[kprev]):
-                # the epoch-anchored reference (DOP853): the filter's state mapped back to the epoch
-                target = (x_f[kprev] if targets is None else np.asarray(targets[kprev], float) / scales) * scales
-                old = _transition(last_traj, steps_t[kprev], n)[0]
-                old_z = np.concatenate([last_traj.state(steps_t[kprev]), x_ref[6:]])
-                delta = target - old_z
-                delta[gm_idx] = 0.0
-                x_ref = x_ref + np.linalg.solve(old, delta)
-        elif kprev >= 0:
-            # the chunk's reference starts at its previous step, from the filter's state there (a
-            # restart) or the current reference's (the same orbit): integrated over the chunk
-            # alone, so the sweep's integration grows with the arc, not with its square. Every
-            # use of the transition below is relative to the anchor (Ψ(t_k) Ψ(t_k-1)⁻¹, J Ψ(t_k)⁻¹).
-            t_anchor = float(steps_t[kprev])
+        if kprev >= 0:
+            target = None
             if restart and settled(p_f[kprev]):
                 target = (x_f[kprev] if targets is None else np.asarray(targets[kprev], float) / scales) * scales
-                x_ref = target.copy()
-                x_ref[gm_idx] = 0.0
+            if not local:
+                if target is not None:
+                    # the epoch-anchored reference (DOP853): the filter's state mapped back to the epoch
+                    old = _transition(last_traj, steps_t[kprev], n)[0]
+                    old_z = np.concatenate([last_traj.state(steps_t[kprev]), x_ref[6:]])
+                    delta = target - old_z
+                    delta[gm_idx] = 0.0
+                    x_ref = x_ref + np.linalg.solve(old, delta)
             else:
-                x_ref = np.concatenate([last_traj.state(t_anchor), x_ref[6:]])
+                # the chunk's reference starts at its previous step, from the filter's state there (a
+                # restart) or the current reference's (the same orbit): integrated over the chunk
+                # alone, so the sweep's integration grows with the arc, not with its square. Every use
+                # of the transition below is relative to the anchor (Ψ(t_k) Ψ(t_k-1)⁻¹, J Ψ(t_k)⁻¹).
+                t_anchor = float(steps_t[kprev])
+                if target is not None:
+                    x_ref = target
+                    x_ref[gm_idx] = 0.0
+                else:
+                    x_ref = np.concatenate([last_traj.state(t_anchor), x_ref[6:]])
         t_need = steps_t[max(kprev, 0):kb + 1]
         if rows.size:
             sub = _sub_problem(problem, np.sort(rows))
