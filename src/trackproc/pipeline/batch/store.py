@@ -203,7 +203,9 @@ def store_result(out: Path, directory: str, result: TaskResult, *, task: str, pa
 
 
 def remove_leftovers(out: Path) -> None:
-    """Temporary files of an interrupted run (``.NAME.XXXX.tmp``): no other run is writing now."""
+    """Temporary files of an interrupted run (``.NAME.XXXX.tmp``), removed under the run's lock:
+    no other run is writing outputs now (another run's write probe, made before it waits for the
+    lock, may go too: that run does not need it back, pipeline/batch/run.py)."""
     removed = 0
     candidates = list(out.glob(".*.tmp"))
     for directory in (out / PASSES_DIR, out / ESTIMATES_DIR):
