@@ -34,8 +34,9 @@ True
 Everything here is pure numpy on SI units; nothing reads files or prints.
 
 One responsibility, the one door to the numerical engines (the Taylor series for two-body and J2,
-DOP853 for the full force model) and the trajectory they return; a little over 400 lines, most of
-it the trajectory's interpolation and that door's argument checks and docs.
+DOP853 for the full force model) and the trajectory they return; under 500 lines, most of it the
+trajectory's interpolation and that door's argument checks and docs, and the same door for a run
+restarted from a later state (:func:`propagate_from`, read on the first epoch's time axis).
 """
 
 from __future__ import annotations
