@@ -267,13 +267,90 @@ def _exp(x: float) -> float:
     return math.exp(min(float(x), 600.0))
 
 
-def _optimise(fun, start, bounds):
-    # scipy's Nelder-Mead written out (the same iterates) without importing scipy.optimize (issue 19)
-    from trackproc.methods.simplex import nelder_mead
+#: The search's stopping point: a step below this in every log-parameter, or a promised gain of
+#: the restricted log-likelihood below ``_FTOL`` (the choice compares 2 Δℓ with thresholds ≥ 2.7).
+_XTOL, _FTOL = 0.01, 5e-4
+#: The step (in log-parameters) of the initial curvature probes.
+_PROBE = 0.5
 
-    x, _, _ = nelder_mead(fun, np.asarray(start, float), xatol=0.05, fatol=0.02, maxfev=30 * len(start))
-    z = np.clip(x, [b[0] for b in bounds], [b[1] for b in bounds])
-    return z, -float(fun(z))
+
+def _optimise(fun, start, bounds, xtol: float = _XTOL, ftol: float = _FTOL, maxiter: int = 40):
+    """Minimise ``fun`` from ``start`` within ``bounds`` (a few log-parameters): quasi-Newton
+    with a trust region (Nocedal & Wright 2006, alg. 4.1 with the exact subproblem of sec. 4.3
+    in these 2-3 dimensions, BFGS updates, eq. 6.19) on forward-difference gradients, a
+    coordinate at a bound whose gradient points out of the box held there (projected
+    gradient). Stops when the quadratic model promises less than ``ftol`` or the step is below
+    ``xtol`` in every coordinate. Returns ``(z, -fun(z))``."""
+    lo = np.array([b[0] for b in bounds], float)
+    hi = np.array([b[1] for b in bounds], float)
+    x = np.clip(np.asarray(start, float), lo, hi)
+    d = x.size
+    f = float(fun(x))
+    h = 1e-4
+
+    def grad(x, f):
+        g = np.empty(d)
+        for i in range(d):
+            step = h if x[i] + h <= hi[i] else -h       # inside the box: the likelihood is defined there
+            y = x.copy()
+            y[i] += step
+            g[i] = (float(fun(y)) - f) / step
+        return g
+
+    g = grad(x, f)
+    # the initial curvature of each coordinate from one probe a finite step downhill (the
+    # likelihood has plateaus where a component vanishes: a unit matrix would stop there)
+    curv = np.empty(d)
+    for i in range(d):
+        step = -_PROBE if g[i] > 0 else _PROBE
+        if not lo[i] <= x[i] + step <= hi[i]:
+            step = -step
+        y = x.copy()
+        y[i] += step
+        fy = float(fun(y))
+        curv[i] = 2.0 * (fy - f - g[i] * step) / step ** 2 if math.isfinite(fy) else 1.0
+    b = np.diag(np.maximum(curv, 0.01))
+    radius = 1.0
+    for _ in range(maxiter):
+        free = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
+        if not free.any() or not np.all(np.isfinite(g)):
+            break
+        gf = g[free]
+        w, v = np.linalg.eigh(b[np.ix_(free, free)])
+        gv = v.T @ gf
+        lam = max(0.0, -float(w.min()) + 1e-10)
+        s = -v @ (gv / (w + lam))
+        if np.linalg.norm(s) > radius:       # the boundary solution: ‖(B + λI)⁻¹g‖ = radius, λ by bisection
+            lo_l, hi_l = lam, lam + np.linalg.norm(gf) / radius + float(np.abs(w).max())
+            for _ in range(40):
+                mid = 0.5 * (lo_l + hi_l)
+                if np.linalg.norm(gv / (w + mid)) > radius:
+                    lo_l = mid
+                else:
+                    hi_l = mid
+            s = -v @ (gv / (w + hi_l))
+        step = np.zeros(d)
+        step[free] = s
+        y = np.clip(x + step, lo, hi)
+        step = y - x
+        pred = -float(g @ step + 0.5 * step @ b @ step)
+        if pred < ftol or np.all(np.abs(step) < xtol):
+            break
+        fy = float(fun(y))
+        rho = (f - fy) / pred if math.isfinite(fy) else -1.0
+        if rho < 0.25:
+            radius = 0.25 * float(np.linalg.norm(step))
+        elif rho > 0.75 and np.linalg.norm(step) > 0.9 * radius:
+            radius *= 2.0
+        if rho > 0.0:
+            gy = grad(y, fy)
+            dg = gy - g
+            sy = float(step @ dg)
+            if sy > 1e-12:                  # BFGS keeps B positive definite only with sᵀy > 0
+                bs = b @ step
+                b = b - np.outer(bs, bs) / float(step @ bs) + np.outer(dg, dg) / sy
+            x, f, g = y, fy, gy
+    return x, -f
 
 
 def candidate_models(noise: str, oscillator: bool) -> tuple:
@@ -311,6 +388,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     span = max(float(ts.max() - ts.min()), 1.0)
     step = max(float(np.median(np.diff(t))) if n > 1 else 1.0, 1e-3)
     tau_lo, tau_hi = math.log(0.5 * step), math.log(2.0 * span)
+    z_sig = -math.log(span)
 
     reml = _Reml(ts, rs, xs, t0, dense)
     sd = max(float(np.std(rs)), 1e-12)
@@ -347,22 +425,22 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
         starts = [[]]
         bounds: list = []
         if has_ar:        # coarse start in τ: the likelihood has local maxima there
-            starts = [[math.log(a), tt] for tt in np.linspace(tau_lo, tau_hi, 4) for a in (1e-3, 0.3, 3.0)]
+            starts = [[za, tt] for tt in np.linspace(tau_lo, tau_hi, 4) for za in (-4.0, -1.5, 1.0)]
             bounds += [(-12.0, 12.0), (tau_lo, tau_hi)]
-        if has_walk:
-            starts = [z + [math.log(b / step)] for z in starts for b in (1e-4, 1e-1)]
+        if has_walk:      # about the intensity whose variance over the pass equals the white noise's
+            starts = [z + [zq] for z in starts for zq in (z_sig - 3.0, z_sig, z_sig + 3.0)]
             bounds += [(-40.0, 20.0)]
         if given:
             starts = [z + [math.log(sd)] for z in starts]
             bounds += [(math.log(sd) - 20.0, math.log(sd) + 5.0)]
-        if has_ar and has_walk and not given:     # nested starts: the AR(1) alone, the walk alone
-            for other in ("ar1", "walk"):
-                if other in fitted:
-                    o = fitted[other][0]
-                    a_r = max(o.ar_sigma / o.white, 1e-3) ** 2 if o.ar_sigma > 0 else 1e-3
-                    tau_r = o.ar_tau_s if o.ar_tau_s > 0 else math.exp(tau_hi)
-                    q_r = max(o.walk / o.white, 1e-6) ** 2 if o.walk > 0 else 1e-6
-                    starts.append([math.log(a_r), math.log(tau_r), math.log(q_r)])
+        if has_ar and has_walk and not given:     # the nested fits: the AR(1) alone, the walk alone, both
+            zf = {o: fitted[o][3] for o in ("ar1", "walk") if o in fitted}
+            starts = [] if zf else starts
+            if "ar1" in zf:
+                starts.append([zf["ar1"][0], zf["ar1"][1], z_sig - 6.0])
+            if "walk" in zf:
+                starts.append([-4.0, tau_hi, zf["walk"][0]])
+                starts += [[0.0, tt, zf["walk"][0]] for tt in (tau_lo, tau_hi)]
         if not bounds:
             ll, s = reml(NoiseModel(1.0))
             nm, k = NoiseModel(s), 1
@@ -375,7 +453,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
             k = len(z) + (0 if given else 1)
         if white_floor > 0 and nm.white < white_floor:
             nm = replace(nm, white=white_floor)
-        fitted[name] = (nm, ll, k)
+        fitted[name] = (nm, ll, k, z if bounds else None)
         cands[name] = {"loglik_restricted": ll, "parameters": k, **nm.as_dict()}
 
     # choice: a correlated model must beat the simplest candidate by 2 Δℓ_R > max(d ln m, χ²_p(d))
@@ -384,10 +462,10 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     # to tell apart on one pass, and taking the one for the other leaves the offset and drift
     # overconfident, checked by Monte Carlo in tests/pipeline/test_refine_noise.py)
     base = min(models, key=lambda name: fitted[name][2])
-    _, ll_base, k_base = fitted[base]
+    _, ll_base, k_base, _ = fitted[base]
     passing = [base]
     for name in models:
-        _, ll, k = fitted[name]
+        _, ll, k, _ = fitted[name]
         d = k - k_base
         if d > 0 and 2.0 * (ll - ll_base) > max(d * math.log(m), chi2_quantile(d, p_select)):
             passing.append(name)
