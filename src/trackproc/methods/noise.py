@@ -272,6 +272,8 @@ def _exp(x: float) -> float:
 _XTOL, _FTOL = 0.01, 5e-4
 #: The step (in log-parameters) of the initial curvature probes.
 _PROBE = 0.5
+#: The floor of the initial curvatures: on a plateau a step goes to the trust radius.
+_CMIN = 1e-3
 
 
 def _optimise(fun, start, bounds, xtol: float = _XTOL, ftol: float = _FTOL, maxiter: int = 40):
@@ -301,6 +303,8 @@ def _optimise(fun, start, bounds, xtol: float = _XTOL, ftol: float = _FTOL, maxi
     # the initial curvature of each coordinate from one probe a finite step downhill (the
     # likelihood has plateaus where a component vanishes: a unit matrix would stop there)
     curv = np.empty(d)
+    steps = np.empty(d)
+    probe = np.empty(d)
     for i in range(d):
         step = -_PROBE if g[i] > 0 else _PROBE
         if not lo[i] <= x[i] + step <= hi[i]:
@@ -308,8 +312,19 @@ def _optimise(fun, start, bounds, xtol: float = _XTOL, ftol: float = _FTOL, maxi
         y = x.copy()
         y[i] += step
         fy = float(fun(y))
+        steps[i], probe[i] = step, fy
         curv[i] = 2.0 * (fy - f - g[i] * step) / step ** 2 if math.isfinite(fy) else 1.0
-    b = np.diag(np.maximum(curv, 0.01))
+    b = np.diag(np.maximum(curv, _CMIN))
+    if np.all(curv > 0.01) and np.all(np.isfinite(probe)):
+        hess = np.diag(curv)
+        for i in range(d):
+            for j in range(i + 1, d):
+                y = x.copy()
+                y[i] += steps[i]
+                y[j] += steps[j]
+                hess[i, j] = hess[j, i] = (float(fun(y)) - probe[i] - probe[j] + f) / (steps[i] * steps[j])
+        if np.all(np.isfinite(hess)) and np.linalg.eigvalsh(hess).min() > 0.01:
+            b = hess
     radius = 1.0
     for _ in range(maxiter):
         free = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
@@ -321,10 +336,11 @@ def _optimise(fun, start, bounds, xtol: float = _XTOL, ftol: float = _FTOL, maxi
         lam = max(0.0, -float(w.min()) + 1e-10)
         s = -v @ (gv / (w + lam))
         if np.linalg.norm(s) > radius:       # the boundary solution: ‖(B + λI)⁻¹g‖ = radius, λ by bisection
-            lo_l, hi_l = lam, lam + np.linalg.norm(gf) / radius + float(np.abs(w).max())
+            wl, gl = w.tolist(), gv.tolist()
+            lo_l, hi_l = lam, lam + float(np.linalg.norm(gf)) / radius + max(abs(e) for e in wl)
             for _ in range(40):
                 mid = 0.5 * (lo_l + hi_l)
-                if np.linalg.norm(gv / (w + mid)) > radius:
+                if sum((gi / (wi + mid)) ** 2 for gi, wi in zip(gl, wl)) > radius * radius:
                     lo_l = mid
                 else:
                     hi_l = mid
@@ -441,10 +457,10 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
             zf = {o: fitted[o][3] for o in ("ar1", "walk") if o in fitted}
             starts = [] if zf else starts
             if "ar1" in zf:
-                starts.append([zf["ar1"][0], zf["ar1"][1], z_sig - 6.0])
+                starts += [[zf["ar1"][0], zf["ar1"][1], z_sig + o] for o in (-6.0, -3.0, 0.0)]
             if "walk" in zf:
                 starts.append([-4.0, tau_hi, zf["walk"][0]])
-                starts += [[0.0, tt, zf["walk"][0]] for tt in (tau_lo, tau_hi)]
+                starts.append([0.0, tau_lo, zf["walk"][0]])
         if not bounds:
             ll, s = reml(NoiseModel(1.0))
             nm, k = NoiseModel(s), 1
