@@ -459,7 +459,9 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
             if "ar1" in zf:
                 starts += [[zf["ar1"][0], zf["ar1"][1], z_sig + o] for o in (-6.0, -3.0, 0.0)]
             if "walk" in zf:
-                starts.append([-4.0, tau_hi, zf["walk"][0]])
+                # an AR(1) of 3 % of the white noise at the longest τ: it and the offset and drift
+                # are nearly one thing, the likelihood is flat along it and the search leaves it here
+                starts.append([math.log(1e-3), tau_hi, zf["walk"][0]])
                 starts.append([0.0, tau_lo, zf["walk"][0]])
         if not bounds:
             ll, s = reml(NoiseModel(1.0))
