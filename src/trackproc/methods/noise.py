@@ -421,8 +421,8 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
 
         def build(z, has_ar=has_ar, has_walk=has_walk, given=given) -> NoiseModel:
             # z: log(σ_a/σ_w)², log τ (AR); log(q/σ_w)² (walk); log σ_w (when the walk is given)
-            # (the simplex is unbounded, its result clipped to the bounds: exp is capped so that a far
-            # excursion is a poor likelihood, not an OverflowError)
+            # (the search stays within the bounds; exp is capped so that a point far out is a poor
+            # likelihood, not an OverflowError)
             w = _exp(z[-1]) if given else 1.0
             a = math.sqrt(_exp(z[0])) * w if has_ar else 0.0
             tau = _exp(z[1]) if has_ar else 0.0
@@ -432,8 +432,8 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
         memo: dict = {}
 
         def evaluate(z, build=build, given=given, memo=memo):
-            """``(ℓ_R, ŝ)`` at ``z``, each point once: the search starts at the best grid point and
-            ends by re-reading its best vertex (the same numbers, one likelihood evaluation each)."""
+            """``(ℓ_R, ŝ)`` at ``z``, each point once: the search starts at the best start, already
+            evaluated, and the scale is read at its end point (one likelihood evaluation each)."""
             key = np.asarray(z, float).tobytes()
             if key not in memo:
                 memo[key] = reml(build(z), profile=not given)
@@ -444,16 +444,19 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
 
         starts = [[]]
         bounds: list = []
-        if has_ar:        # coarse start in τ: the likelihood has local maxima there
+        # starts (the best one is searched from): a coarse grid in τ (the likelihood has local
+        # maxima there) and in the AR(1)'s share; the walk about the intensity whose variance over
+        # the pass equals the white noise's (below it the likelihood is flat: no walk)
+        if has_ar:
             starts = [[za, tt] for tt in np.linspace(tau_lo, tau_hi, 4) for za in (-4.0, -1.5, 1.0)]
             bounds += [(-12.0, 12.0), (tau_lo, tau_hi)]
-        if has_walk:      # about the intensity whose variance over the pass equals the white noise's
+        if has_walk:
             starts = [z + [zq] for z in starts for zq in (z_sig - 3.0, z_sig, z_sig + 3.0)]
             bounds += [(-40.0, 20.0)]
         if given:
             starts = [z + [math.log(sd)] for z in starts]
             bounds += [(math.log(sd) - 20.0, math.log(sd) + 5.0)]
-        if has_ar and has_walk and not given:     # the nested fits: the AR(1) alone, the walk alone, both
+        if has_ar and has_walk and not given:     # from the nested fits: the AR(1) alone, the walk alone
             zf = {o: fitted[o][3] for o in ("ar1", "walk") if o in fitted}
             starts = [] if zf else starts
             if "ar1" in zf:

@@ -4,8 +4,10 @@
 linear algebra, FFTs, rotations, linear programming ...) for the two routines ``refine``,
 ``estimate`` and ``smooth`` use from it:
 
-* :func:`nelder_mead`, the downhill simplex of Nelder & Mead (1965), for the REML noise-model
-  search (:func:`trackproc.methods.noise.fit_noise`);
+* :func:`nelder_mead`, the downhill simplex of Nelder & Mead (1965) (the REML noise-model search
+  used it until it moved to a quasi-Newton search with far fewer likelihood evaluations,
+  :func:`trackproc.methods.noise._optimise`; tests/methods/test_simplex.py still holds it to
+  scipy's bits on those likelihoods);
 * :func:`brentq`, Brent's (1973) root finder ("zeroin": inverse quadratic interpolation,
   secant steps and bisection), for the AR(1) moment equation and the traverse station.
 

@@ -219,8 +219,8 @@ def kept_markov_factor(model, t: np.ndarray, t0: Optional[float], grid: Optional
     """``MarkovFactor(model, t, t0, grid)``, kept while the factors kept hold fewer than
     :data:`_KEPT_SAMPLES` samples (least recently used dropped first): the factor depends on
     nothing else, and the REML searches of one pass (:func:`trackproc.methods.noise.fit_noise`,
-    once per update of the orbit) walk the same simplex points as long as the likelihoods keep
-    their order, so most of their models recur on the pass's times. ``grid`` must be
+    once per update of the orbit) evaluate the same points as long as the residuals barely
+    change, so most of their models recur on the pass's times. ``grid`` must be
     :func:`markov_grid` of ``t`` and ``t0``. A factor is never changed after it is made, so one
     object serves every caller."""
     t = np.asarray(t, float)
