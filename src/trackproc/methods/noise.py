@@ -279,7 +279,8 @@ _CMIN = 1e-3
 def _optimise(fun, start, bounds, xtol: float = _XTOL, ftol: float = _FTOL, maxiter: int = 40):
     """Minimise ``fun`` from ``start`` within ``bounds`` (a few log-parameters): quasi-Newton
     with a trust region (Nocedal & Wright 2006, alg. 4.1 with the exact subproblem of sec. 4.3
-    in these 2-3 dimensions, BFGS updates, eq. 6.19) on forward-difference gradients, a
+    in these 2-3 dimensions, BFGS updates, eq. 6.19) on forward-difference gradients, the first
+    Hessian from one probe ``_PROBE`` downhill per coordinate and their cross terms, a
     coordinate at a bound whose gradient points out of the box held there (projected
     gradient). Stops when the quadratic model promises less than ``ftol`` or the step is below
     ``xtol`` in every coordinate. Returns ``(z, -fun(z))``, ``z`` rounded to 0.001."""
