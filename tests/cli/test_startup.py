@@ -90,8 +90,8 @@ def test_plain_values_equal_typers_own_coercion():
 @pytest.mark.subprocess
 def test_the_tour_does_not_import_scipy_optimize(tmp_path):
     """ingest -> smooth -> refine -> estimate of the README tour in one process: none of them
-    imports scipy.optimize (or scipy.integrate, which imports it): the noise model's simplex and
-    the root finders are methods/simplex.py (scipy's iterates, tests/methods/test_simplex.py); the
+    imports scipy.optimize (or scipy.integrate, which imports it): the noise model's search is
+    methods/noise.py's, the root finder methods/roots.py (scipy's iterates, tests/methods/test_roots.py); the
     first three do not import scipy.special either (tests/methods/test_distributions.py)."""
     out = str(tmp_path)
     commands = [

@@ -12,7 +12,7 @@ from trackproc.constants import MU_EARTH, OMEGA_EARTH
 
 from trackproc.methods.ballistic.conic import (DIRECTIONS, R_PLANAR, anomaly_at, final_anomaly, impact_to_conic, radius,
                                                time_from_apogee)
-from trackproc.methods.simplex import brentq
+from trackproc.methods.roots import brentq
 
 
 def elevation(theta, phi, p_m, e, radius_m: float = R_PLANAR):

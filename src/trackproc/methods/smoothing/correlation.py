@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from trackproc.methods.simplex import brentq
+from trackproc.methods.roots import brentq
 from trackproc.methods.smoothing.fit import (MAX_RHO, NoiseModel, check_arrays, design_matrix, ou_apply, pass_domain,
                                              replace_fit)
 

@@ -16,7 +16,7 @@ from trackproc.dynamics import measurement_spectra as ms
 from trackproc.dynamics import timescales as ts
 from trackproc.errors import ProcessingError
 from trackproc.methods.refinement import range_rate_samples
-from trackproc.methods.simplex import brentq
+from trackproc.methods.roots import brentq
 from trackproc.models import observation as ob
 from trackproc.pipeline.refine.problem import Refinement, link_mode, state_prior_covariance
 from trackproc.pipeline.timing import time_tag_rate

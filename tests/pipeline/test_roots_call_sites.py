@@ -1,6 +1,6 @@
-"""The root finder of methods/simplex.py at its pipeline call site (issue 19): the traverse station
+"""The root finder of methods/roots.py at its pipeline call site: the traverse station
 of the seed 004 Table 1 scenario (pipeline/refine/traverse.py) is the same, to the bit, with
-scipy.optimize.brentq; the algorithm itself is compared with scipy's in tests/methods/test_simplex.py."""
+scipy.optimize.brentq; the algorithm itself is compared with scipy's in tests/methods/test_roots.py."""
 
 from __future__ import annotations
 
