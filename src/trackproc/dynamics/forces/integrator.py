@@ -11,8 +11,9 @@ sensitivities ``S`` (variational equations, Montenbruck & Gill 2000 eqs. 7.42-7.
 The result is a :class:`trackproc.dynamics.taylor.Propagation` like the Taylor engine's, so
 every consumer (dense states, STM, measurement spectra) works unchanged: each accepted
 DOP853 step's 7th-degree dense output is converted to the position polynomial about the
-step's start (8 Chebyshev-Lobatto samples, exact for a degree-7 polynomial), the velocity
-being its derivative.
+step's start (8 Chebyshev-Lobatto samples, exact for a degree-7 polynomial; the value and
+slope at the start taken out first, against rounding: :func:`_spectra`), the velocity being its
+derivative.
 
 Steps are at most ``T / (2N)`` (:func:`max_step_s`: T the orbital period, N the field's
 degree), else DOP853's error estimate misses the field's shortest waves. Tolerances: ``rtol`` on the state (scaled by √(6/n) because scipy's error norm is the RMS
@@ -63,6 +64,38 @@ EVENT_PAST_S = 1e-6
 _DEGREE = 7
 _NODES = 0.5 * (1.0 - np.cos(np.pi * np.arange(_DEGREE + 1) / _DEGREE))
 _VINV = np.linalg.inv(np.vander(_NODES, _DEGREE + 1, increasing=True))
+
+
+def _derivative_pairs(n: int) -> tuple:
+    """Indices of the position-like components of an integrated vector of length n (the state,
+    then Φ and S row by row, :func:`propagate`) and of their time derivatives (the velocity rows)."""
+    npar = (n - 42) // 6 if n > 6 else 0
+    pos, vel = [0, 1, 2], [3, 4, 5]
+    for base, width in ((6, 6), (42, npar)) if n > 6 else ():
+        for i in range(3):
+            pos += range(base + width * i, base + width * (i + 1))
+            vel += range(base + width * (i + 3), base + width * (i + 4))
+    return np.array(pos, int), np.array(vel, int)
+
+
+def _spectra(vals: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """``(S, n, 8)`` polynomial coefficients in seconds from the step's start of the dense output's
+    values ``vals`` (S, 8 nodes, n) over steps of length ``h`` (S,). The value and, for a position-like
+    component, the slope at the step's start (its velocity component) are taken out before the
+    interpolation and put back after (the same polynomial in exact arithmetic): the Vandermonde solve's
+    rounding (~1e-16 × its condition ~1e4 × the values) then acts on the curvature (~1e4 m over a LEO
+    step) instead of the 7e6 m of the position: consecutive steps meet to ~4e-8 m instead of ~1e-5 m
+    (a jitter of the reference between a filter's steps that its time update takes for a change of
+    the orbit); the velocities' ~7e-8 m/s at the joins are then the dense output's own error."""
+    pos, vel = _derivative_pairs(vals.shape[-1])
+    start = vals[:, 0, :].copy()                                 # (S, n): the values at the step's start
+    slope = np.zeros_like(start)
+    slope[:, pos] = vals[:, 0, vel] * h[:, None]                 # d/dx, x = (t - t_old) / h
+    rest = vals - start[:, None, :] - slope[:, None, :] * _NODES[None, :, None]
+    a = np.matmul(_VINV, rest)                                   # (S, 8 powers, n)
+    a[:, 0] += start
+    a[:, 1] += slope
+    return np.swapaxes(a, 1, 2) / h[:, None, None] ** np.arange(_DEGREE + 1)
 
 
 def max_step_s(model, state) -> float:
@@ -219,7 +252,7 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
         k = _reentry_step(np.linalg.norm(vals[:, -1, :3], axis=1)) if len(vals) else None
         if k is not None:                        # the steps up to the first one that ends below
             outcome, t_new, h, vals = Outcome.REENTRY, t_new[:k + 1], h[:k + 1], vals[:k + 1]
-        c = np.swapaxes(np.matmul(_VINV, vals), 1, 2) / h[:, None, None] ** np.arange(_DEGREE + 1)
+        c = _spectra(vals, h)
         coefs = list(c[:, None, 0:3])
         senss = []
         if stm:
@@ -270,7 +303,7 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
                     continue
             signs = new
         vals = dense(t_old + h * _NODES)                            # (n, 8); 3 extra evaluations
-        c = (_VINV @ vals.T).T / h ** np.arange(_DEGREE + 1)        # (n, 8), seconds
+        c = _spectra(vals.T[None], np.array([h]))[0]                # (n, 8), seconds
         coefs.append(c[pos_rows][None])
         if stm:
             phi = c[6:42].reshape(6, 6, -1)[:3]                        # (3, 6, 8)
