@@ -11,9 +11,8 @@ sensitivities ``S`` (variational equations, Montenbruck & Gill 2000 eqs. 7.42-7.
 The result is a :class:`trackproc.dynamics.taylor.Propagation` like the Taylor engine's, so
 every consumer (dense states, STM, measurement spectra) works unchanged: each accepted
 DOP853 step's 7th-degree dense output is converted to the position polynomial about the
-step's start (8 Chebyshev-Lobatto samples, exact for a degree-7 polynomial; the value and
-slope at the start taken out first, against rounding: :func:`_spectra`), the velocity being its
-derivative.
+step's start (8 Chebyshev-Lobatto samples, exact for a degree-7 polynomial, and the step's
+velocities at both ends: degree 9, :func:`_spectra`), the velocity being its derivative.
 
 Steps are at most ``T / (2N)`` (:func:`max_step_s`: T the orbital period, N the field's
 degree), else DOP853's error estimate misses the field's shortest waves. Tolerances: ``rtol`` on the state (scaled by √(6/n) because scipy's error norm is the RMS
@@ -64,6 +63,13 @@ EVENT_PAST_S = 1e-6
 _DEGREE = 7
 _NODES = 0.5 * (1.0 - np.cos(np.pi * np.arange(_DEGREE + 1) / _DEGREE))
 _VINV = np.linalg.inv(np.vander(_NODES, _DEGREE + 1, increasing=True))
+#: coefficients of a step's polynomial: the 8 nodes' values and the slopes at both ends
+_NCOEF = _DEGREE + 3
+_P = np.polynomial.polynomial
+_W = _P.polyfromroots(_NODES)                                   # w(x) = prod (x - x_i), zero at every node
+_DW0, _DW1 = _P.polyval(0.0, _P.polyder(_W)), _P.polyval(1.0, _P.polyder(_W))
+_D0 = np.arange(_DEGREE + 1) * (np.arange(_DEGREE + 1) == 1)    # p'(0) from increasing coefficients
+_D1 = np.arange(_DEGREE + 1).astype(float)                      # p'(1)
 
 
 def _derivative_pairs(n: int) -> tuple:
@@ -79,23 +85,37 @@ def _derivative_pairs(n: int) -> tuple:
 
 
 def _spectra(vals: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """``(S, n, 8)`` polynomial coefficients in seconds from the step's start of the dense output's
-    values ``vals`` (S, 8 nodes, n) over steps of length ``h`` (S,). The value and, for a position-like
-    component, the slope at the step's start (its velocity component) are taken out before the
-    interpolation and put back after (the same polynomial in exact arithmetic): the Vandermonde solve's
-    rounding (~1e-16 × its condition ~1e4 × the values) then acts on the curvature (~1e4 m over a LEO
-    step) instead of the 7e6 m of the position: consecutive steps meet to ~4e-8 m instead of ~1e-5 m
-    (a jitter of the reference between a filter's steps that its time update takes for a change of
-    the orbit); the velocities' ~7e-8 m/s at the joins are then the dense output's own error."""
+    """``(S, n, 10)`` polynomial coefficients in seconds from the step's start of the dense output's
+    values ``vals`` (S, 8 nodes, n) over steps of length ``h`` (S,): a position-like component through
+    its 8 values, its slopes at both ends its velocity component's values there (Hermite conditions at
+    the ends), so that neighbouring steps meet in position and velocity; a velocity-like component
+    (unused) through its values. The value and slope at the start are taken out before the
+    Vandermonde solve, against its rounding (~1e-16 × its condition ~1e4 × the values: on the 7e6 m
+    of the position ~1e-5 m, on the curvature, ~1e4 m over a LEO step, ~1e-8 m), and the end slope is
+    set by ``w(x) (α + β x)``, w zero at every node. Joins within ~4e-8 m and ~1e-12 m/s: a filter's
+    time update between two of the reference's states takes any jitter there for a change of the orbit
+    (docs/filter.md)."""
     pos, vel = _derivative_pairs(vals.shape[-1])
     start = vals[:, 0, :].copy()                                 # (S, n): the values at the step's start
     slope = np.zeros_like(start)
     slope[:, pos] = vals[:, 0, vel] * h[:, None]                 # d/dx, x = (t - t_old) / h
     rest = vals - start[:, None, :] - slope[:, None, :] * _NODES[None, :, None]
-    a = np.matmul(_VINV, rest)                                   # (S, 8 powers, n)
+    a7 = np.matmul(_VINV, rest)                                  # (S, 8 powers, n)
+    a = np.zeros((a7.shape[0], _NCOEF, a7.shape[2]))
+    a[:, :_DEGREE + 1] = a7
+    # the slopes at both ends made the step's velocities: w(x) (alpha + beta x) leaves the values at
+    # the nodes and sets p'(0), p'(1)
+    r0 = np.zeros_like(start)
+    r1 = np.zeros_like(start)
+    r0[:, pos] = -np.einsum("k,skn->sn", _D0, a7[:, :, pos])
+    r1[:, pos] = (vals[:, -1, vel] - vals[:, 0, vel]) * h[:, None] - np.einsum("k,skn->sn", _D1, a7[:, :, pos])
+    alpha = r0 / _DW0
+    beta = r1 / _DW1 - alpha
+    a[:, :_DEGREE + 2] += _W[None, :, None] * alpha[:, None, :]
+    a[:, 1:] += _W[None, :, None] * beta[:, None, :]
     a[:, 0] += start
     a[:, 1] += slope
-    return np.swapaxes(a, 1, 2) / h[:, None, None] ** np.arange(_DEGREE + 1)
+    return np.swapaxes(a, 1, 2) / h[:, None, None] ** np.arange(_NCOEF)
 
 
 def max_step_s(model, state) -> float:
@@ -256,8 +276,8 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
         coefs = list(c[:, None, 0:3])
         senss = []
         if stm:
-            phi = c[:, 6:42].reshape(-1, 6, 6, _DEGREE + 1)[:, :3]
-            sens = phi if not npar else np.concatenate([phi, c[:, 42:].reshape(-1, 6, npar, _DEGREE + 1)[:, :3]], 2)
+            phi = c[:, 6:42].reshape(-1, 6, 6, _NCOEF)[:, :3]
+            sens = phi if not npar else np.concatenate([phi, c[:, 42:].reshape(-1, 6, npar, _NCOEF)[:, :3]], 2)
             senss = list(sens[:, None])
         return _result(model, outcome, [0.0] + list(t_new), coefs, senss, stm, est, rtol, force_label)
     from scipy.integrate import DOP853  # start-up: scipy.integrate (~0.3 s) only on the numpy path
@@ -338,10 +358,10 @@ def _result(model, outcome, times, coefs, senss, stm, est, rtol, force_label) ->
         coef_arr = np.stack(coefs)
         sens_arr = np.stack(senss) if stm else None
     else:
-        coef_arr = np.empty((0, 1, 3, _DEGREE + 1))
-        sens_arr = np.empty((0, 1, 3, 6 + npar, _DEGREE + 1)) if stm else None
+        coef_arr = np.empty((0, 1, 3, _NCOEF))
+        sens_arr = np.empty((0, 1, 3, 6 + npar, _NCOEF)) if stm else None
     f = model.field
     return Propagation(outcome=outcome, step_times_s=np.array(times), coefficients=coef_arr,
                        sensitivities=sens_arr, parameters=(STATE_PARAMETERS + est) if stm else (),
-                       order=_DEGREE - 1, tol=float(rtol), force=force_label, mu_m3_s2=f.gm_m3_s2,
+                       order=_NCOEF - 2, tol=float(rtol), force=force_label, mu_m3_s2=f.gm_m3_s2,
                        j2=f.j2(), re_m=f.radius_m, batch=False)
