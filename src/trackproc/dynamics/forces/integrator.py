@@ -68,7 +68,7 @@ _NCOEF = _DEGREE + 3
 _P = np.polynomial.polynomial
 _W = _P.polyfromroots(_NODES)                                   # w(x) = prod (x - x_i), zero at every node
 _DW0, _DW1 = _P.polyval(0.0, _P.polyder(_W)), _P.polyval(1.0, _P.polyder(_W))
-_D0 = np.arange(_DEGREE + 1) * (np.arange(_DEGREE + 1) == 1)    # p'(0) from increasing coefficients
+_D0 = (np.arange(_DEGREE + 1) == 1).astype(float)              # p'(0) from increasing coefficients
 _D1 = np.arange(_DEGREE + 1).astype(float)                      # p'(1)
 
 
@@ -323,10 +323,10 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
                     continue
             signs = new
         vals = dense(t_old + h * _NODES)                            # (n, 8); 3 extra evaluations
-        c = _spectra(vals.T[None], np.array([h]))[0]                # (n, 8), seconds
+        c = _spectra(vals.T[None], np.array([h]))[0]                # (n, 10), seconds
         coefs.append(c[pos_rows][None])
         if stm:
-            phi = c[6:42].reshape(6, 6, -1)[:3]                        # (3, 6, 8)
+            phi = c[6:42].reshape(6, 6, -1)[:3]                        # (3, 6, 10)
             sens = phi if not npar else np.concatenate([phi, c[42:].reshape(6, npar, -1)[:3]], 1)
             senss.append(sens[None])
         times.append(solver.t)
