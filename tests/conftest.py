@@ -225,7 +225,11 @@ SLOW_CPU: dict[str, str | dict[str, str]] = {
         "test_a_restarted_trajectory_sees_the_absolute_time_of_the_sun_and_the_moon": "full-force restarts: "
                                                                                       "compiles the force kernels "
                                                                                       "on a fresh clone",
-        "test_the_propagated_span_grows_with_the_arc_not_its_square": "filters over 1 and 4 days, 1.1 s"},
+        "test_the_propagated_span_grows_with_the_arc_not_its_square": "filters over 1 and 4 days, 1.1 s",
+        "test_a_full_force_reference_restarts_at_each_segment_and_stays_the_epochs_trajectory":
+            "a 2-day full-force sweep: compiles the force kernels on a fresh clone",
+        "test_the_full_models_steps_meet_without_a_jump": "full-force run: compiles the force kernels on a "
+                                                          "fresh clone"},
     "test_forces_native.py": {
         "test_undefined_symbols_match_nm": "stores the machine code when none is: compiles the force kernels on a "
                                            "fresh clone"},

@@ -17,7 +17,7 @@ BASE = ["filter", SAMPLE / "multistation.parquet", "--initial", SAMPLE / "stale.
         "--apriori-sigma", "range_bias=1000", "--kinds", "range,range_rate"]
 
 
-@pytest.mark.slow           # five sweeps of filter and smoother under the full model, ~5 s of CPU
+@pytest.mark.slow           # four sweeps of filter and smoother under the full model, ~1 s of CPU
 def test_dmc_accelerations_are_estimated_states_with_sigmas(run_cli, tmp_path):
     out = tmp_path / "dmc.json"
     result = run_cli(BASE + ["--force", "full", "--gravity", "2x0", "--third-body", "none", "--no-relativity",

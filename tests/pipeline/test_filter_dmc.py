@@ -105,10 +105,9 @@ def test_mismodelled_drag_dmc_nees_monte_carlo(drag):
     from trackproc.dynamics import jit
 
     nf, ns, ok = [], [], 0
-    # the compiled integrator for every segment: alone, the filter's short segments take the numpy
-    # path (integrator.use_compiled), twice the CPU a draw; the two paths agree to micrometres, far
-    # below the metre-level errors whose NEES is tested, and the single run above keeps the
-    # automatic choice
+    # the compiled integrator for every draw: the sweep's choice for this arc too (made once for the
+    # arc, Problem.compiled_for), pinned so that the draws do not follow that choice's threshold; the
+    # two paths agree to micrometres, far below the metre-level errors whose NEES is tested
     with jit.default("1"):
         for seed in range(100):
             q, a, b = _run(drag, "dmc", seed, dmc=DMC)

@@ -312,7 +312,7 @@ def reference_frame(jd1: float, jd2: float, eop=None) -> QuasiInertialFrame:
 
 def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float = 1e-15,
               stm: bool = False, frame: QuasiInertialFrame | None = None,
-              max_steps: int = 100_000, force_model=None) -> Trajectory:
+              max_steps: int = 100_000, force_model=None, compiled: bool | None = None) -> Trajectory:
     """Propagate a GCRF state to cover times ``t_s`` (s from ``epoch``, either sign).
 
     Parameters
@@ -344,6 +344,9 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
         Integration frame; default that of ``epoch`` (what the simulator uses).
     max_steps : int
         Per run; beyond it the run stops with outcome ``step_limit``.
+    compiled : bool or None
+        For ``"full"``: the compiled (True) or numpy (False) DOP853; None chooses from the run's
+        span (:func:`trackproc.dynamics.forces.integrator.use_compiled`).
 
     Returns
     -------
@@ -394,7 +397,7 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
         env = model.environment(jd, q, t_min, max(t_max, _MIN_SPAN_S))
         for end in ends:
             runs.append(integrator.propagate(env, s0, end, stm=stm, rtol=integrator.rtol_for(tol),
-                                             max_steps=max_steps))
+                                             max_steps=max_steps, compiled=compiled))
     else:
         for end in ends:
             runs.append(taylor.propagate(s0, 0.0, end, force=key, mu_m3_s2=mu, j2=j2, re_m=re, tol=tol,

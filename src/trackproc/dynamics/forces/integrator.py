@@ -11,8 +11,8 @@ sensitivities ``S`` (variational equations, Montenbruck & Gill 2000 eqs. 7.42-7.
 The result is a :class:`trackproc.dynamics.taylor.Propagation` like the Taylor engine's, so
 every consumer (dense states, STM, measurement spectra) works unchanged: each accepted
 DOP853 step's 7th-degree dense output is converted to the position polynomial about the
-step's start (8 Chebyshev-Lobatto samples, exact for a degree-7 polynomial), the velocity
-being its derivative.
+step's start (8 Chebyshev-Lobatto samples, exact for a degree-7 polynomial, and the step's
+velocities at both ends: degree 9, :func:`_spectra`), the velocity being its derivative.
 
 Steps are at most ``T / (2N)`` (:func:`max_step_s`: T the orbital period, N the field's
 degree), else DOP853's error estimate misses the field's shortest waves. Tolerances: ``rtol`` on the state (scaled by √(6/n) because scipy's error norm is the RMS
@@ -63,6 +63,59 @@ EVENT_PAST_S = 1e-6
 _DEGREE = 7
 _NODES = 0.5 * (1.0 - np.cos(np.pi * np.arange(_DEGREE + 1) / _DEGREE))
 _VINV = np.linalg.inv(np.vander(_NODES, _DEGREE + 1, increasing=True))
+#: coefficients of a step's polynomial: the 8 nodes' values and the slopes at both ends
+_NCOEF = _DEGREE + 3
+_P = np.polynomial.polynomial
+_W = _P.polyfromroots(_NODES)                                   # w(x) = prod (x - x_i), zero at every node
+_DW0, _DW1 = _P.polyval(0.0, _P.polyder(_W)), _P.polyval(1.0, _P.polyder(_W))
+_D0 = (np.arange(_DEGREE + 1) == 1).astype(float)              # p'(0) from increasing coefficients
+_D1 = np.arange(_DEGREE + 1).astype(float)                      # p'(1)
+
+
+def _derivative_pairs(n: int) -> tuple:
+    """Indices of the position-like components of an integrated vector of length n (the state,
+    then Φ and S row by row, :func:`propagate`) and of their time derivatives (the velocity rows)."""
+    npar = (n - 42) // 6 if n > 6 else 0
+    pos, vel = [0, 1, 2], [3, 4, 5]
+    for base, width in ((6, 6), (42, npar)) if n > 6 else ():
+        for i in range(3):
+            pos += range(base + width * i, base + width * (i + 1))
+            vel += range(base + width * (i + 3), base + width * (i + 4))
+    return np.array(pos, int), np.array(vel, int)
+
+
+def _spectra(vals: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """``(S, n, 10)`` polynomial coefficients in seconds from the step's start of the dense output's
+    values ``vals`` (S, 8 nodes, n) over steps of length ``h`` (S,): a position-like component through
+    its 8 values, its slopes at both ends its velocity component's values there (Hermite conditions at
+    the ends), so that neighbouring steps meet in position and velocity; a velocity-like component
+    (unused) through its values. The value and slope at the start are taken out before the
+    Vandermonde solve, against its rounding (~1e-16 × its condition ~1e4 × the values: on the 7e6 m
+    of the position ~1e-5 m, on the curvature, ~1e4 m over a LEO step, ~1e-8 m), and the end slope is
+    set by ``w(x) (α + β x)``, w zero at every node. Joins within ~4e-8 m and ~1e-12 m/s: a filter's
+    time update between two of the reference's states takes any jitter there for a change of the orbit
+    (docs/filter.md)."""
+    pos, vel = _derivative_pairs(vals.shape[-1])
+    start = vals[:, 0, :].copy()                                 # (S, n): the values at the step's start
+    slope = np.zeros_like(start)
+    slope[:, pos] = vals[:, 0, vel] * h[:, None]                 # d/dx, x = (t - t_old) / h
+    rest = vals - start[:, None, :] - slope[:, None, :] * _NODES[None, :, None]
+    a7 = np.matmul(_VINV, rest)                                  # (S, 8 powers, n)
+    a = np.zeros((a7.shape[0], _NCOEF, a7.shape[2]))
+    a[:, :_DEGREE + 1] = a7
+    # the slopes at both ends made the step's velocities: w(x) (alpha + beta x) leaves the values at
+    # the nodes and sets p'(0), p'(1)
+    r0 = np.zeros_like(start)
+    r1 = np.zeros_like(start)
+    r0[:, pos] = -np.einsum("k,skn->sn", _D0, a7[:, :, pos])
+    r1[:, pos] = (vals[:, -1, vel] - vals[:, 0, vel]) * h[:, None] - np.einsum("k,skn->sn", _D1, a7[:, :, pos])
+    alpha = r0 / _DW0
+    beta = r1 / _DW1 - alpha
+    a[:, :_DEGREE + 2] += _W[None, :, None] * alpha[:, None, :]
+    a[:, 1:] += _W[None, :, None] * beta[:, None, :]
+    a[:, 0] += start
+    a[:, 1] += slope
+    return np.swapaxes(a, 1, 2) / h[:, None, None] ** np.arange(_NCOEF)
 
 
 def max_step_s(model, state) -> float:
@@ -219,12 +272,12 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
         k = _reentry_step(np.linalg.norm(vals[:, -1, :3], axis=1)) if len(vals) else None
         if k is not None:                        # the steps up to the first one that ends below
             outcome, t_new, h, vals = Outcome.REENTRY, t_new[:k + 1], h[:k + 1], vals[:k + 1]
-        c = np.swapaxes(np.matmul(_VINV, vals), 1, 2) / h[:, None, None] ** np.arange(_DEGREE + 1)
+        c = _spectra(vals, h)
         coefs = list(c[:, None, 0:3])
         senss = []
         if stm:
-            phi = c[:, 6:42].reshape(-1, 6, 6, _DEGREE + 1)[:, :3]
-            sens = phi if not npar else np.concatenate([phi, c[:, 42:].reshape(-1, 6, npar, _DEGREE + 1)[:, :3]], 2)
+            phi = c[:, 6:42].reshape(-1, 6, 6, _NCOEF)[:, :3]
+            sens = phi if not npar else np.concatenate([phi, c[:, 42:].reshape(-1, 6, npar, _NCOEF)[:, :3]], 2)
             senss = list(sens[:, None])
         return _result(model, outcome, [0.0] + list(t_new), coefs, senss, stm, est, rtol, force_label)
     from scipy.integrate import DOP853  # start-up: scipy.integrate (~0.3 s) only on the numpy path
@@ -270,10 +323,10 @@ def propagate(env, state0, t_end_s: float, *, stm: bool = False, rtol: float = R
                     continue
             signs = new
         vals = dense(t_old + h * _NODES)                            # (n, 8); 3 extra evaluations
-        c = (_VINV @ vals.T).T / h ** np.arange(_DEGREE + 1)        # (n, 8), seconds
+        c = _spectra(vals.T[None], np.array([h]))[0]                # (n, 10), seconds
         coefs.append(c[pos_rows][None])
         if stm:
-            phi = c[6:42].reshape(6, 6, -1)[:3]                        # (3, 6, 8)
+            phi = c[6:42].reshape(6, 6, -1)[:3]                        # (3, 6, 10)
             sens = phi if not npar else np.concatenate([phi, c[42:].reshape(6, npar, -1)[:3]], 1)
             senss.append(sens[None])
         times.append(solver.t)
@@ -305,10 +358,10 @@ def _result(model, outcome, times, coefs, senss, stm, est, rtol, force_label) ->
         coef_arr = np.stack(coefs)
         sens_arr = np.stack(senss) if stm else None
     else:
-        coef_arr = np.empty((0, 1, 3, _DEGREE + 1))
-        sens_arr = np.empty((0, 1, 3, 6 + npar, _DEGREE + 1)) if stm else None
+        coef_arr = np.empty((0, 1, 3, _NCOEF))
+        sens_arr = np.empty((0, 1, 3, 6 + npar, _NCOEF)) if stm else None
     f = model.field
     return Propagation(outcome=outcome, step_times_s=np.array(times), coefficients=coef_arr,
                        sensitivities=sens_arr, parameters=(STATE_PARAMETERS + est) if stm else (),
-                       order=_DEGREE - 1, tol=float(rtol), force=force_label, mu_m3_s2=f.gm_m3_s2,
+                       order=_NCOEF - 2, tol=float(rtol), force=force_label, mu_m3_s2=f.gm_m3_s2,
                        j2=f.j2(), re_m=f.radius_m, batch=False)

@@ -126,9 +126,10 @@ def initial_covariance(problem: Problem, carried=None, gm=None):
     return centre, p0
 
 
-def _sub_problem(problem: Problem, rows) -> Problem:
+def _sub_problem(problem: Problem, rows, compiled=None) -> Problem:
     """The problem restricted to ``rows`` (same parameters and epoch; the modifiers bound again,
-    those acting on none of the rows dropped)."""
+    those acting on none of the rows dropped), its trajectories on the full model's integrator
+    ``compiled`` (:attr:`Problem.compiled`)."""
     meas = problem.meas.subset(rows)
     bound = []
     for b in problem.modifiers:
@@ -136,7 +137,8 @@ def _sub_problem(problem: Problem, rows) -> Problem:
             bound.append(b.modifier.bind(meas))
         except ValueError:
             continue
-    return replace(problem, meas=meas, modifiers=bound, times=problem.times[rows], sources=problem.sources[rows])
+    return replace(problem, meas=meas, modifiers=bound, times=problem.times[rows], sources=problem.sources[rows],
+                   compiled=compiled)
 
 
 def _evaluate(sub: Problem, x, cover=(), start_s: float = 0.0):
@@ -255,11 +257,9 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     x_ref[gm_idx] = 0.0
     c0, P0 = np.asarray(centre, float) / scales, np.asarray(p0, float) / ss
     evaluations, integrated_steps, propagated_s = 0, 0, 0.0
-    # chunk-local references under the Taylor models (two-body, J2); the full model's DOP853 keeps
-    # the epoch anchor: restarted, its adaptive steps put a 0.02-sigma floor under the iterations'
-    # change on the DMC case (docs/filter.md)
-    local = problem.force != "full"
     chunks = [(ka, kb, seg > 0) for seg, (ka, kb) in enumerate(segments)]
+    # the chunks integrate the arc once between them: the full model's integrator chosen once for it
+    compiled = problem.compiled if problem.compiled is not None else problem.compiled_for(steps_t[-1] - steps_t[0])
     last_traj = None
     limit = np.inf if opt.ekf_sigma_m is None else float(opt.ekf_sigma_m)
 
@@ -287,34 +287,25 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
             target = None
             if restart and settled(p_f[kprev]):
                 target = (x_f[kprev] if targets is None else np.asarray(targets[kprev], float) / scales) * scales
-            if not local:
-                if target is not None:
-                    # the epoch-anchored reference (DOP853): the filter's state mapped back to the epoch
-                    old = _transition(last_traj, steps_t[kprev], n)[0]
-                    old_z = np.concatenate([last_traj.state(steps_t[kprev]), x_ref[6:]])
-                    delta = target - old_z
-                    delta[gm_idx] = 0.0
-                    x_ref = x_ref + np.linalg.solve(old, delta)
+            # the chunk's reference starts at its previous step, from the filter's state there (a
+            # restart) or the current reference's (the same orbit): integrated over the chunk alone,
+            # so the sweep's integration grows with the arc, not with its square. Every use of the
+            # transition below is relative to the anchor (Ψ(t_k) Ψ(t_k-1)⁻¹, J Ψ(t_k)⁻¹).
+            t_anchor = float(steps_t[kprev])
+            if target is not None:
+                x_ref = target
+                x_ref[gm_idx] = 0.0
             else:
-                # the chunk's reference starts at its previous step, from the filter's state there (a
-                # restart) or the current reference's (the same orbit): integrated over the chunk
-                # alone, so the sweep's integration grows with the arc, not with its square. Every use
-                # of the transition below is relative to the anchor (Ψ(t_k) Ψ(t_k-1)⁻¹, J Ψ(t_k)⁻¹).
-                t_anchor = float(steps_t[kprev])
-                if target is not None:
-                    x_ref = target
-                    x_ref[gm_idx] = 0.0
-                else:
-                    x_ref = np.concatenate([last_traj.state(t_anchor), x_ref[6:]])
+                x_ref = np.concatenate([last_traj.state(t_anchor), x_ref[6:]])
         t_need = steps_t[max(kprev, 0):kb + 1]
         if rows.size:
-            sub = _sub_problem(problem, np.sort(rows))
+            sub = _sub_problem(problem, np.sort(rows), compiled)
             h, jac, traj = _evaluate(sub, x_ref[:n_par], cover=t_need, start_s=t_anchor)
             evaluations += 1
             pos = np.searchsorted(np.sort(rows), rows)         # rows (time order) -> sub's order
             h, jac = h[pos], jac[pos]
         else:
-            traj = problem.trajectory(x_ref[:n_par], cover=t_need, start_s=t_anchor)
+            traj = replace(problem, compiled=compiled).trajectory(x_ref[:n_par], cover=t_need, start_s=t_anchor)
             h, jac = np.zeros(0), np.zeros((0, n_par))
         last_traj = traj
         integrated_steps += traj.n_steps

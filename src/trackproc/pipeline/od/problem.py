@@ -82,6 +82,9 @@ class Problem:
     apriori_source: str = ""
     #: what became of the initial state (methods/estimation/decision.py), set by the estimator
     decision: Optional[dict] = None
+    #: the full model's integrator for every run of :meth:`trajectory` (True compiled, False numpy;
+    #: None: chosen per run from its span, :func:`~trackproc.dynamics.forces.integrator.use_compiled`)
+    compiled: Optional[bool] = None
 
     @property
     def names(self) -> list:
@@ -114,9 +117,21 @@ class Problem:
         margin = (md.TIME_BIAS_LIMIT_S + 1.0) if any(b.modifier.shifts_time for b in self.modifiers) else 0.0
         span = [float(t.min()) - LIGHT_TIME_MARGIN_S - margin, float(t.max()) + margin]
         traj = propagator.propagate_from(x[:3], x[3:6], self.epoch, float(start_s), span, force=self.force, stm=True,
-                                         frame=self.frame, eop=self.eop, force_model=self.force_model_at(x))
+                                         frame=self.frame, eop=self.eop, force_model=self.force_model_at(x),
+                                         compiled=self.compiled)
         traj = traj.raise_for_outcome()
         return _WithForceParameters(traj) if self.force_names else traj
+
+    def compiled_for(self, span_s: float) -> Optional[bool]:
+        """The full model's integrator (:attr:`compiled`) for runs that together integrate ``span_s``
+        seconds, as one run of that span would choose it; None under the Taylor models. A filter's
+        restarted chunks each integrate a short span: chosen per run, every one of them would pay
+        the numpy path's cost per step to spare the one load of the compiled kernels."""
+        if self.force != "full":
+            return None
+        from trackproc.dynamics.forces import integrator  # start-up: the force models load only for "full"
+
+        return integrator.use_compiled(self.force_model, float(span_s), stm=True)
 
     def values(self, x):
         """``computed (N,)`` at ``x``: :meth:`model`'s values (the same numbers: the same trajectory,
