@@ -158,11 +158,12 @@ def serve(path: str) -> None:
             conn = None
         while True:                                       # reap: the children's CPU joins the server's
             try:
-                pid, _ = os.waitpid(-1, os.WNOHANG)
+                pid, _, usage = os.wait4(-1, os.WNOHANG)
             except ChildProcessError:
                 break
             if pid == 0:
                 break
+            _account(pid, usage)
         if conn is None:
             if os.getppid() == 1:                         # the test run is gone
                 return
@@ -172,17 +173,34 @@ def serve(path: str) -> None:
         if request.get("stop"):
             conn.close()
             break
-        if os.fork() == 0:
+        pid = os.fork()
+        if pid == 0:
             server.close()
             _child(conn, request, fds)
+        _COMMANDS[pid] = request["argv"]
         for fd in fds:
             os.close(fd)
         conn.close()
     while True:                                           # wait for the last children, then end
         try:
-            os.waitpid(-1, 0)
+            pid, _, usage = os.wait4(-1, 0)
         except ChildProcessError:
             return
+        _account(pid, usage)
+
+
+#: pid -> argv of the commands running; with TRACKPROC_FORKSERVER_LOG set, each one's CPU seconds and
+#: argv are appended there when it is reaped (which example costs what: the server's CPU reaches the
+#: test run only when it ends)
+_COMMANDS: dict = {}
+
+
+def _account(pid: int, usage) -> None:
+    argv = _COMMANDS.pop(pid, None)
+    path = os.environ.get("TRACKPROC_FORKSERVER_LOG")
+    if path and argv is not None:
+        with open(path, "a") as log:
+            log.write(json.dumps({"cpu": round(usage.ru_utime + usage.ru_stime, 3), "argv": argv}) + "\n")
 
 
 class ForkServer:

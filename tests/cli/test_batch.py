@@ -94,6 +94,40 @@ def _make_passes(root: Path) -> dict:
     return {"dir": root}
 
 
+@pytest.fixture(autouse=True, scope="module")
+def figures_drawn_once():
+    """report.html's figures drawn once per content: the tests here run a batch several times over
+    the same inputs (a re-run, --force, a changed setting), and every run rewrites report.html with
+    the same figures (matplotlib, ~1 s of CPU a run). A figure is a function of what it plots (the
+    records' numbers; a window's residuals file), so the bytes drawn first are the bytes a re-run
+    draws. The report itself is tested in tests/cli/test_batch_report.py and test_report_plots.py."""
+    from trackproc.report import batch_html
+
+    drawn: dict = {}
+    overview_png, window_png = batch_html.overview_png, batch_html.window_png
+
+    def overview_once(records):
+        key = ("overview", json.dumps([(r.get("task"), r.get("status"), r.get("name"), r.get("numbers"))
+                                       for r in records], sort_keys=True, default=str))
+        if key not in drawn:
+            drawn[key] = overview_png(records)
+        return drawn[key]
+
+    def window_once(out, record):
+        rel = next((o for o in record.get("outputs") or [] if o.endswith(".residuals.parquet")), None)
+        if rel is None or not (out / rel).is_file():
+            return window_png(out, record)
+        key = ("window", hashlib.sha256((out / rel).read_bytes()).hexdigest())
+        if key not in drawn:
+            drawn[key] = window_png(out, record)
+        return drawn[key]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(batch_html, "overview_png", overview_once)
+        mp.setattr(batch_html, "window_png", window_once)
+        yield
+
+
 def write_config(path: Path, passes: Path, output: Path, **sections) -> Path:
     """A config file; relative paths in it are relative to its directory (here: absolute)."""
     doc = {"batch": {"inputs": [str(passes / "inbox")], "output": str(output), "workers": 1},
@@ -134,10 +168,21 @@ def mtimes(out: Path) -> dict:
 
 # ----------------------------------------------------------------------------- the done-when run
 
-def test_thirty_passes_five_broken_then_rerun_skips_then_force_redoes(passes, tmp_path, run_cli):
+@pytest.fixture(scope="module")
+def thirty_in_a_pool(passes, tmp_path_factory, run_cli_shared):
+    """(output directory, result) of the 30 inputs through a pool of two workers, run once for the
+    module: the done-when test's first run and the pool side of the Dask comparison are the same
+    command on the same inputs (each checks its own things of it; neither writes to it)."""
+    root = tmp_path_factory.mktemp("thirty_pool")
+    config = write_config(root / "nightly.toml", passes, root / "out")
+    return root / "out", run_cli_shared(["batch", config, "--workers", "2"])
+
+
+def test_thirty_passes_five_broken_then_rerun_skips_then_force_redoes(passes, tmp_path, run_cli, thirty_in_a_pool):
+    shared, first = thirty_in_a_pool
     out = tmp_path / "out"
+    shutil.copytree(shared, out)                  # the first run's results; the re-runs below change this copy
     config = write_config(tmp_path / "nightly.toml", passes, out)
-    first = run_cli(["batch", config, "--workers", "2"])
     assert first.exit_code == 3, first.stderr
     assert "Traceback" not in first.stderr
     records = by_name(out)
@@ -227,16 +272,17 @@ def test_changing_the_config_or_an_input_redoes_only_what_it_touches(passes, tmp
     assert by_name(out)[victim.stem]["status"] == "failed"
 
 
-def test_dask_cluster_and_process_pool_give_the_serial_results(passes, tmp_path, run_cli):
+def test_dask_cluster_and_process_pool_give_the_serial_results(passes, tmp_path, run_cli, thirty_in_a_pool):
     distributed = pytest.importorskip("distributed")
     config = write_config(tmp_path / "b.toml", passes, tmp_path / "unused")
-    serial, pool, dask = tmp_path / "serial", tmp_path / "pool", tmp_path / "dask"
+    serial, dask = tmp_path / "serial", tmp_path / "dask"
+    pool, pool_run = thirty_in_a_pool                 # the pool of two workers: the done-when test's first run
     # the serial reference runs as a user runs it (a fresh process: one BLAS thread, as in the workers)
     exe = Path(sys.executable).with_name("trackproc")
     run = subprocess.run([str(exe), "batch", str(config), "-o", str(serial), "--workers", "1"], capture_output=True,
                          text=True, timeout=120)
     assert run.returncode == 3, run.stderr
-    assert run_cli(["batch", config, "-o", pool, "--workers", "2"]).exit_code == 3
+    assert pool_run.exit_code == 3
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:
         run = run_cli(["batch", config, "-o", dask, "--scheduler", cluster.scheduler_address])

@@ -268,7 +268,7 @@ def test_every_command_has_its_module_for_the_one_command_start_up():
 
 
 @pytest.mark.subprocess
-def test_refine_and_estimate_do_not_import_pandas(tmp_path):
+def test_refine_and_estimate_do_not_import_pandas(tmp_path, run_cli):
     """``refine`` of a smoothed Parquet pass (and of the same pass as CSV, without pandas only) and
     ``estimate`` of a Parquet pass file, each in a
     fresh interpreter, read the pass through numpy columns (types/passes.py ``PassTable.column``)
@@ -281,8 +281,10 @@ def test_refine_and_estimate_do_not_import_pandas(tmp_path):
                 "--carrier-hz", "2.2e9", "--mode", "one-way", "-o", f"{out}/pass.parquet"],
                ["-q", "smooth", f"{out}/pass.parquet", "-o", f"{out}/smoothed.parquet"],
                ["-q", "smooth", f"{out}/pass.parquet", "-o", f"{out}/smoothed.csv"]]
-    subprocess.run([sys.executable, "-c", f"from trackproc.cli import app as a; [a._main(c) for c in {prepare!r}]"],
-                   check=True, cwd=root)
+    # the inputs only (this test's subject is the probes' imports below, each in a fresh interpreter)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(root)
+        assert [run_cli(c).exit_code for c in prepare] == [0, 0, 0]
     refine = ["-q", "refine", f"{out}/smoothed.parquet", "--initial", "sample_data/stale.json", "--doppler-bias",
               "offset+drift", "-o"]
     estimate = ["-q", "estimate", "sample_data/multistation.parquet", "--initial", "sample_data/stale.json",

@@ -47,9 +47,11 @@ def jd_utc_to_datetime64(jd1, jd2) -> np.ndarray:
     ihmsf = np.asarray(ihmsf)
     h, mi, s, f = ihmsf["h"], ihmsf["m"], ihmsf["s"], ihmsf["f"]
     s = np.minimum(s, 59)  # 23:59:60 cannot be held in datetime64
-    dates = np.array([f"{a:04d}-{b:02d}-{c:02d}" for a, b, c in
-                      zip(np.atleast_1d(iy), np.atleast_1d(im), np.atleast_1d(id_))],
-                     dtype="datetime64[ns]")
+    # the calendar date by datetime64's own integer arithmetic (year, then month, then day), not
+    # by formatting and parsing a string per sample: the same dates
+    months = (np.atleast_1d(iy).astype(np.int64) - 1970).astype("datetime64[Y]").astype("datetime64[M]")
+    days = (months + (np.atleast_1d(im).astype(np.int64) - 1).astype("timedelta64[M]")).astype("datetime64[D]")
+    dates = (days + (np.atleast_1d(id_).astype(np.int64) - 1).astype("timedelta64[D]")).astype("datetime64[ns]")
     out = (dates + np.atleast_1d(h).astype("timedelta64[h]") + np.atleast_1d(mi).astype("timedelta64[m]")
            + np.atleast_1d(s).astype("timedelta64[s]") + np.atleast_1d(f).astype("timedelta64[ns]"))
     return out.reshape(np.shape(jd1)) if np.ndim(jd1) else out[0]
