@@ -175,7 +175,7 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
     summary = json_ready(summary_of(fits, options, table.meta, source, doppler_mode, carrier_hz))
     meta = dict(table.meta)
     meta["smoothing"] = summary
-    sample_table = PassTable(samples, {**meta, "smoothing": {**summary, "output": "samples"}})
+    sample_table = _column_table(samples, {**meta, "smoothing": {**summary, "output": "samples"}})
     if options.grid_step_s is None:
         out = sample_table
     else:
@@ -186,6 +186,19 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
 
 
 # --------------------------------------------------------------------------- internals
+
+
+#: The columns the steps after smoothing read (refine's pass selection and samples, batch's
+#: numbers): converted from the frame once, not at every ``PassTable.column`` call (~20 a refinement).
+_READ_COLUMNS = ("time", "station", "pass_id", "kind", "value", "sigma", "flag")
+
+
+def _column_table(frame: pd.DataFrame, meta: dict) -> PassTable:
+    """``PassTable(frame, meta)`` holding :data:`_READ_COLUMNS` as numpy (``PassTable.column``'s
+    own conversion of the frame, so the same arrays) and ``frame`` itself as its DataFrame."""
+    whole = PassTable(frame, meta)
+    columns = {str(name): whole.column(str(name)) if str(name) in _READ_COLUMNS else None for name in frame.columns}
+    return PassTable.from_columns(columns, meta, lambda: frame)
 
 
 def _check_options(options: SmoothOptions) -> None:
