@@ -187,7 +187,11 @@ class WideReader(LayoutReader):
     def _read(self, table: SourceTable) -> RawMeasurements:
         stations = column_strings(table, table.columns["station"])
         pass_ids = column_strings(table, table.columns["pass_id"]) if "pass_id" in table.columns else None
-        pieces = []
+        # one numpy array per field, the measured columns one after another (the rows a pandas
+        # concat of one frame per column gave, without building those frames: ~1 ms a file)
+        parts: dict = {name: [] for name in ("src", "position", "kind", "value", "sigma", "unit", "column",
+                                             "sigma_column", "wrong", "sigma_wrong", "sigma_nan", "found",
+                                             "sigma_found")}
         for position, name in enumerate(self.measured):
             kind, factor, unit = UNIT_SPELLINGS[name]
             col = table.columns[name]
@@ -200,42 +204,58 @@ class WideReader(LayoutReader):
                 sigma = np.full(len(table), np.nan)
                 sigma_wrong = sigma_nan = np.zeros(len(table), dtype=bool)
             take = np.flatnonzero(~missing)
-            pieces.append(pd.DataFrame({
-                "src": take, "position": position, "kind": kind, "value": value[take] * factor,
-                "sigma": sigma[take] * factor, "unit": unit, "column": col.name,
-                "sigma_column": sigma_col.name if sigma_col is not None else "",
-                "wrong": wrong[take], "sigma_wrong": sigma_wrong[take], "sigma_nan": sigma_nan[take],
-                "found": col.text[take] if col.text is not None else value[take],
-                "sigma_found": sigma_col.text[take] if sigma_col is not None and sigma_col.text is not None
-                else sigma[take],
-            }))
-        samples = pd.concat(pieces, ignore_index=True)
-        self.candidates += len(samples)
-        src = samples["src"].to_numpy(dtype=np.int64)
+            n = take.size
+            for key, values in (
+                    ("src", take), ("position", np.full(n, position, dtype=np.int64)),
+                    ("kind", _texts(kind, n)), ("value", value[take] * factor), ("sigma", sigma[take] * factor),
+                    ("unit", _texts(unit, n)), ("column", _texts(col.name, n)),
+                    ("sigma_column", _texts(sigma_col.name if sigma_col is not None else "", n)),
+                    ("wrong", wrong[take]), ("sigma_wrong", sigma_wrong[take]), ("sigma_nan", sigma_nan[take]),
+                    ("found", col.text[take] if col.text is not None else value[take]),
+                    ("sigma_found", sigma_col.text[take] if sigma_col is not None and sigma_col.text is not None
+                     else sigma[take])):
+                parts[key].append(values)
+        samples = {key: _joined(values) for key, values in parts.items()}
+        self.candidates += len(samples["src"])
+        src = samples["src"].astype(np.int64)
         rows = table.rows[src]
-        problems = Problems(rows, table.source, order=rows * 1000 + samples["position"].to_numpy())
+        problems = Problems(rows, table.source, order=rows * 1000 + samples["position"])
         times = column_times(table, table.columns["time"], problems, index=src)
-        problems.add(WRONG_TYPE, samples["wrong"].to_numpy(dtype=bool), column=samples["column"].to_numpy(),
-                     found=samples["found"].to_numpy(), expected="a number or an empty cell")
-        problems.add(WRONG_TYPE, samples["sigma_wrong"].to_numpy(dtype=bool),
-                     column=samples["sigma_column"].to_numpy(),
-                     found=samples["sigma_found"].to_numpy(), expected="a number or an empty cell")
-        problems.add(NONFINITE_SIGMA, samples["sigma_nan"].to_numpy(dtype=bool),
-                     column=samples["sigma_column"].to_numpy(),
+        problems.add(WRONG_TYPE, samples["wrong"].astype(bool), column=samples["column"],
+                     found=samples["found"], expected="a number or an empty cell")
+        problems.add(WRONG_TYPE, samples["sigma_wrong"].astype(bool),
+                     column=samples["sigma_column"],
+                     found=samples["sigma_found"], expected="a number or an empty cell")
+        problems.add(NONFINITE_SIGMA, samples["sigma_nan"].astype(bool),
+                     column=samples["sigma_column"],
                      found=math.nan, expected="a finite number > 0, or an empty cell for the default")
         frame = pd.DataFrame({
             "time": pd.DatetimeIndex(times[src]).tz_localize("UTC"),
             "station": stations[src],
-            "kind": samples["kind"].to_numpy(dtype=object),
-            "value": samples["value"].to_numpy(dtype=np.float64),
-            "sigma": samples["sigma"].to_numpy(dtype=np.float64),
+            "kind": samples["kind"],
+            "value": samples["value"].astype(np.float64),
+            "sigma": samples["sigma"].astype(np.float64),
             "row": rows,
-            "unit": samples["unit"].to_numpy(dtype=object),
+            "unit": samples["unit"],
         })
         if pass_ids is not None:
             frame["pass_id"] = pass_ids[src]
         keep, dropped = problems.resolve(self.drop_invalid)
         return self._raw(frame[keep].reset_index(drop=True), table, dropped)
+
+
+def _texts(text: str, n: int) -> np.ndarray:
+    out = np.empty(n, dtype=object)
+    out[:] = text
+    return out
+
+
+def _joined(values: list) -> np.ndarray:
+    """The arrays of one field end to end, with the dtype pandas' concat gives: object when
+    the pieces' dtypes differ (text and numbers), else theirs."""
+    if len({v.dtype for v in values}) > 1:
+        values = [v.astype(object) for v in values]
+    return np.concatenate(values) if len(values) > 1 else values[0]
 
 
 def _blank(table: SourceTable, column: Column) -> np.ndarray:

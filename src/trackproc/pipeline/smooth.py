@@ -142,8 +142,13 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
     carrier_hz = table.meta.get("carrier_hz")
     fits = []
     selected = frame[frame["kind"].isin(chosen)]
-    for (station, pass_id, kind), group in selected.groupby(["station", "pass_id", "kind"], sort=True):
-        fits.append(_fit_group(group, str(station), str(pass_id), str(kind), options, doppler_mode))
+    # the groups' rows only (no frame per group), the columns as numpy once
+    columns = _Columns(frame)
+    groups = selected.groupby(["station", "pass_id", "kind"], sort=True).indices
+    positions = selected.index.to_numpy()
+    for station, pass_id, kind in sorted(groups):
+        fits.append(_fit_group(columns, positions[groups[(station, pass_id, kind)]], str(station), str(pass_id),
+                               str(kind), options, doppler_mode))
 
     if all(f.status == "failed" for f in fits):
         details = "; ".join(f"{f.label}: {f.error}" for f in fits)
@@ -170,7 +175,7 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
     summary = json_ready(summary_of(fits, options, table.meta, source, doppler_mode, carrier_hz))
     meta = dict(table.meta)
     meta["smoothing"] = summary
-    sample_table = PassTable(samples, {**meta, "smoothing": {**summary, "output": "samples"}})
+    sample_table = _column_table(samples, {**meta, "smoothing": {**summary, "output": "samples"}})
     if options.grid_step_s is None:
         out = sample_table
     else:
@@ -181,6 +186,19 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
 
 
 # --------------------------------------------------------------------------- internals
+
+
+#: The columns the steps after smoothing read (refine's pass selection and samples, batch's
+#: numbers): converted from the frame once, not at every ``PassTable.column`` call (~20 a refinement).
+_READ_COLUMNS = ("time", "station", "pass_id", "kind", "value", "sigma", "flag")
+
+
+def _column_table(frame: pd.DataFrame, meta: dict) -> PassTable:
+    """``PassTable(frame, meta)`` holding :data:`_READ_COLUMNS` as numpy (``PassTable.column``'s
+    own conversion of the frame, so the same arrays) and ``frame`` itself as its DataFrame."""
+    whole = PassTable(frame, meta)
+    columns = {str(name): whole.column(str(name)) if str(name) in _READ_COLUMNS else None for name in frame.columns}
+    return PassTable.from_columns(columns, meta, lambda: frame)
 
 
 def _check_options(options: SmoothOptions) -> None:
@@ -218,18 +236,32 @@ def _check_sigma(frame: pd.DataFrame, kinds, source) -> None:
                          file=source, column="sigma", found=float(sigma[i]), expected="a 1-sigma > 0")
 
 
-def _fit_group(group: pd.DataFrame, station, pass_id, kind, options: SmoothOptions, doppler_mode) -> PassFit:
-    group = group.sort_values("time", kind="mergesort")
-    rows = group.index.to_numpy()
-    times = group["time"]
-    epoch = times.iloc[0]
-    t_s = (times.dt.tz_convert("UTC").dt.tz_localize(None).to_numpy().astype("datetime64[ns]").astype(np.int64)
-           - pd.Timestamp(epoch).tz_convert("UTC").tz_localize(None).as_unit("ns").value) * 1e-9
-    out = PassFit(station=station, pass_id=pass_id, kind=kind, rows=rows, epoch=pd.Timestamp(epoch), t_s=t_s)
-    y = group["value"].to_numpy(dtype=float)
+class _Columns:
+    """The columns a fit reads, as numpy, of the whole (renumbered) frame: ``time_ns`` UTC
+    nanoseconds, ``value``, ``sigma``; ``epoch(row)`` the row's time as a UTC ``pd.Timestamp``."""
+
+    def __init__(self, frame: pd.DataFrame):
+        self.time = frame["time"]
+        self.time_ns = (self.time.dt.tz_convert("UTC").dt.tz_localize(None).to_numpy()
+                        .astype("datetime64[ns]").astype(np.int64))
+        self.value = frame["value"].to_numpy(dtype=float)
+        self.sigma = frame["sigma"].to_numpy(dtype=float)
+
+    def epoch(self, row: int) -> pd.Timestamp:
+        return pd.Timestamp(self.time.iloc[row])
+
+
+def _fit_group(columns: _Columns, rows: np.ndarray, station, pass_id, kind, options: SmoothOptions,
+               doppler_mode) -> PassFit:
+    """Fit one group: ``rows`` its rows of ``columns`` (in table order; fitted in time order, stable)."""
+    rows = rows[np.argsort(columns.time_ns[rows], kind="stable")]
+    epoch = columns.epoch(int(rows[0]))
+    t_s = (columns.time_ns[rows] - epoch.tz_convert("UTC").tz_localize(None).as_unit("ns").value) * 1e-9
+    out = PassFit(station=station, pass_id=pass_id, kind=kind, rows=rows, epoch=epoch, t_s=t_s)
+    y = columns.value[rows]
     if kind == "azimuth":       # fit the continuous angle; a pass through north jumps by 2 pi
         y = np.unwrap(y)
-    sigma = group["sigma"].to_numpy(dtype=float)
+    sigma = columns.sigma[rows]
     try:
         fit = smooth_pass(t_s, y, sigma, options.degree, clip=options.clip, basis=options.basis,
                           max_degree=options.max_degree)

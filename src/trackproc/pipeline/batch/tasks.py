@@ -168,14 +168,14 @@ def _run_task(task: Task) -> TaskResult:
 
 
 def _table_numbers(table) -> dict:
-    frame = table.frame
-    times = frame["time"].to_numpy()                # numpy: the pandas calls cost ~3 ms a pass
-    stations = frame["station"].astype(str).to_numpy()
-    passes = frame["pass_id"].astype(str).to_numpy()
-    return {"samples": int(len(frame)), "passes": len(set(zip(stations.tolist(), passes.tolist()))),
+    times = table.column("time")                    # numpy columns: pandas calls cost ~3 ms a pass
+    stations = table.column("station")
+    passes = table.column("pass_id")
+    n = table.n_rows
+    return {"samples": int(n), "passes": len(set(zip(stations.tolist(), passes.tolist()))),
             "stations": " ".join(sorted(set(stations.tolist()))),
-            "kinds": " ".join(sorted(set(frame["kind"].astype(str).tolist()))),
-            "start_utc": iso_utc(times.min(), 6) if len(frame) else None,
-            "end_utc": iso_utc(times.max(), 6) if len(frame) else None}
+            "kinds": " ".join(sorted(set(table.column("kind").tolist()))),
+            "start_utc": iso_utc(times.min(), 6) if n else None,
+            "end_utc": iso_utc(times.max(), 6) if n else None}
 
 
