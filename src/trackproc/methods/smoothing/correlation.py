@@ -15,7 +15,8 @@ from trackproc.methods.smoothing.fit import (MAX_RHO, NoiseModel, check_arrays, 
 RHO_SIGNIFICANCE = 2.0
 
 
-def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", domain_s=None) -> NoiseModel:
+def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", domain_s=None,
+                   white_q=None) -> NoiseModel:
     """AR(1) correlation of the normalized noise from the residuals of a white-noise fit of ``degree``.
 
     Method of moments corrected for the projection of the fit: with ``z = M u`` the normalized
@@ -25,6 +26,7 @@ def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", doma
     ``E[sum z_i z_(i-1)] / E[sum z_i^2] = tr(L M C M) / tr(M C M)``; both traces cost O(n p) because
     ``C`` is Markov (:func:`ou_apply`). ``step`` is the median sample spacing. An estimate within
     ``RHO_SIGNIFICANCE`` standard errors (``1 / sqrt(n - p)``) of white gives ``rho = 0``.
+    ``white_q``: the caller's ``Q`` of that design matrix (times sorted), when it has it already.
     """
     t, y, s = check_arrays(t_s, y, sigma)
     domain = pass_domain(t, domain_s)
@@ -36,8 +38,11 @@ def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", doma
     step = float(np.median(positive)) if positive.size else 1.0
     if n - p < 4:
         return NoiseModel(step_s=step, degree=int(degree), n_eff=float(n))
-    a = design_matrix(t, int(degree), domain, basis) / s[:, None]
-    q, _ = np.linalg.qr(a)
+    if white_q is None:
+        a = design_matrix(t, int(degree), domain, basis) / s[:, None]
+        q, _ = np.linalg.qr(a)
+    else:
+        q = white_q
     yw = y / s
     z = yw - q @ (q.T @ yw)
     den = float(z @ z)

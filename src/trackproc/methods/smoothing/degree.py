@@ -10,8 +10,9 @@ import math
 import numpy as np
 
 from trackproc.methods.smoothing.correlation import estimate_noise
-from trackproc.methods.smoothing.fit import (MAX_RHO, WHITE, NoiseModel, PolynomialFit, SmoothingError, check_arrays,
-                                             check_enough, design_matrix, pass_domain, replace_fit, solve_fit, whiten)
+from trackproc.methods.smoothing.fit import (MAX_RHO, WHITE, DesignRows, NoiseModel, PolynomialFit, SmoothingError,
+                                             check_arrays, check_enough, design_matrix, pass_domain, replace_fit,
+                                             solve_fit, whiten)
 
 
 #: Default upper bound of the degree search of ``degree="auto"``.
@@ -63,22 +64,25 @@ def smooth_pass(t_s, y, sigma, degree: int | str = "auto", *, clip: float | None
     max_rejected = int(np.floor(MAX_REJECTED_FRACTION * t.size))
     history: list[bytes] = []
     fit = None
+    # sorted times (as the pipeline gives them): the design matrices and white QR factors made once
+    # for all the steps below; otherwise each step builds its own (the same numbers)
+    rows = DesignRows(t, y, s, domain, basis) if np.all(t[1:] >= t[:-1]) else None
     for iteration in range(1, MAX_CLIP_ITERATIONS + 1):
         if np.count_nonzero(used) < 2:
             raise SmoothingError("all_rejected", f"only {np.count_nonzero(used)} of {t.size} samples "
                                  "left after outlier rejection")
         try:
             deg, scores, at_limit, model, cap = _choose(t[used], y[used], s[used], degree, basis, max_degree,
-                                                        domain, noise)
+                                                        domain, noise, rows, used)
         except SmoothingError as exc:
             if iteration > 1:
                 raise SmoothingError("all_rejected", f"after outlier rejection: {exc}") from None
             raise
-        fit = replace_fit(solve_fit(t, y, s, deg, domain, basis, used, model), degree_scores=scores,
+        fit = replace_fit(solve_fit(t, y, s, deg, domain, basis, used, model, rows), degree_scores=scores,
                        degree_at_limit=at_limit, degree_cap=cap)
         if not clipping:
             return fit
-        u, scale = _studentized(t, s, fit, domain, basis)
+        u, scale = _studentized(t, s, fit, domain, basis, rows)
         # residuals at the rounding level of the values are never outliers (an exact curve)
         floor = 1e3 * np.finfo(float).eps * float(np.max(np.abs(y[used]))) / s
         over = np.abs(u) > np.maximum(clip * scale, floor)
@@ -102,7 +106,7 @@ def smooth_pass(t_s, y, sigma, degree: int | str = "auto", *, clip: float | None
 
 
 def select_degree(t_s, y, sigma, *, basis: str = "chebyshev", max_degree: int = DEFAULT_MAX_DEGREE,
-                  domain_s=None, noise: NoiseModel | None = None) -> tuple[int, dict, bool]:
+                  domain_s=None, noise: NoiseModel | None = None, design=None) -> tuple[int, dict, bool]:
     """Degree minimizing ``BIC(d) = n ln(chi2_d / n) + (d + 1) ln n`` over ``0..cap``.
 
     ``chi2_d`` is the weighted (for an AR(1) ``noise``: generalized) residual sum of squares. One QR
@@ -111,13 +115,16 @@ def select_degree(t_s, y, sigma, *, basis: str = "chebyshev", max_degree: int = 
     ``n_distinct - 2`` (each candidate keeps a degree of freedom) and the effective-sample cap
     ``floor(n_eff / 2) - 1`` (:func:`degree_cap`). Returns (degree, {degree: BIC}, at_limit) where
     ``at_limit`` says the minimum is at the upper end of the search (more terms might help).
+    ``design``: ``design(d)`` gives ``design_matrix`` of the (sorted) samples at degree ``d``, when
+    the caller has it already.
     """
     t, y, s = check_arrays(t_s, y, sigma)
     domain = pass_domain(t, domain_s)
     dmax = degree_cap(t, max_degree, noise)
     order = np.argsort(t, kind="stable")
     t, y, s = t[order], y[order], s[order]
-    a = whiten(t, design_matrix(t, dmax, domain, basis) / s[:, None], noise)
+    psi = design_matrix(t, dmax, domain, basis) if design is None else design(dmax)
+    a = whiten(t, psi / s[:, None], noise)
     yw = whiten(t, y / s, noise)
     q, r = np.linalg.qr(a)
     qty = q.T @ yw
@@ -156,28 +163,40 @@ def degree_cap(t_s, max_degree: int = DEFAULT_MAX_DEGREE, noise: NoiseModel | No
     return dmax
 
 
-def _choose(t, y, s, degree, basis, max_degree, domain, noise):
-    """(degree, BIC scores, at_limit, noise model, cap) for the samples in use."""
+def _choose(t, y, s, degree, basis, max_degree, domain, noise, rows=None, used=None):
+    """(degree, BIC scores, at_limit, noise model, cap) for the samples in use (``rows``: the
+    :class:`DesignRows` of all samples, ``used`` the mask of those in use, when sorted)."""
+    design = white_q = None
+    if rows is not None:
+        idx = np.flatnonzero(used)
+
+        def design(d):     # column-major, as design_matrix gives it
+            return np.asfortranarray(rows.design(d)[idx])
+
+        def white_q(d):
+            return rows.white_qr(d, used)[1]
     if not isinstance(degree, str):
         check_enough(t, int(degree))
-        model = estimate_noise(t, y, s, int(degree), basis=basis, domain_s=domain) if noise == "auto" else noise
+        model = (estimate_noise(t, y, s, int(degree), basis=basis, domain_s=domain,
+                                white_q=white_q and white_q(int(degree))) if noise == "auto" else noise)
         return int(degree), {}, False, model, None
     if noise == "auto":
         # rho from the residuals of the white-noise choice: a degree that absorbs the curve (on
         # correlated noise the white BIC over-fits, which the projection correction allows for)
-        white = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain)
+        white = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain, design=design)
         d0 = white[0]
-        model = estimate_noise(t, y, s, d0, basis=basis, domain_s=domain)
+        model = estimate_noise(t, y, s, d0, basis=basis, domain_s=domain, white_q=white_q and white_q(d0))
     else:
         model = noise
     if noise == "auto" and model.white:     # the same search again (white noise whitens nothing)
         deg, scores, at_limit = white
     else:
         deg, scores, at_limit = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain,
-                                              noise=model)
+                                              noise=model, design=design)
     cap = degree_cap(t, max_degree, model)
     if noise == "auto" and not model.white and (model.rho >= MAX_RHO or (at_limit and cap < d0)
-                                                 or _variance_ratio(t, y, s, d0, deg, domain, basis, model)
+                                                 or _variance_ratio(t, y, s, d0, deg, domain, basis, model,
+                                                                    rows, used)
                                                  > MAX_VARIANCE_RATIO):
         # AR(1) noise would leave fewer coefficients than the curve needs (or the correlation is at
         # its bound): correlated noise and unresolved curve cannot be told apart with these samples
@@ -187,24 +206,31 @@ def _choose(t, y, s, degree, basis, max_degree, domain, noise):
     return deg, scores, at_limit, model, cap
 
 
-def _variance_ratio(t, y, s, d_white, d_ar1, domain, basis, model) -> float:
+def _variance_ratio(t, y, s, d_white, d_ar1, domain, basis, model, rows=None, used_all=None) -> float:
     """Variance factor of the AR(1) fit over that of the white-noise fit of the same samples.
 
     Both estimate the marginal noise variance when the AR(1) model holds (measured 1.1 at rho 0.6,
     1.3-2.2 at rho 0.9: the white over-fit absorbs some low-frequency noise); when the AR(1) fit
     has too few terms for the curve, its whitened residuals carry the curve (ratios of 10^3-10^10
     on high passes sampled every 10 s and a two-way range-rate pass at 1 mm/s)."""
-    used = np.ones(t.size, bool)
-    white = solve_fit(t, y, s, d_white, domain, basis, used)
-    ar1 = solve_fit(t, y, s, d_ar1, domain, basis, used, model)
+    if rows is not None:      # the same samples through the shared rows (the same variance factors)
+        t, y, s, used = rows.t, rows.y, rows.s, used_all
+    else:
+        used = np.ones(t.size, bool)
+    white = solve_fit(t, y, s, d_white, domain, basis, used, rows=rows)
+    ar1 = solve_fit(t, y, s, d_ar1, domain, basis, used, model, rows=rows)
     return ar1.variance_factor / white.variance_factor if white.variance_factor > 0 else math.inf
 
 
-def _studentized(t, s, fit: PolynomialFit, domain, basis):
+def _studentized(t, s, fit: PolynomialFit, domain, basis, rows=None):
     """Residuals over their own standard deviation (leverage-corrected), and their robust scale."""
-    psi = design_matrix(t, fit.degree, domain, basis) / s[:, None]
     used = fit.used
-    _, r = np.linalg.qr(psi[used])
+    if rows is None:
+        psi = design_matrix(t, fit.degree, domain, basis) / s[:, None]
+        _, r = np.linalg.qr(psi[used])
+    else:
+        psi = rows.design(fit.degree) / s[:, None]
+        r = rows.white_qr(fit.degree, used)[2]
     g = np.linalg.solve(r.T, psi.T).T          # psi R^-1: hat diagonal on the used rows
     h = np.sum(g * g, axis=1)
     z = fit.residual / s

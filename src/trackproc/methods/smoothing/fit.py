@@ -260,18 +260,23 @@ def check_rank(r, degree: int) -> float:
     return cond
 
 
-def solve_fit(t, y, s, degree, domain, basis, used, noise: NoiseModel = WHITE) -> PolynomialFit:
+def solve_fit(t, y, s, degree, domain, basis, used, noise: NoiseModel = WHITE, rows=None) -> PolynomialFit:
     """QR solution of the whitened system for the samples ``used``; residuals for all samples.
 
     White noise: rows ``psi_i / sigma_i``; AR(1) noise: those rows, in time order, further
     whitened by the inverse Cholesky factor of the correlation (generalized least squares).
+    ``rows``: a :class:`DesignRows` of these samples (t sorted), whose design matrices and white
+    QR factors are shared with the other steps of :func:`smooth_pass` (the same bits).
     """
-    psi = design_matrix(t, degree, domain, basis)
+    psi = design_matrix(t, degree, domain, basis) if rows is None else rows.design(degree)
     idx = used_in_time_order(t, used)
     tu = t[idx]
-    a = whiten(tu, psi[idx] / s[idx, None], noise)
     yw = whiten(tu, y[idx] / s[idx], noise)
-    q, r = np.linalg.qr(a)
+    if rows is not None and noise.white:
+        a, q, r = rows.white_qr(degree, used)
+    else:
+        a = whiten(tu, psi[idx] / s[idx, None], noise)
+        q, r = np.linalg.qr(a)
     cond = check_rank(r, degree)
     coef = np.linalg.solve(r, q.T @ yw)
     r_inv = np.linalg.solve(r, np.eye(degree + 1))
@@ -285,6 +290,52 @@ def solve_fit(t, y, s, degree, domain, basis, used, noise: NoiseModel = WHITE) -
         dof=n_used - (degree + 1), used=np.asarray(used, bool).copy(), residual=residual,
         rms=float(np.sqrt(np.mean(ru ** 2))), wrms=float(np.sqrt(np.mean((ru / s[used]) ** 2))),
         condition_number=cond, noise=noise, t_used=tu)
+
+
+class DesignRows:
+    """The design matrix of one pass's samples (times sorted) and the QR factors of its white
+    weighted rows, made once and shared by the steps of one :func:`smooth_pass` iteration (degree
+    search, noise estimate, fit, studentized residuals), which otherwise factor the same matrix
+    up to three times.
+
+    Same bits as building each afresh: the Chebyshev and Legendre Vandermonde recurrences fill
+    column k from columns k-1 and k-2 only, so the first ``d + 1`` columns of a wider matrix are
+    the degree-``d`` matrix; the division by sigma and the row selection are elementwise; and
+    each matrix keeps the memory order of a fresh one (column-major, as the Vandermonde functions
+    return it): a matrix-vector product takes another BLAS kernel, with other last bits, on the
+    other order.
+    """
+
+    def __init__(self, t, y, s, domain, basis: str):
+        self.t, self.y, self.s, self.domain, self.basis = t, y, s, domain, basis
+        self._wide = None
+        self._design: dict = {}
+        self._qr: dict = {}
+
+    def design(self, degree: int) -> np.ndarray:
+        """``design_matrix(t, degree, domain, basis)`` of every sample."""
+        made = self._design.get(degree)
+        if made is None:
+            if self._wide is None or self._wide.shape[1] < degree + 1:
+                self._wide = design_matrix(self.t, max(degree, DESIGN_ROWS_MIN_DEGREE), self.domain, self.basis)
+            made = self._design[degree] = np.asfortranarray(self._wide[:, : degree + 1])
+        return made
+
+    def white_qr(self, degree: int, used) -> tuple:
+        """``(a, q, r)``: ``a = psi[used] / sigma[used]`` at ``degree`` and ``np.linalg.qr(a)``."""
+        used = np.asarray(used, bool)
+        key = (degree, np.packbits(used).tobytes())
+        made = self._qr.get(key)
+        if made is None:
+            idx = np.flatnonzero(used)
+            a = self.design(degree)[idx] / self.s[idx, None]
+            made = self._qr[key] = (a, *np.linalg.qr(a))
+        return made
+
+
+#: :class:`DesignRows` builds its widest matrix at least at this degree (the default search limit):
+#: one Vandermonde evaluation serves the whole search.
+DESIGN_ROWS_MIN_DEGREE = 30
 
 
 def replace_fit(fit: PolynomialFit, **changes) -> PolynomialFit:
