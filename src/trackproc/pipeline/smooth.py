@@ -282,7 +282,7 @@ def _fit_group(columns: _Columns, rows: np.ndarray, station, pass_id, kind, opti
                 raise SmoothingError("tca_not_observed", f"{where} is {margin:.1f} s from an end of the data "
                                      f"(need {options.tca_max_gap_s:g} s on each side): not observed")
             out.tca = ca
-            out.tca_spread = tca_degree_spread(t_s, y, sigma, fit, kind, doppler_mode)
+            out.tca_spread = tca_degree_spread(t_s, y, sigma, fit, kind, doppler_mode, t_star=ca.t_s)
             if tca_uncertain(fit, ca, out.tca_spread[0]):
                 out.warnings.append("tca_uncertain")
                 spread, width = out.tca_spread[0], degree_spread_width(fit.degree)

@@ -146,9 +146,13 @@ class PolynomialFit:
         once per order: treat it as read-only)."""
         made = self._series.get(deriv)
         if made is None:
-            cls = BASES[self.basis][0]
-            poly = cls(self.coef, domain=list(self.domain_s))
-            made = self._series[deriv] = poly.deriv(deriv) if deriv else poly
+            if deriv:
+                # one order from the one below: numpy's m-th derivative is m first derivatives with
+                # the same scale in turn (chebder / legder), so the same bits with one pass, not m
+                made = self.series(deriv - 1).deriv(1)
+            else:
+                made = BASES[self.basis][0](self.coef, domain=list(self.domain_s))
+            self._series[deriv] = made
         return made
 
     def __call__(self, t_s, deriv: int = 0) -> np.ndarray:
@@ -232,8 +236,11 @@ def pass_domain(t, domain_s):
     return (a, b)
 
 
-def check_enough(t, degree: int) -> None:
-    n_distinct = np.unique(t).size
+def check_enough(t, degree: int, n_distinct: int | None = None) -> None:
+    """Raise the :class:`SmoothingError` of a fit of ``degree`` to times ``t`` it cannot determine
+    (``n_distinct``: the number of distinct times, when the caller has it)."""
+    if n_distinct is None:
+        n_distinct = np.unique(t).size
     if n_distinct < 2:
         raise SmoothingError("single_time", f"all {t.size} samples at one time: no curve can be fitted")
     if n_distinct < degree + 2:

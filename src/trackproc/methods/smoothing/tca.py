@@ -141,7 +141,7 @@ def degree_spread_width(degree: int) -> int:
 
 
 def tca_degree_spread(t_s, y, sigma, fit: PolynomialFit, kind: str, doppler_mode: str = "one-way",
-                      width: int | None = None) -> tuple[float, float, int]:
+                      width: int | None = None, t_star: float | None = None) -> tuple[float, float, int]:
     """Sensitivity of the TCA to the choice of degree: a model-error indicator.
 
     Refits the samples ``fit`` used with degrees ``fit.degree - width .. fit.degree + width`` (default
@@ -149,6 +149,7 @@ def tca_degree_spread(t_s, y, sigma, fit: PolynomialFit, kind: str, doppler_mode
     returns the standard deviation of t* and of the curve value at t* over those that give a
     closest approach, and how many did (NaN when fewer than 3). The coefficient covariance cannot
     show this error: it assumes the polynomial of the chosen degree is the true curve.
+    ``t_star``: ``fit``'s own TCA (:func:`closest_approach`'s ``t_s``), when the caller has it.
     """
     t, yy, s = check_arrays(t_s, y, sigma)
     if width is None:
@@ -158,12 +159,16 @@ def tca_degree_spread(t_s, y, sigma, fit: PolynomialFit, kind: str, doppler_mode
     nested = _nested_coefficients(t, yy, s, fit, degrees[-1])
     for d in degrees:
         try:
-            other = fit if d == fit.degree else replace_fit(fit, degree=d, coef=nested(d))
-            t_star = _tca_time(other, kind, doppler_mode)[2]      # closest_approach's t*, no covariance
+            if d == fit.degree:
+                other = fit
+                t_d = _tca_time(fit, kind, doppler_mode)[2] if t_star is None else t_star
+            else:
+                other = replace_fit(fit, degree=d, coef=nested(d))
+                t_d = _tca_time(other, kind, doppler_mode)[2]      # closest_approach's t*, no covariance
         except SmoothingError:
             continue
-        times.append(float(t_star))
-        values.append(float(other(t_star)))
+        times.append(float(t_d))
+        values.append(float(other(t_d)))
     if len(times) < 3:
         return float("nan"), float("nan"), len(times)
     return float(np.std(times, ddof=1)), float(np.std(values, ddof=1)), len(times)
@@ -185,9 +190,10 @@ def _nested_coefficients(t, y, s, fit: PolynomialFit, top: int):
     noise = fit.noise or WHITE
     aug = np.column_stack([design_matrix(tu, top, fit.domain_s, fit.basis), y[idx]]) / s[idx, None]
     r = np.linalg.qr(whiten(tu, aug, noise), mode="r")
+    n_distinct = np.unique(tu).size
 
     def coef(d: int) -> np.ndarray:
-        check_enough(tu, d)
+        check_enough(tu, d, n_distinct)
         rd = r[: d + 1, : d + 1]
         check_rank(rd, d)                                     # solve_fit's rank test
         return np.linalg.solve(rd, r[: d + 1, -1])
