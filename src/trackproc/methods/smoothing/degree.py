@@ -110,8 +110,9 @@ def select_degree(t_s, y, sigma, *, basis: str = "chebyshev", max_degree: int = 
     """Degree minimizing ``BIC(d) = n ln(chi2_d / n) + (d + 1) ln n`` over ``0..cap``.
 
     ``chi2_d`` is the weighted (for an AR(1) ``noise``: generalized) residual sum of squares. One QR
-    factorization of the whitened design matrix at the largest degree gives every nested fit:
-    ``chi2_d = |y_w|^2 - |(Q^T y_w)[:d+1]|^2``. The search stops at the smallest of ``max_degree``,
+    factorization of the whitened ``[Psi  y]`` at the largest degree gives every nested fit:
+    ``chi2_d = sum_(k > d) R[k, y]^2``, the squares of the last column's entries below row ``d``
+    (the columns of a lower degree are the first ones; Golub & Van Loan 2013, sec. 5.3.3). The search stops at the smallest of ``max_degree``,
     ``n_distinct - 2`` (each candidate keeps a degree of freedom) and the effective-sample cap
     ``floor(n_eff / 2) - 1`` (:func:`degree_cap`). Returns (degree, {degree: BIC}, at_limit) where
     ``at_limit`` says the minimum is at the upper end of the search (more terms might help).
@@ -124,22 +125,17 @@ def select_degree(t_s, y, sigma, *, basis: str = "chebyshev", max_degree: int = 
     order = np.argsort(t, kind="stable")
     t, y, s = t[order], y[order], s[order]
     psi = design_matrix(t, dmax, domain, basis) if design is None else design(dmax)
-    a = whiten(t, psi / s[:, None], noise)
-    yw = whiten(t, y / s, noise)
-    q, r = np.linalg.qr(a)
-    qty = q.T @ yw
-    total = float(yw @ yw)
+    aug = whiten(t, np.column_stack([psi, y]) / s[:, None], noise)
+    # R of the QR of [A  y_w]: the last column's entries below row d are Q^T y_w's part the first
+    # d + 1 columns do not reach, so chi2_d is the sum of their squares (Golub & Van Loan 2013,
+    # sec. 5.3.3) -- no difference of large numbers, every degree from one factorisation
+    r = np.linalg.qr(aug, mode="r")
+    tail = np.cumsum(r[::-1, -1] ** 2)[::-1]          # tail[k] = sum_{j >= k} r[j, -1]^2
     n = t.size
-    scores = {}
     tiny = np.finfo(float).tiny
-    for d in range(dmax + 1):
-        chi2 = max(total - float(qty[: d + 1] @ qty[: d + 1]), 0.0)
-        # Guard against cancellation: recompute small chi2 directly from the residual.
-        if chi2 < 1e-8 * total:
-            coef = np.linalg.lstsq(r[: d + 1, : d + 1], qty[: d + 1], rcond=None)[0]
-            res = yw - a[:, : d + 1] @ coef
-            chi2 = float(res @ res)
-        scores[d] = n * np.log(max(chi2, tiny) / n) + (d + 1) * np.log(n)
+    chi2 = np.maximum(tail[1: dmax + 2], tiny)
+    bic = n * np.log(chi2 / n) + np.arange(1, dmax + 2) * np.log(n)
+    scores = {d: bic[d] for d in range(dmax + 1)}
     best = min(scores, key=scores.get)
     return best, scores, best == dmax
 
