@@ -121,7 +121,7 @@ def smooth_command(
         figures = smooth_plots(result, plot)
     write_pass_table(result.table, out, out_format.value)
     if summary is not None:
-        write_text(summary, summary_json(result.summary))
+        write_text(summary, summary_json(result.summary, ready=True))
     if plot is not None:
         for name, data in figures.items():
             write_bytes(name, data)

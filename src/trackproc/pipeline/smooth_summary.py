@@ -42,9 +42,11 @@ GRID_NOTE = ("value = fitted curve, sigma = its 1-sigma from the scaled coeffici
              "with the coefficient covariance, not as independent samples")
 
 
-def summary_json(summary: dict) -> str:
-    """The summary as strict JSON text (NaN and infinities as null), indented, newline-terminated."""
-    return dumps_indented(json_ready(summary), 2) + "\n"
+def summary_json(summary: dict, ready: bool = False) -> str:
+    """The summary as strict JSON text (NaN and infinities as null), indented, newline-terminated.
+    ``ready``: ``summary`` is :func:`json_ready`'s output already (``SmoothResult.summary`` is), so
+    not converted again (the same text: ``json_ready`` of its own output is that output)."""
+    return dumps_indented(summary if ready else json_ready(summary), 2) + "\n"
 
 
 def iso(ts: pd.Timestamp) -> str:

@@ -106,19 +106,19 @@ def _tca_time(fit: PolynomialFit, kind: str, doppler_mode: str):
     g = fit.series(order)
     gp = fit.series(order + 1)
     candidates = _real_roots(g, fit.domain_s, gp)
-    good = [r for r in candidates if sign * gp(r) > 0]
+    gp_at = _scalar(gp)
+    good = [r for r in candidates if sign * gp_at(r) > 0]
     if not good:
         what = {0: "zero", 1: "minimum", 2: "inflection point"}[order]
         found = f" ({len(candidates)} of the wrong sense)" if candidates else ""
         raise SmoothingError("no_tca", f"no {what} of the fitted {kind.replace('_', '-')} inside the pass"
                              f"{found}: closest approach not observed")
     if order == 2:      # Doppler S-curve: steepest descent = most negative f'
-        f1 = fit.series(1)
-        t_star = min(good, key=lambda r: f1(r))
+        t_star = min(good, key=_scalar(fit.series(1)))
     elif order == 1:    # range: the lowest minimum
-        t_star = min(good, key=lambda r: fit(r))
+        t_star = min(good, key=_scalar(fit.series(0)))
     else:               # steepest crossing
-        t_star = max(good, key=lambda r: abs(gp(r)))
+        t_star = max(good, key=lambda r: abs(gp_at(r)))
     return order, definition, t_star, gp, len(candidates)
 
 
@@ -209,7 +209,8 @@ def _real_roots(series, domain, d1=None) -> list[float]:
         return []
     roots = series.roots()
     half = 0.5 * (b - a)
-    d1 = series.deriv() if d1 is None else d1
+    d1 = _scalar(series.deriv() if d1 is None else d1)
+    value = _scalar(series)
     out = []
     for z in roots:
         if abs(z.imag) > 1e-3 * half:
@@ -219,7 +220,7 @@ def _real_roots(series, domain, d1=None) -> list[float]:
             slope = d1(x)
             if slope == 0:
                 break
-            step = series(x) / slope
+            step = value(x) / slope
             x -= step
             if abs(step) < 1e-12 * half:
                 break
@@ -227,3 +228,28 @@ def _real_roots(series, domain, d1=None) -> list[float]:
             out.append(x)
     out = sorted(set(np.round(out, 9)))
     return [float(v) for v in out]
+
+
+def _scalar(series):
+    """``x -> series(x)`` for one float ``x``: for a Chebyshev series numpy's own operations in
+    Python floats, in the same order (the domain map ``off + scl x``, then ``chebval``'s Clenshaw
+    recurrence), so the same value to the last bit without numpy's per-call overhead (the root
+    polish and the choice among roots call it some 20 times per fit); other bases: the series."""
+    if type(series) is not np.polynomial.Chebyshev:
+        return series
+    off, scl = (float(v) for v in series.mapparms())
+    c = [float(v) for v in series.coef]
+    if len(c) == 1:
+        return lambda x: c[0] + 0 * (off + scl * x)
+
+    def value(x):
+        x = off + scl * x
+        if len(c) == 2:
+            return c[0] + c[1] * x
+        x2 = 2 * x
+        c0, c1 = c[-2], c[-1]
+        for i in range(3, len(c) + 1):
+            c0, c1 = c[-i] - c1, c0 + c1 * x2
+        return c0 + c1 * x
+
+    return value

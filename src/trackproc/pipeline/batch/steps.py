@@ -99,7 +99,7 @@ def smooth_step(ctx: InputContext, opt: dict) -> None:
         basis=opt["basis"], max_degree=opt["max_degree"], tca_max_gap_s=opt["tca_max_gap_s"]),
         source=ctx.source)
     ctx.table = result.table
-    ctx.outputs[".smooth.json"] = summary_json(result.summary).encode("utf-8")
+    ctx.outputs[".smooth.json"] = summary_json(result.summary, ready=True).encode("utf-8")
     counts = result.summary["counts"]
     ctx.numbers.update(fits_ok=counts["ok"], fits_suspect=counts["suspect"], fits_failed=counts["failed"])
     records = result.summary["fits"]
