@@ -149,7 +149,12 @@ class PolynomialFit:
             if deriv:
                 # one order from the one below: numpy's m-th derivative is m first derivatives with
                 # the same scale in turn (chebder / legder), so the same bits with one pass, not m
-                made = self.series(deriv - 1).deriv(1)
+                below = self.series(deriv - 1)
+                if type(below) is np.polynomial.Chebyshev and below.coef.size > 1:
+                    made = type(below)(_chebder1(below.coef, below.mapparms()[1]), below.domain, below.window,
+                                       below.symbol)
+                else:
+                    made = below.deriv(1)
             else:
                 made = BASES[self.basis][0](self.coef, domain=list(self.domain_s))
             self._series[deriv] = made
@@ -167,6 +172,22 @@ class PolynomialFit:
         phi = self.design(t_s, deriv)
         cov = self.covariance(scaled)
         return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", phi, cov, phi), 0.0))
+
+
+def _chebder1(coef, scl) -> np.ndarray:
+    """``numpy.polynomial.chebyshev.chebder(coef, 1, scl)`` of a 1-D series of 2 or more terms:
+    numpy's recurrence for the derivative's coefficients (``c'_(j-1) = c'_(j+1) + 2 j c_j``), step by
+    step in the same order in Python floats, so the same bits without numpy's per-element indexing."""
+    c = [float(v) * scl for v in coef]
+    n = len(c) - 1
+    der = [0.0] * n
+    for j in range(n, 2, -1):
+        der[j - 1] = (2 * j) * c[j]
+        c[j - 2] += (j * c[j]) / (j - 2)
+    if n > 1:
+        der[1] = 4 * c[2]
+    der[0] = c[1]
+    return np.array(der)
 
 
 def design_matrix(t_s, degree: int, domain_s, basis: str = "chebyshev", deriv: int = 0) -> np.ndarray:
