@@ -23,6 +23,12 @@ def _value(rng: random.Random, depth: int = 0):
     if r < 0.5:        # a list of numbers (the fast path), ints and floats mixed, or one of bools
         return [rng.choice([rng.uniform(-1, 1), rng.randint(-5, 5), 1e-17]) for _ in range(rng.randint(0, 7))] \
             if rng.random() < 0.9 else [True, 1, 0.5]
+    if r < 0.6:        # a matrix of numbers (the one-call path): ragged, empty or bool rows too
+        rows = [[rng.choice([rng.uniform(-1, 1), rng.randint(-5, 5), 5e-324, -0.0])
+                 for _ in range(rng.randint(1, 6))] for _ in range(rng.randint(1, 5))]
+        if rng.random() < 0.1:
+            rows.append(rng.choice([[], [True, 1.0], [1.0, "a,b"], (1.0, 2.0), [[1.0]]]))
+        return rows
     if r < 0.75:
         seq = [_value(rng, depth + 1) for _ in range(rng.randint(0, 5))]
         return tuple(seq) if rng.random() < 0.1 else seq
@@ -42,7 +48,8 @@ def test_same_text_as_json_dumps(seed):
 
 
 def test_same_errors_and_fallbacks_as_json_dumps():
-    for value in ([1.0, float("nan")], {"a": float("inf")}, float("-inf"), {"a": {1, 2}}):
+    for value in ([1.0, float("nan")], {"a": float("inf")}, float("-inf"), {"a": {1, 2}},
+                  [[1.0, 2.0], [float("nan"), 1.0]], [[1.0], [float("-inf")]]):
         with pytest.raises((ValueError, TypeError)) as mine:
             dumps_indented(value)
         with pytest.raises((ValueError, TypeError)) as theirs:

@@ -93,6 +93,13 @@ def _emit(value, out: list, newline: str, step: str, sort_keys: bool) -> None:
             items = _COMPACT.encode(value)[1:-1].split(",")  # numbers only: no comma inside an item
             out.append("[" + inner + ("," + inner).join(items) + newline + "]")
             return
+        if all(type(row) is list and row and all(type(v) is float or type(v) is int for v in row) for row in value):
+            # a matrix of numbers (a covariance): all its rows by one call of the C encoder
+            deeper = inner + step
+            rows = _COMPACT.encode(value)[2:-2].split("],[")
+            out.append("[" + inner + ("," + inner).join("[" + deeper + ("," + deeper).join(row.split(",")) + inner + "]"
+                                                        for row in rows) + newline + "]")
+            return
         out.append("[")
         for i, item in enumerate(value):
             out.append("," + inner if i else inner)
