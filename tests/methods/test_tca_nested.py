@@ -50,6 +50,28 @@ def test_nested_coefficients_refuse_what_fit_polynomial_refuses():
             coef(d)
 
 
+def test_nested_coefficients_refuse_rank_deficient_degrees_as_fit_polynomial():
+    """Times in two tight clusters: degree 8 is determined (condition ~1e12), 10 and more are not;
+    the nested fits accept and refuse the same degrees as separate fits, whether or not the widest
+    one is determined."""
+    t = np.concatenate([np.linspace(0.0, 1e-3, 30), np.linspace(1.0 - 1e-3, 1.0, 30)])
+    y = np.sin(3.0 * t)
+    fit = fit_polynomial(t, y, 1.0, 2)
+    for top in (8, 14):
+        coef = _nested_coefficients(t, y, np.ones(t.size), fit, top)
+        for d in range(top + 1):
+            try:
+                ref = fit_polynomial(t, y, 1.0, d, domain_s=fit.domain_s)
+            except SmoothingError as exc:
+                assert exc.reason == "rank_deficient" and d >= 10
+                with pytest.raises(SmoothingError, match="not determined"):
+                    coef(d)
+                continue
+            # the curves (coefficients at condition 1e12 agree only to ~1e-6)
+            got = np.polynomial.Chebyshev(coef(d), domain=list(fit.domain_s))(t)
+            np.testing.assert_allclose(got, ref(t), rtol=0, atol=1e-9)
+
+
 def test_degree_spread_as_with_separate_fits():
     """The spread (std of t* over the degrees around the chosen one) as computed with separate fits."""
     from trackproc.methods.smoothing.tca import _tca_time
