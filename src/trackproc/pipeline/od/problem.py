@@ -188,11 +188,15 @@ class Problem:
         values.update({n: x[i] for n, i in cols.items()})
         try:
             traj = self.trajectory(x)
-            h, jac, _ = ob.evaluate(self.meas, traj, n_state_params=6 + len(self.force_names),
-                                    modifiers=self.modifiers, bias_values=values, bias_columns=cols,
-                                    n_columns=x.size, range_rate_model=self.range_rate_model, partials=partials)
+            # the light times of the last evaluation start this one's iteration (one trajectory
+            # evaluation fewer; the same numbers to the iteration's tolerance)
+            h, jac, geo = ob.evaluate(self.meas, traj, n_state_params=6 + len(self.force_names),
+                                      modifiers=self.modifiers, bias_values=values, bias_columns=cols,
+                                      n_columns=x.size, range_rate_model=self.range_rate_model, partials=partials,
+                                      tau0=self.__dict__.get("_light_times"))
         except ValueError as exc:
             raise ArithmeticError(str(exc)) from None
+        self.__dict__["_light_times"] = geo.tau_s
         self.evaluations += 1
         return h, jac
 
