@@ -166,8 +166,17 @@ def solve_light_time(trajectory, t_r_s, r_st, *, c: float = C_LIGHT, tol_s: floa
     r_st = np.asarray(r_st, float)
     if tau0 is None or np.shape(tau0) != t_r.shape or not np.all(np.isfinite(tau0)):
         tau0 = np.linalg.norm(trajectory.state(t_r)[:, :3] - r_st, axis=-1) / c
-    leg = lt.solve_down_leg(lambda tau: trajectory.state(t_r - tau), r_st, tau0, c=c, tol_s=tol_s,
-                            max_iter=max_iter)
+    last = []
+
+    def state_at(tau):
+        # the leg reads the state again at its converged τ: the last iterate's when the final
+        # Newton step is below τ's rounding (quadratic convergence makes it so)
+        key = tau.tobytes()
+        if not last or last[0] != key:
+            last[:] = [key, trajectory.state(t_r - tau)]
+        return last[1]
+
+    leg = lt.solve_down_leg(state_at, r_st, tau0, c=c, tol_s=tol_s, max_iter=max_iter)
     t_e = t_r - leg.tau_s
     return EmissionGeometry(t_e_s=t_e, tau_s=leg.tau_s, state=leg.state, state_dot=trajectory.state(t_e, derivative=1),
                             rho_m=leg.rho_m, u=leg.u, iterations=leg.iterations)
