@@ -148,6 +148,7 @@ def test_light_time_from_an_earlier_evaluations_light_times_is_the_same_solution
 
         geo = ob.solve_light_time(Counted(), t, r_st, tau0=tau0)
         np.testing.assert_allclose(geo.tau_s, leg.tau_s, rtol=0, atol=1e-13)
+        assert np.array_equal(geo.state, traj.state(geo.t_e_s))   # the state at the τ returned, kept or not
         counts.append(len(calls))
     assert np.max(np.abs(nearby.tau_s - leg.tau_s)) > 1e-6       # a start that needs the iteration
     assert counts[1] == counts[0] - 1
