@@ -126,6 +126,34 @@ def test_light_time_matches_the_simulators_iteration():
     assert geo.iterations <= 4
 
 
+def test_light_time_from_an_earlier_evaluations_light_times_is_the_same_solution():
+    """A start from the light times of an orbit 2 km away (what ``Problem`` hands the next
+    evaluation) converges to the independent iteration's light times as the cold start does,
+    with one trajectory evaluation fewer."""
+    t = np.linspace(100.0, 900.0, 9)
+    r_st, v_st = _stations(t)
+    nearby = ob.solve_light_time(_Trajectory(STATE0 + np.r_[2000.0, -1000.0, 500.0, 1.0, 0.0, -1.0]), t, r_st)
+    traj = _Trajectory(STATE0)
+    s = traj.state(t)
+    leg = mm.light_time_down(s[:, :3], s[:, 3:], traj.state(t, derivative=1)[:, 3:],
+                             traj.state(t, derivative=2)[:, 3:], r_st, v_st)
+    counts = []
+    for tau0 in (None, nearby.tau_s):
+        calls = []
+
+        class Counted:
+            def state(self, tt, derivative=0):
+                calls.append(1)
+                return traj.state(tt, derivative=derivative)
+
+        geo = ob.solve_light_time(Counted(), t, r_st, tau0=tau0)
+        np.testing.assert_allclose(geo.tau_s, leg.tau_s, rtol=0, atol=1e-13)
+        assert np.array_equal(geo.state, traj.state(geo.t_e_s))   # the state at the τ returned, kept or not
+        counts.append(len(calls))
+    assert np.max(np.abs(nearby.tau_s - leg.tau_s)) > 1e-6       # a start that needs the iteration
+    assert counts[1] == counts[0] - 1
+
+
 @pytest.mark.parametrize("model", ["doppler", "instantaneous"])
 def test_partials_through_light_time_match_central_differences_of_the_initial_state(model):
     """The whole chain: propagation STM, light time (eq. 6), geometry, every kind."""

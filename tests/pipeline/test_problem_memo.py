@@ -73,3 +73,24 @@ def test_values_without_the_jacobian_are_the_models_values():
     assert np.array_equal(fresh.values(x), h)
     assert fresh.evaluations == count + 1 and not fresh.__dict__.get("_memo")   # values alone are not kept
     assert np.array_equal(pb.values(x), h)                                      # from the kept result
+
+
+def test_near_the_start_only_the_additive_drivers_moved_is_the_start_evaluation_shifted():
+    """``Problem.model_near`` (a refinement's stale-state test: the stale state with the refined
+    offsets) from the start point's result: the range biases add to the samples, so the values
+    are the start's plus their partials times the change, the Jacobian the start's — what a fresh
+    problem evaluates there, without an evaluation; any other parameter moved is evaluated."""
+    pb, fresh = _problem(), _problem()
+    x0 = pb.x0
+    pb.model(x0)                                     # the solve's start
+    count = pb.evaluations
+    x = x0 + np.r_[np.zeros(6), 40.0 * np.arange(1, x0.size - 5)]
+    h, j = pb.model_near(x)
+    assert pb.evaluations == count
+    hf, jf = fresh.model(x)
+    assert np.allclose(h, hf, rtol=0.0, atol=1e-8) and np.array_equal(j, jf)
+    moved = x.copy()
+    moved[0] += 1.0                                  # the state: not additive, evaluated
+    h2, j2 = pb.model_near(moved)
+    assert pb.evaluations == count + 1
+    assert np.array_equal(h2, fresh.model(moved)[0]) and np.array_equal(j2, fresh.model(moved)[1])

@@ -152,19 +152,31 @@ class EmissionGeometry:
 
 
 def solve_light_time(trajectory, t_r_s, r_st, *, c: float = C_LIGHT, tol_s: float = LIGHT_TIME_TOL_S,
-                     max_iter: int = 10) -> EmissionGeometry:
+                     max_iter: int = 10, tau0=None) -> EmissionGeometry:
     """Emission times of one-way signals received at ``r_st`` (N, 3) at ``t_r_s`` (N,).
 
     ``trajectory.state(t, derivative=0|1)`` gives the satellite's GCRF ``(r, v)`` or ``(v, a)``
     at any times (dense output). Newton on ``g(τ) = c τ - ρ(t_r - τ)``, ``g' = c + û·v``,
-    from ``τ = |r(t_r) - r_st|/c``; converged when every ``|Δτ| < tol_s`` (1e-12 s: 0.3 mm).
-    Raises ``ArithmeticError`` if it does not converge in ``max_iter`` iterations.
+    from ``τ = |r(t_r) - r_st|/c``, or from ``tau0`` (N,) when given (the light times of an earlier
+    evaluation on the same samples: Newton's second step is then below ``tol_s`` as it is from the
+    cold start, and one trajectory evaluation is spared); converged when every ``|Δτ| < tol_s``
+    (1e-12 s: 0.3 mm). Raises ``ArithmeticError`` if it does not converge in ``max_iter`` iterations.
     """
     t_r = np.asarray(t_r_s, float)
     r_st = np.asarray(r_st, float)
-    tau0 = np.linalg.norm(trajectory.state(t_r)[:, :3] - r_st, axis=-1) / c
-    leg = lt.solve_down_leg(lambda tau: trajectory.state(t_r - tau), r_st, tau0, c=c, tol_s=tol_s,
-                            max_iter=max_iter)
+    if tau0 is None or np.shape(tau0) != t_r.shape or not np.all(np.isfinite(tau0)):
+        tau0 = np.linalg.norm(trajectory.state(t_r)[:, :3] - r_st, axis=-1) / c
+    last = []
+
+    def state_at(tau):
+        # the leg reads the state again at its converged τ: the last iterate's when the final
+        # Newton step is below τ's rounding (quadratic convergence makes it so)
+        key = tau.tobytes()
+        if not last or last[0] != key:
+            last[:] = [key, trajectory.state(t_r - tau)]
+        return last[1]
+
+    leg = lt.solve_down_leg(state_at, r_st, tau0, c=c, tol_s=tol_s, max_iter=max_iter)
     t_e = t_r - leg.tau_s
     return EmissionGeometry(t_e_s=t_e, tau_s=leg.tau_s, state=leg.state, state_dot=trajectory.state(t_e, derivative=1),
                             rho_m=leg.rho_m, u=leg.u, iterations=leg.iterations)
@@ -308,7 +320,7 @@ def bias_modifiers(meas: MeasurementSet, names: Sequence[str], epochs: dict | No
 
 def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modifiers: Sequence[BiasModifier] = (),
              bias_values: dict | None = None, bias_columns: dict | None = None, n_columns: int | None = None,
-             range_rate_model: str = "doppler", c: float = C_LIGHT, partials: bool = True):
+             range_rate_model: str = "doppler", c: float = C_LIGHT, partials: bool = True, tau0=None):
     """Model values and partials of every sample (eqs. (1)-(13) of the module docstring).
 
     ``trajectory`` gives GCRF ``state(t, derivative=0|1)`` (N, 6) and ``stm(t)`` (N, 6, P) —
@@ -326,7 +338,9 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
     ``-ḣ(t - τ)``, by a central difference of the model (:func:`_time_partials`).
 
     ``partials=False``: the values alone (the same numbers), the Jacobian None; ``trajectory.stm``
-    is not read (a step rule's trial point needs no Jacobian).
+    is not read (a step rule's trial point needs no Jacobian). ``tau0``: the down leg's light
+    times of an earlier evaluation, where :func:`solve_light_time` starts (the same numbers to
+    its tolerance).
 
     Implements seed 002 eq. 17 (with light time, station motion and the offsets) and its Jacobian (eq. 10).
 
@@ -344,7 +358,7 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         if np.any(dt):
             meas = meas.shifted(dt)
     ncol = n_columns if n_columns is not None else n_state_params + len(bias_columns)
-    geo = solve_light_time(trajectory, meas.t_s, meas.r_st, c=c)
+    geo = solve_light_time(trajectory, meas.t_s, meas.r_st, c=c, tau0=tau0)
     r_e, v_e = geo.state[:, :3], geo.state[:, 3:]
     if partials:
         phi = trajectory.stm(geo.t_e_s)

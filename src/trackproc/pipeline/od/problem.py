@@ -159,18 +159,44 @@ class Problem:
         if len(memo) >= MODEL_MEMO:
             memo.pop(next(iter(memo)))
         memo[key] = (h, jac, self.force_model)
+        if key[0] == self.x0.tobytes():
+            # the solve's start point, kept for :meth:`model_near` (a refinement's stale-state test)
+            self.__dict__["_start"] = (key, memo[key])
         return h.copy(), jac.copy()
+
+    def model_near(self, x):
+        """:meth:`model` at ``x``, from the result kept at the start point :attr:`x0` when ``x``
+        differs from it only in drivers of modifiers that add to the samples (a bias, a Doppler
+        offset or drift: ``h`` is affine in them, with constant partials, and ``J`` does not depend
+        on them), else evaluated."""
+        x = np.asarray(x, float)
+        start = self.__dict__.get("_start")
+        x0 = self.x0
+        cols, fixed = self._columns()
+        if (start is None or start[1][2] is not self.force_model or x.shape != x0.shape
+                or start[0] != _memo_key(x0, cols, fixed)):
+            return self.model(x)
+        linear = {n for b in self.modifiers if not b.modifier.shifts_time for n in b.names}
+        moved = np.flatnonzero(x != x0)
+        if not all(self.names[i] in linear for i in moved):
+            return self.model(x)
+        h, jac = start[1][0], start[1][1]
+        return h + jac[:, moved] @ (x[moved] - x0[moved]), jac.copy()
 
     def _model(self, x, cols, fixed, partials: bool = True):
         values = dict(fixed)
         values.update({n: x[i] for n, i in cols.items()})
         try:
             traj = self.trajectory(x)
-            h, jac, _ = ob.evaluate(self.meas, traj, n_state_params=6 + len(self.force_names),
-                                    modifiers=self.modifiers, bias_values=values, bias_columns=cols,
-                                    n_columns=x.size, range_rate_model=self.range_rate_model, partials=partials)
+            # the light times of the last evaluation start this one's iteration (one trajectory
+            # evaluation fewer; the same numbers to the iteration's tolerance)
+            h, jac, geo = ob.evaluate(self.meas, traj, n_state_params=6 + len(self.force_names),
+                                      modifiers=self.modifiers, bias_values=values, bias_columns=cols,
+                                      n_columns=x.size, range_rate_model=self.range_rate_model, partials=partials,
+                                      tau0=self.__dict__.get("_light_times"))
         except ValueError as exc:
             raise ArithmeticError(str(exc)) from None
+        self.__dict__["_light_times"] = geo.tau_s
         self.evaluations += 1
         return h, jac
 

@@ -185,7 +185,7 @@ def stale_improvement(ref: Refinement, sol, sigma_scale: float = 1.0, n_seen: in
     npb = ref.n_problem
     x = np.asarray(sol.values, float)[:npb].copy()
     x[:6] = ref.x0[:6]
-    h, jac = ref.problem.model(x)
+    h, jac = ref.problem.model_near(x)        # the first solve's start, its offsets moved (linear)
     r = white(np.asarray(y, float) - h)
     bias, bias_cov, cross = np.zeros(0), np.zeros((0, 0)), np.zeros((0, 6))
     if npb > 6:
