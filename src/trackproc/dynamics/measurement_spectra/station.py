@@ -63,6 +63,13 @@ def _era_rate(jd1, jd2, eop):
     return era, era_rate_si(jd1, jd2, eop)
 
 
+def _frozen_arrays(arrays: tuple) -> tuple:
+    """``arrays`` made read-only: they are kept (:meth:`StationModel._kept`) and shared."""
+    for a in arrays:
+        a.flags.writeable = False
+    return arrays
+
+
 def _quadratic_about(nodes_t, values, c):
     """Coefficients (S, 3, ...) of the quadratic through the 3 nodes nearest each ``c``,
     re-expanded about ``c``: value(c + tau) = A0 + A1 tau + A2 tau^2."""
@@ -165,6 +172,10 @@ class StationModel:
         t = np.asarray(t_s, float)
         if self.frozen:
             return self.era0_rad + self.omega_rad_s * t, np.full(t.shape, self.omega_rad_s)
+        # kept: :meth:`spectra` and :meth:`to_enu` ask for the same centres within one prediction
+        return self._kept(("angle", t.tobytes(), t.shape), lambda: _frozen_arrays(self._angle(t)))
+
+    def _angle(self, t):
         j1, j2 = ts.add_seconds_utc(self.epoch_jd_utc, t)
         era, rate = _era_rate(j1, j2, self.eop)
         return era.reshape(t.shape), rate.reshape(t.shape)
@@ -178,8 +189,8 @@ class StationModel:
             p = np.zeros((s, 3, 3))
             p[:, 0] = self.p_nodes[0]
             return pn, p
-        return (_quadratic_about(self.nodes_s, self.pn_nodes, c),
-                _quadratic_about(self.nodes_s, self.p_nodes, c))
+        return self._kept(("slow", c.tobytes(), c.shape), lambda: _frozen_arrays(
+            (_quadratic_about(self.nodes_s, self.pn_nodes, c), _quadratic_about(self.nodes_s, self.p_nodes, c))))
 
     def spectra(self, centres_s, n: int) -> np.ndarray:
         """Position spectra (S, 3, n) of the station about ``centres_s`` (quasi-inertial, m).
