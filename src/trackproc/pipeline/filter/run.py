@@ -126,10 +126,9 @@ def initial_covariance(problem: Problem, carried=None, gm=None):
     return centre, p0
 
 
-def _sub_problem(problem: Problem, rows, compiled=None) -> Problem:
+def _sub_problem(problem: Problem, rows) -> Problem:
     """The problem restricted to ``rows`` (same parameters and epoch; the modifiers bound again,
-    those acting on none of the rows dropped), its trajectories on the full model's integrator
-    ``compiled`` (:attr:`Problem.compiled`)."""
+    those acting on none of the rows dropped)."""
     meas = problem.meas.subset(rows)
     bound = []
     for b in problem.modifiers:
@@ -137,8 +136,7 @@ def _sub_problem(problem: Problem, rows, compiled=None) -> Problem:
             bound.append(b.modifier.bind(meas))
         except ValueError:
             continue
-    return replace(problem, meas=meas, modifiers=bound, times=problem.times[rows], sources=problem.sources[rows],
-                   compiled=compiled)
+    return replace(problem, meas=meas, modifiers=bound, times=problem.times[rows], sources=problem.sources[rows])
 
 
 def _evaluate(sub: Problem, x, cover=(), start_s: float = 0.0):
@@ -258,8 +256,10 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
     c0, P0 = np.asarray(centre, float) / scales, np.asarray(p0, float) / ss
     evaluations, integrated_steps, propagated_s = 0, 0, 0.0
     chunks = [(ka, kb, seg > 0) for seg, (ka, kb) in enumerate(segments)]
-    # the chunks integrate the arc once between them: the full model's integrator chosen once for it
-    compiled = problem.compiled if problem.compiled is not None else problem.compiled_for(steps_t[-1] - steps_t[0])
+    if problem.compiled is None:
+        # the chunks integrate the arc once between them: the full model's integrator chosen once
+        # for it (the chunks' sub-problems inherit it)
+        problem = replace(problem, compiled=problem.compiled_for(steps_t[-1] - steps_t[0]))
     last_traj = None
     limit = np.inf if opt.ekf_sigma_m is None else float(opt.ekf_sigma_m)
 
@@ -299,13 +299,13 @@ def sweep(problem: Problem, x_ref0, centre, p0, opt: FilterOptions, targets=None
                 x_ref = np.concatenate([last_traj.state(t_anchor), x_ref[6:]])
         t_need = steps_t[max(kprev, 0):kb + 1]
         if rows.size:
-            sub = _sub_problem(problem, np.sort(rows), compiled)
+            sub = _sub_problem(problem, np.sort(rows))
             h, jac, traj = _evaluate(sub, x_ref[:n_par], cover=t_need, start_s=t_anchor)
             evaluations += 1
             pos = np.searchsorted(np.sort(rows), rows)         # rows (time order) -> sub's order
             h, jac = h[pos], jac[pos]
         else:
-            traj = replace(problem, compiled=compiled).trajectory(x_ref[:n_par], cover=t_need, start_s=t_anchor)
+            traj = problem.trajectory(x_ref[:n_par], cover=t_need, start_s=t_anchor)
             h, jac = np.zeros(0), np.zeros((0, n_par))
         last_traj = traj
         integrated_steps += traj.n_steps
