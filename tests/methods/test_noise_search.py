@@ -1,5 +1,5 @@
-"""The REML noise search (methods/noise.py ``_optimise``: trust-region quasi-Newton in
-log-parameters) against independent references: the closed-form minimum of quadratics (inside
+"""The REML noise search (methods/trust_region.py ``minimise``: trust-region quasi-Newton in
+log-parameters, as methods/noise.py calls it) against independent references: the closed-form minimum of quadratics (inside
 the box and on its bounds) and a brute-force grid of the restricted likelihood of simulated passes."""
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from trackproc.methods import noise as nz
+from trackproc.methods.trust_region import minimise
 
 
 @pytest.mark.parametrize("seed", range(6))
@@ -28,7 +29,7 @@ def test_minimum_of_a_quadratic_inside_the_box(seed):
         calls.append(1)
         return float((x - c) @ a @ (x - c))
 
-    z, neg = nz._optimise(f, rng.uniform(-3.0, 3.0, d), [(-10.0, 10.0)] * d, ftol=1e-9, xtol=1e-7)
+    z, neg = minimise(f, rng.uniform(-3.0, 3.0, d), [(-10.0, 10.0)] * d, ftol=1e-9, xtol=1e-7)
     assert np.max(np.abs(z - c)) <= 5e-4 + 5e-5 * np.linalg.cond(a), (z, c)
     assert -neg == pytest.approx(f(z))
     assert len(calls) < 150
@@ -39,7 +40,7 @@ def test_minimum_on_the_bounds_is_held_there():
     constrained minimum is that coordinate at its bound, the others at their minimiser."""
     c = np.array([1.5, 14.0, -2.0])
     w = np.array([3.0, 0.5, 10.0])
-    z, _ = nz._optimise(lambda x: float(np.sum(w * (x - c) ** 2)), np.zeros(3), [(-5.0, 5.0)] * 3,
+    z, _ = minimise(lambda x: float(np.sum(w * (x - c) ** 2)), np.zeros(3), [(-5.0, 5.0)] * 3,
                         ftol=1e-10, xtol=1e-8)
     assert z[1] == 5.0
     assert np.max(np.abs(z[[0, 2]] - c[[0, 2]])) <= 6e-4
