@@ -43,7 +43,8 @@ For speed the likelihood is evaluated on at most :data:`MAX_REML_SAMPLES` sample
 consecutive samples spread over the pass: the exact restricted likelihood of that subset, which
 keeps the shortest lags), the final fit uses every sample.
 
-Pure numpy/scipy.
+Pure numpy/scipy. One responsibility, the noise model of a pass (its candidates, likelihood, starts
+and choice); its minimiser is :mod:`trackproc.methods.trust_region`.
 """
 
 from __future__ import annotations
