@@ -283,6 +283,39 @@ def candidate_models(noise: str, oscillator: bool) -> tuple:
     return (noise,)
 
 
+def _starts(has_ar: bool, has_walk: bool, given: bool, tau_lo: float, tau_hi: float, z_sig: float, sd: float,
+            fitted: dict) -> tuple[list, list]:
+    """``(starts, bounds)`` of one candidate's search in its log-parameters (:func:`fit_noise`'s
+    ``build``; the starts set which local maximum the search finds): ``tau_lo``, ``tau_hi`` log τ's
+    bounds, ``z_sig`` the log walk intensity whose variance over the pass equals the white noise's,
+    ``sd`` the residuals' scale, ``fitted`` the candidates fitted so far (name -> (model, ℓ_R, k, z))."""
+    starts = [[]]
+    bounds: list = []
+    # starts (the best one is searched from): a coarse grid in τ (the likelihood has local
+    # maxima there) and in the AR(1)'s share; the walk about the intensity whose variance over
+    # the pass equals the white noise's (below it the likelihood is flat: no walk)
+    if has_ar:
+        starts = [[za, tt] for tt in np.linspace(tau_lo, tau_hi, 4) for za in (-4.0, -1.5, 1.0)]
+        bounds += [(-12.0, 12.0), (tau_lo, tau_hi)]
+    if has_walk:
+        starts = [z + [zq] for z in starts for zq in (z_sig - 3.0, z_sig, z_sig + 3.0)]
+        bounds += [(-40.0, 20.0)]
+    if given:
+        starts = [z + [math.log(sd)] for z in starts]
+        bounds += [(math.log(sd) - 20.0, math.log(sd) + 5.0)]
+    if has_ar and has_walk and not given:     # from the nested fits: the AR(1) alone, the walk alone
+        zf = {o: fitted[o][3] for o in ("ar1", "walk") if o in fitted}
+        starts = [] if zf else starts
+        if "ar1" in zf:
+            starts += [[zf["ar1"][0], zf["ar1"][1], z_sig + o] for o in (-6.0, -3.0, 0.0)]
+        if "walk" in zf:
+            # an AR(1) of 3 % of the white noise at the longest τ: it and the offset and drift
+            # are nearly one thing, the likelihood is flat along it and the search leaves it here
+            starts.append([math.log(1e-3), tau_hi, zf["walk"][0]])
+            starts.append([0.0, tau_lo, zf["walk"][0]])
+    return starts, bounds
+
+
 def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Optional[float] = None,
               white_floor: float = 0.0, t0: Optional[float] = None, p_select: float = SELECTION_P,
               dense: bool = False) -> NoiseFit:
@@ -295,8 +328,6 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     ``white_floor`` a lower bound of ``σ_w`` (quantisation), ``t0`` the start of the walk,
     ``dense``: the likelihood by the n x n Cholesky factor instead of the O(n) whitening (the
     test oracle; same result to rounding).
-
-    Over 100 lines with this docstring; its code is under 100.
     """
     t = np.asarray(t_s, float)
     r = np.asarray(residual, float)
@@ -343,30 +374,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
         def neg(z, evaluate=evaluate):
             return -evaluate(z)[0]
 
-        starts = [[]]
-        bounds: list = []
-        # starts (the best one is searched from): a coarse grid in τ (the likelihood has local
-        # maxima there) and in the AR(1)'s share; the walk about the intensity whose variance over
-        # the pass equals the white noise's (below it the likelihood is flat: no walk)
-        if has_ar:
-            starts = [[za, tt] for tt in np.linspace(tau_lo, tau_hi, 4) for za in (-4.0, -1.5, 1.0)]
-            bounds += [(-12.0, 12.0), (tau_lo, tau_hi)]
-        if has_walk:
-            starts = [z + [zq] for z in starts for zq in (z_sig - 3.0, z_sig, z_sig + 3.0)]
-            bounds += [(-40.0, 20.0)]
-        if given:
-            starts = [z + [math.log(sd)] for z in starts]
-            bounds += [(math.log(sd) - 20.0, math.log(sd) + 5.0)]
-        if has_ar and has_walk and not given:     # from the nested fits: the AR(1) alone, the walk alone
-            zf = {o: fitted[o][3] for o in ("ar1", "walk") if o in fitted}
-            starts = [] if zf else starts
-            if "ar1" in zf:
-                starts += [[zf["ar1"][0], zf["ar1"][1], z_sig + o] for o in (-6.0, -3.0, 0.0)]
-            if "walk" in zf:
-                # an AR(1) of 3 % of the white noise at the longest τ: it and the offset and drift
-                # are nearly one thing, the likelihood is flat along it and the search leaves it here
-                starts.append([math.log(1e-3), tau_hi, zf["walk"][0]])
-                starts.append([0.0, tau_lo, zf["walk"][0]])
+        starts, bounds = _starts(has_ar, has_walk, given, tau_lo, tau_hi, z_sig, sd, fitted)
         if not bounds:
             ll, s = reml(NoiseModel(1.0))
             nm, k = NoiseModel(s), 1
