@@ -50,3 +50,22 @@ def test_traverse_is_the_root_of_centred_predictions(base, model):
     pred = ms.predict(traj, ref.station_model, t, range_rate_model=model, partials=False)
     for m in (-47.3, -0.21, got, 13.37, 59.9):
         assert abs(tv._series_range_rate(pred, t, m) - _centred_rr(ref, traj, m)) < 1e-7
+
+
+def test_highest_elevation_from_the_traverse_series_is_the_predicted_one(base):
+    tab, stale = base
+    ref = prepare(tab, stale, None, RefineOptions(), EOP)
+    x = np.asarray(ref.x0, float)
+    t = ref.problem.meas.t_s
+    traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [float(t.min()) - 1.0, float(t.max())],
+                                force=ref.options.force, frame=ref.problem.frame,
+                                eop=ref.problem.eop).raise_for_outcome()
+    want = np.degrees(ms.predict(traj, ref.station_model, t, partials=False).elevation_rad)
+    assert tv._top_from_grid(ref, x, t) is None          # no traverse search of x yet
+    tv.model_traverse(ref, x)
+    top = tv._top_from_grid(ref, x, t)
+    assert top is not None and abs(top - want.max()) < 1e-9
+    assert tv.max_elevation_deg(ref, x) == top
+    # samples on one side of the top only: their highest is an end of the covered ones, not a top
+    rising = t[(t > -50.0) & (t < -20.0)]
+    assert tv._top_from_grid(ref, x, rising) is None

@@ -26,8 +26,13 @@ from trackproc.types import Station
 
 
 def max_elevation_deg(ref: Refinement, x) -> Optional[float]:
-    """Highest elevation (deg) of the refined orbit at the pass's sample times."""
+    """Highest elevation (deg) of the refined orbit at the pass's sample times: from the series of
+    :func:`model_traverse`'s prediction of the same ``x`` when the top of the pass lies inside its
+    grid (:func:`_top_from_grid`), else by a prediction at all samples."""
     t = ref.problem.meas.t_s
+    top = _top_from_grid(ref, x, t)
+    if top is not None:
+        return top
     try:
         traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [float(t.min()) - 1.0, float(t.max())],
                                     force=ref.options.force, frame=ref.problem.frame,
@@ -57,11 +62,39 @@ def model_traverse(ref: Refinement, x) -> Optional[float]:
     one- or two-way) vanishes (None if not within ±60 s); once per solution of ``ref``."""
     key = np.asarray(x, float).tobytes()
     if key not in ref.traverse_memo:
-        ref.traverse_memo[key] = _model_traverse(ref, x)
+        ref.traverse_memo[key] = _model_traverse(ref, x, key)
     return ref.traverse_memo[key]
 
 
-def _model_traverse(ref: Refinement, x) -> Optional[float]:
+def _top_from_grid(ref: Refinement, x, t) -> Optional[float]:
+    """The highest elevation (deg) at the samples ``t`` from the series of :func:`model_traverse`'s
+    one-way grid prediction of ``x`` (seed 004 eqs. 10 and 13, as ``predict`` evaluates them, on the
+    segment of the nearest grid point), or None when there is none or the highest of the samples
+    it covers is the first or last of them: a single pass's elevation rises to one top and falls,
+    so a top with lower samples on both sides inside the grid is the top of all samples."""
+    grid = ref.traverse_memo.get(("grid", np.asarray(x, float).tobytes()))
+    if grid is None:
+        return None
+    pred, t_grid = grid
+    inside = np.flatnonzero((t >= t_grid[0]) & (t <= t_grid[-1]))
+    if inside.size < 3:
+        return None
+    ts = t[inside]
+    j = np.clip(np.searchsorted(t_grid, ts), 1, t_grid.size - 1)
+    j = np.where(t_grid[j] - ts <= ts - t_grid[j - 1], j, j - 1)
+    segs = pred.segments
+    s = pred.segment_index[j]
+    centres = segs.centre_s[s]
+    powers = (ts - centres)[:, None] ** np.arange(segs.rho.shape[-1])
+    rho = np.einsum("nkc,nc->nk", segs.rho[s], powers)
+    _, el, _ = geodesy.enu_to_azel(ref.station_model.to_enu(rho, ts, centres_s=centres))
+    i = int(np.argmax(el))
+    if ts[i] <= ts.min() or ts[i] >= ts.max():
+        return None
+    return float(np.degrees(el[i]))
+
+
+def _model_traverse(ref: Refinement, x, key=None) -> Optional[float]:
     try:
         traj = propagator.propagate(x[:3], x[3:6], ref.problem.epoch, [-62.0, 62.0], force=ref.options.force,
                                     stm=link_mode(ref) == "two-way", frame=ref.problem.frame,
@@ -71,6 +104,8 @@ def _model_traverse(ref: Refinement, x) -> Optional[float]:
             pred = ms.predict(traj, ref.station_model, t, range_rate_model=ref.problem.range_rate_model,
                               partials=False)
             rr = pred.range_rate_m_s
+            if key is not None:          # the same series give the highest elevation (max_elevation_deg)
+                ref.traverse_memo[("grid", key)] = (pred, t)
 
             def at(m):
                 return _series_range_rate(pred, t, m)
