@@ -339,12 +339,16 @@ def priors_of(params: pm.ParameterSet, opt: EstimateOptions, rv0, cov0, initial,
     return priors, note, bool(apriori_initial), source
 
 
-def build_problem(tables, initial, stations=None, options: EstimateOptions | None = None, eop=None) -> Problem:
+def build_problem(tables, initial, stations=None, options: EstimateOptions | None = None, eop=None,
+                  like: Problem | None = None) -> Problem:
     """Assemble the :class:`Problem` from pass tables, an initial state and stations.
 
     ``tables``: sequence of ``(source name, PassTable)``; ``initial``: a GCRF
     :class:`~trackproc.io.statefile.State`; ``stations``: name -> Station (optional when the pass
-    files' metadata carry them). Raises :class:`InputError` for invalid input.
+    files' metadata carry them). ``like``: a problem built before from the same tables, stations,
+    Earth model and EOP (a refinement prepared again at another epoch or with another transmitter
+    model): its stations' GCRF geometry at the reception times is reused when the samples' times
+    and stations are the same. Raises :class:`InputError` for invalid input.
     """
     opt = options or EstimateOptions()
     check_options(opt)
@@ -356,7 +360,9 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     known = sm.resolve_stations(frame, tables, stations)
     t64 = frame["time"]
     epoch = sm.solution_epoch(opt.epoch, initial, t64)
-    meas = sm.measurement_set(frame, t64, epoch, known, opt.earth, eop)
+    same = (like is not None and like.eop is eop and like.meas.gcrf_to_enu is not None and like.meas.a_st is not None
+            and np.array_equal(like.times, t64) and np.array_equal(like.meas.station, frame["station"]))
+    meas = sm.measurement_set(frame, t64, epoch, known, opt.earth, eop, geometry=like.meas if same else None)
 
     force_model = opt.force_model
     if opt.force == "full" and force_model is None:

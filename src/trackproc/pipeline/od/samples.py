@@ -168,14 +168,23 @@ def utc_times(frame) -> np.ndarray:
     return times.to_numpy(dtype="datetime64[ns]")
 
 
-def measurement_set(frame, t64, epoch, known, earth: str, eop) -> ob.MeasurementSet:
+def measurement_set(frame, t64, epoch, known, earth: str, eop, geometry: ob.MeasurementSet | None = None
+                    ) -> ob.MeasurementSet:
     """The :class:`~trackproc.models.observation.MeasurementSet` of ``frame`` (:func:`merge_tables`): reception times
     in SI seconds from ``epoch`` (through TAI), every station in GCRF at its reception times
-    (IAU 2006/2000A) with its velocity, acceleration and GCRF -> ENU rotation."""
+    (IAU 2006/2000A) with its velocity, acceleration and GCRF -> ENU rotation. ``geometry``: a set of
+    the same samples and stations counted from another epoch, whose station geometry (a function of
+    the reception times alone) is copied instead of transformed again."""
     epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(epoch))
     jd1, jd2 = ts.datetime64_to_jd_utc(t64)
     t_s = np.asarray(ts.seconds_since((jd1, jd2), epoch_jd), float)
     n = len(frame["time"])
+    if geometry is not None:
+        return ob.MeasurementSet(t_s=t_s, kind=frame["kind"], station=frame["station"], pass_id=frame["pass_id"],
+                                 observed=np.asarray(frame["value"], float), sigma=np.asarray(frame["sigma"], float),
+                                 r_st=geometry.r_st.copy(), v_st=geometry.v_st.copy(),
+                                 gcrf_to_enu=geometry.gcrf_to_enu.copy(), carrier_hz=frame["_carrier"],
+                                 a_st=geometry.a_st.copy(), mode=frame["_mode"])
     r_st = np.empty((n, 3))
     v_st = np.empty((n, 3))
     a_st = np.empty((n, 3))

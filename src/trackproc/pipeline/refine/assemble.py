@@ -90,9 +90,12 @@ def apriori_choice(opt: RefineOptions, initial) -> tuple[dict, bool, str, str]:
 
 
 def prepare(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
-            source: str = "<pass>", curve: Optional[SmoothedCurve] = None) -> Refinement:
+            source: str = "<pass>", curve: Optional[SmoothedCurve] = None, like: Optional[Refinement] = None
+            ) -> Refinement:
     """Assemble a :class:`Refinement` (see the module docstring); :class:`InputError` for bad input.
-    ``curve``: the pass's smoothed curve when already made (:func:`refine`'s re-solves)."""
+    ``curve``: the pass's smoothed curve when already made (:func:`refine`'s re-solves); ``like``:
+    the refinement of the same pass, stations and Earth model prepared before (those re-solves):
+    its stations' geometry at the samples, and its station model at the same epoch, are reused."""
     opt = options or RefineOptions()
     check_options(opt)
     warnings: list = []
@@ -136,7 +139,8 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
                           earth=opt.earth, range_rate_model=opt.range_rate_model, max_iterations=opt.max_iterations,
                           clip=opt.clip, epoch=t_traverse, kinds=[kind], modifiers=opt.modifiers,
                           oscillator_noise=opt.oscillator_noise)
-    problem = build_problem([(source, sub)], initial, stations, est, eop)
+    problem = build_problem([(source, sub)], initial, stations, est, eop,
+                            like=like.problem if like is not None else None)
     mu = propagator.force_parameters(opt.force)[0]
     if source == "default":
         rv0 = problem.x0[:6]
@@ -167,8 +171,13 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     lat, lon, r_itrf = geodesy.station_itrf(st, opt.earth)
     t_meas = problem.meas.t_s
     epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))
-    station_model = ms.StationModel.build(r_itrf, lat, lon, epoch_jd, problem.frame.q, float(t_meas.min()) - 60.0,
-                                          float(t_meas.max()) + 60.0, eop=eop)
+    if (like is not None and like.station_name == station and like.problem.epoch == problem.epoch
+            and like.problem.eop is eop and like.options.earth == opt.earth
+            and np.array_equal(like.problem.meas.t_s, t_meas)):
+        station_model = like.station_model            # the same site, epoch and span
+    else:
+        station_model = ms.StationModel.build(r_itrf, lat, lon, epoch_jd, problem.frame.q, float(t_meas.min()) - 60.0,
+                                              float(t_meas.max()) + 60.0, eop=eop)
 
     # the station's geocentric axis at the traverse epoch (GCRF): the single-pass rotation family
     r_st0, _ = station_model.state(np.array([0.0]))

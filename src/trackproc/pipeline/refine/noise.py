@@ -101,7 +101,7 @@ def solve_noise(table, initial, ref: Refinement, stations=None, eop=None, source
         noisy, want_drift = noise_model(ref, sol, scale)
         if want_drift and observed is None:
             ref = prepare(table, initial, stations, replace(ref.options, doppler_bias="offset+drift"), eop, source,
-                          curve=ref.curve)   # the same smoothed curve and epoch: no second smoothing
+                          curve=ref.curve, like=ref)   # the same smoothed curve and epoch: no second smoothing
             noisy = replace(ref, noise=noisy.noise, noise_edited=noisy.noise_edited, noise_report=noisy.noise_report)
         elif not noisy.correlated() and not ref.correlated():
             return noisy, sol, kkt, scale                 # white, no drift to add: the white fit stands

@@ -135,7 +135,7 @@ def refine(table: PassTable, initial, stations=None, options: RefineOptions | No
             later = float((epoch - epoch0) / np.timedelta64(1, "ns")) * 1e-9
             moved = prepare(table, initial, stations, replace(opt, traverse_epoch=epoch, doppler_bias=bias,
                                                               modifiers=shifted(opt.modifiers, later)), eop,
-                            source, curve=ref.curve)
+                            source, curve=ref.curve, like=ref)
             moved.warnings[:] = list(ref.warnings)
             moved = with_noise_of(moved, ref)
             first = solve_weighted(moved)
