@@ -12,7 +12,6 @@ from typing import Optional
 import numpy as np
 
 from trackproc.constants import C_LIGHT
-
 from trackproc.dynamics import frames, geodesy, propagator
 from trackproc.dynamics import measurement_spectra as ms
 from trackproc.dynamics import timescales as ts
@@ -79,17 +78,17 @@ def _top_from_grid(ref: Refinement, x, t) -> Optional[float]:
     inside = np.flatnonzero((t >= t_grid[0]) & (t <= t_grid[-1]))
     if inside.size < 3:
         return None
-    ts = t[inside]
-    j = np.clip(np.searchsorted(t_grid, ts), 1, t_grid.size - 1)
-    j = np.where(t_grid[j] - ts <= ts - t_grid[j - 1], j, j - 1)
+    t_in = t[inside]
+    j = np.clip(np.searchsorted(t_grid, t_in), 1, t_grid.size - 1)
+    j = np.where(t_grid[j] - t_in <= t_in - t_grid[j - 1], j, j - 1)
     segs = pred.segments
     s = pred.segment_index[j]
     centres = segs.centre_s[s]
-    powers = (ts - centres)[:, None] ** np.arange(segs.rho.shape[-1])
+    powers = (t_in - centres)[:, None] ** np.arange(segs.rho.shape[-1])
     rho = np.einsum("nkc,nc->nk", segs.rho[s], powers)
-    _, el, _ = geodesy.enu_to_azel(ref.station_model.to_enu(rho, ts, centres_s=centres))
+    _, el, _ = geodesy.enu_to_azel(ref.station_model.to_enu(rho, t_in, centres_s=centres))
     i = int(np.argmax(el))
-    if ts[i] <= ts.min() or ts[i] >= ts.max():
+    if t_in[i] <= t_in.min() or t_in[i] >= t_in.max():
         return None
     return float(np.degrees(el[i]))
 
