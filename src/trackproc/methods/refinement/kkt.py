@@ -142,9 +142,16 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
             return xv
         raise ArithmeticError(f"cannot satisfy the constraints (relative residual {rel.max():.3g})")
 
+    factorised = {}              # null_space by the constraint Jacobian (a linear constraint's is the same throughout)
+    last = [None]                # the last linearisation and its point (the solution's, when iterate stops there)
+
     def reduced(jac, r, xv, mask, it):
         f, ac = constraints(xv)
-        yb, zb, rr = null_space(ac * scales[None, :])
+        a_s = ac * scales[None, :]
+        key = a_s.tobytes()
+        if key not in factorised:
+            factorised[key] = null_space(a_s)
+        yb, zb, rr = factorised[key]
         p = -np.linalg.solve(rr.T, f)
         a, b = prob.system(jac, r, xv, mask, it)
         ub, s, vt = whitened_svd(a @ zb, b - a @ (yb @ p))
@@ -154,6 +161,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
                 f"rank-deficient problem under the constraints (condition number "
                 f"{s[0] / s[-1] if s.size and s[-1] > 0 else math.inf:.3g}); unobservable combination of the "
                 f"scaled parameters: {weak}", {"iteration": it, "singular_values": s.tolist()})
+        last[0] = ((jac, r, xv, mask), (yb, zb, rr, p, ub, s, vt), (a, b, f, ac))
         return yb, zb, rr, p, ub, s, vt
 
     def linearise(jac, r, xv, mask, it):
@@ -186,11 +194,15 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
 
     # covariance, multipliers and stationarity at the solution
     x = run.x
-    yb, zb, rr, _, ub, s, vt = reduced(run.jac, run.r, x, run.mask, run.iterations)
+    at = last[0]
+    if at is None or any(u is not v for u, v in zip(at[0], (run.jac, run.r, x, run.mask))):
+        reduced(run.jac, run.r, x, run.mask, run.iterations)
+        at = last[0]
+    # else: the run stopped at its last linearisation (the same arrays, the same numbers)
+    yb, zb, rr, _, ub, s, vt = at[1]
+    a, b, f, ac = at[2]
     inner = (vt.T / s ** 2) @ vt
-    f, ac = constraints(x)
     sol = prob.solution(names, run, zb @ inner @ zb.T, s, free=n - f.size, constrained=True)
-    a, b = prob.system(run.jac, run.r, x, run.mask, run.iterations)
     grad = -2.0 * a.T @ b                                    # ∇χ² in the scaled parameters
     lam = np.linalg.lstsq((ac * scales[None, :]).T, -grad, rcond=None)[0]
     # stationarity: the free Gauss-Newton step left at the solution, in formal sigmas
