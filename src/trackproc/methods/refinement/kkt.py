@@ -95,7 +95,8 @@ def null_space(a_scaled):
 
 def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: Sequence[str],
               constraints: Callable[[np.ndarray], tuple], constraint_scale: Callable[[np.ndarray], np.ndarray],
-              scales=None, priors=(), periodic=None, options: Options | None = None, retract=None) -> KKTResult:
+              scales=None, priors=(), periodic=None, options: Options | None = None, retract=None,
+              diagnostics: bool = True) -> KKTResult:
     """Minimise ``Σ ((y - h(x))/σ)² + prior terms`` subject to ``f(x) = 0`` (seed 004 eqs. 15-17).
 
     Gauss-Newton on the KKT system of each linearised step, solved by the null-space method
@@ -106,6 +107,8 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
     ``constraints(x) -> (f (m,), A (m, n))``; ``constraint_scale(x) -> (m,)`` positive scales
     making ``f`` relative (feasible when every ``|f| / scale < 1e-14``); ``retract`` as in
     :func:`~trackproc.methods.least_squares.solve` (applied before the restoration).
+    ``diagnostics`` False: the solution alone (``multipliers``, ``sensitivity`` and ``curvature``
+    None, ``stationarity`` NaN; for a caller that needs only the point and its covariance).
     Raises :class:`ProcessingError` on failure.
 
     Over 100 lines with this docstring; its code is under 100.
@@ -203,6 +206,9 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
     a, b, f, ac = at[2]
     inner = (vt.T / s ** 2) @ vt
     sol = prob.solution(names, run, zb @ inner @ zb.T, s, free=n - f.size, constrained=True)
+    if not diagnostics:
+        return KKTResult(solution=sol, multipliers=None, constraints=f, relative=f / constraint_scale(x),
+                         stationarity=math.nan, restorations=restorations, null_space_dim=int(zb.shape[1]))
     grad = -2.0 * a.T @ b                                    # ∇χ² in the scaled parameters
     lam = np.linalg.lstsq((ac * scales[None, :]).T, -grad, rcond=None)[0]
     # stationarity: the free Gauss-Newton step left at the solution, in formal sigmas
