@@ -146,15 +146,14 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
         raise ArithmeticError(f"cannot satisfy the constraints (relative residual {rel.max():.3g})")
 
     factorised = {}              # null_space by the constraint Jacobian (a linear constraint's is the same throughout)
-    last = [None]                # the last linearisation and its point (the solution's, when iterate stops there)
+    last = [((None,) * 4, None)]  # the last linearisation, by its arrays (the run may stop at that point)
 
     def reduced(jac, r, xv, mask, it):
+        if all(u is v for u, v in zip(last[0][0], (jac, r, xv, mask))):
+            return last[0][1]
         f, ac = constraints(xv)
         a_s = ac * scales[None, :]
-        key = a_s.tobytes()
-        if key not in factorised:
-            factorised[key] = null_space(a_s)
-        yb, zb, rr = factorised[key]
+        yb, zb, rr = factorised.get(a_s.tobytes()) or factorised.setdefault(a_s.tobytes(), null_space(a_s))
         p = -np.linalg.solve(rr.T, f)
         a, b = prob.system(jac, r, xv, mask, it)
         ub, s, vt = whitened_svd(a @ zb, b - a @ (yb @ p))
@@ -164,11 +163,11 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
                 f"rank-deficient problem under the constraints (condition number "
                 f"{s[0] / s[-1] if s.size and s[-1] > 0 else math.inf:.3g}); unobservable combination of the "
                 f"scaled parameters: {weak}", {"iteration": it, "singular_values": s.tolist()})
-        last[0] = ((jac, r, xv, mask), (yb, zb, rr, p, ub, s, vt), (a, b, f, ac))
-        return yb, zb, rr, p, ub, s, vt
+        last[0] = ((jac, r, xv, mask), (yb, zb, rr, p, ub, s, vt, a, b, f, ac))
+        return last[0][1]
 
     def linearise(jac, r, xv, mask, it):
-        yb, zb, _, p, ub, s, vt = reduced(jac, r, xv, mask, it)
+        yb, zb, _, p, ub, s, vt = reduced(jac, r, xv, mask, it)[:7]
         return ub, s, vt, lambda q: yb @ p + zb @ q                 # δ = Y p + Z q
 
     def trial(xv, xi):
@@ -197,20 +196,24 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
 
     # covariance, multipliers and stationarity at the solution
     x = run.x
-    at = last[0]
-    if at is None or any(u is not v for u, v in zip(at[0], (run.jac, run.r, x, run.mask))):
-        reduced(run.jac, run.r, x, run.mask, run.iterations)
-        at = last[0]
-    # else: the run stopped at its last linearisation (the same arrays, the same numbers)
-    yb, zb, rr, _, ub, s, vt = at[1]
-    a, b, f, ac = at[2]
+    yb, zb, rr, _, ub, s, vt, a, b, f, ac = reduced(run.jac, run.r, x, run.mask, run.iterations)
     inner = (vt.T / s ** 2) @ vt
     sol = prob.solution(names, run, zb @ inner @ zb.T, s, free=n - f.size, constrained=True)
+    common = dict(solution=sol, constraints=f, relative=f / constraint_scale(x), restorations=restorations,
+                  null_space_dim=int(zb.shape[1]))
     if not diagnostics:
-        return KKTResult(solution=sol, multipliers=None, constraints=f, relative=f / constraint_scale(x),
-                         stationarity=math.nan, restorations=restorations, null_space_dim=int(zb.shape[1]))
+        return KKTResult(multipliers=None, stationarity=math.nan, **common)
+    lam, stationarity, sens, curvature = _diagnostics(a, b, ac * scales[None, :], yb, zb, rr, ub, s, vt, inner)
+    return KKTResult(multipliers=lam, stationarity=stationarity, sensitivity=sens * scales[:, None],
+                     curvature=curvature, **common)
+
+
+def _diagnostics(a, b, a_scaled, yb, zb, rr, ub, s, vt, inner):
+    """At a KKT solution of :func:`solve_kkt` (whitened system ``a ξ ≈ b``, scaled constraint Jacobian
+    ``a_scaled``, its null-space split and the reduced SVD): the multipliers λ of ``Aᵀλ = -∇χ²`` (seed
+    004 eq. 16), the stationarity, the sensitivity ``dξ/dε`` (scaled) and the curvature ``G``."""
     grad = -2.0 * a.T @ b                                    # ∇χ² in the scaled parameters
-    lam = np.linalg.lstsq((ac * scales[None, :]).T, -grad, rcond=None)[0]
+    lam = np.linalg.lstsq(a_scaled.T, -grad, rcond=None)[0]
     # stationarity: the free Gauss-Newton step left at the solution, in formal sigmas
     sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))
     stationarity = float(np.max(np.abs(vt.T @ (ub / s)) / sig_q))
@@ -218,10 +221,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
     a_y = yb @ np.linalg.inv(rr.T)
     sens = a_y - zb @ (inner @ (zb.T @ (a.T @ (a @ a_y))))
     ad = a @ sens
-    return KKTResult(solution=sol, multipliers=lam, constraints=f, relative=f / constraint_scale(x),
-                     stationarity=stationarity, restorations=restorations, null_space_dim=int(zb.shape[1]),
-                     sensitivity=sens * scales[:, None], curvature=ad.T @ ad)
-
+    return lam, stationarity, sens, ad.T @ ad
 
 #: Newton steps on the soft constraint values ε stop below this fraction of their posterior sigma.
 SOFT_STEP_TOL = 0.01
