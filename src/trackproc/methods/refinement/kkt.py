@@ -95,7 +95,8 @@ def null_space(a_scaled):
 
 def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: Sequence[str],
               constraints: Callable[[np.ndarray], tuple], constraint_scale: Callable[[np.ndarray], np.ndarray],
-              scales=None, priors=(), periodic=None, options: Options | None = None, retract=None) -> KKTResult:
+              scales=None, priors=(), periodic=None, options: Options | None = None, retract=None,
+              diagnostics: bool = True) -> KKTResult:
     """Minimise ``Σ ((y - h(x))/σ)² + prior terms`` subject to ``f(x) = 0`` (seed 004 eqs. 15-17).
 
     Gauss-Newton on the KKT system of each linearised step, solved by the null-space method
@@ -106,6 +107,8 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
     ``constraints(x) -> (f (m,), A (m, n))``; ``constraint_scale(x) -> (m,)`` positive scales
     making ``f`` relative (feasible when every ``|f| / scale < 1e-14``); ``retract`` as in
     :func:`~trackproc.methods.least_squares.solve` (applied before the restoration).
+    ``diagnostics`` False: the solution alone (``multipliers``, ``sensitivity`` and ``curvature``
+    None, ``stationarity`` NaN; for a caller that needs only the point and its covariance).
     Raises :class:`ProcessingError` on failure.
 
     Over 100 lines with this docstring; its code is under 100.
@@ -142,9 +145,15 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
             return xv
         raise ArithmeticError(f"cannot satisfy the constraints (relative residual {rel.max():.3g})")
 
+    factorised = {}              # null_space by the constraint Jacobian (a linear constraint's is the same throughout)
+    last = [((None,) * 4, None)]  # the last linearisation, by its arrays (the run may stop at that point)
+
     def reduced(jac, r, xv, mask, it):
+        if all(u is v for u, v in zip(last[0][0], (jac, r, xv, mask))):
+            return last[0][1]
         f, ac = constraints(xv)
-        yb, zb, rr = null_space(ac * scales[None, :])
+        a_s = ac * scales[None, :]
+        yb, zb, rr = factorised.get(a_s.tobytes()) or factorised.setdefault(a_s.tobytes(), null_space(a_s))
         p = -np.linalg.solve(rr.T, f)
         a, b = prob.system(jac, r, xv, mask, it)
         ub, s, vt = whitened_svd(a @ zb, b - a @ (yb @ p))
@@ -154,10 +163,11 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
                 f"rank-deficient problem under the constraints (condition number "
                 f"{s[0] / s[-1] if s.size and s[-1] > 0 else math.inf:.3g}); unobservable combination of the "
                 f"scaled parameters: {weak}", {"iteration": it, "singular_values": s.tolist()})
-        return yb, zb, rr, p, ub, s, vt
+        last[0] = ((jac, r, xv, mask), (yb, zb, rr, p, ub, s, vt, a, b, f, ac))
+        return last[0][1]
 
     def linearise(jac, r, xv, mask, it):
-        yb, zb, _, p, ub, s, vt = reduced(jac, r, xv, mask, it)
+        yb, zb, _, p, ub, s, vt = reduced(jac, r, xv, mask, it)[:7]
         return ub, s, vt, lambda q: yb @ p + zb @ q                 # δ = Y p + Z q
 
     def trial(xv, xi):
@@ -186,13 +196,24 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
 
     # covariance, multipliers and stationarity at the solution
     x = run.x
-    yb, zb, rr, _, ub, s, vt = reduced(run.jac, run.r, x, run.mask, run.iterations)
+    yb, zb, rr, _, ub, s, vt, a, b, f, ac = reduced(run.jac, run.r, x, run.mask, run.iterations)
     inner = (vt.T / s ** 2) @ vt
-    f, ac = constraints(x)
     sol = prob.solution(names, run, zb @ inner @ zb.T, s, free=n - f.size, constrained=True)
-    a, b = prob.system(run.jac, run.r, x, run.mask, run.iterations)
+    common = dict(solution=sol, constraints=f, relative=f / constraint_scale(x), restorations=restorations,
+                  null_space_dim=int(zb.shape[1]))
+    if not diagnostics:
+        return KKTResult(multipliers=None, stationarity=math.nan, **common)
+    lam, stationarity, sens, curvature = _diagnostics(a, b, ac * scales[None, :], yb, zb, rr, ub, s, vt, inner)
+    return KKTResult(multipliers=lam, stationarity=stationarity, sensitivity=sens * scales[:, None],
+                     curvature=curvature, **common)
+
+
+def _diagnostics(a, b, a_scaled, yb, zb, rr, ub, s, vt, inner):
+    """At a KKT solution of :func:`solve_kkt` (whitened system ``a ξ ≈ b``, scaled constraint Jacobian
+    ``a_scaled``, its null-space split and the reduced SVD): the multipliers λ of ``Aᵀλ = -∇χ²`` (seed
+    004 eq. 16), the stationarity, the sensitivity ``dξ/dε`` (scaled) and the curvature ``G``."""
     grad = -2.0 * a.T @ b                                    # ∇χ² in the scaled parameters
-    lam = np.linalg.lstsq((ac * scales[None, :]).T, -grad, rcond=None)[0]
+    lam = np.linalg.lstsq(a_scaled.T, -grad, rcond=None)[0]
     # stationarity: the free Gauss-Newton step left at the solution, in formal sigmas
     sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))
     stationarity = float(np.max(np.abs(vt.T @ (ub / s)) / sig_q))
@@ -200,10 +221,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
     a_y = yb @ np.linalg.inv(rr.T)
     sens = a_y - zb @ (inner @ (zb.T @ (a.T @ (a @ a_y))))
     ad = a @ sens
-    return KKTResult(solution=sol, multipliers=lam, constraints=f, relative=f / constraint_scale(x),
-                     stationarity=stationarity, restorations=restorations, null_space_dim=int(zb.shape[1]),
-                     sensitivity=sens * scales[:, None], curvature=ad.T @ ad)
-
+    return lam, stationarity, sens, ad.T @ ad
 
 #: Newton steps on the soft constraint values ε stop below this fraction of their posterior sigma.
 SOFT_STEP_TOL = 0.01

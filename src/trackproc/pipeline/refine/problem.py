@@ -274,7 +274,7 @@ class Refinement:
                 start = x_hat + gain * (target / sigma_i ** 2)
                 k = solve_kkt(cached, start, y, sigma, names=self.names, constraints=constraint,
                               constraint_scale=lambda x: np.array([max(sigma_i, 1.0)]), scales=self.scales,
-                              priors=priors, periodic=periodic, options=opts)
+                              priors=priors, periodic=periodic, options=opts, diagnostics=False)
                 return k.solution.values, k.solution.covariance
 
             out += profile_mixture(fixed, x_hat, sigma_i) - cov
