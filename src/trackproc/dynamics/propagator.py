@@ -140,9 +140,12 @@ class Trajectory:
     @property
     def rotation(self) -> np.ndarray:
         """``blockdiag(q, q)`` (6, 6): GCRF state -> quasi-inertial state."""
-        big = np.zeros((6, 6))
-        big[:3, :3] = big[3:, 3:] = self.frame.q
-        return big
+        big = self.__dict__.get("_rotation")
+        if big is None:
+            big = np.zeros((6, 6))
+            big[:3, :3] = big[3:, 3:] = self.frame.q
+            self.__dict__["_rotation"] = big
+        return big.copy()
 
     def raise_for_outcome(self) -> Trajectory:
         """Raise :class:`ProcessingError` unless every run reached its end; return self."""
@@ -184,7 +187,13 @@ class Trajectory:
         return np.asarray(t, float)
 
     def _split(self, t_s):
+        """``(shape, flat times, [(run, selection, its times)])``, kept for the last times asked
+        (the light time reads the state, its derivative and the STM at the same emission times)."""
         t = self._as_seconds(t_s)
+        key = (t.shape, t.tobytes())
+        last = self.__dict__.get("_last_split")
+        if last is not None and last[0] == key:
+            return last[1]
         flat = t.reshape(-1)
         back = flat < 0.0
         if not any(run.t_end_s > run.t0_s for run in self.runs):
@@ -193,21 +202,23 @@ class Trajectory:
         for run in self.runs:
             sel = back if run.t_end_s < run.t0_s else ~back
             if run.n_steps and sel.any():
-                parts.append((run, sel))
+                parts.append((run, sel, flat[sel]))
         covered = np.zeros(flat.size, bool)
-        for _, sel in parts:
+        for _, sel, _ in parts:
             covered |= sel
         if not covered.all():
             bad = flat[~covered]
             raise ValueError(f"times {bad.min()} .. {bad.max()} s lie outside the propagated interval "
                              f"[{self.t_min_s}, {self.t_max_s}] s")
-        return t.shape, flat, parts
+        split = (t.shape, flat, parts)
+        self.__dict__["_last_split"] = (key, split)
+        return split
 
     def _evaluate(self, t_s, fn, tail):
         shape, flat, parts = self._split(t_s)
         out = np.empty((flat.size,) + tail)
-        for run, sel in parts:
-            out[sel] = fn(run, flat[sel])
+        for run, sel, times in parts:
+            out[sel] = fn(run, times)
         return out.reshape(shape + tail)
 
     def state(self, t_s, *, frame: str = "gcrf", derivative: int = 0) -> np.ndarray:
@@ -221,7 +232,8 @@ class Trajectory:
             q = self.frame.q
             out = np.concatenate([out[..., :3] @ q, out[..., 3:] @ q], axis=-1)
             if derivative == 0 and self.initial_gcrf is not None:
-                out[self._as_seconds(t_s) == 0.0] = self.initial_gcrf      # the epoch state, unrotated
+                shape, flat, _ = self._split(t_s)
+                out[flat.reshape(shape) == 0.0] = self.initial_gcrf        # the epoch state, unrotated
         return out
 
     def stm(self, t_s, *, frame: str = "gcrf") -> np.ndarray:
