@@ -181,10 +181,25 @@ class Trajectory:
     # -- evaluation --------------------------------------------------------------------------
     def _as_seconds(self, t_s) -> np.ndarray:
         """Seconds from the epoch; UTC ``datetime64`` values are converted."""
+        if type(t_s) is np.ndarray and t_s.dtype == np.float64:
+            return t_s
         t = np.asarray(t_s)
         if np.issubdtype(t.dtype, np.datetime64):
             return self.seconds(t)
         return np.asarray(t, float)
+
+    def _layout(self):
+        """``([(run, backward)], only backward, complete)``: the runs and their directions, made
+        once; ``complete`` when a backward and a forward run both have steps (every time is then
+        covered by one of them)."""
+        layout = self.__dict__.get("_run_layout")
+        if layout is None:
+            runs = [(run, run.t_end_s < run.t0_s) for run in self.runs]
+            only_back = not any(run.t_end_s > run.t0_s for run in self.runs)
+            complete = (any(b and run.n_steps for run, b in runs)
+                        and any(not b and run.n_steps for run, b in runs))
+            layout = self.__dict__["_run_layout"] = (runs, only_back, complete)
+        return layout
 
     def _split(self, t_s):
         """``(shape, flat times, [(run, selection, its times)])``, kept for the last times asked
@@ -194,22 +209,29 @@ class Trajectory:
         last = self.__dict__.get("_last_split")
         if last is not None and last[0] == key:
             return last[1]
+        runs, only_back, complete = self._layout()
         flat = t.reshape(-1)
         back = flat < 0.0
-        if not any(run.t_end_s > run.t0_s for run in self.runs):
+        if only_back:
             back |= flat == 0.0                  # only a backward run: it starts at t = 0
+        n_back = np.count_nonzero(back)
         parts = []
-        for run in self.runs:
-            sel = back if run.t_end_s < run.t0_s else ~back
-            if run.n_steps and sel.any():
+        for run, backward in runs:
+            if not run.n_steps or n_back == (0 if backward else flat.size):
+                continue
+            if n_back == (flat.size if backward else 0):
+                parts.append((run, slice(None), flat))       # every time: no selection
+            else:
+                sel = back if backward else ~back
                 parts.append((run, sel, flat[sel]))
-        covered = np.zeros(flat.size, bool)
-        for _, sel, _ in parts:
-            covered |= sel
-        if not covered.all():
-            bad = flat[~covered]
-            raise ValueError(f"times {bad.min()} .. {bad.max()} s lie outside the propagated interval "
-                             f"[{self.t_min_s}, {self.t_max_s}] s")
+        if not complete:
+            covered = np.zeros(flat.size, bool)
+            for _, sel, _ in parts:
+                covered[sel] = True
+            if not covered.all():
+                bad = flat[~covered]
+                raise ValueError(f"times {bad.min()} .. {bad.max()} s lie outside the propagated interval "
+                                 f"[{self.t_min_s}, {self.t_max_s}] s")
         split = (t.shape, flat, parts)
         self.__dict__["_last_split"] = (key, split)
         return split
@@ -227,12 +249,15 @@ class Trajectory:
 
         ``frame="gcrf"`` (default) or ``"quasi-inertial"``; ``derivative=1`` gives ``[v, a]``.
         """
-        out = self._evaluate(t_s, lambda run, t: run.state(t, derivative), (6,))
-        if _frame_key(frame) == "gcrf":
+        shape, flat, parts = self._split(t_s)
+        out = np.empty((flat.size, 6))
+        for run, sel, times in parts:
+            out[sel] = run.state(times, derivative)
+        out = out.reshape(shape + (6,))
+        if frame == "gcrf" or _frame_key(frame) == "gcrf":
             q = self.frame.q
             out = np.concatenate([out[..., :3] @ q, out[..., 3:] @ q], axis=-1)
             if derivative == 0 and self.initial_gcrf is not None:
-                shape, flat, _ = self._split(t_s)
                 out[flat.reshape(shape) == 0.0] = self.initial_gcrf        # the epoch state, unrotated
         return out
 
@@ -246,7 +271,7 @@ class Trajectory:
         if not self.has_stm:
             raise ValueError("this trajectory carries no STM; propagate with stm=True")
         out = self._evaluate(t_s, lambda run, t: run.stm(t), (6, 6))
-        if _frame_key(frame) == "gcrf":
+        if frame == "gcrf" or _frame_key(frame) == "gcrf":
             big = self.rotation
             out = big.T @ out @ big
         return out

@@ -114,7 +114,8 @@ class Propagation:
     re_m: float
     batch: bool
     engine: str = "numpy"
-    #: derivative spectra of a step, made once: (values or sensitivities, step, m) -> (B*2F, n-m)
+    #: derivative spectra of a step, made once: (values or sensitivities, step, m) -> (B*2F, n-m);
+    #: and the interval covered with its slack ("bounds")
     _spectra: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     #: the last times evaluated and their plan (:meth:`_plan`): a light-time solution reads the
     #: state, its derivative and the STM at the same emission times
@@ -153,8 +154,11 @@ class Propagation:
         tb = self.step_times_s
         if self.n_steps == 0:
             raise ValueError("no step was taken; nothing to evaluate")
-        lo, hi = (tb[0], tb[-1]) if tb[-1] >= tb[0] else (tb[-1], tb[0])
-        slack = 8 * _EPS * max(abs(lo), abs(hi), 1.0)
+        bounds = self._spectra.get("bounds")
+        if bounds is None:
+            lo, hi = (tb[0], tb[-1]) if tb[-1] >= tb[0] else (tb[-1], tb[0])
+            bounds = self._spectra["bounds"] = (lo, hi, 8 * _EPS * max(abs(lo), abs(hi), 1.0))
+        lo, hi, slack = bounds
         tmin, tmax = (t.min(), t.max()) if t.size else (lo, hi)
         if not (lo - slack <= tmin and tmax <= hi + slack):
             raise ValueError(f"times must lie in the propagated interval [{lo}, {hi}] s; "
