@@ -255,8 +255,8 @@ class Trajectory:
             out[sel] = run.state(times, derivative)
         out = out.reshape(shape + (6,))
         if frame == "gcrf" or _frame_key(frame) == "gcrf":
-            q = self.frame.q
-            out = np.concatenate([out[..., :3] @ q, out[..., 3:] @ q], axis=-1)
+            # both halves (r, v) of every row as rows of one product: r q and v q, one call
+            out = (out.reshape(-1, 3) @ self.frame.q).reshape(out.shape)
             if derivative == 0 and self.initial_gcrf is not None:
                 out[flat.reshape(shape) == 0.0] = self.initial_gcrf        # the epoch state, unrotated
         return out
