@@ -202,28 +202,31 @@ class Trajectory:
         return layout
 
     def _split(self, t_s):
-        """``(shape, flat times, [(run, selection, its times)])``, kept for the last times asked
-        (the light time reads the state, its derivative and the STM at the same emission times)."""
+        """``(shape, flat times, [(run, selection, its times)], where the epoch is or None)``, kept
+        for the last times asked (the light time reads the state, its derivative and the STM at
+        the same emission times)."""
         t = self._as_seconds(t_s)
         key = (t.shape, t.tobytes())
         last = self.__dict__.get("_last_split")
         if last is not None and last[0] == key:
             return last[1]
         runs, only_back, complete = self._layout()
-        flat = t.reshape(-1)
+        flat = t.reshape(-1).copy()              # kept: the caller may change its array later
         back = flat < 0.0
         if only_back:
             back |= flat == 0.0                  # only a backward run: it starts at t = 0
         n_back = np.count_nonzero(back)
+        # the backward times first (samples in time order): slices, not selections
+        prefix = np.count_nonzero(back[:n_back]) == n_back
         parts = []
         for run, backward in runs:
             if not run.n_steps or n_back == (0 if backward else flat.size):
                 continue
-            if n_back == (flat.size if backward else 0):
-                parts.append((run, slice(None), flat))       # every time: no selection
+            if prefix:
+                sel = slice(0, n_back) if backward else slice(n_back, None)
             else:
                 sel = back if backward else ~back
-                parts.append((run, sel, flat[sel]))
+            parts.append((run, sel, flat[sel]))
         if not complete:
             covered = np.zeros(flat.size, bool)
             for _, sel, _ in parts:
@@ -232,12 +235,13 @@ class Trajectory:
                 bad = flat[~covered]
                 raise ValueError(f"times {bad.min()} .. {bad.max()} s lie outside the propagated interval "
                                  f"[{self.t_min_s}, {self.t_max_s}] s")
-        split = (t.shape, flat, parts)
+        zero = flat == 0.0
+        split = (t.shape, flat, parts, zero.reshape(t.shape) if zero.any() else None)
         self.__dict__["_last_split"] = (key, split)
         return split
 
     def _evaluate(self, t_s, fn, tail):
-        shape, flat, parts = self._split(t_s)
+        shape, flat, parts, _ = self._split(t_s)
         out = np.empty((flat.size,) + tail)
         for run, sel, times in parts:
             out[sel] = fn(run, times)
@@ -249,7 +253,7 @@ class Trajectory:
 
         ``frame="gcrf"`` (default) or ``"quasi-inertial"``; ``derivative=1`` gives ``[v, a]``.
         """
-        shape, flat, parts = self._split(t_s)
+        shape, flat, parts, zero = self._split(t_s)
         out = np.empty((flat.size, 6))
         for run, sel, times in parts:
             out[sel] = run.state(times, derivative)
@@ -257,8 +261,8 @@ class Trajectory:
         if frame == "gcrf" or _frame_key(frame) == "gcrf":
             # both halves (r, v) of every row as rows of one product: r q and v q, one call
             out = (out.reshape(-1, 3) @ self.frame.q).reshape(out.shape)
-            if derivative == 0 and self.initial_gcrf is not None:
-                out[flat.reshape(shape) == 0.0] = self.initial_gcrf        # the epoch state, unrotated
+            if derivative == 0 and self.initial_gcrf is not None and zero is not None:
+                out[zero] = self.initial_gcrf                               # the epoch state, unrotated
         return out
 
     def stm(self, t_s, *, frame: str = "gcrf") -> np.ndarray:
