@@ -401,8 +401,10 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         m = meas.is_kind(k)
         if not m.any():
             continue
-        rr, d_r, d_v = range_rate_partials(r_e[m], v_e[m], meas.r_st[m], meas.v_st[m], range_rate_model, c)
-        factor = 1.0 if k == "range_rate" else -meas.carrier_hz[m] / c
+        sel = m if not m.all() else slice(None)     # every row (one kind): no selection's copies
+        rr, d_r, d_v = range_rate_partials(_rows(r_e, sel), _rows(v_e, sel), _rows(meas.r_st, sel),
+                                           _rows(meas.v_st, sel), range_rate_model, c)
+        factor = 1.0 if k == "range_rate" else -_rows(meas.carrier_hz, sel) / c
         if k == "doppler" and not np.all(np.isfinite(factor)):
             raise ValueError("Doppler samples need a carrier frequency")
         factor = np.broadcast_to(factor, rr.shape)
@@ -416,9 +418,9 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
             if k == "doppler":
                 factor = np.where(tm, 2.0 * factor, factor)     # eq. (10): the round trip doubles the shift
             g_t[rows] = factor[tm] * d_t
-        value[m] = factor * rr
-        g[m, :3] = factor[:, None] * d_r
-        g[m, 3:] = factor[:, None] * d_v
+        value[sel] = factor * rr
+        g[sel, :3] = factor[:, None] * d_r
+        g[sel, 3:] = factor[:, None] * d_v
     ang = meas.is_kind("azimuth") | meas.is_kind("elevation")
     if ang.any():
         if meas.gcrf_to_enu is None:
@@ -443,6 +445,12 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         if col is not None:
             jac[mod.rows, col] += _time_partials(meas, mod.rows, trajectory, n_state_params, range_rate_model, c)
     return value, jac, geo
+
+
+def _rows(a, sel):
+    """``a[sel]``: a copy in C order for a boolean ``sel``, as for ``slice(None)`` (every row) where
+    ``a`` is not already C-ordered: the same operands either way, without the selection's copy."""
+    return np.ascontiguousarray(a) if isinstance(sel, slice) else a[sel]
 
 
 def _time_partials(meas: MeasurementSet, rows, trajectory, n_state_params: int, range_rate_model: str,
