@@ -112,7 +112,7 @@ def series_sqrt(d2) -> np.ndarray:
         d[:, 1] = d2[:, 1] * inv2
     if n > 2 and _compiled():
         from trackproc.dynamics import jit
-        from trackproc.dynamics.measurement_spectra import series_jit  # numba is loaded already
+        from trackproc.dynamics.measurement_spectra import series_jit  # numba is loaded already (_compiled)
 
         work = np.ascontiguousarray(d)              # C order for the kernel; d keeps d2's layout
         with jit.compile_once([series_jit.sqrt_orders], "series-sqrt"):
@@ -125,13 +125,20 @@ def series_sqrt(d2) -> np.ndarray:
 
 
 def _compiled() -> bool:
-    """The compiled recurrence (:mod:`.series_jit`, the same numbers) where numba is loaded
-    already (a batch worker, the compiled Taylor engine) and allowed: it costs no start-up."""
+    """The compiled recurrence (:mod:`.series_jit`, the same numbers) where numba is loaded and
+    allowed, and the work is many predictions in one process (``TRACKPROC_JIT=1``, a batch's tasks)
+    or the kernel is in this process already: its first load (~40 ms of CPU from numba's cache,
+    ~0.4 s to compile) is not paid by a single command's few predictions (0.2 ms saved each)."""
     if "numba" not in sys.modules:
         return False
     from trackproc.dynamics import jit
 
-    return jit.enabled()
+    if not jit.enabled():
+        return False
+    if jit.forced():
+        return True
+    kernels = sys.modules.get("trackproc.dynamics.measurement_spectra.series_jit")
+    return kernels is not None and bool(kernels.sqrt_orders.signatures)
 
 
 def series_reciprocal(u) -> np.ndarray:
