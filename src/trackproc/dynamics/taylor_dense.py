@@ -198,12 +198,13 @@ class Propagation:
         ``k`` rows of ``_powers(dt, n)`` for ``k <= n`` (the doubling computes every row by the
         same product whatever ``n``), so a shorter series takes a prefix of the same numbers."""
         key = tf.tobytes()
-        last = self._last
-        if last and last[0] == key:
-            return last[1], last[2]
+        entry = self._last[0] if self._last else None             # one read: (key, idx, groups)
+        if entry is not None and entry[0] == key:
+            return entry[1], entry[2]
         idx = self._locate(tf)
-        last[:] = [key, idx, []]
-        return idx, last[2]
+        groups = []
+        self._last[:] = [(key, idx, groups)]
+        return idx, groups
 
     @staticmethod
     def _groups(idx):
