@@ -157,3 +157,59 @@ def test_input_errors():
         propagator.propagate(R0, V0, EPOCH, [])
     with pytest.raises(ValueError, match="force model"):
         propagator.propagate(R0, V0, EPOCH, 10.0, force="j3")
+
+
+def _fresh(t_span=(-900.0, 900.0)):
+    return propagator.propagate(R0, V0, EPOCH, list(t_span), force="j2", stm=True)
+
+
+def test_kept_times_give_the_numbers_of_a_fresh_trajectory_in_any_order():
+    """The state, its derivative and the STM at the same times share one run split, location and
+    set of powers (kept for the last times): bit for bit what a trajectory that never saw those
+    times gives, whatever the order of the calls; and the GCRF state is the quasi-inertial one
+    times q, r and v alike (the product the rotation makes)."""
+    t = np.linspace(-800.0, 800.0, 161)
+    a = _fresh()
+    first = a.state(t), a.state(t, derivative=1), a.stm(t), a.state(t, derivative=2)
+    for order in ((3, 2, 1, 0), (1, 0, 3, 2)):
+        b = _fresh()
+        got = {}
+        for i in order:
+            got[i] = b.stm(t) if i == 2 else b.state(t, derivative=(0, 1, None, 2)[i])
+        for i in range(4):
+            assert np.array_equal(got[i], first[i])
+    qi = _fresh().state(t, frame="quasi-inertial")
+    q = a.frame.q
+    rotated = np.concatenate([qi[:, :3] @ q, qi[:, 3:] @ q], axis=-1)
+    off = t != 0.0                                                  # the epoch row is the state as given
+    assert np.array_equal(first[0][off], rotated[off])
+    assert np.array_equal(first[0][~off][0], np.concatenate([R0, V0]))
+    big = a.rotation
+    assert np.array_equal(first[2], big.T @ _fresh().stm(t, frame="quasi-inertial") @ big)
+
+
+def test_times_out_of_order_and_changed_by_the_caller():
+    """Unsorted times (selections rather than slices) give the sorted times' numbers, permuted;
+    an array the caller changes in place after a call is read afresh, and its old values again
+    give the old numbers (what is kept is a copy)."""
+    t = np.linspace(-800.0, 800.0, 161)
+    ref = _fresh().state(t)
+    perm = np.random.default_rng(5).permutation(t.size)
+    traj = _fresh()
+    assert np.array_equal(traj.state(t[perm]), ref[perm])
+    arr = t.copy()
+    assert np.array_equal(traj.state(arr), ref)
+    arr += 50.0
+    assert np.array_equal(traj.state(arr), _fresh().state(t + 50.0))
+    arr -= 50.0
+    assert np.array_equal(traj.state(t), ref)
+    assert np.array_equal(traj.state(arr), _fresh().state(arr))
+    epoch = traj.state(np.array([0.0, 10.0]))
+    assert np.array_equal(epoch[0], np.concatenate([R0, V0]))       # the epoch state, unrotated
+
+
+def test_times_outside_a_one_sided_trajectory_are_refused():
+    traj = propagator.propagate(R0, V0, EPOCH, [0.0, 600.0], force="j2")
+    with pytest.raises(ValueError, match="outside the propagated interval"):
+        traj.state(np.array([-10.0, 10.0]))
+    assert traj.state(np.array([10.0, 20.0])).shape == (2, 6)

@@ -382,3 +382,16 @@ def test_stm_backward_is_inverse_of_forward():
     back = propagate(fwd.state(3000.0), 3000.0, 0.0, stm=True)
     prod = back.stm(0.0) @ fwd.stm(3000.0)
     assert np.abs(prod - np.eye(6)).max() < 1e-9
+
+
+def test_powers_prefix_is_the_shorter_series_powers():
+    """A shorter series' powers are the first rows of a longer one's, bit for bit (the dense
+    output shares one set between the state and its derivative), and they are dt^k."""
+    from trackproc.dynamics.taylor_dense import _powers
+
+    dt = np.random.default_rng(3).uniform(-90.0, 90.0, 37)
+    for n in range(1, 34):
+        full = _powers(dt, n)
+        np.testing.assert_allclose(full, dt[None, :] ** np.arange(n)[:, None], rtol=1e-13)
+        for k in range(1, n + 1):
+            assert np.array_equal(_powers(dt, k), full[:k])

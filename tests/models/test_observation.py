@@ -223,3 +223,21 @@ def test_bias_values_and_columns_in_evaluate():
     assert jac.shape == (6, 10)
     np.testing.assert_allclose(jac[:, 6], [1, 0, 0, 0, 0, 1])
     np.testing.assert_allclose(jac[:, 7], [0, 1, -C_LIGHT / 2.2e9, 0, 0, 0])
+
+
+def test_values_alone_are_the_values_with_partials_and_kinds_follow_the_kind_array():
+    """``partials=False`` gives the same values bit for bit (without the emission state's
+    derivative, read only by the partials); the kept kind masks follow a new ``kind`` array."""
+    t = np.linspace(100.0, 900.0, 12)
+    meas = _meas(["doppler"] * 12, t)
+    traj = _Trajectory(STATE0)
+    h, jac, geo = ob.evaluate(meas, traj, n_columns=6)
+    h0, jac0, geo0 = ob.evaluate(meas, _Trajectory(STATE0), n_columns=6, partials=False)
+    assert np.array_equal(h, h0) and jac0 is None and geo0.state_dot is None
+    assert np.array_equal(geo.state_dot, traj.state(geo.t_e_s, derivative=1))
+    mixed = _meas(["doppler", "range"] * 6, t)
+    hm = ob.evaluate(mixed, traj, n_columns=6)[0]
+    assert np.array_equal(hm[::2], h[::2]) and np.allclose(hm[1::2], geo.rho_m[1::2], rtol=0, atol=0)
+    meas.kind = np.array(["range"] * 12, dtype=object)
+    assert meas.is_kind("range").all() and not meas.is_kind("doppler").any()
+    assert np.array_equal(ob.evaluate(meas, traj, n_columns=6)[0], geo.rho_m)

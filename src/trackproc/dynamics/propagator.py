@@ -140,9 +140,12 @@ class Trajectory:
     @property
     def rotation(self) -> np.ndarray:
         """``blockdiag(q, q)`` (6, 6): GCRF state -> quasi-inertial state."""
-        big = np.zeros((6, 6))
-        big[:3, :3] = big[3:, 3:] = self.frame.q
-        return big
+        big = self.__dict__.get("_rotation")
+        if big is None:
+            big = np.zeros((6, 6))
+            big[:3, :3] = big[3:, 3:] = self.frame.q
+            self.__dict__["_rotation"] = big
+        return big.copy()
 
     def raise_for_outcome(self) -> Trajectory:
         """Raise :class:`ProcessingError` unless every run reached its end; return self."""
@@ -178,36 +181,70 @@ class Trajectory:
     # -- evaluation --------------------------------------------------------------------------
     def _as_seconds(self, t_s) -> np.ndarray:
         """Seconds from the epoch; UTC ``datetime64`` values are converted."""
+        if type(t_s) is np.ndarray and t_s.dtype == np.float64:
+            return t_s
         t = np.asarray(t_s)
         if np.issubdtype(t.dtype, np.datetime64):
             return self.seconds(t)
         return np.asarray(t, float)
 
+    def _layout(self):
+        """``([(run, backward)], only backward, complete)``: the runs and their directions, made
+        once; ``complete`` when a backward and a forward run both have steps (every time is then
+        covered by one of them)."""
+        layout = self.__dict__.get("_run_layout")
+        if layout is None:
+            runs = [(run, run.t_end_s < run.t0_s) for run in self.runs]
+            only_back = not any(run.t_end_s > run.t0_s for run in self.runs)
+            complete = (any(b and run.n_steps for run, b in runs)
+                        and any(not b and run.n_steps for run, b in runs))
+            layout = self.__dict__["_run_layout"] = (runs, only_back, complete)
+        return layout
+
     def _split(self, t_s):
+        """``(shape, flat times, [(run, selection, its times)], where the epoch is or None)``, kept
+        for the last times asked (the light time reads the state, its derivative and the STM at
+        the same emission times)."""
         t = self._as_seconds(t_s)
-        flat = t.reshape(-1)
+        key = (t.shape, t.tobytes())
+        last = self.__dict__.get("_last_split")
+        if last is not None and last[0] == key:
+            return last[1]
+        runs, only_back, complete = self._layout()
+        flat = t.reshape(-1).copy()              # kept: the caller may change its array later
         back = flat < 0.0
-        if not any(run.t_end_s > run.t0_s for run in self.runs):
+        if only_back:
             back |= flat == 0.0                  # only a backward run: it starts at t = 0
+        n_back = np.count_nonzero(back)
+        # the backward times first (samples in time order): slices, not selections
+        prefix = np.count_nonzero(back[:n_back]) == n_back
         parts = []
-        for run in self.runs:
-            sel = back if run.t_end_s < run.t0_s else ~back
-            if run.n_steps and sel.any():
-                parts.append((run, sel))
-        covered = np.zeros(flat.size, bool)
-        for _, sel in parts:
-            covered |= sel
-        if not covered.all():
-            bad = flat[~covered]
-            raise ValueError(f"times {bad.min()} .. {bad.max()} s lie outside the propagated interval "
-                             f"[{self.t_min_s}, {self.t_max_s}] s")
-        return t.shape, flat, parts
+        for run, backward in runs:
+            if not run.n_steps or n_back == (0 if backward else flat.size):
+                continue
+            if prefix:
+                sel = slice(0, n_back) if backward else slice(n_back, None)
+            else:
+                sel = back if backward else ~back
+            parts.append((run, sel, flat[sel]))
+        if not complete:
+            covered = np.zeros(flat.size, bool)
+            for _, sel, _ in parts:
+                covered[sel] = True
+            if not covered.all():
+                bad = flat[~covered]
+                raise ValueError(f"times {bad.min()} .. {bad.max()} s lie outside the propagated interval "
+                                 f"[{self.t_min_s}, {self.t_max_s}] s")
+        zero = flat == 0.0
+        split = (t.shape, flat, parts, zero.reshape(t.shape) if zero.any() else None)
+        self.__dict__["_last_split"] = (key, split)
+        return split
 
     def _evaluate(self, t_s, fn, tail):
-        shape, flat, parts = self._split(t_s)
+        shape, flat, parts, _ = self._split(t_s)
         out = np.empty((flat.size,) + tail)
-        for run, sel in parts:
-            out[sel] = fn(run, flat[sel])
+        for run, sel, times in parts:
+            out[sel] = fn(run, times)
         return out.reshape(shape + tail)
 
     def state(self, t_s, *, frame: str = "gcrf", derivative: int = 0) -> np.ndarray:
@@ -216,12 +253,16 @@ class Trajectory:
 
         ``frame="gcrf"`` (default) or ``"quasi-inertial"``; ``derivative=1`` gives ``[v, a]``.
         """
-        out = self._evaluate(t_s, lambda run, t: run.state(t, derivative), (6,))
-        if _frame_key(frame) == "gcrf":
-            q = self.frame.q
-            out = np.concatenate([out[..., :3] @ q, out[..., 3:] @ q], axis=-1)
-            if derivative == 0 and self.initial_gcrf is not None:
-                out[self._as_seconds(t_s) == 0.0] = self.initial_gcrf      # the epoch state, unrotated
+        shape, flat, parts, zero = self._split(t_s)
+        out = np.empty((flat.size, 6))
+        for run, sel, times in parts:
+            out[sel] = run.state(times, derivative)
+        out = out.reshape(shape + (6,))
+        if frame == "gcrf" or _frame_key(frame) == "gcrf":
+            # both halves (r, v) of every row as rows of one product: r q and v q, one call
+            out = (out.reshape(-1, 3) @ self.frame.q).reshape(out.shape)
+            if derivative == 0 and self.initial_gcrf is not None and zero is not None:
+                out[zero] = self.initial_gcrf                               # the epoch state, unrotated
         return out
 
     def stm(self, t_s, *, frame: str = "gcrf") -> np.ndarray:
@@ -234,7 +275,7 @@ class Trajectory:
         if not self.has_stm:
             raise ValueError("this trajectory carries no STM; propagate with stm=True")
         out = self._evaluate(t_s, lambda run, t: run.stm(t), (6, 6))
-        if _frame_key(frame) == "gcrf":
+        if frame == "gcrf" or _frame_key(frame) == "gcrf":
             big = self.rotation
             out = big.T @ out @ big
         return out

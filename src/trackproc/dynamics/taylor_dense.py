@@ -32,6 +32,9 @@ class Outcome(Enum):
 
 
 
+_EPS = float(np.finfo(float).eps)
+
+
 def _powers(dt, n):
     """Powers ``dt^k``, k = 0..n-1, shape (n, M), by doubling (log2 n vector products)."""
     p = np.empty((n, dt.size))
@@ -111,8 +114,12 @@ class Propagation:
     re_m: float
     batch: bool
     engine: str = "numpy"
-    #: derivative spectra of a step, made once: (values or sensitivities, step, m) -> (B*2F, n-m)
+    #: derivative spectra of a step, made once: (values or sensitivities, step, m) -> (B*2F, n-m);
+    #: and the interval covered with its slack ("bounds")
     _spectra: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    #: the last times evaluated and their plan (:meth:`_plan`): a light-time solution reads the
+    #: state, its derivative and the STM at the same emission times
+    _last: list = field(default_factory=list, init=False, repr=False, compare=False)
 
     # -- summary -----------------------------------------------------------------------------
     @property
@@ -147,8 +154,11 @@ class Propagation:
         tb = self.step_times_s
         if self.n_steps == 0:
             raise ValueError("no step was taken; nothing to evaluate")
-        lo, hi = (tb[0], tb[-1]) if tb[-1] >= tb[0] else (tb[-1], tb[0])
-        slack = 8 * np.finfo(float).eps * max(abs(lo), abs(hi), 1.0)
+        bounds = self._spectra.get("bounds")
+        if bounds is None:
+            lo, hi = (tb[0], tb[-1]) if tb[-1] >= tb[0] else (tb[-1], tb[0])
+            bounds = self._spectra["bounds"] = (lo, hi, 8 * _EPS * max(abs(lo), abs(hi), 1.0))
+        lo, hi, slack = bounds
         tmin, tmax = (t.min(), t.max()) if t.size else (lo, hi)
         if not (lo - slack <= tmin and tmax <= hi + slack):
             raise ValueError(f"times must lie in the propagated interval [{lo}, {hi}] s; "
@@ -178,6 +188,39 @@ class Propagation:
             cd = self._spectra[(key, s, m)] = cd.reshape(nb * 2 * nf, nm)
         return cd
 
+    def _plan(self, tf):
+        """Step index (None for one step) of the 1-D times ``tf`` and their groups ``[step,
+        selection, offsets, powers]`` (filled by :meth:`_dense`), kept for the last times asked:
+        the state, its derivative and the STM read at the same times share one location and one
+        set of powers.
+
+        The powers are those of the longest series asked so far: ``_powers(dt, k)`` is the first
+        ``k`` rows of ``_powers(dt, n)`` for ``k <= n`` (the doubling computes every row by the
+        same product whatever ``n``), so a shorter series takes a prefix of the same numbers."""
+        key = tf.tobytes()
+        entry = self._last[0] if self._last else None             # one read: (key, idx, groups)
+        if entry is not None and entry[0] == key:
+            return entry[1], entry[2]
+        idx = self._locate(tf)
+        groups = []
+        self._last[:] = [(key, idx, groups)]
+        return idx, groups
+
+    @staticmethod
+    def _groups(idx):
+        """``[step, selection]`` of the times of each step touched (slices when sorted)."""
+        if idx is None:
+            return [[0, None]]
+        if np.all(idx[1:] >= idx[:-1]):                              # sorted: slices
+            cuts = np.flatnonzero(np.diff(idx)) + 1
+            starts = np.concatenate([[0], cuts])
+            ends = np.concatenate([cuts, [idx.size]])
+            return [[int(idx[a]), slice(int(a), int(b))] for a, b in zip(starts, ends)]
+        order = np.argsort(idx, kind="stable")
+        sidx = idx[order]
+        cuts = np.flatnonzero(np.diff(sidx)) + 1
+        return [[int(idx[g[0]]), g] for g in np.split(order, cuts)]
+
     def _dense(self, coef, t_s, m, key="state"):
         """Derivatives m and m+1 of spectra coef (n_steps, B, F, n) at t_s.
 
@@ -187,7 +230,7 @@ class Propagation:
         """
         t = np.asarray(t_s, dtype=float)
         tf = t.reshape(-1)
-        idx = self._locate(tf)
+        idx, groups = self._plan(tf)
         _, nb, nf, n = coef.shape
         tb = self.step_times_s
         nm = max(n - m, 1)
@@ -201,23 +244,17 @@ class Propagation:
             with jit.compile_once([taylor_jit.dense], "taylor-dense", "the Taylor engine's kernels", 6):
                 return taylor_jit.dense(np.ascontiguousarray(coef), np.ascontiguousarray(tb, dtype=float),
                                         idx.astype(np.int64), np.ascontiguousarray(tf), m), t.shape
-        if idx is None:
-            groups = [(0, None)]
-        elif np.all(idx[1:] >= idx[:-1]):                            # sorted: slices
-            cuts = np.flatnonzero(np.diff(idx)) + 1
-            starts = np.concatenate([[0], cuts])
-            ends = np.concatenate([cuts, [idx.size]])
-            groups = [(int(idx[a]), slice(int(a), int(b))) for a, b in zip(starts, ends)]
-        else:
-            order = np.argsort(idx, kind="stable")
-            sidx = idx[order]
-            cuts = np.flatnonzero(np.diff(sidx)) + 1
-            groups = [(int(idx[g[0]]), g) for g in np.split(order, cuts)]
+        if not groups:
+            groups.extend(g + [None, None] for g in self._groups(idx))
         out = None if len(groups) == 1 else np.empty((nb, tf.size, 2, nf))
-        for s, sel in groups:
-            dt = (tf if sel is None else tf[sel]) - tb[s]
+        for group in groups:
+            s, sel, dt, pw = group
+            if pw is None or pw.shape[0] < nm:
+                if dt is None:
+                    dt = group[2] = (tf if sel is None else tf[sel]) - tb[s]
+                pw = group[3] = _powers(dt, nm)
             # one 2-D product of contiguous operands (BLAS), (B*2F, nm) @ (nm, M)
-            res = (self._derivative_spectra(coef, s, m, key) @ _powers(dt, nm)).reshape(nb, 2, nf, -1)
+            res = (self._derivative_spectra(coef, s, m, key) @ pw[:nm]).reshape(nb, 2, nf, -1)
             res = res.transpose(0, 3, 1, 2)
             if out is None:
                 out = res

@@ -44,6 +44,12 @@ def _dot(a, b):
     return np.einsum("...i,...i->...", a, b)
 
 
+def _norm(d):
+    """``np.linalg.norm(d, axis=-1)`` of real vectors by the same operations (its vector case:
+    square root of the sum of squares), without its dispatch: the light-time loop calls it often."""
+    return np.sqrt(np.add.reduce(d * d, axis=-1))
+
+
 @dataclass(frozen=True)
 class DownLeg:
     """Result of :func:`solve_down_leg` (arrays along the samples).
@@ -75,7 +81,7 @@ def solve_down_leg(state_at: Callable[[np.ndarray], np.ndarray], r_st, tau0, *, 
     for it in range(1, max_iter + 1):
         s = state_at(tau)
         d = s[..., :3] - r_st
-        rho = np.linalg.norm(d, axis=-1)
+        rho = _norm(d)
         u = d / rho[..., None]
         step = (c * tau - rho) / (c + _dot(u, s[..., 3:]))
         tau = tau - step
@@ -85,7 +91,7 @@ def solve_down_leg(state_at: Callable[[np.ndarray], np.ndarray], r_st, tau0, *, 
         raise ArithmeticError("light-time iteration did not converge")
     s = state_at(tau)
     d = s[..., :3] - r_st
-    rho = np.linalg.norm(d, axis=-1)
+    rho = _norm(d)
     return DownLeg(tau_s=tau, state=s, rho_m=rho, u=d / rho[..., None], iterations=it)
 
 

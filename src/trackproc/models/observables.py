@@ -105,7 +105,7 @@ def range_rate_partials(r_e, v_e, r_st, v_st, model: str = "doppler", c: float =
     check_range_rate_model(model)
     r_e, v_e, r_st, v_st = (np.asarray(x, float) for x in (r_e, v_e, r_st, v_st))
     d = r_e - r_st
-    rho = np.linalg.norm(d, axis=-1)[..., None]
+    rho = np.sqrt(np.add.reduce(d * d, axis=-1))[..., None]   # np.linalg.norm(d, axis=-1), its operations
     u = d / rho
     dv = v_e - v_st
     num = _dot(u, dv)[..., None]

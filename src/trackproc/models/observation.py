@@ -138,7 +138,7 @@ class EmissionGeometry:
     """Result of :func:`solve_light_time` (arrays along the samples).
 
     ``t_e_s`` emission times (s, the trajectory's time axis), ``tau_s`` light times,
-    ``state`` (N, 6) and ``state_dot`` (N, 6) of the satellite at ``t_e``, ``rho_m`` ranges,
+    ``state`` (N, 6) and ``state_dot`` (N, 6; None when not asked for) of the satellite at ``t_e``, ``rho_m`` ranges,
     ``u`` unit vectors station -> satellite, ``iterations`` Newton iterations taken.
     """
 
@@ -152,7 +152,7 @@ class EmissionGeometry:
 
 
 def solve_light_time(trajectory, t_r_s, r_st, *, c: float = C_LIGHT, tol_s: float = LIGHT_TIME_TOL_S,
-                     max_iter: int = 10, tau0=None) -> EmissionGeometry:
+                     max_iter: int = 10, tau0=None, derivative: bool = True) -> EmissionGeometry:
     """Emission times of one-way signals received at ``r_st`` (N, 3) at ``t_r_s`` (N,).
 
     ``trajectory.state(t, derivative=0|1)`` gives the satellite's GCRF ``(r, v)`` or ``(v, a)``
@@ -161,6 +161,7 @@ def solve_light_time(trajectory, t_r_s, r_st, *, c: float = C_LIGHT, tol_s: floa
     evaluation on the same samples: Newton's second step is then below ``tol_s`` as it is from the
     cold start, and one trajectory evaluation is spared); converged when every ``|Δτ| < tol_s``
     (1e-12 s: 0.3 mm). Raises ``ArithmeticError`` if it does not converge in ``max_iter`` iterations.
+    ``derivative=False``: ``state_dot`` is None (read only by the partials).
     """
     t_r = np.asarray(t_r_s, float)
     r_st = np.asarray(r_st, float)
@@ -178,7 +179,8 @@ def solve_light_time(trajectory, t_r_s, r_st, *, c: float = C_LIGHT, tol_s: floa
 
     leg = lt.solve_down_leg(state_at, r_st, tau0, c=c, tol_s=tol_s, max_iter=max_iter)
     t_e = t_r - leg.tau_s
-    return EmissionGeometry(t_e_s=t_e, tau_s=leg.tau_s, state=leg.state, state_dot=trajectory.state(t_e, derivative=1),
+    return EmissionGeometry(t_e_s=t_e, tau_s=leg.tau_s, state=leg.state,
+                            state_dot=trajectory.state(t_e, derivative=1) if derivative else None,
                             rho_m=leg.rho_m, u=leg.u, iterations=leg.iterations)
 
 
@@ -243,6 +245,17 @@ class MeasurementSet:
     def __len__(self) -> int:
         return len(self.t_s)
 
+    def is_kind(self, kind: str) -> np.ndarray:
+        """``self.kind == kind``, kept with the kind array it was computed from (a model evaluation
+        asks the same few kinds of the same samples many times)."""
+        kept = self.__dict__.get("_kind_masks")
+        if kept is None or kept[0] is not self.kind:
+            kept = self.__dict__["_kind_masks"] = (self.kind, {})
+        mask = kept[1].get(kind)
+        if mask is None:
+            mask = kept[1][kind] = self.kind == kind
+        return mask.copy()
+
     @property
     def periodic(self) -> np.ndarray:
         """True for azimuth samples (residuals wrap at 2π)."""
@@ -251,7 +264,8 @@ class MeasurementSet:
     @property
     def two_way(self) -> np.ndarray:
         """True for two-way range, range-rate and Doppler samples (the round-trip model)."""
-        return (self.mode == "two-way") & np.isin(self.kind, LINK_KINDS)
+        two = self.mode == "two-way"
+        return two & np.isin(self.kind, LINK_KINDS) if two.any() else two
 
     def shifted(self, dt_s) -> "MeasurementSet":
         """The samples as if received ``dt_s`` (s, scalar or per row) later: ``t_s + dt`` and the
@@ -358,7 +372,7 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         if np.any(dt):
             meas = meas.shifted(dt)
     ncol = n_columns if n_columns is not None else n_state_params + len(bias_columns)
-    geo = solve_light_time(trajectory, meas.t_s, meas.r_st, c=c, tau0=tau0)
+    geo = solve_light_time(trajectory, meas.t_s, meas.r_st, c=c, tau0=tau0, derivative=partials)
     r_e, v_e = geo.state[:, :3], geo.state[:, 3:]
     if partials:
         phi = trajectory.stm(geo.t_e_s)
@@ -375,7 +389,7 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         up = solve_up_leg(r_e[two], meas.r_st[two], meas.v_st[two], meas.a_st[two], geo.tau_s[two], c=c)
         g_t = np.zeros(n)                           # ∂ value / ∂ T at fixed s_b (eq. 12)
         pos = np.cumsum(two) - 1                    # row -> index in the up-leg arrays
-    m = kind == "range"
+    m = meas.is_kind("range")
     value[m] = geo.rho_m[m]
     g[m, :3] = geo.u[m]
     if up is not None and (m & two).any():
@@ -384,11 +398,13 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         value[rows], g[rows, :3], g_t[rows] = two_way_range_partials(geo.rho_m[rows], geo.u[rows], up.rho_m[j],
                                                                      up.u[j], up.v_st[j])
     for k in ("range_rate", "doppler"):
-        m = kind == k
+        m = meas.is_kind(k)
         if not m.any():
             continue
-        rr, d_r, d_v = range_rate_partials(r_e[m], v_e[m], meas.r_st[m], meas.v_st[m], range_rate_model, c)
-        factor = 1.0 if k == "range_rate" else -meas.carrier_hz[m] / c
+        sel = m if not m.all() else slice(None)     # every row (one kind): no selection's copies
+        rr, d_r, d_v = range_rate_partials(_rows(r_e, sel), _rows(v_e, sel), _rows(meas.r_st, sel),
+                                           _rows(meas.v_st, sel), range_rate_model, c)
+        factor = 1.0 if k == "range_rate" else -_rows(meas.carrier_hz, sel) / c
         if k == "doppler" and not np.all(np.isfinite(factor)):
             raise ValueError("Doppler samples need a carrier frequency")
         factor = np.broadcast_to(factor, rr.shape)
@@ -402,10 +418,10 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
             if k == "doppler":
                 factor = np.where(tm, 2.0 * factor, factor)     # eq. (10): the round trip doubles the shift
             g_t[rows] = factor[tm] * d_t
-        value[m] = factor * rr
-        g[m, :3] = factor[:, None] * d_r
-        g[m, 3:] = factor[:, None] * d_v
-    ang = (kind == "azimuth") | (kind == "elevation")
+        value[sel] = factor * rr
+        g[sel, :3] = factor[:, None] * d_r
+        g[sel, 3:] = factor[:, None] * d_v
+    ang = meas.is_kind("azimuth") | meas.is_kind("elevation")
     if ang.any():
         if meas.gcrf_to_enu is None:
             raise ValueError("angle samples need gcrf_to_enu")
@@ -429,6 +445,12 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         if col is not None:
             jac[mod.rows, col] += _time_partials(meas, mod.rows, trajectory, n_state_params, range_rate_model, c)
     return value, jac, geo
+
+
+def _rows(a, sel):
+    """``a[sel]``: a copy in C order for a boolean ``sel``, as for ``slice(None)`` (every row) where
+    ``a`` is not already C-ordered: the same operands either way, without the selection's copy."""
+    return np.ascontiguousarray(a) if isinstance(sel, slice) else a[sel]
 
 
 def _time_partials(meas: MeasurementSet, rows, trajectory, n_state_params: int, range_rate_model: str,

@@ -5,6 +5,7 @@ time shift, square root and reciprocal, and their evaluation on segments.
 from __future__ import annotations
 
 import math
+import sys
 from functools import lru_cache
 
 import numpy as np
@@ -98,7 +99,8 @@ def evaluate_segments(spec, bounds, vander) -> np.ndarray:
 def series_sqrt(d2) -> np.ndarray:
     """Seed 004 eq. 12 on (S, n) spectra: ``D(K) = (D2(K) - sum_{l=1..K-1} D(K-l) D(l)) / (2 D(0))``.
 
-    The same rule as :func:`trackproc.dynamics.spectra.sqrt`, with less per-order overhead.
+    The same rule as :func:`trackproc.dynamics.spectra.sqrt`, with less per-order overhead (the
+    orders' recurrence compiled where numba is loaded: :mod:`.series_jit`, the same numbers).
     """
     if np.any(d2[:, 0] <= 0):
         raise ArithmeticError("the station-satellite distance vanishes (D2(0) <= 0)")
@@ -108,9 +110,35 @@ def series_sqrt(d2) -> np.ndarray:
     inv2 = 0.5 / d[:, 0]
     if n > 1:
         d[:, 1] = d2[:, 1] * inv2
+    if n > 2 and _compiled():
+        from trackproc.dynamics import jit
+        from trackproc.dynamics.measurement_spectra import series_jit  # numba is loaded already (_compiled)
+
+        work = np.ascontiguousarray(d)              # C order for the kernel; d keeps d2's layout
+        with jit.compile_once([series_jit.sqrt_orders], "series-sqrt"):
+            series_jit.sqrt_orders(np.ascontiguousarray(d2), work, np.ascontiguousarray(inv2))
+        d[...] = work
+        return d
     for k in range(2, n):
         d[:, k] = (d2[:, k] - np.einsum("sl,sl->s", d[:, 1:k], d[:, k - 1:0:-1])) * inv2
     return d
+
+
+def _compiled() -> bool:
+    """The compiled recurrence (:mod:`.series_jit`, the same numbers) where numba is loaded and
+    allowed, and the work is many predictions in one process (``TRACKPROC_JIT=1``, a batch's tasks)
+    or the kernel is in this process already: its first load (~40 ms of CPU from numba's cache,
+    ~0.4 s to compile) is not paid by a single command's few predictions (0.2 ms saved each)."""
+    if "numba" not in sys.modules:
+        return False
+    from trackproc.dynamics import jit
+
+    if not jit.enabled():
+        return False
+    if jit.forced():
+        return True
+    kernels = sys.modules.get("trackproc.dynamics.measurement_spectra.series_jit")
+    return kernels is not None and bool(kernels.sqrt_orders.signatures)
 
 
 def series_reciprocal(u) -> np.ndarray:
