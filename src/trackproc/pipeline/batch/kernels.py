@@ -31,10 +31,13 @@ def compiled_kernels(settings: Settings) -> bool:
 
 def load_numba() -> None:
     """Import numba and load (or, the first time on this installation, compile) the compiled
-    Taylor kernels and the Kalman gains in this process (:func:`compiled_kernels`), so that the
-    workers only load them; nothing when they cannot be."""
+    Taylor kernels, the Kalman gains and the predictions' square-root recurrence in this process
+    (:func:`compiled_kernels`), so that the workers only load them; nothing when they cannot be."""
     try:
+        import numpy as np
+
         from trackproc.dynamics import jit, taylor
+        from trackproc.dynamics.measurement_spectra.series import series_sqrt
         from trackproc.methods.whitening import compiled_riccati
 
         module = taylor._jit_module()
@@ -47,5 +50,6 @@ def load_numba() -> None:
                 module.compile_all()
         with jit.default("1"):
             compiled_riccati()                 # the Kalman gains and whitening, compiled or loaded here
+            series_sqrt(np.ones((1, 3)))       # the predictions' recurrence (series_jit), likewise
     except Exception:  # noqa: BLE001 - optional: the numpy paths serve
         pass
