@@ -154,7 +154,7 @@ def overview_png(records: list) -> Optional[bytes]:
     quantity); None when no input has any of them."""
     import numpy as np  # numpy and matplotlib only when a figure is drawn, after the BLAS set-up (batch/steps)
 
-    from trackproc.report.plots import encode, pyplot
+    from trackproc.report.plots import encode, figure
 
     ok = [r for r in records if r.get("task") == "pass" and r.get("status") == "ok"]
     if not ok:
@@ -181,9 +181,9 @@ def overview_png(records: list) -> Optional[bytes]:
         panels.append(("sigma", "refined state 1-sigma [m]", None))
     if not panels:
         return None
-    plt = pyplot()
     x = np.arange(len(ok))
-    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 2.6 * len(panels) + 1.2), squeeze=False, sharex=True)
+    fig = figure(figsize=(10, 2.6 * len(panels) + 1.2))
+    axes = fig.subplots(len(panels), 1, squeeze=False, sharex=True)
     for ax, (what, ylabel, legend) in zip(axes[:, 0], panels):
         if what == "fit":
             ax.plot(x, rms, "o", ms=4, color="C0", label=legend)
