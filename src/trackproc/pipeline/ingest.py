@@ -148,17 +148,17 @@ class Ingest:
     def _add_chunk(self, raw: RawMeasurements, index: int) -> None:
         frame = _chunk_frame(raw, index, self.options)
         self.merged += len(frame)
-        if self.option_error is not None or self.pending is not None or frame.empty:
+        if self.option_error is not None or self.pending is not None or not len(frame):
             return   # nothing after the first invalid sample can be reported before it
         problems = sample_problems(frame)
         if problems and not self.options.drop_invalid:
             error = problems.first_error()
             self.pending = ((index, int(error.row)), error)
-            frame = frame[~problems.invalid()]
+            frame = frame.select(~problems.invalid())
         elif problems:
             keep, counts = problems.resolve(True)
             add_counts(self.checked_dropped, counts)
-            frame = frame[keep]
+            frame = frame.select(keep)
         self.samples.append(frame, index)
         if len(self.samples) > self.max_samples:   # ~45 bytes each are kept until the end
             raise InputError(f"more than {self.max_samples} samples in all inputs", file=raw.source,
@@ -239,15 +239,38 @@ class Ingest:
                           expected="one sample per station, kind and time")
 
 
-def _chunk_frame(raw: RawMeasurements, index: int, options: IngestOptions) -> pd.DataFrame:
-    """One chunk of one input as the merged frame the checks read (sigma defaults filled in)."""
+class Chunk:
+    """One chunk of one input as the numpy columns the checks read (sigma defaults filled in):
+    ``time`` (int64 ns since 1970, UTC), ``station``, ``pass_id``, ``kind``, ``unit``,
+    ``value_column``, ``sigma_column``, ``source`` (object arrays of str), ``value``, ``sigma``
+    (float64), ``row`` (int64). Plain arrays, not a DataFrame: each string column of a DataFrame
+    is converted to an Arrow string array on the way in and back to objects on the way out."""
+
+    __slots__ = ("columns",)
+
+    def __init__(self, columns: dict):
+        self.columns = columns
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.columns[name]
+
+    def __len__(self) -> int:
+        return len(self.columns["time"])
+
+    def select(self, mask: np.ndarray) -> "Chunk":
+        return Chunk({name: values[mask] for name, values in self.columns.items()})
+
+
+def _chunk_frame(raw: RawMeasurements, index: int, options: IngestOptions) -> Chunk:
+    """One chunk of one input as the merged columns the checks read (sigma defaults filled in)."""
     frame = raw.frame
     missing = [c for c in ("time", "station", "kind", "value", "sigma", "row") if c not in frame.columns]
     if missing:
         raise InputError("reader returned incomplete samples", file=raw.source, column=missing[0])
     defaults = options.default_sigmas()
+    n = len(frame)
     kind = frame["kind"].astype(str).to_numpy(dtype=object)
-    codes, kinds = pd.factorize(pd.Series(kind, dtype=object))   # per distinct kind, not per row
+    codes, kinds = pd.factorize(kind)   # per distinct kind, not per row
     kinds = [str(k) for k in kinds]
 
     def per_kind(values) -> np.ndarray:
@@ -258,19 +281,19 @@ def _chunk_frame(raw: RawMeasurements, index: int, options: IngestOptions) -> pd
         sigma[kind == "range"] = math.nan
     default = per_kind([defaults.get(k, math.nan) for k in kinds]).astype(np.float64)
     sigma = np.where(np.isnan(sigma), default, sigma)
-    return pd.DataFrame({
-        "time": pd.to_datetime(frame["time"], utc=True).dt.as_unit("ns"),
+    time = pd.to_datetime(frame["time"], utc=True).dt.as_unit("ns").dt.tz_localize(None)
+    return Chunk({
+        "time": time.to_numpy().astype(np.int64),
         "station": frame["station"].astype(str).to_numpy(dtype=object),
         "pass_id": (frame["pass_id"].fillna("").astype(str).to_numpy(dtype=object)
-                    if "pass_id" in frame.columns else np.full(len(frame), "", dtype=object)),
+                    if "pass_id" in frame.columns else np.full(n, "", dtype=object)),
         "kind": kind,
         "value": frame["value"].to_numpy(dtype=np.float64),
         "sigma": sigma,
         "row": frame["row"].to_numpy(dtype=np.int64),
         "unit": (frame["unit"].astype(str).to_numpy(dtype=object) if "unit" in frame.columns
-                 else np.full(len(frame), "", dtype=object)),
-        "source": raw.source,
-        "input": index,
+                 else np.full(n, "", dtype=object)),
+        "source": np.full(n, raw.source, dtype=object),
         "value_column": per_kind([raw.column.get(k, "value") for k in kinds]),
         "sigma_column": per_kind([raw.column.get(f"sigma:{k}", "sigma") for k in kinds]),
     })
