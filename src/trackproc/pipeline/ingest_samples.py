@@ -134,11 +134,17 @@ class Samples:
 
     def frame(self) -> pd.DataFrame:
         c = self.columns
+
+        def strings(names, codes) -> pd.Series:
+            # the few distinct names as a str array, taken by code (in Arrow): not one Python
+            # string per row converted to Arrow
+            return pd.Series(pd.array([str(n) for n in names], dtype="str").take(codes.astype(np.intp)))
+
         return pd.DataFrame({
             "time": pd.DatetimeIndex(c["time"].astype("datetime64[ns]")).tz_localize("UTC"),
-            "station": pd.Series(self.stations.array()[c["station"]] if len(c["time"]) else [], dtype=object).astype(str),
-            "pass_id": pd.Series(self.passes.array()[c["pass_id"]], dtype=object).astype(str),
-            "kind": pd.Series(np.array(KINDS, dtype=object)[c["kind"]], dtype=object).astype(str),
+            "station": strings(self.stations.names, c["station"]),
+            "pass_id": strings(self.passes.names, c["pass_id"]),
+            "kind": strings(KINDS, c["kind"]),
             "value": c["value"], "sigma": c["sigma"],
         })[list(COLUMNS)]
 
