@@ -67,7 +67,8 @@ def sample_problems(frame) -> Problems:
                  expected="a finite sigma > 0")
     problems.add(NONPOSITIVE_SIGMA, sigma <= 0, column=sigma_col, found=sigma_written,
                  expected="sigma > 0")
-    floor = pd.Series(kind, dtype=object).map(SIGMA_FLOOR).fillna(0.0).to_numpy(dtype=np.float64)
+    codes, kinds = pd.factorize(kind)   # one lookup per distinct kind (0 for an unknown one)
+    floor = np.array([SIGMA_FLOOR.get(k, 0.0) for k in kinds] + [0.0], dtype=np.float64)[codes]
     problems.add(TINY_SIGMA, (sigma > 0) & (sigma < floor), column=sigma_col, found=sigma_written,
                  expected=lambda i: (f"sigma >= {floor[i]:g} {KIND_UNITS.get(kind[i], '')} (SI) for {kind[i]}; "
                                      "smaller is no tracking system's precision"))
