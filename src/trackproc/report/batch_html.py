@@ -197,7 +197,7 @@ def window_png(out: Path, record: dict) -> Optional[bytes]:
     rel = next((o for o in record.get("outputs") or [] if o.endswith(".residuals.parquet")), None)
     if rel is None or not (out / rel).is_file():
         return None
-    import pyarrow.parquet as pq  # only when a figure is drawn, as in overview_png
+    import pyarrow.parquet as pq  # only when a figure is drawn
 
     from trackproc.report.plots import residuals_png
 

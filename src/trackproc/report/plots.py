@@ -8,7 +8,6 @@ a multi-page PDF where a figure per pass is asked for).
 from __future__ import annotations
 
 import io
-import sys
 import textwrap
 from pathlib import Path
 
@@ -33,18 +32,6 @@ def pyplot():
     return plt
 
 
-def figure(**kw):
-    """A matplotlib Figure drawn by Agg, without pyplot: pyplot's import (~0.3 s of CPU) and its
-    figure manager are for interactive use; a figure only saved to bytes needs neither."""
-    require_matplotlib()
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(**kw)
-    FigureCanvasAgg(fig)
-    return fig
-
-
 #: Called with every figure just before it is saved (the tests check its layout here).
 FIGURE_CHECKS: list = []
 
@@ -52,13 +39,12 @@ FIGURE_CHECKS: list = []
 def encode(fig, fmt: str = "png", dpi: int = 100, tight: bool = True) -> bytes:
     """The figure as ``fmt`` bytes; ``tight``: the saved area grows to every artist (legends placed
     outside the axes, rotated tick labels), so nothing is clipped."""
+    plt = pyplot()
     for check in FIGURE_CHECKS:
         check(fig)
     buffer = io.BytesIO()
     fig.savefig(buffer, format=fmt, dpi=dpi, **({"bbox_inches": "tight", "pad_inches": 0.1} if tight else {}))
-    plt = sys.modules.get("matplotlib.pyplot")  # a figure from :func:`figure` has no pyplot manager
-    if plt is not None:
-        plt.close(fig)
+    plt.close(fig)
     return buffer.getvalue()
 
 
