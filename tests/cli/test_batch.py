@@ -96,22 +96,16 @@ def _make_passes(root: Path) -> dict:
 
 @pytest.fixture(autouse=True, scope="module")
 def figures_drawn_once():
-    """report.html's figures drawn once per content: the tests here run a batch several times over
-    the same inputs (a re-run, --force, a changed setting), and every run rewrites report.html with
-    the same figures (matplotlib, ~1 s of CPU a run). A figure is a function of what it plots (the
-    records' numbers; a window's residuals file), so the bytes drawn first are the bytes a re-run
-    draws. The report itself is tested in tests/cli/test_batch_report.py and test_report_plots.py."""
+    """report.html's window figures drawn once per content: the tests here run a batch several times
+    over the same inputs (a re-run, --force, a changed setting), and every run rewrites report.html
+    with the same figures (matplotlib, ~1 s of CPU a run). A figure is a function of what it plots (a
+    window's residuals file), so the bytes drawn first are the bytes a re-run draws. The overview is
+    an SVG written as text (milliseconds): drawn each time. The report itself is tested in
+    tests/cli/test_batch_report.py, tests/report/test_batch_svg.py and test_report_plots.py."""
     from trackproc.report import batch_html
 
     drawn: dict = {}
-    overview_png, window_png = batch_html.overview_png, batch_html.window_png
-
-    def overview_once(records):
-        key = ("overview", json.dumps([(r.get("task"), r.get("status"), r.get("name"), r.get("numbers"))
-                                       for r in records], sort_keys=True, default=str))
-        if key not in drawn:
-            drawn[key] = overview_png(records)
-        return drawn[key]
+    window_png = batch_html.window_png
 
     def window_once(out, record):
         rel = next((o for o in record.get("outputs") or [] if o.endswith(".residuals.parquet")), None)
@@ -123,7 +117,6 @@ def figures_drawn_once():
         return drawn[key]
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(batch_html, "overview_png", overview_once)
         mp.setattr(batch_html, "window_png", window_once)
         yield
 

@@ -22,7 +22,7 @@ class Page(HTMLParser):
 
     def __init__(self):
         super().__init__()
-        self.rows, self.links, self.images, self.attrs, self.scripts = [], [], [], [], []
+        self.rows, self.links, self.images, self.attrs, self.scripts, self.svgs = [], [], [], [], [], []
         self._in_results = self._in_body = False
         self._row = self._cell = None
         self._script = None
@@ -42,6 +42,8 @@ class Page(HTMLParser):
             self.links.append(attrs.get("href"))
         elif tag == "img":
             self.images.append(attrs.get("src"))
+        elif tag == "svg":
+            self.svgs.append(attrs.get("aria-label"))
         elif tag in ("script", "link") and (attrs.get("src") or attrs.get("href")):
             self.scripts.append(attrs.get("src") or attrs.get("href"))
 
@@ -108,8 +110,10 @@ def test_report_lists_every_input_links_its_outputs_and_fetches_nothing(night, r
     text = (out / "report.html").read_text()
     assert page.scripts == [] and "http://" not in text and "https://" not in text and "//" not in \
         "".join(a for a in page.attrs if not a.startswith("data:"))
-    # the figures are inline PNGs: the overview and the window's residuals
-    assert len(page.images) == 2 and all(s.startswith("data:image/png;base64,") for s in page.images)
+    # the figures are inline: the overview an SVG (its content: tests/report/test_batch_svg.py), the
+    # window's residuals a PNG
+    assert len(page.svgs) == 1 and "per input" in page.svgs[0]
+    assert len(page.images) == 1 and all(s.startswith("data:image/png;base64,") for s in page.images)
     assert "<script>" in text and "sortable" in text
     # the report is rewritten with the run: a rerun (all up to date) marks the rows so
     assert run_cli(["batch", config, "--workers", "1"]).exit_code == 3

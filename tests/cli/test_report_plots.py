@@ -259,16 +259,6 @@ def test_accuracy_figure_and_the_aliasing_warning(tmp_path, laid_out, run_cli):
     assert_report_ready(laid_out, png.read_bytes())
 
 
-def test_batch_report_overview_figure(laid_out):
-    from trackproc.report.batch_html import overview_png
-
-    records = [{"task": "pass", "name": f"pass-{i:02d}", "status": "ok",
-                "numbers": {"kind": "doppler", "rms": 0.2 + 0.01 * i, "rms_unit": "Hz", "residual_rms": 0.3,
-                            "residual_rms_unit": "Hz", "sigma_radial_m": 10.0 * (i + 1), "sigma_along_m": 300.0,
-                            "sigma_cross_m": 5000.0}} for i in range(12)]
-    assert_report_ready(laid_out, overview_png(records))
-
-
 def test_filter_figure_bands_and_sigmas(tmp_path, laid_out):
     """``filter --plot`` on the shipped three-station set: a panel per kind whose ±3σ band is three
     times the innovation sigma of ``--residuals`` (its √S), angles in degrees, and a sigma panel

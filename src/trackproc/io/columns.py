@@ -328,6 +328,10 @@ def column_numbers(table: SourceTable, column: Column) -> tuple[np.ndarray, np.n
     """
     if column.text is not None:
         n = len(column.text)
+        try:   # every cell a number (the common case): numpy calls float() on each, in C
+            return (column.text.astype(np.float64), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
+        except (ValueError, TypeError):
+            pass
         values = np.full(n, np.nan)
         missing = np.zeros(n, dtype=bool)
         wrong = np.zeros(n, dtype=bool)

@@ -11,7 +11,6 @@ import logging
 import math
 
 import numpy as np
-import pandas as pd
 
 from trackproc.errors import InputError
 from trackproc.io.columns import Column, SourceTable, column_numbers, column_strings, column_times
@@ -78,7 +77,7 @@ class LayoutReader:
             self.first_row = int(table.rows[0])
         self.rows += len(table)
         raw = self._read(table)
-        self.samples += len(raw.frame)
+        self.samples += raw.size()
         return raw
 
     def read_whole(self, table: SourceTable) -> RawMeasurements:
@@ -96,13 +95,17 @@ class LayoutReader:
     def _read(self, table: SourceTable) -> RawMeasurements:
         raise NotImplementedError
 
-    def _raw(self, frame: pd.DataFrame, table: SourceTable, dropped: dict) -> RawMeasurements:
+    def _raw(self, arrays: dict, keep: np.ndarray, table: SourceTable, dropped: dict) -> RawMeasurements:
+        """The samples kept as numpy columns (:attr:`RawMeasurements.arrays`; the frame is built
+        from them only for a caller that asks)."""
         meta = {"source": table.source, "dropped": dropped}
         carried = table.meta
         for key in ("carrier_hz", "doppler_mode", "stations", "doptrack"):
             if carried.get(key) is not None:
                 meta[key] = carried[key]
-        return RawMeasurements(frame=frame, source=table.source, column=dict(self.column_map), meta=meta)
+        if not keep.all():
+            arrays = {name: values[keep] for name, values in arrays.items()}
+        return RawMeasurements(source=table.source, column=dict(self.column_map), meta=meta, arrays=arrays)
 
 
 class LongReader(LayoutReader):
@@ -141,19 +144,19 @@ class LongReader(LayoutReader):
             explicit_nan = np.isnan(sigma) & ~_blank(table, sigma_col) & ~wrong
             problems.add(NONFINITE_SIGMA, explicit_nan, column=sigma_col.name, found=math.nan,
                          expected="a finite number > 0, or an empty cell for the default")
-        frame = pd.DataFrame({
-            "time": pd.DatetimeIndex(times).tz_localize("UTC"),
+        arrays = {
+            "time": np.asarray(times, dtype="datetime64[ns]"),
             "station": column_strings(table, table.columns["station"]),
             "kind": kind,
             "value": value * factor,
             "sigma": sigma * factor,
             "row": table.rows,
             "unit": unit,
-        })
+        }
         if "pass_id" in table.columns:
-            frame["pass_id"] = column_strings(table, table.columns["pass_id"])
+            arrays["pass_id"] = column_strings(table, table.columns["pass_id"])
         keep, dropped = problems.resolve(self.drop_invalid)
-        return self._raw(frame[keep].reset_index(drop=True), table, dropped)
+        return self._raw(arrays, keep, table, dropped)
 
 
 class WideReader(LayoutReader):
@@ -229,19 +232,19 @@ class WideReader(LayoutReader):
         problems.add(NONFINITE_SIGMA, samples["sigma_nan"].astype(bool),
                      column=samples["sigma_column"],
                      found=math.nan, expected="a finite number > 0, or an empty cell for the default")
-        frame = pd.DataFrame({
-            "time": pd.DatetimeIndex(times[src]).tz_localize("UTC"),
+        arrays = {
+            "time": np.asarray(times[src], dtype="datetime64[ns]"),
             "station": stations[src],
             "kind": samples["kind"],
             "value": samples["value"].astype(np.float64),
             "sigma": samples["sigma"].astype(np.float64),
             "row": rows,
             "unit": samples["unit"],
-        })
+        }
         if pass_ids is not None:
-            frame["pass_id"] = pass_ids[src]
+            arrays["pass_id"] = pass_ids[src]
         keep, dropped = problems.resolve(self.drop_invalid)
-        return self._raw(frame[keep].reset_index(drop=True), table, dropped)
+        return self._raw(arrays, keep, table, dropped)
 
 
 def _texts(text: str, n: int) -> np.ndarray:

@@ -148,17 +148,17 @@ class Ingest:
     def _add_chunk(self, raw: RawMeasurements, index: int) -> None:
         frame = _chunk_frame(raw, index, self.options)
         self.merged += len(frame)
-        if self.option_error is not None or self.pending is not None or frame.empty:
+        if self.option_error is not None or self.pending is not None or not len(frame):
             return   # nothing after the first invalid sample can be reported before it
         problems = sample_problems(frame)
         if problems and not self.options.drop_invalid:
             error = problems.first_error()
             self.pending = ((index, int(error.row)), error)
-            frame = frame[~problems.invalid()]
+            frame = frame.select(~problems.invalid())
         elif problems:
             keep, counts = problems.resolve(True)
             add_counts(self.checked_dropped, counts)
-            frame = frame[keep]
+            frame = frame.select(keep)
         self.samples.append(frame, index)
         if len(self.samples) > self.max_samples:   # ~45 bytes each are kept until the end
             raise InputError(f"more than {self.max_samples} samples in all inputs", file=raw.source,
@@ -239,41 +239,82 @@ class Ingest:
                           expected="one sample per station, kind and time")
 
 
-def _chunk_frame(raw: RawMeasurements, index: int, options: IngestOptions) -> pd.DataFrame:
-    """One chunk of one input as the merged frame the checks read (sigma defaults filled in)."""
+class Chunk:
+    """One chunk of one input as the numpy columns the checks read (sigma defaults filled in):
+    ``time`` (int64 ns since 1970, UTC), ``station``, ``pass_id``, ``kind``, ``unit``,
+    ``value_column``, ``sigma_column``, ``source`` (object arrays of str), ``value``, ``sigma``
+    (float64), ``row`` (int64). Plain arrays, not a DataFrame: each string column of a DataFrame
+    is converted to an Arrow string array on the way in and back to objects on the way out."""
+
+    __slots__ = ("columns",)
+
+    def __init__(self, columns: dict):
+        self.columns = columns
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.columns[name]
+
+    def __len__(self) -> int:
+        return len(self.columns["time"])
+
+    def select(self, mask: np.ndarray) -> "Chunk":
+        return Chunk({name: values[mask] for name, values in self.columns.items()})
+
+
+def _raw_columns(raw: RawMeasurements) -> dict:
+    """The reader's samples as numpy columns: its ``arrays`` as they are (text cells are str
+    already), or its DataFrame's columns as the checks read them (text as str, time in ns)."""
+    if raw.arrays is not None:
+        a = raw.arrays
+        missing = [c for c in ("time", "station", "kind", "value", "sigma", "row") if c not in a]
+        if missing:
+            raise InputError("reader returned incomplete samples", file=raw.source, column=missing[0])
+        n = len(a["row"])
+        return {"time": np.asarray(a["time"], dtype="datetime64[ns]").astype(np.int64),
+                "station": a["station"], "kind": a["kind"],
+                "pass_id": a["pass_id"] if "pass_id" in a else np.full(n, "", dtype=object),
+                "value": np.asarray(a["value"], dtype=np.float64), "sigma": np.array(a["sigma"], dtype=np.float64),
+                "row": np.asarray(a["row"], dtype=np.int64),
+                "unit": a["unit"] if "unit" in a else np.full(n, "", dtype=object)}
     frame = raw.frame
     missing = [c for c in ("time", "station", "kind", "value", "sigma", "row") if c not in frame.columns]
     if missing:
         raise InputError("reader returned incomplete samples", file=raw.source, column=missing[0])
+    n = len(frame)
+    time = pd.to_datetime(frame["time"], utc=True).dt.as_unit("ns").dt.tz_localize(None)
+    return {"time": time.to_numpy().astype(np.int64),
+            "station": frame["station"].astype(str).to_numpy(dtype=object),
+            "kind": frame["kind"].astype(str).to_numpy(dtype=object),
+            "pass_id": (frame["pass_id"].fillna("").astype(str).to_numpy(dtype=object)
+                        if "pass_id" in frame.columns else np.full(n, "", dtype=object)),
+            "value": frame["value"].to_numpy(dtype=np.float64),
+            "sigma": frame["sigma"].to_numpy(dtype=np.float64).copy(),
+            "row": frame["row"].to_numpy(dtype=np.int64),
+            "unit": (frame["unit"].astype(str).to_numpy(dtype=object) if "unit" in frame.columns
+                     else np.full(n, "", dtype=object))}
+
+
+def _chunk_frame(raw: RawMeasurements, index: int, options: IngestOptions) -> Chunk:
+    """One chunk of one input as the merged columns the checks read (sigma defaults filled in)."""
+    c = _raw_columns(raw)
     defaults = options.default_sigmas()
-    kind = frame["kind"].astype(str).to_numpy(dtype=object)
-    codes, kinds = pd.factorize(pd.Series(kind, dtype=object))   # per distinct kind, not per row
+    n = len(c["row"])
+    kind = c["kind"]
+    codes, kinds = pd.factorize(kind)   # per distinct kind, not per row
     kinds = [str(k) for k in kinds]
 
     def per_kind(values) -> np.ndarray:
         return np.array(values + [None], dtype=object)[codes] if len(codes) else np.zeros(0, object)
 
-    sigma = frame["sigma"].to_numpy(dtype=np.float64).copy()
+    sigma = c["sigma"]   # a copy: the defaults are filled in
     if options.sigma_range_explicit and raw.meta.get("crd"):
         sigma[kind == "range"] = math.nan
     default = per_kind([defaults.get(k, math.nan) for k in kinds]).astype(np.float64)
-    sigma = np.where(np.isnan(sigma), default, sigma)
-    return pd.DataFrame({
-        "time": pd.to_datetime(frame["time"], utc=True).dt.as_unit("ns"),
-        "station": frame["station"].astype(str).to_numpy(dtype=object),
-        "pass_id": (frame["pass_id"].fillna("").astype(str).to_numpy(dtype=object)
-                    if "pass_id" in frame.columns else np.full(len(frame), "", dtype=object)),
-        "kind": kind,
-        "value": frame["value"].to_numpy(dtype=np.float64),
-        "sigma": sigma,
-        "row": frame["row"].to_numpy(dtype=np.int64),
-        "unit": (frame["unit"].astype(str).to_numpy(dtype=object) if "unit" in frame.columns
-                 else np.full(len(frame), "", dtype=object)),
-        "source": raw.source,
-        "input": index,
-        "value_column": per_kind([raw.column.get(k, "value") for k in kinds]),
-        "sigma_column": per_kind([raw.column.get(f"sigma:{k}", "sigma") for k in kinds]),
-    })
+    c["sigma"] = np.where(np.isnan(sigma), default, sigma)
+    c["source"] = np.full(n, raw.source, dtype=object)
+    c["value_column"] = per_kind([raw.column.get(k, "value") for k in kinds])
+    c["sigma_column"] = per_kind([raw.column.get(f"sigma:{k}", "sigma") for k in kinds])
+    return Chunk(c)
 
 
 def _meta(raws, station_names, known, options: IngestOptions, carrier_hz, mode, dropped) -> dict:

@@ -46,17 +46,18 @@ def unit_factors(units: np.ndarray) -> np.ndarray:
     return factors[codes]                                                # code -1 (missing): the last, 1
 
 
-def sample_problems(frame: pd.DataFrame) -> Problems:
-    """The checks of each sample on its own (value, sigma, domains) over one chunk of one input."""
-    problems = Problems(frame["row"].to_numpy(), frame["source"].to_numpy(dtype=object))
-    kind = frame["kind"].to_numpy(dtype=object)
-    value = frame["value"].to_numpy()
-    sigma = frame["sigma"].to_numpy()
-    units = frame["unit"].to_numpy(dtype=object)
+def sample_problems(frame) -> Problems:
+    """The checks of each sample on its own (value, sigma, domains) over one chunk of one input
+    (:class:`trackproc.pipeline.ingest.Chunk`: numpy columns by name)."""
+    problems = Problems(frame["row"], frame["source"])
+    kind = frame["kind"]
+    value = frame["value"]
+    sigma = frame["sigma"]
+    units = frame["unit"]
     factors = unit_factors(units)
     value_written, sigma_written = value / factors, sigma / factors
-    value_col = frame["value_column"].to_numpy(dtype=object)
-    sigma_col = frame["sigma_column"].to_numpy(dtype=object)
+    value_col = frame["value_column"]
+    sigma_col = frame["sigma_column"]
 
     problems.add(UNKNOWN_KIND, ~np.isin(kind, KINDS), column="kind", found=kind,
                  expected="one of " + ", ".join(KINDS))
@@ -66,7 +67,8 @@ def sample_problems(frame: pd.DataFrame) -> Problems:
                  expected="a finite sigma > 0")
     problems.add(NONPOSITIVE_SIGMA, sigma <= 0, column=sigma_col, found=sigma_written,
                  expected="sigma > 0")
-    floor = pd.Series(kind, dtype=object).map(SIGMA_FLOOR).fillna(0.0).to_numpy(dtype=np.float64)
+    codes, kinds = pd.factorize(kind)   # one lookup per distinct kind (0 for an unknown one)
+    floor = np.array([SIGMA_FLOOR.get(k, 0.0) for k in kinds] + [0.0], dtype=np.float64)[codes]
     problems.add(TINY_SIGMA, (sigma > 0) & (sigma < floor), column=sigma_col, found=sigma_written,
                  expected=lambda i: (f"sigma >= {floor[i]:g} {KIND_UNITS.get(kind[i], '')} (SI) for {kind[i]}; "
                                      "smaller is no tracking system's precision"))

@@ -57,25 +57,24 @@ class Samples:
         self.columns: dict[str, np.ndarray] = {}
         self._appended = 0
 
-    def append(self, frame: pd.DataFrame, input_index: int) -> None:
-        """Samples of one chunk (the merged frame of :mod:`trackproc.pipeline.ingest`)."""
+    def append(self, frame, input_index: int) -> None:
+        """Samples of one chunk (:class:`trackproc.pipeline.ingest.Chunk`: numpy columns by name)."""
         n = len(frame)
         if not n:
             return
         self._appended += n
         kind_codes = {k: i for i, k in enumerate(KINDS)}
         pieces = self._pieces
-        pieces["time"].append(frame["time"].dt.tz_convert("UTC").dt.tz_localize(None).dt.as_unit("ns")
-                              .to_numpy().astype(np.int64))
-        pieces["station"].append(self.stations.encode(frame["station"].to_numpy(dtype=object)))
-        pieces["pass_id"].append(self.passes.encode(frame["pass_id"].to_numpy(dtype=object)))
-        codes, kinds = pd.factorize(frame["kind"].to_numpy(dtype=object))   # kinds checked before
+        pieces["time"].append(np.asarray(frame["time"], dtype=np.int64))
+        pieces["station"].append(self.stations.encode(frame["station"]))
+        pieces["pass_id"].append(self.passes.encode(frame["pass_id"]))
+        codes, kinds = pd.factorize(frame["kind"])   # kinds checked before
         pieces["kind"].append(np.array([kind_codes[k] for k in kinds] or [0], dtype=np.int8)[codes])
-        pieces["value"].append(frame["value"].to_numpy(dtype=np.float64))
-        pieces["sigma"].append(frame["sigma"].to_numpy(dtype=np.float64))
-        pieces["row"].append(frame["row"].to_numpy(dtype=np.int64))
+        pieces["value"].append(np.asarray(frame["value"], dtype=np.float64))
+        pieces["sigma"].append(np.asarray(frame["sigma"], dtype=np.float64))
+        pieces["row"].append(np.asarray(frame["row"], dtype=np.int64))
         pieces["input"].append(np.full(n, input_index, dtype=np.int32))
-        pieces["unit"].append(self.units.encode(frame["unit"].to_numpy(dtype=object)).astype(np.int16))
+        pieces["unit"].append(self.units.encode(frame["unit"]).astype(np.int16))
 
     def concatenate(self) -> None:
         for name, dtype in DTYPES.items():
@@ -135,11 +134,17 @@ class Samples:
 
     def frame(self) -> pd.DataFrame:
         c = self.columns
+
+        def strings(names, codes) -> pd.Series:
+            # the few distinct names as a str array, taken by code (in Arrow): not one Python
+            # string per row converted to Arrow
+            return pd.Series(pd.array([str(n) for n in names], dtype="str").take(codes.astype(np.intp)))
+
         return pd.DataFrame({
             "time": pd.DatetimeIndex(c["time"].astype("datetime64[ns]")).tz_localize("UTC"),
-            "station": pd.Series(self.stations.array()[c["station"]] if len(c["time"]) else [], dtype=object).astype(str),
-            "pass_id": pd.Series(self.passes.array()[c["pass_id"]], dtype=object).astype(str),
-            "kind": pd.Series(np.array(KINDS, dtype=object)[c["kind"]], dtype=object).astype(str),
+            "station": strings(self.stations.names, c["station"]),
+            "pass_id": strings(self.passes.names, c["pass_id"]),
+            "kind": strings(KINDS, c["kind"]),
             "value": c["value"], "sigma": c["sigma"],
         })[list(COLUMNS)]
 

@@ -2,8 +2,9 @@
 
 One row per input and per estimate window (status, quality verdict and its reasons, the decision
 on the initial orbit, key numbers, links to the outputs), in a table that sorts when a header is
-clicked; with matplotlib installed, the fit and residual RMS and the RTN sigmas of every input and
-the residuals of every estimate window as inline PNG images (``data:`` URIs). Nothing is fetched:
+clicked; the fit and residual RMS and the RTN sigmas of every input as an inline SVG (written as
+text, report/svg.py), and, with matplotlib installed, the residuals of every estimate window as
+inline PNG images (``data:`` URIs). Nothing is fetched:
 the CSS and the few lines of JavaScript are inline, links are relative to the output directory,
 so the page works from a copied directory, a mail attachment's folder or ``file://``.
 """
@@ -36,7 +37,7 @@ th.asc::after{content:" \\25B2"}th.desc::after{content:" \\25BC"}
 td.num{text-align:right;font-variant-numeric:tabular-nums}
 tr.failed td.status,tr.rejected td.quality{background:#f8d0d0}
 tr.suspect td.quality{background:#fbeeb8}tr.ok td.status{background:#d6f0d6}
-.muted{color:#777}img{max-width:100%;border:1px solid #ddd;margin:0.4em 0}
+.muted{color:#777}img,svg.figure{max-width:100%;height:auto;border:1px solid #ddd;margin:0.4em 0}
 dl{display:grid;grid-template-columns:max-content auto;gap:2px 12px}dt{font-weight:bold}dd{margin:0}
 """
 
@@ -141,72 +142,54 @@ def _png_img(data: bytes, alt: str) -> str:
 
 
 def _have_matplotlib() -> bool:
-    try:
-        import matplotlib  # noqa: F401
-    except ImportError:
-        return False
-    return True
+    """Whether matplotlib is installed, without importing it (~0.1 s): only the window figures need it."""
+    import importlib.util
+    import sys
+
+    if "matplotlib" in sys.modules:  # imported already, or blocked (None)
+        return sys.modules["matplotlib"] is not None
+    return importlib.util.find_spec("matplotlib") is not None
 
 
-def overview_png(records: list) -> Optional[bytes]:
+def overview_svg(records: list) -> Optional[str]:
     """Per input (in the table's order): the smoothing fit RMS of its primary kind, the refined
-    pass's residual RMS, and the refined state's RTN 1-sigma (log scales; one marker per
-    quantity); None when no input has any of them."""
-    import numpy as np  # numpy and matplotlib only when a figure is drawn, after the BLAS set-up (batch/steps)
-
-    from trackproc.report.plots import encode, pyplot
+    pass's residual RMS, and the refined state's RTN 1-sigma (a log scale where a panel's values
+    span more than a decade; one marker per quantity), as an inline ``<svg>``; None when no input
+    has any of them. Written as text (report/svg.py): no matplotlib, a few milliseconds."""
+    from trackproc.report.svg import Panel, Series, scatter_panels
 
     ok = [r for r in records if r.get("task") == "pass" and r.get("status") == "ok"]
     if not ok:
         return None
+    numbers = [r.get("numbers") or {} for r in ok]
 
     def values(key):
-        return np.array([float((r.get("numbers") or {}).get(key) or np.nan) for r in ok])
+        out = []
+        for n in numbers:
+            try:
+                out.append(float(n.get(key)) if n.get(key) is not None else None)
+            except (TypeError, ValueError):
+                out.append(None)
+        return out
 
-    rms, residual = values("rms"), values("residual_rms")
-    sigmas = {label: values(key) for label, key in (("radial", "sigma_radial_m"), ("along-track", "sigma_along_m"),
-                                                    ("cross-track", "sigma_cross_m"))}
     panels = []
-    if np.isfinite(rms).any():
-        units = sorted({str((r.get("numbers") or {}).get("rms_unit")) for r in ok
-                        if (r.get("numbers") or {}).get("rms") is not None})
-        kinds = sorted({str((r.get("numbers") or {}).get("kind")) for r in ok
-                        if (r.get("numbers") or {}).get("rms") is not None})
-        panels.append(("fit", f"smoothing fit RMS [{', '.join(units)}]", f"{', '.join(kinds)}"))
-    if np.isfinite(residual).any():
-        unit = next(((r.get("numbers") or {}).get("residual_rms_unit") for r in ok
-                     if (r.get("numbers") or {}).get("residual_rms") is not None), "")
-        panels.append(("residual", f"refine residual RMS [{unit}]", None))
-    if any(np.isfinite(v).any() for v in sigmas.values()):
-        panels.append(("sigma", "refined state 1-sigma [m]", None))
+    fit = Series(", ".join(sorted({str(n.get("kind")) for n in numbers if n.get("rms") is not None})),
+                 values("rms"))
+    residual = Series("residual RMS", values("residual_rms"))
+    sigmas = [Series(label, values(key)) for label, key in (
+        ("radial", "sigma_radial_m"), ("along-track", "sigma_along_m"), ("cross-track", "sigma_cross_m"))]
+    units = sorted({str(n.get("rms_unit")) for n in numbers if n.get("rms") is not None})
+    candidates = [Panel(f"smoothing fit RMS [{', '.join(units)}]", [fit]),
+                  Panel("refine residual RMS [" + str(next((n.get("residual_rms_unit") for n in numbers
+                                                            if n.get("residual_rms") is not None), "")) + "]",
+                        [residual]),
+                  Panel("refined state 1-sigma [m]", sigmas)]
+    panels = [p for p in candidates if p.finite()]
     if not panels:
         return None
-    plt = pyplot()
-    x = np.arange(len(ok))
-    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 2.6 * len(panels) + 1.2), squeeze=False, sharex=True)
-    for ax, (what, ylabel, legend) in zip(axes[:, 0], panels):
-        if what == "fit":
-            ax.plot(x, rms, "o", ms=4, color="C0", label=legend)
-        elif what == "residual":
-            ax.plot(x, residual, "o", ms=4, color="C2", label="residual RMS")
-        else:
-            for (label, v), marker in zip(sigmas.items(), ("o", "s", "^")):
-                ax.plot(x, v, marker, ms=4, label=label)
-        finite = np.concatenate([a[np.isfinite(a) & (a > 0)] for a in (
-            [rms] if what == "fit" else [residual] if what == "residual" else list(sigmas.values()))])
-        if finite.size and finite.max() > 10 * finite.min():  # log only where the values span decades
-            ax.set_yscale("log")
-        ax.set_ylabel(ylabel, fontsize=8)
-        ax.grid(True, which="major", color="0.9")
-        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
-    ax = axes[-1, 0]
-    if len(ok) <= 60:
-        ax.set_xticks(x, [str(r.get("name")) for r in ok], rotation=90, fontsize=7)
-    else:
-        ax.set_xlabel(f"input (index of the {len(ok)} processed inputs, in the table's order)")
-    axes[0, 0].set_title("per input: fit and residual RMS, refined state sigma", fontsize=10)
-    fig.tight_layout()
-    return encode(fig, tight=True)
+    return scatter_panels(panels, [str(r.get("name")) for r in ok],
+                          "per input: fit and residual RMS, refined state sigma",
+                          xlabel=f"input (index of the {len(ok)} processed inputs, in the table's order)")
 
 
 def window_png(out: Path, record: dict) -> Optional[bytes]:
@@ -214,7 +197,7 @@ def window_png(out: Path, record: dict) -> Optional[bytes]:
     rel = next((o for o in record.get("outputs") or [] if o.endswith(".residuals.parquet")), None)
     if rel is None or not (out / rel).is_file():
         return None
-    import pyarrow.parquet as pq  # only when a figure is drawn, as in overview_png
+    import pyarrow.parquet as pq  # only when a figure is drawn
 
     from trackproc.report.plots import residuals_png
 
@@ -250,12 +233,16 @@ def report_html(summary: dict, out: Path, plots: Optional[bool] = None) -> str:
                  + "".join(f"<th>{_e(c)}</th>" for c in _COLUMNS) + "</tr></thead><tbody>")
     parts.extend(_row(r) for r in inputs + windows)
     parts.append("</tbody></table>")
+    try:
+        overview = overview_svg(inputs)
+        if overview:
+            parts.append("<h2>Per input</h2>" + overview)
+    except Exception as exc:  # as the PNG figures below: the table stays
+        log.warning("report.html: overview figure left out (%s: %s)", type(exc).__name__, exc)
+        parts.append(f'<p class="muted">Overview figure left out: {_e(type(exc).__name__)}: {_e(exc)}</p>')
     if plots:
         figures = []
         try:
-            overview = overview_png(inputs)
-            if overview:
-                figures.append("<h2>Per input</h2>" + _png_img(overview, "fit and residual RMS, sigma per input"))
             for record in [w for w in windows if w.get("status") == "ok"
                            and w.get("task", "estimate") == "estimate"][-MAX_WINDOW_PLOTS:]:
                 image = window_png(out, record)
@@ -267,7 +254,7 @@ def report_html(summary: dict, out: Path, plots: Optional[bool] = None) -> str:
             figures = [f'<p class="muted">Figures left out: {_e(type(exc).__name__)}: {_e(exc)}</p>']
         parts.extend(figures)
     else:
-        parts.append('<p class="muted">No figures: matplotlib is not installed '
+        parts.append('<p class="muted">No residual figures of the estimate windows: matplotlib is not installed '
                      "(pip install 'trackproc[plot]').</p>")
     parts.append(f"<script>{_JS}</script></body></html>\n")
     return "\n".join(parts)

@@ -3,10 +3,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from typing import Optional
 
 
-@dataclass
 class RawMeasurements:
     """Samples in long form, SI units, not yet validated.
 
@@ -17,9 +16,47 @@ class RawMeasurements:
     ``column`` maps each kind to the source column it came from, for error messages.
     ``meta`` carries file-level facts: ``carrier_hz``, ``doppler_mode``, ``stations``
     (name -> {lat_deg, lon_deg, height_m}) when the source defines them, ``source``.
+
+    A reader may give ``arrays`` instead of ``frame``: the same columns as numpy arrays (``time``
+    datetime64[ns] in UTC, the text columns object arrays of str); ``frame`` is then built from
+    them when first asked for. Ingest reads the arrays directly (no DataFrame: with pandas 3 its
+    string columns would become Arrow strings and back).
     """
 
-    frame: object
-    source: str
-    column: dict = field(default_factory=dict)
-    meta: dict = field(default_factory=dict)
+    def __init__(self, frame=None, source: str = "", column: Optional[dict] = None, meta: Optional[dict] = None,
+                 arrays: Optional[dict] = None):
+        self._frame = frame
+        self.source = source
+        self.column = {} if column is None else column
+        self.meta = {} if meta is None else meta
+        self.arrays = arrays
+
+    @property
+    def frame(self):
+        if self._frame is None and self.arrays is not None:
+            self._frame = frame_of_arrays(self.arrays)
+        return self._frame
+
+    @frame.setter
+    def frame(self, value) -> None:
+        self._frame = value
+
+    def size(self) -> int:
+        """The number of samples (without building the frame)."""
+        return len(self.arrays["row"]) if self.arrays is not None else len(self.frame)
+
+    def __repr__(self) -> str:
+        return f"RawMeasurements(source={self.source!r}, samples={self.size()}, column={self.column!r})"
+
+
+#: The columns of a reader's frame, in order (``pass_id`` when the input has it).
+FRAME_COLUMNS = ("time", "station", "kind", "value", "sigma", "row", "unit", "pass_id")
+
+
+def frame_of_arrays(arrays: dict):
+    """The DataFrame of :attr:`RawMeasurements.arrays` (the frame the readers built before)."""
+    import pandas as pd  # only when a caller wants the frame (info, the ingest command's summary)
+
+    columns = {name: arrays[name] for name in FRAME_COLUMNS if name in arrays}
+    columns["time"] = pd.DatetimeIndex(columns["time"]).tz_localize("UTC")
+    return pd.DataFrame(columns)

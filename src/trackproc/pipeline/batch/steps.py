@@ -33,6 +33,26 @@ from trackproc.errors import InputError, ProcessingError
 from trackproc.isotime import iso_utc
 from trackproc.pipeline.batch.chain import InputContext, Step, WindowContext, register
 
+#: Stations tables parsed in this process, by (path, bytes): every input of a batch reads the same one.
+_STATIONS: dict = {}
+
+
+def _stations(ctx) -> dict:
+    """The batch's stations table (``ingest.stations``) by name, parsed once per process and
+    content (a pure function of the bytes; an invalid table raises each time, as before); a new
+    dict each call (the Station values are frozen)."""
+    data = ctx.files.get("ingest.stations")
+    if data is None:
+        return {}
+    key = (ctx.paths["ingest.stations"], data)
+    if key not in _STATIONS:
+        from trackproc.io.stations import parse_stations
+
+        _STATIONS.clear()   # one table at a time: a changed file replaces it
+        _STATIONS[key] = parse_stations(data, ctx.paths["ingest.stations"])
+    return dict(_STATIONS[key])
+
+
 #: Kinds in the order their fit is reported as the input's key numbers.
 _PRIMARY_KINDS = ("doppler", "range_rate", "range", "elevation", "azimuth")
 
@@ -69,11 +89,9 @@ def _read_input(data: bytes, source: str, opt: dict):
 
 def ingest_step(ctx: InputContext, opt: dict) -> None:
     """ingest: the input file -> the canonical pass table (:func:`trackproc.pipeline.ingest.ingest`)."""
-    from trackproc.io.stations import parse_stations
     from trackproc.pipeline.ingest import IngestOptions, ingest
 
-    stations = ({} if ctx.files.get("ingest.stations") is None
-                else parse_stations(ctx.files["ingest.stations"], ctx.paths["ingest.stations"]))
+    stations = _stations(ctx)
     raw = _read_input(ctx.data, ctx.source, opt)
     result = ingest([raw], stations, IngestOptions(
         carrier_hz=opt["carrier_hz"], doppler_mode=opt["mode"], max_gap_s=opt["max_gap_s"],
@@ -124,7 +142,6 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
 
     from trackproc.io.eop import earth_orientation
     from trackproc.io.residuals import residuals_bytes
-    from trackproc.io.stations import parse_stations
     from trackproc.io.statefile import format_epoch, parse_state_or_tle, state_json
     from trackproc.pipeline.estimate import EstimateOptions, estimate
     from trackproc.pipeline.orbit_source import tle_evaluation_epoch
@@ -138,7 +155,7 @@ def estimate_step(ctx: WindowContext, opt: dict) -> None:
     at = tle_evaluation_epoch(opt["epoch"], tables, column="estimate.epoch")
     state0 = parse_state_or_tle(initial_bytes, initial_path, orientation, at=at)
     stations = (None if ctx.files.get("ingest.stations") is None
-                else parse_stations(ctx.files["ingest.stations"], ctx.paths["ingest.stations"]))
+                else _stations(ctx))
     options = EstimateOptions(
         range_bias=opt["range_bias"], doppler_bias=opt["doppler_bias"], doppler_bias_per=opt["doppler_bias_per"],
         angle_bias=opt["angle_bias"], apriori_sigma=dict(opt["apriori_sigma"]), force=opt["force"],
@@ -192,7 +209,6 @@ def filter_step(ctx: WindowContext, opt: dict) -> None:
     import numpy as np
 
     from trackproc.io.eop import earth_orientation
-    from trackproc.io.stations import parse_stations
     from trackproc.io.statefile import format_epoch, parse_state_or_tle, state_json
     from trackproc.pipeline.filter import FilterOptions, filter_passes
     from trackproc.pipeline.od import EstimateOptions
@@ -206,7 +222,7 @@ def filter_step(ctx: WindowContext, opt: dict) -> None:
     at = tle_evaluation_epoch(None, tables)
     state0 = parse_state_or_tle(ctx.files[key], ctx.paths[key], orientation, at=at)
     stations = (None if ctx.files.get("ingest.stations") is None
-                else parse_stations(ctx.files["ingest.stations"], ctx.paths["ingest.stations"]))
+                else _stations(ctx))
     walks = {"doppler_offset": opt["oscillator_noise"]} if opt["oscillator_noise"] else {}
     problem = EstimateOptions(range_bias=opt["range_bias"], doppler_bias=opt["doppler_bias"],
                               apriori_sigma=dict(opt["apriori_sigma"]), force=opt["force"], noise=opt["noise"],
@@ -291,7 +307,6 @@ def refine_step(ctx: InputContext, opt: dict) -> None:
     (:func:`trackproc.pipeline.refine.refine`, as ``trackproc refine PASS --pass-id ID``); the pass
     with the most samples when the input holds several (:func:`refine_pass`)."""
     from trackproc.io.eop import earth_orientation
-    from trackproc.io.stations import parse_stations
     from trackproc.io.statefile import state_json
     from trackproc.pipeline.refine import RefineOptions, refine
 
@@ -300,7 +315,7 @@ def refine_step(ctx: InputContext, opt: dict) -> None:
         ctx.warnings.append(warning)
     initial = initial_state(ctx.files["refine.initial"], ctx.paths["refine.initial"], orientation)
     stations = (None if ctx.files.get("ingest.stations") is None
-                else parse_stations(ctx.files["ingest.stations"], ctx.paths["ingest.stations"]))
+                else _stations(ctx))
     table, chosen, candidates = refine_pass(ctx.table)
     if len(candidates) > 1:
         ctx.warnings.append("%d passes in the input: refined %s/%s (%d samples: %s); not refined: %s" % (
