@@ -51,6 +51,15 @@ def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", doma
     c_obs = float(z[1:] @ z[:-1]) / den
     lag1 = c_obs
 
+    # The traces as functions of w = C q (C symmetric, so every rho-free factor is made once):
+    #   tr(M C M) = n - <q, w>;   tr(L M C M) = sum_i a_i - <zl, w>,
+    # zl_i = q_(i+1) + q_(i-1) - (q K)_i with K = q[1:]^T q[:-1]: the terms tr(L C), tr(L Q Q^T C),
+    # tr(L C Q Q^T) and tr(L Q (Q^T C Q) Q^T) of tr(L M C M), M = I - Q Q^T, each linear in w
+    zl = q @ (q[1:].T @ q[:-1])
+    np.negative(zl, out=zl)
+    zl[:-1] += q[1:]
+    zl[1:] += q[:-1]
+    qv, zv = q.ravel(), zl.ravel()          # C order, like every w below
     memo: dict = {}
 
     def expected(rho: float) -> float:
@@ -60,16 +69,12 @@ def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", doma
         return memo[rho]
 
     def _expected(rho: float) -> float:
-        model = NoiseModel(rho=rho, step_s=step)
-        acorr = model.neighbour_correlation(t)
-        # C = I at rho = 0: ou_apply would return a copy of q (x + 0 f), bit for bit; a copy, as
-        # numpy's q.T @ q of one buffer takes another BLAS routine (syrk) with other last bits
-        w = q.copy() if rho == 0.0 else ou_apply(acorr, q)
-        g = q.T @ w
-        tr_mcm = n - float(np.sum(q * w))
-        lag = (float(np.sum(acorr)) - float(np.sum(q[1:] * w[:-1])) - float(np.sum(w[1:] * q[:-1]))
-               + float(np.sum((q[1:] @ g) * q[:-1])))
-        return lag / tr_mcm
+        if rho == 0.0:           # C = I
+            w, sum_a = qv, 0.0
+        else:
+            acorr = NoiseModel(rho=rho, step_s=step).neighbour_correlation(t)
+            w, sum_a = ou_apply(acorr, q).ravel(), float(np.sum(acorr))
+        return (sum_a - float(zv @ w)) / (n - float(qv @ w))
 
     e0 = expected(0.0)
     if c_obs <= e0:
