@@ -1,6 +1,6 @@
 """The AR(1) moment equation of the smoothing's noise estimate (correlation.moment_ratio,
 estimate_noise) against the dense traces tr(L M C M) / tr(M C M) built from n x n matrices, on
-irregular times (gaps, a repeated time), and the estimate's rho and white/AR(1) decision against
+irregular times (gaps, a repeated time), C x itself against the dense C, and the estimate's rho and white/AR(1) decision against
 the same dense reference solved by scipy's brentq."""
 
 import numpy as np
@@ -8,13 +8,23 @@ import pytest
 from scipy.optimize import brentq
 
 from trackproc.methods.smoothing.correlation import RHO_SIGNIFICANCE, estimate_noise, moment_ratio
-from trackproc.methods.smoothing.fit import MAX_RHO, NoiseModel, design_matrix
+from trackproc.methods.smoothing.fit import MAX_RHO, TRIDIAGONAL_MAX_A, NoiseModel, design_matrix, ou_apply
 
 
-def _times(rng, n):
+def _times(rng, n, repeated=True):
     steps = rng.choice([1.0, 1.0, 1.0, 1.0, 2.0, 7.0], size=n - 1)
-    steps[n // 3] = 0.0                                   # a repeated time
+    if repeated:
+        steps[n // 3] = 0.0                               # a repeated time (correlation MAX_RHO there)
     return np.concatenate([[0.0], np.cumsum(steps)])
+
+
+def _dense_correlation(a):
+    """C_ij = a_(j+1) ... a_i (i > j), the Markov correlation, entry by entry."""
+    n = a.size + 1
+    c = np.eye(n)
+    for i in range(1, n):
+        c[i, :i] = c[i - 1, :i] * a[i - 1]
+    return np.tril(c) + np.tril(c, -1).T
 
 
 def _dense_ratio(t, q, step):
@@ -24,21 +34,29 @@ def _dense_ratio(t, q, step):
     m = np.eye(n) - q @ q.T
 
     def ratio(rho):
-        c = np.eye(n)
-        if rho > 0:
-            a = NoiseModel(rho=rho, step_s=step).neighbour_correlation(t)
-            for i in range(1, n):                         # C_ij = a_(j+1) ... a_i, the Markov correlation
-                c[i, :i] = c[i - 1, :i] * a[i - 1]
-            c = np.tril(c) + np.tril(c, -1).T
+        c = _dense_correlation(NoiseModel(rho=rho, step_s=step).neighbour_correlation(t)) if rho > 0 else np.eye(n)
         return np.trace(lag @ m @ c @ m) / np.trace(m @ c @ m)
 
     return ratio
 
 
+@pytest.mark.parametrize("largest", [0.3, 0.9, TRIDIAGONAL_MAX_A, 0.97, MAX_RHO])
+def test_ou_apply_equals_the_dense_correlation(largest):
+    """Both of ou_apply's ways (the tridiagonal solve up to TRIDIAGONAL_MAX_A, the recurrences
+    beyond) against C x with C built entry by entry."""
+    rng = np.random.default_rng(int(largest * 100))
+    a = rng.uniform(0.0, largest, 120)
+    a[17] = largest
+    x = rng.normal(size=(121, 7))
+    want = _dense_correlation(a) @ x
+    np.testing.assert_allclose(ou_apply(a, x), want, rtol=0, atol=1e-13 * np.abs(want).max())
+
+
+@pytest.mark.parametrize("repeated", [True, False])
 @pytest.mark.parametrize("seed, p", [(1, 4), (2, 12), (3, 25)])
-def test_moment_ratio_equals_the_dense_traces(seed, p):
+def test_moment_ratio_equals_the_dense_traces(seed, p, repeated):
     rng = np.random.default_rng(seed)
-    t = _times(rng, 160)
+    t = _times(rng, 160, repeated)
     s = rng.uniform(0.5, 2.0, t.size)
     q, _ = np.linalg.qr(design_matrix(t, p - 1, (t[0], t[-1])) / s[:, None])
     fast, dense = moment_ratio(t, q, 1.0), _dense_ratio(t, q, 1.0)
