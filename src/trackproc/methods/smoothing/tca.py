@@ -12,8 +12,9 @@ import numpy as np
 from numpy.polynomial import chebyshev as _cheb
 from numpy.polynomial import polyutils as pu
 
-from trackproc.methods.smoothing.fit import (WHITE, _chebder1, PolynomialFit, SmoothingError, check_arrays, check_enough,
-                                             check_rank, design_matrix, replace_fit, used_in_time_order, whiten)
+from trackproc.methods.smoothing.fit import (WHITE, PolynomialFit, SmoothingError, _chebder1, check_arrays,
+                                             check_enough, check_rank, design_matrix, replace_fit, solve_upper,
+                                             used_in_time_order, whiten)
 
 
 #: A TCA whose spread over neighbouring degrees exceeds this many formal sigmas is ``uncertain``.
@@ -244,7 +245,7 @@ def _nested_coefficients(t, y, s, fit: PolynomialFit, top: int):
         rd = r[: d + 1, : d + 1]
         if not all_ranked:
             check_rank(rd, d)                                 # solve_fit's rank test
-        return np.linalg.solve(rd, r[: d + 1, -1])
+        return solve_upper(rd, r[: d + 1, -1])
 
     return coef
 
