@@ -179,7 +179,7 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
     known = {**columns.known(), "flag": flag}
     # the key columns as PassTable.column gives them when every entry is a string (``astype(str)``
     # changes nothing then)
-    known.update({c: v for c, v in keys.items() if v.dtype == object and all(type(k) is str for k in v.tolist())})
+    known.update({c: v for c, v in keys.items() if v.dtype == object and set(map(type, v)) == {str}})
     sample_table = _column_table(samples, {**meta, "smoothing": {**summary, "output": "samples"}}, known)
     if options.grid_step_s is None:
         out = sample_table

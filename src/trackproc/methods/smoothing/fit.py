@@ -405,34 +405,28 @@ def _markov_sum(a, x):
     return f
 
 
-#: :func:`ou_apply` solves with the tridiagonal inverse when no neighbour correlation exceeds this.
-TRIDIAGONAL_MAX_A = 0.95
-
-
 def ou_apply(a, x):
     """``C x`` for the Markov correlation ``C_ij = prod a_k`` between i and j (O(n p)).
 
     ``C`` is the covariance of ``u_0 = e_0``, ``u_i = a_i u_(i-1) + e_i`` with independent ``e_i`` of
-    variance ``v_i`` (1, then ``1 - a_i^2``): ``D u = e`` with ``D`` unit lower bidiagonal
-    (``-a_i`` below the diagonal), so ``C^-1 = D^T V^-1 D`` is tridiagonal (the Gauss-Markov
-    precision matrix; Rue & Held 2005, sec. 1.3) and ``C x`` is one symmetric positive definite
-    tridiagonal solve (LAPACK ``dptsv``, its LDL^T: Golub & Van Loan 2013, sec. 4.3.6), 2-3 times
-    faster than the two recurrences ``f_i = x_i + a_i f_(i-1)`` forward and backward
-    (:func:`_markov_sum`). The solve's error grows with the condition number of ``C``, about
-    ``(1 + a) / (1 - a)``: equal to the recurrences' to a few ulps for ``a <= TRIDIAGONAL_MAX_A``
-    (the moment ratio of :func:`trackproc.methods.smoothing.correlation.moment_ratio` within
-    3e-15 at 0.9), 1e3 times theirs at 0.99, where the recurrences are used.
+    variance ``v_i`` (1, then ``1 - a_i^2``): ``D u = e`` with ``D`` unit lower bidiagonal (``-a_i``
+    below the diagonal), so ``C = D^-1 V D^-T`` and its inverse ``D^T V^-1 D`` is tridiagonal (the
+    Gauss-Markov precision matrix; Rue & Held 2005, sec. 1.3). Reversed in time, ``J C^-1 J =
+    L (J V^-1 J) L^T`` with ``L = J D^T J`` unit lower bidiagonal (``-a`` reversed below the
+    diagonal): the L D L^T factors LAPACK's ``dpttrs`` solves with (Golub & Van Loan 2013, sec.
+    4.3.6), known without a factorisation. So ``C x`` is two first-order recurrences with a scaling
+    between them, each as benign as the forward and backward sums ``f_i = x_i + a_i f_(i-1)`` of
+    :func:`_markov_sum` (the same values to a few ulps at every ``a`` up to ``MAX_RHO``; a solve
+    with the assembled tridiagonal matrix loses ``(1 + a) / (1 - a)``), 2-3 times faster.
     """
     a = np.asarray(a, float)
-    if a.size and float(np.max(a)) <= TRIDIAGONAL_MAX_A:
-        inv_v = np.empty(a.size + 1)
-        inv_v[0] = 1.0
-        inv_v[1:] = 1.0 / (1.0 - a * a)
-        diag = inv_v.copy()
-        diag[:-1] += a * a * inv_v[1:]
-        _, _, out, info = _dptsv()(diag, -a * inv_v[1:], x)
+    if a.size:
+        d = np.empty(a.size + 1)
+        d[0] = 1.0
+        d[1:] = 1.0 / (1.0 - a * a)
+        out, info = _lapack("dpttrs")(d[::-1], -a[::-1], x[::-1])
         if info == 0:
-            return out
+            return out[::-1]
     forward = _markov_sum(a, x)
     backward = _markov_sum(a[::-1], x[::-1])[::-1]
     return forward + backward - x
@@ -459,7 +453,3 @@ def _lapack(name: str):
 
 
 _LAPACK: dict = {}
-
-
-def _dptsv():
-    return _lapack("dptsv")
