@@ -35,3 +35,37 @@ def test_derivative_series_of_a_fit_equal_numpy_deriv():
     reference = np.polynomial.Chebyshev(fit.coef, domain=list(fit.domain_s))
     for m in (1, 2, 3):
         np.testing.assert_array_equal(fit.series(m).coef, reference.deriv(m).coef)
+
+
+@pytest.mark.parametrize("kind, mode", [("doppler", "one-way"), ("doppler", "two-way"), ("range_rate", "one-way"),
+                                        ("range", "one-way")])
+def test_coefficient_tca_equals_the_series_path_bitwise(kind, mode):
+    """tca._cheb_tca (the degree spread's neighbours from coefficient arrays) against _tca_time on a
+    fit of that degree (numpy series objects): the same t*, the same curve value there, to the bit,
+    and the same failures (no root of the right sense)."""
+    from trackproc.methods.smoothing.fit import SmoothingError, replace_fit
+    from trackproc.methods.smoothing.tca import _cheb_tca, _tca_time
+
+    rng = np.random.default_rng(7)
+    t = np.linspace(0.0, 640.0, 321)
+    shape = {"doppler": -4e4 * np.tanh((t - 300.0) / 80.0), "range_rate": 6e3 * np.tanh((t - 330.0) / 90.0),
+             "range": 1e6 + 2e3 * (t - 310.0) ** 2}[kind]
+    fit = fit_polynomial(t, shape + rng.normal(0.0, 1.0, t.size), np.ones(t.size), 22)
+    base = fit.series(0)
+    outcomes = set()
+    for d in range(4, 24):        # tca_degree_spread takes this path from degree order + 1 up
+        coef = rng.normal(size=d + 1) * 10.0 ** rng.integers(-2, 3) if d % 5 == 0 else \
+            fit_polynomial(t, shape + rng.normal(0.0, 1.0, t.size), np.ones(t.size), d).coef
+        other = replace_fit(fit, degree=d, coef=coef)
+        try:
+            want = _tca_time(other, kind, mode)[2]
+        except SmoothingError:
+            with pytest.raises(SmoothingError):
+                _cheb_tca(coef, base, fit.domain_s, kind, mode)
+            outcomes.add("none")
+            continue
+        got_t, got_v = _cheb_tca(coef, base, fit.domain_s, kind, mode)
+        assert float(got_t).hex() == float(want).hex()
+        assert float(got_v).hex() == float(other(want)).hex()
+        outcomes.add("root")
+    assert "root" in outcomes

@@ -124,7 +124,10 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
     """Fit every (station, pass, kind) of ``table``; see the module docstring for the statuses."""
     options = options or SmoothOptions()
     _check_options(options)
-    frame = table.frame.drop(columns=[c for c in ADDED_COLUMNS if c in table.frame.columns])
+    frame = table.frame
+    added = [c for c in ADDED_COLUMNS if c in frame.columns]
+    if added:                    # (a drop of no columns still copies the frame)
+        frame = frame.drop(columns=added)
     frame = frame.reset_index(drop=True)
     present = sorted(frame["kind"].unique())
     kinds = list(options.kinds) if options.kinds else present
@@ -143,7 +146,8 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
     fits = []
     # the groups' rows only (no frame per group), the columns as numpy once
     columns = _Columns(frame)
-    groups = _group_rows(frame, chosen)
+    keys = {c: frame[c].to_numpy() for c in ("station", "pass_id", "kind")}
+    groups = _group_rows(frame, chosen, keys)
     for station, pass_id, kind in sorted(groups):
         fits.append(_fit_group(columns, groups[(station, pass_id, kind)], str(station), str(pass_id),
                                str(kind), options, doppler_mode))
@@ -165,15 +169,18 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
         if f.kind == "azimuth":
             smoothed[f.rows] = np.mod(smoothed[f.rows], 2 * np.pi)
         flag[f.rows] = ~f.fit.used
-    samples = frame.copy()
-    samples["smoothed"] = smoothed
-    samples["residual"] = residual
-    samples["flag"] = flag
+    # the frame and the three columns in one concatenation (half the time of three insertions)
+    samples = pd.concat([frame, pd.DataFrame({"smoothed": smoothed, "residual": residual, "flag": flag},
+                                             index=frame.index)], axis=1)
 
     summary = json_ready(summary_of(fits, options, table.meta, source, doppler_mode, carrier_hz))
     meta = dict(table.meta)
     meta["smoothing"] = summary
-    sample_table = _column_table(samples, {**meta, "smoothing": {**summary, "output": "samples"}})
+    known = {**columns.known(), "flag": flag}
+    # the key columns as PassTable.column gives them when every entry is a string (``astype(str)``
+    # changes nothing then)
+    known.update({c: v for c, v in keys.items() if v.dtype == object and set(map(type, v)) == {str}})
+    sample_table = _column_table(samples, {**meta, "smoothing": {**summary, "output": "samples"}}, known)
     if options.grid_step_s is None:
         out = sample_table
     else:
@@ -191,11 +198,14 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
 _READ_COLUMNS = ("time", "station", "pass_id", "kind", "value", "sigma", "flag")
 
 
-def _column_table(frame: pd.DataFrame, meta: dict) -> PassTable:
+def _column_table(frame: pd.DataFrame, meta: dict, known: dict | None = None) -> PassTable:
     """``PassTable(frame, meta)`` holding :data:`_READ_COLUMNS` as numpy (``PassTable.column``'s
-    own conversion of the frame, so the same arrays) and ``frame`` itself as its DataFrame."""
+    own conversion of the frame, so the same arrays) and ``frame`` itself as its DataFrame.
+    ``known``: columns already converted that way (the fit's own arrays), by name."""
     whole = PassTable(frame, meta)
-    columns = {str(name): whole.column(str(name)) if str(name) in _READ_COLUMNS else None for name in frame.columns}
+    known = known or {}
+    columns = {str(name): (known[str(name)] if str(name) in known else whole.column(str(name)))
+               if str(name) in _READ_COLUMNS else None for name in frame.columns}
     return PassTable.from_columns(columns, meta, lambda: frame)
 
 
@@ -223,9 +233,11 @@ def _check_options(options: SmoothOptions) -> None:
 
 
 def _check_sigma(frame: pd.DataFrame, kinds, source) -> None:
-    sel = frame["kind"].isin(kinds).to_numpy()
     sigma = frame["sigma"].to_numpy(dtype=float)
-    bad = sel & ~(np.isfinite(sigma) & (sigma > 0))
+    wrong = ~(np.isfinite(sigma) & (sigma > 0))
+    if not wrong.any():          # (the kinds' rows are looked up only when some sigma is wrong)
+        return
+    bad = frame["kind"].isin(kinds).to_numpy() & wrong
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
         row = frame.iloc[i]
@@ -234,12 +246,13 @@ def _check_sigma(frame: pd.DataFrame, kinds, source) -> None:
                          file=source, column="sigma", found=float(sigma[i]), expected="a 1-sigma > 0")
 
 
-def _group_rows(frame: pd.DataFrame, kinds) -> dict:
+def _group_rows(frame: pd.DataFrame, kinds, keys: dict | None = None) -> dict:
     """``{(station, pass_id, kind): row positions, increasing}`` of the rows of ``kinds`` (``frame``
     numbered 0..n-1): ``groupby([...]).indices`` of those rows, by one pass over the three columns
     as Python lists (a fifth of the groupby's time on a pass of two kinds); the groupby itself
-    when a key is not a string (a missing one: the groupby leaves it out)."""
-    keys = [frame[c].to_numpy().tolist() for c in ("station", "pass_id", "kind")]
+    when a key is not a string (a missing one: the groupby leaves it out). ``keys``: the three
+    columns' ``to_numpy()``, when the caller has them."""
+    keys = [(frame[c].to_numpy() if keys is None else keys[c]).tolist() for c in ("station", "pass_id", "kind")]
     wanted = set(kinds)
     groups: dict = {}
     for i, key in enumerate(zip(*keys)):
@@ -264,10 +277,16 @@ class _Columns:
 
     def __init__(self, frame: pd.DataFrame):
         self.time = frame["time"]
-        self.time_ns = (self.time.dt.tz_convert("UTC").dt.tz_localize(None).to_numpy()
-                        .astype("datetime64[ns]").astype(np.int64))
+        self.utc = self.time.dt.tz_convert("UTC").dt.tz_localize(None).to_numpy().astype("datetime64[ns]")
+        self.time_ns = self.utc.astype(np.int64)
         self.value = frame["value"].to_numpy(dtype=float)
         self.sigma = frame["sigma"].to_numpy(dtype=float)
+        self.float_values = frame["value"].dtype == np.float64 and frame["sigma"].dtype == np.float64
+
+    def known(self) -> dict:
+        """The columns as ``PassTable.column`` gives them (``time`` naive UTC; ``value`` and
+        ``sigma`` when the frame holds them as float64, as ingest writes them)."""
+        return {"time": self.utc, **({"value": self.value, "sigma": self.sigma} if self.float_values else {})}
 
     def epoch(self, row: int) -> pd.Timestamp:
         return pd.Timestamp(self.time.iloc[row])

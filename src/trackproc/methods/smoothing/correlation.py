@@ -24,7 +24,7 @@ def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", doma
     ``u`` unit-variance noise of correlation ``C(rho)`` (``rho^(|t_i - t_j| / step)``), the observed
     ``c = sum z_i z_(i-1) / sum z_i^2`` is solved for ``rho`` from
     ``E[sum z_i z_(i-1)] / E[sum z_i^2] = tr(L M C M) / tr(M C M)``; both traces cost O(n p) because
-    ``C`` is Markov (:func:`ou_apply`). ``step`` is the median sample spacing. An estimate within
+    ``C`` is Markov (:func:`moment_ratio`). ``step`` is the median sample spacing. An estimate within
     ``RHO_SIGNIFICANCE`` standard errors (``1 / sqrt(n - p)``) of white gives ``rho = 0``.
     ``white_q``: the caller's ``Q`` of that design matrix (times sorted), when it has it already.
     """
@@ -51,26 +51,7 @@ def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", doma
     c_obs = float(z[1:] @ z[:-1]) / den
     lag1 = c_obs
 
-    memo: dict = {}
-
-    def expected(rho: float) -> float:
-        # each rho once: brentq evaluates the bracket's ends again
-        if rho not in memo:
-            memo[rho] = _expected(rho)
-        return memo[rho]
-
-    def _expected(rho: float) -> float:
-        model = NoiseModel(rho=rho, step_s=step)
-        acorr = model.neighbour_correlation(t)
-        # C = I at rho = 0: ou_apply would return a copy of q (x + 0 f), bit for bit; a copy, as
-        # numpy's q.T @ q of one buffer takes another BLAS routine (syrk) with other last bits
-        w = q.copy() if rho == 0.0 else ou_apply(acorr, q)
-        g = q.T @ w
-        tr_mcm = n - float(np.sum(q * w))
-        lag = (float(np.sum(acorr)) - float(np.sum(q[1:] * w[:-1])) - float(np.sum(w[1:] * q[:-1]))
-               + float(np.sum((q[1:] @ g) * q[:-1])))
-        return lag / tr_mcm
-
+    expected = moment_ratio(t, q, step)
     e0 = expected(0.0)
     if c_obs <= e0:
         rho_hat = 0.0
@@ -82,3 +63,37 @@ def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", doma
     rho = rho_hat if significant else 0.0
     model = NoiseModel(rho=rho, step_s=step, rho_estimate=rho_hat, lag1_observed=lag1, degree=int(degree))
     return replace_fit(model, n_eff=model.effective_samples(t))
+
+
+def moment_ratio(t_sorted, q, step_s: float):
+    """``rho -> tr(L M C M) / tr(M C M)``: the expected lag-1 ratio of the residuals
+    ``z = M u`` (``M = I - Q Q^T``, ``q`` the orthonormal ``Q`` at the sorted times) of unit-variance
+    AR(1) noise of correlation ``C(rho)`` (:func:`estimate_noise`), each rho computed once.
+
+    Both traces are linear in ``w = C q`` (``C`` symmetric): ``tr(M C M) = n - <q, w>`` and
+    ``tr(L M C M) = sum_i a_i - <zl, w>`` with ``zl_i = q_(i+1) + q_(i-1) - (q K)_i``,
+    ``K = q[1:]^T q[:-1]`` -- the terms ``tr(L C)``, ``tr(L Q Q^T C)``, ``tr(L C Q Q^T)`` and
+    ``tr(L Q (Q^T C Q) Q^T)`` of the expanded product -- so ``zl`` is made once and each rho costs
+    ``C q`` (:func:`ou_apply`, O(n p)) and two dot products.
+    """
+    n = q.shape[0]
+    zl = q @ (q[1:].T @ q[:-1])
+    np.negative(zl, out=zl)
+    zl[:-1] += q[1:]
+    zl[1:] += q[:-1]
+    qv, zv = q.ravel(), zl.ravel()          # C order, like every w below
+    memo: dict = {}
+
+    def expected(rho: float) -> float:
+        # each rho once: brentq evaluates the bracket's ends again
+        made = memo.get(rho)
+        if made is None:
+            if rho == 0.0:           # C = I
+                w, sum_a = qv, 0.0
+            else:
+                acorr = NoiseModel(rho=rho, step_s=step_s).neighbour_correlation(t_sorted)
+                w, sum_a = ou_apply(acorr, q).ravel(), float(np.sum(acorr))
+            made = memo[rho] = (sum_a - float(zv @ w)) / (n - float(qv @ w))
+        return made
+
+    return expected

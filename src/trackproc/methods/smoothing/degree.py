@@ -12,7 +12,7 @@ import numpy as np
 from trackproc.methods.smoothing.correlation import estimate_noise
 from trackproc.methods.smoothing.fit import (MAX_RHO, WHITE, DesignRows, NoiseModel, PolynomialFit, SmoothingError,
                                              check_arrays, check_enough, design_matrix, pass_domain, replace_fit,
-                                             solve_fit, whiten)
+                                             solve_fit, solve_upper, whiten)
 
 
 #: Default upper bound of the degree search of ``degree="auto"``.
@@ -227,7 +227,7 @@ def _studentized(t, s, fit: PolynomialFit, domain, basis, rows=None):
     else:
         psi = rows.design(fit.degree) / s[:, None]
         r = rows.white_qr(fit.degree, used)[2]
-    g = np.linalg.solve(r.T, psi.T).T          # psi R^-1: hat diagonal on the used rows
+    g = solve_upper(r, psi.T, transpose=True).T     # psi R^-1: hat diagonal on the used rows
     h = np.sum(g * g, axis=1)
     z = fit.residual / s
     u = np.where(used, z / np.sqrt(np.maximum(1.0 - h, 1e-6)), z / np.sqrt(1.0 + h))

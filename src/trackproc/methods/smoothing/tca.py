@@ -9,9 +9,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.polynomial import chebyshev as _cheb
+from numpy.polynomial import polyutils as pu
 
-from trackproc.methods.smoothing.fit import (WHITE, PolynomialFit, SmoothingError, check_arrays, check_enough,
-                                             check_rank, design_matrix, replace_fit, used_in_time_order, whiten)
+from trackproc.methods.smoothing.fit import (WHITE, PolynomialFit, SmoothingError, _chebder1, check_arrays,
+                                             check_enough, check_rank, design_matrix, replace_fit, solve_upper,
+                                             used_in_time_order, whiten)
 
 
 #: A TCA whose spread over neighbouring degrees exceeds this many formal sigmas is ``uncertain``.
@@ -91,18 +94,7 @@ def closest_approach(fit: PolynomialFit, kind: str, doppler_mode: str = "one-way
 def _tca_time(fit: PolynomialFit, kind: str, doppler_mode: str):
     """``(order, definition, t*, the derivative series at order + 1, candidates)`` of
     :func:`closest_approach` (the time alone: :func:`tca_degree_spread` needs no covariance)."""
-    if kind == "range_rate":
-        order, sign, definition = 0, +1, "zero of the fitted range-rate (negative to positive)"
-    elif kind == "range":
-        order, sign, definition = 1, +1, "minimum of the fitted range (zero of its derivative)"
-    elif kind == "doppler" and doppler_mode == "two-way":
-        order, sign, definition = 0, -1, "zero of the fitted two-way Doppler (positive to negative)"
-    elif kind == "doppler":
-        order, sign, definition = 2, +1, ("inflection point of the fitted one-way Doppler S-curve "
-                                          "(zero of the second derivative, steepest descent)")
-    else:
-        raise ValueError(f"no closest approach is defined for kind {kind!r}")
-
+    order, sign, definition = _definition(kind, doppler_mode)
     g = fit.series(order)
     gp = fit.series(order + 1)
     candidates = _real_roots(g, fit.domain_s, gp)
@@ -120,6 +112,48 @@ def _tca_time(fit: PolynomialFit, kind: str, doppler_mode: str):
     else:               # steepest crossing
         t_star = max(good, key=lambda r: abs(gp_at(r)))
     return order, definition, t_star, gp, len(candidates)
+
+
+def _definition(kind: str, doppler_mode: str):
+    """``(order, sign, definition)``: the TCA is a root of the curve's ``order``-th derivative where
+    the next derivative has the sign ``sign``."""
+    if kind == "range_rate":
+        return 0, +1, "zero of the fitted range-rate (negative to positive)"
+    if kind == "range":
+        return 1, +1, "minimum of the fitted range (zero of its derivative)"
+    if kind == "doppler" and doppler_mode == "two-way":
+        return 0, -1, "zero of the fitted two-way Doppler (positive to negative)"
+    if kind == "doppler":
+        return 2, +1, ("inflection point of the fitted one-way Doppler S-curve "
+                       "(zero of the second derivative, steepest descent)")
+    raise ValueError(f"no closest approach is defined for kind {kind!r}")
+
+
+def _cheb_tca(coef, base, domain, kind: str, doppler_mode: str) -> tuple[float, float]:
+    """``(t*, curve at t*)`` of :func:`_tca_time` for the Chebyshev coefficients ``coef`` on
+    ``domain``, the domain of the series ``base`` (a fit of another degree on the same pass), from coefficient
+    arrays: the derivatives by :func:`_chebder1` with ``base``'s scale, the roots by ``chebroots``
+    mapped as ``Chebyshev.roots`` maps them, the values by :func:`_cheb_scalar` -- the operations of
+    the series path in the same order (the same bits) without building a numpy series per
+    derivative. Raises :class:`SmoothingError` (``no_tca``) where :func:`_tca_time` would."""
+    order, sign, _ = _definition(kind, doppler_mode)
+    off, scl = base.mapparms()
+    coefs = [np.array(coef, dtype=float)]
+    for _ in range(order + 1):
+        coefs.append(_chebder1(coefs[-1], scl))
+    value = [_cheb_scalar(c, off, scl) for c in coefs]
+    candidates = _polish(pu.mapdomain(_cheb.chebroots(coefs[order]), base.window, base.domain), value[order],
+                         value[order + 1], domain)
+    good = [r for r in candidates if sign * value[order + 1](r) > 0]
+    if not good:
+        raise SmoothingError("no_tca", "no closest approach")
+    if order == 2:
+        t_star = min(good, key=value[1])
+    elif order == 1:
+        t_star = min(good, key=value[0])
+    else:
+        t_star = max(good, key=lambda r: abs(value[1](r)))
+    return t_star, value[0](t_star)
 
 
 def tca_uncertain(fit: PolynomialFit, ca: ClosestApproach, spread_s: float) -> bool:
@@ -157,18 +191,25 @@ def tca_degree_spread(t_s, y, sigma, fit: PolynomialFit, kind: str, doppler_mode
     times, values = [], []
     degrees = range(max(0, fit.degree - width), fit.degree + width + 1)
     nested = _nested_coefficients(t, yy, s, fit, degrees[-1])
+    base = fit.series(0)
+    # Chebyshev degrees whose derivative series down to the root's all have two or more terms (the
+    # series path's _chebder1 steps): from coefficient arrays
+    light = _definition(kind, doppler_mode)[0] + 1 if type(base) is np.polynomial.Chebyshev else 0
     for d in degrees:
         try:
             if d == fit.degree:
-                other = fit
                 t_d = _tca_time(fit, kind, doppler_mode)[2] if t_star is None else t_star
+                v_d = fit(t_d)
+            elif light and d >= light:
+                t_d, v_d = _cheb_tca(nested(d), base, fit.domain_s, kind, doppler_mode)
             else:
                 other = replace_fit(fit, degree=d, coef=nested(d))
                 t_d = _tca_time(other, kind, doppler_mode)[2]      # closest_approach's t*, no covariance
+                v_d = other(t_d)
         except SmoothingError:
             continue
         times.append(float(t_d))
-        values.append(float(other(t_d)))
+        values.append(float(v_d))
     if len(times) < 3:
         return float("nan"), float("nan"), len(times)
     return float(np.std(times, ddof=1)), float(np.std(values, ddof=1)), len(times)
@@ -204,7 +245,7 @@ def _nested_coefficients(t, y, s, fit: PolynomialFit, top: int):
         rd = r[: d + 1, : d + 1]
         if not all_ranked:
             check_rank(rd, d)                                 # solve_fit's rank test
-        return np.linalg.solve(rd, r[: d + 1, -1])
+        return solve_upper(rd, r[: d + 1, -1])
 
     return coef
 
@@ -212,13 +253,16 @@ def _nested_coefficients(t, y, s, fit: PolynomialFit, top: int):
 def _real_roots(series, domain, d1=None) -> list[float]:
     """Real roots of a numpy series inside [a, b], polished by Newton steps; ``d1`` its
     derivative when the caller has it already (the same series as ``series.deriv()``)."""
-    a, b = domain
     if series.degree() < 1:
         return []
-    roots = series.roots()
+    return _polish(series.roots(), _scalar(series), _scalar(series.deriv() if d1 is None else d1), domain)
+
+
+def _polish(roots, value, d1, domain) -> list[float]:
+    """The roots (complex, of a series whose value and derivative at a float are ``value`` and
+    ``d1``) that are real to 1e-3 of the half-width of ``domain``, after up to 5 Newton steps, inside it."""
+    a, b = domain
     half = 0.5 * (b - a)
-    d1 = _scalar(series.deriv() if d1 is None else d1)
-    value = _scalar(series)
     out = []
     for z in roots:
         if abs(z.imag) > 1e-3 * half:
@@ -245,8 +289,13 @@ def _scalar(series):
     polish and the choice among roots call it some 20 times per fit); other bases: the series."""
     if type(series) is not np.polynomial.Chebyshev:
         return series
-    off, scl = (float(v) for v in series.mapparms())
-    c = [float(v) for v in series.coef]
+    return _cheb_scalar(series.coef, *series.mapparms())
+
+
+def _cheb_scalar(coef, off, scl):
+    """:func:`_scalar` of the Chebyshev series ``coef`` whose domain map is ``off + scl x``."""
+    off, scl = float(off), float(scl)
+    c = [float(v) for v in coef]
     if len(c) == 1:
         return lambda x: c[0] + 0 * (off + scl * x)
 
