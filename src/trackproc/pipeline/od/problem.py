@@ -277,7 +277,7 @@ def default_force_model(epoch, eop, degree: int = 20):
                       relativity=True, eop=eop)
 
 
-#: Integration frames by UTC epoch (two-part JD) with the Earth orientation they were made with:
+#: Integration frames by UTC epoch (ns since 1970) with the Earth orientation they were made with:
 #: a batch refines every pass from the same stale state, whose frame is then made once.
 _FRAMES: dict = {}
 _FRAMES_MAX = 16
@@ -289,16 +289,16 @@ def epoch_frame(epoch, eop):
     and ``eop`` object (the frame is a function of them alone)."""
     if isinstance(epoch, str):
         epoch = epoch.rstrip("Zz")
-    jd1, jd2 = ts.datetime64_to_jd_utc(np.datetime64(epoch, "ns"))
-    key = (float(jd1), float(jd2))
-    hit = _FRAMES.get(key)
-    if hit is not None and hit[0] is eop:
-        return hit[1]
-    frame = propagator.reference_frame(key[0], key[1], eop)
-    if len(_FRAMES) >= _FRAMES_MAX:
-        _FRAMES.clear()
-    _FRAMES[key] = (eop, frame)
-    return frame
+    epoch = np.datetime64(epoch, "ns")
+    key = int(epoch.astype(np.int64))
+    hit = _FRAMES.pop(key, None)
+    if hit is None or hit[0] is not eop:
+        jd1, jd2 = ts.datetime64_to_jd_utc(epoch)
+        hit = (eop, propagator.reference_frame(float(jd1), float(jd2), eop))
+        if len(_FRAMES) >= _FRAMES_MAX:
+            _FRAMES.pop(next(iter(_FRAMES)))        # the least recently used
+    _FRAMES[key] = hit
+    return hit[1]
 
 
 def initial_at_epoch(initial, epoch, force, eop, force_model=None):
