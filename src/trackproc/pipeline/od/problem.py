@@ -11,6 +11,7 @@ and the model applies the modifiers bound to the samples (steps 3-5 of
 from __future__ import annotations
 
 import copy
+import threading
 from dataclasses import dataclass
 from typing import Optional
 
@@ -281,6 +282,7 @@ def default_force_model(epoch, eop, degree: int = 20):
 #: a batch refines every pass from the same stale state, whose frame is then made once.
 _FRAMES: dict = {}
 _FRAMES_MAX = 16
+_FRAMES_LOCK = threading.Lock()
 
 
 def epoch_frame(epoch, eop):
@@ -291,13 +293,15 @@ def epoch_frame(epoch, eop):
         epoch = epoch.rstrip("Zz")
     epoch = np.datetime64(epoch, "ns")
     key = int(epoch.astype(np.int64))
-    hit = _FRAMES.pop(key, None)
+    with _FRAMES_LOCK:
+        hit = _FRAMES.pop(key, None)
     if hit is None or hit[0] is not eop:
         jd1, jd2 = ts.datetime64_to_jd_utc(epoch)
         hit = (eop, propagator.reference_frame(float(jd1), float(jd2), eop))
+    with _FRAMES_LOCK:
         if len(_FRAMES) >= _FRAMES_MAX:
             _FRAMES.pop(next(iter(_FRAMES)))        # the least recently used
-    _FRAMES[key] = hit
+        _FRAMES[key] = hit
     return hit[1]
 
 
