@@ -40,6 +40,21 @@ def test_q_independent_of_the_other_dates_and_the_cache():
     assert np.array_equal(alone, together[:5])
 
 
+def test_q_of_a_pass_and_of_a_day_read_by_span_as_by_sorting():
+    # a pass (1 s for 15 min) and a day of passes: the nodes read by their offset in the span
+    # (frames._Q_SPAN_NODES), bit for bit the values of dates asked for one at a time, and the direct
+    # ERFA evaluation to rounding
+    rng = np.random.default_rng(4)
+    for t in (8100.25 + np.arange(900) / 86400.0, np.sort(8200.0 + rng.uniform(0.0, 0.98, 300))):
+        frames._Q_NODES.clear()
+        q, q_dot = frames.precession_nutation(2451545.0, t)
+        frames._Q_NODES.clear()
+        for i in range(0, t.size, 97):
+            one, one_dot = frames.precession_nutation(2451545.0, t[i:i + 1])
+            assert np.array_equal(one[0], q[i]) and np.array_equal(one_dot[0], q_dot[i])
+        assert np.abs(q - np.asarray(erfa.c2i06a(2451545.0, t))).max() < 1e-15
+
+
 def test_earth_rotation_position_within_a_millimetre_of_direct_c2t06a():
     # the full GCRF -> ITRF matrix against erfa's one-call c2t06a at many dates of a day
     from trackproc.dynamics import timescales as ts

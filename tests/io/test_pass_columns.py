@@ -77,3 +77,23 @@ def test_csv_times_parsed_by_numpy_are_pandas_times(cells, plain):
     if plain:
         want = pd.to_datetime(pd.Series(cells), utc=True, format="ISO8601").dt.tz_localize(None).to_numpy()
         assert got.tolist() == want.astype("datetime64[ns]").tolist()
+
+
+@pytest.mark.parametrize("name", ["smoothed.parquet", "smoothed.csv"])
+def test_columns_kept_once_the_frame_is_built(smoothed, name):
+    """A table read from a file answers from its numpy columns also after its frame was built (writing a
+    file builds it): the same values as the frame's own conversion, also after take; setting the
+    frame drops them (the new frame is read)."""
+    table = read_pass_table(str(smoothed / name))
+    frame = table.frame                                            # built
+    from_frame = PassTable(frame, table.meta)                      # the reference: the frame's conversion
+    _same(table, from_frame)
+    assert table.column("value") is table.column("value")          # answered from the kept column
+    rows = np.arange(table.n_rows) % 3 == 1
+    taken = table.take(rows)
+    _same(taken, from_frame.take(rows))
+    assert taken.frame.equals(from_frame.take(rows).frame)
+    changed = frame.copy()
+    changed["value"] = changed["value"] + 1.0
+    table.frame = changed
+    np.testing.assert_array_equal(table.column("value"), from_frame.column("value") + 1.0)

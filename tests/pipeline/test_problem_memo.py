@@ -94,3 +94,25 @@ def test_near_the_start_only_the_additive_drivers_moved_is_the_start_evaluation_
     h2, j2 = pb.model_near(moved)
     assert pb.evaluations == count + 1
     assert np.array_equal(h2, fresh.model(moved)[0]) and np.array_equal(j2, fresh.model(moved)[1])
+
+
+def test_epoch_frame_is_the_propagators_frame_kept_per_epoch_and_eop():
+    """``epoch_frame`` (a batch's stale state is moved from one epoch for every pass) is the frame
+    ``propagator.propagate`` makes by default, made again for another EOP object or epoch."""
+    from trackproc.dynamics import propagator
+
+    t = np.datetime64("2026-03-20T09:30:00.123456789", "ns")
+    jd1, jd2 = ts.datetime64_to_jd_utc(t)
+    want = propagator.reference_frame(float(jd1), float(jd2), EOP)
+    got = od_problem.epoch_frame(t, EOP)
+    for a in ("q", "w", "era0", "omega", "ref_jd_utc"):
+        np.testing.assert_array_equal(np.asarray(getattr(got, a)), np.asarray(getattr(want, a)))
+    assert od_problem.epoch_frame(t, EOP) is got
+    assert od_problem.epoch_frame("2026-03-20T09:30:00.123456789Z", EOP) is got
+    other = ts.EarthOrientation.constant(0.3)
+    assert od_problem.epoch_frame(t, other) is not got
+    assert od_problem.epoch_frame(t, other).era0 != got.era0
+    assert od_problem.epoch_frame(t + np.timedelta64(60, "s"), EOP).era0 != got.era0
+    traj = propagator.propagate(TRUTH.r_m, TRUTH.v_m_s, t, [600.0], force="j2", eop=EOP)
+    with_frame = propagator.propagate(TRUTH.r_m, TRUTH.v_m_s, t, [600.0], force="j2", eop=EOP, frame=got)
+    np.testing.assert_array_equal(traj.state(600.0), with_frame.state(600.0))

@@ -90,11 +90,19 @@ _RATE_DELTA_S = 60.0
 #: (a batch worker keeps it warm across passes). Bounded: cleared beyond _Q_CACHE_MAX nodes.
 _Q_NODES: dict[int, np.ndarray] = {}
 _Q_CACHE_MAX = 200_000
+#: Node spans (a day) read by offset from the first node rather than sorted by np.unique.
+_Q_SPAN_NODES = 48
 
 
 def _q_at_nodes(nodes: np.ndarray) -> np.ndarray:
     """``erfa.c2i06a`` at grid nodes (node numbers, int array), (len(nodes), 3, 3), from the cache."""
-    uniq, inverse = np.unique(nodes, return_inverse=True)
+    lo, hi = int(nodes.min()), int(nodes.max())
+    if hi - lo < _Q_SPAN_NODES:
+        # a pass or a day: every node of the span is asked for (4 a date, consecutive), so the span
+        # is the distinct nodes and the offset their index, without np.unique's sort (~0.1 ms a pass)
+        uniq, inverse = np.arange(lo, hi + 1), nodes - lo
+    else:
+        uniq, inverse = np.unique(nodes, return_inverse=True)
     missing = [int(i) for i in uniq if int(i) not in _Q_NODES]
     if missing:
         if len(_Q_NODES) + len(missing) > _Q_CACHE_MAX:

@@ -55,8 +55,11 @@ class PassTable:
         return len(self._frame)
 
     def column(self, name: str) -> np.ndarray:
-        """One column as numpy: ``time`` naive UTC ``datetime64[ns]``, text as object arrays of str."""
-        if self._frame is None and self._columns.get(name) is not None:
+        """One column as numpy: ``time`` naive UTC ``datetime64[ns]``, text as object arrays of str.
+        A table made by :meth:`from_columns` answers from its numpy columns also once its frame is
+        built (the same values: the frame is built from them; writing a pass file builds it, and
+        refine then reads ~13 columns a pass); setting :attr:`frame` drops them."""
+        if self._columns is not None and self._columns.get(name) is not None:
             return self._columns[name]
         values = self.frame[name]
         if name == "time":
@@ -70,13 +73,14 @@ class PassTable:
     def take(self, rows: np.ndarray, meta: dict | None = None) -> "PassTable":
         """The rows ``rows`` (indices or a boolean mask), renumbered from 0, with ``meta`` (default: this one's)."""
         meta = self.meta if meta is None else meta
-        if self._frame is not None:
+        if self._columns is None:
             rows = np.asarray(rows)
             picked = self._frame.loc[rows] if rows.dtype == bool else self._frame.iloc[rows]
             return PassTable(picked.reset_index(drop=True), meta)
         rows = np.asarray(rows)
         columns = {name: None if values is None else values[rows] for name, values in self._columns.items()}
-        build = self._build
+        built = self._frame
+        build = self._build if built is None else (lambda: built)
 
         def build_taken():
             frame = build()

@@ -11,6 +11,7 @@ and the model applies the modifiers bound to the samples (steps 3-5 of
 from __future__ import annotations
 
 import copy
+import threading
 from dataclasses import dataclass
 from typing import Optional
 
@@ -277,6 +278,33 @@ def default_force_model(epoch, eop, degree: int = 20):
                       relativity=True, eop=eop)
 
 
+#: Integration frames by UTC epoch (ns since 1970) with the Earth orientation they were made with:
+#: a batch refines every pass from the same stale state, whose frame is then made once.
+_FRAMES: dict = {}
+_FRAMES_MAX = 16
+_FRAMES_LOCK = threading.Lock()
+
+
+def epoch_frame(epoch, eop):
+    """:func:`~trackproc.dynamics.propagator.reference_frame` of the UTC ``epoch`` (what
+    :func:`~trackproc.dynamics.propagator.propagate` makes by default), kept for the same epoch
+    and ``eop`` object (the frame is a function of them alone)."""
+    if isinstance(epoch, str):
+        epoch = epoch.rstrip("Zz")
+    epoch = np.datetime64(epoch, "ns")
+    key = int(epoch.astype(np.int64))
+    with _FRAMES_LOCK:
+        hit = _FRAMES.pop(key, None)
+    if hit is None or hit[0] is not eop:
+        jd1, jd2 = ts.datetime64_to_jd_utc(epoch)
+        hit = (eop, propagator.reference_frame(float(jd1), float(jd2), eop))
+    with _FRAMES_LOCK:
+        if len(_FRAMES) >= _FRAMES_MAX:
+            _FRAMES.pop(next(iter(_FRAMES)))        # the least recently used
+        _FRAMES[key] = hit
+    return hit[1]
+
+
 def initial_at_epoch(initial, epoch, force, eop, force_model=None):
     """Initial GCRF state (and 6 × 6 covariance if any) moved to ``epoch`` (Taylor + STM)."""
     cov = initial.state_covariance
@@ -284,7 +312,8 @@ def initial_at_epoch(initial, epoch, force, eop, force_model=None):
         return initial.rv, cov
     dt = float(ts.seconds_since(ts.datetime64_to_jd_utc(epoch), initial.jd_utc))
     traj = propagator.propagate(initial.r_m, initial.v_m_s, initial.epoch, [dt], force=force, stm=cov is not None,
-                                eop=eop, force_model=force_model).raise_for_outcome()
+                                eop=eop, force_model=force_model,
+                                frame=epoch_frame(initial.epoch, eop)).raise_for_outcome()
     rv = traj.state(dt)
     if cov is not None:
         cov = traj.covariance(dt, cov)
@@ -391,7 +420,7 @@ def build_problem(tables, initial, stations=None, options: EstimateOptions | Non
     except ValueError as exc:
         raise InputError(str(exc), column="--doppler-bias") from None
     priors, note, initial_prior, source = priors_of(params, opt, rv0, cov0, initial, epoch)
-    frame_q = propagator.reference_frame(*(float(a) for a in ts.datetime64_to_jd_utc(epoch)), eop)
+    frame_q = epoch_frame(epoch, eop)
     return Problem(meas=meas, params=params, epoch=epoch, frame=frame_q, force=opt.force, range_rate_model=model,
                    modifiers=bound, priors=priors, times=t64, sources=frame["_source"],
                    eop=eop, apriori_note=note, force_model=force_model, force_names=force_names,

@@ -18,7 +18,7 @@ def select_pass(table: PassTable, options: RefineOptions, source: str) -> tuple[
     if table.n_rows == 0:
         raise InputError("no samples", file=source, expected="a pass file with one Doppler or range-rate pass")
     kind_of = table.column("kind")
-    kinds = set(np.unique(kind_of))      # not a Python loop over the rows
+    kinds = set(kind_of.tolist())        # not np.unique: a sort of str objects
     if options.kind is not None:
         if options.kind not in RANGE_RATE_KINDS:
             raise InputError("refine uses Doppler or range-rate", column="--kind", found=options.kind,
