@@ -81,9 +81,14 @@ def minimise(fun, start, bounds, xtol: float, ftol: float, maxiter: int = 40, fi
         if np.linalg.norm(s) > radius:       # the boundary solution: ‖(B + λI)⁻¹g‖ = radius, λ by bisection
             wl, gl = w.tolist(), gv.tolist()
             lo_l, hi_l = lam, lam + float(np.linalg.norm(gf)) / radius + max(abs(e) for e in wl)
+            pairs = list(zip(gl, wl))
+            r2 = radius * radius
             for _ in range(40):
                 mid = 0.5 * (lo_l + hi_l)
-                if sum((gi / (wi + mid)) ** 2 for gi, wi in zip(gl, wl)) > radius * radius:
+                total = 0.0                 # the terms summed in order (as sum() did: the same bits)
+                for gi, wi in pairs:
+                    total += (gi / (wi + mid)) ** 2
+                if total > r2:
                     lo_l = mid
                 else:
                     hi_l = mid

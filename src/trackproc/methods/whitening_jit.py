@@ -87,15 +87,22 @@ def reml_terms(dt, ds, tau, a2, q2, w2, m, p):
     n, k = m.shape
     x0 = np.zeros(k)
     x1 = np.zeros(k)
-    wt = np.empty((k, n))                 # the whitened columns, each contiguous for the QR
+    w = np.empty((n, k))                  # the whitened rows
     p00 = a2
     p01 = 0.0
     p11 = q2 * ds[0]
     logdet = 0.0
+    gap = math.nan
+    f_gap = 0.0
+    va_gap = 0.0
     for i in range(n):
         if i < n - 1 and tau > 0.0:
-            f = math.exp(-dt[i] / tau)
-            va = -math.expm1(-2.0 * dt[i] / tau) * a2
+            if dt[i] != gap:              # a regular grid: the same gap, the same φ
+                gap = dt[i]
+                f_gap = math.exp(-gap / tau)
+                va_gap = -math.expm1(-2.0 * gap / tau) * a2
+            f = f_gap
+            va = va_gap
         else:
             f = 0.0
             va = 0.0
@@ -111,35 +118,40 @@ def reml_terms(dt, ds, tau, a2, q2, w2, m, p):
         g1 = hp1 / s
         for j in range(k):
             e = m[i, j] - x0[j] - x1[j]
-            wt[j, i] = e / sd
+            w[i, j] = e / sd
             x0[j] = f * (x0[j] + g0 * e)
             x1[j] = x1[j] + g1 * e
         p00 = f * f * (p00 - g0 * hp0) + va
         p01 = f * (p01 - g0 * hp1)
         p11 = p11 - g1 * hp1 + vw
+    # Householder on the columns; the inner loops run along a row (one accumulator per column)
     logx = 0.0
-    rss = 0.0
+    dot = np.empty(k)
     for j in range(k):
         norm2 = 0.0
         for i in range(j, n):
-            norm2 += wt[j, i] * wt[j, i]
+            norm2 += w[i, j] * w[i, j]
         if j == k - 1:
-            rss = norm2
-            break
+            return logdet, logx, norm2
         if not norm2 > 0.0:
             logx = -math.inf
             continue
         norm = math.sqrt(norm2)
         if j < p:
             logx += math.log(norm2)
-        alpha = -norm if wt[j, j] >= 0.0 else norm
-        wt[j, j] -= alpha                  # v = x - alpha e_1, |v|^2 = 2 |x| (|x| + |x_1|)
-        vn2 = 2.0 * norm * (norm + abs(wt[j, j] + alpha))
+        alpha = -norm if w[j, j] >= 0.0 else norm
+        w[j, j] -= alpha                   # v = x - alpha e_1, |v|^2 = 2 |x| (|x| + |x_1|)
+        vn2 = 2.0 * norm * (norm + abs(w[j, j] + alpha))
         for col in range(j + 1, k):
-            dot = 0.0
-            for i in range(j, n):
-                dot += wt[j, i] * wt[col, i]
-            fac = 2.0 * dot / vn2
-            for i in range(j, n):
-                wt[col, i] -= fac * wt[j, i]
-    return logdet, logx, rss
+            dot[col] = 0.0
+        for i in range(j, n):
+            vi = w[i, j]
+            for col in range(j + 1, k):
+                dot[col] += vi * w[i, col]
+        for col in range(j + 1, k):
+            dot[col] *= 2.0 / vn2
+        for i in range(j, n):
+            vi = w[i, j]
+            for col in range(j + 1, k):
+                w[i, col] -= dot[col] * vi
+    return logdet, logx, 0.0
