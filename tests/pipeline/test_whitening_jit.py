@@ -143,3 +143,21 @@ def test_compiled_reml_pass_refuses_a_covariance_not_positive_definite(monkeypat
     bad = nz.NoiseModel(0.0, 0.0, 0.0, 0.1)          # no white noise, a walk from 0 at t0: S_0 = 0
     assert reml.fast(bad) == -np.inf == reml(bad)[0]
     assert np.isnan(whitening.compiled_reml()(np.ones(1), np.zeros(2), 0.0, 0.0, 0.0, -1.0, np.ones((2, 2)), 1)[0])
+
+
+def test_compiled_reml_pass_log_determinant_over_a_wide_range_of_variances(monkeypatch):
+    """log|C| summed through products: variances near 1e±200 and products beyond the double range."""
+    monkeypatch.setenv("TRACKPROC_JIT", "1")
+    t = np.arange(400.0)
+    rng = np.random.default_rng(3)
+    x = nz._basis(np.column_stack([np.ones(t.size), t]))
+    for white in (1e-100, 1e-20, 1.0, 1e20, 1e100):
+        r = white * rng.normal(size=t.size)
+        reml = nz._Reml(t, r, x, 0.0)
+        for model in (nz.NoiseModel(white, 0.5 * white, 30.0), nz.NoiseModel(white, 0.0, 0.0, 0.01 * white)):
+            assert reml.fast(model, profile=False) == pytest.approx(reml(model, profile=False)[0], rel=1e-11)
+    # a first variance just below 1e150, the next ones near 1e160: their product is beyond the doubles
+    r = 1e80 * rng.normal(size=t.size)
+    model = nz.NoiseModel(10.0 ** 74.6, 0.0, 0.0, 1e80)
+    reml = nz._Reml(t, r, x, 0.0)
+    assert reml.fast(model, profile=False) == pytest.approx(reml(model, profile=False)[0], rel=1e-11)

@@ -87,11 +87,12 @@ def reml_terms(dt, ds, tau, a2, q2, w2, m, p):
     n, k = m.shape
     x0 = np.zeros(k)
     x1 = np.zeros(k)
-    w = np.empty((n, k))                  # the whitened rows
+    wt = np.empty((k, n))                 # the whitened columns, each contiguous for the QR
     p00 = a2
     p01 = 0.0
     p11 = q2 * ds[0]
     logdet = 0.0
+    prod = 1.0
     gap = math.nan
     f_gap = 0.0
     va_gap = 0.0
@@ -112,25 +113,32 @@ def reml_terms(dt, ds, tau, a2, q2, w2, m, p):
         s = hp0 + hp1 + w2
         if not (s > 0.0 and math.isfinite(s)):
             return math.nan, math.nan, math.nan
-        logdet += math.log(s)
-        sd = math.sqrt(s)
-        g0 = hp0 / s
-        g1 = hp1 / s
+        if 1e-100 < s < 1e100:            # Σ log S_k: one log per 1e150 of the product
+            prod *= s
+            if not 1e-150 < prod < 1e150:
+                logdet += math.log(prod)
+                prod = 1.0
+        else:
+            logdet += math.log(s)
+        inv = 1.0 / s
+        sd_inv = math.sqrt(inv)
+        g0 = hp0 * inv
+        g1 = hp1 * inv
         for j in range(k):
             e = m[i, j] - x0[j] - x1[j]
-            w[i, j] = e / sd
+            wt[j, i] = e * sd_inv
             x0[j] = f * (x0[j] + g0 * e)
             x1[j] = x1[j] + g1 * e
         p00 = f * f * (p00 - g0 * hp0) + va
         p01 = f * (p01 - g0 * hp1)
         p11 = p11 - g1 * hp1 + vw
-    # Householder on the columns; the inner loops run along a row (one accumulator per column)
+    logdet += math.log(prod)
+    # Householder, R's diagonal only; two columns reflected per sweep of the reflector
     logx = 0.0
-    dot = np.empty(k)
     for j in range(k):
         norm2 = 0.0
         for i in range(j, n):
-            norm2 += w[i, j] * w[i, j]
+            norm2 += wt[j, i] * wt[j, i]
         if j == k - 1:
             return logdet, logx, norm2
         if not norm2 > 0.0:
@@ -139,19 +147,31 @@ def reml_terms(dt, ds, tau, a2, q2, w2, m, p):
         norm = math.sqrt(norm2)
         if j < p:
             logx += math.log(norm2)
-        alpha = -norm if w[j, j] >= 0.0 else norm
-        w[j, j] -= alpha                   # v = x - alpha e_1, |v|^2 = 2 |x| (|x| + |x_1|)
-        vn2 = 2.0 * norm * (norm + abs(w[j, j] + alpha))
-        for col in range(j + 1, k):
-            dot[col] = 0.0
-        for i in range(j, n):
-            vi = w[i, j]
-            for col in range(j + 1, k):
-                dot[col] += vi * w[i, col]
-        for col in range(j + 1, k):
-            dot[col] *= 2.0 / vn2
-        for i in range(j, n):
-            vi = w[i, j]
-            for col in range(j + 1, k):
-                w[i, col] -= dot[col] * vi
+        alpha = -norm if wt[j, j] >= 0.0 else norm
+        wt[j, j] -= alpha                  # v = x - alpha e_1, |v|^2 = 2 |x| (|x| + |x_1|)
+        vn2 = 2.0 * norm * (norm + abs(wt[j, j] + alpha))
+        col = j + 1
+        while col < k:
+            if col + 1 < k:
+                da = 0.0
+                db = 0.0
+                for i in range(j, n):
+                    v = wt[j, i]
+                    da += v * wt[col, i]
+                    db += v * wt[col + 1, i]
+                fa = 2.0 * da / vn2
+                fb = 2.0 * db / vn2
+                for i in range(j, n):
+                    v = wt[j, i]
+                    wt[col, i] -= fa * v
+                    wt[col + 1, i] -= fb * v
+                col += 2
+            else:
+                da = 0.0
+                for i in range(j, n):
+                    da += wt[j, i] * wt[col, i]
+                fa = 2.0 * da / vn2
+                for i in range(j, n):
+                    wt[col, i] -= fa * wt[j, i]
+                col += 1
     return logdet, logx, 0.0
