@@ -105,3 +105,59 @@ def test_batch_runs_its_refine_and_estimate_tasks_with_the_compiled_kernels(monk
         assert not compiled_kernels(refine)
     monkeypatch.delenv("TRACKPROC_JIT")
     assert taylor._jit_mode() == "auto"                                    # restored after the block
+
+
+REML_MODELS = [
+    nz.NoiseModel(0.6, 1.2, 25.0, 0.0),            # AR(1)
+    nz.NoiseModel(0.6, 0.0, 0.0, 0.03),            # walk
+    *BOTH,
+    nz.NoiseModel(0.7, 7e-4, 900.0, 0.05),         # an AR(1) the offset and drift nearly absorb
+]
+
+
+@pytest.mark.parametrize("seed", range(2))
+@pytest.mark.parametrize("model", REML_MODELS, ids=lambda m: m.name + f"-{m.white}")
+def test_compiled_reml_pass_against_the_dense_likelihood(model, seed, monkeypatch):
+    """The search's one-pass restricted likelihood (whitening_jit.reml_terms via _Reml.fast)
+    against the n x n Cholesky form (the oracle) and the O(n) path, scaled and not, to rounding,
+    on a grid with duplicate times and near-zero gaps."""
+    monkeypatch.setenv("TRACKPROC_JIT", "1")
+    assert whitening.compiled_reml() is not None
+    t = _grid(seed, 200)
+    rng = np.random.default_rng(seed)
+    x = nz._basis(np.column_stack([np.ones(t.size), t - t[0], np.sin(t / 40.0), rng.normal(size=t.size)]))
+    r = rng.normal(size=t.size) + np.cumsum(rng.normal(0.0, 0.1, t.size))
+    for t0 in (float(t[0]), float(t[0]) - 3.0):
+        fast, exact = nz._Reml(t, r, x, t0), nz._Reml(t, r, x, t0, dense=True)
+        for profile in (True, False):
+            ref = exact(model, profile)[0]
+            assert fast.fast(model, profile) == pytest.approx(ref, rel=1e-10, abs=1e-8)
+            assert fast.fast(model, profile) == pytest.approx(fast(model, profile)[0], rel=1e-11, abs=1e-9)
+
+
+def test_compiled_reml_pass_refuses_a_covariance_not_positive_definite(monkeypatch):
+    monkeypatch.setenv("TRACKPROC_JIT", "1")
+    t = np.arange(50.0)
+    x = nz._basis(np.ones((50, 1)))
+    reml = nz._Reml(t, np.random.default_rng(1).normal(size=50), x, 0.0)
+    bad = nz.NoiseModel(0.0, 0.0, 0.0, 0.1)          # no white noise, a walk from 0 at t0: S_0 = 0
+    assert reml.fast(bad) == -np.inf == reml(bad)[0]
+    assert np.isnan(whitening.compiled_reml()(np.ones(1), np.zeros(2), 0.0, 0.0, 0.0, -1.0, np.ones((2, 2)), 1)[0])
+
+
+def test_compiled_reml_pass_log_determinant_over_a_wide_range_of_variances(monkeypatch):
+    """log|C| summed through products: variances near 1e±200 and products beyond the double range."""
+    monkeypatch.setenv("TRACKPROC_JIT", "1")
+    t = np.arange(400.0)
+    rng = np.random.default_rng(3)
+    x = nz._basis(np.column_stack([np.ones(t.size), t]))
+    for white in (1e-100, 1e-20, 1.0, 1e20, 1e100):
+        r = white * rng.normal(size=t.size)
+        reml = nz._Reml(t, r, x, 0.0)
+        for model in (nz.NoiseModel(white, 0.5 * white, 30.0), nz.NoiseModel(white, 0.0, 0.0, 0.01 * white)):
+            assert reml.fast(model, profile=False) == pytest.approx(reml(model, profile=False)[0], rel=1e-11)
+    # a first variance just below 1e150, the next ones near 1e160: their product is beyond the doubles
+    r = 1e80 * rng.normal(size=t.size)
+    model = nz.NoiseModel(10.0 ** 74.6, 0.0, 0.0, 1e80)
+    reml = nz._Reml(t, r, x, 0.0)
+    assert reml.fast(model, profile=False) == pytest.approx(reml(model, profile=False)[0], rel=1e-11)

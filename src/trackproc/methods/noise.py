@@ -49,6 +49,7 @@ and choice); its minimiser is :mod:`trackproc.methods.trust_region`.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 from typing import Optional, Sequence
@@ -58,8 +59,8 @@ import numpy as np
 from trackproc.methods.distributions import chi2_quantile
 from trackproc.methods.lapack import routines
 from trackproc.methods.trust_region import minimise
-from trackproc.methods.whitening import (MarkovFactor, PassCovariance, effective_samples,  # noqa: F401  (re-exported)
-                                        effective_samples_beyond, kept_markov_factor, markov_grid)
+from trackproc.methods.whitening import (MarkovFactor, PassCovariance, compiled_reml,  # noqa: F401  (re-exported)
+                                        effective_samples, effective_samples_beyond, kept_markov_factor, markov_grid)
 
 dgeqrf, = routines("dgeqrf")
 
@@ -155,6 +156,8 @@ class _Reml:
         self.dense = dense or (t.size > 1 and not np.all(np.diff(t) >= 0))
         self.xr = np.column_stack([x, r])        # the residuals last: see __call__
         self.grid = None if self.dense else markov_grid(t, t0)      # shared by every model evaluated
+        self.kernel = None if self.dense else compiled_reml()       # looked up once per set of residuals
+        self.xr_rows = np.ascontiguousarray(self.xr) if self.kernel is not None else None   # the kernel's layout
         if self.dense:
             self.lag = np.abs(t[:, None] - t[None, :])
             dt = np.clip(t - t0, 0.0, None)
@@ -212,6 +215,29 @@ class _Reml:
             return -0.5 * (logdet + rss), 1.0
         s2 = rss / m
         return -0.5 * (m * math.log(s2) + logdet + m), math.sqrt(s2)
+
+
+    def fast(self, model: NoiseModel, profile: bool = True) -> float:
+        """``ℓ_R`` of :meth:`__call__` by one compiled pass (:func:`~trackproc.methods.whitening.compiled_reml`:
+        the filter's innovations rotated into R row by row, no factor object, no whitened copy), equal
+        to it to rounding; :meth:`__call__` itself without the compiled kernel or for unordered times."""
+        kernel = self.kernel
+        if kernel is None:
+            return self(model, profile)[0]
+        n, p = self.n, self.p
+        m = n - p
+        if m <= 0:
+            return -math.inf
+        has_ar = model.ar_sigma > 0 and model.ar_tau_s > 0
+        logdet_c, logdet_x, rss = kernel(self.grid[0], self.grid[1], float(model.ar_tau_s) if has_ar else 0.0,
+                                         float(model.ar_sigma) ** 2 if has_ar else 0.0, float(model.walk) ** 2,
+                                         float(model.white) ** 2, self.xr_rows, p)
+        if not (math.isfinite(logdet_c) and rss > 0 and math.isfinite(rss)):
+            return -math.inf
+        logdet = logdet_c + logdet_x
+        if not profile:
+            return -0.5 * (logdet + rss)
+        return -0.5 * (m * math.log(rss / m) + logdet + m)
 
 
 def restricted_loglik(model, t, r, x, t0=None, profile: bool = True, dense: bool = False) -> tuple[float, float]:
@@ -272,6 +298,12 @@ def _exp(x: float) -> float:
 #: The search's stopping point: a step below this in every log-parameter, or a promised gain of
 #: the restricted log-likelihood below ``_FTOL`` (the choice compares 2 Δℓ with thresholds ≥ 2.7).
 _XTOL, _FTOL = 0.01, 5e-4
+
+
+@functools.lru_cache(maxsize=64)
+def _chi2_point(d: int, p: float) -> float:
+    """:func:`chi2_quantile`, once per (d, p) a process (every pass asks for the same few)."""
+    return chi2_quantile(d, p)
 
 
 def candidate_models(noise: str, oscillator: bool) -> tuple:
@@ -371,6 +403,17 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
                 memo[key] = reml(build(z), profile=not given)
             return memo[key]
 
+        fast_memo: dict = {}
+
+        def neg_fast(z, build=build, given=given, memo=fast_memo):
+            """``-ℓ_R`` at a point of the search by the compiled pass (equal to ``evaluate`` to
+            rounding): the search's gradients and steps; its end point is then ``evaluate``d, so a
+            path that reaches the same point of the 0.001 grid gives the same numbers."""
+            key = np.asarray(z, float).tobytes()
+            if key not in memo:
+                memo[key] = -reml.fast(build(z), profile=not given)
+            return memo[key]
+
         def neg(z, evaluate=evaluate):
             return -evaluate(z)[0]
 
@@ -379,8 +422,8 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
             ll, s = reml(NoiseModel(1.0))
             nm, k = NoiseModel(s), 1
         else:
-            z0 = min(starts, key=lambda z: neg(np.asarray(z)))
-            z, ll = minimise(neg, z0, bounds, xtol=_XTOL, ftol=_FTOL)
+            z0 = min(starts, key=lambda z: neg_fast(np.asarray(z)))
+            z, ll = minimise(neg_fast, z0, bounds, xtol=_XTOL, ftol=_FTOL, final=neg)
             nm = build(z)
             s = 1.0 if given else evaluate(z)[1]
             nm = NoiseModel(nm.white * s, nm.ar_sigma * s, nm.ar_tau_s, nm.walk * s if not given else nm.walk)
@@ -401,7 +444,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
     for name in models:
         _, ll, k, _ = fitted[name]
         d = k - k_base
-        if d > 0 and 2.0 * (ll - ll_base) > max(d * math.log(m), chi2_quantile(d, p_select)):
+        if d > 0 and 2.0 * (ll - ll_base) > max(d * math.log(m), _chi2_point(d, p_select)):
             passing.append(name)
     chosen = base if len(passing) == 1 else max(passing[1:], key=lambda name: (fitted[name][2], fitted[name][1]))
     model = fitted[chosen][0]

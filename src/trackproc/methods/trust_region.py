@@ -17,14 +17,15 @@ _PROBE = 0.5
 _CMIN = 1e-3
 
 
-def minimise(fun, start, bounds, xtol: float, ftol: float, maxiter: int = 40):
+def minimise(fun, start, bounds, xtol: float, ftol: float, maxiter: int = 40, final=None):
     """Minimise ``fun`` from ``start`` within ``bounds`` (a few log-parameters): quasi-Newton
     with a trust region (Nocedal & Wright 2006, alg. 4.1 with the exact subproblem of sec. 4.3
     in these 2-3 dimensions, BFGS updates, eq. 6.19) on forward-difference gradients, the first
     Hessian from one probe ``_PROBE`` downhill per coordinate and their cross terms, a
     coordinate at a bound whose gradient points out of the box held there (projected
     gradient). Stops when the quadratic model promises less than ``ftol`` or the step is below
-    ``xtol`` in every coordinate. Returns ``(z, -fun(z))``, ``z`` rounded to 0.001."""
+    ``xtol`` in every coordinate. Returns ``(z, -fun(z))``, ``z`` rounded to 0.001 (``final``:
+    ``-final(z)``, ``final`` being ``fun`` by a more exact path)."""
     lo = np.array([b[0] for b in bounds], float)
     hi = np.array([b[1] for b in bounds], float)
     x = np.clip(np.asarray(start, float), lo, hi)
@@ -80,9 +81,14 @@ def minimise(fun, start, bounds, xtol: float, ftol: float, maxiter: int = 40):
         if np.linalg.norm(s) > radius:       # the boundary solution: ‖(B + λI)⁻¹g‖ = radius, λ by bisection
             wl, gl = w.tolist(), gv.tolist()
             lo_l, hi_l = lam, lam + float(np.linalg.norm(gf)) / radius + max(abs(e) for e in wl)
+            pairs = list(zip(gl, wl))
+            r2 = radius * radius
             for _ in range(40):
                 mid = 0.5 * (lo_l + hi_l)
-                if sum((gi / (wi + mid)) ** 2 for gi, wi in zip(gl, wl)) > radius * radius:
+                total = 0.0                 # the terms summed in order (as sum() did: the same bits)
+                for gi, wi in pairs:
+                    total += (gi / (wi + mid)) ** 2
+                if total > r2:
                     lo_l = mid
                 else:
                     hi_l = mid
@@ -112,4 +118,4 @@ def minimise(fun, start, bounds, xtol: float, ftol: float, maxiter: int = 40):
     # determines): the gradients differ from path to path by the likelihood's rounding / h, so
     # likelihoods equal to rounding (the O(n) and the dense path) end on the same point
     z = np.clip(np.round(x, 3), lo, hi)
-    return z, -float(fun(z))
+    return z, -float((fun if final is None else final)(z))

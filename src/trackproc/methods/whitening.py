@@ -45,7 +45,7 @@ from trackproc.methods.lapack import routines
 dpbtrf, dtbtrs = routines("dpbtrf", "dtbtrs")     # scipy.linalg.lapack's, without scipy.linalg
 
 __all__ = ["PassCovariance", "effective_samples", "effective_samples_beyond", "MarkovFactor", "markov_factor",
-           "kept_markov_factor", "compiled_riccati", "markov_grid"]
+           "kept_markov_factor", "compiled_riccati", "compiled_reml", "markov_grid"]
 
 
 def effective_samples(cov: np.ndarray) -> float:
@@ -181,16 +181,27 @@ def compiled_riccati():
         kernel = None
         if jit.enabled():
             try:
-                from trackproc.methods.whitening_jit import kalman_whiten, riccati as kernel
+                from trackproc.methods.whitening_jit import kalman_whiten, reml_terms, riccati as kernel
 
                 # compiled or loaded here, by one process at a time on a fresh cache
-                with jit.compile_once([kernel, kalman_whiten], "whitening"):
+                with jit.compile_once([kernel, kalman_whiten, reml_terms], "whitening"):
                     kernel(np.ones(1), np.ones(2), np.ones(2), 1.0, 1.0)
                     kalman_whiten(np.ones(1), np.ones(1), np.ones(1), np.ones(2), np.ones((2, 1)))
+                    reml_terms(np.ones(1), np.ones(2), 1.0, 1.0, 1.0, 1.0, np.ones((2, 2)), 1)
             except Exception:                      # noqa: BLE001 - numba unusable here: the Python loop
                 kernel = None
         _RICCATI.append(kernel)
     return _RICCATI[0]
+
+
+def compiled_reml():
+    """The compiled one-pass restricted-likelihood terms (:func:`trackproc.methods.whitening_jit.reml_terms`:
+    ``(log|C|, log|XᵀC⁻¹X|, rᵀPr)``) when :func:`compiled_riccati` is, else None."""
+    if compiled_riccati() is None:
+        return None
+    from trackproc.methods.whitening_jit import reml_terms
+
+    return reml_terms
 
 
 def _compiled_whiten():
