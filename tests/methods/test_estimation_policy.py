@@ -31,6 +31,30 @@ def test_probability_better_is_the_monte_carlo_frequency():
         assert size == pytest.approx(np.linalg.norm(d))
 
 
+def test_probability_better_over_is_probability_better_at_each_time():
+    """The stacked form over K times against the one-time closed form at each: random maps, a time
+    where the state change does not move the position (0.5), one with no uncertainty along the
+    move (1), and the rest to round-off."""
+    rng = np.random.default_rng(11)
+    maps = rng.normal(size=(9, 3, 6)) * 1e3
+    maps[0] = np.hstack([np.zeros((3, 3)), np.eye(3)])            # sees only the velocity
+    maps[1] = np.hstack([np.eye(3), np.zeros((3, 3))])            # sees only the position
+    change = np.r_[2.0, -1.0, 0.5, 0.0, 0.0, 0.0]
+    a = rng.normal(size=(6, 6))
+    cov = a @ a.T
+    cov[:3, :] = 0.0
+    cov[:, :3] = 0.0                                              # the position exactly known
+    cov[3:, 3:] += np.eye(3)
+    p, size, sigma = dm.probability_better_over(maps, change, cov)
+    assert p.shape == size.shape == sigma.shape == (9,)
+    assert (p[0], size[0], sigma[0]) == (0.5, 0.0, 0.0)
+    assert p[1] == 1.0 and sigma[1] == 0.0 and size[1] == pytest.approx(np.linalg.norm(change[:3]), rel=1e-15)
+    for k in range(2, 9):
+        pk, sk, gk = dm.probability_better(maps[k] @ change, maps[k] @ cov @ maps[k].T)
+        assert p[k] == pytest.approx(pk, abs=1e-14) and size[k] == pytest.approx(sk, rel=1e-14)
+        assert sigma[k] == pytest.approx(gk, rel=1e-12)
+
+
 def test_by_prediction_replaces_on_a_significant_gain_anywhere_and_keeps_otherwise():
     """Two times: a move of 5 sigma at the first replaces even if the second is a coin toss; 0.5 sigma
     at both keeps; the reported probability is the larger one."""

@@ -61,10 +61,17 @@ def solve(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, names: S
                 {"measurements": prob.nobs, "kept": kept, "edited": int(mask.sum()), "parameters": n,
                  "apriori_rows": prob.n_prior})
 
+    last = [((), None)]
+
     def factor(jac, r, xv, mask, it):
+        # a run that stops at the Gauss-Newton test returns the point it last factored: the error
+        # matrices below then reuse that SVD (the same arrays, so the same numbers)
+        if len(last[0][0]) == 4 and all(u is v for u, v in zip(last[0][0], (jac, r, xv, mask))):
+            return last[0][1]
         ub, s, vt = whitened_svd(*prob.system(jac, r, xv, mask, it))
         if s.size < n or s[-1] <= opt.rank_rtol * s[0]:
             _raise_rank(s, vt, names, scales, opt.rank_rtol, it)
+        last[0] = ((jac, r, xv, mask), (ub, s, vt))
         return ub, s, vt
 
     def linearise(jac, r, xv, mask, it):

@@ -212,7 +212,24 @@ def stale_improvement(ref: Refinement, sol, sigma_scale: float = 1.0, n_seen: in
     return out
 
 
+#: the last :func:`refinement_apriori_test`: ``((ref, sol, kkt), result)``, the objects kept so
+#: that their identity stands for their contents (the gates test the first solution, the quality
+#: report tests the same one again)
+_LAST_TEST: list = [((), None)]
+
+
 def refinement_apriori_test(ref: Refinement, sol, kkt=None) -> Optional[dict]:
+    """:func:`_apriori_test` of ``(ref, sol, kkt)``, the last call's result again (a copy) when these
+    are the same objects."""
+    key, made = _LAST_TEST[0]
+    if len(key) == 3 and key[0] is ref and key[1] is sol and key[2] is kkt:
+        return None if made is None else dict(made)
+    made = _apriori_test(ref, sol, kkt)
+    _LAST_TEST[0] = ((ref, sol, kkt), made)
+    return None if made is None else dict(made)
+
+
+def _apriori_test(ref: Refinement, sol, kkt=None) -> Optional[dict]:
     """:func:`trackproc.methods.estimation.prior.apriori_test` of a refinement: the innovation of the
     a-priori for the pointwise cost without ``circular``; the a-priori's share of χ² otherwise (the
     integral cost's covariance is a sandwich, ``circular``'s singular across the constraints). The
