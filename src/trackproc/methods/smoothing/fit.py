@@ -7,6 +7,7 @@ and the fit) belongs with the fit whose matrices it holds.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -424,12 +425,45 @@ def ou_apply(a, x):
         d = np.empty(a.size + 1)
         d[0] = 1.0
         d[1:] = 1.0 / (1.0 - a * a)
+        kernel = _compiled_ou() if x.ndim == 2 and x.dtype == np.float64 and x.flags.c_contiguous else None
+        if kernel is not None:          # dpttrs's own operations, row by row (the same bits)
+            out = np.empty_like(x)
+            kernel(d, -a, x, out)
+            return out
         out, info = _lapack("dpttrs")(d[::-1], -a[::-1], x[::-1])
         if info == 0:
             return out[::-1]
     forward = _markov_sum(a, x)
     backward = _markov_sum(a[::-1], x[::-1])[::-1]
     return forward + backward - x
+
+
+def _compiled_ou():
+    """The compiled recurrences of :func:`ou_apply` (:mod:`.ou_jit`, the same numbers) when they
+    pay, else None: ``TRACKPROC_JIT=0`` never; ``TRACKPROC_JIT=1`` (a batch's tasks) whenever numba
+    is importable; unset, only when numba is loaded in this process already (a single command's
+    few noise estimates save less than numba's import)."""
+    from trackproc.dynamics import jit
+
+    mode = jit.mode()
+    if mode == "0" or (mode != "1" and "numba" not in sys.modules):
+        return None
+    if not _OU:
+        kernel = None
+        if jit.enabled():
+            try:
+                from trackproc.methods.smoothing.ou_jit import ou_solve as kernel
+
+                # compiled or loaded here, by one process at a time on a fresh cache
+                with jit.compile_once([kernel], "smoothing-ou"):
+                    kernel(np.ones(2), np.zeros(1), np.ones((2, 1)), np.empty((2, 1)))
+            except Exception:                      # noqa: BLE001 - numba unusable here: LAPACK's dpttrs
+                kernel = None
+        _OU.append(kernel)
+    return _OU[0]
+
+
+_OU: list = []
 
 
 def solve_upper(r, b, transpose: bool = False) -> np.ndarray:

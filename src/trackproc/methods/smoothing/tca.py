@@ -9,7 +9,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.polynomial import chebyshev as _cheb
 from numpy.polynomial import polyutils as pu
 
 from trackproc.methods.smoothing.fit import (WHITE, PolynomialFit, SmoothingError, _chebder1, check_arrays,
@@ -142,8 +141,10 @@ def _cheb_tca(coef, base, domain, kind: str, doppler_mode: str) -> tuple[float, 
     for _ in range(order + 1):
         coefs.append(_chebder1(coefs[-1], scl))
     value = [_cheb_scalar(c, off, scl) for c in coefs]
-    candidates = _polish(pu.mapdomain(_cheb.chebroots(coefs[order]), base.window, base.domain), value[order],
-                         value[order + 1], domain)
+    # window -> domain as pu.mapdomain(roots, base.window, base.domain) maps them: its own
+    # mapparms, then off + scl * x (the same operations, without its argument checks)
+    w_off, w_scl = pu.mapparms(base.window, base.domain)
+    candidates = _polish(w_off + w_scl * _cheb_roots(coefs[order]), value[order], value[order + 1], domain)
     good = [r for r in candidates if sign * value[order + 1](r) > 0]
     if not good:
         raise SmoothingError("no_tca", "no closest approach")
@@ -154,6 +155,42 @@ def _cheb_tca(coef, base, domain, kind: str, doppler_mode: str) -> tuple[float, 
     else:
         t_star = max(good, key=lambda r: abs(value[1](r)))
     return t_star, value[0](t_star)
+
+
+def _cheb_roots(coef) -> np.ndarray:
+    """``numpy.polynomial.chebyshev.chebroots(coef)`` of a 1-D float series, the same bits: the
+    eigenvalues (``numpy.linalg.eigvals``) of the same rotated scaled companion matrix
+    (``chebcompanion``; Barnett 1975, the colleague matrix), made from a kept matrix of its constant
+    entries for each size instead of numpy's per-call construction (its argument checks, the
+    trimming copy and the scale vector are most of a call below degree ~12), then sorted."""
+    c = np.asarray(coef, dtype=float)
+    k = c.size
+    while k > 1 and c[k - 1] == 0:       # as_series' trim of trailing zeros
+        k -= 1
+    if k < 2:
+        return np.array([], dtype=float)
+    if k == 2:
+        return np.array([-c[0] / c[1]])
+    n = k - 1
+    kept = _COMPANION.get(n)
+    if kept is None:
+        mat = np.zeros((n, n))
+        top = mat.reshape(-1)[1::n + 1]
+        bot = mat.reshape(-1)[n::n + 1]
+        top[0] = np.sqrt(.5)
+        top[1:] = 1 / 2
+        bot[...] = top
+        scl = np.array([1.] + [np.sqrt(.5)] * (n - 1))
+        kept = _COMPANION[n] = (mat, scl / scl[-1])
+    mat = kept[0].copy()
+    mat[:, -1] -= (c[: n] / c[n]) * kept[1] * .5
+    r = np.linalg.eigvals(mat[::-1, ::-1])
+    r.sort()
+    return r
+
+
+#: ``n -> (the constant part of chebcompanion's n x n matrix, its column scale over the last)``.
+_COMPANION: dict = {}
 
 
 def tca_uncertain(fit: PolynomialFit, ca: ClosestApproach, spread_s: float) -> bool:
