@@ -206,7 +206,11 @@ def design_matrix(t_s, degree: int, domain_s, basis: str = "chebyshev", deriv: i
     if deriv > degree:
         return np.zeros((x.size, degree + 1))
     # Coefficients of d^m P_k / dt^m, for each k (columns), in the same basis; dx/dt = 2/(b-a).
-    dcoef = der(np.eye(degree + 1), deriv, scl=2.0 / (b - a), axis=0)
+    kernels = _compiled() if basis == "chebyshev" else None
+    if kernels is not None:     # numpy's chebder, compiled (the same bits)
+        dcoef = kernels.cheb_der_rows(np.eye(degree + 1), deriv, 2.0 / (b - a))
+    else:
+        dcoef = der(np.eye(degree + 1), deriv, scl=2.0 / (b - a), axis=0)
     return vander(x, degree - deriv) @ dcoef
 
 
@@ -425,10 +429,10 @@ def ou_apply(a, x):
         d = np.empty(a.size + 1)
         d[0] = 1.0
         d[1:] = 1.0 / (1.0 - a * a)
-        kernel = _compiled_ou() if x.ndim == 2 and x.dtype == np.float64 and x.flags.c_contiguous else None
-        if kernel is not None:          # dpttrs's own operations, row by row (the same bits)
+        kernels = _compiled() if x.ndim == 2 and x.dtype == np.float64 and x.flags.c_contiguous else None
+        if kernels is not None:          # dpttrs's own operations, row by row (the same bits)
             out = np.empty_like(x)
-            kernel(d, -a, x, out)
+            kernels.ou_solve(d, -a, x, out)
             return out
         out, info = _lapack("dpttrs")(d[::-1], -a[::-1], x[::-1])
         if info == 0:
@@ -438,32 +442,33 @@ def ou_apply(a, x):
     return forward + backward - x
 
 
-def _compiled_ou():
-    """The compiled recurrences of :func:`ou_apply` (:mod:`.ou_jit`, the same numbers) when they
-    pay, else None: ``TRACKPROC_JIT=0`` never; ``TRACKPROC_JIT=1`` (a batch's tasks) whenever numba
-    is importable; unset, only when numba is loaded in this process already (a single command's
-    few noise estimates save less than numba's import)."""
+def _compiled():
+    """The smoothing's compiled kernels (:mod:`.compiled`, the same numbers as the paths they
+    replace) when they pay, else None: ``TRACKPROC_JIT=0`` never; ``TRACKPROC_JIT=1`` (a batch's
+    tasks) whenever numba is importable; unset, only when numba is loaded in this process already
+    (a single command's few noise estimates save less than numba's import)."""
     from trackproc.dynamics import jit
 
     mode = jit.mode()
     if mode == "0" or (mode != "1" and "numba" not in sys.modules):
         return None
-    if not _OU:
-        kernel = None
+    if not _KERNELS:
+        kernels = None
         if jit.enabled():
             try:
-                from trackproc.methods.smoothing.ou_jit import ou_solve as kernel
+                from trackproc.methods.smoothing import compiled as kernels
 
                 # compiled or loaded here, by one process at a time on a fresh cache
-                with jit.compile_once([kernel], "smoothing-ou"):
-                    kernel(np.ones(2), np.zeros(1), np.ones((2, 1)), np.empty((2, 1)))
-            except Exception:                      # noqa: BLE001 - numba unusable here: LAPACK's dpttrs
-                kernel = None
-        _OU.append(kernel)
-    return _OU[0]
+                with jit.compile_once([kernels.ou_solve, kernels.cheb_der_rows], "smoothing"):
+                    kernels.ou_solve(np.ones(2), np.zeros(1), np.ones((2, 1)), np.empty((2, 1)))
+                    kernels.cheb_der_rows(np.eye(3), 1, 1.0)
+            except Exception:                      # noqa: BLE001 - numba unusable here: the numpy paths
+                kernels = None
+        _KERNELS.append(kernels)
+    return _KERNELS[0]
 
 
-_OU: list = []
+_KERNELS: list = []
 
 
 def solve_upper(r, b, transpose: bool = False) -> np.ndarray:

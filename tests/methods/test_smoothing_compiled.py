@@ -1,6 +1,8 @@
-"""The compiled AR(1) product ``C x`` (methods/smoothing/ou_jit.py, used by ``ou_apply`` under
-``TRACKPROC_JIT=1``) against LAPACK's ``dpttrs`` path bit for bit, against ``C`` built entry by
-entry (an independent reference), and the noise estimate it serves equal on both paths."""
+"""The smoothing's compiled kernels (methods/smoothing/compiled.py, used under ``TRACKPROC_JIT=1``):
+the AR(1) product ``C x`` of ``ou_apply`` against LAPACK's ``dpttrs`` path bit for bit and against
+``C`` built entry by entry (an independent reference), the noise estimate it serves equal on both
+paths; the derivative rows of ``design_matrix`` against numpy's ``chebder`` bit for bit and against
+derivatives by central differences of the Chebyshev polynomials."""
 
 import numpy as np
 import pytest
@@ -32,8 +34,7 @@ def _lapack_path(a, x):
 def test_compiled_product_equals_dpttrs_bitwise_and_the_dense_matrix(n, p):
     rng = np.random.default_rng(n * 100 + p)
     with jit.default("1"):
-        kernel = fitmod._compiled_ou()
-        assert kernel is not None
+        assert fitmod._compiled() is not None
         for rho in (0.05, 0.5, 0.9, 0.99):
             gaps = rng.choice([1.0, 1.0, 1.0, 2.0, 7.5], size=n - 1)
             a = np.minimum(rho ** gaps, fitmod.MAX_RHO)
@@ -62,3 +63,31 @@ def test_noise_estimate_equal_on_both_paths():
     assert 0.3 < want.rho_estimate < 0.9
     assert got.rho_estimate.hex() == want.rho_estimate.hex()
     assert got == want
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3, 9, 30])
+def test_compiled_derivative_rows_equal_numpy_bitwise(degree):
+    rng = np.random.default_rng(degree)
+    x = rng.uniform(-50.0, 700.0, 7)
+    for deriv in range(1, min(degree, 3) + 1):
+        for domain in ((0.0, 640.0), (-3.25, 811.5), (1e5, 1e5 + 37.0)):
+            with jit.default("0"):
+                want = fitmod.design_matrix(x, degree, domain, "chebyshev", deriv)
+            with jit.default("1"):
+                got = fitmod.design_matrix(x, degree, domain, "chebyshev", deriv)
+            assert got.tobytes() == want.tobytes()
+            scl = np.polynomial.chebyshev.chebder(np.eye(degree + 1), deriv, 2.0 / (domain[1] - domain[0]), axis=0)
+            with jit.default("1"):
+                assert fitmod._compiled().cheb_der_rows(np.eye(degree + 1), deriv,
+                                                        2.0 / (domain[1] - domain[0])).tobytes() == scl.tobytes()
+
+
+def test_compiled_derivative_rows_against_differences():
+    """The first derivative rows against central differences of the degree-9 basis (independent)."""
+    domain = (0.0, 600.0)
+    t = np.array([12.0, 300.0, 587.5])
+    h = 1e-3
+    with jit.default("1"):
+        got = fitmod.design_matrix(t, 9, domain, "chebyshev", 1)
+    diff = (fitmod.design_matrix(t + h, 9, domain) - fitmod.design_matrix(t - h, 9, domain)) / (2 * h)
+    np.testing.assert_allclose(got, diff, rtol=1e-6, atol=1e-9)
