@@ -91,3 +91,48 @@ def test_compiled_derivative_rows_against_differences():
         got = fitmod.design_matrix(t, 9, domain, "chebyshev", 1)
     diff = (fitmod.design_matrix(t + h, 9, domain) - fitmod.design_matrix(t - h, 9, domain)) / (2 * h)
     np.testing.assert_allclose(got, diff, rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize("kind, mode", [("doppler", "one-way"), ("doppler", "two-way"), ("range_rate", "one-way"),
+                                        ("range", "one-way")])
+def test_compiled_tca_polish_equals_the_python_floats_bitwise(kind, mode):
+    """tca._cheb_tca with the compiled polish and evaluations against its Python-float path (itself
+    equal to numpy's series path: test_smoothing_scalar_series.py) on fits and random series of
+    degrees 2-33: the same t*, the same value there, to the bit, and the same failures."""
+    from trackproc.methods.smoothing.fit import SmoothingError, fit_polynomial
+    from trackproc.methods.smoothing.tca import _cheb_tca
+
+    rng = np.random.default_rng(17)
+    t = np.linspace(0.0, 640.0, 321)
+    shape = {"doppler": -4e4 * np.tanh((t - 300.0) / 80.0), "range_rate": 6e3 * np.tanh((t - 330.0) / 90.0),
+             "range": 1e6 + 2e3 * (t - 310.0) ** 2}[kind]
+    base = fit_polynomial(t, shape, np.ones(t.size), 22).series(0)
+    outcomes = set()
+    for d in range(4, 34):
+        for trial in range(3):
+            coef = rng.normal(size=d + 1) * 10.0 ** rng.integers(-2, 3) if trial == 2 else \
+                fit_polynomial(t, shape + rng.normal(0.0, 1.0 + 50 * trial, t.size), np.ones(t.size), d).coef
+            results = []
+            for jit_mode in ("0", "1"):
+                with jit.default(jit_mode):
+                    try:
+                        got = _cheb_tca(coef, base, (0.0, 640.0), kind, mode)
+                        results.append(tuple(float(v).hex() for v in got))
+                    except SmoothingError:
+                        results.append("none")
+            assert results[0] == results[1]
+            outcomes.add(results[0] == "none")
+    assert False in outcomes
+
+
+@pytest.mark.parametrize("n", [2, 3, 4, 7, 21, 31])
+def test_compiled_series_derivative_equals_chebder1_bitwise(n):
+    """cheb_der_rows on one column (the TCA spread's derivative series) against fit._chebder1."""
+    rng = np.random.default_rng(300 + n)
+    with jit.default("1"):
+        kernels = fitmod._compiled()
+    for _ in range(50):
+        coef = rng.normal(size=n) * 10.0 ** rng.integers(-6, 7)
+        scl = float(rng.uniform(1e-4, 2.0))
+        got = kernels.cheb_der_rows(coef.reshape(-1, 1), 1, scl).reshape(-1)
+        assert got.tobytes() == fitmod._chebder1(coef, scl).tobytes()

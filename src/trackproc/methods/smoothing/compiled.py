@@ -12,6 +12,10 @@ for the AR(1) correlation): LAPACK ``dpttrs`` (reference ``dptts2``) on the time
 :func:`cheb_der_rows`: ``numpy.polynomial.chebyshev.chebder(c, m, scl, axis=0)`` of a matrix (the
 derivative rows of :func:`~trackproc.methods.smoothing.fit.design_matrix`, ~110 us of numpy
 row operations an order at degree 30).
+
+:func:`polish_roots`, :func:`cheb_values`: the TCA spread's Newton polish of the companion
+matrix's roots and its evaluations of the derivative series (:func:`trackproc.methods.smoothing.tca._cheb_tca`),
+which loop in Python floats.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import numpy as np
 
 from trackproc.dynamics.jit import njit
 
-__all__ = ["cheb_der_rows", "ou_solve"]
+__all__ = ["cheb_der_rows", "cheb_value", "cheb_values", "ou_solve", "polish_roots"]
 
 
 @njit(nogil=True)
@@ -70,3 +74,54 @@ def cheb_der_rows(c, m, scl):
             der[0, k] = c[1, k]
         c = der
     return c
+
+
+@njit(nogil=True)
+def cheb_value(c, off, scl, x):
+    """:func:`trackproc.methods.smoothing.tca._cheb_scalar`'s value of the Chebyshev series ``c``
+    (domain map ``off + scl x``) at one float ``x``: its operations in its order."""
+    n = c.size
+    u = off + scl * x
+    if n == 1:
+        return c[0] + 0.0 * u
+    if n == 2:
+        return c[0] + c[1] * u
+    x2 = 2 * u
+    c0, c1 = c[n - 2], c[n - 1]
+    for i in range(3, n + 1):
+        c0, c1 = c[n - i] - c1, c0 + c1 * x2
+    return c0 + c1 * u
+
+
+@njit(nogil=True)
+def cheb_values(c, off, scl, xs):
+    """:func:`cheb_value` at each of ``xs``."""
+    out = np.empty(xs.size)
+    for k in range(xs.size):
+        out[k] = cheb_value(c, off, scl, xs[k])
+    return out
+
+
+@njit(nogil=True)
+def polish_roots(zr, zi, cv, cd, off, scl, lo, hi):
+    """:func:`trackproc.methods.smoothing.tca._polish` before its rounding: the roots
+    ``zr + i zi`` real to 1e-3 of the half-width of ``[lo, hi]``, after up to 5 Newton steps on the
+    series ``cv`` (derivative ``cd``), inside it; NaN for the others."""
+    half = 0.5 * (hi - lo)
+    out = np.empty(zr.size)
+    for k in range(zr.size):
+        out[k] = np.nan
+        if abs(zi[k]) > 1e-3 * half:
+            continue
+        x = zr[k]
+        for _ in range(5):
+            slope = cheb_value(cd, off, scl, x)
+            if slope == 0:
+                break
+            step = cheb_value(cv, off, scl, x) / slope
+            x -= step
+            if abs(step) < 1e-12 * half:
+                break
+        if lo <= x <= hi and np.isfinite(x):
+            out[k] = x
+    return out

@@ -459,9 +459,13 @@ def _compiled():
                 from trackproc.methods.smoothing import compiled as kernels
 
                 # compiled or loaded here, by one process at a time on a fresh cache
-                with jit.compile_once([kernels.ou_solve, kernels.cheb_der_rows], "smoothing"):
+                with jit.compile_once([kernels.ou_solve, kernels.cheb_der_rows, kernels.polish_roots,
+                                       kernels.cheb_values, kernels.cheb_value], "smoothing"):
                     kernels.ou_solve(np.ones(2), np.zeros(1), np.ones((2, 1)), np.empty((2, 1)))
                     kernels.cheb_der_rows(np.eye(3), 1, 1.0)
+                    kernels.polish_roots(np.zeros(1), np.zeros(1), np.ones(3), np.ones(2), 0.0, 1.0, -1.0, 1.0)
+                    kernels.cheb_values(np.ones(3), 0.0, 1.0, np.zeros(1))
+                    kernels.cheb_value(np.ones(3), 0.0, 1.0, 0.0)
             except Exception:                      # noqa: BLE001 - numba unusable here: the numpy paths
                 kernels = None
         _KERNELS.append(kernels)
