@@ -295,14 +295,23 @@ def check_rank(r, degree: int) -> float:
     return cond
 
 
-def solve_fit(t, y, s, degree, domain, basis, used, noise: NoiseModel = WHITE, rows=None) -> PolynomialFit:
+def solve_fit(t, y, s, degree, domain, basis, used, noise: NoiseModel = WHITE, rows=None,
+              _kept: bool = True) -> PolynomialFit:
     """QR solution of the whitened system for the samples ``used``; residuals for all samples.
 
     White noise: rows ``psi_i / sigma_i``; AR(1) noise: those rows, in time order, further
     whitened by the inverse Cholesky factor of the correlation (generalized least squares).
     ``rows``: a :class:`DesignRows` of these samples (t sorted), whose design matrices and white
-    QR factors are shared with the other steps of :func:`smooth_pass` (the same bits).
+    QR factors are shared with the other steps of :func:`smooth_pass` (the same bits), and which
+    keeps its fits by (degree, samples, noise): a fit asked again is the one made (frozen).
     """
+    if rows is not None and _kept:
+        # the same fit asked again (the variance-ratio test's AR(1) fit is smooth_pass's fit)
+        key = (degree, np.packbits(np.asarray(used, bool)).tobytes(), noise)
+        made = rows.fits.get(key)
+        if made is None:
+            made = rows.fits[key] = solve_fit(t, y, s, degree, domain, basis, used, noise, rows, _kept=False)
+        return made
     psi = design_matrix(t, degree, domain, basis) if rows is None else rows.design(degree)
     idx = used_in_time_order(t, used)
     tu = t[idx]
@@ -346,6 +355,7 @@ class DesignRows:
         self._wide = None
         self._design: dict = {}
         self._qr: dict = {}
+        self.fits: dict = {}        # solve_fit's results by (degree, samples in use, noise model)
 
     def design(self, degree: int) -> np.ndarray:
         """``design_matrix(t, degree, domain, basis)`` of every sample."""
