@@ -16,7 +16,6 @@ from trackproc.methods.smoothing.correlation import estimate_noise  # noqa: E402
 
 def _dense(a):
     """``C_ij = prod a_k`` over the steps between i and j."""
-    n = a.size + 1
     logs = np.concatenate([[0.0], np.cumsum(np.log(a))])
     return np.exp(-np.abs(logs[:, None] - logs[None, :]))
 
@@ -76,10 +75,10 @@ def test_compiled_derivative_rows_equal_numpy_bitwise(degree):
             with jit.default("1"):
                 got = fitmod.design_matrix(x, degree, domain, "chebyshev", deriv)
             assert got.tobytes() == want.tobytes()
-            scl = np.polynomial.chebyshev.chebder(np.eye(degree + 1), deriv, 2.0 / (domain[1] - domain[0]), axis=0)
+            rows = np.polynomial.chebyshev.chebder(np.eye(degree + 1), deriv, 2.0 / (domain[1] - domain[0]), axis=0)
             with jit.default("1"):
                 assert fitmod._compiled().cheb_der_rows(np.eye(degree + 1), deriv,
-                                                        2.0 / (domain[1] - domain[0])).tobytes() == scl.tobytes()
+                                                        2.0 / (domain[1] - domain[0])).tobytes() == rows.tobytes()
 
 
 def test_compiled_derivative_rows_against_differences():
