@@ -69,3 +69,19 @@ def test_coefficient_tca_equals_the_series_path_bitwise(kind, mode):
         assert float(got_v).hex() == float(other(want)).hex()
         outcomes.add("root")
     assert "root" in outcomes
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 9, 17, 31])
+def test_companion_roots_equal_numpy_chebroots_bitwise(n):
+    """tca._cheb_roots (the kept companion scaffolding) against numpy's chebroots: the same roots to
+    the bit, trailing zero coefficients trimmed as numpy trims them, for every size of series."""
+    from trackproc.methods.smoothing.tca import _cheb_roots
+
+    rng = np.random.default_rng(200 + n)
+    for trial in range(60):
+        coef = rng.normal(size=n) * 10.0 ** rng.integers(-6, 7) / np.arange(1, n + 1) ** rng.integers(0, 3)
+        if trial % 7 == 0:
+            coef[-min(2, n - 1):] = 0.0 if n > 1 else coef[-1:]
+        got, want = _cheb_roots(coef), np.polynomial.chebyshev.chebroots(coef)
+        assert got.dtype == want.dtype and got.shape == want.shape
+        assert got.tobytes() == want.tobytes()

@@ -65,3 +65,17 @@ def test_the_samples_table_columns_are_its_frames():
         na = pd.isna(a)                                   # a missing pass id stays missing (NaN != NaN)
         np.testing.assert_array_equal(na, pd.isna(b))
         np.testing.assert_array_equal(a[~na], b[~na])
+
+
+def test_columns_utc_from_a_zone_aware_column_equal_pandas_conversion():
+    """_Columns.utc from a zone-aware column's values (its UTC instants) against pandas'
+    tz_convert("UTC").tz_localize(None), for another zone, a microsecond unit and a DST change."""
+    from trackproc.pipeline.smooth import _Columns
+
+    base = pd.date_range("2026-03-29 00:30", periods=400, freq="7s", tz="Europe/Copenhagen")    # 02:00 -> 03:00
+    for times in (base, base.tz_convert("UTC"), base.as_unit("us"), base.tz_convert("America/St_Johns")):
+        frame = pd.DataFrame({"time": times, "value": np.arange(400.0), "sigma": np.ones(400)})
+        want = frame["time"].dt.tz_convert("UTC").dt.tz_localize(None).to_numpy().astype("datetime64[ns]")
+        got = _Columns(frame).utc
+        assert got.dtype == want.dtype
+        np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))

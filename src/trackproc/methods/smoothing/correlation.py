@@ -82,6 +82,8 @@ def moment_ratio(t_sorted, q, step_s: float):
     zl[:-1] += q[1:]
     zl[1:] += q[:-1]
     qv, zv = q.ravel(), zl.ravel()          # C order, like every w below
+    # NoiseModel.neighbour_correlation's exponent, made once (the same array at every rho)
+    spacing = np.diff(t_sorted) / step_s
     memo: dict = {}
 
     def expected(rho: float) -> float:
@@ -91,7 +93,7 @@ def moment_ratio(t_sorted, q, step_s: float):
             if rho == 0.0:           # C = I
                 w, sum_a = qv, 0.0
             else:
-                acorr = NoiseModel(rho=rho, step_s=step_s).neighbour_correlation(t_sorted)
+                acorr = np.minimum(rho ** spacing, MAX_RHO)      # neighbour_correlation (rho > 0)
                 w, sum_a = ou_apply(acorr, q).ravel(), float(np.sum(acorr))
             made = memo[rho] = (sum_a - float(zv @ w)) / (n - float(qv @ w))
         return made

@@ -7,6 +7,7 @@ and the fit) belongs with the fit whose matrices it holds.
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -205,7 +206,11 @@ def design_matrix(t_s, degree: int, domain_s, basis: str = "chebyshev", deriv: i
     if deriv > degree:
         return np.zeros((x.size, degree + 1))
     # Coefficients of d^m P_k / dt^m, for each k (columns), in the same basis; dx/dt = 2/(b-a).
-    dcoef = der(np.eye(degree + 1), deriv, scl=2.0 / (b - a), axis=0)
+    kernels = _compiled() if basis == "chebyshev" else None
+    if kernels is not None:     # numpy's chebder, compiled (the same bits)
+        dcoef = kernels.cheb_der_rows(np.eye(degree + 1), deriv, 2.0 / (b - a))
+    else:
+        dcoef = der(np.eye(degree + 1), deriv, scl=2.0 / (b - a), axis=0)
     return vander(x, degree - deriv) @ dcoef
 
 
@@ -290,14 +295,23 @@ def check_rank(r, degree: int) -> float:
     return cond
 
 
-def solve_fit(t, y, s, degree, domain, basis, used, noise: NoiseModel = WHITE, rows=None) -> PolynomialFit:
+def solve_fit(t, y, s, degree, domain, basis, used, noise: NoiseModel = WHITE, rows=None,
+              _kept: bool = True) -> PolynomialFit:
     """QR solution of the whitened system for the samples ``used``; residuals for all samples.
 
     White noise: rows ``psi_i / sigma_i``; AR(1) noise: those rows, in time order, further
     whitened by the inverse Cholesky factor of the correlation (generalized least squares).
     ``rows``: a :class:`DesignRows` of these samples (t sorted), whose design matrices and white
-    QR factors are shared with the other steps of :func:`smooth_pass` (the same bits).
+    QR factors are shared with the other steps of :func:`smooth_pass` (the same bits), and which
+    keeps its fits by (degree, samples, noise): a fit asked again is the one made (frozen).
     """
+    if rows is not None and _kept:
+        # the same fit asked again (the variance-ratio test's AR(1) fit is smooth_pass's fit)
+        key = (degree, np.packbits(np.asarray(used, bool)).tobytes(), noise)
+        made = rows.fits.get(key)
+        if made is None:
+            made = rows.fits[key] = solve_fit(t, y, s, degree, domain, basis, used, noise, rows, _kept=False)
+        return made
     psi = design_matrix(t, degree, domain, basis) if rows is None else rows.design(degree)
     idx = used_in_time_order(t, used)
     tu = t[idx]
@@ -341,6 +355,7 @@ class DesignRows:
         self._wide = None
         self._design: dict = {}
         self._qr: dict = {}
+        self.fits: dict = {}        # solve_fit's results by (degree, samples in use, noise model)
 
     def design(self, degree: int) -> np.ndarray:
         """``design_matrix(t, degree, domain, basis)`` of every sample."""
@@ -424,12 +439,50 @@ def ou_apply(a, x):
         d = np.empty(a.size + 1)
         d[0] = 1.0
         d[1:] = 1.0 / (1.0 - a * a)
+        kernels = _compiled() if x.ndim == 2 and x.dtype == np.float64 and x.flags.c_contiguous else None
+        if kernels is not None:          # dpttrs's own operations, row by row (the same bits)
+            out = np.empty_like(x)
+            kernels.ou_solve(d, -a, x, out)
+            return out
         out, info = _lapack("dpttrs")(d[::-1], -a[::-1], x[::-1])
         if info == 0:
             return out[::-1]
     forward = _markov_sum(a, x)
     backward = _markov_sum(a[::-1], x[::-1])[::-1]
     return forward + backward - x
+
+
+def _compiled():
+    """The smoothing's compiled kernels (:mod:`.compiled`, the same numbers as the paths they
+    replace) when they pay, else None: ``TRACKPROC_JIT=0`` never; ``TRACKPROC_JIT=1`` (a batch's
+    tasks) whenever numba is importable; unset, only when numba is loaded in this process already
+    (a single command's few noise estimates save less than numba's import)."""
+    from trackproc.dynamics import jit
+
+    mode = jit.mode()
+    if mode == "0" or (mode != "1" and "numba" not in sys.modules):
+        return None
+    if not _KERNELS:
+        kernels = None
+        if jit.enabled():
+            try:
+                from trackproc.methods.smoothing import compiled as kernels
+
+                # compiled or loaded here, by one process at a time on a fresh cache
+                with jit.compile_once([kernels.ou_solve, kernels.cheb_der_rows, kernels.polish_roots,
+                                       kernels.cheb_values, kernels.cheb_value], "smoothing"):
+                    kernels.ou_solve(np.ones(2), np.zeros(1), np.ones((2, 1)), np.empty((2, 1)))
+                    kernels.cheb_der_rows(np.eye(3), 1, 1.0)
+                    kernels.polish_roots(np.zeros(1), np.zeros(1), np.ones(3), np.ones(2), 0.0, 1.0, -1.0, 1.0)
+                    kernels.cheb_values(np.ones(3), 0.0, 1.0, np.zeros(1))
+                    kernels.cheb_value(np.ones(3), 0.0, 1.0, 0.0)
+            except Exception:                      # noqa: BLE001 - numba unusable here: the numpy paths
+                kernels = None
+        _KERNELS.append(kernels)
+    return _KERNELS[0]
+
+
+_KERNELS: list = []
 
 
 def solve_upper(r, b, transpose: bool = False) -> np.ndarray:

@@ -9,10 +9,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.polynomial import chebyshev as _cheb
 from numpy.polynomial import polyutils as pu
 
-from trackproc.methods.smoothing.fit import (WHITE, PolynomialFit, SmoothingError, _chebder1, check_arrays,
+from trackproc.methods.smoothing.fit import (WHITE, PolynomialFit, SmoothingError, _chebder1, _compiled, check_arrays,
                                              check_enough, check_rank, design_matrix, replace_fit, solve_upper,
                                              used_in_time_order, whiten)
 
@@ -138,12 +137,19 @@ def _cheb_tca(coef, base, domain, kind: str, doppler_mode: str) -> tuple[float, 
     derivative. Raises :class:`SmoothingError` (``no_tca``) where :func:`_tca_time` would."""
     order, sign, _ = _definition(kind, doppler_mode)
     off, scl = base.mapparms()
+    kernels = _compiled()
     coefs = [np.array(coef, dtype=float)]
     for _ in range(order + 1):
-        coefs.append(_chebder1(coefs[-1], scl))
+        coefs.append(_chebder1(coefs[-1], scl) if kernels is None else
+                     kernels.cheb_der_rows(coefs[-1].reshape(-1, 1), 1, float(scl)).reshape(-1))
+    # window -> domain as pu.mapdomain(roots, base.window, base.domain) maps them: its own
+    # mapparms, then off + scl * x (the same operations, without its argument checks)
+    w_off, w_scl = pu.mapparms(base.window, base.domain)
+    roots = w_off + w_scl * _cheb_roots(coefs[order])
+    if kernels is not None:     # the same operations compiled (compiled.polish_roots, cheb_values)
+        return _cheb_tca_compiled(kernels, roots, coefs, float(off), float(scl), domain, order, sign)
     value = [_cheb_scalar(c, off, scl) for c in coefs]
-    candidates = _polish(pu.mapdomain(_cheb.chebroots(coefs[order]), base.window, base.domain), value[order],
-                         value[order + 1], domain)
+    candidates = _polish(roots, value[order], value[order + 1], domain)
     good = [r for r in candidates if sign * value[order + 1](r) > 0]
     if not good:
         raise SmoothingError("no_tca", "no closest approach")
@@ -154,6 +160,67 @@ def _cheb_tca(coef, base, domain, kind: str, doppler_mode: str) -> tuple[float, 
     else:
         t_star = max(good, key=lambda r: abs(value[1](r)))
     return t_star, value[0](t_star)
+
+
+def _cheb_tca_compiled(kernels, roots, coefs, off, scl, domain, order, sign) -> tuple[float, float]:
+    """:func:`_cheb_tca`'s polish and choice among the roots by the compiled kernels: the same
+    Newton steps and values (:func:`_cheb_scalar`'s operations), the same rounding, order and
+    choice (the first of equal keys, as ``min`` / ``max`` take it)."""
+    roots = np.asarray(roots)
+    zr = np.ascontiguousarray(roots.real, dtype=float)
+    zi = np.ascontiguousarray(roots.imag, dtype=float)
+    a, b = float(domain[0]), float(domain[1])
+    out = kernels.polish_roots(zr, zi, coefs[order], coefs[order + 1], off, scl, a, b)
+    out = out[~np.isnan(out)]
+    candidates = np.array([float(v) for v in sorted(set(np.round(out, 9)))], dtype=float)
+    if candidates.size:
+        good = candidates[sign * kernels.cheb_values(coefs[order + 1], off, scl, candidates) > 0]
+    else:
+        good = candidates
+    if not good.size:
+        raise SmoothingError("no_tca", "no closest approach")
+    keys = kernels.cheb_values(coefs[0 if order == 1 else 1], off, scl, good).tolist()
+    at = range(len(keys))
+    # Python's min / max over the keys, as _cheb_tca takes them (NaN included)
+    best = max(at, key=lambda i: abs(keys[i])) if order == 0 else min(at, key=keys.__getitem__)
+    t_star = float(good[best])
+    return t_star, float(kernels.cheb_value(coefs[0], off, scl, t_star))
+
+
+def _cheb_roots(coef) -> np.ndarray:
+    """``numpy.polynomial.chebyshev.chebroots(coef)`` of a 1-D float series, the same bits: the
+    eigenvalues (``numpy.linalg.eigvals``) of the same rotated scaled companion matrix
+    (``chebcompanion``; Barnett 1975, the colleague matrix), made from a kept matrix of its constant
+    entries for each size instead of numpy's per-call construction (its argument checks, the
+    trimming copy and the scale vector are most of a call below degree ~12), then sorted."""
+    c = np.asarray(coef, dtype=float)
+    k = c.size
+    while k > 1 and c[k - 1] == 0:       # as_series' trim of trailing zeros
+        k -= 1
+    if k < 2:
+        return np.array([], dtype=float)
+    if k == 2:
+        return np.array([-c[0] / c[1]])
+    n = k - 1
+    kept = _COMPANION.get(n)
+    if kept is None:
+        mat = np.zeros((n, n))
+        top = mat.reshape(-1)[1::n + 1]
+        bot = mat.reshape(-1)[n::n + 1]
+        top[0] = np.sqrt(.5)
+        top[1:] = 1 / 2
+        bot[...] = top
+        scl = np.array([1.] + [np.sqrt(.5)] * (n - 1))
+        kept = _COMPANION[n] = (mat, scl / scl[-1])
+    mat = kept[0].copy()
+    mat[:, -1] -= (c[: n] / c[n]) * kept[1] * .5
+    r = np.linalg.eigvals(mat[::-1, ::-1])
+    r.sort()
+    return r
+
+
+#: ``n -> (the constant part of chebcompanion's n x n matrix, its column scale over the last)``.
+_COMPANION: dict = {}
 
 
 def tca_uncertain(fit: PolynomialFit, ca: ClosestApproach, spread_s: float) -> bool:
