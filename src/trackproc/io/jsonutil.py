@@ -44,6 +44,15 @@ def dumps(value, indent: int | None = 2) -> str:
     return dumps_indented(json_ready(value), indent, sort_keys=True) + "\n"
 
 
+def dumps_compact(value, sort_keys: bool = True, ready: bool = False) -> str:
+    """:func:`dumps` without whitespace, newline-terminated: the same values (the same float text,
+    ``float.__repr__``), all encoded by the standard library's C encoder, several times faster
+    than the indented text (for the files a batch writes per input, which a program reads).
+    ``ready``: ``value`` is :func:`json_ready`'s output already (not converted again)."""
+    return json.dumps(value if ready else json_ready(value), sort_keys=sort_keys, allow_nan=False,
+                      separators=(",", ":")) + "\n"
+
+
 class _NotPlain(Exception):
     """A value :func:`dumps_indented` leaves to ``json.dumps`` (another type, a non-finite float)."""
 
