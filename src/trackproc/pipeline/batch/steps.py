@@ -30,7 +30,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from trackproc.errors import InputError, ProcessingError
-from trackproc.isotime import iso_utc
 from trackproc.pipeline.batch.chain import InputContext, Step, WindowContext, register
 
 #: Stations tables parsed in this process, by (path, bytes): every input of a batch reads the same one.
@@ -278,6 +277,7 @@ def refine_pass(table) -> tuple:
     without Doppler or range-rate: refine reports that) is returned as it is."""
     import numpy as np
 
+    from trackproc.isotime import iso_utc
     from trackproc.pipeline.refine import RANGE_RATE_KINDS
 
     # numpy columns, not pandas: the same groups and order (~2 ms a pass of pandas calls)
