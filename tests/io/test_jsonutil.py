@@ -10,7 +10,7 @@ import random
 import numpy as np
 import pytest
 
-from trackproc.io.jsonutil import dumps, dumps_indented, json_ready
+from trackproc.io.jsonutil import dumps, dumps_compact, dumps_indented, json_ready
 
 _LEAVES = [0.1, -0.0, 5e-324, 1e308, 1e-300, 123456789.125, 2**70, -3, 0, True, False, None, "", "a,b",
            "é \"quoted\"\n\ttab", "\u2028 σ", "[1,2]"]
@@ -70,3 +70,23 @@ def test_a_pass_outputs_text_is_unchanged():
     ready = json_ready(doc)
     assert dumps(doc) == json.dumps(ready, indent=2, sort_keys=True, allow_nan=False) + "\n"
     assert dumps(doc, indent=None) == json.dumps(ready, sort_keys=True, allow_nan=False) + "\n"
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_compact_text_holds_the_indented_texts_values(seed):
+    """dumps_compact (the batch's manifests and .smooth.json): one line, no whitespace outside
+    strings, and parsed back the same values (every float bit for bit) as the indented text of
+    dumps, the reference being json.loads of each."""
+    rng = random.Random(seed)
+    for _ in range(300):
+        value = {"v": _value(rng), "nan": float("nan"), "x": np.float64(rng.uniform(-1, 1))}
+        compact, indented = dumps_compact(value), dumps(value)
+        assert compact.endswith("\n") and compact.count("\n") == 1
+        assert json.loads(compact) == json.loads(indented)
+        assert len(compact) <= len(indented)
+        ready = json_ready(value)
+        assert dumps_compact(ready, sort_keys=False, ready=True) == json.dumps(
+            ready, allow_nan=False, separators=(",", ":")) + "\n"
+    floats = [rng.uniform(-1e3, 1e3) for _ in range(200)] + [5e-324, -0.0, 1e308]
+    back = json.loads(dumps_compact({"f": floats}))["f"]
+    assert [f.hex() for f in back] == [f.hex() for f in floats]

@@ -25,3 +25,35 @@ def test_a_worker_starts_with_the_steps_modules_and_one_blas_thread():
         executor.close()
     assert loaded == list(MODULES)
     assert threads == "1"
+
+
+_DRIVER = """
+import sys
+from trackproc.pipeline.batch.config import Settings
+from trackproc.pipeline.batch.executors import make_executor
+from trackproc.pipeline.batch.kernels import compiled_kernels
+
+settings = Settings(values={"batch": {"scheduler": None, "workers": 2, "steps": ["ingest", "smooth", "refine"]}},
+                    origins={})
+jit = compiled_kernels(settings)
+executor = make_executor(settings, 4, jit)
+try:
+    worker = executor.pool.submit(eval, "'numba' in __import__('sys').modules").result()
+finally:
+    executor.close()
+print(jit, "numba" in sys.modules, worker)
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.skipif("forkserver" not in multiprocessing.get_all_start_methods(), reason="no fork server here")
+def test_a_pool_driver_leaves_the_kernels_to_the_workers():
+    """With a pool the driver runs no task: it does not import numba (~0.3-0.5 s of CPU a run);
+    its workers start with the kernels loaded (by the fork server, under the compile locks)."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("numba")
+    done = subprocess.run([sys.executable, "-c", _DRIVER], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.split() == ["True", "False", "True"]

@@ -344,7 +344,8 @@ class Executors:
 
 def make_executor(settings: Settings, n_tasks: int, jit: bool = False):
     """The executor of a run: a Dask client, this process or a process pool; ``jit``: the tasks
-    use the compiled kernels (:func:`compiled_kernels`), so this process and the workers load them."""
+    use the compiled kernels (:func:`compiled_kernels`), so the process that runs them loads them
+    (this one with one worker, else the pool's fork server or each of its workers)."""
     scheduler = settings.get("batch.scheduler")
     if scheduler:
         if settings.origins.get("batch.workers") != "default":
@@ -353,8 +354,10 @@ def make_executor(settings: Settings, n_tasks: int, jit: bool = False):
         return DaskExecutor(scheduler)
     workers = settings.get("batch.workers") or _cores()
     workers = max(1, min(workers, n_tasks))
-    if jit and workers > 1:
-        load_numba()        # compiled here first, if never before, so that the workers only load them
+    # with a pool this process runs no task and needs no kernel: the fork server loads them (or,
+    # the first time on this installation, compiles them under jit.compile_once's locks) before it
+    # forks the workers (preload_jit); without a fork server each worker's start_worker loads them
+    # under the same locks, so one compiles and the others wait and load
     return SerialExecutor(jit) if workers == 1 else PoolExecutor(workers, jit)
 
 

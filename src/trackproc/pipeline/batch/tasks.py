@@ -19,7 +19,6 @@ import trackproc.pipeline.batch.steps  # noqa: F401 - registers the steps (a wor
 from trackproc.dynamics import jit
 from trackproc.errors import InputError, TrackprocError
 from trackproc.io.jsonutil import json_ready
-from trackproc.isotime import iso_utc
 from trackproc.pipeline.batch.chain import STEPS, InputContext, WindowContext
 
 @dataclass
@@ -168,6 +167,8 @@ def _run_task(task: Task) -> TaskResult:
 
 
 def _table_numbers(table) -> dict:
+    from trackproc.isotime import iso_utc           # numpy: not in a pool's driver, which runs no task
+
     times = table.column("time")                    # numpy columns: pandas calls cost ~3 ms a pass
     stations = table.column("station")
     passes = table.column("pass_id")
