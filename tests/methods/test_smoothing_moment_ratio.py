@@ -1,7 +1,7 @@
 """The AR(1) moment equation of the smoothing's noise estimate (correlation.moment_ratio,
 estimate_noise) against the dense traces tr(L M C M) / tr(M C M) built from n x n matrices, on
-irregular times (gaps, a repeated time), C x itself against the dense C, and the estimate's rho and white/AR(1) decision against
-the same dense reference solved by scipy's brentq."""
+irregular times (gaps, a repeated time), C x itself against the dense C, and the estimate's rho
+and white/AR(1) decision against the same dense reference solved by scipy's brentq."""
 
 import numpy as np
 import pytest
