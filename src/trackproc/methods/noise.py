@@ -216,7 +216,6 @@ class _Reml:
         s2 = rss / m
         return -0.5 * (m * math.log(s2) + logdet + m), math.sqrt(s2)
 
-
     def fast(self, model: NoiseModel, profile: bool = True) -> float:
         """``ℓ_R`` of :meth:`__call__` by one compiled pass (:func:`~trackproc.methods.whitening.compiled_reml`:
         the filter's innovations rotated into R row by row, no factor object, no whitened copy), equal
