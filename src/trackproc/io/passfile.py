@@ -97,7 +97,12 @@ def _json_default(value):
 
 
 def to_arrow(table: PassTable) -> pa.Table:
-    """The table as Arrow, canonical types, metadata under ``trackproc`` (no pandas metadata)."""
+    """The table as Arrow, canonical types, metadata under ``trackproc`` (no pandas metadata).
+    A table that holds every column as numpy is converted from them, without its DataFrame (the
+    same arrays: the frame path converts the frame to these numpy types first)."""
+    columns = table.numpy_columns()
+    if columns is not None and all(c in columns for c in COLUMNS):
+        return _arrow_of_columns(columns, table.meta)
     frame = table.frame
     missing = [c for c in COLUMNS if c not in frame.columns]
     if missing:
@@ -123,6 +128,27 @@ def to_arrow(table: PassTable) -> pa.Table:
             arrays.append(array)
             fields.append(pa.field(str(name), array.type))
     schema = pa.schema(fields, metadata={META_KEY: meta_json(table.meta).encode()})
+    return pa.Table.from_arrays(arrays, schema=schema)
+
+
+def _arrow_of_columns(columns: dict, meta: dict) -> pa.Table:
+    """:func:`to_arrow` of numpy columns (``time`` naive UTC ``datetime64[ns]``, text object arrays
+    of str): the same schema, and NaN in an added column written as null as ``from_pandas`` does."""
+    arrays = [pa.array(columns["time"], pa.timestamp("ns")).cast(pa.timestamp("ns", tz="UTC")),
+              *(pa.array(columns[c], pa.string()) for c in ("station", "pass_id", "kind")),
+              *(pa.array(np.asarray(columns[c], dtype=np.float64), pa.float64()) for c in ("value", "sigma"))]
+    fields = [pa.field("time", pa.timestamp("ns", tz="UTC"), nullable=False),
+              pa.field("station", pa.string(), nullable=False),
+              pa.field("pass_id", pa.string(), nullable=False),
+              pa.field("kind", pa.string(), nullable=False),
+              pa.field("value", pa.float64(), nullable=False),
+              pa.field("sigma", pa.float64(), nullable=False)]
+    for name, values in columns.items():
+        if name not in COLUMNS:
+            array = pa.array(values, from_pandas=True)
+            arrays.append(array)
+            fields.append(pa.field(str(name), array.type))
+    schema = pa.schema(fields, metadata={META_KEY: meta_json(meta).encode()})
     return pa.Table.from_arrays(arrays, schema=schema)
 
 
@@ -172,7 +198,7 @@ def pass_table_bytes(table: PassTable, fmt: str = "parquet") -> bytes:
     if records is None and smoothing_record.smoothing_of(meta).get("fits"):
         text = meta_json(meta)
         smoothing_record.check_inline_size(text, f"a {fmt} stream")
-    table = PassTable(table.frame, meta)
+    table = table.with_meta(meta)
     if fmt == "csv":
         out = io.StringIO()
         out.write(csv_metadata_line(meta_json(table.meta)))
@@ -208,7 +234,7 @@ def write_pass_table(table: PassTable, path: str, fmt: str = "parquet") -> None:
                 file=side.name, sha256=hashlib.sha256(side_bytes).hexdigest())
             with open_atomic(side) as handle:
                 handle.write(side_bytes)
-            table = PassTable(table.frame, meta)
+            table = table.with_meta(meta)
     data = pass_table_bytes(table, fmt)
     with open_atomic(path) as handle:
         handle.write(data)

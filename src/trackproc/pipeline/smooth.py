@@ -37,7 +37,6 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 import numpy as np
-import pandas as pd
 
 from trackproc.pipeline.plotting import require_matplotlib  # noqa: F401  (re-exported for the CLI)
 from trackproc.io.jsonutil import json_ready
@@ -84,7 +83,7 @@ class PassFit:
     pass_id: str
     kind: str
     rows: np.ndarray                      # positions in the input frame
-    epoch: pd.Timestamp                   # t = 0 of the polynomial (first sample), UTC
+    epoch_utc: np.datetime64              # t = 0 of the polynomial (first sample), UTC datetime64[ns]
     t_s: np.ndarray                       # sample times, s from epoch
     status: str = "ok"                    # ok | suspect | failed
     error: str | None = None
@@ -95,6 +94,13 @@ class PassFit:
     tca_gap_s: float | None = None
     tca_spread: tuple = (float("nan"), float("nan"), 0)   # (s, value unit, degrees) over degree +- 2
     warnings: list = field(default_factory=list)
+
+    @property
+    def epoch(self):
+        """:attr:`epoch_utc` as a UTC ``pd.Timestamp`` (pandas imported only by who asks)."""
+        import pandas as pd
+
+        return pd.Timestamp(self.epoch_utc).tz_localize("UTC")
 
     @property
     def label(self) -> str:
@@ -124,12 +130,21 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
     """Fit every (station, pass, kind) of ``table``; see the module docstring for the statuses."""
     options = options or SmoothOptions()
     _check_options(options)
-    frame = table.frame
-    added = [c for c in ADDED_COLUMNS if c in frame.columns]
-    if added:                    # (a drop of no columns still copies the frame)
-        frame = frame.drop(columns=added)
-    frame = frame.reset_index(drop=True)
-    present = sorted(frame["kind"].unique())
+    # a table of numpy columns (a pass file read, ingest's) is smoothed without its DataFrame
+    source_columns = _numpy_columns(table)
+    if source_columns is not None:
+        frame = None
+        n_rows = len(source_columns["time"])
+        kind_column = source_columns["kind"]
+    else:
+        frame = table.frame
+        added = [c for c in ADDED_COLUMNS if c in frame.columns]
+        if added:                    # (a drop of no columns still copies the frame)
+            frame = frame.drop(columns=added)
+        frame = frame.reset_index(drop=True)
+        n_rows = len(frame)
+        kind_column = frame["kind"].to_numpy()
+    present = sorted(set(kind_column.tolist()) if frame is None else frame["kind"].unique())
     kinds = list(options.kinds) if options.kinds else present
     unknown = [k for k in kinds if k not in KINDS]
     if unknown:
@@ -139,15 +154,20 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
     if not chosen:
         raise InputError("no samples of the requested kinds", file=source, column="kind",
                          found=", ".join(present) or "no samples", expected=", ".join(kinds))
-    _check_sigma(frame, chosen, source)
+    _check_sigma(source_columns["sigma"] if frame is None else frame["sigma"].to_numpy(dtype=float), kind_column,
+                 lambda: _without_added(table.frame) if frame is None else frame, chosen, source)
 
     doppler_mode = str(table.meta.get("doppler_mode") or "one-way")
     carrier_hz = table.meta.get("carrier_hz")
     fits = []
     # the groups' rows only (no frame per group), the columns as numpy once
-    columns = _Columns(frame)
-    keys = {c: frame[c].to_numpy() for c in ("station", "pass_id", "kind")}
-    groups = _group_rows(frame, chosen, keys)
+    if frame is None:
+        columns = _Columns.of_numpy(source_columns)
+        keys = {c: source_columns[c] for c in ("station", "pass_id", "kind")}
+    else:
+        columns = _Columns(frame)
+        keys = {c: frame[c].to_numpy() for c in ("station", "pass_id", "kind")}
+    groups = _group_rows((lambda: _without_added(table.frame)) if frame is None else frame, chosen, keys)
     for station, pass_id, kind in sorted(groups):
         fits.append(_fit_group(columns, groups[(station, pass_id, kind)], str(station), str(pass_id),
                                str(kind), options, doppler_mode))
@@ -157,9 +177,9 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
         raise ProcessingError(f"no pass could be fitted ({len(fits)} tried): {details}",
                               {"failed": [f.label for f in fits]})
 
-    smoothed = np.full(len(frame), np.nan)
-    residual = np.full(len(frame), np.nan)
-    flag = np.zeros(len(frame), bool)
+    smoothed = np.full(n_rows, np.nan)
+    residual = np.full(n_rows, np.nan)
+    flag = np.zeros(n_rows, bool)
     for f in fits:
         if f.fit is None:
             flag[f.rows] = True
@@ -169,18 +189,23 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
         if f.kind == "azimuth":
             smoothed[f.rows] = np.mod(smoothed[f.rows], 2 * np.pi)
         flag[f.rows] = ~f.fit.used
-    # the frame and the three columns in one concatenation (half the time of three insertions)
-    samples = pd.concat([frame, pd.DataFrame({"smoothed": smoothed, "residual": residual, "flag": flag},
-                                             index=frame.index)], axis=1)
+    added_columns = {"smoothed": smoothed, "residual": residual, "flag": flag}
+    if frame is not None:
+        samples = _with_added(frame, added_columns)
 
     summary = json_ready(summary_of(fits, options, table.meta, source, doppler_mode, carrier_hz))
     meta = dict(table.meta)
     meta["smoothing"] = summary
-    known = {**columns.known(), "flag": flag}
-    # the key columns as PassTable.column gives them when every entry is a string (``astype(str)``
-    # changes nothing then)
-    known.update({c: v for c, v in keys.items() if v.dtype == object and set(map(type, v)) == {str}})
-    sample_table = _column_table(samples, {**meta, "smoothing": {**summary, "output": "samples"}}, known)
+    sample_meta = {**meta, "smoothing": {**summary, "output": "samples"}}
+    if frame is None:
+        sample_table = PassTable.from_columns({**source_columns, **added_columns}, sample_meta,
+                                              lambda: _with_added(_without_added(table.frame), added_columns))
+    else:
+        known = {**columns.known(), "flag": flag}
+        # the key columns as PassTable.column gives them when every entry is a string (``astype(str)``
+        # changes nothing then)
+        known.update({c: v for c, v in keys.items() if v.dtype == object and set(map(type, v)) == {str}})
+        sample_table = _column_table(samples, sample_meta, known)
     if options.grid_step_s is None:
         out = sample_table
     else:
@@ -198,7 +223,36 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
 _READ_COLUMNS = ("time", "station", "pass_id", "kind", "value", "sigma", "flag")
 
 
-def _column_table(frame: pd.DataFrame, meta: dict, known: dict | None = None) -> PassTable:
+def _numpy_columns(table: PassTable) -> dict | None:
+    """The table's numpy columns without :data:`ADDED_COLUMNS` (a smoothed table smoothed again),
+    when it holds all of them with the canonical types (``time`` datetime64[ns], the key columns
+    object arrays); else None (the DataFrame path)."""
+    columns = table.numpy_columns()
+    if columns is None or any(c not in columns for c in ("time", "station", "pass_id", "kind", "value", "sigma")):
+        return None
+    if columns["time"].dtype != np.dtype("datetime64[ns]") or any(
+            columns[c].dtype != object for c in ("station", "pass_id", "kind")):
+        return None
+    return {name: values for name, values in columns.items() if name not in ADDED_COLUMNS}
+
+
+def _without_added(frame):
+    """``frame`` without :data:`ADDED_COLUMNS`, numbered 0..n-1 (the frame smooth fits)."""
+    added = [c for c in ADDED_COLUMNS if c in frame.columns]
+    if added:                    # (a drop of no columns still copies the frame)
+        frame = frame.drop(columns=added)
+    return frame.reset_index(drop=True)
+
+
+def _with_added(frame, added_columns: dict):
+    """The sample table's DataFrame: ``frame`` and the added columns in one concatenation (half the
+    time of three insertions)."""
+    import pandas as pd  # start-up: pandas only when a caller asks for the smoothed table's DataFrame
+
+    return pd.concat([frame, pd.DataFrame(added_columns, index=frame.index)], axis=1)
+
+
+def _column_table(frame, meta: dict, known: dict | None = None) -> PassTable:
     """``PassTable(frame, meta)`` holding :data:`_READ_COLUMNS` as numpy (``PassTable.column``'s
     own conversion of the frame, so the same arrays) and ``frame`` itself as its DataFrame.
     ``known``: columns already converted that way (the fit's own arrays), by name."""
@@ -232,21 +286,22 @@ def _check_options(options: SmoothOptions) -> None:
         raise InputError("invalid option", column="--basis", found=options.basis, expected="chebyshev or legendre")
 
 
-def _check_sigma(frame: pd.DataFrame, kinds, source) -> None:
-    sigma = frame["sigma"].to_numpy(dtype=float)
+def _check_sigma(sigma: np.ndarray, kind: np.ndarray, frame_of, kinds, source) -> None:
+    """InputError when a sample of ``kinds`` has a sigma that is not finite and > 0; ``frame_of()``
+    the fitted frame, built only to name the first such sample."""
     wrong = ~(np.isfinite(sigma) & (sigma > 0))
     if not wrong.any():          # (the kinds' rows are looked up only when some sigma is wrong)
         return
-    bad = frame["kind"].isin(kinds).to_numpy() & wrong
+    bad = np.isin(kind, list(kinds)) & wrong
     if bad.any():
         i = int(np.flatnonzero(bad)[0])
-        row = frame.iloc[i]
+        row = frame_of().iloc[i]
         raise InputError(f"sigma must be finite and > 0 ({int(bad.sum())} samples are not; first: "
                          f"{row['station']}/{row['pass_id']}/{row['kind']} at {row['time']})",
                          file=source, column="sigma", found=float(sigma[i]), expected="a 1-sigma > 0")
 
 
-def _group_rows(frame: pd.DataFrame, kinds, keys: dict | None = None) -> dict:
+def _group_rows(frame, kinds, keys: dict | None = None) -> dict:
     """``{(station, pass_id, kind): row positions, increasing}`` of the rows of ``kinds`` (``frame``
     numbered 0..n-1): ``groupby([...]).indices`` of those rows, by one pass over the three columns
     as Python lists (a fifth of the groupby's time on a pass of two kinds); the groupby itself
@@ -265,6 +320,8 @@ def _group_rows(frame: pd.DataFrame, kinds, keys: dict | None = None) -> dict:
             rows.append(i)
     else:
         return {key: np.array(rows, dtype=np.intp) for key, rows in groups.items()}
+    if callable(frame):          # the caller's frame, built only for this fallback
+        frame = frame()
     selected = frame[frame["kind"].isin(list(kinds))]
     positions = selected.index.to_numpy()
     return {key: positions[idx] for key, idx in selected.groupby(["station", "pass_id", "kind"], sort=True)
@@ -273,9 +330,11 @@ def _group_rows(frame: pd.DataFrame, kinds, keys: dict | None = None) -> dict:
 
 class _Columns:
     """The columns a fit reads, as numpy, of the whole (renumbered) frame: ``time_ns`` UTC
-    nanoseconds, ``value``, ``sigma``; ``epoch(row)`` the row's time as a UTC ``pd.Timestamp``."""
+    nanoseconds, ``value``, ``sigma``; ``epoch(row)`` the row's time, UTC ``datetime64[ns]``."""
 
-    def __init__(self, frame: pd.DataFrame):
+    def __init__(self, frame):
+        import pandas as pd  # start-up: only a table held as a DataFrame comes here
+
         self.time = frame["time"]
         if isinstance(self.time.dtype, pd.DatetimeTZDtype):
             # the array's own conversion to naive UTC (a fifteenth of the time through the Series'
@@ -288,13 +347,24 @@ class _Columns:
         self.sigma = frame["sigma"].to_numpy(dtype=float)
         self.float_values = frame["value"].dtype == np.float64 and frame["sigma"].dtype == np.float64
 
+    @classmethod
+    def of_numpy(cls, columns: dict) -> "_Columns":
+        """From numpy columns as :meth:`PassTable.column` gives them (``time`` naive UTC)."""
+        self = cls.__new__(cls)
+        self.utc = columns["time"]
+        self.time_ns = self.utc.astype(np.int64)
+        self.value = np.asarray(columns["value"], dtype=float)
+        self.sigma = np.asarray(columns["sigma"], dtype=float)
+        self.float_values = columns["value"].dtype == np.float64 and columns["sigma"].dtype == np.float64
+        return self
+
     def known(self) -> dict:
         """The columns as ``PassTable.column`` gives them (``time`` naive UTC; ``value`` and
         ``sigma`` when the frame holds them as float64, as ingest writes them)."""
         return {"time": self.utc, **({"value": self.value, "sigma": self.sigma} if self.float_values else {})}
 
-    def epoch(self, row: int) -> pd.Timestamp:
-        return pd.Timestamp(self.time.iloc[row])
+    def epoch(self, row: int) -> np.datetime64:
+        return self.utc[row]
 
 
 def _fit_group(columns: _Columns, rows: np.ndarray, station, pass_id, kind, options: SmoothOptions,
@@ -302,8 +372,8 @@ def _fit_group(columns: _Columns, rows: np.ndarray, station, pass_id, kind, opti
     """Fit one group: ``rows`` its rows of ``columns`` (in table order; fitted in time order, stable)."""
     rows = rows[np.argsort(columns.time_ns[rows], kind="stable")]
     epoch = columns.epoch(int(rows[0]))
-    t_s = (columns.time_ns[rows] - epoch.tz_convert("UTC").tz_localize(None).as_unit("ns").value) * 1e-9
-    out = PassFit(station=station, pass_id=pass_id, kind=kind, rows=rows, epoch=epoch, t_s=t_s)
+    t_s = (columns.time_ns[rows] - columns.time_ns[int(rows[0])]) * 1e-9
+    out = PassFit(station=station, pass_id=pass_id, kind=kind, rows=rows, epoch_utc=epoch, t_s=t_s)
     y = columns.value[rows]
     if kind == "azimuth":       # fit the continuous angle; a pass through north jumps by 2 pi
         y = np.unwrap(y)
@@ -320,7 +390,7 @@ def _fit_group(columns: _Columns, rows: np.ndarray, station, pass_id, kind, opti
             ca = closest_approach(fit, kind, doppler_mode)
             gap, margin = _coverage(t_s[fit.used], ca.t_s)
             out.tca_gap_s = gap
-            where = f"closest approach of the fit at {iso(at_offset(out.epoch, ca.t_s))} ({ca.t_s:.1f} s into the pass)"
+            where = f"closest approach of the fit at {iso(at_offset(out.epoch_utc, ca.t_s))} ({ca.t_s:.1f} s into the pass)"
             if gap > options.tca_max_gap_s:
                 raise SmoothingError("tca_not_observed", f"{where} falls in a {gap:.1f} s data gap "
                                      f"(limit {options.tca_max_gap_s:g} s): not observed")

@@ -9,12 +9,11 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from trackproc.io.jsonutil import json_ready
 from trackproc.io.passfile import COLUMNS
 from trackproc.io.raw import KIND_UNITS
-from trackproc.isotime import iso_utc
+from trackproc.isotime import iso_utc, to_datetime64_ns
 from trackproc.methods.smoothing import DEFAULT_MAX_DEGREE, TCA_SPREAD_RATIO, PolynomialFit
 from trackproc.io.jsonutil import dumps_indented
 from trackproc import __version__
@@ -49,12 +48,13 @@ def summary_json(summary: dict, ready: bool = False) -> str:
     return dumps_indented(summary if ready else json_ready(summary), 2) + "\n"
 
 
-def iso(ts: pd.Timestamp) -> str:
+def iso(ts) -> str:
     return iso_utc(ts, 9)
 
 
-def at_offset(epoch: pd.Timestamp, t_s: float) -> pd.Timestamp:
-    return pd.Timestamp(epoch) + pd.Timedelta(int(round(t_s * 1e9)), unit="ns")
+def at_offset(epoch, t_s: float) -> np.datetime64:
+    """``epoch`` (UTC ``datetime64[ns]``, or a pandas Timestamp) plus ``t_s`` seconds rounded to the ns."""
+    return to_datetime64_ns(epoch) + np.timedelta64(int(round(t_s * 1e9)), "ns")
 
 
 def finite_or_none(x):
@@ -76,7 +76,7 @@ def fit_record(f: PassFit, carrier_hz, doppler_mode, max_degree: int = DEFAULT_M
     unit = KIND_UNITS.get(f.kind, "")
     rec = {"station": f.station, "pass_id": f.pass_id, "kind": f.kind, "unit": unit, "status": f.status,
            "error": f.error, "reason": f.reason, "warnings": list(f.warnings), "n_samples": int(f.t_s.size),
-           "epoch_utc": iso(f.epoch)}
+           "epoch_utc": iso(f.epoch_utc)}
     fit = f.fit
     if fit is None:
         rec.update({"n_used": 0, "n_rejected": int(f.t_s.size)})
@@ -88,7 +88,7 @@ def fit_record(f: PassFit, carrier_hz, doppler_mode, max_degree: int = DEFAULT_M
         "n_used": fit.n_used, "n_rejected": fit.n_rejected,
         "basis": fit.basis,
         "domain_s": [float(fit.domain_s[0]), float(fit.domain_s[1])],
-        "domain_utc": [iso(at_offset(f.epoch, fit.domain_s[0])), iso(at_offset(f.epoch, fit.domain_s[1]))],
+        "domain_utc": [iso(at_offset(f.epoch_utc, fit.domain_s[0])), iso(at_offset(f.epoch_utc, fit.domain_s[1]))],
         "degree": fit.degree,
         "degree_selection": ({"criterion": "bic", "at_limit": bool(fit.degree_at_limit),
                               "cap": fit.degree_cap, "max_degree": int(max_degree),
@@ -121,7 +121,7 @@ def fit_record(f: PassFit, carrier_hz, doppler_mode, max_degree: int = DEFAULT_M
         else:
             ca = f.tca
             spread = f.tca_spread[0]
-            tca = {"status": "uncertain" if "tca_uncertain" in f.warnings else "ok", "definition": ca.definition, "time_utc": iso(at_offset(f.epoch, ca.t_s)),
+            tca = {"status": "uncertain" if "tca_uncertain" in f.warnings else "ok", "definition": ca.definition, "time_utc": iso(at_offset(f.epoch_utc, ca.t_s)),
                    "t_s": ca.t_s, "sigma_s": ca.sigma_s, "sigma_s_unscaled": ca.sigma_s_unscaled,
                    "gap_s": f.tca_gap_s, "candidates": ca.n_candidates,
                    "degree_spread_s": spread, "degree_spread_fits": f.tca_spread[2],
@@ -184,7 +184,10 @@ def summary_of(fits, options: SmoothOptions, meta, source, doppler_mode, carrier
     }
 
 
-def grid_of(fits, step_s: float) -> pd.DataFrame:
+def grid_of(fits, step_s: float):
+    """The fitted curves every ``step_s`` seconds as a DataFrame of :data:`COLUMNS`."""
+    import pandas as pd  # start-up: pandas only for a grid output (smooth --grid)
+
     parts = []
     for f in fits:
         if f.fit is None:
@@ -192,7 +195,7 @@ def grid_of(fits, step_s: float) -> pd.DataFrame:
         a, b = f.fit.domain_s
         t = a + step_s * np.arange(int(math.floor((b - a) / step_s + 1e-9)) + 1)
         ns = np.round(t * 1e9).astype(np.int64)
-        times = pd.DatetimeIndex(pd.Timestamp(f.epoch).tz_convert("UTC").as_unit("ns").value + ns, tz="UTC")
+        times = pd.DatetimeIndex(to_datetime64_ns(f.epoch_utc).astype(np.int64) + ns, tz="UTC")
         parts.append(pd.DataFrame({"time": times, "station": f.station, "pass_id": f.pass_id, "kind": f.kind,
                                    "value": np.mod(f.fit(t), 2 * np.pi) if f.kind == "azimuth" else f.fit(t),
                                    "sigma": f.fit.sigma(t)}))

@@ -70,6 +70,21 @@ class PassTable:
             return values.astype(str).to_numpy(dtype=object)
         return values.to_numpy()
 
+    def numpy_columns(self) -> dict | None:
+        """Every column as numpy (as :meth:`column` gives them), by name in table order, when the
+        table was made by :meth:`from_columns` with all of them; else None (the frame holds some)."""
+        if self._columns is None or any(values is None for values in self._columns.values()):
+            return None
+        return dict(self._columns)
+
+    def with_meta(self, meta: dict) -> "PassTable":
+        """The same samples with ``meta``: its numpy columns and its frame (built or not) shared."""
+        if self._columns is None:
+            return PassTable(self._frame, meta)
+        table = PassTable.from_columns(self._columns, meta, self._build)
+        table._frame = self._frame
+        return table
+
     def take(self, rows: np.ndarray, meta: dict | None = None) -> "PassTable":
         """The rows ``rows`` (indices or a boolean mask), renumbered from 0, with ``meta`` (default: this one's)."""
         meta = self.meta if meta is None else meta

@@ -90,7 +90,7 @@ def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source
     pf = result.fits[0]
     if pf.fit is None:
         raise ProcessingError(f"the pass cannot be smoothed: {pf.error}")
-    epoch = np.datetime64(pd.Timestamp(pf.epoch).tz_convert("UTC").tz_localize(None).as_unit("ns").to_datetime64())
+    epoch = np.datetime64(pf.epoch_utc, "ns")
     tca, note = pf.tca, pf.tca_error or ""
     if tca is None:
         try:
