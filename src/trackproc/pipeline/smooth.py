@@ -390,7 +390,8 @@ def _fit_group(columns: _Columns, rows: np.ndarray, station, pass_id, kind, opti
             ca = closest_approach(fit, kind, doppler_mode)
             gap, margin = _coverage(t_s[fit.used], ca.t_s)
             out.tca_gap_s = gap
-            where = f"closest approach of the fit at {iso(at_offset(out.epoch_utc, ca.t_s))} ({ca.t_s:.1f} s into the pass)"
+            at = iso(at_offset(out.epoch_utc, ca.t_s))
+            where = f"closest approach of the fit at {at} ({ca.t_s:.1f} s into the pass)"
             if gap > options.tca_max_gap_s:
                 raise SmoothingError("tca_not_observed", f"{where} falls in a {gap:.1f} s data gap "
                                      f"(limit {options.tca_max_gap_s:g} s): not observed")

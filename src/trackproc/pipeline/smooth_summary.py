@@ -121,7 +121,8 @@ def fit_record(f: PassFit, carrier_hz, doppler_mode, max_degree: int = DEFAULT_M
         else:
             ca = f.tca
             spread = f.tca_spread[0]
-            tca = {"status": "uncertain" if "tca_uncertain" in f.warnings else "ok", "definition": ca.definition, "time_utc": iso(at_offset(f.epoch_utc, ca.t_s)),
+            tca = {"status": "uncertain" if "tca_uncertain" in f.warnings else "ok", "definition": ca.definition,
+                   "time_utc": iso(at_offset(f.epoch_utc, ca.t_s)),
                    "t_s": ca.t_s, "sigma_s": ca.sigma_s, "sigma_s_unscaled": ca.sigma_s_unscaled,
                    "gap_s": f.tca_gap_s, "candidates": ca.n_candidates,
                    "degree_spread_s": spread, "degree_spread_fits": f.tca_spread[2],

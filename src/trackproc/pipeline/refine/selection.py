@@ -78,8 +78,7 @@ def smoothed_curve(sub: PassTable, kind: str, station: str, pass_id: str, source
     if smoothing_record.output_of(meta) == "grid":
         raise InputError("a smoothed grid without its polynomial", file=source, column="smoothing",
                          expected=f"the smoothing record of {station}/{pass_id}/{kind} in the metadata")
-    # start-up: smooth (and pandas) only for a pass that was not smoothed
-    import pandas as pd
+    # start-up: smooth only for a pass that was not smoothed
     from trackproc.pipeline.smooth import SmoothOptions, smooth
 
     try:
