@@ -46,11 +46,13 @@ class SourceTable:
 
 @dataclass
 class Column:
-    """One column: ``text`` (object array of str, '' = empty) or typed Arrow ``array``."""
+    """One column: ``text`` (object array of str, '' = empty) or typed Arrow ``array``;
+    ``strings``: the same ``text`` as an Arrow string array when Arrow's CSV reader read it."""
 
     name: str
     text: np.ndarray | None = None
     array: pa.Array | None = None
+    strings: pa.Array | None = None
 
     @property
     def type_name(self) -> str:
@@ -140,7 +142,8 @@ def _csv_meta(comments: list[str]) -> dict:
 
 
 def _text_source(text: TextTable, source: str) -> SourceTable:
-    columns = {name.lower(): Column(name, text=text.cells[name]) for name in text.columns}
+    arrow = text.arrow or {}
+    columns = {name.lower(): Column(name, text=text.cells[name], strings=arrow.get(name)) for name in text.columns}
     return SourceTable(source, columns, text.rows, text.header_row, _csv_meta(text.comments))
 
 
@@ -392,6 +395,9 @@ def column_numbers(table: SourceTable, column: Column) -> tuple[np.ndarray, np.n
     """
     if column.text is not None:
         n = len(column.text)
+        values = _plain_numbers(column.strings)
+        if values is not None:
+            return values, np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
         try:   # every cell a number (the common case): numpy calls float() on each, in C
             return (column.text.astype(np.float64), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
         except (ValueError, TypeError):
@@ -419,6 +425,32 @@ def column_numbers(table: SourceTable, column: Column) -> tuple[np.ndarray, np.n
     missing = arr.is_null().to_numpy(zero_copy_only=False)
     values = pc.fill_null(arr.cast(pa.float64()), math.nan).to_numpy(zero_copy_only=False)
     return values.astype(np.float64), missing, np.zeros(len(values), dtype=bool)
+
+
+#: Bytes of a decimal number literal without spaces, underscores, ``inf`` or ``nan``.
+_NUMBER_BYTES = np.zeros(256, dtype=bool)
+_NUMBER_BYTES[np.frombuffer(b"0123456789.eE+-", np.uint8)] = True
+
+
+def _plain_numbers(strings) -> np.ndarray | None:
+    """float64 of Arrow string cells that are all non-empty and made only of :data:`_NUMBER_BYTES`,
+    by Arrow's cast (correctly rounded, like ``float()``, and on that alphabet accepting only what
+    ``float()`` accepts: ``tests/io/test_plain_numbers.py``); None otherwise (``float()`` per cell
+    then decides, and reports the wrong cells)."""
+    if strings is None or strings.null_count or not pa.types.is_string(strings.type) or not len(strings):
+        return None
+    offsets = np.frombuffer(strings.buffers()[1], np.int32, len(strings) + 1, strings.offset * 4)
+    if (offsets[1:] == offsets[:-1]).any():
+        return None
+    data = np.frombuffer(strings.buffers()[2], np.uint8)[offsets[0]:offsets[-1]]
+    if not _NUMBER_BYTES[data].all():
+        return None
+    import pyarrow.compute as pc  # start-up: as in _arrow_column
+
+    try:
+        return arrow_numpy(pc.cast(strings, pa.float64()))
+    except (pa.ArrowInvalid, ValueError):
+        return None
 
 
 def column_strings(table: SourceTable, column: Column) -> np.ndarray:
