@@ -46,11 +46,13 @@ class SourceTable:
 
 @dataclass
 class Column:
-    """One column: ``text`` (object array of str, '' = empty) or typed Arrow ``array``."""
+    """One column: ``text`` (object array of str, '' = empty) or typed Arrow ``array``;
+    ``strings``: the same ``text`` as an Arrow string array when Arrow's CSV reader read it."""
 
     name: str
     text: np.ndarray | None = None
     array: pa.Array | None = None
+    strings: pa.Array | None = None
 
     @property
     def type_name(self) -> str:
@@ -140,7 +142,8 @@ def _csv_meta(comments: list[str]) -> dict:
 
 
 def _text_source(text: TextTable, source: str) -> SourceTable:
-    columns = {name.lower(): Column(name, text=text.cells[name]) for name in text.columns}
+    arrow = text.arrow or {}
+    columns = {name.lower(): Column(name, text=text.cells[name], strings=arrow.get(name)) for name in text.columns}
     return SourceTable(source, columns, text.rows, text.header_row, _csv_meta(text.comments))
 
 
@@ -254,19 +257,10 @@ def column_times(table: SourceTable, column: Column, problems: Problems, index=N
     ``index`` maps the problems' positions to the table's rows (default: one to one).
     """
     if column.text is not None:
-        import pandas as pd  # start-up: pandas (~0.15 s) only for times written as text (CSV)
-
-        text = pd.Series(column.text, dtype=object)
-        # beyond 1678-2261 a nanosecond timestamp wraps or raises: such rows are unparseable times
-        if not _years_in_range(column.text):
-            year = pd.to_numeric(text.astype(str).str.extract(r"^\s*([+-]?\d{4,})-", expand=False),
-                                 errors="coerce")
-            text = text.where(~((year < FIRST_YEAR) | (year > LAST_YEAR)), "")
-        try:
-            parsed = pd.to_datetime(text, utc=True, format="ISO8601", errors="coerce")
-        except (ValueError, OverflowError):   # OutOfBoundsDatetime despite errors="coerce"
-            parsed = pd.Series([_one_time(t) for t in text], dtype="datetime64[ns, UTC]")
-        values = parsed.dt.tz_localize(None).dt.as_unit("ns").to_numpy()
+        # a pass file's times have one layout: read without a parse per cell when every one is valid
+        values = _fixed_iso_times(column.text)
+        if values is None:
+            values = _iso_times(column.text)
     elif pa.types.is_timestamp(column.array.type):
         # Out-of-range stamps (year 3000 in ms or us) become NaT and are reported by row; a failing
         # cast is not used for this (its exception left Arrow aborting at exit in ~7 % of runs).
@@ -296,6 +290,79 @@ def column_times(table: SourceTable, column: Column, problems: Problems, index=N
         found = "null or out of range"
     problems.add(UNPARSEABLE_TIME, bad, column=column.name, found=found, expected=TIME_EXPECTED)
     return values
+
+
+def _iso_times(cells) -> np.ndarray:
+    """ISO 8601 text of any layout pandas reads as ``datetime64[ns]``, NaT where unparseable."""
+    import pandas as pd  # start-up: pandas (~0.15 s) only for times written as text (CSV)
+
+    text = pd.Series(cells, dtype=object)
+    # beyond 1678-2261 a nanosecond timestamp wraps or raises: such rows are unparseable times
+    if not _years_in_range(cells):
+        year = pd.to_numeric(text.astype(str).str.extract(r"^\s*([+-]?\d+)-", expand=False),
+                             errors="coerce")
+        text = text.where(~((year < FIRST_YEAR) | (year > LAST_YEAR)), "")
+    try:
+        parsed = pd.to_datetime(text, utc=True, format="ISO8601", errors="coerce")
+    except (ValueError, OverflowError):   # OutOfBoundsDatetime despite errors="coerce"
+        parsed = pd.Series([_one_time(t) for t in text], dtype="datetime64[ns, UTC]")
+    return parsed.dt.tz_localize(None).dt.as_unit("ns").to_numpy()
+
+
+#: Suffixes :func:`_fixed_iso_times` reads as UTC (pandas' ISO 8601 parser with ``utc=True`` does).
+_UTC_SUFFIXES = ("Z", "+00:00", "")
+
+
+def _fixed_iso_times(text) -> np.ndarray | None:
+    """``datetime64[ns]`` of ISO 8601 UTC cells that all have one fixed layout,
+    ``YYYY-MM-DDTHH:MM:SS[.f]`` with 1-9 fractional digits (or none) and ``Z``, ``+00:00`` or no
+    zone, every field in range (Gregorian calendar, second 0-59, years FIRST_YEAR..LAST_YEAR);
+    None when any cell is otherwise (the general parser then reads them all and reports the bad
+    rows). The same instants as ``pandas.to_datetime(..., utc=True, format="ISO8601")``: ISO 8601
+    calendar date and time of day (ISO 8601-1:2019, 5.2.2 and 5.3.1.4), days counted by numpy's
+    proleptic Gregorian months. Read from one byte matrix instead of a Python parse per cell."""
+    n = len(text)
+    if not n or type(text[0]) is not str:
+        return None
+    width = len(text[0])
+    suffix = next(s for s in _UTC_SUFFIXES if text[0].endswith(s))
+    body = width - len(suffix)
+    digits = body - 20 if body > 20 else 0
+    if not (body == 19 or 1 <= digits <= 9):
+        return None
+    try:
+        data = "".join(text).encode("ascii")
+        lengths = np.fromiter(map(len, text), np.int64, n)
+    except (TypeError, UnicodeEncodeError):
+        return None
+    if len(data) != n * width or (lengths != width).any():
+        return None
+    cells = np.frombuffer(data, np.uint8).reshape(n, width)
+    layout = "0000-00-00T00:00:00" + ("." + "0" * digits if digits else "") + suffix
+    number = np.array([c == "0" for c in layout])
+    if ((cells[:, number] - 48) > 9).any() or \
+            (cells[:, ~number] != np.frombuffer(layout.encode(), np.uint8)[~number]).any():
+        return None
+    d = (cells[:, number] - 48).astype(np.int64)     # the digits, most significant first per field
+
+    def field(start, stop):
+        return d[:, start:stop] @ (10 ** np.arange(stop - start - 1, -1, -1, dtype=np.int64))
+
+    year, month, day = field(0, 4), field(4, 6), field(6, 8)
+    hour, minute, second = field(8, 10), field(10, 12), field(12, 14)
+    if not ((year >= FIRST_YEAR) & (year <= LAST_YEAR) & (month >= 1) & (month <= 12) & (day >= 1)
+            & (hour <= 23) & (minute <= 59) & (second <= 59)).all():
+        return None
+    months = (year - 1970) * 12 + month - 1
+    first = months.astype("datetime64[M]").astype("datetime64[D]").astype(np.int64)
+    length = (months + 1).astype("datetime64[M]").astype("datetime64[D]").astype(np.int64) - first
+    if (day > length).any():
+        return None
+    ns = (((first + day - 1) * 24 + hour) * 60 + minute) * 60 + second
+    ns *= 1_000_000_000
+    if digits:
+        ns += field(14, 14 + digits) * 10 ** (9 - digits)
+    return ns.astype("datetime64[ns]")
 
 
 def _years_in_range(text) -> bool:
@@ -328,6 +395,9 @@ def column_numbers(table: SourceTable, column: Column) -> tuple[np.ndarray, np.n
     """
     if column.text is not None:
         n = len(column.text)
+        values = _plain_numbers(column.strings)
+        if values is not None:
+            return values, np.zeros(n, dtype=bool), np.zeros(n, dtype=bool)
         try:   # every cell a number (the common case): numpy calls float() on each, in C
             return (column.text.astype(np.float64), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
         except (ValueError, TypeError):
@@ -355,6 +425,32 @@ def column_numbers(table: SourceTable, column: Column) -> tuple[np.ndarray, np.n
     missing = arr.is_null().to_numpy(zero_copy_only=False)
     values = pc.fill_null(arr.cast(pa.float64()), math.nan).to_numpy(zero_copy_only=False)
     return values.astype(np.float64), missing, np.zeros(len(values), dtype=bool)
+
+
+#: Bytes of a decimal number literal without spaces, underscores, ``inf`` or ``nan``.
+_NUMBER_BYTES = np.zeros(256, dtype=bool)
+_NUMBER_BYTES[np.frombuffer(b"0123456789.eE+-", np.uint8)] = True
+
+
+def _plain_numbers(strings) -> np.ndarray | None:
+    """float64 of Arrow string cells that are all non-empty and made only of :data:`_NUMBER_BYTES`,
+    by Arrow's cast (correctly rounded, like ``float()``, and on that alphabet accepting only what
+    ``float()`` accepts: ``tests/io/test_plain_numbers.py``); None otherwise (``float()`` per cell
+    then decides, and reports the wrong cells)."""
+    if strings is None or strings.null_count or not pa.types.is_string(strings.type) or not len(strings):
+        return None
+    offsets = np.frombuffer(strings.buffers()[1], np.int32, len(strings) + 1, strings.offset * 4)
+    if (offsets[1:] == offsets[:-1]).any():
+        return None
+    data = np.frombuffer(strings.buffers()[2], np.uint8)[offsets[0]:offsets[-1]]
+    if not _NUMBER_BYTES[data].all():
+        return None
+    import pyarrow.compute as pc  # start-up: as in _arrow_column
+
+    try:
+        return arrow_numpy(pc.cast(strings, pa.float64()))
+    except (pa.ArrowInvalid, ValueError):
+        return None
 
 
 def column_strings(table: SourceTable, column: Column) -> np.ndarray:

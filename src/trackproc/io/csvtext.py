@@ -121,6 +121,7 @@ class TextTable:
     rows: np.ndarray                         # 1-based physical line of each data row
     header_row: int
     comments: list[str] = field(default_factory=list)   # '#' lines, without the '#'
+    arrow: dict | None = None    # header name -> the same cells as an Arrow string array (Arrow's reader)
 
 
 def decode_text(data: bytes, source: str, *, line0: int = 0, encoding: str = "utf-8-sig") -> str:
@@ -242,9 +243,10 @@ def _plain_chunk(piece: bytes, header: list[str], line0: int) -> TextTable | Non
     # the line-by-line reader strips every cell (str.strip: any Unicode white space); nothing to
     # strip in ASCII text without a space or a tab
     bare = piece.isascii() and b" " not in piece and b"\t" not in piece
-    cells = {name: (table.column(name) if bare else pc.utf8_trim_whitespace(table.column(name)))
-             .to_numpy(zero_copy_only=False).astype(object) for name in header}
-    return TextTable(list(header), cells, np.arange(line0 + 1, line0 + n + 1, dtype=np.int64), 0)
+    arrow = {name: (table.column(name) if bare else pc.utf8_trim_whitespace(table.column(name))).combine_chunks()
+             for name in header}
+    cells = {name: array.to_numpy(zero_copy_only=False).astype(object) for name, array in arrow.items()}
+    return TextTable(list(header), cells, np.arange(line0 + 1, line0 + n + 1, dtype=np.int64), 0, arrow=arrow)
 
 
 def _plain_table(data: bytes, text: str, source: str) -> TextTable | None:

@@ -140,13 +140,15 @@ class Samples:
             # string per row converted to Arrow
             return pd.Series(pd.array([str(n) for n in names], dtype="str").take(codes.astype(np.intp)))
 
-        return pd.DataFrame({
+        # built in COLUMNS order: no reindexing copy after (the same columns, dtypes and blocks)
+        columns = {
             "time": pd.DatetimeIndex(c["time"].astype("datetime64[ns]")).tz_localize("UTC"),
             "station": strings(self.stations.names, c["station"]),
             "pass_id": strings(self.passes.names, c["pass_id"]),
             "kind": strings(KINDS, c["kind"]),
             "value": c["value"], "sigma": c["sigma"],
-        })[list(COLUMNS)]
+        }
+        return pd.DataFrame({name: columns[name] for name in COLUMNS})
 
     def arrow_batches(self, schema):
         """The canonical table as Arrow record batches of :data:`SLICE_ROWS` rows."""
