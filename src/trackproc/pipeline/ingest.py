@@ -92,7 +92,8 @@ class IngestResult:
     @property
     def table(self) -> PassTable:
         if self._table is None:
-            self._table = PassTable(self.samples.frame(), self.meta)
+            # numpy columns; the DataFrame only when a caller asks for it (PassTable.frame)
+            self._table = PassTable.from_columns(self.samples.numpy_columns(), self.meta, self.samples.frame)
         return self._table
 
 

@@ -150,6 +150,19 @@ class Samples:
         }
         return pd.DataFrame({name: columns[name] for name in COLUMNS})
 
+    def numpy_columns(self) -> dict:
+        """The canonical table's columns as :meth:`~trackproc.types.passes.PassTable.column` gives
+        them of :meth:`frame` (time datetime64[ns] UTC, the names as str objects, value and sigma
+        float64), without the DataFrame: a batch's smooth and refine read these."""
+        c = self.columns
+
+        def names(known, codes):
+            return np.array([str(n) for n in known], dtype=object)[codes.astype(np.intp)]
+
+        return {"time": c["time"].astype("datetime64[ns]"), "station": names(self.stations.names, c["station"]),
+                "pass_id": names(self.passes.names, c["pass_id"]), "kind": names(KINDS, c["kind"]),
+                "value": np.asarray(c["value"], dtype=np.float64), "sigma": np.asarray(c["sigma"], dtype=np.float64)}
+
     def arrow_batches(self, schema):
         """The canonical table as Arrow record batches of :data:`SLICE_ROWS` rows."""
         c = self.columns
