@@ -274,11 +274,38 @@ class Trajectory:
         """
         if not self.has_stm:
             raise ValueError("this trajectory carries no STM; propagate with stm=True")
+        gcrf = frame == "gcrf" or _frame_key(frame) == "gcrf"
+        if gcrf:
+            out = self._stm_gcrf(t_s)
+            if out is not None:
+                return out
         out = self._evaluate(t_s, lambda run, t: run.stm(t), (6, 6))
-        if frame == "gcrf" or _frame_key(frame) == "gcrf":
+        if gcrf:
             big = self.rotation
             out = big.T @ out @ big
         return out
+
+    def _stm_gcrf(self, t_s):
+        """``Q^T Phi Q`` of :meth:`stm` from each run's ``[row, column, time]`` products: the left
+        rotation of every matrix is one product over all the times (``Q^T`` times the rows), the
+        right one a product for each row (``Q^T`` times its columns), each element the sum of
+        the same products in the same order as the rotation of each matrix (equal bit for bit);
+        None where a run cannot give that layout or has a single time."""
+        shape, flat, parts, _ = self._split(t_s)
+        if any(times.size < 2 for _, _, times in parts):
+            return None                         # a single column: matrix-vector kernels, other sums
+        out = np.empty((flat.size, 6, 6))
+        big_t = self.__dict__.get("_rotation_t")
+        if big_t is None:
+            big_t = self.__dict__["_rotation_t"] = self.rotation.T
+        for run, sel, times in parts:
+            rows = run.stm_rows(times)
+            if rows is None:
+                return None
+            m = times.size
+            left = (big_t @ rows.reshape(6, 6 * m)).reshape(6, 6, m)      # [i, p, n] = (Q^T Phi_n)[i, p]
+            out[sel] = (big_t @ left).transpose(2, 0, 1)                  # [i, j, n] = (Q^T Phi_n Q)[i, j]
+        return out.reshape(shape + (6, 6))
 
     @property
     def force_parameter_names(self) -> tuple:
