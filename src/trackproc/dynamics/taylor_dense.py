@@ -242,8 +242,8 @@ class Propagation:
                                                                                          dtype=float),
                                         self._plan(tf)[0].astype(np.int64), np.ascontiguousarray(tf), m), t.shape
         out = rows.transpose(0, 3, 1, 2)
-        if len(self._plan(tf)[1]) > 1:
-            out = np.ascontiguousarray(out)      # the layout callers had from several steps
+        if rows.base is None:
+            out = np.ascontiguousarray(out)      # several steps filled it: the layout callers had
         return out, t.shape
 
     def _dense_rows(self, coef, tf, m, key):
