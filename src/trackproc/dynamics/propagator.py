@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trackproc.dynamics import taylor, timescales as ts
+from trackproc.dynamics import taylor, taylor_dense, timescales as ts
 from trackproc.dynamics.frames import QuasiInertialFrame, earth_rotation
 from trackproc.dynamics.gravity import force_parameters  # noqa: F401  (re-exported: propagator.force_parameters)
 from trackproc import vocabulary
@@ -238,7 +238,31 @@ class Trajectory:
         zero = flat == 0.0
         split = (t.shape, flat, parts, zero.reshape(t.shape) if zero.any() else None)
         self.__dict__["_last_split"] = (key, split)
+        if len(parts) > 1:
+            self._share_powers(flat, parts)
         return split
+
+    @staticmethod
+    def _share_powers(flat, parts) -> None:
+        """Give runs of one step each, all expanded about the same time (the epoch: both runs start
+        there), the powers of their offsets as columns of one set computed for all the times:
+        each column is the same products whichever run's times it sits with (each run's kept
+        plan, :meth:`taylor_dense.Propagation._plan`, then finds them)."""
+        runs = [run for run, _, _ in parts]
+        if any(run.n_steps != 1 or run.batch for run in runs):
+            return
+        t0 = runs[0].step_times_s[0]
+        if any(run.step_times_s[0] != t0 for run in runs):
+            return
+        for run, _, times in parts:
+            if not run.covers(times):
+                return                          # let the run's own evaluation raise its error
+        n = max(max(run.coefficients.shape[-1], 1 if run.sensitivities is None else run.sensitivities.shape[-1])
+                for run in runs)
+        dt = flat - t0
+        pw = taylor_dense._powers(dt, n)
+        for run, sel, times in parts:
+            run.keep_plan(times, None, [[0, None, dt[sel], pw[:, sel]]])
 
     def _evaluate(self, t_s, fn, tail):
         shape, flat, parts, _ = self._split(t_s)

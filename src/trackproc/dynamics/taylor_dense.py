@@ -149,16 +149,30 @@ class Propagation:
         return self
 
     # -- dense output ------------------------------------------------------------------------
+    def covers(self, t) -> bool:
+        """Whether every time of the 1-D ``t`` lies in the interval :meth:`_locate` accepts."""
+        lo, hi, slack = self._bounds()
+        return (not t.size) or bool(lo - slack <= t.min() and t.max() <= hi + slack)
+
+    def keep_plan(self, tf, idx, groups) -> None:
+        """Keep ``(idx, groups)`` as :meth:`_plan`'s answer for the 1-D times ``tf`` (a caller that
+        computed the powers of several runs' times at once)."""
+        self._last[:] = [(tf.tobytes(), idx, groups)]
+
+    def _bounds(self):
+        bounds = self._spectra.get("bounds")
+        if bounds is None:
+            tb = self.step_times_s
+            lo, hi = (tb[0], tb[-1]) if tb[-1] >= tb[0] else (tb[-1], tb[0])
+            bounds = self._spectra["bounds"] = (lo, hi, 8 * _EPS * max(abs(lo), abs(hi), 1.0))
+        return bounds
+
     def _locate(self, t):
         """Step index of every time in ``t`` (1-D); ValueError outside the interval."""
         tb = self.step_times_s
         if self.n_steps == 0:
             raise ValueError("no step was taken; nothing to evaluate")
-        bounds = self._spectra.get("bounds")
-        if bounds is None:
-            lo, hi = (tb[0], tb[-1]) if tb[-1] >= tb[0] else (tb[-1], tb[0])
-            bounds = self._spectra["bounds"] = (lo, hi, 8 * _EPS * max(abs(lo), abs(hi), 1.0))
-        lo, hi, slack = bounds
+        lo, hi, slack = self._bounds()
         tmin, tmax = (t.min(), t.max()) if t.size else (lo, hi)
         if not (lo - slack <= tmin and tmax <= hi + slack):
             raise ValueError(f"times must lie in the propagated interval [{lo}, {hi}] s; "
