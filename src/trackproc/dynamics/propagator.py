@@ -280,7 +280,10 @@ class Trajectory:
         shape, flat, parts, zero = self._split(t_s)
         out = np.empty((flat.size, 6))
         for run, sel, times in parts:
-            out[sel] = run.state(times, derivative)
+            # the run's products, (1, 2, 3, M): the rows of out, without the run's own reshaping
+            rows = (run._dense_rows(run.coefficients, times, derivative, "state")
+                    if derivative in (0, 1) and not run.batch and times.size else None)
+            out[sel] = run.state(times, derivative) if rows is None else rows.reshape(6, -1).T
         out = out.reshape(shape + (6,))
         if frame == "gcrf" or _frame_key(frame) == "gcrf":
             # both halves (r, v) of every row as rows of one product: r q and v q, one call
