@@ -413,7 +413,8 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
         factor = 1.0 if k == "range_rate" else -_rows(meas.carrier_hz, sel) / c
         if k == "doppler" and not np.all(np.isfinite(factor)):
             raise ValueError("Doppler samples need a carrier frequency")
-        factor = np.broadcast_to(factor, rr.shape)
+        if np.shape(factor) != rr.shape:
+            factor = np.broadcast_to(factor, rr.shape)
         tm = two[m]
         if tm.any():
             rows = np.flatnonzero(m)[tm]
