@@ -45,7 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from trackproc.dynamics import taylor, timescales as ts
+from trackproc.dynamics import taylor, taylor_dense, timescales as ts
 from trackproc.dynamics.frames import QuasiInertialFrame, earth_rotation
 from trackproc.dynamics.gravity import force_parameters  # noqa: F401  (re-exported: propagator.force_parameters)
 from trackproc import vocabulary
@@ -238,7 +238,31 @@ class Trajectory:
         zero = flat == 0.0
         split = (t.shape, flat, parts, zero.reshape(t.shape) if zero.any() else None)
         self.__dict__["_last_split"] = (key, split)
+        if len(parts) > 1:
+            self._share_powers(flat, parts)
         return split
+
+    @staticmethod
+    def _share_powers(flat, parts) -> None:
+        """Give runs of one step each, all expanded about the same time (the epoch: both runs start
+        there), the powers of their offsets as columns of one set computed for all the times:
+        each column is the same products whichever run's times it sits with (each run's kept
+        plan, :meth:`taylor_dense.Propagation._plan`, then finds them)."""
+        runs = [run for run, _, _ in parts]
+        if any(run.n_steps != 1 or run.batch for run in runs):
+            return
+        t0 = runs[0].step_times_s[0]
+        if any(run.step_times_s[0] != t0 for run in runs):
+            return
+        for run, _, times in parts:
+            if not run.covers(times):
+                return                          # let the run's own evaluation raise its error
+        n = max(max(run.coefficients.shape[-1], 1 if run.sensitivities is None else run.sensitivities.shape[-1])
+                for run in runs)
+        dt = flat - t0
+        pw = taylor_dense._powers(dt, n)
+        for run, sel, times in parts:
+            run.keep_plan(times, None, [[0, None, dt[sel], pw[:, sel]]])
 
     def _evaluate(self, t_s, fn, tail):
         shape, flat, parts, _ = self._split(t_s)
@@ -256,7 +280,10 @@ class Trajectory:
         shape, flat, parts, zero = self._split(t_s)
         out = np.empty((flat.size, 6))
         for run, sel, times in parts:
-            out[sel] = run.state(times, derivative)
+            # the run's products, (1, 2, 3, M): the rows of out, without the run's own reshaping
+            rows = (run._dense_rows(run.coefficients, times, derivative, "state")
+                    if derivative in (0, 1) and not run.batch and times.size else None)
+            out[sel] = run.state(times, derivative) if rows is None else rows.reshape(6, -1).T
         out = out.reshape(shape + (6,))
         if frame == "gcrf" or _frame_key(frame) == "gcrf":
             # both halves (r, v) of every row as rows of one product: r q and v q, one call
@@ -274,11 +301,38 @@ class Trajectory:
         """
         if not self.has_stm:
             raise ValueError("this trajectory carries no STM; propagate with stm=True")
+        gcrf = frame == "gcrf" or _frame_key(frame) == "gcrf"
+        if gcrf:
+            out = self._stm_gcrf(t_s)
+            if out is not None:
+                return out
         out = self._evaluate(t_s, lambda run, t: run.stm(t), (6, 6))
-        if frame == "gcrf" or _frame_key(frame) == "gcrf":
+        if gcrf:
             big = self.rotation
             out = big.T @ out @ big
         return out
+
+    def _stm_gcrf(self, t_s):
+        """``Q^T Phi Q`` of :meth:`stm` from each run's ``[row, column, time]`` products: the left
+        rotation of every matrix is one product over all the times (``Q^T`` times the rows), the
+        right one a product for each row (``Q^T`` times its columns), each element the sum of
+        the same products in the same order as the rotation of each matrix (equal bit for bit);
+        None where a run cannot give that layout or has a single time."""
+        shape, flat, parts, _ = self._split(t_s)
+        if any(times.size < 2 for _, _, times in parts):
+            return None                         # a single column: matrix-vector kernels, other sums
+        out = np.empty((flat.size, 6, 6))
+        big_t = self.__dict__.get("_rotation_t")
+        if big_t is None:
+            big_t = self.__dict__["_rotation_t"] = self.rotation.T
+        for run, sel, times in parts:
+            rows = run.stm_rows(times)
+            if rows is None:
+                return None
+            m = times.size
+            left = (big_t @ rows.reshape(6, 6 * m)).reshape(6, 6, m)      # [i, p, n] = (Q^T Phi_n)[i, p]
+            out[sel] = (big_t @ left).transpose(2, 0, 1)                  # [i, j, n] = (Q^T Phi_n Q)[i, j]
+        return out.reshape(shape + (6, 6))
 
     @property
     def force_parameter_names(self) -> tuple:

@@ -149,16 +149,30 @@ class Propagation:
         return self
 
     # -- dense output ------------------------------------------------------------------------
+    def covers(self, t) -> bool:
+        """Whether every time of the 1-D ``t`` lies in the interval :meth:`_locate` accepts."""
+        lo, hi, slack = self._bounds()
+        return (not t.size) or bool(lo - slack <= t.min() and t.max() <= hi + slack)
+
+    def keep_plan(self, tf, idx, groups) -> None:
+        """Keep ``(idx, groups)`` as :meth:`_plan`'s answer for the 1-D times ``tf`` (a caller that
+        computed the powers of several runs' times at once)."""
+        self._last[:] = [(tf.tobytes(), idx, groups)]
+
+    def _bounds(self):
+        bounds = self._spectra.get("bounds")
+        if bounds is None:
+            tb = self.step_times_s
+            lo, hi = (tb[0], tb[-1]) if tb[-1] >= tb[0] else (tb[-1], tb[0])
+            bounds = self._spectra["bounds"] = (lo, hi, 8 * _EPS * max(abs(lo), abs(hi), 1.0))
+        return bounds
+
     def _locate(self, t):
         """Step index of every time in ``t`` (1-D); ValueError outside the interval."""
         tb = self.step_times_s
         if self.n_steps == 0:
             raise ValueError("no step was taken; nothing to evaluate")
-        bounds = self._spectra.get("bounds")
-        if bounds is None:
-            lo, hi = (tb[0], tb[-1]) if tb[-1] >= tb[0] else (tb[-1], tb[0])
-            bounds = self._spectra["bounds"] = (lo, hi, 8 * _EPS * max(abs(lo), abs(hi), 1.0))
-        lo, hi, slack = bounds
+        lo, hi, slack = self._bounds()
         tmin, tmax = (t.min(), t.max()) if t.size else (lo, hi)
         if not (lo - slack <= tmin and tmax <= hi + slack):
             raise ValueError(f"times must lie in the propagated interval [{lo}, {hi}] s; "
@@ -230,23 +244,37 @@ class Propagation:
         """
         t = np.asarray(t_s, dtype=float)
         tf = t.reshape(-1)
-        idx, groups = self._plan(tf)
         _, nb, nf, n = coef.shape
-        tb = self.step_times_s
-        nm = max(n - m, 1)
         if tf.size == 0:
             return np.empty((nb, 0, 2, nf)), t.shape
-        # compiled (numba is loaded already) when steps are many and samples per step few; one
-        # BLAS product per step wins for hundreds of samples in a step (a pass: 601 in 1 step)
-        if self.engine == "compiled" and idx is not None and tf.size <= 64 * self.n_steps:
+        rows = self._dense_rows(coef, tf, m, key)
+        if rows is None:
             from trackproc.dynamics import jit, taylor_jit  # start-up: numba, loaded only for the compiled engine
 
             with jit.compile_once([taylor_jit.dense], "taylor-dense", "the Taylor engine's kernels", 6):
-                return taylor_jit.dense(np.ascontiguousarray(coef), np.ascontiguousarray(tb, dtype=float),
-                                        idx.astype(np.int64), np.ascontiguousarray(tf), m), t.shape
+                return taylor_jit.dense(np.ascontiguousarray(coef), np.ascontiguousarray(self.step_times_s,
+                                                                                         dtype=float),
+                                        self._plan(tf)[0].astype(np.int64), np.ascontiguousarray(tf), m), t.shape
+        out = rows.transpose(0, 3, 1, 2)
+        if rows.base is None:
+            out = np.ascontiguousarray(out)      # several steps filled it: the layout callers had
+        return out, t.shape
+
+    def _dense_rows(self, coef, tf, m, key):
+        """Derivatives m and m+1 of spectra coef at the 1-D times ``tf`` as the products give them,
+        (B, 2, F, M), the times last; None where the compiled kernel evaluates instead (many
+        steps, few samples a step: :meth:`_dense`)."""
+        idx, groups = self._plan(tf)
+        _, nb, nf, n = coef.shape
+        nm = max(n - m, 1)
+        # compiled (numba is loaded already) when steps are many and samples per step few; one
+        # BLAS product per step wins for hundreds of samples in a step (a pass: 601 in 1 step)
+        if self.engine == "compiled" and idx is not None and tf.size <= 64 * self.n_steps:
+            return None
         if not groups:
             groups.extend(g + [None, None] for g in self._groups(idx))
-        out = None if len(groups) == 1 else np.empty((nb, tf.size, 2, nf))
+        out = None if len(groups) == 1 else np.empty((nb, 2, nf, tf.size))
+        tb = self.step_times_s
         for group in groups:
             s, sel, dt, pw = group
             if pw is None or pw.shape[0] < nm:
@@ -255,12 +283,28 @@ class Propagation:
                 pw = group[3] = _powers(dt, nm)
             # one 2-D product of contiguous operands (BLAS), (B*2F, nm) @ (nm, M)
             res = (self._derivative_spectra(coef, s, m, key) @ pw[:nm]).reshape(nb, 2, nf, -1)
-            res = res.transpose(0, 3, 1, 2)
             if out is None:
                 out = res
             else:
-                out[:, sel] = res
-        return out, t.shape
+                out[..., sel] = res
+        return out
+
+    def stm_rows(self, t_s):
+        """``Phi`` at the 1-D times ``t_s`` as (6, 6, M), ``[row, column, time]`` (the layout of the
+        products: a rotation of every matrix is then two matrix products, without transposing
+        them first), or None where :meth:`stm` has to be used (batch mode, compiled kernel)."""
+        if self.sensitivities is None or self.batch:
+            return None
+        sens = self.sensitivities
+        nsteps, nb, _, npar, n = sens.shape
+        tf = np.asarray(t_s, dtype=float).reshape(-1)
+        if nb != 1 or tf.size == 0:
+            return None
+        rows = self._dense_rows(sens.reshape(nsteps, nb, 3 * npar, n), tf, 0, "jacobian")
+        if rows is None:
+            return None
+        rows = rows.reshape(6, npar, tf.size)
+        return rows if npar == 6 else rows[:, :6]
 
     def _finish(self, arr, tshape, tail):
         """(B, M, ...) -> (B?,) + tshape + tail."""

@@ -95,27 +95,33 @@ def range_rate_value(r_e, v_e, r_st, v_st, model: str = "doppler", c: float = C_
     return rr
 
 
-def range_rate_partials(r_e, v_e, r_st, v_st, model: str = "doppler", c: float = C_LIGHT):
+def range_rate_partials(r_e, v_e, r_st, v_st, model: str = "doppler", c: float = C_LIGHT, *, rho=None, u=None):
     """Range-rate (eq. 2 or 3) and its partials ``∂ρ̇/∂r_e`` and ``∂ρ̇/∂v_e`` at fixed ``t_e``
     (module docstring). Implements seed 002 eq. 17 (range-rate) with its partials and, pointwise,
     seed 004 eqs. 11-12 (Vr = dD/dt).
 
+    ``rho`` (...,) and ``u`` (..., 3): the range and unit vector of ``r_e - r_st`` when the caller
+    has them by the same operations (the light time's), not computed again.
     Returns ``(rr, d_rr_d_r (..., 3), d_rr_d_v (..., 3))``.
     """
     check_range_rate_model(model)
     r_e, v_e, r_st, v_st = (np.asarray(x, float) for x in (r_e, v_e, r_st, v_st))
-    d = r_e - r_st
-    rho = np.sqrt(np.add.reduce(d * d, axis=-1))[..., None]   # np.linalg.norm(d, axis=-1), its operations
-    u = d / rho
+    if rho is None or u is None:
+        d = r_e - r_st
+        rho = np.sqrt(np.add.reduce(d * d, axis=-1))[..., None]   # np.linalg.norm(d, axis=-1), its operations
+        u = d / rho
+    else:
+        rho = np.asarray(rho, float)[..., None]
     dv = v_e - v_st
     num = _dot(u, dv)[..., None]
     # P w = w - u (u·w): derivative of û along r_e, times rho
     proj_dv = dv - u * num
     if model == "instantaneous":
         return num[..., 0], proj_dv / rho, u.copy()
-    den = 1.0 + _dot(u, v_e)[..., None] / c
+    uv = _dot(u, v_e)[..., None]
+    den = 1.0 + uv / c
     rr = num / den
-    proj_v = v_e - u * _dot(u, v_e)[..., None]
+    proj_v = v_e - u * uv
     d_r = (proj_dv - rr * proj_v / c) / (rho * den)
     d_v = u * (1.0 - rr / c) / den
     return rr[..., 0], d_r, d_v

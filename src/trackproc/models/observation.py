@@ -263,9 +263,14 @@ class MeasurementSet:
 
     @property
     def two_way(self) -> np.ndarray:
-        """True for two-way range, range-rate and Doppler samples (the round-trip model)."""
-        two = self.mode == "two-way"
-        return two & np.isin(self.kind, LINK_KINDS) if two.any() else two
+        """True for two-way range, range-rate and Doppler samples (the round-trip model); kept with
+        the mode and kind arrays it was computed from (each model evaluation asks)."""
+        kept = self.__dict__.get("_two_way")
+        if kept is None or kept[0] is not self.mode or kept[1] is not self.kind:
+            two = self.mode == "two-way"
+            two = two & np.isin(self.kind, LINK_KINDS) if two.any() else two
+            kept = self.__dict__["_two_way"] = (self.mode, self.kind, two)
+        return kept[2].copy()
 
     def shifted(self, dt_s) -> "MeasurementSet":
         """The samples as if received ``dt_s`` (s, scalar or per row) later: ``t_s + dt`` and the
@@ -403,11 +408,13 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
             continue
         sel = m if not m.all() else slice(None)     # every row (one kind): no selection's copies
         rr, d_r, d_v = range_rate_partials(_rows(r_e, sel), _rows(v_e, sel), _rows(meas.r_st, sel),
-                                           _rows(meas.v_st, sel), range_rate_model, c)
+                                           _rows(meas.v_st, sel), range_rate_model, c, rho=geo.rho_m[sel],
+                                           u=geo.u[sel])
         factor = 1.0 if k == "range_rate" else -_rows(meas.carrier_hz, sel) / c
         if k == "doppler" and not np.all(np.isfinite(factor)):
             raise ValueError("Doppler samples need a carrier frequency")
-        factor = np.broadcast_to(factor, rr.shape)
+        if np.shape(factor) != rr.shape:
+            factor = np.broadcast_to(factor, rr.shape)
         tm = two[m]
         if tm.any():
             rows = np.flatnonzero(m)[tm]
