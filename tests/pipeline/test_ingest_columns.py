@@ -33,3 +33,22 @@ def test_numpy_columns_are_the_frames_columns():
         for column in reference.column_names:
             assert _same(table.column(column), reference.column(column)), (name, column)
         assert table.frame.equals(reference.frame)        # and the frame, when asked for, is the same
+
+
+def test_a_frame_changed_in_place_is_what_is_read_and_written(tmp_path):
+    """A caller that reads ``frame`` and changes it in place (a renamed station) gets its change
+    into every later read (``column``) and write (the pass file), for a table of numpy columns and
+    for a reader's arrays alike."""
+    from trackproc.io.passfile import read_pass_table, write_pass_table
+
+    stations = read_stations(str(ROOT / "sample_data" / "stations.csv"))
+    raw = read_raw(str(ROOT / "sample_data" / "elevation_pass.csv"))
+    name = str(raw.frame["station"].iloc[0])
+    raw.frame["station"] = raw.frame["station"].replace(name, "XXX")
+    assert set(ingest([raw], {**stations, "XXX": stations[name]}, IngestOptions()).table.column("station")) == {"XXX"}
+
+    table = ingest([read_raw(str(ROOT / "sample_data" / "elevation_pass.csv"))], stations, IngestOptions()).table
+    table.frame["station"] = table.frame["station"].replace(name, "YYY")
+    assert set(table.column("station")) == {"YYY"}
+    write_pass_table(table, str(tmp_path / "p.parquet"))
+    assert set(read_pass_table(str(tmp_path / "p.parquet")).column("station")) == {"YYY"}

@@ -36,8 +36,12 @@ class PassTable:
 
     @property
     def frame(self):
+        """The samples as a DataFrame, built from the numpy columns when first read. Once handed
+        out it is the table's truth: a caller may change it in place (``table.frame["station"] =
+        ...``), so the numpy columns are dropped and :meth:`column` reads the frame from then on."""
         if self._frame is None:
             self._frame = self._build()
+        self._columns = self._build = None
         return self._frame
 
     @frame.setter
@@ -56,9 +60,8 @@ class PassTable:
 
     def column(self, name: str) -> np.ndarray:
         """One column as numpy: ``time`` naive UTC ``datetime64[ns]``, text as object arrays of str.
-        A table made by :meth:`from_columns` answers from its numpy columns also once its frame is
-        built (the same values: the frame is built from them; writing a pass file builds it, and
-        refine then reads ~13 columns a pass); setting :attr:`frame` drops them."""
+        A table made by :meth:`from_columns` answers from its numpy columns until its frame is read
+        (:attr:`frame`: then from the frame, which its reader may have changed)."""
         if self._columns is not None and self._columns.get(name) is not None:
             return self._columns[name]
         values = self.frame[name]

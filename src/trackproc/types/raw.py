@@ -19,8 +19,8 @@ class RawMeasurements:
 
     A reader may give ``arrays`` instead of ``frame``: the same columns as numpy arrays (``time``
     datetime64[ns] in UTC, the text columns object arrays of str); ``frame`` is then built from
-    them when first asked for. Ingest reads the arrays directly (no DataFrame: with pandas 3 its
-    string columns would become Arrow strings and back).
+    them when first asked for (and is the truth from then on). Ingest reads the arrays directly (no
+    DataFrame: with pandas 3 its string columns would become Arrow strings and back).
     """
 
     def __init__(self, frame=None, source: str = "", column: Optional[dict] = None, meta: Optional[dict] = None,
@@ -33,13 +33,17 @@ class RawMeasurements:
 
     @property
     def frame(self):
+        """The samples as a DataFrame, built from :attr:`arrays` when first read. Once handed out it
+        is the truth (a caller may change it in place): the arrays are dropped, and ingest reads
+        the frame from then on."""
         if self._frame is None and self.arrays is not None:
             self._frame = frame_of_arrays(self.arrays)
+        self.arrays = None
         return self._frame
 
     @frame.setter
     def frame(self, value) -> None:
-        self._frame = value
+        self._frame, self.arrays = value, None
 
     def size(self) -> int:
         """The number of samples (without building the frame)."""
