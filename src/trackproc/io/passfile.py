@@ -118,12 +118,7 @@ def to_arrow(table: PassTable) -> pa.Table:
         *(pa.array(frame[c].astype(object).to_numpy(), pa.string()) for c in ("station", "pass_id", "kind")),
         *(pa.array(frame[c].to_numpy(dtype=np.float64), pa.float64()) for c in ("value", "sigma")),
     ]
-    fields = [pa.field("time", pa.timestamp("ns", tz="UTC"), nullable=False),
-              pa.field("station", pa.string(), nullable=False),
-              pa.field("pass_id", pa.string(), nullable=False),
-              pa.field("kind", pa.string(), nullable=False),
-              pa.field("value", pa.float64(), nullable=False),
-              pa.field("sigma", pa.float64(), nullable=False)]
+    fields = _canonical_fields()
     for name in frame.columns:
         if name not in COLUMNS:
             array = pa.array(frame[name], from_pandas=True)
@@ -131,6 +126,16 @@ def to_arrow(table: PassTable) -> pa.Table:
             fields.append(pa.field(str(name), array.type))
     schema = pa.schema(fields, metadata={META_KEY: meta_json(table.meta).encode()})
     return pa.Table.from_arrays(arrays, schema=schema)
+
+
+def _canonical_fields() -> list:
+    """The Arrow fields of :data:`COLUMNS` (a new list: the added columns' fields are appended)."""
+    return [pa.field("time", pa.timestamp("ns", tz="UTC"), nullable=False),
+            pa.field("station", pa.string(), nullable=False),
+            pa.field("pass_id", pa.string(), nullable=False),
+            pa.field("kind", pa.string(), nullable=False),
+            pa.field("value", pa.float64(), nullable=False),
+            pa.field("sigma", pa.float64(), nullable=False)]
 
 
 def _arrow_of_columns(columns: dict, meta: dict) -> pa.Table | None:
@@ -143,12 +148,7 @@ def _arrow_of_columns(columns: dict, meta: dict) -> pa.Table | None:
         return None
     arrays = [utc_time_array(columns["time"]), *(string_array(columns[c]) for c in ("station", "pass_id", "kind")),
               *(float_array(columns[c]) for c in ("value", "sigma"))]
-    fields = [pa.field("time", pa.timestamp("ns", tz="UTC"), nullable=False),
-              pa.field("station", pa.string(), nullable=False),
-              pa.field("pass_id", pa.string(), nullable=False),
-              pa.field("kind", pa.string(), nullable=False),
-              pa.field("value", pa.float64(), nullable=False),
-              pa.field("sigma", pa.float64(), nullable=False)]
+    fields = _canonical_fields()
     for name, values in extras.items():
         array = bool_array(values) if values.dtype == np.bool_ else _float_array_nan_null(values)
         arrays.append(array)
