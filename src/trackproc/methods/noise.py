@@ -347,6 +347,18 @@ def _starts(has_ar: bool, has_walk: bool, given: bool, tau_lo: float, tau_hi: fl
     return starts, bounds
 
 
+def _by_point(fn):
+    """``fn`` remembering its value at each point ``z`` it was given (by the point's bytes)."""
+    memo: dict = {}
+
+    def at(z):
+        key = np.asarray(z, float).tobytes()
+        if key not in memo:
+            memo[key] = fn(z)
+        return memo[key]
+    return at
+
+
 def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Optional[float] = None,
               white_floor: float = 0.0, t0: Optional[float] = None, p_select: float = SELECTION_P,
               dense: bool = False) -> NoiseFit:
@@ -392,26 +404,12 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
             q = walk if given else (math.sqrt(_exp(z[2 if has_ar else 0])) if has_walk else 0.0)
             return NoiseModel(w, a, tau, q or 0.0)
 
-        memo: dict = {}
-
-        def evaluate(z, build=build, given=given, memo=memo):
-            """``(ℓ_R, ŝ)`` at ``z``, each point once: the search starts at the best start, already
-            evaluated, and the scale is read at its end point (one likelihood evaluation each)."""
-            key = np.asarray(z, float).tobytes()
-            if key not in memo:
-                memo[key] = reml(build(z), profile=not given)
-            return memo[key]
-
-        fast_memo: dict = {}
-
-        def neg_fast(z, build=build, given=given, memo=fast_memo):
-            """``-ℓ_R`` at a point of the search by the compiled pass (equal to ``evaluate`` to
-            rounding): the search's gradients and steps; its end point is then ``evaluate``d, so a
-            path that reaches the same point of the 0.001 grid gives the same numbers."""
-            key = np.asarray(z, float).tobytes()
-            if key not in memo:
-                memo[key] = -reml.fast(build(z), profile=not given)
-            return memo[key]
+        # each point once (the search starts at the best start, already evaluated; the scale is read
+        # at the end point): the exact path (ℓ_R, ŝ) and the compiled one (-ℓ_R, equal to rounding,
+        # for the search's gradients and steps: its end point is then evaluated exactly, so a path
+        # that reaches the same point of the 0.001 grid gives the same numbers)
+        evaluate = _by_point(lambda z, build=build, given=given: reml(build(z), profile=not given))
+        neg_fast = _by_point(lambda z, build=build, given=given: -reml.fast(build(z), profile=not given))
 
         def neg(z, evaluate=evaluate):
             return -evaluate(z)[0]
