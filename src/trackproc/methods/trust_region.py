@@ -78,21 +78,8 @@ def minimise(fun, start, bounds, xtol: float, ftol: float, maxiter: int = 40, fi
         gv = v.T @ gf
         lam = max(0.0, -float(w.min()) + 1e-10)
         s = -v @ (gv / (w + lam))
-        if np.linalg.norm(s) > radius:       # the boundary solution: ‖(B + λI)⁻¹g‖ = radius, λ by bisection
-            wl, gl = w.tolist(), gv.tolist()
-            lo_l, hi_l = lam, lam + float(np.linalg.norm(gf)) / radius + max(abs(e) for e in wl)
-            pairs = list(zip(gl, wl))
-            r2 = radius * radius
-            for _ in range(40):
-                mid = 0.5 * (lo_l + hi_l)
-                total = 0.0                 # the terms summed in order (as sum() did: the same bits)
-                for gi, wi in pairs:
-                    total += (gi / (wi + mid)) ** 2
-                if total > r2:
-                    lo_l = mid
-                else:
-                    hi_l = mid
-            s = -v @ (gv / (w + hi_l))
+        if np.linalg.norm(s) > radius:       # the boundary solution: ‖(B + λI)⁻¹g‖ = radius
+            s = -v @ (gv / (w + _boundary_shift(w, gv, lam, float(np.linalg.norm(gf)), radius)))
         step = np.zeros(d)
         step[free] = s
         y = np.clip(x + step, lo, hi)
@@ -119,3 +106,23 @@ def minimise(fun, start, bounds, xtol: float, ftol: float, maxiter: int = 40, fi
     # likelihoods equal to rounding (the O(n) and the dense path) end on the same point
     z = np.clip(np.round(x, 3), lo, hi)
     return z, -float((fun if final is None else final)(z))
+
+
+def _boundary_shift(w, gv, lam: float, g_norm: float, radius: float) -> float:
+    """The shift λ ≥ ``lam`` with ‖(B + λI)⁻¹g‖ = ``radius`` (Nocedal & Wright 2006, sec. 4.3), ``w``
+    the eigenvalues of B and ``gv`` the gradient in its eigenvectors, by 40 bisections between ``lam``
+    and an upper bound; the upper end of the last bracket (inside the radius)."""
+    wl = w.tolist()
+    lo_l, hi_l = lam, lam + g_norm / radius + max(abs(e) for e in wl)
+    pairs = list(zip(gv.tolist(), wl))
+    r2 = radius * radius
+    for _ in range(40):
+        mid = 0.5 * (lo_l + hi_l)
+        total = 0.0                 # the terms summed in order (as sum() did: the same bits)
+        for gi, wi in pairs:
+            total += (gi / (wi + mid)) ** 2
+        if total > r2:
+            lo_l = mid
+        else:
+            hi_l = mid
+    return hi_l
