@@ -89,6 +89,21 @@ def apriori_choice(opt: RefineOptions, initial) -> tuple[dict, bool, str, str]:
     return apriori_sigma, apriori_initial, note, source
 
 
+def _station_model(problem, st, station: str, opt: RefineOptions, eop, like: Optional[Refinement]):
+    """The :class:`~trackproc.dynamics.measurement_spectra.StationModel` of ``station`` (``st``) over the
+    pass's samples (±60 s) at ``problem``'s epoch: ``like``'s when it is of the same site, epoch,
+    Earth model and samples (:func:`prepare`'s re-solves), else built."""
+    t_meas = problem.meas.t_s
+    if (like is not None and like.station_name == station and like.problem.epoch == problem.epoch
+            and like.problem.eop is eop and like.options.earth == opt.earth
+            and np.array_equal(like.problem.meas.t_s, t_meas)):
+        return like.station_model
+    lat, lon, r_itrf = geodesy.station_itrf(st, opt.earth)
+    epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))
+    return ms.StationModel.build(r_itrf, lat, lon, epoch_jd, problem.frame.q, float(t_meas.min()) - 60.0,
+                                 float(t_meas.max()) + 60.0, eop=eop)
+
+
 def prepare(table: PassTable, initial, stations=None, options: RefineOptions | None = None, eop=None,
             source: str = "<pass>", curve: Optional[SmoothedCurve] = None, like: Optional[Refinement] = None
             ) -> Refinement:
@@ -168,16 +183,7 @@ def prepare(table: PassTable, initial, stations=None, options: RefineOptions | N
     for n_, s_ in sub.stations().items():
         known.setdefault(n_, s_)
     st = known[station]
-    lat, lon, r_itrf = geodesy.station_itrf(st, opt.earth)
-    t_meas = problem.meas.t_s
-    epoch_jd = tuple(float(a) for a in ts.datetime64_to_jd_utc(problem.epoch))
-    if (like is not None and like.station_name == station and like.problem.epoch == problem.epoch
-            and like.problem.eop is eop and like.options.earth == opt.earth
-            and np.array_equal(like.problem.meas.t_s, t_meas)):
-        station_model = like.station_model            # the same site, epoch and span
-    else:
-        station_model = ms.StationModel.build(r_itrf, lat, lon, epoch_jd, problem.frame.q, float(t_meas.min()) - 60.0,
-                                              float(t_meas.max()) + 60.0, eop=eop)
+    station_model = _station_model(problem, st, station, opt, eop, like)
 
     # the station's geocentric axis at the traverse epoch (GCRF): the single-pass rotation family
     r_st0, _ = station_model.state(np.array([0.0]))
