@@ -34,9 +34,11 @@ True
 Everything here is pure numpy on SI units; nothing reads files or prints.
 
 One responsibility, the one door to the numerical engines (the Taylor series for two-body and J2,
-DOP853 for the full force model) and the trajectory they return; under 500 lines, most of it the
-trajectory's interpolation and that door's argument checks and docs, and the same door for a run
-restarted from a later state (:func:`propagate_from`, read on the first epoch's time axis).
+DOP853 for the full force model) and the trajectory they return; ~590 lines, most of it the
+trajectory's interpolation and that door's argument checks and docs, the same door for a run
+restarted from a later state (:func:`propagate_from`, read on the first epoch's time axis), and the
+trajectory's kept reads (the last times' split and powers, which the light time reads three times:
+state, derivative, STM). The kept reads could move to a module of their own with the interpolation.
 """
 
 from __future__ import annotations

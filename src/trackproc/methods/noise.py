@@ -44,7 +44,8 @@ consecutive samples spread over the pass: the exact restricted likelihood of tha
 keeps the shortest lags), the final fit uses every sample.
 
 Pure numpy/scipy. One responsibility, the noise model of a pass (its candidates, likelihood, starts
-and choice); its minimiser is :mod:`trackproc.methods.trust_region`.
+and choice), ~450 lines with the likelihood's exact and compiled evaluations side by side; its
+minimiser is :mod:`trackproc.methods.trust_region`.
 """
 
 from __future__ import annotations

@@ -26,7 +26,8 @@ instead of factorising the dense n x n covariance (O(n³); issue 19):
 
 Pure numpy/scipy; the gain recursion optionally compiled (numba, :func:`compiled_riccati`), and
 with it the whitening of the two-state case (the filter's state recursion over each column, equal
-to the banded solve to rounding).
+to the banded solve to rounding). A little over 400 lines: the numpy and compiled paths of the same
+recursion are kept together; the kernels themselves are in :mod:`trackproc.methods.whitening_jit`.
 """
 
 from __future__ import annotations

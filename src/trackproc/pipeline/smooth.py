@@ -28,6 +28,9 @@ Status of each fit, in the summary and the metadata:
 Azimuth is unwrapped before the fit (a pass through north jumps by 2 pi), so its coefficients
 describe the continuous angle; ``smoothed`` and grid values are wrapped back to [0, 2 pi) and
 residuals are the wrapped differences.
+
+A little over 400 lines: the pass table in, the fits per group and the smoothed table out, from a
+DataFrame or from numpy columns (the batch's path, without pandas) in the same module.
 """
 
 from __future__ import annotations

@@ -1,8 +1,9 @@
 """The smoothing polynomial of one pass (implements seed 004 eq. 1, ``y_LSQ(t) = phi(t)^T C``): the
 bases, the design matrix, the (generalized) weighted least-squares fit by QR with the AR(1)
-whitening of :class:`NoiseModel`, and the fit's result :class:`PolynomialFit`. A little over 400
-lines: :class:`DesignRows` (one pass's design matrices and QR factors, shared by the degree search
-and the fit) belongs with the fit whose matrices it holds.
+whitening of :class:`NoiseModel`, and the fit's result :class:`PolynomialFit`. About 500 lines:
+:class:`DesignRows` (one pass's design matrices and QR factors, shared by the degree search and the
+fit) belongs with the fit whose matrices it holds, and the AR(1) products' numpy and compiled paths
+(the same numbers) stay beside each other.
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ The parameters are the six state drivers ``x..vz`` plus the drivers that the mea
 modifiers own (:mod:`trackproc.models.modifiers`): the options choose the modifiers
 (:func:`trackproc.pipeline.od.modifiers.bias_modifiers`), the estimator collects their drivers,
 and the model applies the modifiers bound to the samples (steps 3-5 of
-:mod:`trackproc.pipeline.estimate`).
+:mod:`trackproc.pipeline.estimate`). A little over 400 lines: the problem, its builder and the
+model's memo (which evaluations are reused) are one unit; the priors' assembly could move out.
 """
 
 from __future__ import annotations
