@@ -90,3 +90,56 @@ def test_compact_text_holds_the_indented_texts_values(seed):
     floats = [rng.uniform(-1e3, 1e3) for _ in range(200)] + [5e-324, -0.0, 1e308]
     back = json.loads(dumps_compact({"f": floats}))["f"]
     assert [f.hex() for f in back] == [f.hex() for f in floats]
+
+
+def _unready(rng: random.Random, value):
+    """``value`` with some leaves and containers swapped for what json_ready converts: numpy
+    scalars and arrays, non-finite floats, datetime64, int/bool/None keys, dict and list subclasses."""
+    r = rng.random()
+    if isinstance(value, dict):
+        out = {k: _unready(rng, v) for k, v in value.items()}
+        if r < 0.15:
+            out[rng.choice([7, 10, True, None, 2.5])] = rng.choice([1.0, "k"])
+        return _Dict(out) if r > 0.95 else out
+    if isinstance(value, (list, tuple)):
+        out = [_unready(rng, v) for v in value]
+        if r < 0.1 and out and all(type(v) is float for v in out):
+            return np.array(out)
+        return _List(out) if r > 0.95 else out
+    if type(value) is float:
+        return rng.choice([value, np.float64(value), float("nan"), float("-inf"), np.float32(0.5)]) if r < 0.2 else value
+    if type(value) is int and -2**63 < value < 2**63:
+        return np.int64(value) if r < 0.2 else value
+    if value is None and r < 0.2:
+        return np.datetime64("2026-03-20T09:30:00.123456789")
+    return value
+
+
+class _Dict(dict):
+    pass
+
+
+class _List(list):
+    pass
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_dumps_in_one_walk_is_json_dumps_of_json_ready(seed):
+    """dumps (json_ready's conversion where it is needed, in the emitting walk) against the
+    standard library's indented text of the fully converted value."""
+    rng = random.Random(seed)
+    for _ in range(400):
+        value = _unready(rng, {"v": _value(rng), "w": [_value(rng) for _ in range(3)]})
+        want = json.dumps(json_ready(value), indent=2, sort_keys=True, allow_nan=False) + "\n"
+        assert dumps(value) == want, value
+
+
+def test_scalar_containers_at_every_depth():
+    """The containers of scalars that the C encoder writes in one call, at several depths, with
+    strings holding separators and control characters: the standard library's text."""
+    value = {"a": {"s": "x,\n  y", "n": None, "t": True, "f": -0.0, "i": 2**70, "e": "é\u2028"},
+             "b": [[{"k": 1.5, "j": "]"}, ["a", None, False]], []], "c": {}, "d": ["", 1, 0.1]}
+    for indent in (1, 2, 4):
+        for sort_keys in (False, True):
+            assert dumps_indented(value, indent, sort_keys) == json.dumps(value, indent=indent, sort_keys=sort_keys)
+    assert dumps(value) == json.dumps(value, indent=2, sort_keys=True) + "\n"
