@@ -58,3 +58,58 @@ def test_a_taken_temporary_name_is_skipped(tmp_path, monkeypatch):
     write_bytes(tmp_path / "a.bin", b"mine")
     assert (tmp_path / "a.bin").read_bytes() == b"mine"
     assert (tmp_path / f".a.bin.{'01' * 6}.tmp").read_bytes() == b"someone else's"
+
+
+def _calls(monkeypatch):
+    """The order of the file-system calls write_bytes makes (recorded, then done)."""
+    seen = []
+    for name in ("write", "fsync", "close", "replace", "unlink"):
+        real = getattr(os, name)
+        monkeypatch.setattr(atomic.os, name, lambda *a, _real=real, _name=name: (seen.append(_name), _real(*a))[1])
+    return seen
+
+
+def test_write_bytes_syncs_before_the_rename_and_replaces_the_old_file(tmp_path, monkeypatch):
+    """The durable contract of the module docstring: the data fsynced, then renamed over the
+    target (which keeps its old content until then); the reference is the file read back."""
+    target = tmp_path / "out.bin"
+    target.write_bytes(b"old content")
+    seen = _calls(monkeypatch)
+    data = bytes(range(256)) * 300
+    write_bytes(target, data)
+    assert seen == ["write", "fsync", "close", "replace"]
+    assert target.read_bytes() == data
+    assert [p.name for p in tmp_path.iterdir()] == ["out.bin"]
+
+
+def test_write_bytes_failing_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatch):
+    target = tmp_path / "out.bin"
+    target.write_bytes(b"old")
+
+    def full(fd, data):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(atomic.os, "write", full)
+    with pytest.raises(OutputError, match="out.bin"):
+        write_bytes(target, b"new")
+    assert [p.name for p in tmp_path.iterdir()] == ["out.bin"] and target.read_bytes() == b"old"
+
+
+def test_write_bytes_in_a_transaction_is_held_until_it_ends(tmp_path):
+    """all_or_none: the written file appears at the end of the block, or never."""
+    with atomic.all_or_none():
+        write_bytes(tmp_path / "a.bin", b"a")
+        assert not (tmp_path / "a.bin").exists()
+    assert (tmp_path / "a.bin").read_bytes() == b"a"
+    with pytest.raises(RuntimeError):
+        with atomic.all_or_none():
+            write_bytes(tmp_path / "b.bin", b"b")
+            raise RuntimeError("the second output failed")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.bin"]
+
+
+def test_write_bytes_to_a_device_or_a_directory(tmp_path):
+    write_bytes(os.devnull, b"discarded")                     # written through, not renamed over
+    assert os.path.exists(os.devnull) and not os.path.isfile(os.devnull)
+    with pytest.raises(OutputError, match="directory"):
+        write_bytes(tmp_path, b"x")

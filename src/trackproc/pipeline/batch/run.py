@@ -18,6 +18,7 @@ from typing import Callable, Optional
 from trackproc import __version__
 from trackproc.errors import InputError, OutputError, ProcessingError, TrackprocError
 from trackproc.io.atomic import max_input_bytes, write_bytes
+from trackproc.io.jsonutil import json_ready
 from trackproc.pipeline.batch.chain import STEPS, Chain, WindowContext, make_chain
 from trackproc.pipeline.batch.config import Settings
 from trackproc.pipeline.batch.discovery import discover
@@ -239,10 +240,12 @@ def _run_inputs(settings, chain, inputs, files, paths, hashes, out, executors, p
                     files=task_files, paths=task_paths, source=item.path, data=data, reads_raw=chain.reads_raw,
                     side_steps=chain.side_steps, table_key=table_key, jit=executors.jit)
 
+    settings_doc = json_ready({"steps": list(chain.input_steps), **options_doc})  # once: each manifest holds it
+
     def on_result(entry, result: TaskResult):
         item = entry[0]
         record = store_result(out, PASSES_DIR, result, task="pass", path=item.path, old=manifests.get(item.name),
-                        settings_doc={"steps": list(chain.input_steps), **options_doc})
+                              settings_doc=settings_doc)
         records[item.name] = record
         log_record(record, result)
         done[0] += 1
@@ -312,10 +315,12 @@ def _run_windows(settings, chain, records, files, paths, hashes, out, executors)
         return Task(kind="window", name=name, key=key, steps=chain.window_steps, options=options, files=task_files,
                     paths=task_paths, members=data, jit=executors.jit)
 
+    settings_doc = json_ready({"steps": list(chain.window_steps), **options_doc})
+
     def on_result(entry, result: TaskResult):
         name, key, members = entry
         record = store_result(out, ESTIMATES_DIR, result, task="estimate", path=None, old=manifests.get(name),
-                        settings_doc={"steps": list(chain.window_steps), **options_doc},
+                              settings_doc=settings_doc,
                         members=[r.name for r in members])
         results[name] = record
         log_record(record, result)

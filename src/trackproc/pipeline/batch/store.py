@@ -161,7 +161,7 @@ def store_result(out: Path, directory: str, result: TaskResult, *, task: str, pa
            members: Sequence = (), old: Optional[dict] = None) -> Record:
     """Write a task's outputs (atomically) then its manifest; remove a failed input's old outputs.
     When only the side steps ran (``result.reused``), the stored table stage's outputs stay as
-    they are and are listed again."""
+    they are and are listed again. ``settings_doc`` is JSON-ready (``json_ready``'s output)."""
     outputs = {}
     for suffix, data in sorted(result.outputs.items()):
         rel = f"{directory}/{result.name}{suffix}"
@@ -200,8 +200,20 @@ def store_result(out: Path, directory: str, result: TaskResult, *, task: str, pa
         manifest["table_key"] = result.table_key or result.key
         if stage is not None:
             manifest["table_stage"] = stage
-    write_text(manifest_path(out, directory, result.name), dumps_compact(manifest))  # one line: read by runs
+    write_text(manifest_path(out, directory, result.name), manifest_text(manifest))
     return record
+
+
+def manifest_text(manifest: dict) -> str:
+    """The manifest's one line (read by runs, not people): its parts are JSON-ready already (a
+    task's numbers and details are ``json_ready``'s output in the worker, the settings document
+    is made ready once a run, the rest are strings, numbers and lists of them), so they go to the
+    C encoder as they are, without a second ``json_ready`` walk; a value that is not (a numpy
+    scalar, a non-finite float) makes the encoder raise, and then the whole manifest is converted."""
+    try:
+        return dumps_compact(manifest, ready=True)
+    except (TypeError, ValueError):
+        return dumps_compact(manifest)
 
 
 
