@@ -191,9 +191,20 @@ def _emit(value, out: list, newline: str, step: str, sort_keys: bool, convert) -
                 out.append("{" + inner + text[1:-1] + newline + "}")
                 return
         out.append("{")
-        for i, (key, item) in enumerate(sorted(value.items()) if sort_keys else value.items()):
-            out.append(("," + inner if i else inner) + _STRING(key) + ": ")
-            _emit(item, out, inner, step, sort_keys, convert)
+        first = True
+        for key, item in (sorted(value.items()) if sort_keys else value.items()):
+            head = (inner if first else "," + inner) + _STRING(key) + ": "
+            first = False
+            kind = type(item)
+            if kind is str:                                 # the scalars here, without a call
+                out.append(head + _STRING(item))
+            elif kind is float and math.isfinite(item):
+                out.append(head + float.__repr__(item))
+            elif kind is int:
+                out.append(head + int.__repr__(item))
+            else:
+                out.append(head)
+                _emit(item, out, inner, step, sort_keys, convert)
         out.append(newline + "}")
     elif convert is None:
         raise _NotPlain
