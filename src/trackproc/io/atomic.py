@@ -161,7 +161,7 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
 _CREATE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_NOFOLLOW", 0)
 
 
-def _create_temporary(directory: Path, name: str) -> tuple[int, str]:
+def _create_temporary(directory: str | Path, name: str) -> tuple[int, str]:
     """(fd, path) of a new empty file ``.NAME.XXXXXXXX.tmp`` in ``directory`` (made, with its
     parents, when missing), mode 0666 less the umask, as any file the user writes.
 
@@ -181,7 +181,7 @@ def _create_temporary(directory: Path, name: str) -> tuple[int, str]:
         except FileNotFoundError:
             if made:
                 raise
-            directory.mkdir(parents=True, exist_ok=True)
+            Path(directory).mkdir(parents=True, exist_ok=True)
             made = True
     raise FileExistsError(errno.EEXIST, "no usable temporary name", str(directory))
 
@@ -233,7 +233,7 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> None:
         return
     directory, base = os.path.split(name)
     try:
-        fd, tmp = _create_temporary(Path(directory or "."), base)
+        fd, tmp = _create_temporary(directory or ".", base)
     except FileExistsError as exc:  # a parent is a file
         raise OutputError(str(path), NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR))) from exc
     except OSError as exc:
