@@ -11,8 +11,10 @@ raise; a module that fails to import is imported again, and reported, by the tas
 from __future__ import annotations
 
 from trackproc.pipeline.batch.executors import single_thread_blas
+from trackproc.pipeline.lazy_numpy import defer_unused_numpy_modules
 
 single_thread_blas()                        # before numpy, in this process as in the workers
+defer_unused_numpy_modules()                # before scipy: numpy.f2py and numpy.testing stay unloaded
 
 try:
     import numpy  # noqa: F401
