@@ -30,7 +30,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-import yaml
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import read_input_bytes
@@ -86,6 +85,8 @@ MAX_SIDECAR_BYTES = 1 << 20
 def _safe_loader():
     """PyYAML's SafeLoader without aliases: ``*name`` repeats a node without copying it, so a chain
     of aliases in an 800-byte file expands to gigabytes once the value is used as text."""
+    import yaml  # start-up: PyYAML (~10 ms) only when a sidecar is read (tabular imports this module)
+
     class NoAliasLoader(yaml.SafeLoader):
         def compose_node(self, parent, index):
             if self.check_event(yaml.AliasEvent):
@@ -106,6 +107,8 @@ def load_sidecar(path: Path) -> dict:
     except UnicodeDecodeError as exc:
         raise InputError(f"cannot read the DopTrack sidecar ({exc.__class__.__name__})",
                          file=str(path), expected="UTF-8 YAML text") from None
+    import yaml  # start-up: as in _safe_loader
+
     try:
         doc = yaml.load(text, Loader=_safe_loader())  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as exc:
