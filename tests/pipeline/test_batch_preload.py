@@ -1,6 +1,6 @@
 """A batch's pool workers are forked by a fork server that has already imported what the input
 steps need (pipeline/batch/preload.py) with one BLAS thread: a worker does not import them again;
-and nothing the nightly path does not use (pandas, numpy.f2py, numpy.testing)."""
+and nothing the nightly path does not use (pandas, pyarrow.compute, numpy.f2py, numpy.testing)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from trackproc.pipeline import batch as batch_module
 MODULES = ("numpy", "pyarrow.parquet", "trackproc.pipeline.ingest", "trackproc.pipeline.smooth",
            "trackproc.pipeline.refine")
 #: Not used by ingest -> smooth -> refine of CSV pass files: not preloaded (numpy's two: lazy modules).
-UNUSED = ("pandas", "numpy.f2py", "numpy.testing")
+UNUSED = ("pandas", "pyarrow.compute", "numpy.f2py", "numpy.testing")
 
 
 @pytest.mark.slow
