@@ -1,7 +1,7 @@
 """The ``trackproc`` command: the entry point of a Typer app (cli/root.py) whose commands live in
 sibling modules.
 
-Only the standard library is imported here: ``trackproc --version`` and a ``--help`` already
+Only the standard library is imported here (and ``pipeline/lazy_numpy.py``, which imports only it): ``trackproc --version`` and a ``--help`` already
 rendered once (cli/help_cache.py) are answered without typer; the command modules import only
 typer and the standard library at import time, and numpy, pandas, scipy and pyarrow inside the
 commands (see ``benchmarks/startup.py``). The names of cli/root.py (``app``, ``plain_help``, ...)
@@ -15,6 +15,9 @@ import sys
 
 from trackproc import __version__
 from trackproc.errors import EXIT_INPUT
+# standard library only, shared with a batch's fork server (pipeline/batch/preload.py)
+from trackproc.pipeline.lazy_numpy import UNUSED_NUMPY_MODULES as _UNUSED_NUMPY_MODULES  # noqa: F401 - tests
+from trackproc.pipeline.lazy_numpy import defer_unused_numpy_modules as _defer_unused_numpy_modules
 
 
 def __getattr__(name: str):
@@ -61,36 +64,6 @@ def _one_blas_thread() -> None:
     if "numpy" not in sys.modules:
         for name in _BLAS_THREADS:
             os.environ.setdefault(name, "1")
-
-
-#: numpy submodules no trackproc command uses, which scipy imports only to copy their names
-_UNUSED_NUMPY_MODULES = ("numpy.f2py", "numpy.testing")
-
-
-def _defer_unused_numpy_modules() -> None:
-    """Make :data:`_UNUSED_NUMPY_MODULES` lazy modules (``importlib.util.LazyLoader``: loaded
-    on first attribute access) before scipy loads. scipy >= 1.15 copies numpy's namespace when
-    it starts (``scipy._lib.array_api_compat.clone_module``: ``hasattr(numpy, name)`` for every
-    name), which imports them: ~45 ms of CPU in every command that uses scipy (issue 19). Any
-    failure leaves numpy as it is."""
-    if any(name in sys.modules for name in _UNUSED_NUMPY_MODULES) or "scipy" in sys.modules:
-        return
-    try:
-        import importlib.util
-
-        import numpy
-
-        for name in _UNUSED_NUMPY_MODULES:
-            spec = importlib.util.find_spec(name)
-            if spec is None or spec.loader is None:
-                continue
-            spec.loader = importlib.util.LazyLoader(spec.loader)
-            module = importlib.util.module_from_spec(spec)
-            sys.modules[name] = module
-            spec.loader.exec_module(module)
-            setattr(numpy, name.rpartition(".")[2], module)
-    except Exception:  # noqa: BLE001 - only a start-up saving: never a reason to fail
-        pass
 
 
 def _has_children() -> bool:

@@ -447,12 +447,24 @@ def _plain_numbers(strings) -> np.ndarray | None:
     data = np.frombuffer(strings.buffers()[2], np.uint8)[offsets[0]:offsets[-1]]
     if not _NUMBER_BYTES[data].all():
         return None
-    import pyarrow.compute as pc  # start-up: as in _arrow_column
-
     try:
-        return arrow_numpy(pc.cast(strings, pa.float64()))
+        return arrow_numpy(_safe_cast(strings, pa.float64()))
     except (pa.ArrowInvalid, ValueError):
         return None
+
+
+def _safe_cast(array, target):
+    """``pyarrow.compute.cast(array, target)`` (a safe cast) by the same call of Arrow's compute
+    functions, without importing ``pyarrow.compute``: its module builds Python wrappers and
+    docstrings for every compute function when imported (~28 ms of CPU a process), and a plain
+    CSV pass file needs only this cast."""
+    try:
+        from pyarrow._compute import CastOptions, call_function
+    except ImportError:                    # another layout of pyarrow: its public function
+        import pyarrow.compute as pc
+
+        return pc.cast(array, target)
+    return call_function("cast", [array], CastOptions.safe(target))
 
 
 def column_strings(table: SourceTable, column: Column) -> np.ndarray:

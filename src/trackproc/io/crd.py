@@ -38,7 +38,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pandas as pd
 
 from trackproc.constants import C_LIGHT
 from trackproc.errors import InputError
@@ -81,6 +80,8 @@ def _number(fields, index, name, source, row, *, kind=float):
 
 def _date_ns(fields, start, name, source, row) -> int:
     """Nanoseconds since 1970 of ``y m d h m s`` in ``fields[start:start+6]``."""
+    import pandas as pd  # start-up: pandas (~0.15 s) only when a CRD file is read (tabular imports this module)
+
     y, mo, d, h, mi, s = (_number(fields, start + k, name, source, row, kind=int) for k in range(6))
     try:
         return pd.Timestamp(year=y, month=mo, day=d, hour=h, minute=mi, second=s).value
@@ -205,6 +206,8 @@ def read_crd(data: bytes, source: str, *, drop_invalid: bool = False) -> RawMeas
     if not samples:
         raise InputError("no range records", file=source, row=1, found="no 11 (or 10) records",
                          expected="CRD normal points")
+    import pandas as pd  # start-up: as in _date_ns
+
     t_ns, stations, values, rows, pass_ids, sigmas = (list(x) for x in zip(*samples))
     frame = pd.DataFrame({
         "time": pd.to_datetime(np.array(t_ns, dtype=np.int64), utc=True).as_unit("ns"),
@@ -251,6 +254,8 @@ def _sod_ns(session, sod: float) -> int:
 
 
 def _pass_id(session) -> str:
+    import pandas as pd  # start-up: as in _date_ns
+
     return f"{session['station']}-" + pd.Timestamp(session["start_ns"]).strftime("%Y%m%dT%H%M")
 
 

@@ -221,8 +221,7 @@ def _plain_chunk(piece: bytes, header: list[str], line0: int) -> TextTable | Non
     of fields, which that reader reports with its row)."""
     if not piece.endswith(b"\n") or not _is_plain(piece):
         return None
-    import pyarrow.compute as pc  # start-up: Arrow's CSV reader and compute (~30 ms each) only for large plain files
-    import pyarrow.csv as pacsv
+    import pyarrow.csv as pacsv  # start-up: Arrow's CSV reader (~10 ms) only for large plain files
 
     try:
         table = pacsv.read_csv(
@@ -237,16 +236,25 @@ def _plain_chunk(piece: bytes, header: list[str], line0: int) -> TextTable | Non
     if n != piece.count(b"\n"):
         return None
     limit = csv.field_size_limit()   # a cell the csv module refuses: its error, with the row
-    if len(piece) > limit and any((pc.max(pc.binary_length(table.column(name))).as_py() or 0) > limit
-                                  for name in header):
+    if len(piece) > limit and any((_compute().max(_compute().binary_length(table.column(name))).as_py() or 0)
+                                  > limit for name in header):
         return None
     # the line-by-line reader strips every cell (str.strip: any Unicode white space); nothing to
     # strip in ASCII text without a space or a tab
     bare = piece.isascii() and b" " not in piece and b"\t" not in piece
-    arrow = {name: (table.column(name) if bare else pc.utf8_trim_whitespace(table.column(name))).combine_chunks()
-             for name in header}
-    cells = {name: array.to_numpy(zero_copy_only=False).astype(object) for name, array in arrow.items()}
+    arrow = {name: (table.column(name) if bare else _compute().utf8_trim_whitespace(table.column(name)))
+             .combine_chunks() for name in header}
+    # to_pylist, not to_numpy: Arrow's to_numpy of a string array imports pandas (~0.15 s a process)
+    cells = {name: np.array(array.to_pylist(), dtype=object) for name, array in arrow.items()}
     return TextTable(list(header), cells, np.arange(line0 + 1, line0 + n + 1, dtype=np.int64), 0, arrow=arrow)
+
+
+def _compute():
+    """``pyarrow.compute``, imported where a chunk needs it (~28 ms of CPU a process for its
+    wrappers): a plain ASCII pass file without spaces needs none of its functions."""
+    import pyarrow.compute as pc
+
+    return pc
 
 
 def _plain_table(data: bytes, text: str, source: str) -> TextTable | None:

@@ -27,10 +27,9 @@ import datetime as dt
 import math
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
-import yaml
 
 from trackproc.errors import InputError
 from trackproc.io.atomic import read_input_bytes
@@ -39,6 +38,9 @@ from trackproc.io.tabular import (NONFINITE_VALUE, UNPARSEABLE_TIME, WRONG_TYPE,
                                   column_numbers, parse_text_table)
 from trackproc.io.validate import check_iso_year, check_name, check_station, check_year
 from trackproc.isotime import iso_utc
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: Nominal downlink carrier of Delfi-C3 (NORAD 32789), Hz: 145.870 MHz (TU Delft, DopTrack).
 DELFI_C3_CARRIER_HZ = 145.870e6
@@ -83,6 +85,8 @@ MAX_SIDECAR_BYTES = 1 << 20
 def _safe_loader():
     """PyYAML's SafeLoader without aliases: ``*name`` repeats a node without copying it, so a chain
     of aliases in an 800-byte file expands to gigabytes once the value is used as text."""
+    import yaml  # start-up: PyYAML (~10 ms) only when a sidecar is read (tabular imports this module)
+
     class NoAliasLoader(yaml.SafeLoader):
         def compose_node(self, parent, index):
             if self.check_event(yaml.AliasEvent):
@@ -103,6 +107,8 @@ def load_sidecar(path: Path) -> dict:
     except UnicodeDecodeError as exc:
         raise InputError(f"cannot read the DopTrack sidecar ({exc.__class__.__name__})",
                          file=str(path), expected="UTF-8 YAML text") from None
+    import yaml  # start-up: as in _safe_loader
+
     try:
         doc = yaml.load(text, Loader=_safe_loader())  # noqa: S506 - a SafeLoader subclass
     except yaml.YAMLError as exc:
@@ -136,6 +142,8 @@ def _utc(value, source: str, key: str) -> pd.Timestamp:
                found=str(value))
     if isinstance(value, str):
         check_iso_year(value, file=source, column=key)
+    import pandas as pd  # start-up: pandas (~0.15 s) only when a DopTrack file is read (tabular imports this module)
+
     try:
         stamp = pd.Timestamp(value)
     except (ValueError, TypeError, OverflowError):
@@ -159,7 +167,7 @@ def _number(value, source: str, key: str, expected: str) -> float:
 
 
 def _iso(value) -> object:
-    if isinstance(value, (dt.datetime, dt.date, pd.Timestamp)):
+    if isinstance(value, (dt.datetime, dt.date)):   # a pandas Timestamp is a datetime
         return iso_utc(value, 6)
     if isinstance(value, dict):
         return {str(k): _iso(v) for k, v in value.items()}
@@ -248,6 +256,8 @@ def read_doptrack(data: bytes, source: str, *, data_path: Path | None = None,
                  expected="the received frequency in Hz")
     problems.add(NONFINITE_VALUE, missing_f, column="frequency", found="", expected="a finite frequency, Hz")
     keep, dropped = problems.resolve(drop_invalid)
+
+    import pandas as pd  # start-up: as in _utc
 
     offset_ns = np.round(np.where(bad_time, 0.0, seconds) * 1e9).astype(np.int64)
     times = pd.DatetimeIndex(epoch.as_unit("ns").value + offset_ns).tz_localize("UTC")

@@ -9,7 +9,6 @@ import math
 from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
-import pandas as pd
 
 from trackproc.errors import InputError
 from trackproc.io.layouts import UNIT_SPELLINGS
@@ -18,7 +17,7 @@ from trackproc.io.raw import KIND_UNITS
 from trackproc.io.problems import NONFINITE_SIGMA, NONFINITE_VALUE, UNKNOWN_KIND, Problems
 from trackproc.io.raw import RawMeasurements
 from trackproc.io.validate import MAX_LOS_SPEED_M_S, check_carrier, check_los_speed
-from trackproc.pipeline.ingest_samples import Samples
+from trackproc.pipeline.ingest_samples import Samples, factorize
 
 if TYPE_CHECKING:
     from trackproc.pipeline.ingest import IngestOptions
@@ -40,7 +39,7 @@ UNIT_FACTORS = {unit: factor for _, factor, unit in UNIT_SPELLINGS.values()}
 
 def unit_factors(units: np.ndarray) -> np.ndarray:
     """Per sample, the factor from the unit the file used to SI (1 where unknown)."""
-    codes, uniques = pd.factorize(np.asarray(units, dtype=object))   # one lookup per distinct unit
+    codes, uniques = factorize(units)   # one lookup per distinct unit
     factors = np.array([UNIT_FACTORS.get(u, 1.0) if isinstance(u, str) else 1.0 for u in uniques] + [1.0],
                        dtype=np.float64)
     return factors[codes]                                                # code -1 (missing): the last, 1
@@ -67,7 +66,7 @@ def sample_problems(frame) -> Problems:
                  expected="a finite sigma > 0")
     problems.add(NONPOSITIVE_SIGMA, sigma <= 0, column=sigma_col, found=sigma_written,
                  expected="sigma > 0")
-    codes, kinds = pd.factorize(kind)   # one lookup per distinct kind (0 for an unknown one)
+    codes, kinds = factorize(kind)   # one lookup per distinct kind (0 for an unknown one)
     floor = np.array([SIGMA_FLOOR.get(k, 0.0) for k in kinds] + [0.0], dtype=np.float64)[codes]
     problems.add(TINY_SIGMA, (sigma > 0) & (sigma < floor), column=sigma_col, found=sigma_written,
                  expected=lambda i: (f"sigma >= {floor[i]:g} {KIND_UNITS.get(kind[i], '')} (SI) for {kind[i]}; "
@@ -122,7 +121,7 @@ def doppler_settings(raws: Sequence[RawMeasurements], samples: Samples, options:
     if carrier is not None:
         carrier = check_carrier(carrier, column="--carrier-hz" if options.carrier_hz is not None else "carrier_hz")
         sources = np.array([raw.source for raw in raws], dtype=object)[c["input"][doppler]]
-        for source in pd.unique(sources):
+        for source in dict.fromkeys(sources.tolist()):   # in order of first appearance
             mine = doppler[sources == source]
             check_los_speed(c["value"][mine], "doppler", carrier_hz=carrier, mode=settings["doppler_mode"],
                             file=source, rows=c["row"][mine],

@@ -88,8 +88,7 @@ def _read_input(data: bytes, source: str, opt: dict):
 
 def ingest_step(ctx: InputContext, opt: dict) -> None:
     """ingest: the input file -> the canonical pass table (:func:`trackproc.pipeline.ingest.ingest`)."""
-    import pyarrow.compute  # noqa: F401 - with pyarrow.csv: a plain CSV pass file read whole by Arrow (io.csvtext)
-    import pyarrow.csv  # noqa: F401
+    import pyarrow.csv  # noqa: F401 - a plain CSV pass file read whole by Arrow (io.csvtext)
 
     from trackproc.pipeline.ingest import IngestOptions, ingest
 
