@@ -168,7 +168,7 @@ class Problem:
         if self.n_prior:
             a = np.vstack([a, self.prior_a])
             b = np.concatenate([b, self.prior_rhs(x)])
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ProcessingError("the Jacobian has non-finite entries", {"iteration": it})
         return a, b
 
@@ -236,7 +236,7 @@ def iterate(prob: Problem, opt: Options, x, h, jac, r, mask, *, stable: bool, li
                 h_new, jac_new = prob.evaluate(x_new)
             except (ArithmeticError, ProcessingError, ValueError):
                 continue
-            if not np.all(np.isfinite(h_new)):
+            if not np.isfinite(h_new).all():
                 continue
             r_new = prob.residuals(h_new)
             c_new = prob.cost(r_new, x_new, mask)
