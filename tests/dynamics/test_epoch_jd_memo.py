@@ -49,3 +49,37 @@ def test_a_dubious_year_warns_on_every_call():
         warnings.simplefilter("ignore")
         assert (jd1, jd2) == tuple(np.asarray(x, float) for x in erfa.dtf2d("UTC", 2090, 1, 1, 0, 0, 0.0))
     assert int(t.view(np.int64)) not in ts._JD_OF_EPOCH
+
+
+def _table():
+    mjd = np.arange(60000.0, 61500.0)
+    rng = np.random.default_rng(3)
+    return ts.eop_from_table(mjd, rng.normal(0.0, 0.2, mjd.size), rng.normal(0.0, 0.3, mjd.size),
+                             rng.normal(0.0, 0.3, mjd.size), "test")
+
+
+def test_earth_orientation_of_a_few_dates_is_remembered_bit_for_bit():
+    eop = _table()
+    fresh = _table()                                       # the same table, nothing remembered
+    dates = [(np.float64(2461119.5), np.float64(0.3961)), (np.array([2461119.5]), np.array([0.25])),
+             (np.full(3, 2461119.5), np.array([0.1, 0.2, 0.3])), (np.full(4, 2460000.5), np.linspace(0, 1, 4))]
+    for jd1, jd2 in dates:
+        want = fresh.at(jd1, jd2)
+        fresh.__dict__.pop("_at_memo", None)
+        for _ in range(3):                                 # computed, then remembered
+            got = eop.at(jd1, jd2)
+            for g, w in zip(got, want):
+                assert type(g) is type(w) and np.shape(g) == np.shape(w) and np.asarray(g).tobytes() == np.asarray(w).tobytes()
+        if isinstance(got[0], np.ndarray):
+            got[0][...] = 99.0                             # a caller's change does not reach the memo
+            assert np.asarray(eop.at(jd1, jd2)[0]).tobytes() == np.asarray(want[0]).tobytes()
+    many = np.full(50, 2461119.5), np.linspace(0.0, 0.5, 50)
+    eop.at(*many)
+    assert all(k[0] != (50,) for k in eop.__dict__["_at_memo"])     # long sets are not kept
+
+
+def test_dates_outside_the_table_warn_on_every_call():
+    eop = _table()
+    for _ in range(2):
+        with pytest.warns(ts.EopCoverageWarning):
+            eop.at(np.float64(2461600.5), np.float64(0.0))        # MJD 61600, past the table

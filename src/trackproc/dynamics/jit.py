@@ -150,6 +150,12 @@ def cold(kernel) -> bool:
         return False
 
 
+def warm(kernel) -> bool:
+    """True when ``kernel`` was seen compiled in this process (:func:`cold` found its signatures):
+    its calls need no :func:`compile_once` block."""
+    return _WARM.get(id(kernel)) is kernel
+
+
 def announce_compiling(kernels, what: str, cpu_s: float) -> None:
     """Say once per process, on stderr, that ``what`` is being compiled when any of ``kernels``
     is :func:`cold`, so that a first run's long silence has its reason (later runs load the

@@ -437,15 +437,20 @@ def _propagate_compiled(s0, t0, t1, p, mu, kj2, tol, stm, mu_sensitivity, max_st
     v0 = np.ascontiguousarray(s0[0, 3:], dtype=float)
     args = (float(t0), float(t1), int(p), float(mu), float(kj2))
     kernel = tj.propagate_var if stm else tj.propagate_state
-    with jit.compile_once([kernel], "taylor", "the Taylor engine's kernels", 6):
+
+    def run():
         if stm:
             dr0, dv0 = _initial_sensitivities(7 if mu_sensitivity else 6)
             code, times, coefs, sens = kernel(r0, v0, dr0, dv0, *args, 6 if mu_sensitivity else -1,
                                               float(tol), int(max_steps))
-            sens = sens[:, None]
-        else:
-            code, times, coefs = kernel(r0, v0, *args, float(tol), int(max_steps))
-            sens = None
+            return code, times, coefs, sens[:, None]
+        return kernel(r0, v0, *args, float(tol), int(max_steps)) + (None,)
+
+    if jit.warm(kernel):                  # compiled in this process: no lock to take
+        code, times, coefs, sens = run()
+    else:
+        with jit.compile_once([kernel], "taylor", "the Taylor engine's kernels", 6):
+            code, times, coefs, sens = run()
     outcome = _compiled_outcome(tj, int(code))
     params = STATE_PARAMETERS + (("mu",) if mu_sensitivity else ())
     return Propagation(outcome=outcome, step_times_s=times, coefficients=coefs[:, None],

@@ -173,6 +173,12 @@ def add_seconds_utc(ref_jd_utc: tuple, dt_s) -> tuple[np.ndarray, np.ndarray]:
     return tai_to_utc(b1 + whole, b2 + (dt_s - whole * DAY_S) / DAY_S)
 
 
+#: :meth:`EarthOrientation.at` keeps its answers for up to this many dates a call (the single
+#: epochs and short sets that prepare asks again), at most ``_AT_MEMO_MAX`` of them.
+_AT_MEMO_DATES = 4
+_AT_MEMO_MAX = 256
+
+
 class EopCoverageWarning(UserWarning):
     """Dates outside the tabulated Earth orientation (values held at the table's end)."""
 
@@ -220,9 +226,23 @@ class EarthOrientation:
                 f"dates outside the Earth-orientation table ({self.source}: MJD {self.mjd[0]:.0f}-"
                 f"{self.mjd[-1]:.0f}): UT1-UTC and polar motion held at the end value; give --eop with a "
                 "table covering them"), stacklevel=2)
+        key = (jd1.shape, jd1.tobytes(), jd2.tobytes()) if jd1.size <= _AT_MEMO_DATES else None
+        if key is not None:
+            # a few dates asked again (an epoch's frame and its station model): the values kept
+            memo = self.__dict__.get("_at_memo")
+            if memo is None:
+                memo = self.__dict__["_at_memo"] = {}
+            hit = memo.get(key)
+            if hit is not None:
+                return tuple(v.copy() for v in hit)
         ut1_tai = np.interp(mjd, self.mjd, self.ut1_minus_tai_s)
         dut1 = ut1_tai + tai_minus_utc_s(jd1, jd2)
-        return dut1, np.interp(mjd, self.mjd, self.xp_rad), np.interp(mjd, self.mjd, self.yp_rad)
+        out = dut1, np.interp(mjd, self.mjd, self.xp_rad), np.interp(mjd, self.mjd, self.yp_rad)
+        if key is not None:
+            if len(memo) >= _AT_MEMO_MAX:
+                memo.clear()
+            memo[key] = tuple(v.copy() for v in out)
+        return out
 
 
 def eop_from_table(mjd, dut1_s, xp_arcsec, yp_arcsec, source: str) -> EarthOrientation:

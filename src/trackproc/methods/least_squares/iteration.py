@@ -259,7 +259,8 @@ def iterate(prob: Problem, opt: Options, x, h, jac, r, mask, *, stable: bool, li
         check(new_mask)
         stable = bool(np.array_equal(new_mask, mask))
         mask = new_mask
-        cost = prob.cost(r, x, mask)
+        # the same editing: the accepted point's cost is the one just computed, by the same sums
+        cost = c_new if stable else prob.cost(r, x, mask)
         history.append(cost)
         if stable and (step_sig < opt.step_tol or rel < opt.cost_rtol):
             message = (f"converged: step {step_sig:.2g} sigma{tag}" if step_sig < opt.step_tol
