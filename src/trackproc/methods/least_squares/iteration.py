@@ -66,8 +66,28 @@ def combination_text(vector: np.ndarray, names: Sequence[str], threshold: float 
     return " ".join(terms)
 
 
+#: :func:`prior_rows`' whitened rows and factors by the priors' indices and covariances, the parameter
+#: count and the scales: a pass's solves (the profile covariance's 4 per direction) share them.
+_PRIOR_ROWS: dict = {}
+_PRIOR_ROWS_MAX = 64
+
+
 def prior_rows(priors: Sequence[Prior], n: int, scales: np.ndarray):
     """Whitening of the priors: rows ``W E S`` and the factor W (with W Wᵀ = covariance⁻¹)."""
+    key = (n, np.asarray(scales, float).tobytes()) + tuple(
+        (np.asarray(p.index, int).tobytes(), np.atleast_2d(np.asarray(p.covariance, float)).tobytes(),
+         np.shape(p.covariance)) for p in priors)
+    kept = _PRIOR_ROWS.get(key)
+    if kept is None:
+        a, factors = _prior_rows(priors, n, scales)
+        if len(_PRIOR_ROWS) >= _PRIOR_ROWS_MAX:
+            _PRIOR_ROWS.clear()
+        kept = _PRIOR_ROWS[key] = (a, [w for w, _ in factors])
+    a, ws = kept
+    return a.copy(), [(w.copy(), p) for w, p in zip(ws, priors)]
+
+
+def _prior_rows(priors: Sequence[Prior], n: int, scales: np.ndarray):
     rows, factors = [], []
     for p in priors:
         cov = np.atleast_2d(np.asarray(p.covariance, float))
