@@ -54,7 +54,7 @@ def test_prior_rows_kept_are_the_computed_ones_with_the_callers_priors():
         a[...] = 0.0                                           # a caller's change does not reach the kept rows
         factors[0][0][...] = 0.0
         x = rng.normal(size=8)
-        assert it.prior_rhs(it.prior_rows(priors, 8, scales)[1], x).tobytes() == \\
+        assert it.prior_rhs(it.prior_rows(priors, 8, scales)[1], x).tobytes() == \
             it.prior_rhs([(w, p) for (w, _), p in zip(want_f, priors)], x).tobytes()
     other = it.prior_rows([Prior(np.arange(6), first[0].centre, 2.0 * cov)], 8, scales)[0]
     assert not np.array_equal(other, want_a[:6])               # another covariance: its own rows
