@@ -128,6 +128,10 @@ def light_cache_load(kernel):
 
 
 _ANNOUNCED: set = set()
+#: Kernels seen compiled in this process, by id (a dispatcher keeps its signatures once it has
+#: one): :func:`cold` answers for them without numba's ``signatures`` (a list built at each
+#: call), which the Taylor engine asks before each run.
+_WARM: dict = {}
 
 
 def cold(kernel) -> bool:
@@ -135,12 +139,21 @@ def cold(kernel) -> bool:
     has an entry in numba's on-disk cache: calling it now compiles (tens of seconds of CPU for
     the force and Taylor kernels). Reads one small index file; an internal numba API, so any
     surprise there counts as "not cold" (no announcement rather than a wrong one)."""
+    if _WARM.get(id(kernel)) is kernel:
+        return False
     try:
         if kernel.signatures:
+            _WARM[id(kernel)] = kernel
             return False
         return not kernel._cache._cache_file._load_index()
     except Exception:                                     # noqa: BLE001 - numba internals moved
         return False
+
+
+def warm(kernel) -> bool:
+    """True when ``kernel`` was seen compiled in this process (:func:`cold` found its signatures):
+    its calls need no :func:`compile_once` block."""
+    return _WARM.get(id(kernel)) is kernel
 
 
 def announce_compiling(kernels, what: str, cpu_s: float) -> None:

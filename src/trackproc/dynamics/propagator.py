@@ -472,13 +472,13 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
         key = "two-body" if j2 == 0.0 else "j2"
     r = np.asarray(r_m, float).reshape(3)
     v = np.asarray(v_m_s, float).reshape(3)
-    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(v))):
+    if not (np.isfinite(r).all() and np.isfinite(v).all()):
         raise ValueError("the initial state must be finite")
     t = np.atleast_1d(np.asarray(t_s))
     if np.issubdtype(t.dtype, np.datetime64):
         t = np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(t.astype("datetime64[ns]")), jd), float)
     t = t.astype(float)
-    if t.size == 0 or not np.all(np.isfinite(t)):
+    if t.size == 0 or not np.isfinite(t).all():
         raise ValueError("t_s must hold at least one finite time")
     fr = frame if frame is not None else reference_frame(jd[0], jd[1], eop)
     q = fr.q

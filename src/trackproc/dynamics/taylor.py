@@ -282,9 +282,10 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
     if engine == "compiled" and (nb > 1 or not _compiled_available()):
         raise ValueError("engine='compiled' integrates one trajectory and needs numba "
                          "(pip install numba) with TRACKPROC_JIT != 0")
-    if mode == "on" and nb == 1 and _compiled_available():
+    tj = _jit_module() if mode == "on" and nb == 1 else None
+    if tj is not None:
         return _propagate_compiled(s0, t0, t1, p, mu_m3_s2, kj2, tol, stm, mu_sensitivity,
-                                   max_steps, force=force, j2=j2, re_m=re_m, batch=batch)
+                                   max_steps, force=force, j2=j2, re_m=re_m, batch=batch, tj=tj)
     # auto: decided after the first step (its size predicts the number of steps)
     decide = mode == "auto" and nb == 1
 
@@ -374,12 +375,23 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
                        j2=j2 if force == "j2" else 0.0, re_m=re_m, batch=batch)
 
 
+_OUTCOMES: dict = {}
+
+
+def _compiled_outcome(tj, code: int):
+    """The :class:`Outcome` of a compiled loop's return code."""
+    if not _OUTCOMES:
+        _OUTCOMES.update({tj.OUTCOME_SUCCESS: Outcome.SUCCESS, tj.OUTCOME_STEP_LIMIT: Outcome.STEP_LIMIT,
+                          tj.OUTCOME_NON_FINITE: Outcome.NON_FINITE})
+    return _OUTCOMES[code]
+
+
 def _check_state_and_model(s0: np.ndarray, force: str, tol: float) -> None:
     """ValueError for an initial state :func:`propagate` cannot take, an unknown force model or a
     tolerance outside (0, 1)."""
     if s0.shape[-1] != 6 or s0.ndim not in (1, 2) or (s0.ndim == 2 and s0.shape[0] == 0):
         raise ValueError(f"state0 must have shape (6,) or (B, 6); found {s0.shape}")
-    if not np.all(np.isfinite(s0)):
+    if not np.isfinite(s0).all():
         raise ValueError("state0 must be finite; found NaN or infinity")
     if force not in FORCES:
         raise ValueError(f"unknown force model {force!r}; expected one of {FORCES}")
@@ -400,30 +412,46 @@ def _check_span_and_options(t0: float, t1: float, p: int, stm: bool, mu_sensitiv
         raise ValueError(f"unknown engine {engine!r}; expected one of {ENGINES}")
 
 
+_SENS0: dict = {}
+
+
+def _initial_sensitivities(npar: int):
+    """``d r0 / d p`` and ``d v0 / d p`` (3, npar) at the start: the identity on the state (fresh
+    copies of arrays made once)."""
+    made = _SENS0.get(npar)
+    if made is None:
+        dr0 = np.zeros((3, npar))
+        dv0 = np.zeros((3, npar))
+        dr0[[0, 1, 2], [0, 1, 2]] = 1.0
+        dv0[[0, 1, 2], [3, 4, 5]] = 1.0
+        made = _SENS0[npar] = (dr0, dv0)
+    return made[0].copy(), made[1].copy()
+
+
 def _propagate_compiled(s0, t0, t1, p, mu, kj2, tol, stm, mu_sensitivity, max_steps, *, force,
-                        j2, re_m, batch) -> Propagation:
-    """:func:`propagate` of one trajectory by the compiled loop (:mod:`taylor_jit`)."""
-    tj = _jit_module()
+                        j2, re_m, batch, tj=None) -> Propagation:
+    """:func:`propagate` of one trajectory by the compiled loop (:mod:`taylor_jit`, ``tj`` when
+    the caller has it). The kernels do no numpy arithmetic, so no ``errstate`` around them."""
+    tj = tj or _jit_module()
     r0 = np.ascontiguousarray(s0[0, :3], dtype=float)
     v0 = np.ascontiguousarray(s0[0, 3:], dtype=float)
     args = (float(t0), float(t1), int(p), float(mu), float(kj2))
-    with np.errstate(all="ignore"), jit.compile_once([tj.propagate_var if stm else tj.propagate_state], "taylor",
-                                                     "the Taylor engine's kernels", 6):
+    kernel = tj.propagate_var if stm else tj.propagate_state
+
+    def run():
         if stm:
-            npar = 7 if mu_sensitivity else 6
-            dr0 = np.zeros((3, npar))
-            dv0 = np.zeros((3, npar))
-            dr0[[0, 1, 2], [0, 1, 2]] = 1.0
-            dv0[[0, 1, 2], [3, 4, 5]] = 1.0
-            code, times, coefs, sens = tj.propagate_var(r0, v0, dr0, dv0, *args,
-                                                        6 if mu_sensitivity else -1,
-                                                        float(tol), int(max_steps))
-            sens = sens[:, None]
-        else:
-            code, times, coefs = tj.propagate_state(r0, v0, *args, float(tol), int(max_steps))
-            sens = None
-    outcome = {tj.OUTCOME_SUCCESS: Outcome.SUCCESS, tj.OUTCOME_STEP_LIMIT: Outcome.STEP_LIMIT,
-               tj.OUTCOME_NON_FINITE: Outcome.NON_FINITE}[int(code)]
+            dr0, dv0 = _initial_sensitivities(7 if mu_sensitivity else 6)
+            code, times, coefs, sens = kernel(r0, v0, dr0, dv0, *args, 6 if mu_sensitivity else -1,
+                                              float(tol), int(max_steps))
+            return code, times, coefs, sens[:, None]
+        return kernel(r0, v0, *args, float(tol), int(max_steps)) + (None,)
+
+    if jit.warm(kernel):                  # compiled in this process: no lock to take
+        code, times, coefs, sens = run()
+    else:
+        with jit.compile_once([kernel], "taylor", "the Taylor engine's kernels", 6):
+            code, times, coefs, sens = run()
+    outcome = _compiled_outcome(tj, int(code))
     params = STATE_PARAMETERS + (("mu",) if mu_sensitivity else ())
     return Propagation(outcome=outcome, step_times_s=times, coefficients=coefs[:, None],
                        sensitivities=sens, parameters=params if stm else (),

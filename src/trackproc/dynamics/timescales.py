@@ -25,9 +25,31 @@ _NS = 1_000_000_000
 _DAY_NS = 86_400 * _NS
 
 
+#: Two-part dates of single epochs already converted, by nanoseconds since 1970 (a refinement
+#: propagates from the same epoch hundreds of times; ERFA's call costs ~40 µs a scalar).
+_JD_OF_EPOCH: dict = {}
+_JD_OF_EPOCH_MAX = 512
+
+
 def datetime64_to_jd_utc(t) -> tuple[np.ndarray, np.ndarray]:
-    """UTC datetime64 (any precision, naive = UTC) -> two-part UTC quasi-JD (ERFA dtf2d)."""
+    """UTC datetime64 (any precision, naive = UTC) -> two-part UTC quasi-JD (ERFA dtf2d).
+
+    A single epoch is remembered once ERFA converted it without a warning (the same two numbers
+    on every later call; a dubious year or an error still goes through ERFA each time)."""
     t = np.asarray(t, dtype="datetime64[ns]")
+    if t.ndim == 0:
+        key = int(t.view(np.int64))
+        jd = _JD_OF_EPOCH.get(key)
+        if jd is None:
+            jd = _jd_of_epoch(t)
+            if jd is None:
+                return _jd_utc(t)
+        return np.asarray(jd[0], float), np.asarray(jd[1], float)
+    return _jd_utc(t)
+
+
+def _fields(t):
+    """Year, month, day, hour, minute and seconds of UTC ``datetime64[ns]`` ``t``."""
     days = t.astype("datetime64[D]")
     y = days.astype("datetime64[Y]").astype(np.int64) + 1970
     m = days.astype("datetime64[M]").astype(np.int64) % 12 + 1
@@ -36,8 +58,25 @@ def datetime64_to_jd_utc(t) -> tuple[np.ndarray, np.ndarray]:
     hh = ns // 3_600_000_000_000
     mm = (ns // 60_000_000_000) % 60
     ss = (ns % 60_000_000_000) / 1e9
-    jd1, jd2 = erfa.dtf2d("UTC", y, m, d, hh, mm, ss)
+    return y, m, d, hh, mm, ss
+
+
+def _jd_utc(t):
+    jd1, jd2 = erfa.dtf2d("UTC", *_fields(t))
     return np.asarray(jd1, float), np.asarray(jd2, float)
+
+
+def _jd_of_epoch(t):
+    """``(jd1, jd2)`` floats of the single epoch ``t`` by ERFA's dtf2d (the function
+    :func:`erfa.dtf2d` wraps, whose status it reports), kept in :data:`_JD_OF_EPOCH`; None when
+    ERFA's status is not 0 (the caller's wrapped call then warns or raises as ever)."""
+    d1, d2, status = erfa.ufunc.dtf2d("UTC", *_fields(t))
+    if int(status) != 0:
+        return None
+    if len(_JD_OF_EPOCH) >= _JD_OF_EPOCH_MAX:
+        _JD_OF_EPOCH.clear()
+    jd = _JD_OF_EPOCH[int(t.view(np.int64))] = (float(d1), float(d2))
+    return jd
 
 
 def jd_utc_to_datetime64(jd1, jd2) -> np.ndarray:
@@ -134,6 +173,12 @@ def add_seconds_utc(ref_jd_utc: tuple, dt_s) -> tuple[np.ndarray, np.ndarray]:
     return tai_to_utc(b1 + whole, b2 + (dt_s - whole * DAY_S) / DAY_S)
 
 
+#: :meth:`EarthOrientation.at` keeps its answers for up to this many dates a call (the single
+#: epochs and short sets that prepare asks again), at most ``_AT_MEMO_MAX`` of them.
+_AT_MEMO_DATES = 4
+_AT_MEMO_MAX = 256
+
+
 class EopCoverageWarning(UserWarning):
     """Dates outside the tabulated Earth orientation (values held at the table's end)."""
 
@@ -181,9 +226,23 @@ class EarthOrientation:
                 f"dates outside the Earth-orientation table ({self.source}: MJD {self.mjd[0]:.0f}-"
                 f"{self.mjd[-1]:.0f}): UT1-UTC and polar motion held at the end value; give --eop with a "
                 "table covering them"), stacklevel=2)
+        key = (jd1.shape, jd1.tobytes(), jd2.tobytes()) if jd1.size <= _AT_MEMO_DATES else None
+        if key is not None:
+            # a few dates asked again (an epoch's frame and its station model): the values kept
+            memo = self.__dict__.get("_at_memo")
+            if memo is None:
+                memo = self.__dict__["_at_memo"] = {}
+            hit = memo.get(key)
+            if hit is not None:
+                return tuple(v.copy() for v in hit)
         ut1_tai = np.interp(mjd, self.mjd, self.ut1_minus_tai_s)
         dut1 = ut1_tai + tai_minus_utc_s(jd1, jd2)
-        return dut1, np.interp(mjd, self.mjd, self.xp_rad), np.interp(mjd, self.mjd, self.yp_rad)
+        out = dut1, np.interp(mjd, self.mjd, self.xp_rad), np.interp(mjd, self.mjd, self.yp_rad)
+        if key is not None:
+            if len(memo) >= _AT_MEMO_MAX:
+                memo.clear()
+            memo[key] = tuple(v.copy() for v in out)
+        return out
 
 
 def eop_from_table(mjd, dut1_s, xp_arcsec, yp_arcsec, source: str) -> EarthOrientation:

@@ -221,17 +221,22 @@ class _Reml:
         """``ℓ_R`` of :meth:`__call__` by one compiled pass (:func:`~trackproc.methods.whitening.compiled_reml`:
         the filter's innovations rotated into R row by row, no factor object, no whitened copy), equal
         to it to rounding; :meth:`__call__` itself without the compiled kernel or for unordered times."""
-        kernel = self.kernel
-        if kernel is None:
+        if self.kernel is None:
             return self(model, profile)[0]
+        return self.fast_terms(model.white, model.ar_sigma, model.ar_tau_s, model.walk, profile)
+
+    def fast_terms(self, white, ar_sigma, ar_tau_s, walk, profile: bool = True) -> float:
+        """:meth:`fast` of ``NoiseModel(white, ar_sigma, ar_tau_s, walk)`` given by its four numbers
+        (the search's points: no model object for each); needs the compiled kernel."""
+        kernel = self.kernel
         n, p = self.n, self.p
         m = n - p
         if m <= 0:
             return -math.inf
-        has_ar = model.ar_sigma > 0 and model.ar_tau_s > 0
-        logdet_c, logdet_x, rss = kernel(self.grid[0], self.grid[1], float(model.ar_tau_s) if has_ar else 0.0,
-                                         float(model.ar_sigma) ** 2 if has_ar else 0.0, float(model.walk) ** 2,
-                                         float(model.white) ** 2, self.xr_rows, p)
+        has_ar = ar_sigma > 0 and ar_tau_s > 0
+        logdet_c, logdet_x, rss = kernel(self.grid[0], self.grid[1], float(ar_tau_s) if has_ar else 0.0,
+                                         float(ar_sigma) ** 2 if has_ar else 0.0, float(walk) ** 2,
+                                         float(white) ** 2, self.xr_rows, p)
         if not (math.isfinite(logdet_c) and rss > 0 and math.isfinite(rss)):
             return -math.inf
         logdet = logdet_c + logdet_x
@@ -395,7 +400,7 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
         has_walk = "walk" in name and walk is None
         given = walk is not None
 
-        def build(z, has_ar=has_ar, has_walk=has_walk, given=given) -> NoiseModel:
+        def terms(z, has_ar=has_ar, has_walk=has_walk, given=given) -> tuple:
             # z: log(σ_a/σ_w)², log τ (AR); log(q/σ_w)² (walk); log σ_w (when the walk is given)
             # (the search stays within the bounds; exp is capped so that a point far out is a poor
             # likelihood, not an OverflowError)
@@ -403,14 +408,20 @@ def fit_noise(t_s, residual, design, *, models: Sequence[str] = MODELS, walk: Op
             a = math.sqrt(_exp(z[0])) * w if has_ar else 0.0
             tau = _exp(z[1]) if has_ar else 0.0
             q = walk if given else (math.sqrt(_exp(z[2 if has_ar else 0])) if has_walk else 0.0)
-            return NoiseModel(w, a, tau, q or 0.0)
+            return w, a, tau, q or 0.0
+
+        def build(z, terms=terms) -> NoiseModel:
+            return NoiseModel(*terms(z))
 
         # each point once (the search starts at the best start, already evaluated; the scale is read
         # at the end point): the exact path (ℓ_R, ŝ) and the compiled one (-ℓ_R, equal to rounding,
         # for the search's gradients and steps: its end point is then evaluated exactly, so a path
         # that reaches the same point of the 0.001 grid gives the same numbers)
         evaluate = _by_point(lambda z, build=build, given=given: reml(build(z), profile=not given))
-        neg_fast = _by_point(lambda z, build=build, given=given: -reml.fast(build(z), profile=not given))
+        if reml.kernel is not None:           # the search's points by their numbers, no model object each
+            neg_fast = _by_point(lambda z, terms=terms, given=given: -reml.fast_terms(*terms(z), profile=not given))
+        else:
+            neg_fast = _by_point(lambda z, build=build, given=given: -reml.fast(build(z), profile=not given))
 
         def neg(z, evaluate=evaluate):
             return -evaluate(z)[0]

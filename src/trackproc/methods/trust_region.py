@@ -71,7 +71,7 @@ def minimise(fun, start, bounds, xtol: float, ftol: float, maxiter: int = 40, fi
     radius = 1.0
     for _ in range(maxiter):
         free = ~(((x <= lo) & (g > 0)) | ((x >= hi) & (g < 0)))
-        if not free.any() or not np.all(np.isfinite(g)):
+        if not free.any() or not np.isfinite(g).all():
             break
         gf = g[free]
         w, v = np.linalg.eigh(b[np.ix_(free, free)])
@@ -85,7 +85,7 @@ def minimise(fun, start, bounds, xtol: float, ftol: float, maxiter: int = 40, fi
         y = np.clip(x + step, lo, hi)
         step = y - x
         pred = -float(g @ step + 0.5 * step @ b @ step)
-        if pred < ftol or np.all(np.abs(step) < xtol):
+        if pred < ftol or (np.abs(step) < xtol).all():
             break
         fy = float(fun(y))
         rho = (f - fy) / pred if math.isfinite(fy) else -1.0

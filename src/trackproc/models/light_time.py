@@ -85,7 +85,7 @@ def solve_down_leg(state_at: Callable[[np.ndarray], np.ndarray], r_st, tau0, *, 
         u = d / rho[..., None]
         step = (c * tau - rho) / (c + _dot(u, s[..., 3:]))
         tau = tau - step
-        if np.all(np.abs(step) < tol_s):
+        if (np.abs(step) < tol_s).all():
             break
     else:
         raise ArithmeticError("light-time iteration did not converge")
@@ -137,7 +137,7 @@ def solve_up_leg(r_b, r_st, v_st, a_st, tau_down_s, *, c: float = C_LIGHT, tol_s
         rho = np.linalg.norm(d, axis=-1)
         step = (c * tau - rho) / (c - _dot(d / rho[..., None], big_v))
         tau = tau - step
-        if np.all(np.abs(step) < tol_s):
+        if (np.abs(step) < tol_s).all():
             break
     else:
         raise ArithmeticError("two-way up-leg light-time iteration did not converge")

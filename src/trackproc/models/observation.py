@@ -165,7 +165,7 @@ def solve_light_time(trajectory, t_r_s, r_st, *, c: float = C_LIGHT, tol_s: floa
     """
     t_r = np.asarray(t_r_s, float)
     r_st = np.asarray(r_st, float)
-    if tau0 is None or np.shape(tau0) != t_r.shape or not np.all(np.isfinite(tau0)):
+    if tau0 is None or np.shape(tau0) != t_r.shape or not np.isfinite(tau0).all():
         tau0 = np.linalg.norm(trajectory.state(t_r)[:, :3] - r_st, axis=-1) / c
     last = []
 
@@ -411,7 +411,7 @@ def evaluate(meas: MeasurementSet, trajectory, *, n_state_params: int = 6, modif
                                            _rows(meas.v_st, sel), range_rate_model, c, rho=geo.rho_m[sel],
                                            u=geo.u[sel])
         factor = 1.0 if k == "range_rate" else -_rows(meas.carrier_hz, sel) / c
-        if k == "doppler" and not np.all(np.isfinite(factor)):
+        if k == "doppler" and not np.isfinite(factor).all():
             raise ValueError("Doppler samples need a carrier frequency")
         if np.shape(factor) != rr.shape:
             factor = np.broadcast_to(factor, rr.shape)

@@ -27,9 +27,31 @@ def whitened_svd(jacobian_w: np.ndarray, rhs: np.ndarray):
     if jacobian_w.shape[0] <= n:
         u, s, vt = np.linalg.svd(jacobian_w, full_matrices=False)
         return u.T @ rhs, s, vt
-    r = np.linalg.qr(np.column_stack([jacobian_w, rhs]), mode="r")
+    r = _tall_r(jacobian_w, rhs)
     u, s, vt = np.linalg.svd(r[:n, :n])
     return u.T @ r[:n, n], s, vt
+
+
+_DGEQRF: list = []
+
+
+def _tall_r(jacobian_w: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """``R`` (n, n + 1) of the Householder QR of the tall ``[J | b]``: LAPACK's dgeqrf, the routine
+    ``np.linalg.qr(..., mode="r")`` calls (the same R bit for bit, tests/methods/test_tall_r.py), on
+    the augmented matrix made in Fortran order, without numpy's wrapper (~20 µs a call, each
+    linearisation of every solve)."""
+    if not _DGEQRF:
+        from trackproc.methods.lapack import routines   # start-up: scipy's LAPACK wrapper, ~3 ms, when solving
+
+        _DGEQRF.extend(routines("dgeqrf"))
+    m, n = jacobian_w.shape
+    aug = np.empty((m, n + 1), order="F")
+    aug[:, :n] = jacobian_w
+    aug[:, n] = rhs
+    qr, _, _, info = _DGEQRF[0](aug, overwrite_a=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dgeqrf failed (info {info})")
+    return np.triu(qr[:n, :])
 
 
 def combination_text(vector: np.ndarray, names: Sequence[str], threshold: float = 0.1) -> str:
@@ -44,8 +66,28 @@ def combination_text(vector: np.ndarray, names: Sequence[str], threshold: float 
     return " ".join(terms)
 
 
+#: :func:`prior_rows`' whitened rows and factors by the priors' indices and covariances, the parameter
+#: count and the scales: a pass's solves (the profile covariance's 4 per direction) share them.
+_PRIOR_ROWS: dict = {}
+_PRIOR_ROWS_MAX = 64
+
+
 def prior_rows(priors: Sequence[Prior], n: int, scales: np.ndarray):
     """Whitening of the priors: rows ``W E S`` and the factor W (with W Wᵀ = covariance⁻¹)."""
+    key = (n, np.asarray(scales, float).tobytes()) + tuple(
+        (np.asarray(p.index, int).tobytes(), np.atleast_2d(np.asarray(p.covariance, float)).tobytes(),
+         np.shape(p.covariance)) for p in priors)
+    kept = _PRIOR_ROWS.get(key)
+    if kept is None:
+        a, factors = _prior_rows(priors, n, scales)
+        if len(_PRIOR_ROWS) >= _PRIOR_ROWS_MAX:
+            _PRIOR_ROWS.clear()
+        kept = _PRIOR_ROWS[key] = (a, [w for w, _ in factors])
+    a, ws = kept
+    return a.copy(), [(w.copy(), p) for w, p in zip(ws, priors)]
+
+
+def _prior_rows(priors: Sequence[Prior], n: int, scales: np.ndarray):
     rows, factors = [], []
     for p in priors:
         cov = np.atleast_2d(np.asarray(p.covariance, float))
@@ -168,7 +210,7 @@ class Problem:
         if self.n_prior:
             a = np.vstack([a, self.prior_a])
             b = np.concatenate([b, self.prior_rhs(x)])
-        if not np.all(np.isfinite(a)):
+        if not np.isfinite(a).all():
             raise ProcessingError("the Jacobian has non-finite entries", {"iteration": it})
         return a, b
 
@@ -236,7 +278,7 @@ def iterate(prob: Problem, opt: Options, x, h, jac, r, mask, *, stable: bool, li
                 h_new, jac_new = prob.evaluate(x_new)
             except (ArithmeticError, ProcessingError, ValueError):
                 continue
-            if not np.all(np.isfinite(h_new)):
+            if not np.isfinite(h_new).all():
                 continue
             r_new = prob.residuals(h_new)
             c_new = prob.cost(r_new, x_new, mask)
@@ -259,7 +301,8 @@ def iterate(prob: Problem, opt: Options, x, h, jac, r, mask, *, stable: bool, li
         check(new_mask)
         stable = bool(np.array_equal(new_mask, mask))
         mask = new_mask
-        cost = prob.cost(r, x, mask)
+        # the same editing: the accepted point's cost is the one just computed, by the same sums
+        cost = c_new if stable else prob.cost(r, x, mask)
         history.append(cost)
         if stable and (step_sig < opt.step_tol or rel < opt.cost_rtol):
             message = (f"converged: step {step_sig:.2g} sigma{tag}" if step_sig < opt.step_tol

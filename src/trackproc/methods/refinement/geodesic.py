@@ -77,7 +77,7 @@ def geodesic_retraction(model, sigma, scales, priors=(), *, fraction: float = 0.
         hvv = (2.0 / fraction) * ((np.asarray(h1) - h0) / fraction - jac @ dx)
         a_w = np.vstack([jac / sig[:, None] * sc[None, :], prior_a])
         rhs = np.r_[hvv / sig, np.zeros(prior_a.shape[0])]
-        if not (np.all(np.isfinite(a_w)) and np.all(np.isfinite(rhs))):
+        if not (np.isfinite(a_w).all() and np.isfinite(rhs).all()):
             return x + dx
         acc = -np.linalg.lstsq(a_w, rhs, rcond=None)[0]
         if np.linalg.norm(acc) > alpha * np.linalg.norm(dx / sc):

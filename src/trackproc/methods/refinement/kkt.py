@@ -127,7 +127,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
         for _ in range(MAX_RESTORE):
             f, a = constraints(xv)
             scale = constraint_scale(xv)
-            if np.all(np.abs(f) <= FEASIBILITY_RTOL * scale):
+            if (np.abs(f) <= FEASIBILITY_RTOL * scale).all():
                 return xv
             # a constraint evaluated at rounding level (e.g. a linear one at |x| ~ 7e6 m) never
             # reaches 1e-14: once a step no longer reduces it, more steps only stir the last bits
@@ -181,7 +181,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
             raise ProcessingError(f"too few measurements: {int((~mask).sum())} kept for {n} parameters")
 
     x, h, jac = prob.start(x, prepare=restore)
-    if not np.all(np.isfinite(h)):
+    if not np.isfinite(h).all():
         raise ProcessingError("the model gives non-finite values at the initial values")
     r = prob.residuals(h)
     mask = prob.edit(r, np.zeros(prob.nobs, bool))
