@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from trackproc.io.jsonshare import dumps_shared
 from trackproc.io.tables import arrow_table_bytes, bool_array, float_array, string_array, utc_time_array
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
@@ -83,14 +84,21 @@ def base_meta(**extra) -> dict:
 
 
 def meta_json(meta: dict) -> str:
-    """Deterministic JSON of the metadata (sorted keys, no NaN)."""
-    return json.dumps(meta, sort_keys=True, separators=(",", ":"), allow_nan=False, default=_json_default)
+    """Deterministic JSON of the metadata (sorted keys, no NaN): ``json.dumps(meta, sort_keys=True,
+    separators=(",", ":"), allow_nan=False, default=...)``, the same text, the smoothing records'
+    float lists' text shared with the last encodings of the same lists (``.smooth.json``, the size
+    check; :mod:`trackproc.io.jsonshare`)."""
+    return dumps_shared(meta, _META_ENCODER)
 
 
 def _json_default(value):
     if isinstance(value, np.generic):
         return value.item()
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+#: ``json.dumps``'s encoder for :func:`meta_json`'s arguments.
+_META_ENCODER = json.JSONEncoder(sort_keys=True, separators=(",", ":"), allow_nan=False, default=_json_default)
 
 
 # --------------------------------------------------------------------------- writing

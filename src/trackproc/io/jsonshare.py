@@ -1,0 +1,100 @@
+"""Compact JSON text of a value whose long float lists are encoded once and shared between texts.
+
+A smoothed pass is written twice with the same smoothing records: ``.smooth.json`` (keys in
+insertion order) and the pass file's metadata (keys sorted, :func:`trackproc.io.passfile.meta_json`).
+The records' covariance matrices and coefficients are most of either text, and their float text
+(``float.__repr__``) most of the encoding's work; key order does not reach inside a list of
+floats, so that text is the same in both. :func:`dumps_shared` gives exactly what the given C
+encoder's ``encode`` gives, with each such list's text taken from a small memo of the lists
+encoded last (by identity, and used only while the list holds the very float objects it held).
+"""
+
+from __future__ import annotations
+
+import json
+import operator
+from itertools import count
+
+#: Lists shorter than this are left to the encoder (the memo would cost more than their text).
+MIN_SHARED = 8
+#: Memo entries kept: a pass has a few fits of three lists each.
+MEMO_SIZE = 64
+#: Nesting walked to find the lists (deeper values are left to the encoder as they are).
+MAX_DEPTH = 16
+
+_LIST = json.JSONEncoder(allow_nan=False, separators=(",", ":"))
+_MEMO: dict = {}
+_TOKENS = count()
+
+
+def dumps_shared(value, encoder: json.JSONEncoder) -> str:
+    """``encoder.encode(value)``, the same text; ``encoder`` compact (``separators=(",", ":")``)
+    with ``allow_nan=False``, any other goes straight to ``encoder.encode``."""
+    if encoder.item_separator != "," or encoder.key_separator != ":" or encoder.allow_nan:
+        return encoder.encode(value)
+    lists: dict = {}
+    shallow = _replace(value, lists, 0)
+    if not lists:
+        return encoder.encode(value)
+    try:
+        text = encoder.encode(shallow)
+        for token, values in lists.items():
+            quoted = _LIST.encode(token)
+            if text.count(quoted) != 1:      # a string of the data spelled like a token
+                return encoder.encode(value)
+            text = text.replace(quoted, _list_text(values), 1)
+    except (TypeError, ValueError, RecursionError):
+        return encoder.encode(value)         # its own error, the first in its order
+    return text
+
+
+def _replace(value, lists: dict, depth: int):
+    """``value`` with every long list of floats replaced by a fresh token string (``lists``:
+    token -> the list); the dicts and lists on the way copied, nothing else."""
+    kind = type(value)
+    if depth > MAX_DEPTH or (kind is not dict and kind is not list):
+        return value
+    if kind is dict:
+        return {k: _replace(v, lists, depth + 1) for k, v in value.items()}
+    if _float_rows(value):
+        token = "\x00jsonshare %d\x00" % next(_TOKENS)
+        lists[token] = value
+        return token
+    return [_replace(v, lists, depth + 1) for v in value]
+
+
+def _float_rows(values: list) -> bool:
+    """A list of at least :data:`MIN_SHARED` floats, or of such lists (a matrix)."""
+    if not values:
+        return False
+    if type(values[0]) is list:
+        return all(type(row) is list and len(row) >= MIN_SHARED and all(type(x) is float for x in row)
+                   for row in values)
+    return len(values) >= MIN_SHARED and all(type(x) is float for x in values)
+
+
+def _snapshot(values: list) -> tuple:
+    if type(values[0]) is list:
+        return tuple((row, tuple(row)) for row in values)
+    return tuple(values)
+
+
+def _unchanged(values: list, snapshot: tuple) -> bool:
+    """The same float objects in the same places as when the text was made (floats are immutable)."""
+    if len(values) != len(snapshot):
+        return False
+    if type(values[0]) is list:
+        return all(row is kept and len(row) == len(items) and all(map(operator.is_, row, items))
+                   for row, (kept, items) in zip(values, snapshot))
+    return all(map(operator.is_, values, snapshot))
+
+
+def _list_text(values: list) -> str:
+    entry = _MEMO.get(id(values))
+    if entry is not None and entry[0] is values and _unchanged(values, entry[1]):
+        return entry[2]
+    text = _LIST.encode(values)              # raises for a non-finite float, as the encoder would
+    if len(_MEMO) >= MEMO_SIZE:
+        _MEMO.clear()
+    _MEMO[id(values)] = (values, _snapshot(values), text)
+    return text
