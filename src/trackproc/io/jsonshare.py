@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import json
 import operator
-from itertools import count
+import re
+from itertools import chain, count
 
 #: Lists shorter than this are left to the encoder (the memo would cost more than their text).
 MIN_SHARED = 8
@@ -24,6 +25,9 @@ MAX_DEPTH = 16
 
 _LIST = json.JSONEncoder(allow_nan=False, separators=(",", ":"))
 _MEMO: dict = {}
+_LIST_TYPE, _FLOAT_TYPE = {list}, {float}
+#: A token as the encoder writes it (ASCII escapes of NUL), its number captured.
+_TOKEN_TEXT = re.compile(r'"\\u0000jsonshare (\d+)\\u0000"')
 _TOKENS = count()
 
 
@@ -37,29 +41,28 @@ def dumps_shared(value, encoder: json.JSONEncoder) -> str:
     if not lists:
         return encoder.encode(value)
     try:
-        text = encoder.encode(shallow)
-        for token, values in lists.items():
-            quoted = _LIST.encode(token)
-            if text.count(quoted) != 1:      # a string of the data spelled like a token
-                return encoder.encode(value)
-            text = text.replace(quoted, _list_text(values), 1)
+        parts = _TOKEN_TEXT.split(encoder.encode(shallow))
+        found = parts[1::2]
+        if len(found) != len(lists) or set(found) != lists.keys():
+            return encoder.encode(value)     # a string of the data spelled like a token
+        parts[1::2] = [_list_text(lists[token]) for token in found]
     except (TypeError, ValueError, RecursionError):
         return encoder.encode(value)         # its own error, the first in its order
-    return text
+    return "".join(parts)
 
 
 def _replace(value, lists: dict, depth: int):
     """``value`` with every long list of floats replaced by a fresh token string (``lists``:
-    token -> the list); the dicts and lists on the way copied, nothing else."""
+    the token's number -> the list); the dicts and lists on the way copied, nothing else."""
     kind = type(value)
     if depth > MAX_DEPTH or (kind is not dict and kind is not list):
         return value
     if kind is dict:
         return {k: _replace(v, lists, depth + 1) for k, v in value.items()}
     if _float_rows(value):
-        token = "\x00jsonshare %d\x00" % next(_TOKENS)
+        token = str(next(_TOKENS))
         lists[token] = value
-        return token
+        return "\x00jsonshare " + token + "\x00"
     return [_replace(v, lists, depth + 1) for v in value]
 
 
@@ -68,9 +71,9 @@ def _float_rows(values: list) -> bool:
     if not values:
         return False
     if type(values[0]) is list:
-        return all(type(row) is list and len(row) >= MIN_SHARED and all(type(x) is float for x in row)
-                   for row in values)
-    return len(values) >= MIN_SHARED and all(type(x) is float for x in values)
+        return set(map(type, values)) == _LIST_TYPE and min(map(len, values)) >= MIN_SHARED \
+            and set(map(type, chain.from_iterable(values))) == _FLOAT_TYPE
+    return len(values) >= MIN_SHARED and set(map(type, values)) == _FLOAT_TYPE
 
 
 def _snapshot(values: list) -> tuple:
