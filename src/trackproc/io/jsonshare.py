@@ -26,6 +26,7 @@ MAX_DEPTH = 16
 _LIST = json.JSONEncoder(allow_nan=False, separators=(",", ":"))
 _MEMO: dict = {}
 _LIST_TYPE, _FLOAT_TYPE = {list}, {float}
+_CONTAINERS = (dict, list)
 #: A token as the encoder writes it (ASCII escapes of NUL), its number captured.
 _TOKEN_TEXT = re.compile(r'"\\u0000jsonshare (\d+)\\u0000"')
 _TOKENS = count()
@@ -57,13 +58,14 @@ def _replace(value, lists: dict, depth: int):
     kind = type(value)
     if depth > MAX_DEPTH or (kind is not dict and kind is not list):
         return value
-    if kind is dict:
-        return {k: _replace(v, lists, depth + 1) for k, v in value.items()}
+    depth += 1
+    if kind is dict:         # (scalars without a call: most of a summary's values)
+        return {k: _replace(v, lists, depth) if type(v) in _CONTAINERS else v for k, v in value.items()}
     if _float_rows(value):
         token = str(next(_TOKENS))
         lists[token] = value
         return "\x00jsonshare " + token + "\x00"
-    return [_replace(v, lists, depth + 1) for v in value]
+    return [_replace(v, lists, depth) if type(v) in _CONTAINERS else v for v in value]
 
 
 def _float_rows(values: list) -> bool:
