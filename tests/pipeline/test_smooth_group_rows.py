@@ -1,4 +1,4 @@
-"""pipeline.smooth._group_rows (integer codes and one stable sort; the row loop when a key is not a
+"""pipeline.smooth._group_rows (one pass over the key columns as lists; groupby when a key is not a
 string) against pandas' groupby of the same rows (the reference): the same groups, the same rows in
 increasing order, on drawn tables."""
 
@@ -44,11 +44,3 @@ def test_the_groups_of_pandas_groupby(seed):
                 assert ours[key].dtype == np.intp and np.array_equal(ours[key], rows)
                 assert np.all(np.diff(ours[key]) > 0)
 
-
-def test_the_coded_path_is_taken_only_for_strings():
-    keys = [["A", "A", "B"], ["1", "1", "1"], ["doppler", "range", "doppler"]]
-    groups = sm._group_rows_coded(keys, ["doppler"])
-    assert sorted(groups) == [("A", "1", "doppler"), ("B", "1", "doppler")]
-    assert groups[("A", "1", "doppler")].tolist() == [0] and groups[("B", "1", "doppler")].tolist() == [2]
-    assert sm._group_rows_coded([["A", None], ["1", "1"], ["doppler", "range"]], ["doppler"]) is None
-    assert sm._group_rows_coded([["A", 1], ["1", "1"], ["doppler", "range"]], ["doppler"]) is None

@@ -311,9 +311,6 @@ def _group_rows(frame, kinds, keys: dict | None = None) -> dict:
     when a key is not a string (a missing one: the groupby leaves it out). ``keys``: the three
     columns' ``to_numpy()``, when the caller has them."""
     keys = [(frame[c].to_numpy() if keys is None else keys[c]).tolist() for c in ("station", "pass_id", "kind")]
-    coded = _group_rows_coded(keys, kinds)
-    if coded is not None:
-        return coded
     wanted = set(kinds)
     groups: dict = {}
     for i, key in enumerate(zip(*keys)):
@@ -332,39 +329,6 @@ def _group_rows(frame, kinds, keys: dict | None = None) -> dict:
     positions = selected.index.to_numpy()
     return {key: positions[idx] for key, idx in selected.groupby(["station", "pass_id", "kind"], sort=True)
             .indices.items()}
-
-
-def _group_rows_coded(keys: list, kinds) -> dict | None:
-    """:func:`_group_rows` of key columns (Python lists) whose every entry is a string, by one
-    integer code a row (each column's distinct values numbered) and one stable sort; None when an
-    entry is not a string (the row loop decides then)."""
-    distinct = [dict.fromkeys(column) for column in keys]
-    if any(type(value) is not str for values in distinct for value in values):
-        return None
-    n = len(keys[0])
-    sizes = [len(values) for values in distinct]
-    if not n or math.prod(sizes) >= 2 ** 62:
-        return None
-    codes = [np.fromiter(map({v: i for i, v in enumerate(values)}.__getitem__, column), np.int64, n)
-             for values, column in zip(distinct, keys)]
-    kind_values = list(distinct[2])
-    wanted = np.array([value in set(kinds) for value in kind_values], dtype=bool)
-    positions = np.flatnonzero(wanted[codes[2]])
-    if not positions.size:
-        return {}
-    combined = ((codes[0] * sizes[1] + codes[1]) * sizes[2] + codes[2])[positions]
-    order = np.argsort(combined, kind="stable")       # each group's rows stay increasing
-    combined, positions = combined[order], positions[order]
-    starts = np.flatnonzero(np.r_[True, combined[1:] != combined[:-1]])
-    stops = np.r_[starts[1:], combined.size]
-    names = [list(values) for values in distinct]
-    groups = {}
-    for start, stop in zip(starts.tolist(), stops.tolist()):
-        code = int(combined[start])
-        rest, k = divmod(code, sizes[2])
-        i, j = divmod(rest, sizes[1])
-        groups[(names[0][i], names[1][j], kind_values[k])] = positions[start:stop].astype(np.intp)
-    return groups
 
 
 class _Columns:
