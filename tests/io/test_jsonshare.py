@@ -75,6 +75,13 @@ def test_a_string_spelled_like_the_token_and_the_errors():
         dumps_shared(cyclic, enc)
 
 
+def test_other_encoders_are_left_alone():
+    value = {"v": [0.5] * 10, "w": [[1.5] * 9] * 2}
+    for kwargs in ({"indent": 1, "separators": (",", ":"), "allow_nan": False}, {"allow_nan": False},
+                   {"allow_nan": True, "separators": (",", ":")}):
+        assert dumps_shared(value, json.JSONEncoder(**kwargs)) == json.dumps(value, **kwargs)
+
+
 def test_the_memo_stays_small():
     enc = json.JSONEncoder(**INSERTION)
     for i in range(3 * jsonshare.MEMO_SIZE):

@@ -33,9 +33,10 @@ _TOKENS = count()
 
 
 def dumps_shared(value, encoder: json.JSONEncoder) -> str:
-    """``encoder.encode(value)``, the same text; ``encoder`` compact (``separators=(",", ":")``)
-    with ``allow_nan=False``, any other goes straight to ``encoder.encode``."""
-    if encoder.item_separator != "," or encoder.key_separator != ":" or encoder.allow_nan:
+    """``encoder.encode(value)``, the same text; ``encoder`` compact (``separators=(",", ":")``, no
+    indent) with ``allow_nan=False``, any other goes straight to ``encoder.encode``."""
+    if encoder.item_separator != "," or encoder.key_separator != ":" or encoder.allow_nan \
+            or encoder.indent is not None:
         return encoder.encode(value)
     lists: dict = {}
     shallow = _replace(value, lists, 0)
