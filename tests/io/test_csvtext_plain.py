@@ -58,3 +58,27 @@ def test_wrong_number_of_fields_is_the_same_error():
     with pytest.raises(InputError) as slow:
         _line_by_line(data)
     assert str(fast.value) == str(slow.value) and "wrong number of fields" in str(fast.value)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_plainness_is_the_regular_expressions_answer_on_drawn_text(seed):
+    """_is_plain (substring and newline tests) against _NOT_PLAIN itself: pass-file text, short and
+    long (the two ways of finding a line that starts with a newline or comma), with one or two of
+    the bytes and sequences the regular expression looks for at drawn places, the first and the last
+    included."""
+    rng = np.random.default_rng(seed)
+    pieces = [b"\n", b",", b" ", b"\t", b'"', b"#", b"\r", b"\x00", b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e",
+              b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9", b"\xc2\xa0", b"\xe2\x80\xa7", b"\xc2", b"\n\n", b"\n,",
+              b"\n \n", b"\n\t,", b",\n", b"\xe2\x80"]
+    seen = {True: 0, False: 0}
+    for _ in range(400):
+        body = ROWS[:int(rng.integers(1, 3)) * int(rng.choice([20, 200, len(ROWS) // 2]))]
+        data = bytearray(HEADER + body)
+        for _ in range(int(rng.integers(0, 3))):
+            at = int(rng.choice([0, len(data), int(rng.integers(0, len(data) + 1))]))
+            data[at:at] = pieces[int(rng.integers(len(pieces)))]
+        data = bytes(data)
+        expected = not csvtext._NOT_PLAIN.search(data)
+        assert csvtext._is_plain(data) == expected, data
+        seen[expected] += 1
+    assert min(seen.values()) > 50

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from trackproc.io.jsonshare import dumps_shared
 from trackproc.io.tables import arrow_table_bytes, bool_array, float_array, string_array, utc_time_array
 from trackproc.errors import InputError
 from trackproc.io.atomic import is_stdio, open_atomic, read_input_bytes
@@ -83,8 +84,11 @@ def base_meta(**extra) -> dict:
 
 
 def meta_json(meta: dict) -> str:
-    """Deterministic JSON of the metadata (sorted keys, no NaN)."""
-    return json.dumps(meta, sort_keys=True, separators=(",", ":"), allow_nan=False, default=_json_default)
+    """Deterministic JSON of the metadata (sorted keys, no NaN): ``json.dumps(meta, sort_keys=True,
+    separators=(",", ":"), allow_nan=False, default=...)``, the same text, the smoothing records'
+    float lists' text shared with the last encodings of the same lists (``.smooth.json``, the size
+    check; :mod:`trackproc.io.jsonshare`)."""
+    return dumps_shared(meta, _META_ENCODER)
 
 
 def _json_default(value):
@@ -93,15 +97,23 @@ def _json_default(value):
     raise TypeError(f"not JSON serialisable: {type(value).__name__}")
 
 
+#: ``json.dumps``'s encoder for :func:`meta_json`'s arguments.
+_META_ENCODER = json.JSONEncoder(sort_keys=True, separators=(",", ":"), allow_nan=False, default=_json_default)
+
+
 # --------------------------------------------------------------------------- writing
 
 
-def to_arrow(table: PassTable) -> pa.Table:
+def to_arrow(table: PassTable, meta_text: str | None = None) -> pa.Table:
     """The table as Arrow, canonical types, metadata under ``trackproc`` (no pandas metadata).
     A table that holds every column as numpy is converted from them, without its DataFrame (the
-    same arrays: the frame path converts the frame to these numpy types first)."""
+    same arrays: the frame path converts the frame to these numpy types first). ``meta_text``:
+    :func:`meta_json` of ``table.meta`` when the caller has it (a pass file's smoothing records
+    make it ~1 ms of float text)."""
+    if meta_text is None:
+        meta_text = meta_json(table.meta)
     columns = table.numpy_columns()
-    arrow = _arrow_of_columns(columns, table.meta) if columns is not None and all(c in columns for c in COLUMNS) \
+    arrow = _arrow_of_columns(columns, meta_text) if columns is not None and all(c in columns for c in COLUMNS) \
         else None
     if arrow is not None:
         return arrow
@@ -124,7 +136,7 @@ def to_arrow(table: PassTable) -> pa.Table:
             array = pa.array(frame[name], from_pandas=True)
             arrays.append(array)
             fields.append(pa.field(str(name), array.type))
-    schema = pa.schema(fields, metadata={META_KEY: meta_json(table.meta).encode()})
+    schema = pa.schema(fields, metadata={META_KEY: meta_text.encode()})
     return pa.Table.from_arrays(arrays, schema=schema)
 
 
@@ -138,7 +150,7 @@ def _canonical_fields() -> list:
             pa.field("sigma", pa.float64(), nullable=False)]
 
 
-def _arrow_of_columns(columns: dict, meta: dict) -> pa.Table | None:
+def _arrow_of_columns(columns: dict, meta_text: str) -> pa.Table | None:
     """:func:`to_arrow` of numpy columns (``time`` naive UTC ``datetime64[ns]``, text object arrays
     of str), built from their buffers (``pa.array`` imports pandas, ~0.25 s of CPU): the same
     schema, NaN in an added float column a null as ``from_pandas`` makes it. None when an added
@@ -153,7 +165,7 @@ def _arrow_of_columns(columns: dict, meta: dict) -> pa.Table | None:
         array = bool_array(values) if values.dtype == np.bool_ else _float_array_nan_null(values)
         arrays.append(array)
         fields.append(pa.field(str(name), array.type))
-    schema = pa.schema(fields, metadata={META_KEY: meta_json(meta).encode()})
+    schema = pa.schema(fields, metadata={META_KEY: meta_text.encode()})
     return pa.Table.from_arrays(arrays, schema=schema)
 
 
@@ -212,16 +224,16 @@ def pass_table_bytes(table: PassTable, fmt: str = "parquet") -> bytes:
     if fmt not in FORMATS:
         raise ValueError(f"unknown pass-table format {fmt!r}; expected one of {FORMATS}")
     meta, records = smoothing_record.split_records(table.meta, "stream" if fmt == "arrow" else "inline")
+    text = meta_json(meta)         # once: the size check and the file (the records' floats dominate)
     if records is None and smoothing_record.smoothing_of(meta).get("fits"):
-        text = meta_json(meta)
         smoothing_record.check_inline_size(text, f"a {fmt} stream")
     table = table.with_meta(meta)
     if fmt == "csv":
         out = io.StringIO()
-        out.write(csv_metadata_line(meta_json(table.meta)))
+        out.write(csv_metadata_line(text))
         _write_csv_rows(out, table.frame, header=True)
         return out.getvalue().encode("utf-8")
-    data = arrow_table_bytes(to_arrow(table), fmt)
+    data = arrow_table_bytes(to_arrow(table, text), fmt)
     return data if records is None else data + arrow_table_bytes(records, "arrow")
 
 

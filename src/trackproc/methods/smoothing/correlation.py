@@ -16,7 +16,7 @@ RHO_SIGNIFICANCE = 2.0
 
 
 def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", domain_s=None,
-                   white_q=None) -> NoiseModel:
+                   white_q=None, _checked: bool = False) -> NoiseModel:
     """AR(1) correlation of the normalized noise from the residuals of a white-noise fit of ``degree``.
 
     Method of moments corrected for the projection of the fit: with ``z = M u`` the normalized
@@ -26,9 +26,10 @@ def estimate_noise(t_s, y, sigma, degree: int, *, basis: str = "chebyshev", doma
     ``E[sum z_i z_(i-1)] / E[sum z_i^2] = tr(L M C M) / tr(M C M)``; both traces cost O(n p) because
     ``C`` is Markov (:func:`moment_ratio`). ``step`` is the median sample spacing. An estimate within
     ``RHO_SIGNIFICANCE`` standard errors (``1 / sqrt(n - p)``) of white gives ``rho = 0``.
-    ``white_q``: the caller's ``Q`` of that design matrix (times sorted), when it has it already.
+    ``white_q``: the caller's ``Q`` of that design matrix (times sorted), when it has it already;
+    ``_checked``: the arrays are :func:`check_arrays`' output already.
     """
-    t, y, s = check_arrays(t_s, y, sigma)
+    t, y, s = (t_s, y, sigma) if _checked else check_arrays(t_s, y, sigma)
     domain = pass_domain(t, domain_s)
     order = np.argsort(t, kind="stable")
     t, y, s = t[order], y[order], s[order]

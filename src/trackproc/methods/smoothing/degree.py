@@ -11,7 +11,8 @@ import numpy as np
 
 from trackproc.methods.smoothing.correlation import estimate_noise
 from trackproc.methods.smoothing.fit import (MAX_RHO, WHITE, DesignRows, NoiseModel, PolynomialFit, SmoothingError,
-                                             check_arrays, check_enough, design_matrix, pass_domain, replace_fit,
+                                             check_arrays, check_enough, design_matrix, distinct_count, pass_domain,
+                                             replace_fit,
                                              solve_fit, solve_upper, whiten)
 
 
@@ -106,7 +107,8 @@ def smooth_pass(t_s, y, sigma, degree: int | str = "auto", *, clip: float | None
 
 
 def select_degree(t_s, y, sigma, *, basis: str = "chebyshev", max_degree: int = DEFAULT_MAX_DEGREE,
-                  domain_s=None, noise: NoiseModel | None = None, design=None) -> tuple[int, dict, bool]:
+                  domain_s=None, noise: NoiseModel | None = None, design=None,
+                  _checked: bool = False) -> tuple[int, dict, bool]:
     """Degree minimizing ``BIC(d) = n ln(chi2_d / n) + (d + 1) ln n`` over ``0..cap``.
 
     ``chi2_d`` is the weighted (for an AR(1) ``noise``: generalized) residual sum of squares. One QR
@@ -117,9 +119,10 @@ def select_degree(t_s, y, sigma, *, basis: str = "chebyshev", max_degree: int = 
     ``floor(n_eff / 2) - 1`` (:func:`degree_cap`). Returns (degree, {degree: BIC}, at_limit) where
     ``at_limit`` says the minimum is at the upper end of the search (more terms might help).
     ``design``: ``design(d)`` gives ``design_matrix`` of the (sorted) samples at degree ``d``, when
-    the caller has it already.
+    the caller has it already. ``_checked``: the arrays are :func:`check_arrays`' output already
+    (:func:`smooth_pass`'s samples in use).
     """
-    t, y, s = check_arrays(t_s, y, sigma)
+    t, y, s = (t_s, y, sigma) if _checked else check_arrays(t_s, y, sigma)
     domain = pass_domain(t, domain_s)
     dmax = degree_cap(t, max_degree, noise)
     order = np.argsort(t, kind="stable")
@@ -148,7 +151,7 @@ def degree_cap(t_s, max_degree: int = DEFAULT_MAX_DEGREE, noise: NoiseModel | No
     Raises :class:`SmoothingError` when not even a constant can be fitted and tested.
     """
     t = np.asarray(t_s, float)
-    n_distinct = np.unique(t).size
+    n_distinct = distinct_count(t)
     if n_distinct < 2:
         raise SmoothingError("single_time", f"all {t.size} samples at one time: no curve can be fitted")
     n_eff = (noise or WHITE).effective_samples(t) if noise is not None and not noise.white else float(t.size)
@@ -174,21 +177,24 @@ def _choose(t, y, s, degree, basis, max_degree, domain, noise, rows=None, used=N
     if not isinstance(degree, str):
         check_enough(t, int(degree))
         model = (estimate_noise(t, y, s, int(degree), basis=basis, domain_s=domain,
-                                white_q=white_q and white_q(int(degree))) if noise == "auto" else noise)
+                                white_q=white_q and white_q(int(degree)), _checked=True)
+                 if noise == "auto" else noise)
         return int(degree), {}, False, model, None
     if noise == "auto":
         # rho from the residuals of the white-noise choice: a degree that absorbs the curve (on
         # correlated noise the white BIC over-fits, which the projection correction allows for)
-        white = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain, design=design)
+        white = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain, design=design,
+                              _checked=True)
         d0 = white[0]
-        model = estimate_noise(t, y, s, d0, basis=basis, domain_s=domain, white_q=white_q and white_q(d0))
+        model = estimate_noise(t, y, s, d0, basis=basis, domain_s=domain, white_q=white_q and white_q(d0),
+                               _checked=True)
     else:
         model = noise
     if noise == "auto" and model.white:     # the same search again (white noise whitens nothing)
         deg, scores, at_limit = white
     else:
         deg, scores, at_limit = select_degree(t, y, s, basis=basis, max_degree=max_degree, domain_s=domain,
-                                              noise=model, design=design)
+                                              noise=model, design=design, _checked=True)
     cap = degree_cap(t, max_degree, model)
     if noise == "auto" and not model.white and (model.rho >= MAX_RHO or (at_limit and cap < d0)
                                                  or _variance_ratio(t, y, s, d0, deg, domain, basis, model,

@@ -265,11 +265,23 @@ def pass_domain(t, domain_s):
     return (a, b)
 
 
+def distinct_count(t) -> int:
+    """``np.unique(t).size``: for times in increasing order (a pass's, every step of the degree
+    search) one comparison of neighbours instead of the sorted copy (the same count: equal
+    neighbours are what ``unique`` merges)."""
+    t = np.asarray(t)
+    if t.ndim == 1 and t.size > 1:
+        later, earlier = t[1:], t[:-1]
+        if (later >= earlier).all():        # (False for a NaN: unique decides)
+            return 1 + int(np.count_nonzero(later != earlier))
+    return np.unique(t).size
+
+
 def check_enough(t, degree: int, n_distinct: int | None = None) -> None:
     """Raise the :class:`SmoothingError` of a fit of ``degree`` to times ``t`` it cannot determine
     (``n_distinct``: the number of distinct times, when the caller has it)."""
     if n_distinct is None:
-        n_distinct = np.unique(t).size
+        n_distinct = distinct_count(t)
     if n_distinct < 2:
         raise SmoothingError("single_time", f"all {t.size} samples at one time: no curve can be fitted")
     if n_distinct < degree + 2:

@@ -12,8 +12,8 @@ import numpy as np
 from numpy.polynomial import polyutils as pu
 
 from trackproc.methods.smoothing.fit import (WHITE, PolynomialFit, SmoothingError, _chebder1, _compiled, check_arrays,
-                                             check_enough, check_rank, design_matrix, replace_fit, solve_upper,
-                                             used_in_time_order, whiten)
+                                             check_enough, check_rank, design_matrix, distinct_count, replace_fit,
+                                             solve_upper, used_in_time_order, whiten)
 
 
 #: A TCA whose spread over neighbouring degrees exceeds this many formal sigmas is ``uncertain``.
@@ -298,7 +298,7 @@ def _nested_coefficients(t, y, s, fit: PolynomialFit, top: int):
     noise = fit.noise or WHITE
     aug = np.column_stack([design_matrix(tu, top, fit.domain_s, fit.basis), y[idx]]) / s[idx, None]
     r = np.linalg.qr(whiten(tu, aug, noise), mode="r")
-    n_distinct = np.unique(tu).size
+    n_distinct = distinct_count(tu)
     # R_d's columns are the first d + 1 of R_top's (zero below row d), so its condition number is
     # at most R_top's (singular values interlace when columns are removed: Golub & Van Loan 2013,
     # cor. 8.6.3): one SVD decides for every degree when R_top is well inside solve_fit's limit

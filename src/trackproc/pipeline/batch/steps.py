@@ -112,7 +112,7 @@ def smooth_step(ctx: InputContext, opt: dict) -> None:
     """smooth: polynomial fit of every pass and kind (:func:`trackproc.pipeline.smooth.smooth`).
     Output ``.smooth.json``: the summary of ``trackproc smooth --summary``, the same values in
     compact JSON (one line: a program reads it; ~0.4 ms of CPU a pass less than the indented text)."""
-    from trackproc.io.jsonutil import dumps_compact
+    from trackproc.io.jsonshare import dumps_shared
     from trackproc.io.smoothing_record import fit_summary
     from trackproc.pipeline.smooth import SmoothOptions, smooth
 
@@ -121,7 +121,9 @@ def smooth_step(ctx: InputContext, opt: dict) -> None:
         basis=opt["basis"], max_degree=opt["max_degree"], tca_max_gap_s=opt["tca_max_gap_s"]),
         source=ctx.source)
     ctx.table = result.table
-    ctx.outputs[".smooth.json"] = dumps_compact(result.summary, sort_keys=False, ready=True).encode("utf-8")
+    # dumps_compact(summary, sort_keys=False)'s text; the records' float lists encoded here are
+    # the pass file's metadata's too (io.jsonshare)
+    ctx.outputs[".smooth.json"] = (dumps_shared(result.summary, _summary_encoder()) + "\n").encode("utf-8")
     counts = result.summary["counts"]
     ctx.numbers.update(fits_ok=counts["ok"], fits_suspect=counts["suspect"], fits_failed=counts["failed"])
     records = result.summary["fits"]
@@ -137,6 +139,19 @@ def smooth_step(ctx: InputContext, opt: dict) -> None:
             ctx.warnings.append(f"{f.label}: failed: {f.error}")
         elif f.status == "suspect":
             ctx.warnings.append(f"{f.label}: suspect ({', '.join(f.warnings)})")
+
+
+#: ``json.dumps(..., allow_nan=False, separators=(",", ":"))``'s encoder (``jsonutil.dumps_compact``).
+_SUMMARY_ENCODER = None
+
+
+def _summary_encoder():
+    global _SUMMARY_ENCODER
+    if _SUMMARY_ENCODER is None:
+        import json
+
+        _SUMMARY_ENCODER = json.JSONEncoder(allow_nan=False, separators=(",", ":"))
+    return _SUMMARY_ENCODER
 
 
 def estimate_step(ctx: WindowContext, opt: dict) -> None:
