@@ -44,8 +44,15 @@ def bool_array(values) -> pa.Array:
     return pa.Array.from_buffers(pa.bool_(), flags.size, [None, pa.py_buffer(np.packbits(flags, bitorder="little"))])
 
 
+#: Distinct labels up to which :func:`string_array` builds the column from the labels' bytes.
+FEW_LABELS = 16
+
+
 def string_array(values) -> pa.Array:
     """string (UTF-8) Arrow array of ``values`` (each written as ``str``; no nulls)."""
+    few = _few_labels(values)
+    if few is not None:
+        return _labels_array(*few)
     encoded = [str(v).encode("utf-8") for v in values]
     offsets = np.zeros(len(encoded) + 1, dtype=np.int64)
     np.cumsum([len(b) for b in encoded], out=offsets[1:])
@@ -53,3 +60,39 @@ def string_array(values) -> pa.Array:
         raise ValueError("text column too large for an Arrow string array (2 GiB)")
     return pa.Array.from_buffers(pa.string(), len(encoded),
                                  [None, pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(b"".join(encoded))])
+
+
+def _few_labels(values) -> tuple[np.ndarray, list] | None:
+    """(codes, distinct labels) of a 1-d object array of at most :data:`FEW_LABELS` distinct
+    ``str`` labels (a pass table's station, pass id and kind: a few names, ~1000 rows), found by
+    one hashing pass and one comparison per label in C; None for anything else. A value equal to
+    a ``str`` label is written as that label (``str`` of a ``numpy.str_`` is the same text)."""
+    if not isinstance(values, np.ndarray) or values.dtype != object or values.ndim != 1 or not len(values):
+        return None
+    labels = list(dict.fromkeys(values.tolist()))
+    if len(labels) > FEW_LABELS or not all(type(label) is str for label in labels):
+        return None
+    codes = np.zeros(len(values), dtype=np.intp)
+    for code, label in enumerate(labels[1:], 1):
+        codes[values == label] = code
+    return codes, labels
+
+
+def _labels_array(codes: np.ndarray, labels: list) -> pa.Array:
+    """The string array of ``labels[codes]`` from the labels' UTF-8 bytes: each row's bytes taken
+    from a (labels x longest) byte matrix and the padding masked out, row-major (the Arrow
+    columnar layout: int32 offsets, the rows' bytes back to back)."""
+    encoded = [label.encode("utf-8") for label in labels]
+    lengths = np.array([len(b) for b in encoded], dtype=np.int64)
+    row_lengths = lengths[codes]
+    offsets = np.zeros(len(codes) + 1, dtype=np.int64)
+    np.cumsum(row_lengths, out=offsets[1:])
+    if offsets[-1] >= 2 ** 31:
+        raise ValueError("text column too large for an Arrow string array (2 GiB)")
+    width = int(lengths.max())
+    matrix = np.zeros((len(labels), max(width, 1)), dtype=np.uint8)
+    for i, b in enumerate(encoded):
+        matrix[i, :len(b)] = np.frombuffer(b, dtype=np.uint8)
+    data = matrix[codes][np.arange(matrix.shape[1]) < row_lengths[:, None]].tobytes()
+    return pa.Array.from_buffers(pa.string(), len(codes),
+                                 [None, pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(data)])
