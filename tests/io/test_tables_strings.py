@@ -33,9 +33,9 @@ LABELS = st.lists(st.text(min_size=0, max_size=6), min_size=1, max_size=5, uniqu
 
 @settings(max_examples=80, deadline=None)
 @given(LABELS, st.lists(st.integers(0, 4), min_size=1, max_size=60))
-def test_few_labels_same_array(labels, picks):
+def testfew_labels_same_array(labels, picks):
     values = np.array([labels[i % len(labels)] for i in picks], dtype=object)
-    assert tables._few_labels(values) is not None          # the labels' path is the one tested
+    assert tables.few_labels(values) is not None          # the labels' path is the one tested
     _same(string_array(values), _reference(values))
 
 

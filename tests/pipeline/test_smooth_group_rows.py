@@ -1,5 +1,5 @@
-"""pipeline.smooth._group_rows (one pass over the key columns as lists; groupby when a key is not a
-string) against pandas' groupby of the same rows (the reference): the same groups, the same rows in
+"""pipeline.smooth._group_rows (the key columns' codes when each holds a few str labels, one pass
+over them as lists otherwise; groupby when a key is not a string) against pandas' groupby of the same rows (the reference): the same groups, the same rows in
 increasing order, on drawn tables."""
 
 import numpy as np
@@ -38,6 +38,9 @@ def test_the_groups_of_pandas_groupby(seed):
                                     int(rng.integers(1, 4)), replace=False))
             keys = {c: frame[c].to_numpy() for c in ("station", "pass_id", "kind")}
             ours = sm._group_rows(frame, kinds, keys)
+            if not odd or n <= 3:   # str labels only: the codes' path, its groups in order of first row
+                assert sm._coded_groups(list(keys.values()), kinds) is not None
+                assert list(ours) == list(dict.fromkeys(k for k in zip(*keys.values()) if k[2] in kinds))
             expected = _reference(frame, kinds)
             assert sorted(ours) == sorted(expected)
             for key, rows in expected.items():

@@ -50,7 +50,7 @@ FEW_LABELS = 16
 
 def string_array(values) -> pa.Array:
     """string (UTF-8) Arrow array of ``values`` (each written as ``str``; no nulls)."""
-    few = _few_labels(values)
+    few = few_labels(values)
     if few is not None:
         return _labels_array(*few)
     encoded = [str(v).encode("utf-8") for v in values]
@@ -62,7 +62,7 @@ def string_array(values) -> pa.Array:
                                  [None, pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(b"".join(encoded))])
 
 
-def _few_labels(values) -> tuple[np.ndarray, list] | None:
+def few_labels(values) -> tuple[np.ndarray, list] | None:
     """(codes, distinct labels) of a 1-d object array of at most :data:`FEW_LABELS` distinct
     ``str`` labels (a pass table's station, pass id and kind: a few names, ~1000 rows), found by
     one hashing pass and one comparison per label in C; None for anything else. A value equal to
@@ -79,20 +79,18 @@ def _few_labels(values) -> tuple[np.ndarray, list] | None:
 
 
 def _labels_array(codes: np.ndarray, labels: list) -> pa.Array:
-    """The string array of ``labels[codes]`` from the labels' UTF-8 bytes: each row's bytes taken
-    from a (labels x longest) byte matrix and the padding masked out, row-major (the Arrow
-    columnar layout: int32 offsets, the rows' bytes back to back)."""
+    """The string array of ``labels[codes]`` from the labels' UTF-8 bytes, each encoded once (the
+    Arrow columnar layout: int32 offsets, the rows' bytes back to back)."""
     encoded = [label.encode("utf-8") for label in labels]
-    lengths = np.array([len(b) for b in encoded], dtype=np.int64)
-    row_lengths = lengths[codes]
-    offsets = np.zeros(len(codes) + 1, dtype=np.int64)
-    np.cumsum(row_lengths, out=offsets[1:])
+    n = len(codes)
+    if len(encoded) == 1:        # one label (a pass file's station, pass id): no per-row work
+        size = len(encoded[0])
+        offsets = np.arange(0, (n + 1) * size, size, dtype=np.int64) if size else np.zeros(n + 1, np.int64)
+        data = encoded[0] * n
+    else:
+        offsets = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(np.array([len(b) for b in encoded], dtype=np.int64)[codes], out=offsets[1:])
+        data = b"".join(map(encoded.__getitem__, codes.tolist()))
     if offsets[-1] >= 2 ** 31:
         raise ValueError("text column too large for an Arrow string array (2 GiB)")
-    width = int(lengths.max())
-    matrix = np.zeros((len(labels), max(width, 1)), dtype=np.uint8)
-    for i, b in enumerate(encoded):
-        matrix[i, :len(b)] = np.frombuffer(b, dtype=np.uint8)
-    data = matrix[codes][np.arange(matrix.shape[1]) < row_lengths[:, None]].tobytes()
-    return pa.Array.from_buffers(pa.string(), len(codes),
-                                 [None, pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(data)])
+    return pa.Array.from_buffers(pa.string(), n, [None, pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(data)])

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from itertools import chain
 from typing import Sequence
 
 import numpy as np
@@ -196,7 +197,7 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
     if frame is not None:
         samples = _with_added(frame, added_columns)
 
-    summary = json_ready(summary_of(fits, options, table.meta, source, doppler_mode, carrier_hz))
+    summary = _summary_ready(summary_of(fits, options, table.meta, source, doppler_mode, carrier_hz))
     meta = dict(table.meta)
     meta["smoothing"] = summary
     sample_meta = {**meta, "smoothing": {**summary, "output": "samples"}}
@@ -224,6 +225,35 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
 #: The columns the steps after smoothing read (refine's pass selection and samples, batch's
 #: numbers): converted from the frame once, not at every ``PassTable.column`` call (~20 a refinement).
 _READ_COLUMNS = ("time", "station", "pass_id", "kind", "value", "sigma", "flag")
+
+
+#: A fit record's float lists (``tolist()`` of the fit's arrays: Python floats), most of its numbers.
+_FLOAT_LISTS = frozenset(("coefficients", "covariance_unscaled", "covariance_scaled"))
+_LIST_TYPE, _FLOAT_TYPE = {list}, {float}
+
+
+def _summary_ready(summary: dict) -> dict:
+    """``json_ready(summary)``, the same value and key order, with the records' float lists
+    taken as they are when they hold only finite Python floats (``json_ready`` would copy them
+    unchanged, walking each float in Python)."""
+    fits = summary.get("fits")
+    if type(fits) is not list or not all(type(rec) is dict for rec in fits):
+        return json_ready(summary)
+    rest = json_ready({k: v for k, v in summary.items() if k != "fits"})
+    records = [{str(k): v if k in _FLOAT_LISTS and _finite_floats(v) else json_ready(v) for k, v in rec.items()}
+               for rec in fits]
+    return {str(k): records if k == "fits" else rest[str(k)] for k in summary}
+
+
+def _finite_floats(values) -> bool:
+    """A list of finite floats, or a list of such lists."""
+    if type(values) is not list:
+        return False
+    if values and type(values[0]) is list:
+        if set(map(type, values)) != _LIST_TYPE:
+            return False
+        values = list(chain.from_iterable(values))
+    return set(map(type, values)) <= _FLOAT_TYPE and all(map(math.isfinite, values))
 
 
 def _numpy_columns(table: PassTable) -> dict | None:
@@ -306,11 +336,16 @@ def _check_sigma(sigma: np.ndarray, kind: np.ndarray, frame_of, kinds, source) -
 
 def _group_rows(frame, kinds, keys: dict | None = None) -> dict:
     """``{(station, pass_id, kind): row positions, increasing}`` of the rows of ``kinds`` (``frame``
-    numbered 0..n-1): ``groupby([...]).indices`` of those rows, by one pass over the three columns
+    numbered 0..n-1): ``groupby([...]).indices`` of those rows, by the columns' codes when each
+    holds a few ``str`` labels (:func:`_coded_groups`), else by one pass over the three columns
     as Python lists (a fifth of the groupby's time on a pass of two kinds); the groupby itself
     when a key is not a string (a missing one: the groupby leaves it out). ``keys``: the three
     columns' ``to_numpy()``, when the caller has them."""
-    keys = [(frame[c].to_numpy() if keys is None else keys[c]).tolist() for c in ("station", "pass_id", "kind")]
+    arrays = [frame[c].to_numpy() if keys is None else keys[c] for c in ("station", "pass_id", "kind")]
+    coded = _coded_groups(arrays, kinds)
+    if coded is not None:
+        return coded
+    keys = [values.tolist() for values in arrays]
     wanted = set(kinds)
     groups: dict = {}
     for i, key in enumerate(zip(*keys)):
@@ -329,6 +364,31 @@ def _group_rows(frame, kinds, keys: dict | None = None) -> dict:
     positions = selected.index.to_numpy()
     return {key: positions[idx] for key, idx in selected.groupby(["station", "pass_id", "kind"], sort=True)
             .indices.items()}
+
+
+def _coded_groups(arrays: list, kinds) -> dict | None:
+    """:func:`_group_rows` of key columns of a few ``str`` labels each (a pass file's: one station,
+    one pass, two kinds; :func:`~trackproc.io.tables.few_labels`), by their codes in numpy: the
+    rows of each (station, pass, kind) code in increasing order (a stable sort), the groups in
+    order of first row as the row loop makes them. None when a column is not such labels."""
+    from trackproc.io.tables import few_labels
+
+    coded = [few_labels(values) for values in arrays]
+    if any(c is None for c in coded):
+        return None
+    (station, stations), (pass_id, passes), (kind, kind_labels) = coded
+    wanted = set(kinds)
+    rows = np.flatnonzero(np.array([label in wanted for label in kind_labels])[kind])
+    if not rows.size:
+        return {}
+    key = (station[rows] * len(passes) + pass_id[rows]) * len(kind_labels) + kind[rows]
+    order = np.argsort(key, kind="stable")
+    ordered = key[order]
+    starts = np.flatnonzero(np.concatenate(([True], ordered[1:] != ordered[:-1])))
+    groups = np.split(rows[order], starts[1:])
+    groups.sort(key=lambda g: g[0])
+    return {(stations[station[g[0]]], passes[pass_id[g[0]]], kind_labels[kind[g[0]]]): g.astype(np.intp, copy=False)
+            for g in groups}
 
 
 class _Columns:
