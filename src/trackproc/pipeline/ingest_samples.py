@@ -15,6 +15,7 @@ import numpy as np
 import pyarrow as pa
 
 from trackproc.io.passfile import COLUMNS, KINDS
+from trackproc.io.tables import few_labels
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -32,6 +33,9 @@ def factorize(values) -> tuple[np.ndarray, list]:
     readers' text columns) are coded here with two dict passes in C, without importing pandas
     (~0.15 s of CPU a process); any other label (None, NaN, a number) goes to pandas itself, so
     its rules for missing values and for equal labels of different types stay the rules."""
+    few = few_labels(np.asarray(values, dtype=object))
+    if few is not None:          # a few str labels (a pass file's): one comparison per label in numpy
+        return few
     items = np.asarray(values, dtype=object).tolist()
     uniques = list(dict.fromkeys(items))
     if not all(isinstance(u, str) for u in uniques):
