@@ -246,14 +246,15 @@ def _summary_ready(summary: dict) -> dict:
 
 
 def _finite_floats(values) -> bool:
-    """A list of finite floats, or a list of such lists."""
+    """A list of finite floats, or a list of such lists (their sum is finite only when each is:
+    a NaN or an infinity stays in it; a sum that overflows says False, and json_ready decides)."""
     if type(values) is not list:
         return False
     if values and type(values[0]) is list:
         if set(map(type, values)) != _LIST_TYPE:
             return False
         values = list(chain.from_iterable(values))
-    return set(map(type, values)) <= _FLOAT_TYPE and all(map(math.isfinite, values))
+    return set(map(type, values)) <= _FLOAT_TYPE and math.isfinite(sum(values))
 
 
 def _numpy_columns(table: PassTable) -> dict | None:
