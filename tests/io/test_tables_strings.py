@@ -52,6 +52,7 @@ def test_pass_key_columns():
     np.array([np.str_("x"), "x", "y"], dtype=object),
     np.array([f"s{i}" for i in range(tables.FEW_LABELS + 1)], dtype=object),   # many labels
     ["a", "b", "a"],
+    np.array([["x"], "x", ["y"]], dtype=object),          # unhashable values: str of each
     np.array([], dtype=object),
 ])
 def test_other_values_same_array(values):

@@ -69,7 +69,10 @@ def few_labels(values) -> tuple[np.ndarray, list] | None:
     a ``str`` label is written as that label (``str`` of a ``numpy.str_`` is the same text)."""
     if not isinstance(values, np.ndarray) or values.dtype != object or values.ndim != 1 or not len(values):
         return None
-    labels = list(dict.fromkeys(values.tolist()))
+    try:
+        labels = list(dict.fromkeys(values.tolist()))
+    except TypeError:            # an unhashable value (a list): the caller's own path
+        return None
     if len(labels) > FEW_LABELS or not all(type(label) is str for label in labels):
         return None
     codes = np.zeros(len(values), dtype=np.intp)
