@@ -244,27 +244,39 @@ class Trajectory:
             self._share_powers(flat, parts)
         return split
 
-    @staticmethod
-    def _share_powers(flat, parts) -> None:
+    def _share_powers(self, flat, parts) -> None:
         """Give runs of one step each, all expanded about the same time (the epoch: both runs start
         there), the powers of their offsets as columns of one set computed for all the times:
         each column is the same products whichever run's times it sits with (each run's kept
         plan, :meth:`taylor_dense.Propagation._plan`, then finds them)."""
-        runs = [run for run, _, _ in parts]
-        if any(run.n_steps != 1 or run.batch for run in runs):
+        runs = tuple(run for run, _, _ in parts)
+        kept = self.__dict__.get("_shared_powers")
+        if kept is None or kept[0] != runs:
+            # whether the runs qualify, their common start and the longest series: fixed for the runs
+            kept = self.__dict__["_shared_powers"] = (runs, self._shared_series(runs))
+        if kept[1] is None:
             return
-        t0 = runs[0].step_times_s[0]
-        if any(run.step_times_s[0] != t0 for run in runs):
-            return
+        t0, n = kept[1]
         for run, _, times in parts:
             if not run.covers(times):
                 return                          # let the run's own evaluation raise its error
-        n = max(max(run.coefficients.shape[-1], 1 if run.sensitivities is None else run.sensitivities.shape[-1])
-                for run in runs)
         dt = flat - t0
         pw = taylor_dense._powers(dt, n)
         for run, sel, times in parts:
             run.keep_plan(times, None, [[0, None, dt[sel], pw[:, sel]]])
+
+    @staticmethod
+    def _shared_series(runs):
+        """``(start, series length)`` of :meth:`_share_powers` for ``runs``, or None where they do not
+        share one expansion (more than one step, batch, different starts)."""
+        if any(run.n_steps != 1 or run.batch for run in runs):
+            return None
+        t0 = runs[0].step_times_s[0]
+        if any(run.step_times_s[0] != t0 for run in runs):
+            return None
+        n = max(max(run.coefficients.shape[-1], 1 if run.sensitivities is None else run.sensitivities.shape[-1])
+                for run in runs)
+        return t0, n
 
     def _evaluate(self, t_s, fn, tail):
         shape, flat, parts, _ = self._split(t_s)
