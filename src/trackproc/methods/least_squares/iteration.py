@@ -197,7 +197,9 @@ class Problem:
 
     def cost(self, r, x, mask):
         """χ²: squared normalized residuals of the kept samples plus the a-priori terms."""
-        z = r[~mask] / self.sig[~mask]
+        keep = ~mask
+        # nothing edited: the whole arrays, the same contiguous values without the selections' copies
+        z = r / self.sig if keep.all() else r[keep] / self.sig[keep]
         pr = self.prior_rhs(x)
         return float(z @ z + pr @ pr)
 
@@ -213,8 +215,12 @@ class Problem:
     def system(self, jac, r, x, mask, it):
         """The whitened, scaled system ``J ξ ≈ b``: kept samples, then the a-priori rows."""
         keep = ~mask
-        a = jac[keep] / self.sig[keep, None] * self.scales[None, :]
-        b = r[keep] / self.sig[keep]
+        if keep.all() and jac.flags.c_contiguous:
+            sig = self.sig                      # every row: the same C-ordered values without the copies
+        else:
+            sig, jac, r = self.sig[keep], jac[keep], r[keep]
+        a = jac / sig[:, None] * self.scales[None, :]
+        b = r / sig
         if self.n_prior:
             a = np.vstack([a, self.prior_a])
             b = np.concatenate([b, self.prior_rhs(x)])
