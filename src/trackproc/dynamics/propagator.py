@@ -241,14 +241,18 @@ class Trajectory:
         split = (t.shape, flat, parts, zero.reshape(t.shape) if zero.any() else None)
         self.__dict__["_last_split"] = (key, split)
         if len(parts) > 1:
-            self._share_powers(flat, parts)
+            self._share_powers(flat, parts, key[1])
         return split
 
-    def _share_powers(self, flat, parts) -> None:
+    def _share_powers(self, flat, parts, flat_bytes: bytes) -> None:
         """Give runs of one step each, all expanded about the same time (the epoch: both runs start
         there), the powers of their offsets as columns of one set computed for all the times:
         each column is the same products whichever run's times it sits with (each run's kept
-        plan, :meth:`taylor_dense.Propagation._plan`, then finds them)."""
+        plan, :meth:`taylor_dense.Propagation._plan`, then finds them).
+
+        The powers depend on the times alone: the last set is kept for the next trajectory (a
+        light-time solution starts where the previous model evaluation's ended, at the same
+        emission times), read-only."""
         runs = tuple(run for run, _, _ in parts)
         kept = self.__dict__.get("_shared_powers")
         if kept is None or kept[0] != runs:
@@ -260,8 +264,15 @@ class Trajectory:
         for run, _, times in parts:
             if not run.covers(times):
                 return                          # let the run's own evaluation raise its error
-        dt = flat - t0
-        pw = taylor_dense._powers(dt, n)
+        memo_key = (float(t0), n, flat_bytes)
+        last = _LAST_POWERS[0]                  # one read: (key, offsets, powers)
+        if last is not None and last[0] == memo_key:
+            dt, pw = last[1], last[2]
+        else:
+            dt = flat - t0
+            pw = taylor_dense._powers(dt, n)
+            dt.flags.writeable = pw.flags.writeable = False     # shared: the runs' plans hold views
+            _LAST_POWERS[0] = (memo_key, dt, pw)
         for run, sel, times in parts:
             run.keep_plan(times, None, [[0, None, dt[sel], pw[:, sel]]])
 
@@ -400,6 +411,10 @@ class Trajectory:
         return Steps(t_lo_s=np.array(lo), t_hi_s=np.array(hi), t_expand_s=np.array(ex),
                      coefficients=np.stack(coef),
                      sensitivities=np.stack(sens) if len(sens) == len(lo) else None)
+
+
+#: The last offsets and powers :meth:`Trajectory._share_powers` made, ``(key, dt, powers)``.
+_LAST_POWERS: list = [None]
 
 
 def _frame_key(frame: str) -> str:
