@@ -502,7 +502,7 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
     if not (np.isfinite(r).all() and np.isfinite(v).all()):
         raise ValueError("the initial state must be finite")
     t = np.atleast_1d(np.asarray(t_s))
-    if np.issubdtype(t.dtype, np.datetime64):
+    if t.dtype.kind == "M":                      # datetime64 (np.issubdtype's answer, without its cost)
         t = np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(t.astype("datetime64[ns]")), jd), float)
     t = t.astype(float)
     if t.size == 0 or not np.isfinite(t).all():
