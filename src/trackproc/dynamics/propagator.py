@@ -241,30 +241,53 @@ class Trajectory:
         split = (t.shape, flat, parts, zero.reshape(t.shape) if zero.any() else None)
         self.__dict__["_last_split"] = (key, split)
         if len(parts) > 1:
-            self._share_powers(flat, parts)
+            self._share_powers(flat, parts, key[1])
         return split
 
-    @staticmethod
-    def _share_powers(flat, parts) -> None:
+    def _share_powers(self, flat, parts, flat_bytes: bytes) -> None:
         """Give runs of one step each, all expanded about the same time (the epoch: both runs start
         there), the powers of their offsets as columns of one set computed for all the times:
         each column is the same products whichever run's times it sits with (each run's kept
-        plan, :meth:`taylor_dense.Propagation._plan`, then finds them)."""
-        runs = [run for run, _, _ in parts]
-        if any(run.n_steps != 1 or run.batch for run in runs):
+        plan, :meth:`taylor_dense.Propagation._plan`, then finds them).
+
+        The powers depend on the times alone: the last set is kept for the next trajectory (a
+        light-time solution starts where the previous model evaluation's ended, at the same
+        emission times), read-only."""
+        runs = tuple(run for run, _, _ in parts)
+        kept = self.__dict__.get("_shared_powers")
+        if kept is None or kept[0] != runs:
+            # whether the runs qualify, their common start and the longest series: fixed for the runs
+            kept = self.__dict__["_shared_powers"] = (runs, self._shared_series(runs))
+        if kept[1] is None:
             return
-        t0 = runs[0].step_times_s[0]
-        if any(run.step_times_s[0] != t0 for run in runs):
-            return
+        t0, n = kept[1]
         for run, _, times in parts:
             if not run.covers(times):
                 return                          # let the run's own evaluation raise its error
-        n = max(max(run.coefficients.shape[-1], 1 if run.sensitivities is None else run.sensitivities.shape[-1])
-                for run in runs)
-        dt = flat - t0
-        pw = taylor_dense._powers(dt, n)
+        memo_key = (float(t0), n, flat_bytes)
+        last = _LAST_POWERS[0]                  # one read: (key, offsets, powers)
+        if last is not None and last[0] == memo_key:
+            dt, pw = last[1], last[2]
+        else:
+            dt = flat - t0
+            pw = taylor_dense._powers(dt, n)
+            dt.flags.writeable = pw.flags.writeable = False     # shared: the runs' plans hold views
+            _LAST_POWERS[0] = (memo_key, dt, pw)
         for run, sel, times in parts:
             run.keep_plan(times, None, [[0, None, dt[sel], pw[:, sel]]])
+
+    @staticmethod
+    def _shared_series(runs):
+        """``(start, series length)`` of :meth:`_share_powers` for ``runs``, or None where they do not
+        share one expansion (more than one step, batch, different starts)."""
+        if any(run.n_steps != 1 or run.batch for run in runs):
+            return None
+        t0 = runs[0].step_times_s[0]
+        if any(run.step_times_s[0] != t0 for run in runs):
+            return None
+        n = max(max(run.coefficients.shape[-1], 1 if run.sensitivities is None else run.sensitivities.shape[-1])
+                for run in runs)
+        return t0, n
 
     def _evaluate(self, t_s, fn, tail):
         shape, flat, parts, _ = self._split(t_s)
@@ -390,6 +413,10 @@ class Trajectory:
                      sensitivities=np.stack(sens) if len(sens) == len(lo) else None)
 
 
+#: The last offsets and powers :meth:`Trajectory._share_powers` made, ``(key, dt, powers)``.
+_LAST_POWERS: list = [None]
+
+
 def _frame_key(frame: str) -> str:
     key = str(frame).strip().lower().replace("_", "-")
     if key in ("gcrf", "gcrs", "icrf"):
@@ -475,7 +502,7 @@ def propagate(r_m, v_m_s, epoch, t_s, *, force: str = "j2", eop=None, tol: float
     if not (np.isfinite(r).all() and np.isfinite(v).all()):
         raise ValueError("the initial state must be finite")
     t = np.atleast_1d(np.asarray(t_s))
-    if np.issubdtype(t.dtype, np.datetime64):
+    if t.dtype.kind == "M":                      # datetime64 (np.issubdtype's answer, without its cost)
         t = np.asarray(ts.seconds_since(ts.datetime64_to_jd_utc(t.astype("datetime64[ns]")), jd), float)
     t = t.astype(float)
     if t.size == 0 or not np.isfinite(t).all():

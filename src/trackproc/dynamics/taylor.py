@@ -104,12 +104,16 @@ def _jit_mode() -> str:
 _JIT_MODULE: list = []         # [module or None] once looked up
 
 
-def _jit_module():
+def _jit_module(mode_on: bool = False):
     """:mod:`trackproc.dynamics.taylor_jit`, or None when numba is off, absent or unusable (cached).
 
     numba can refuse ``cache=True`` at import (no writable cache directory); the numpy engine
-    then serves, with one warning.
+    then serves, with one warning. ``mode_on``: the caller has just read ``TRACKPROC_JIT`` as
+    ``1`` (:func:`_jit_mode`), so the module once looked up is the answer without reading it again
+    (it was looked up only with numba importable, which stays so).
     """
+    if mode_on and _JIT_MODULE:
+        return _JIT_MODULE[0]
     if not jit.enabled():
         return None
     if not _JIT_MODULE:
@@ -282,7 +286,7 @@ def propagate(state0, t0_s: float, t_end_s: float, *, force: str = "j2",
     if engine == "compiled" and (nb > 1 or not _compiled_available()):
         raise ValueError("engine='compiled' integrates one trajectory and needs numba "
                          "(pip install numba) with TRACKPROC_JIT != 0")
-    tj = _jit_module() if mode == "on" and nb == 1 else None
+    tj = _jit_module(mode_on=True) if mode == "on" and nb == 1 else None
     if tj is not None:
         return _propagate_compiled(s0, t0, t1, p, mu_m3_s2, kj2, tol, stm, mu_sensitivity,
                                    max_steps, force=force, j2=j2, re_m=re_m, batch=batch, tj=tj)

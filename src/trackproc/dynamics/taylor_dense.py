@@ -225,7 +225,7 @@ class Propagation:
         """``[step, selection]`` of the times of each step touched (slices when sorted)."""
         if idx is None:
             return [[0, None]]
-        if np.all(idx[1:] >= idx[:-1]):                              # sorted: slices
+        if (idx[1:] >= idx[:-1]).all():                              # sorted: slices
             cuts = np.flatnonzero(np.diff(idx)) + 1
             starts = np.concatenate([[0], cuts])
             ends = np.concatenate([cuts, [idx.size]])

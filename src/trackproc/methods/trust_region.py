@@ -74,7 +74,8 @@ def minimise(fun, start, bounds, xtol: float, ftol: float, maxiter: int = 40, fi
         if not free.any() or not np.isfinite(g).all():
             break
         gf = g[free]
-        w, v = np.linalg.eigh(b[np.ix_(free, free)])
+        # every coordinate free (the usual case): B itself, the same numbers as its full selection
+        w, v = np.linalg.eigh(b if free.all() else b[np.ix_(free, free)])
         gv = v.T @ gf
         lam = max(0.0, -float(w.min()) + 1e-10)
         s = -v @ (gv / (w + lam))

@@ -51,7 +51,15 @@ def _tall_r(jacobian_w: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     qr, _, _, info = _DGEQRF[0](aug, overwrite_a=1)
     if info != 0:
         raise np.linalg.LinAlgError(f"dgeqrf failed (info {info})")
-    return np.triu(qr[:n, :])
+    # np.triu's own operation (``where(tri(n, n + 1, -1), 0, R)``) with its mask made once a size
+    mask = _BELOW.get(n)
+    if mask is None:
+        mask = _BELOW[n] = np.tri(n, n + 1, k=-1, dtype=bool)
+    return np.where(mask, _ZERO, qr[:n, :])
+
+
+_BELOW: dict = {}                # n -> the (n, n + 1) mask below the diagonal
+_ZERO = np.zeros(1)
 
 
 def combination_text(vector: np.ndarray, names: Sequence[str], threshold: float = 0.1) -> str:
@@ -189,7 +197,9 @@ class Problem:
 
     def cost(self, r, x, mask):
         """χ²: squared normalized residuals of the kept samples plus the a-priori terms."""
-        z = r[~mask] / self.sig[~mask]
+        keep = ~mask
+        # nothing edited: the whole arrays, the same contiguous values without the selections' copies
+        z = r / self.sig if keep.all() else r[keep] / self.sig[keep]
         pr = self.prior_rhs(x)
         return float(z @ z + pr @ pr)
 
@@ -205,8 +215,12 @@ class Problem:
     def system(self, jac, r, x, mask, it):
         """The whitened, scaled system ``J ξ ≈ b``: kept samples, then the a-priori rows."""
         keep = ~mask
-        a = jac[keep] / self.sig[keep, None] * self.scales[None, :]
-        b = r[keep] / self.sig[keep]
+        if keep.all() and jac.flags.c_contiguous:
+            sig = self.sig                      # every row: the same C-ordered values without the copies
+        else:
+            sig, jac, r = self.sig[keep], jac[keep], r[keep]
+        a = jac / sig[:, None] * self.scales[None, :]
+        b = r / sig
         if self.n_prior:
             a = np.vstack([a, self.prior_a])
             b = np.concatenate([b, self.prior_rhs(x)])
@@ -258,9 +272,10 @@ def iterate(prob: Problem, opt: Options, x, h, jac, r, mask, *, stable: bool, li
     it = 0
     for it in range(1, opt.max_iterations + 1):
         ub, s, vt, to_step = linearise(jac, r, x, mask, it)
-        sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))     # formal sigma of q
+        # np.sum / np.max as the ufuncs' reduce: the same reductions without numpy's wrappers
+        sig_q = np.sqrt(np.add.reduce((vt / s[:, None]) ** 2, axis=0))     # formal sigma of q
         q_gn = vt.T @ (ub / s)
-        gn_sig = float(np.max(np.abs(q_gn) / sig_q))
+        gn_sig = float(np.maximum.reduce(np.abs(q_gn) / sig_q))
         if stable and gn_sig < opt.step_tol:          # at the minimum already: no evaluation needed
             return Run(x, h, jac, r, mask, cost, history, damped, True,
                         f"converged: Gauss-Newton step {gn_sig:.2g} sigma{tag}", it, s, vt)
@@ -295,7 +310,7 @@ def iterate(prob: Problem, opt: Options, x, h, jac, r, mask, *, stable: bool, li
                 f"(cost {cost:.6g}); the initial state may be too far off",
                 {"iteration": it, "cost": cost, "cost_history": history})
         x, h, jac, r, c_new, q = accepted
-        step_sig = float(np.max(np.abs(q) / sig_q))
+        step_sig = float(np.maximum.reduce(np.abs(q) / sig_q))
         rel = abs(cost - c_new) / max(c_new, 1e-300)
         new_mask = prob.edit(r, mask)
         check(new_mask)

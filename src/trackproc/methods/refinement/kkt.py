@@ -88,7 +88,7 @@ def null_space(a_scaled):
     m = a_scaled.shape[0]
     q, r = np.linalg.qr(a_scaled.T, mode="complete")
     rr = r[:m, :m]
-    if np.any(np.abs(np.diag(rr)) <= 1e-13 * max(np.abs(np.diag(rr)).max(), 1e-300)):
+    if (np.abs(np.diag(rr)) <= 1e-13 * max(np.abs(np.diag(rr)).max(), 1e-300)).any():
         raise ProcessingError("the constraints are degenerate at this point (their Jacobian is rank deficient)")
     return q[:, :m], q[:, m:], rr
 
@@ -131,7 +131,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
                 return xv
             # a constraint evaluated at rounding level (e.g. a linear one at |x| ~ 7e6 m) never
             # reaches 1e-14: once a step no longer reduces it, more steps only stir the last bits
-            rel = float(np.max(np.abs(f) / scale))
+            rel = float(np.maximum.reduce(np.abs(f) / scale))
             if rel >= best[0] and best[0] < 1e-10:
                 return best[1]
             if rel < best[0]:
@@ -141,7 +141,7 @@ def solve_kkt(model: Callable[[np.ndarray], tuple], x0, observed, sigma, *, name
             restorations += 1
         f, _ = constraints(xv)
         rel = np.abs(f) / constraint_scale(xv)
-        if np.all(rel < 1e-10):
+        if (rel < 1e-10).all():
             return xv
         raise ArithmeticError(f"cannot satisfy the constraints (relative residual {rel.max():.3g})")
 
@@ -215,8 +215,8 @@ def _diagnostics(a, b, a_scaled, yb, zb, rr, ub, s, vt, inner):
     grad = -2.0 * a.T @ b                                    # ∇χ² in the scaled parameters
     lam = np.linalg.lstsq(a_scaled.T, -grad, rcond=None)[0]
     # stationarity: the free Gauss-Newton step left at the solution, in formal sigmas
-    sig_q = np.sqrt(np.sum((vt / s[:, None]) ** 2, axis=0))
-    stationarity = float(np.max(np.abs(vt.T @ (ub / s)) / sig_q))
+    sig_q = np.sqrt(np.add.reduce((vt / s[:, None]) ** 2, axis=0))
+    stationarity = float(np.maximum.reduce(np.abs(vt.T @ (ub / s)) / sig_q))
     # dξ/dε: the constraint step Y R⁻ᵀ δε, minus the free directions' readjustment
     a_y = yb @ np.linalg.inv(rr.T)
     sens = a_y - zb @ (inner @ (zb.T @ (a.T @ (a @ a_y))))
