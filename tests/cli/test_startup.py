@@ -349,3 +349,22 @@ def test_propagate_does_not_import_pandas(tmp_path):
     assert __import__("numpy").array_equal(parquet.states, csv.states)
     assert "stm_1_4" in read_ephemeris(str(tmp_path / "e.arrow")).columns
     assert main(["-q", "info", str(tmp_path / "e.parquet")]) == 0
+
+
+@pytest.mark.subprocess
+def test_the_batch_driver_modules_and_the_numpy_deferral_import_no_numpy():
+    """A pool's batch driver never needs numpy: the command line's deferral of numpy's unused
+    modules (a meta path finder, pipeline/lazy_numpy.py), the batch run's modules and the
+    up-front check of a valid ``refine.initial`` (io/statecheck.py) do not import it; numpy
+    imported afterwards still meets the deferral (scipy's start-up leaves both modules lazy)."""
+    probe = ("import sys; from trackproc.cli import app as a; a._defer_unused_numpy_modules()\n"
+             "import trackproc.pipeline.batch.run as r\n"
+             "ok = r.certainly_valid(open('sample_data/stale.json', 'rb').read())\n"
+             "before = 'numpy' in sys.modules\n"
+             "import scipy.linalg\n"
+             "print('RESULT', ok, before, *[type(sys.modules[m]).__name__ for m in a._UNUSED_NUMPY_MODULES])")
+    root = __import__("pathlib").Path(__file__).resolve().parents[2]
+    res = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True, cwd=root)
+    last = [line for line in res.stdout.splitlines() if line.startswith("RESULT")]
+    assert last and last[-1].split()[1:] == ["True", "False", "_LazyModule", "_LazyModule"], \
+        res.stdout[-2000:] + res.stderr[-2000:]

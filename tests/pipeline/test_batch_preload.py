@@ -64,3 +64,30 @@ def test_a_pool_driver_leaves_the_kernels_to_the_workers():
     done = subprocess.run([sys.executable, "-c", _DRIVER], capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.split() == ["True", "False", "True"]
+
+
+_LOAD = """
+import sys
+from trackproc.pipeline.batch.kernels import load_numba
+from trackproc.methods import whitening_jit
+
+load_numba()
+kernels = (whitening_jit.riccati, whitening_jit.kalman_whiten, whitening_jit.reml_terms)
+print(all(k.signatures for k in kernels), "numba.np.linalg" in sys.modules)
+"""
+
+
+@pytest.mark.slow
+def test_loading_the_cached_kernels_skips_numbas_target_refresh():
+    """``load_numba`` (a fork server's preload, a 1-worker run) loads every cached kernel, the
+    whitening ones too, without numba's ``target_context.refresh()`` (which imports all of numba's
+    lowering modules, numba.np.linalg among them: ~0.17 s of CPU a process). The first run warms
+    the cache (it may compile, and then refresh); the second must only load."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("numba")
+    for _ in range(2):
+        done = subprocess.run([sys.executable, "-c", _LOAD], capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.split() == ["True", "False"]

@@ -28,6 +28,7 @@ Units: metres, m/s; the covariance in the units of the parameters (m², m²/s, m
 from __future__ import annotations
 
 import json
+import math
 from typing import Optional
 
 import numpy as np
@@ -75,7 +76,10 @@ def _vector(doc: dict, key: str, n: int | None, file: str, required: bool = True
     if not ok or (n is not None and len(value) != n):
         raise InputError("wrong type or length", file=file, column=key, found=_short(value),
                          expected=f"a list of {n} numbers" if n else "a list of numbers")
-    out = np.asarray(value, float)
+    try:
+        out = np.asarray(value, float)
+    except OverflowError:                                # an integer beyond a float's range
+        out = np.array([math.inf])
     if not np.all(np.isfinite(out)):
         raise InputError("non-finite number", file=file, column=key, found=_short(value), expected="finite numbers")
     return out
@@ -252,7 +256,10 @@ def _covariance(doc: dict, n: int | None, file: str) -> Optional[np.ndarray]:
     expected = f"a {size} x {size} list of lists of numbers (rows and columns follow 'parameters')"
     if not ok or len(value) != size or any(len(row) != size for row in value):
         raise InputError("wrong type or shape", file=file, column="covariance", found=_short(value), expected=expected)
-    cov = np.asarray(value, float)
+    try:
+        cov = np.asarray(value, float)
+    except OverflowError:                                # an integer beyond a float's range
+        cov = np.array([math.inf])
     if not np.all(np.isfinite(cov)):
         raise InputError("non-finite number", file=file, column="covariance", found=_short(value),
                          expected="finite numbers")

@@ -24,7 +24,6 @@ import signal
 import threading
 import time
 import traceback
-import uuid
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Callable, Sequence
 
@@ -232,6 +231,8 @@ class DaskExecutor:
         self.slots = 2 * threads
 
     def submit(self, task: Task):
+        import uuid  # here: only a Dask run names its tasks (uuid imports platform: ~5 ms a process)
+
         return self.client.submit(run_task, task, pure=False,
                                   key=f"trackproc-batch-{task.kind}-{task.key[:12]}-{uuid.uuid4().hex[:8]}")
 

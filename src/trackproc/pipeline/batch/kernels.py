@@ -48,6 +48,12 @@ def load_numba() -> None:
                 if not (module.ready(True) and module.ready(False)):
                     log.info("compiling the Taylor engine's kernels for this installation (once: ~10 s of CPU)")
                 module.compile_all()
+        # numba.njit kernels (not jit.njit): loaded light, as jit.njit's are, so that no process
+        # of the run pays numba's target refresh (~0.17 s of CPU) for code already compiled
+        from trackproc.methods import whitening_jit
+
+        for kernel in (whitening_jit.riccati, whitening_jit.kalman_whiten, whitening_jit.reml_terms):
+            jit.light_cache_load(kernel)
         with jit.default("1"):
             compiled_riccati()                 # the Kalman gains and whitening, compiled or loaded here
             series_sqrt(np.ones((1, 3)))       # the predictions' recurrence (series_jit), likewise

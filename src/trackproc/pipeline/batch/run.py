@@ -19,6 +19,7 @@ from trackproc import __version__
 from trackproc.errors import InputError, OutputError, ProcessingError, TrackprocError
 from trackproc.io.atomic import max_input_bytes, write_bytes
 from trackproc.io.jsonutil import json_ready
+from trackproc.io.statecheck import certainly_valid
 from trackproc.pipeline.batch.chain import STEPS, Chain, WindowContext, make_chain
 from trackproc.pipeline.batch.config import Settings
 from trackproc.pipeline.batch.discovery import discover
@@ -68,7 +69,9 @@ def run_batch(settings: Settings, progress: Optional[Callable] = None,
         raise InputError("give either an EOP file or UT1-UTC, not both", column="filter.eop / filter.dut1",
                          expected="one of --filter-eop, --filter-dut1")
     files, paths, hashes = _read_files(settings, chain)
-    if "refine" in chain.names:  # a state file every input would fail on: a usage error, now
+    if "refine" in chain.names and not certainly_valid(files["refine.initial"]):
+        # a state file every input would fail on: a usage error, now (the reader's own error; a
+        # file certainly valid is not parsed here: a pool's driver then never imports numpy)
         initial_state(files["refine.initial"], paths["refine.initial"], None)
     out = Path(output)
     try:
