@@ -450,7 +450,8 @@ def run_measured(cmd, timeout_s: float = 900.0) -> dict:
         err.seek(0)
         rss = usage.ru_maxrss / (1024.0 if sys.platform != "darwin" else 2.0 ** 20)
         return {"returncode": proc.returncode, "stdout": out.read().decode(errors="replace"),
-                "stderr": err.read().decode(errors="replace"), "wall_s": wall, "maxrss_mb": rss}
+                "stderr": err.read().decode(errors="replace"), "wall_s": wall, "maxrss_mb": rss,
+                "cpu_s": usage.ru_utime + usage.ru_stime}
 
 
 def run_subprocess(config: dict, workdir, timeout_s: float = 900.0) -> dict:
@@ -465,7 +466,7 @@ def run_subprocess(config: dict, workdir, timeout_s: float = 900.0) -> dict:
         raise RuntimeError(f"Orekit run failed (exit {child['returncode']}):\n{child['stderr'][-4000:]}")
     result = json.loads(out.read_text())
     result["inner_maxrss_mb"] = result.pop("maxrss_mb", None)
-    result.update(wall_s=child["wall_s"], maxrss_mb=child["maxrss_mb"])
+    result.update(wall_s=child["wall_s"], maxrss_mb=child["maxrss_mb"], cpu_s=child["cpu_s"])
     return result
 
 
@@ -487,7 +488,7 @@ def run_subprocess_many(configs: list, timeout_s: float = 900.0) -> list:
     for out in args[1::2]:
         result = json.loads(out.read_text())
         result["inner_maxrss_mb"] = result.pop("maxrss_mb", None)
-        result.update(wall_s=child["wall_s"], maxrss_mb=child["maxrss_mb"])
+        result.update(wall_s=child["wall_s"], maxrss_mb=child["maxrss_mb"], cpu_s=child["cpu_s"])
         results.append(result)
     return results
 
