@@ -107,7 +107,9 @@ def _unready(rng: random.Random, value):
             return np.array(out)
         return _List(out) if r > 0.95 else out
     if type(value) is float:
-        return rng.choice([value, np.float64(value), float("nan"), float("-inf"), np.float32(0.5)]) if r < 0.2 else value
+        if r >= 0.2:
+            return value
+        return rng.choice([value, np.float64(value), float("nan"), float("-inf"), np.float32(0.5)])
     if type(value) is int and -2**63 < value < 2**63:
         return np.int64(value) if r < 0.2 else value
     if value is None and r < 0.2:

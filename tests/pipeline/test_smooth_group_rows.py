@@ -1,6 +1,6 @@
 """pipeline.smooth._group_rows (the key columns' codes when each holds a few str labels, one pass
-over them as lists otherwise; groupby when a key is not a string) against pandas' groupby of the same rows (the reference): the same groups, the same rows in
-increasing order, on drawn tables."""
+over them as lists otherwise; groupby when a key is not a string) against pandas' groupby of the same
+rows (the reference): the same groups, the same rows in increasing order, on drawn tables."""
 
 import numpy as np
 import pandas as pd

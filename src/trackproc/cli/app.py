@@ -1,8 +1,8 @@
 """The ``trackproc`` command: the entry point of a Typer app (cli/root.py) whose commands live in
 sibling modules.
 
-Only the standard library is imported here (and ``pipeline/lazy_numpy.py``, which imports only it): ``trackproc --version`` and a ``--help`` already
-rendered once (cli/help_cache.py) are answered without typer; the command modules import only
+Only the standard library is imported here (and ``pipeline/lazy_numpy.py``, which imports only it):
+``trackproc --version`` and a ``--help`` already rendered once (cli/help_cache.py) are answered without typer; the command modules import only
 typer and the standard library at import time, and numpy, pandas, scipy and pyarrow inside the
 commands (see ``benchmarks/startup.py``). The names of cli/root.py (``app``, ``plain_help``, ...)
 are also reachable here, imported when first used.

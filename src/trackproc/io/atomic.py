@@ -127,17 +127,8 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
             raise OutputError(str(path), exc) from None
         return
     if mode is not None and stat.S_ISDIR(mode):
-
         raise OutputError(str(path), IsADirectoryError(errno.EISDIR, os.strerror(errno.EISDIR)))
-    directory = target.parent if str(target.parent) else Path(".")
-    try:
-        fd, tmp = _create_temporary(directory, target.name)
-    except FileExistsError as exc:  # a parent is a file
-
-        raise OutputError(str(path), NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR))) from exc
-    except OSError as exc:
-        raise OutputError(str(path), exc) from None
-    txn = _transaction if _transaction is not None and _transaction.pid == os.getpid() else None
+    fd, tmp, txn = _temporary(path, target.parent if str(target.parent) else Path("."), target.name)
     try:
         try:
             with os.fdopen(fd, "wb") as handle:
@@ -155,6 +146,18 @@ def open_atomic(path: str | os.PathLike) -> Iterator[BinaryIO]:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(tmp)
         raise
+
+
+def _temporary(path, directory, name: str):
+    """``(fd, tmp, txn)``: the new temporary file for ``path`` (:func:`_create_temporary`) and the
+    transaction of this process it joins (None: renamed at once); errors as :class:`OutputError`."""
+    try:
+        fd, tmp = _create_temporary(directory, name)
+    except FileExistsError as exc:  # a parent is a file
+        raise OutputError(str(path), NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR))) from exc
+    except OSError as exc:
+        raise OutputError(str(path), exc) from None
+    return fd, tmp, (_transaction if _transaction is not None and _transaction.pid == os.getpid() else None)
 
 
 #: Exclusive creation of a new file that is not followed through a symbolic link (as mkstemp's).
@@ -232,13 +235,7 @@ def write_bytes(path: str | os.PathLike, data: bytes) -> None:
             handle.write(data)
         return
     directory, base = os.path.split(name)
-    try:
-        fd, tmp = _create_temporary(directory or ".", base)
-    except FileExistsError as exc:  # a parent is a file
-        raise OutputError(str(path), NotADirectoryError(errno.ENOTDIR, os.strerror(errno.ENOTDIR))) from exc
-    except OSError as exc:
-        raise OutputError(str(path), exc) from None
-    txn = _transaction if _transaction is not None and _transaction.pid == os.getpid() else None
+    fd, tmp, txn = _temporary(path, directory or ".", base)
     try:
         try:
             view = memoryview(data).cast("B")
