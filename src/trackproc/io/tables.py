@@ -62,17 +62,20 @@ def string_array(values) -> pa.Array:
                                  [None, pa.py_buffer(offsets.astype(np.int32)), pa.py_buffer(b"".join(encoded))])
 
 
-def few_labels(values) -> tuple[np.ndarray, list] | None:
+def few_labels(values, labels: list | None = None) -> tuple[np.ndarray, list] | None:
     """(codes, distinct labels) of a 1-d object array of at most :data:`FEW_LABELS` distinct
     ``str`` labels (a pass table's station, pass id and kind: a few names, ~1000 rows), found by
     one hashing pass and one comparison per label in C; None for anything else. A value equal to
-    a ``str`` label is written as that label (``str`` of a ``numpy.str_`` is the same text)."""
+    a ``str`` label is written as that label (``str`` of a ``numpy.str_`` is the same text).
+    ``labels``: the distinct values in order of first appearance, when the caller has them (the
+    hashing pass is then not made again)."""
     if not isinstance(values, np.ndarray) or values.dtype != object or values.ndim != 1 or not len(values):
         return None
-    try:
-        labels = list(dict.fromkeys(values.tolist()))
-    except TypeError:            # an unhashable value (a list): the caller's own path
-        return None
+    if labels is None:
+        try:
+            labels = list(dict.fromkeys(values.tolist()))
+        except TypeError:        # an unhashable value (a list): the caller's own path
+            return None
     if len(labels) > FEW_LABELS or not all(type(label) is str for label in labels):
         return None
     codes = np.zeros(len(values), dtype=np.intp)

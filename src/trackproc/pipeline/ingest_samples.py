@@ -33,16 +33,17 @@ def factorize(values) -> tuple[np.ndarray, list]:
     readers' text columns) are coded here with two dict passes in C, without importing pandas
     (~0.15 s of CPU a process); any other label (None, NaN, a number) goes to pandas itself, so
     its rules for missing values and for equal labels of different types stay the rules."""
-    few = few_labels(np.asarray(values, dtype=object))
-    if few is not None:          # a few str labels (a pass file's): one comparison per label in numpy
-        return few
-    items = np.asarray(values, dtype=object).tolist()
+    array = np.asarray(values, dtype=object)
+    items = array.tolist()
     uniques = list(dict.fromkeys(items))
     if not all(isinstance(u, str) for u in uniques):
         import pandas as pd  # start-up: only for labels other than str (see above)
 
-        codes, found = pd.factorize(np.asarray(values, dtype=object), sort=False)
+        codes, found = pd.factorize(array, sort=False)
         return codes, list(found)
+    few = few_labels(array, uniques)
+    if few is not None:          # a few str labels (a pass file's): one comparison per label in numpy
+        return few
     lookup = {u: i for i, u in enumerate(uniques)}
     return np.fromiter(map(lookup.__getitem__, items), dtype=np.intp, count=len(items)), uniques
 
