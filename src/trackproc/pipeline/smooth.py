@@ -141,11 +141,7 @@ def smooth(table: PassTable, options: SmoothOptions | None = None, *, source: st
         n_rows = len(source_columns["time"])
         kind_column = source_columns["kind"]
     else:
-        frame = table.frame
-        added = [c for c in ADDED_COLUMNS if c in frame.columns]
-        if added:                    # (a drop of no columns still copies the frame)
-            frame = frame.drop(columns=added)
-        frame = frame.reset_index(drop=True)
+        frame = _without_added(table.frame)
         n_rows = len(frame)
         kind_column = frame["kind"].to_numpy()
     present = sorted(set(kind_column.tolist()) if frame is None else frame["kind"].unique())
