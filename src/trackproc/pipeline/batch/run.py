@@ -1,6 +1,8 @@
 """``trackproc batch``: the run: inputs, then windows, under the output directory's lock.
 
-See :mod:`trackproc.pipeline.batch` for what a run does and leaves behind.
+See :mod:`trackproc.pipeline.batch` for what a run does and leaves behind. About 400 lines, one
+responsibility (the run's order: inputs, windows, the filter, the summary), the steps and the
+storage being their own modules.
 """
 
 from __future__ import annotations
@@ -323,8 +325,7 @@ def _run_windows(settings, chain, records, files, paths, hashes, out, executors)
     def on_result(entry, result: TaskResult):
         name, key, members = entry
         record = store_result(out, ESTIMATES_DIR, result, task="estimate", path=None, old=manifests.get(name),
-                              settings_doc=settings_doc,
-                        members=[r.name for r in members])
+                              settings_doc=settings_doc, members=[r.name for r in members])
         results[name] = record
         log_record(record, result)
 

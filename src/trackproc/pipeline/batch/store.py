@@ -216,7 +216,6 @@ def manifest_text(manifest: dict) -> str:
         return dumps_compact(manifest)
 
 
-
 def remove_leftovers(out: Path) -> None:
     """Temporary files of an interrupted run (``.NAME.XXXX.tmp``), removed under the run's lock:
     no other run is writing outputs now (another run's write probe, made before it waits for the
