@@ -3,6 +3,9 @@
 Row numbers are the physical lines an editor shows (the header on line 1 makes the first data row
 row 2); blank lines and ``#`` comment lines are skipped but counted. A streamed file is cut only
 after a newline outside quotes, so a chunk holds whole records and the same numbers as a whole read.
+
+A little over 400 lines: the exact line-by-line reader and Arrow's fast reader of plain lines
+(with the test of what is plain) are kept side by side, as each must give the other's cells.
 """
 
 from __future__ import annotations
@@ -201,23 +204,17 @@ def iter_text_tables(blocks: Iterable[bytes], source: str) -> Iterator[TextTable
 _NOT_PLAIN = re.compile(rb'["#\r\x00\x0b\x0c\x1c-\x1e]|\xc2\x85|\xe2\x80[\xa8\xa9]|(?:^|\n)[ \t,]*\n')
 
 
-#: Bytes and sequences of which one is enough for :data:`_NOT_PLAIN` to match; each tested by a
-#: substring search (C, a few microseconds), the regular expression only when one is present
-#: (it takes ~25 ns a byte, 0.8 ms for a pass file).
-_NOT_PLAIN_HINTS = (b'"', b"#", b"\r", b"\x00", b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e", b"\xc2\x85",
-                    b"\xe2\x80\xa8", b"\xe2\x80\xa9", b"\n\n", b"\n ", b"\n\t", b"\n,")
-
-
-#: :data:`_NOT_PLAIN_HINTS` by what finds them fast: single bytes (``memchr``); the sequences
-#: beyond ASCII; a line starting with a space or tab (searched for only when that byte occurs);
-#: a line starting with a newline or comma (the bytes after every newline, at once).
+#: Bytes and sequences any one of which lets :data:`_NOT_PLAIN` match, grouped by what finds them fast (the
+#: regular expression takes ~25 ns a byte, 0.8 ms for a pass file): single bytes (``memchr``); the
+#: sequences beyond ASCII; a line starting with a space or tab (searched for only when that byte
+#: occurs); a line starting with a newline or comma (the bytes after every newline, at once).
 _HINT_BYTES = (b'"', b"#", b"\r", b"\x00", b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e")
 _HINT_NON_ASCII = (b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9")
 
 
 def _is_plain(piece: bytes) -> bool:
     """``not _NOT_PLAIN.search(piece)``, faster on the common plain text: the regular expression
-    only when one of :data:`_NOT_PLAIN_HINTS` is in ``piece`` (a two-byte substring search takes
+    only when :func:`_has_hint` finds what it could match in ``piece`` (a two-byte substring search takes
     ~1 ns a byte, as long as the regular expression's pass over a pass file's lines; a one-byte one
     is a ``memchr``)."""
     if piece[:1] in (b"\n", b" ", b"\t", b",") or _has_hint(piece):
@@ -226,7 +223,9 @@ def _is_plain(piece: bytes) -> bool:
 
 
 def _has_hint(piece: bytes) -> bool:
-    """Whether one of :data:`_NOT_PLAIN_HINTS` is in ``piece``."""
+    """Whether ``piece`` holds a byte or sequence that :data:`_NOT_PLAIN` matches: one of
+    :data:`_HINT_BYTES` or :data:`_HINT_NON_ASCII`, or a newline followed by a newline, space,
+    tab or comma."""
     if any(hint in piece for hint in _HINT_BYTES):
         return True
     if not piece.isascii() and any(hint in piece for hint in _HINT_NON_ASCII):
