@@ -23,6 +23,9 @@ transform, which is linear in position and velocity). Writing is deterministic (
 order, shortest round-trip floats) and atomic, always in GCRF.
 
 Units: metres, m/s; the covariance in the units of the parameters (m², m²/s, m²/s², ...).
+
+A little over 400 lines: one format, its field checks, frame conversions and writer together
+(:mod:`trackproc.io.statecheck` is the standard-library pre-check a batch's driver uses).
 """
 
 from __future__ import annotations

@@ -23,7 +23,9 @@ apart and numbered ``<station>-001``, ``-002``, ... by start time, unless the in
 Memory (issue 14 item 5): :class:`Ingest` takes each input chunk by chunk
 (:func:`trackproc.io.tabular.iter_raw`); only the valid samples are kept, in compact columns
 (:mod:`trackproc.pipeline.ingest_samples`, ~45 bytes a sample, at most ``TRACKPROC_MAX_INPUT_ROWS``),
-for the checks that need them all; the CLI writes the table slice by slice.
+for the checks that need them all; the CLI writes the table slice by slice. About 400 lines:
+the input's chunks, their checks and the pass numbering in one place (the samples' storage and
+the per-sample checks are their own modules).
 """
 
 from __future__ import annotations
