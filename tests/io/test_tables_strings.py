@@ -57,3 +57,14 @@ def test_pass_key_columns():
 ])
 def test_other_values_same_array(values):
     _same(string_array(values), _reference(values))
+
+
+def test_labels_with_trailing_nul_keep_their_codes():
+    """A label ending in NUL is its own label (numpy's string type would drop the NUL and make
+    it equal to the label without it): the case hypothesis found, and the coding itself."""
+    values = np.array(["", "\x00", "a\x00", "a", "\x00"], dtype=object)
+    codes, labels = tables.few_labels(values)
+    assert labels == ["", "\x00", "a\x00", "a"]
+    assert codes.tolist() == [0, 1, 2, 3, 1]
+    _same(string_array(values), _reference(values))
+    _same(string_array(values[[1, 0]]), _reference(values[[1, 0]]))

@@ -80,7 +80,9 @@ def few_labels(values, labels: list | None = None) -> tuple[np.ndarray, list] | 
         return None
     codes = np.zeros(len(values), dtype=np.intp)
     for code, label in enumerate(labels[1:], 1):
-        codes[values == label] = code
+        # against the label as a Python object: a bare str would become a numpy string, which
+        # drops trailing NULs ("a\x00" would then equal "a" and take its code)
+        codes[values == np.array(label, dtype=object)] = code
     return codes, labels
 
 
