@@ -10,10 +10,18 @@ the TLE of the latest pass at least 7 days before A):
 * ``bound``: the same after also the best time shift of that prediction (an along-track
   correction of the old TLE; it also removes B's own time-tag error, which no orbit can, so it is
   an optimistic bound for any orbit whose error is mostly along-track, as a week-old TLE's is);
-* ``fresh``: the same predicted by B's own TLE (hours old).
+* ``fresh``: the same predicted by B's own TLE (hours old); ``old-fresh``: B's best time shift
+  against the old TLE less that against its own TLE, the old TLE's along-track error in seconds
+  (B's own time-tag error cancels; a fresh TLE is good to ~0.05 s);
+* ``taken``: the old TLE's prediction of B shifted by the time shift pass A itself shows against
+  the old TLE (first order, through B's Doppler rate): an orbit that takes all of A's timing as
+  an along-track correction, the most a single pass can move a TLE along its track. It gains on
+  B only when A's and B's timing errors are common (an along-track error of the old TLE), and
+  loses when they are each pass's own (the station's time tags).
 
 A median of ``bound / old`` above 0.95 says the issue's target cannot be met on those pairs by
-any along-track correction, however good. No refinement is run: nothing here is tuned.
+any along-track correction, however good; ``taken/old`` above 1 in most pairs says that moving
+the TLE by pass A's own timing loses. No refinement is run: nothing here is tuned.
 
 Usage: ``PYTHONPATH=src python benchmarks/doptrack_bound.py [dev|holdout|both] [evening|day]``
 """
@@ -30,6 +38,7 @@ import numpy as np  # noqa: E402
 # (doptrack_never_worse puts tests/ on the path and holds the pairs, the loader and the scores)
 from doptrack_never_worse import (EOP, _load, _predicted_rms, pass_pairs, stale_tle_for,  # noqa: E402
                                   timing_split)
+from test_refine_realdata import _predicted_residuals, _rate, _rms_after_own_offset_drift  # noqa: E402
 from trackproc.io.tle import tle_state  # noqa: E402
 
 
@@ -40,11 +49,19 @@ def rows(dev: bool, pairs: str) -> list:
         old = stale_tle_for(a, stamps)
         if old is None:
             continue
+        ta, _ = _load(a)
         tb, fresh_b = _load(b)
         state = tle_state(old, eop=EOP)
         rms, after, shift = timing_split(tb, state, old)
-        fresh = _predicted_rms(tb, tle_state(fresh_b, eop=EOP), fresh_b)
-        out.append((a, b, rms, after, shift, fresh))
+        fresh_state = tle_state(fresh_b, eop=EOP)
+        fresh = _predicted_rms(tb, fresh_state, fresh_b)
+        old_error = shift - timing_split(tb, fresh_state, fresh_b)[2]
+        shift_a = timing_split(ta, state, old)[2]
+        # B's residual with the prediction delayed by A's shift (fit-tle's sign: the residual's
+        # fitted rate coefficient is -shift, so a shift s removes -s * rate)
+        t_s, residual, computed = _predicted_residuals(tb, state, old)
+        taken = _rms_after_own_offset_drift(t_s, residual + shift_a * _rate(t_s, computed))
+        out.append((a, b, rms, after, shift, fresh, shift_a, taken, old_error))
     return out
 
 
@@ -56,15 +73,20 @@ def main() -> None:
         print(f"old TLE (>= 7 days) predicting the next pass, {pairs} pairs, "
               f"{'development (1-10 April)' if dev else 'HOLD-OUT (11-15 April)'}")
         print(f"{'pass':>13} {'next':>13} {'old Hz':>7} {'bound Hz':>8} {'shift s':>7} {'fresh Hz':>8} "
-              f"{'bound/old':>9}")
-        for a, b, rms, after, shift, fresh in got:
-            print(f"{a:>13} {b:>13} {rms:7.2f} {after:8.2f} {shift:7.2f} {fresh:8.2f} {after / rms:9.2f}")
+              f"{'bound/old':>9} {'A shift s':>9} {'taken Hz':>8} {'taken/old':>9} {'old-fresh s':>11}")
+        for a, b, rms, after, shift, fresh, shift_a, taken, old_error in got:
+            print(f"{a:>13} {b:>13} {rms:7.2f} {after:8.2f} {shift:7.2f} {fresh:8.2f} {after / rms:9.2f} "
+                  f"{shift_a:9.2f} {taken:8.2f} {taken / rms:9.2f} {old_error:11.2f}")
         if got:
             ratio = np.array([r[3] / r[2] for r in got])
             fresh_ratio = np.array([r[5] / r[2] for r in got])
+            taken_ratio = np.array([r[7] / r[2] for r in got])
             print(f"  {len(got)} pairs: bound/old median {np.median(ratio):.3f} ({int((ratio <= 0.95).sum())} at or "
-                  f"below 0.95); fresh/old median {np.median(fresh_ratio):.3f}; |shift| median "
-                  f"{np.median(np.abs([r[4] for r in got])):.2f} s")
+                  f"below 0.95); fresh/old median {np.median(fresh_ratio):.3f} ({int((fresh_ratio < 1).sum())} "
+                  f"better); |shift| median {np.median(np.abs([r[4] for r in got])):.2f} s; taken/old median "
+                  f"{np.median(taken_ratio):.3f} ({int((taken_ratio < 1).sum())} better, "
+                  f"{int((taken_ratio > 1.1).sum())} worse by more than 10 %); |old-fresh| median "
+                  f"{np.median(np.abs([r[8] for r in got])):.2f} s")
         print()
 
 

@@ -121,6 +121,9 @@ def table(dev: bool, which: str):
         rows.append((a, b, tle_hz, ours, 1.0 if keeps else ours / tle_hz, f"{action}/{res.quality.verdict}", z, cpu))
     title = f"refine from the {which} TLE, {'development (1-10 April)' if dev else 'HOLD-OUT (11-15 April)'}"
     print(title)
+    if not rows:
+        print(f"  no pair has a TLE at least {STALE_DAYS:g} days older than its pass")
+        return rows
     print(f"{'pass':>13} {'next':>13} {'TLE Hz':>7} {'ours Hz':>7} {'ratio':>6} {'z':>6} {'cpu s':>5} decision/verdict")
     for r in rows:
         print(f"{r[0]:>13} {r[1]:>13} {r[2]:7.2f} {r[3]:7.2f} {r[4]:6.2f} {r[6]:6.2f} {r[7]:5.2f} {r[5]}")
