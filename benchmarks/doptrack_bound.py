@@ -23,7 +23,13 @@ A median of ``bound / old`` above 0.95 says the issue's target cannot be met on 
 any along-track correction, however good; ``taken/old`` above 1 in most pairs says that moving
 the TLE by pass A's own timing loses. No refinement is run: nothing here is tuned.
 
-Usage: ``PYTHONPATH=src python benchmarks/doptrack_bound.py [dev|holdout|both] [evening|day]``
+``nextday`` asks the same of ``fit-tle`` from an old TLE over an evening (the cases of
+``benchmarks/fit_tle_stale.py``: an evening of passes < 4 h apart, the newest catalogue TLE at
+least 7 days older, every pass 4-30 h later predicted): ``taken`` then shifts the old TLE's
+prediction of each next-day pass by the mean of the evening's own shifts against it (the along-track
+phase an evening measures; first order, no drift).
+
+Usage: ``PYTHONPATH=src python benchmarks/doptrack_bound.py [dev|holdout|both] [evening|day|nextday]``
 """
 
 from __future__ import annotations
@@ -57,11 +63,35 @@ def rows(dev: bool, pairs: str) -> list:
         fresh = _predicted_rms(tb, fresh_state, fresh_b)
         old_error = shift - timing_split(tb, fresh_state, fresh_b)[2]
         shift_a = timing_split(ta, state, old)[2]
-        # B's residual with the prediction delayed by A's shift (fit-tle's sign: the residual's
-        # fitted rate coefficient is -shift, so a shift s removes -s * rate)
-        t_s, residual, computed = _predicted_residuals(tb, state, old)
-        taken = _rms_after_own_offset_drift(t_s, residual + shift_a * _rate(t_s, computed))
-        out.append((a, b, rms, after, shift, fresh, shift_a, taken, old_error))
+        out.append((a, b, rms, after, shift, fresh, shift_a, _taken(tb, state, old, shift_a), old_error))
+    return out
+
+
+def _taken(table, state, tle, shift_s: float) -> float:
+    """The RMS (Hz) of ``table``'s Doppler after its own offset and drift, predicted by ``tle`` with
+    the prediction shifted by ``shift_s`` (fit-tle's sign: the residual's fitted rate coefficient is
+    -shift, so a shift s removes -s * rate)."""
+    t_s, residual, computed = _predicted_residuals(table, state, tle)
+    return _rms_after_own_offset_drift(t_s, residual + shift_s * _rate(t_s, computed))
+
+
+def evening_rows(dev: bool) -> list:
+    """The rows of :func:`rows` for fit-tle's cases: (evening, next-day pass, ...), ``A shift`` the
+    mean of the evening's shifts against the old TLE."""
+    from fit_tle_stale import cases
+
+    out = []
+    for evening, old, later in cases(dev):
+        state = tle_state(old, eop=EOP)
+        mean_shift = float(np.mean([timing_split(_load(s)[0], state, old)[2] for s in evening]))
+        for b in later:
+            tb, fresh_b = _load(b)
+            rms, after, shift = timing_split(tb, state, old)
+            fresh_state = tle_state(fresh_b, eop=EOP)
+            fresh = _predicted_rms(tb, fresh_state, fresh_b)
+            old_error = shift - timing_split(tb, fresh_state, fresh_b)[2]
+            label = f"{evening[0][:8]} {'+'.join(s[-4:] for s in evening)}"
+            out.append((label, b, rms, after, shift, fresh, mean_shift, _taken(tb, state, old, mean_shift), old_error))
     return out
 
 
@@ -69,11 +99,12 @@ def main() -> None:
     sets = {"dev": [True], "holdout": [False], "both": [True, False]}[sys.argv[1] if len(sys.argv) > 1 else "dev"]
     pairs = sys.argv[2] if len(sys.argv) > 2 else "evening"
     for dev in sets:
-        got = rows(dev, pairs)
+        got = evening_rows(dev) if pairs == "nextday" else rows(dev, pairs)
         print(f"old TLE (>= 7 days) predicting the next pass, {pairs} pairs, "
               f"{'development (1-10 April)' if dev else 'HOLD-OUT (11-15 April)'}")
-        print(f"{'pass':>13} {'next':>13} {'old Hz':>7} {'bound Hz':>8} {'shift s':>7} {'fresh Hz':>8} "
-              f"{'bound/old':>9} {'A shift s':>9} {'taken Hz':>8} {'taken/old':>9} {'old-fresh s':>11}")
+        print(f"{'evening' if pairs == 'nextday' else 'pass':>13} {'next':>13} {'old Hz':>7} {'bound Hz':>8} "
+              f"{'shift s':>7} {'fresh Hz':>8} {'bound/old':>9} {'A shift s':>9} {'taken Hz':>8} {'taken/old':>9} "
+              f"{'old-fresh s':>11}")
         for a, b, rms, after, shift, fresh, shift_a, taken, old_error in got:
             print(f"{a:>13} {b:>13} {rms:7.2f} {after:8.2f} {shift:7.2f} {fresh:8.2f} {after / rms:9.2f} "
                   f"{shift_a:9.2f} {taken:8.2f} {taken / rms:9.2f} {old_error:11.2f}")
