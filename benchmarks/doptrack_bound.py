@@ -48,23 +48,15 @@ from test_refine_realdata import _predicted_residuals, _rate, _rms_after_own_off
 from trackproc.io.tle import tle_state  # noqa: E402
 
 
-def rows(dev: bool, pairs: str) -> list:
-    stamps, chosen = pass_pairs(dev, pairs)
-    out = []
-    for a, b in chosen:
-        old = stale_tle_for(a, stamps)
-        if old is None:
-            continue
-        ta, _ = _load(a)
-        tb, fresh_b = _load(b)
-        state = tle_state(old, eop=EOP)
-        rms, after, shift = timing_split(tb, state, old)
-        fresh_state = tle_state(fresh_b, eop=EOP)
-        fresh = _predicted_rms(tb, fresh_state, fresh_b)
-        old_error = shift - timing_split(tb, fresh_state, fresh_b)[2]
-        shift_a = timing_split(ta, state, old)[2]
-        out.append((a, b, rms, after, shift, fresh, shift_a, _taken(tb, state, old, shift_a), old_error))
-    return out
+def _scores(b: str, state, old, shift_a: float) -> tuple:
+    """Pass ``b`` predicted by the ``old`` TLE (``state`` its state): ``(old Hz, bound Hz, shift s,
+    fresh Hz, A shift s, taken Hz, old-fresh s)``, ``shift_a`` the shift taken (module docstring)."""
+    tb, fresh_b = _load(b)
+    rms, after, shift = timing_split(tb, state, old)
+    fresh_state = tle_state(fresh_b, eop=EOP)
+    fresh = _predicted_rms(tb, fresh_state, fresh_b)
+    old_error = shift - timing_split(tb, fresh_state, fresh_b)[2]
+    return rms, after, shift, fresh, shift_a, _taken(tb, state, old, shift_a), old_error
 
 
 def _taken(table, state, tle, shift_s: float) -> float:
@@ -75,23 +67,30 @@ def _taken(table, state, tle, shift_s: float) -> float:
     return _rms_after_own_offset_drift(t_s, residual + shift_s * _rate(t_s, computed))
 
 
+def rows(dev: bool, pairs: str) -> list:
+    """``(pass A, pass B, *scores of B)`` for the pairs (``evening`` or ``day``), A's own shift taken."""
+    stamps, chosen = pass_pairs(dev, pairs)
+    out = []
+    for a, b in chosen:
+        old = stale_tle_for(a, stamps)
+        if old is None:
+            continue
+        state = tle_state(old, eop=EOP)
+        out.append((a, b, *_scores(b, state, old, timing_split(_load(a)[0], state, old)[2])))
+    return out
+
+
 def evening_rows(dev: bool) -> list:
-    """The rows of :func:`rows` for fit-tle's cases: (evening, next-day pass, ...), ``A shift`` the
-    mean of the evening's shifts against the old TLE."""
+    """``(evening, next-day pass, *scores)`` for fit-tle's cases, the mean of the evening's shifts
+    against the old TLE taken."""
     from fit_tle_stale import cases
 
     out = []
     for evening, old, later in cases(dev):
         state = tle_state(old, eop=EOP)
         mean_shift = float(np.mean([timing_split(_load(s)[0], state, old)[2] for s in evening]))
-        for b in later:
-            tb, fresh_b = _load(b)
-            rms, after, shift = timing_split(tb, state, old)
-            fresh_state = tle_state(fresh_b, eop=EOP)
-            fresh = _predicted_rms(tb, fresh_state, fresh_b)
-            old_error = shift - timing_split(tb, fresh_state, fresh_b)[2]
-            label = f"{evening[0][:8]} {'+'.join(s[-4:] for s in evening)}"
-            out.append((label, b, rms, after, shift, fresh, mean_shift, _taken(tb, state, old, mean_shift), old_error))
+        label = f"{evening[0][:8]} {'+'.join(s[-4:] for s in evening)}"
+        out.extend((label, b, *_scores(b, state, old, mean_shift)) for b in later)
     return out
 
 
