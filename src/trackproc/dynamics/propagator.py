@@ -34,7 +34,7 @@ True
 Everything here is pure numpy on SI units; nothing reads files or prints.
 
 One responsibility, the one door to the numerical engines (the Taylor series for two-body and J2,
-DOP853 for the full force model) and the trajectory they return; ~590 lines, most of it the
+DOP853 for the full force model) and the trajectory they return; ~610 lines, most of it the
 trajectory's interpolation and that door's argument checks and docs, the same door for a run
 restarted from a later state (:func:`propagate_from`, read on the first epoch's time axis), and the
 trajectory's kept reads (the last times' split and powers, which the light time reads three times:
